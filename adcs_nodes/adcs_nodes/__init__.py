@@ -1,0 +1,1 @@
+"""adcs_nodes package."""

@@ -1,0 +1,27 @@
+"""ament_python package of the flight software and tools (``ros2 run adcs_nodes <node>``)."""
+from setuptools import find_packages, setup
+
+PACKAGE = 'adcs_nodes'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='ADCS maintainers',
+    maintainer_email='adcs@example.org',
+    description='Flight software of the satellite ADCS and the adcs launcher CLI.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'adcs = adcs_nodes.tools.cli:main',
+            'recorder = adcs_nodes.nodes.recorder:main',
+            'compose = adcs_nodes.tools.compose:main',
+        ],
+    },
+)

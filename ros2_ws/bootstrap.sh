@@ -1,0 +1,102 @@
+#!/usr/bin/env bash
+# Bootstrap the ADCS workspace on a machine with only Python 3.11 (no ROS install needed).
+#
+#   1. a virtual environment in ros2_ws/.venv with the pinned ROS 2 wheels from PyPI
+#      (ros2_ws/requirements.txt),
+#   2. the known path pitfall of those wheels fixed: some installed share/**/*.cmake files carry
+#      the wheel builder's Python and numpy include paths; they are rewritten to this
+#      interpreter's sysconfig include dir and numpy.get_include(),
+#   3. `colcon build --symlink-install` of adcs_msgs, adcs_nodes and sim_node into
+#      ros2_ws/install, with -DPython3_EXECUTABLE set.
+#
+# Each step is skipped when its inputs did not change (stamp files in .venv/), so a second run
+# takes about a second. On a machine with ROS 2 installed, you do not need this script:
+# source /opt/ros/<distro>/setup.bash, then `colcon build` in ros2_ws.
+set -euo pipefail
+
+WS="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+VENV="$WS/.venv"
+PYTHON_BIN="${ADCS_PYTHON:-}"
+if [ -z "$PYTHON_BIN" ]; then
+    for cand in python3.11 python3; do
+        if command -v "$cand" >/dev/null 2>&1; then PYTHON_BIN="$cand"; break; fi
+    done
+fi
+if [ -z "$PYTHON_BIN" ]; then
+    echo "bootstrap: no python3.11 found; install Python 3.11 (apt-get install python3.11 python3.11-venv)" >&2
+    exit 1
+fi
+ver="$("$PYTHON_BIN" -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
+if [ "$ver" != "3.11" ]; then
+    echo "bootstrap: the pinned ROS 2 wheels need CPython 3.11, found $PYTHON_BIN = $ver" >&2
+    echo "           (set ADCS_PYTHON=/path/to/python3.11)" >&2
+    exit 1
+fi
+
+say() { printf '[bootstrap] %s\n' "$*"; }
+
+hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -d' ' -f1; }
+
+# 1. virtual environment + pinned wheels
+if [ ! -x "$VENV/bin/python" ]; then
+    say "creating virtual environment $VENV"
+    "$PYTHON_BIN" -m venv "$VENV"
+fi
+req_hash="$(hash_of "$WS/requirements.txt")"
+if [ "$(cat "$VENV/.requirements.sha256" 2>/dev/null)" != "$req_hash" ]; then
+    say "installing pinned requirements (first run: about a minute)"
+    mkdir -p "$WS/log"
+    if ! { "$VENV/bin/python" -m pip install --disable-pip-version-check -q --upgrade "pip==26.3" &&
+           "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r "$WS/requirements.txt"; } \
+            > "$WS/log/pip-install.out" 2>&1; then
+        grep -v 'is ignored: it is neither' "$WS/log/pip-install.out" >&2
+        echo "bootstrap: pip install failed (log: ros2_ws/log/pip-install.out)" >&2
+        exit 1
+    fi
+    rm -f "$VENV/.cmake-fixed" "$VENV/.build.sha256"
+    echo "$req_hash" > "$VENV/.requirements.sha256"
+fi
+
+# 2. the wheels' cmake files name the wheel builder's include dirs: point them at ours
+if [ ! -f "$VENV/.cmake-fixed" ]; then
+    "$VENV/bin/python" - "$VENV" <<'PY'
+import pathlib, re, sys, sysconfig
+import numpy
+venv = pathlib.Path(sys.argv[1])
+py_inc = sysconfig.get_paths()["include"]
+np_inc = numpy.get_include()
+pat_py = re.compile(r"/opt/python/[^/;\"\s]+/include/python3\.\d+")
+pat_np = re.compile(r"/opt/python/[^;\"\s]*?/site-packages/numpy/_?core/include")
+n = 0
+for path in venv.rglob("*.cmake"):
+    text = path.read_text(errors="surrogateescape")
+    new = pat_np.sub(np_inc, pat_py.sub(py_inc, text))
+    if new != text:
+        path.write_text(new, errors="surrogateescape")
+        n += 1
+print(f"[bootstrap] rewrote include paths in {n} cmake files")
+PY
+    touch "$VENV/.cmake-fixed"
+fi
+
+# 3. colcon build (inputs: package manifests, build files, interface definitions)
+export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+cd "$WS"
+build_inputs=$(find -L src -maxdepth 3 \( -name package.xml -o -name CMakeLists.txt -o -name setup.py \
+    -o -name setup.cfg -o -name '*.msg' -o -name '*.srv' -o -name '*.action' \) | sort)
+build_hash="$( (echo "$build_inputs"; hash_of $build_inputs) | sha256sum | cut -d' ' -f1)"
+if [ "$(cat "$VENV/.build.sha256" 2>/dev/null)" != "$build_hash" ] || [ ! -f install/local_setup.bash ]; then
+    say "colcon build (adcs_msgs, adcs_nodes, sim_node)"
+    # shellcheck disable=SC1091
+    source "$VENV/bin/activate"
+    if ! colcon --log-base log build --symlink-install --base-paths src \
+            --event-handlers console_cohesion- summary+ status- \
+            --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \
+            > "$WS/log/colcon-build.out" 2>&1 < /dev/null; then
+        cat "$WS/log/colcon-build.out" >&2
+        echo "bootstrap: colcon build failed (full log above and in ros2_ws/log/)" >&2
+        exit 1
+    fi
+    echo "$build_hash" > "$VENV/.build.sha256"
+fi
