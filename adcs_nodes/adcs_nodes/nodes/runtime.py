@@ -1,0 +1,92 @@
+"""Shared process runtime for every ADCS node: init, EventsExecutor spin, clean shutdown.
+
+``EventsExecutor.spin()`` ignores SIGINT (DESIGN section 6), so nodes spin on a future with a
+short timeout and stop on SIGINT/SIGTERM or when a node asks to finish (``node.done``).
+The same node classes run one per process (``main`` of each node module) or several in one
+process with one executor (``adcs_nodes.tools.compose``).
+"""
+from __future__ import annotations
+
+import signal
+import sys
+from typing import Callable, Iterable, List, Optional
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
+
+
+def make_executor():
+    """Return an ``EventsExecutor`` when rclpy has one, else a ``SingleThreadedExecutor``."""
+    try:
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    except ImportError:  # older rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor()
+
+
+def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None,
+               poll_s: float = 0.1) -> None:
+    """Spin ``nodes`` on one executor until SIGINT/SIGTERM, ``until()`` or every node is done.
+
+    A node signals it has finished its job by setting ``node.done = True`` (for example the
+    dynamics node at the end of the scenario).
+    """
+    nodes: List[Node] = list(nodes)
+    executor = make_executor()
+    for node in nodes:
+        executor.add_node(node)
+    stop = {'flag': False}
+
+    def _handler(signum, frame):
+        stop['flag'] = True
+
+    old_int = signal.signal(signal.SIGINT, _handler)
+    old_term = signal.signal(signal.SIGTERM, _handler)
+    never = Future()
+    try:
+        while rclpy.ok() and not stop['flag']:
+            executor.spin_until_future_complete(never, timeout_sec=poll_s)
+            if until is not None and until():
+                break
+            if nodes and all(getattr(n, 'done', False) for n in nodes):
+                break
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        signal.signal(signal.SIGINT, old_int)
+        signal.signal(signal.SIGTERM, old_term)
+        for node in nodes:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+        for node in nodes:
+            executor.remove_node(node)
+            node.destroy_node()
+        executor.shutdown()
+
+
+def run(factory: Callable[[], Node], args=None) -> int:
+    """Entry point body of a node executable: init rclpy, build the node, spin, shut down.
+
+    Returns the process exit code: 0 on a normal end, 1 when the node raised (the error is
+    printed with the node's name so the launcher can report it).
+    """
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    code = 0
+    node = None
+    try:
+        node = factory()
+        spin_nodes([node])
+        code = int(getattr(node, 'exit_code', 0))
+    except ValueError as exc:  # configuration errors: one clear line, no traceback
+        name = node.get_name() if node is not None else getattr(factory, '__name__', 'node')
+        print(f'[{name}] configuration error: {exc}', file=sys.stderr)
+        code = 2
+    finally:
+        if rclpy.ok():
+            rclpy.shutdown()
+    return code
