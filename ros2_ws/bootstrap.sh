@@ -100,3 +100,13 @@ if [ "$(cat "$VENV/.build.sha256" 2>/dev/null)" != "$build_hash" ] || [ ! -f ins
     fi
     echo "$build_hash" > "$VENV/.build.sha256"
 fi
+
+# 4. the `adcs` command in the venv (the colcon install puts console scripts under
+#    install/adcs_nodes/lib/adcs_nodes, which is what `ros2 run` uses; users want `adcs` on PATH)
+if [ ! -x "$VENV/bin/adcs" ]; then
+    cat > "$VENV/bin/adcs" <<'SH'
+#!/usr/bin/env bash
+exec python -m adcs_nodes.tools.cli "$@"
+SH
+    chmod +x "$VENV/bin/adcs"
+fi

@@ -1,0 +1,207 @@
+"""Base class of every lockstep node: parameters, start handshake, timing, status.
+
+Start handshake (no fixed sleeps, DESIGN section 6)
+---------------------------------------------------
+The launcher knows the whole graph, so it tells each node how many DDS endpoints must be
+matched before it is ready: parameter ``expected_matches`` is a list of ``"pub:<topic>=<n>"``
+(that many subscriptions matched to our publisher) and ``"sub:<topic>=<n>"`` (that many
+publishers matched to our subscription). When all hold, the node publishes its name on the
+latched topic ``lockstep/ready``. The clock master (dynamics) starts frame 0 only when every node
+in its ``wait_for_nodes`` list said ready. A node started alone (``ros2 run``) has no
+expectations and is ready at once.
+
+Time: ``/clock`` carries ``epoch + elapsed``; nodes convert stamps to elapsed integer
+nanoseconds at the edge (``elapsed_ns``) so frame arithmetic is exact.
+"""
+from __future__ import annotations
+
+import time
+from datetime import datetime, timezone
+from typing import Any, Callable, Dict, List, Optional
+
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+from adcs_msgs.msg import LockstepStatus
+from adcs_nodes.core.lockstep import NS_PER_S, seconds_to_ns
+from adcs_nodes.nodes.convert import to_stamp
+
+#: Reliable, keep-last QoS deep enough that no frame is lost in lockstep.
+QOS_DATA = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                      history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+#: Latched (transient local) QoS for status-like topics.
+QOS_LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         history=HistoryPolicy.KEEP_LAST,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                       history=HistoryPolicy.KEEP_LAST,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+DEFAULT_EPOCH = '2026-01-01T00:00:00Z'
+
+
+def parse_epoch(text: str) -> datetime:
+    """ISO-8601 UTC text (``2026-01-01T00:00:00Z``) -> aware ``datetime``; ValueError if bad."""
+    try:
+        dt = datetime.fromisoformat(str(text).replace('Z', '+00:00'))
+    except ValueError as exc:
+        raise ValueError(f'epoch {text!r} is not an ISO-8601 date-time') from exc
+    if dt.tzinfo is None:
+        dt = dt.replace(tzinfo=timezone.utc)
+    return dt.astimezone(timezone.utc)
+
+
+def epoch_to_ns(epoch: datetime) -> int:
+    """Aware datetime -> integer nanoseconds since the Unix epoch (exact for whole microseconds)."""
+    delta = epoch - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    return (delta.days * 86400 + delta.seconds) * NS_PER_S + delta.microseconds * 1000
+
+
+class LockstepNode(Node):
+    """rclpy node with the project's parameter, handshake and status conventions.
+
+    Parameters common to every node: ``epoch`` (ISO UTC of sim time 0), ``frame_period_s``
+    (base frame), ``timeout_s`` (wall-clock wait for a missing input), ``seed``,
+    ``expected_matches`` (start handshake), ``real_time`` (latest-value mode).
+    """
+
+    def __init__(self, name: str, **kwargs: Any) -> None:
+        super().__init__(name, allow_undeclared_parameters=True,
+                         automatically_declare_parameters_from_overrides=True, **kwargs)
+        self.done = False
+        self.exit_code = 0
+        self.epoch = parse_epoch(self.param('epoch', DEFAULT_EPOCH))
+        self.epoch_ns = epoch_to_ns(self.epoch)
+        self.frame_ns = seconds_to_ns(self.param('frame_period_s', 1.0))
+        if self.frame_ns <= 0:
+            raise ValueError('frame_period_s must be positive')
+        self.timeout_s = float(self.param('timeout_s', 5.0))
+        if not self.timeout_s > 0:
+            raise ValueError('timeout_s must be positive')
+        self.seed = int(self.param('seed', 0))
+        self.real_time = bool(self.param('real_time', False))
+        self.frames = 0
+        self.missed_frames = 0
+        self.last_missed_input = ''
+        self._wall0 = time.monotonic()
+        self._ready_sent = False
+        self._ready_pub = self.create_publisher(String, 'lockstep/ready', QOS_READY)
+        self._status_pub = self.create_publisher(LockstepStatus, 'lockstep/status', QOS_DATA)
+        self._pubs: Dict[str, Any] = {}
+        self._subs: Dict[str, Any] = {}
+        self._on_ready: Optional[Callable[[], None]] = None
+        self.create_timer(1.0, self.publish_status)
+
+    # ------------------------------------------------------------------ parameters
+    def param(self, name: str, default: Any) -> Any:
+        """Value of parameter ``name`` (declared with ``default`` if not given)."""
+        if not self.has_parameter(name):
+            self.declare_parameter(name, default)
+        value = self.get_parameter(name).value
+        return default if value is None else value
+
+    def section(self, prefix: str, defaults: Dict[str, Any]) -> Dict[str, Any]:
+        """Parameters ``prefix.*`` as a dict merged over ``defaults`` (for model factories)."""
+        given = {k: p.value for k, p in self.get_parameters_by_prefix(prefix).items()}
+        return {**defaults, **given}
+
+    # ------------------------------------------------------------------ endpoints
+    def publisher(self, msg_type, topic: str, qos: QoSProfile = QOS_DATA):
+        """Create a publisher and register it for the start handshake."""
+        pub = self.create_publisher(msg_type, topic, qos)
+        self._pubs[pub.topic_name] = pub
+        return pub
+
+    def subscription(self, msg_type, topic: str, callback, qos: QoSProfile = QOS_DATA):
+        """Create a subscription and register it for the start handshake."""
+        sub = self.create_subscription(msg_type, topic, callback, qos)
+        self._subs[sub.topic_name] = sub
+        return sub
+
+    # ------------------------------------------------------------------ handshake
+    def _expectations(self) -> List[tuple]:
+        out = []
+        for item in self.param('expected_matches', ['']):
+            if not item:
+                continue
+            try:
+                kind, rest = item.split(':', 1)
+                topic, n = rest.rsplit('=', 1)
+                out.append((kind, self.resolve_topic_name(topic), int(n)))
+            except ValueError as exc:
+                raise ValueError(f'bad expected_matches entry {item!r} '
+                                 '(want "pub:<topic>=<n>" or "sub:<topic>=<n>")') from exc
+        return out
+
+    def unmatched(self) -> List[str]:
+        """Handshake expectations not met yet, as readable strings."""
+        missing = []
+        for kind, topic, n in self._expectations():
+            table = self._pubs if kind == 'pub' else self._subs
+            ent = table.get(topic)
+            if ent is None:
+                missing.append(f'{kind}:{topic} (no such endpoint in {self.get_name()})')
+                continue
+            have = ent.get_subscription_count() if kind == 'pub' else ent.get_publisher_count()
+            if have < n:
+                missing.append(f'{kind}:{topic} {have}/{n}')
+        return missing
+
+    def start_handshake(self, on_ready: Optional[Callable[[], None]] = None) -> None:
+        """Poll matching every 20 ms; when complete publish ready and call ``on_ready``."""
+        self._on_ready = on_ready
+        self._hs_t0 = time.monotonic()
+        self._hs_warned = 0.0
+        self._hs_timer = self.create_timer(0.02, self._check_ready)
+
+    def _check_ready(self) -> None:
+        missing = self.unmatched()
+        if missing:
+            waited = time.monotonic() - self._hs_t0
+            if waited - self._hs_warned > 10.0:
+                self._hs_warned = waited
+                self.get_logger().warn(f'still waiting for endpoints after {waited:.0f} s: '
+                                       + ', '.join(missing))
+            return
+        self._hs_timer.cancel()
+        self.destroy_timer(self._hs_timer)
+        self._ready_sent = True
+        self._ready_pub.publish(String(data=self.get_name()))
+        if self._on_ready is not None:
+            self._on_ready()
+
+    # ------------------------------------------------------------------ time and status
+    def elapsed_ns(self, stamp_ns: int) -> int:
+        """Elapsed sim time of an absolute stamp."""
+        return int(stamp_ns) - self.epoch_ns
+
+    def stamp(self, elapsed_ns: int):
+        """Absolute ``builtin_interfaces/Time`` of an elapsed sim time."""
+        return to_stamp(self.epoch_ns + int(elapsed_ns))
+
+    def count_missed(self, inputs: List[str], t_ns: int) -> None:
+        """Record a frame whose inputs ``inputs`` timed out, and log it."""
+        self.missed_frames += 1
+        self.last_missed_input = ','.join(inputs)
+        self.get_logger().warn(
+            f'frame t={t_ns / NS_PER_S:.3f} s: no {self.last_missed_input} within '
+            f'{self.timeout_s:g} s wall; going on with the last value '
+            f'(missed frames: {self.missed_frames})')
+
+    def publish_status(self, t_ns: Optional[int] = None) -> None:
+        """Publish ``lockstep/status`` (frames, missed frames, wall time)."""
+        msg = LockstepStatus()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.node = self.get_name()
+        msg.frames = int(self.frames)
+        msg.missed_frames = int(self.missed_frames)
+        msg.last_missed_input = self.last_missed_input
+        msg.wall_time = time.monotonic() - self._wall0
+        self._status_pub.publish(msg)
+
+
+def use_sim_time_override() -> List[Parameter]:
+    """Parameter override that makes a node follow ``/clock``."""
+    return [Parameter('use_sim_time', Parameter.Type.BOOL, True)]

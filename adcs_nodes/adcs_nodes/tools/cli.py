@@ -1,0 +1,172 @@
+"""``adcs``: the command-line launcher of the ADCS node graph.
+
+Commands
+--------
+``adcs run SCENARIO [--record BAG] [--duration S] [--real-time [--rate F]] [--compose]
+[--report]``
+    Validate the scenario, start its nodes (one process each, or composed), show progress,
+    stop everything cleanly at the end, on Ctrl-C or when a node dies.
+``adcs list [--dir scenarios]``
+    Scenarios (with their description) and the known nodes.
+``adcs validate SCENARIO``
+    Check a scenario file only (errors name the key and the line).
+``adcs export BAG --csv DIR``
+    One CSV per topic, flattened fields, time column ``t`` in seconds.
+``adcs report BAG [--out DIR]``
+    Metrics, PNG plots and ``summary.md``.
+
+Exit codes: 0 success, 1 run failure (a node died, recorder lagged), 2 bad input
+(scenario, arguments, bag), 130 interrupted.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from typing import List, Optional
+
+from adcs_nodes.tools.scenario import ScenarioError, list_scenarios, load_scenario
+
+#: Nodes of the graph: (package, executable, role).
+KNOWN_NODES = [
+    ('sim_node', 'environment', 'orbit + geomagnetic field (sim/environment)'),
+    ('sim_node', 'dynamics', 'rigid-body dynamics, actuators, clock master (/clock, sim/state)'),
+    ('adcs_nodes', 'recorder', 'rosbag2 MCAP recorder of every topic'),
+]
+
+
+def _default_scenario_dir() -> str:
+    here = os.path.dirname(os.path.abspath(__file__))
+    for cand in (os.path.join(os.getcwd(), 'scenarios'),
+                 os.path.normpath(os.path.join(here, '..', '..', '..', 'scenarios'))):
+        if os.path.isdir(cand):
+            return cand
+    return os.path.join(os.getcwd(), 'scenarios')
+
+
+def cmd_run(args) -> int:
+    from adcs_nodes.tools.launcher import LaunchError, Launcher
+    try:
+        sc = load_scenario(args.scenario)
+        if args.rate is not None and not args.real_time:
+            raise LaunchError('--rate needs --real-time')
+        launcher = Launcher(sc, duration_s=args.duration, record=args.record,
+                            real_time=args.real_time, rate_factor=args.rate or 1.0,
+                            compose=args.compose, progress=not args.quiet)
+    except (ScenarioError, LaunchError) as exc:
+        print(f'adcs run: {exc}', file=sys.stderr)
+        return 2
+    result = launcher.run()
+    rtf = result.sim_time_s / result.wall_time_s if result.wall_time_s else 0.0
+    print(f'[adcs] {result.message}: {result.sim_time_s:g} s sim in {result.wall_time_s:.1f} s '
+          f'wall ({rtf:.1f}x real time), missed frames {result.missed_frames}')
+    if result.bag:
+        print(f'[adcs] bag: {result.bag}')
+    if result.exit_code == 0 and args.report and result.bag:
+        return cmd_report(argparse.Namespace(bag=result.bag, out=None))
+    return result.exit_code
+
+
+def cmd_list(args) -> int:
+    directory = args.dir or _default_scenario_dir()
+    if not os.path.isdir(directory):
+        print(f'adcs list: no scenario directory {directory}', file=sys.stderr)
+        return 2
+    print(f'Scenarios in {directory}:')
+    for fname, desc in list_scenarios(directory):
+        print(f'  {fname:32s} {desc}')
+    print('Nodes (ros2 run <package> <executable>):')
+    for pkg, exe, role in KNOWN_NODES:
+        print(f'  {pkg + " " + exe:32s} {role}')
+    return 0
+
+
+def cmd_validate(args) -> int:
+    try:
+        sc = load_scenario(args.scenario)
+    except ScenarioError as exc:
+        print(f'adcs validate: {exc}', file=sys.stderr)
+        return 2
+    print(f'{args.scenario}: OK ({sc["name"]}, {sc["duration_s"]:g} s, '
+          f'frame {sc["timing"]["frame_s"]:g} s)')
+    return 0
+
+
+def cmd_export(args) -> int:
+    from adcs_nodes.tools.export import export_csv
+    try:
+        files = export_csv(args.bag, args.csv)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f'adcs export: {exc}', file=sys.stderr)
+        return 2
+    for f in files:
+        print(f)
+    return 0
+
+
+def cmd_report(args) -> int:
+    from adcs_nodes.tools.report import make_report
+    out = args.out or os.path.normpath(args.bag.rstrip('/')) + '_report'
+    try:
+        make_report(args.bag, out)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f'adcs report: {exc}', file=sys.stderr)
+        return 2
+    summary = os.path.join(out, 'summary.md')
+    if os.path.isfile(summary):
+        with open(summary, encoding='utf-8') as fh:
+            print(fh.read())
+    print(f'[adcs] report written to {out}')
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog='adcs', description='Run, record and analyse the satellite ADCS node graph.',
+        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split('Exit')[0])
+    sub = ap.add_subparsers(dest='command', required=True)
+
+    p = sub.add_parser('run', help='run a scenario')
+    p.add_argument('scenario', help='scenario YAML file (see `adcs list`)')
+    p.add_argument('--record', metavar='BAG', help='record every topic to this rosbag2 MCAP '
+                   'bag directory (must not exist)')
+    p.add_argument('--duration', type=float, metavar='S',
+                   help='simulated seconds (default: the scenario duration_s)')
+    p.add_argument('--real-time', action='store_true',
+                   help='pace the clock by the wall clock (latest-value inputs, no lockstep)')
+    p.add_argument('--rate', type=float, metavar='F',
+                   help='with --real-time: sim seconds per wall second (default 1)')
+    p.add_argument('--compose', action='store_true',
+                   help='all nodes in one process on one executor (faster, same trajectory)')
+    p.add_argument('--report', action='store_true', help='write the report of the bag after')
+    p.add_argument('--quiet', action='store_true', help='no progress bar')
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser('list', help='list scenarios and nodes')
+    p.add_argument('--dir', help='scenario directory (default ./scenarios)')
+    p.set_defaults(func=cmd_list)
+
+    p = sub.add_parser('validate', help='check a scenario file')
+    p.add_argument('scenario')
+    p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser('export', help='export a bag to CSV files')
+    p.add_argument('bag')
+    p.add_argument('--csv', required=True, metavar='DIR', help='output directory')
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser('report', help='metrics, plots and summary of a bag')
+    p.add_argument('bag')
+    p.add_argument('--out', metavar='DIR', help='output directory (default BAG_report)')
+    p.set_defaults(func=cmd_report)
+    return ap
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Entry point of the ``adcs`` console script."""
+    args = build_parser().parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,284 @@
+"""``dynamics`` node: the spacecraft's rigid-body motion, and the clock master of the lockstep.
+
+Frame k (DESIGN section 6), lockstep mode::
+
+    A. publish /clock = epoch + t_k            -> environment publishes sim/environment(t_k)
+    B. on sim/environment(t_k): publish sim/state(t_k), sim/wheels(t_k)
+                                               -> sensors, estimator, controllers, manager ...
+    C. if a command is due at t_k: wait for adcs/actuator_command stamped t_k
+       hold it (zero-order hold) and integrate t_k -> t_k+1 (fixed RK4 substeps)
+    D. k += 1, back to A (after the last frame: done, the process exits 0)
+
+Missing input past ``timeout_s`` of wall time: log, count a missed frame, and go on with the last
+environment (extrapolated by its rates inside the frame) or a zero command.
+
+Real-time mode (``real_time: true``): a wall timer at ``frame_period_s / rate_factor`` steps the
+same model with the latest inputs, without waiting.
+"""
+from __future__ import annotations
+
+import time
+from typing import Optional
+
+import numpy as np
+from rclpy.duration import Duration
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import String
+
+from adcs_msgs.msg import ActuatorCommand, AttitudeState, Environment, WheelState
+from adcs_nodes.core import attitude as att
+from adcs_nodes.core.lockstep import FrameSync, derive_seed, ns_to_seconds, seconds_to_ns
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
+from adcs_nodes.nodes.lockstep_node import QOS_DATA, QOS_READY, LockstepNode
+from sim_node.models.dynamics import ActuatorCommand as Command
+from sim_node.models.dynamics import FrameEnvironment, SpacecraftState
+from sim_node.models.spacecraft_config import (DEFAULT_INITIAL, DEFAULT_SPACECRAFT,
+                                               initial_state, spacecraft_from_config)
+
+QOS_CLOCK = QOS_DATA
+
+
+class DynamicsNode(LockstepNode):
+    """Clock master and rigid-body integrator (see module docstring)."""
+
+    def __init__(self, name: str = 'dynamics', **kwargs) -> None:
+        super().__init__(name, **kwargs)
+        self.duration_ns = seconds_to_ns(self.param('duration_s', 0.0))
+        self.substeps = int(self.param('substeps', 10))
+        if self.substeps < 1:
+            raise ValueError('substeps must be >= 1')
+        self.rate_factor = float(self.param('rate_factor', 1.0))
+        if not self.rate_factor > 0:
+            raise ValueError('rate_factor must be positive')
+        cmd_period_s = float(self.param('command_period_s', 0.0))
+        cmd_ns = seconds_to_ns(cmd_period_s) if cmd_period_s > 0 else 0
+        if cmd_ns % self.frame_ns:
+            raise ValueError('command_period_s must be a multiple of frame_period_s')
+        self.wait_for_nodes = [n for n in self.param('wait_for_nodes', ['']) if n]
+        cfg = self.section('spacecraft', DEFAULT_SPACECRAFT)
+        self.spacecraft = spacecraft_from_config(
+            cfg, seed=derive_seed(self.seed, 'dynamics/disturbance'))
+        self.initial_cfg = self.section('initial', DEFAULT_INITIAL)
+        self.wheel_names = list(cfg.get('wheel_names', [])) or [
+            f'wheel{i}' for i in range(self.spacecraft.n_wheels)]
+        self.wheel_h0 = cfg.get('wheel_h0_Nms')
+
+        self.sync = FrameSync({'env': self.frame_ns, 'cmd': cmd_ns})
+        self.clock_pub = self.publisher(Clock, '/clock', QOS_CLOCK)
+        self.state_pub = self.publisher(AttitudeState, 'sim/state')
+        self.wheels_pub = self.publisher(WheelState, 'sim/wheels')
+        self.subscription(Environment, 'sim/environment', self.on_environment)
+        self.subscription(ActuatorCommand, 'adcs/actuator_command', self.on_command)
+        self.ready_nodes = set()
+        self.create_subscription(String, 'lockstep/ready', self.on_ready_msg, QOS_READY)
+
+        self.k = 0
+        self.state: Optional[SpacecraftState] = None
+        self.phase = 'idle'          # idle -> wait_env -> wait_cmd -> (integrate) -> wait_env
+        self.wait_since = 0.0
+        self.last_cmd = self.spacecraft.zero_command()
+        self.rejected_commands = 0
+        self.applied_wheel_torque = np.zeros(self.spacecraft.n_wheels)
+        self.started = False
+        self.create_timer(min(0.05, self.timeout_s / 4.0), self.on_watchdog)
+        self.start_handshake(self.try_start)
+
+    # ------------------------------------------------------------------ start
+    def on_ready_msg(self, msg: String) -> None:
+        """Collect ``lockstep/ready`` announcements of the other nodes."""
+        self.ready_nodes.add(msg.data)
+        self.try_start()
+
+    def try_start(self) -> None:
+        """Start frame 0 once we and every node in ``wait_for_nodes`` are ready."""
+        if self.started or not self._ready_sent:
+            return
+        if any(n not in self.ready_nodes for n in self.wait_for_nodes):
+            return
+        self.started = True
+        self.get_logger().info(
+            f'lockstep start: frame {self.frame_ns / 1e9:g} s, {self.substeps} RK4 substeps, '
+            f'duration {self.duration_ns / 1e9:g} s, real_time={self.real_time}')
+        self.wall_start = time.monotonic()
+        if self.real_time:
+            self.create_timer(ns_to_seconds(self.frame_ns) / self.rate_factor, self.on_rt_tick)
+        else:
+            self.begin_frame()
+
+    # ------------------------------------------------------------------ lockstep
+    @property
+    def t_ns(self) -> int:
+        """Elapsed sim time of the current frame."""
+        return self.k * self.frame_ns
+
+    def begin_frame(self) -> None:
+        """Phase A: publish the clock of frame k and wait for its environment."""
+        self.phase = 'wait_env'
+        self.wait_since = time.monotonic()
+        self.clock_pub.publish(Clock(clock=self.stamp(self.t_ns)))
+        self.advance()
+
+    def on_environment(self, msg: Environment) -> None:
+        """Store an environment message (dropped with a warning if it holds NaN)."""
+        vals = (vec3(msg.r_eci), vec3(msg.v_eci), vec3(msg.b_eci), vec3(msg.b_dot_eci),
+                quat(msg.q_eci_orbit))
+        if not all_finite(*vals):
+            self.get_logger().warn('sim/environment with non-finite values ignored')
+            return
+        self.sync.add('env', self.elapsed_ns(stamp_ns(msg.header.stamp)), msg)
+        self.advance()
+
+    def on_command(self, msg: ActuatorCommand) -> None:
+        """Store an actuator command; a malformed one becomes a zero command (safe)."""
+        t_ns = self.elapsed_ns(stamp_ns(msg.header.stamp))
+        cmd = self.to_command(msg)
+        self.sync.add('cmd', t_ns, cmd)
+        self.advance()
+
+    def to_command(self, msg: ActuatorCommand) -> Command:
+        """Message -> model command; NaN or a wrong wheel count -> zero command, logged."""
+        n = self.spacecraft.n_wheels
+        wheel = np.asarray(msg.wheel_torque, dtype=float)
+        if wheel.size == 0:
+            wheel = np.zeros(n)
+        dipole, torque = vec3(msg.dipole_body), vec3(msg.torque_body)
+        if wheel.size != n or not all_finite(dipole, torque, wheel):
+            self.rejected_commands += 1
+            self.get_logger().warn(
+                f'rejected actuator command from {msg.source!r} (non-finite or '
+                f'{wheel.size} wheel torques for {n} wheels): using zero command')
+            return self.spacecraft.zero_command()
+        return Command(dipole_body=dipole, wheel_torque=wheel, torque_body=torque)
+
+    def advance(self) -> None:
+        """Run the frame phases as far as the arrived inputs allow."""
+        if self.real_time or not self.started:
+            return
+        t = self.t_ns
+        if self.phase == 'wait_env' and self.sync.has('env', t):
+            self.publish_state(self.sync.value('env', t))
+            if self.duration_ns and t >= self.duration_ns:
+                self.finish()
+                return
+            self.phase = 'wait_cmd'
+            self.wait_since = time.monotonic()
+        if self.phase == 'wait_cmd' and not self.sync.missing(t):
+            self.integrate(self.sync.value('cmd', t))
+
+    def step_frame(self, cmd: Optional[Command]) -> None:
+        """Zero-order-hold the command and integrate from t_k to t_k+1."""
+        t = self.t_ns
+        env_msg = self.sync.value('env', t)
+        if cmd is not None:
+            self.last_cmd = cmd
+        env = FrameEnvironment(r_eci=vec3(env_msg.r_eci), v_eci=vec3(env_msg.v_eci),
+                               b_eci=vec3(env_msg.b_eci), b_dot_eci=vec3(env_msg.b_dot_eci))
+        # environment stamped earlier (timeout, real-time mode): extrapolate with its rates
+        dt_env = ns_to_seconds(t - self.elapsed_ns(stamp_ns(env_msg.header.stamp)))
+        if dt_env:
+            env = FrameEnvironment(r_eci=env.r_eci + env.v_eci * dt_env, v_eci=env.v_eci,
+                                   b_eci=env.b_eci + env.b_dot_eci * dt_env,
+                                   b_dot_eci=env.b_dot_eci)
+        self.state, self.applied = self.spacecraft.step(
+            self.state, ns_to_seconds(t), ns_to_seconds(self.frame_ns), env, self.last_cmd,
+            self.substeps)
+        self.applied_wheel_torque = self.applied.get('wheel_torque', self.applied_wheel_torque)
+        self.sync.prune(t)
+        self.frames += 1
+        self.k += 1
+
+    def integrate(self, cmd: Optional[Command]) -> None:
+        """Phase C+D of the lockstep: step the frame, then begin the next one."""
+        self.step_frame(cmd)
+        self.begin_frame()
+
+    def on_watchdog(self) -> None:
+        """Wall-clock timeout of the current wait: count a missed frame and go on."""
+        if not self.started or self.real_time or self.done:
+            return
+        if time.monotonic() - self.wait_since < self.timeout_s:
+            return
+        t = self.t_ns
+        if self.phase == 'wait_env':
+            if self.sync.value('env', t) is None:
+                # nothing to go on with (frame 0): keep waiting but say so, and re-send clock
+                self.count_missed(['sim/environment'], t)
+                self.wait_since = time.monotonic()
+                self.clock_pub.publish(Clock(clock=self.stamp(t)))
+                return
+            self.count_missed(['sim/environment'], t)
+            self.sync.add('env', t, self.sync.value('env', t))
+            self.advance()
+        elif self.phase == 'wait_cmd':
+            self.count_missed(['adcs/actuator_command'], t)
+            self.integrate(self.spacecraft.zero_command())
+
+    # ------------------------------------------------------------------ real time
+    def on_rt_tick(self) -> None:
+        """Real-time mode: publish frame k, then step with the latest inputs (no waiting)."""
+        t = self.t_ns
+        self.clock_pub.publish(Clock(clock=self.stamp(t)))
+        env_msg = self.sync.value('env', t)
+        if env_msg is None:
+            return  # the environment has not answered yet: the sim waits at t = 0
+        self.publish_state(env_msg)
+        if self.duration_ns and t >= self.duration_ns:
+            self.finish()
+            return
+        self.step_frame(self.sync.value('cmd', t))
+
+    # ------------------------------------------------------------------ outputs
+    def publish_state(self, env_msg: Environment) -> None:
+        """Phase B: publish truth state and wheels of frame k (initialises at frame 0)."""
+        q_eci_orbit = quat(env_msg.q_eci_orbit)
+        omega_orbit_eci_eci = vec3(env_msg.omega_orbit_eci_eci)
+        if self.state is None:
+            self.state = initial_state(self.initial_cfg, q_eci_orbit, omega_orbit_eci_eci,
+                                       self.spacecraft, self.wheel_h0)
+        st = self.state
+        r_body_eci = att.to_matrix(st.q_eci_body).T
+        msg = AttitudeState()
+        msg.header.stamp = self.stamp(self.t_ns)
+        msg.header.frame_id = 'body'
+        msg.q_eci_body = to_quat(st.q_eci_body)
+        msg.q_orbit_body = to_quat(att.canonical(
+            att.multiply(att.conjugate(q_eci_orbit), st.q_eci_body)))
+        msg.omega_body_eci_body = to_vec3(st.omega_body_eci_body)
+        msg.omega_body_orbit_body = to_vec3(st.omega_body_eci_body
+                                            - r_body_eci @ omega_orbit_eci_eci)
+        self.state_pub.publish(msg)
+        w = WheelState()
+        w.header = msg.header
+        w.names = self.wheel_names
+        h = np.asarray(st.h_wheels, dtype=float)
+        w.momentum = h.tolist()
+        wheels = self.spacecraft.wheels
+        if wheels is not None:
+            w.speed = wheels.speed(h, st.omega_body_eci_body).tolist()
+            w.torque = np.asarray(self.applied_wheel_torque, dtype=float).tolist()
+            w.h_wheels_body = to_vec3(wheels.h_body(h))
+        self.wheels_pub.publish(w)
+
+    def finish(self) -> None:
+        """End of the scenario: report and let the runtime stop the process."""
+        wall = time.monotonic() - self.wall_start
+        sim = ns_to_seconds(self.t_ns)
+        self.get_logger().info(
+            f'done: {sim:g} s sim in {wall:.2f} s wall ({sim / max(wall, 1e-9):.1f}x real '
+            f'time, {self.frames / max(wall, 1e-9):.0f} frames/s), missed frames '
+            f'{self.missed_frames}')
+        self.publish_status()
+        # reliable delivery of the last frame before the process exits
+        for pub in (self.clock_pub, self.state_pub, self.wheels_pub):
+            pub.wait_for_all_acked(Duration(seconds=2.0))
+        self.done = True
+
+
+def main(args=None) -> int:
+    """``ros2 run sim_node dynamics``."""
+    return runtime.run(DynamicsNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,75 @@
+"""``environment`` node: orbit state and geomagnetic field of the simulated world.
+
+Subscribes ``/clock``; for every clock tick t_k publishes ``sim/environment`` stamped t_k:
+r, v (ECI), q_eci_orbit, orbit rate, argument of latitude, B (ECI) and dB/dt, q_eci_ecef.
+Models: ``sim_node.models.orbit`` and ``sim_node.models.geomag``, configured by the
+parameters ``orbit.*`` and ``field.*`` (same keys as the scenario YAML sections).
+"""
+from __future__ import annotations
+
+from datetime import timedelta
+
+from rosgraph_msgs.msg import Clock
+
+from adcs_msgs.msg import Environment
+from adcs_nodes.core.lockstep import ns_to_seconds
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.convert import stamp_ns, to_quat, to_vec3
+from adcs_nodes.nodes.lockstep_node import LockstepNode
+from sim_node.models.geomag import make_field
+from sim_node.models.orbit import make_orbit, q_eci_ecef
+
+#: Defaults when run alone: paper 000's 690 km, 98 deg circular orbit and a tilted dipole.
+DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
+                 'raan_deg': 0.0, 'arg_latitude0_deg': 0.0}
+DEFAULT_FIELD = {'model': 'dipole'}
+
+
+class EnvironmentNode(LockstepNode):
+    """Publishes the orbit and field at each ``/clock`` tick (see module docstring)."""
+
+    def __init__(self, name: str = 'environment', **kwargs) -> None:
+        super().__init__(name, **kwargs)
+        self.orbit = make_orbit(self.section('orbit', DEFAULT_ORBIT), self.epoch)
+        self.field = make_field(self.section('field', DEFAULT_FIELD), self.epoch)
+        self.pub = self.publisher(Environment, 'sim/environment')
+        self.subscription(Clock, '/clock', self.on_clock)
+        self._last_ns = None
+        self.start_handshake()
+
+    def compute(self, t_ns: int) -> Environment:
+        """Environment message for elapsed sim time ``t_ns``."""
+        t = ns_to_seconds(t_ns)
+        st = self.orbit.state(t)
+        b_eci, b_dot_eci = self.field.field_and_rate(self.orbit, t)
+        msg = Environment()
+        msg.header.stamp = self.stamp(t_ns)
+        msg.header.frame_id = 'eci'
+        msg.r_eci = to_vec3(st.r_eci)
+        msg.v_eci = to_vec3(st.v_eci)
+        msg.q_eci_orbit = to_quat(st.q_eci_orbit)
+        msg.omega_orbit_eci_eci = to_vec3(st.omega_orbit_eci_eci)
+        msg.orbit_rate = float(st.orbit_rate)
+        msg.argument_of_latitude = float(st.argument_of_latitude)
+        msg.b_eci = to_vec3(b_eci)
+        msg.b_dot_eci = to_vec3(b_dot_eci)
+        msg.q_eci_ecef = to_quat(q_eci_ecef(self.epoch + timedelta(seconds=t)))
+        return msg
+
+    def on_clock(self, msg: Clock) -> None:
+        """One frame: compute and publish for the clock's time (duplicates ignored)."""
+        t_ns = self.elapsed_ns(stamp_ns(msg.clock))
+        if t_ns == self._last_ns:
+            return
+        self._last_ns = t_ns
+        self.pub.publish(self.compute(t_ns))
+        self.frames += 1
+
+
+def main(args=None) -> int:
+    """``ros2 run sim_node environment``."""
+    return runtime.run(EnvironmentNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
