@@ -54,7 +54,7 @@ def parse_epoch(text: str) -> datetime:
 
 
 def epoch_to_ns(epoch: datetime) -> int:
-    """Aware datetime -> integer nanoseconds since the Unix epoch (exact for whole microseconds)."""
+    """Aware datetime -> integer ns since the Unix epoch (exact to the microsecond)."""
     delta = epoch - datetime(1970, 1, 1, tzinfo=timezone.utc)
     return (delta.days * 86400 + delta.seconds) * NS_PER_S + delta.microseconds * 1000
 

@@ -47,6 +47,8 @@ class RunResult:
     bag: Optional[str]
     run_dir: str
     message: str
+    #: lockstep throughput measured by the clock master from frame 0 to its end [frames/s]
+    frames_per_s: float = 0.0
 
 
 def acquire_domain():
@@ -260,12 +262,15 @@ class Launcher:
             sim_s = monitor.sim_ns / 1e9
             frames = int(round(sim_s / self.sc['timing']['frame_s']))
             missed = monitor.missed_frames
+            dyn = monitor.status.get('dynamics')
+            fps = dyn.frames / dyn.wall_time if dyn is not None and dyn.wall_time > 0 else 0.0
             monitor.close()
             signal.signal(signal.SIGINT, old_int)
             signal.signal(signal.SIGTERM, old_term)
             os.unlink(manifest_path)
             lock.close()
-        return RunResult(code, sim_s, wall, frames, missed, self.record, self.run_dir, message)
+        return RunResult(code, sim_s, wall, frames, missed, self.record, self.run_dir, message,
+                         fps)
 
     def _on_signal(self, signum, frame) -> None:
         self._stop_requested = True
@@ -296,6 +301,7 @@ class Launcher:
                            f'last lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
 
     def _finish(self, monitor: _Monitor, total_ns: int):
+        monitor.spin(0.2)  # take the master's final status
         monitor.sim_ns = max(monitor.sim_ns, total_ns)
         if self.record and not self.compose:
             deadline = time.monotonic() + 15.0

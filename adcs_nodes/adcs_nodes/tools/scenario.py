@@ -49,12 +49,13 @@ ORBIT_VARIANTS = {
     },
 }
 _FIELD_COMMON = {'model': F('str', 'dipole', 'geomagnetic model',
-                           ('dipole', 'igrf_dipole', 'igrf'))}
+                            ('dipole', 'igrf_dipole', 'igrf'))}
 FIELD_VARIANTS = {
     'dipole': {
         'b0_T': F('float', OPTIONAL, 'dipole strength at the reference radius [T]'),
         'r_ref_m': F('float', OPTIONAL, 'reference radius of b0_T [m]'),
-        'pole_colatitude_deg': F('float', OPTIONAL, 'geographic colatitude of the dipole axis [deg]'),
+        'pole_colatitude_deg': F('float', OPTIONAL,
+                                 'geographic colatitude of the dipole axis [deg]'),
         'pole_longitude_deg': F('float', OPTIONAL, 'geographic east longitude of the axis [deg]'),
     },
     'igrf_dipole': {

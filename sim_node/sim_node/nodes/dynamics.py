@@ -101,6 +101,7 @@ class DynamicsNode(LockstepNode):
             f'lockstep start: frame {self.frame_ns / 1e9:g} s, {self.substeps} RK4 substeps, '
             f'duration {self.duration_ns / 1e9:g} s, real_time={self.real_time}')
         self.wall_start = time.monotonic()
+        self._wall0 = self.wall_start      # status wall_time counts from the lockstep start
         if self.real_time:
             self.create_timer(ns_to_seconds(self.frame_ns) / self.rate_factor, self.on_rt_tick)
         else:
@@ -270,7 +271,7 @@ class DynamicsNode(LockstepNode):
             f'{self.missed_frames}')
         self.publish_status()
         # reliable delivery of the last frame before the process exits
-        for pub in (self.clock_pub, self.state_pub, self.wheels_pub):
+        for pub in (self.clock_pub, self.state_pub, self.wheels_pub, self._status_pub):
             pub.wait_for_all_acked(Duration(seconds=2.0))
         self.done = True
 

@@ -1,0 +1,82 @@
+"""FrameSync and integer-nanosecond timing (DESIGN section 6), against hand-worked cases."""
+import pytest
+
+from adcs_nodes.core.lockstep import (FrameSync, derive_seed, ns_to_seconds, period_to_frames,
+                                      seconds_to_ns)
+
+S = 1_000_000_000
+
+
+def test_seconds_ns_round_trip_is_exact_for_decimal_periods():
+    assert seconds_to_ns(0.1) == 100_000_000
+    assert seconds_to_ns(2.0) == 2 * S
+    # 0.1 s summed 10 times as floats is not 1 s; as integer ns it is
+    assert sum(seconds_to_ns(0.1) for _ in range(10)) == S
+    assert ns_to_seconds(1_500_000_000) == 1.5
+
+
+def test_period_must_be_a_multiple_of_the_frame():
+    assert period_to_frames(10.0, seconds_to_ns(2.0)) == 5
+    assert period_to_frames(0.3, seconds_to_ns(0.1)) == 3
+    with pytest.raises(ValueError, match='multiple'):
+        period_to_frames(2.5, seconds_to_ns(1.0))
+    with pytest.raises(ValueError, match='positive'):
+        period_to_frames(0.0, S)
+
+
+def test_due_inputs_gate_the_frame_and_others_are_latest():
+    # magnetometer every frame (1 s), command every 2 s
+    sync = FrameSync({'mag': S, 'cmd': 2 * S})
+    assert sync.missing(0) == ['mag', 'cmd']
+    sync.add('mag', 0, 'm0')
+    assert not sync.ready(0)
+    sync.add('cmd', 0, 'c0')
+    assert sync.ready(0)
+    # t = 1 s: only mag is due; cmd is taken as latest (stamped 0)
+    assert sync.missing(S) == ['mag']
+    sync.add('mag', S, 'm1')
+    assert sync.ready(S)
+    assert sync.value('cmd', S) == 'c0'
+    # t = 2 s: the old command does not satisfy the new due frame
+    sync.add('mag', 2 * S, 'm2')
+    assert sync.missing(2 * S) == ['cmd']
+
+
+def test_early_message_waits_for_its_frame_and_stale_stamp_does_not_count():
+    sync = FrameSync({'env': S})
+    sync.add('env', 2 * S, 'e2')      # arrived early
+    assert not sync.ready(S)          # a later stamp never satisfies an earlier frame
+    assert sync.value('env', S) is None
+    assert sync.ready(2 * S)
+    assert sync.value('env', 3 * S) == 'e2'   # latest at or before
+
+
+def test_zero_period_input_is_never_waited_for():
+    sync = FrameSync({'env': S, 'cmd': 0})
+    sync.add('env', 0, 'e')
+    assert sync.ready(0)
+    assert sync.value('cmd', 0) is None
+
+
+def test_prune_keeps_the_newest_older_message():
+    sync = FrameSync({'a': S})
+    for k in range(5):
+        sync.add('a', k * S, k)
+    sync.prune(4 * S)
+    assert sync.value('a', 3 * S) == 3
+    assert sync.value('a', 1 * S) is None
+
+
+def test_bad_declarations_raise():
+    with pytest.raises(ValueError):
+        FrameSync({'a': -1})
+    with pytest.raises(KeyError):
+        FrameSync({'a': S}).add('b', 0, 1)
+
+
+def test_derived_seeds_are_stable_and_distinct():
+    a = derive_seed(1, 'dynamics/disturbance')
+    assert a == derive_seed(1, 'dynamics/disturbance')
+    assert a != derive_seed(2, 'dynamics/disturbance')
+    assert a != derive_seed(1, 'magnetometer')
+    assert 0 <= a < 2 ** 64

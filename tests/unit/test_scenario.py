@@ -1,0 +1,100 @@
+"""Scenario validation: every shipped scenario loads; bad files fail naming key and line."""
+import os
+import re
+import textwrap
+
+import pytest
+
+from adcs_nodes.tools.graph import build_graph, params_file_text
+from adcs_nodes.tools.scenario import ScenarioError, load_scenario
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCEN = os.path.join(ROOT, 'scenarios')
+
+GOOD = textwrap.dedent("""\
+    name: t  # name
+    duration_s: 10.0  # s
+    orbit:  # orbit
+      altitude_km: 690.0  # km
+      inclination_deg: 98.0  # deg
+    field:  # field
+      model: dipole  # model
+    spacecraft:  # sc
+      inertia_kgm2: [1.0, 2.0, 3.0]  # kg m2
+    """)
+
+
+def write(tmp_path, text):
+    p = tmp_path / 's.yaml'
+    p.write_text(text)
+    return str(p)
+
+
+@pytest.mark.parametrize('fname', sorted(f for f in os.listdir(SCEN) if f.endswith('.yaml')))
+def test_shipped_scenarios_are_valid_and_every_key_is_commented(fname):
+    path = os.path.join(SCEN, fname)
+    sc = load_scenario(path)
+    assert sc['name']
+    key = re.compile(r'^\s*(- )?[A-Za-z_][A-Za-z0-9_]*:')
+    with open(path) as fh:
+        for i, line in enumerate(fh, 1):
+            if key.match(line):
+                assert '#' in line, f'{fname}:{i}: key without a comment: {line.strip()}'
+
+
+def test_defaults_are_filled(tmp_path):
+    sc = load_scenario(write(tmp_path, GOOD))
+    assert sc['timing'] == {'frame_s': 1.0, 'substeps': 10, 'timeout_s': 5.0}
+    assert sc['spacecraft']['inertia_kgm2'] == [[1, 0, 0], [0, 2, 0], [0, 0, 3]]
+    assert sc['orbit']['raan_deg'] == 0.0
+    assert 'magnetorquer' not in sc['spacecraft']
+
+
+def test_unknown_key_names_key_line_and_suggestion(tmp_path):
+    bad = GOOD.replace('  inclination_deg: 98.0', '  inclinaton_deg: 98.0')
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(write(tmp_path, bad))
+    msg = str(exc.value)
+    assert ':5: orbit.inclinaton_deg: unknown key' in msg
+    assert "did you mean 'inclination_deg'" in msg
+
+
+@pytest.mark.parametrize('old,new,expect', [
+    ('duration_s: 10.0', 'duration_s: ten', 'duration_s: expected a number'),
+    ('duration_s: 10.0', 'duration_s: .nan', 'finite'),
+    ('duration_s: 10.0', 'duration_s: -1.0', 'must be positive'),
+    ('duration_s: 10.0', 'duration_s: 10.5', 'whole number'),
+    ('model: dipole', 'model: wmm', "unknown model 'wmm'"),
+    ('[1.0, 2.0, 3.0]', '[1.0, 2.0]', 'expected 3 numbers or a 3x3'),
+    ('name: t  # name\n', '', 'name: missing required key'),
+    ('altitude_km: 690.0', 'altitude_km: [1]', 'expected a number'),
+])
+def test_bad_values_are_named(tmp_path, old, new, expect):
+    with pytest.raises(ScenarioError, match=expect.replace('[', r'\[')):
+        load_scenario(write(tmp_path, GOOD.replace(old, new)))
+
+
+def test_yaml_syntax_error_has_a_line(tmp_path):
+    with pytest.raises(ScenarioError, match=r's.yaml:\d+: YAML syntax error'):
+        load_scenario(write(tmp_path, GOOD + 'orbit: [unclosed\n'))
+
+
+def test_missing_file_and_non_mapping(tmp_path):
+    with pytest.raises(ScenarioError, match='no such scenario file'):
+        load_scenario(str(tmp_path / 'nope.yaml'))
+    with pytest.raises(ScenarioError, match='mapping'):
+        load_scenario(write(tmp_path, '- 1\n- 2\n'))
+
+
+def test_free_tumble_graph_converts_paper_conventions():
+    sc = load_scenario(os.path.join(SCEN, 'free_tumble.yaml'))
+    nodes = {n.name: n for n in build_graph(sc, 60.0, record=True)}
+    dyn = nodes['dynamics'].params
+    # paper 000 Lambda(0) scalar first -> scalar last
+    assert dyn['initial.q_orbit_body'] == pytest.approx([0.48, -0.48, 0.64, 0.36])
+    assert dyn['initial.omega_body_eci_body'][0] == pytest.approx(-3.0 * 3.141592653589793 / 180)
+    assert dyn['wait_for_nodes'] == ['environment', 'recorder']
+    assert 'pub:/clock=2' in dyn['expected_matches']        # environment + recorder
+    assert 'sub:sim/environment=1' in dyn['expected_matches']
+    text = params_file_text(list(nodes.values()))
+    assert '/dynamics:' in text and 'ros__parameters' in text
