@@ -190,8 +190,15 @@ class LockstepNode(Node):
             f'{self.timeout_s:g} s wall; going on with the last value '
             f'(missed frames: {self.missed_frames})')
 
-    def publish_status(self, t_ns: Optional[int] = None) -> None:
-        """Publish ``lockstep/status`` (frames, missed frames, wall time)."""
+    def publish_status(self, final: bool = False) -> None:
+        """Publish ``lockstep/status`` (frames, missed frames, wall time).
+
+        After the ``final`` one, the periodic timer publishes nothing more, so the final
+        status stays the latest a listener has.
+        """
+        if getattr(self, '_final_sent', False):
+            return
+        self._final_sent = bool(final)
         msg = LockstepStatus()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.node = self.get_name()

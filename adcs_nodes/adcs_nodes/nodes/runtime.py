@@ -29,11 +29,12 @@ def make_executor():
 
 
 def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None,
-               poll_s: float = 0.1) -> None:
+               poll_s: float = 0.1, linger_s: float = 0.3) -> None:
     """Spin ``nodes`` on one executor until SIGINT/SIGTERM, ``until()`` or every node is done.
 
     A node signals it has finished its job by setting ``node.done = True`` (for example the
-    dynamics node at the end of the scenario).
+    dynamics node at the end of the scenario); the executor then spins ``linger_s`` more so
+    reliable DDS can resend the last messages before the process exits.
     """
     nodes: List[Node] = list(nodes)
     executor = make_executor()
@@ -53,6 +54,7 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
             if until is not None and until():
                 break
             if nodes and all(getattr(n, 'done', False) for n in nodes):
+                executor.spin_until_future_complete(never, timeout_sec=linger_s)
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -21,7 +21,6 @@ import time
 from typing import Optional
 
 import numpy as np
-from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
@@ -269,11 +268,8 @@ class DynamicsNode(LockstepNode):
             f'done: {sim:g} s sim in {wall:.2f} s wall ({sim / max(wall, 1e-9):.1f}x real '
             f'time, {self.frames / max(wall, 1e-9):.0f} frames/s), missed frames '
             f'{self.missed_frames}')
-        self.publish_status()
-        # reliable delivery of the last frame before the process exits
-        for pub in (self.clock_pub, self.state_pub, self.wheels_pub, self._status_pub):
-            pub.wait_for_all_acked(Duration(seconds=2.0))
-        self.done = True
+        self.publish_status(final=True)
+        self.done = True  # the runtime lingers briefly (DDS resends) and exits
 
 
 def main(args=None) -> int:
