@@ -162,7 +162,7 @@ class LockstepNode(Node):
             waited = time.monotonic() - self._hs_t0
             if waited - self._hs_warned > 10.0:
                 self._hs_warned = waited
-                self.get_logger().warn(f'still waiting for endpoints after {waited:.0f} s: '
+                self.get_logger().warning(f'still waiting for endpoints after {waited:.0f} s: '
                                        + ', '.join(missing))
             return
         self._hs_timer.cancel()
@@ -185,7 +185,7 @@ class LockstepNode(Node):
         """Record a frame whose inputs ``inputs`` timed out, and log it."""
         self.missed_frames += 1
         self.last_missed_input = ','.join(inputs)
-        self.get_logger().warn(
+        self.get_logger().warning(
             f'frame t={t_ns / NS_PER_S:.3f} s: no {self.last_missed_input} within '
             f'{self.timeout_s:g} s wall; going on with the last value '
             f'(missed frames: {self.missed_frames})')

@@ -124,7 +124,7 @@ class DynamicsNode(LockstepNode):
         vals = (vec3(msg.r_eci), vec3(msg.v_eci), vec3(msg.b_eci), vec3(msg.b_dot_eci),
                 quat(msg.q_eci_orbit))
         if not all_finite(*vals):
-            self.get_logger().warn('sim/environment with non-finite values ignored')
+            self.get_logger().warning('sim/environment with non-finite values ignored')
             return
         self.sync.add('env', self.elapsed_ns(stamp_ns(msg.header.stamp)), msg)
         self.advance()
@@ -145,7 +145,7 @@ class DynamicsNode(LockstepNode):
         dipole, torque = vec3(msg.dipole_body), vec3(msg.torque_body)
         if wheel.size != n or not all_finite(dipole, torque, wheel):
             self.rejected_commands += 1
-            self.get_logger().warn(
+            self.get_logger().warning(
                 f'rejected actuator command from {msg.source!r} (non-finite or '
                 f'{wheel.size} wheel torques for {n} wheels): using zero command')
             return self.spacecraft.zero_command()

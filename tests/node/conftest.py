@@ -1,0 +1,50 @@
+"""In-process rclpy fixtures: a private context on a private ROS domain per test."""
+import os
+import time
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+
+
+@pytest.fixture
+def ros_context():
+    """A fresh rclpy context on this test's own domain (localhost discovery)."""
+    os.environ['ROS_DOMAIN_ID'] = str(150 + os.getpid() % 50)
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    if ctx.ok():
+        rclpy.shutdown(context=ctx)
+
+
+@pytest.fixture
+def spin(ros_context):
+    """``spin(nodes, until, timeout)``: spin nodes on one executor until ``until()`` or timeout.
+
+    Returns True when ``until()`` became true, False on timeout.
+    """
+    from rclpy.executors import SingleThreadedExecutor
+
+    executors = []
+
+    def _spin(nodes, until, timeout=10.0):
+        ex = SingleThreadedExecutor(context=ros_context)
+        executors.append(ex)
+        for n in nodes:
+            ex.add_node(n)
+        deadline = time.monotonic() + timeout
+        try:
+            while time.monotonic() < deadline:
+                ex.spin_once(timeout_sec=0.01)
+                if until():
+                    return True
+            return False
+        finally:
+            for n in nodes:
+                ex.remove_node(n)
+
+    yield _spin
+    for ex in executors:
+        ex.shutdown()
