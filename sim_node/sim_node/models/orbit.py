@@ -1,0 +1,457 @@
+"""Orbit models and Earth rotation of the simulated world (pure numpy, no ROS).
+
+Equations
+---------
+Circular Keplerian orbit, radius ``a = R_EARTH + altitude``, node unit vector ``p1``, in-plane
+unit vector ``p2`` (90 deg ahead of the node) and orbit normal ``p3``
+(columns of ``Rz(raan) Rx(i)``)::
+
+    n = sqrt(MU_EARTH / a^3),  T = 2 pi / n,  u(t) = u0 + n t                     (O1)
+    r_eci = a (cos u p1 + sin u p2),  v_eci = a n (-sin u p1 + cos u p2)        (O2)
+
+Orbit frame (papers 000/004; DESIGN section 4), columns of ``R_eci_orbit``::
+
+    z = r / |r| (zenith),  y = h / |h| with h = r x v (orbit normal),  x = y x z   (O3)
+
+``x`` is the along-track direction (equal to ``v / |v|`` on a circular orbit). The frame
+rotates with ``omega_orbit_eci_eci = h / |r|^2`` (exact for a Keplerian orbit, where ``h`` is
+constant; it neglects the slow turning of ``h`` under perturbations in :class:`Sgp4Orbit`).
+LVLH (paper 001): x along-track, y = -orbit normal, z nadir, i.e. a half turn about the orbit
+x axis: ``q_orbit_lvlh = [1, 0, 0, 0]``.
+
+Argument of latitude: angle from the ascending node ``N = e_z x h`` to ``r``, positive about
+``h``; for an equatorial orbit (``N = 0``) it is measured from the ECI x axis::
+
+    u = atan2(h_hat . (N_hat x r), N_hat . r)  in [0, 2 pi)                       (O4)
+
+Earth rotation (IAU 1982 GMST, Aoki et al. 1982, A&A 105:359; as in Vallado, *Fundamentals of
+Astrodynamics and Applications*, 4th ed., Example 3-5), ``T`` in Julian centuries of UT1 from
+J2000::
+
+    GMST [s] = 67310.54841 + (876600 h + 8640184.812866) T + 0.093104 T^2 - 6.2e-6 T^3  (E1)
+    R_eci_ecef = Rz(GMST),  q_eci_ecef = [0, 0, sin(GMST/2), cos(GMST/2)]          (E2)
+
+Approximations (stated honestly)
+--------------------------------
+* UT1 is taken equal to UTC: ``|UT1 - UTC| < 0.9 s``, i.e. < 6.6e-5 rad (0.004 deg) of Earth
+  rotation. Polar motion (< 0.5 arcsec) is ignored, so "ecef" is the pseudo-Earth-fixed frame.
+* :class:`Sgp4Orbit` returns SGP4's TEME frame (true equator, mean equinox of date) and this
+  module treats it as "eci". TEME -> Earth-fixed is exactly Rz(-GMST82) (Vallado et al. 2006,
+  AIAA 2006-6753), so the Earth-fixed position fed to the field models is right. TEME is NOT
+  J2000/GCRF: they differ by precession and nutation, about 50.3 arcsec per year since 2000
+  (about 0.35 deg in 2025) plus up to ~20 arcsec of nutation. TEME itself turns by only
+  ~8e-12 rad/s, negligible for the dynamics. Inside the simulator every node uses the same
+  "eci", so this matters only when comparing with external J2000 data (star catalogues).
+* For :class:`CircularOrbit` "eci" is the ideal inertial frame whose z axis is the Earth's
+  rotation axis and whose x axis is the GMST origin (mean equinox); RAAN is measured from it.
+
+References: Vallado (2013) ch. 2-3; Vallado, Crawford, Hujsak, Kelso, "Revisiting Spacetrack
+Report #3" (2006); paper 000 (Lebedev et al.) and its digest section 1.2 for the orbit frame.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
+from typing import Mapping, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from adcs_nodes.core import attitude
+
+MU_EARTH = 3.986004418e14
+"""Earth gravitational parameter [m^3/s^2] (WGS 84 / EGM96)."""
+R_EARTH = 6378137.0
+"""Earth equatorial radius [m] (WGS 84); altitudes are measured from it."""
+OMEGA_EARTH = 7.2921150e-5
+"""Earth rotation rate [rad/s] (WGS 84 nominal)."""
+
+Q_ORBIT_LVLH = np.array([1.0, 0.0, 0.0, 0.0])
+"""``q_orbit_lvlh`` (4,), scalar last: half turn about the orbit x axis."""
+Q_ORBIT_LVLH.setflags(write=False)
+
+_J2000 = datetime(2000, 1, 1, 12, 0, 0, tzinfo=timezone.utc)
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class OrbitState:
+    """Orbit state at one instant.
+
+    Attributes
+    ----------
+    r_eci : numpy.ndarray
+        Position, shape (3,) [m], ECI.
+    v_eci : numpy.ndarray
+        Velocity, shape (3,) [m/s], ECI.
+    q_eci_orbit : numpy.ndarray
+        Attitude of the orbit frame, shape (4,) scalar last: ``v_eci = R(q) v_orbit``.
+    omega_orbit_eci_eci : numpy.ndarray
+        Rate of the orbit frame w.r.t. ECI, shape (3,) [rad/s], ECI axes (``h / |r|^2``).
+    orbit_rate : float
+        ``|omega_orbit_eci_eci|`` [rad/s].
+    argument_of_latitude : float
+        Angle from the ascending node to ``r`` [rad], in [0, 2 pi).
+    """
+
+    r_eci: np.ndarray
+    v_eci: np.ndarray
+    q_eci_orbit: np.ndarray
+    omega_orbit_eci_eci: np.ndarray
+    orbit_rate: float
+    argument_of_latitude: float
+
+
+class OrbitModel(Protocol):
+    """What the rest of the simulator needs from an orbit model."""
+
+    epoch: datetime
+
+    def state(self, t: float) -> OrbitState:
+        """State at ``t`` seconds after :attr:`epoch`."""
+
+
+# ---------------------------------------------------------------------------- validation
+def _finite(value: float, name: str) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be a number, got {value!r}') from None
+    if not math.isfinite(value):
+        raise ValueError(f'{name} must be finite, got {value}')
+    return value
+
+
+def _vec3(v: ArrayLike, name: str) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f'{name} must be a finite array of shape (3,), got {v!r}')
+    return v
+
+
+def _utc(t_utc: datetime, name: str = 'epoch') -> datetime:
+    if not isinstance(t_utc, datetime):
+        raise ValueError(f'{name} must be a datetime, got {t_utc!r}')
+    if t_utc.tzinfo is None or t_utc.utcoffset() is None:
+        raise ValueError(f'{name} must be timezone-aware (UTC), got naive {t_utc}')
+    return t_utc.astimezone(timezone.utc)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    # np.cross costs ~10x more for single 3-vectors; this is called every frame.
+    return np.array([a[1] * b[2] - a[2] * b[1],
+                     a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
+# ------------------------------------------------------------------------ Earth rotation
+def gmst(t_utc: datetime, t: float = 0.0) -> float:
+    """Greenwich mean sidereal time, IAU 1982 formula (E1), with UT1 = UTC.
+
+    Parameters
+    ----------
+    t_utc : datetime
+        Timezone-aware instant.
+    t : float
+        Seconds added to ``t_utc`` (keeps full precision for ``epoch + t``).
+
+    Returns
+    -------
+    float
+        GMST [rad] in [0, 2 pi): angle from the ECI x axis to the ECEF x axis about z.
+    """
+    days = ((_utc(t_utc, 't_utc') - _J2000).total_seconds() + float(t)) / 86400.0
+    cent = days / 36525.0
+    # 876600 h T = 86400 s * days, kept apart from the small terms for precision.
+    sec = (67310.54841 + 86400.0 * math.fmod(days, 1.0)
+           + cent * (8640184.812866 + cent * (0.093104 - 6.2e-6 * cent)))
+    return (math.fmod(sec, 86400.0) / 86400.0 * _TWO_PI) % _TWO_PI
+
+
+def q_eci_ecef(t_utc: datetime, t: float = 0.0) -> np.ndarray:
+    """``q_eci_ecef`` (4,), scalar last: rotation by GMST about z (E2), ``t`` s after ``t_utc``."""
+    half = 0.5 * gmst(t_utc, t)
+    return np.array([0.0, 0.0, math.sin(half), math.cos(half)])
+
+
+def _rz(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def ecef_from_eci(r_eci: ArrayLike, t_utc: datetime, t: float = 0.0) -> np.ndarray:
+    """Earth-fixed components (3,) of the ECI vector ``r_eci`` (3,), any unit, at ``t_utc + t``."""
+    return _rz(gmst(t_utc, t)).T @ _vec3(r_eci, 'r_eci')
+
+
+def eci_from_ecef(r_ecef: ArrayLike, t_utc: datetime, t: float = 0.0) -> np.ndarray:
+    """ECI components (3,) of the Earth-fixed vector ``r_ecef`` (3,) at ``t_utc + t``."""
+    return _rz(gmst(t_utc, t)) @ _vec3(r_ecef, 'r_ecef')
+
+
+# ------------------------------------------------------------------------- orbit frames
+def _frame_axes(r: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    h = _cross(r, v)
+    nh, nr = math.sqrt(h @ h), math.sqrt(r @ r)
+    if nr == 0.0 or nh <= 1e-12 * nr * math.sqrt(v @ v):
+        raise ValueError('r and v must be non-zero and not parallel to define the orbit frame')
+    z = r / nr
+    y = h / nh
+    return _cross(y, z), y, z
+
+
+def orbit_frame_dcm(r_eci: ArrayLike, v_eci: ArrayLike) -> np.ndarray:
+    """``R_eci_orbit`` (3, 3): columns are the orbit x (along-track), y (normal), z (zenith).
+
+    Parameters
+    ----------
+    r_eci, v_eci : array_like
+        Position [m] and velocity [m/s], shape (3,), ECI.
+
+    Raises
+    ------
+    ValueError
+        If the inputs are not finite (3,) vectors, or ``r`` and ``v`` are zero or parallel.
+    """
+    x, y, z = _frame_axes(_vec3(r_eci, 'r_eci'), _vec3(v_eci, 'v_eci'))
+    return np.column_stack((x, y, z))
+
+
+def q_eci_orbit(r_eci: ArrayLike, v_eci: ArrayLike) -> np.ndarray:
+    """``q_eci_orbit`` (4,), scalar last, ``w >= 0``, of the orbit frame (O3)."""
+    return attitude.from_matrix(orbit_frame_dcm(r_eci, v_eci))
+
+
+def q_eci_lvlh(r_eci: ArrayLike, v_eci: ArrayLike) -> np.ndarray:
+    """``q_eci_lvlh`` (4,), scalar last: LVLH (x along-track, y -normal, z nadir) in ECI."""
+    return attitude.multiply(q_eci_orbit(r_eci, v_eci), Q_ORBIT_LVLH)
+
+
+def _argument_of_latitude(r: np.ndarray, h_hat: np.ndarray) -> float:
+    node = np.array([-h_hat[1], h_hat[0], 0.0])  # e_z x h_hat
+    nn = math.sqrt(node @ node)
+    node = node / nn if nn > 1e-12 else np.array([1.0, 0.0, 0.0])
+    u = math.atan2(h_hat @ _cross(node, r), node @ r)
+    return u % _TWO_PI
+
+
+def state_from_rv(r_eci: ArrayLike, v_eci: ArrayLike) -> OrbitState:
+    """:class:`OrbitState` of a position (3,) [m] and velocity (3,) [m/s] in ECI (O3, O4)."""
+    r, v = _vec3(r_eci, 'r_eci'), _vec3(v_eci, 'v_eci')
+    x, y, z = _frame_axes(r, v)
+    omega = _cross(r, v) / (r @ r)
+    return OrbitState(r, v, _quat_from_axes(x, y, z), omega, float(math.sqrt(omega @ omega)),
+                      _argument_of_latitude(r, y))
+
+
+def _quat_from_axes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    # Shepperd's method on R = [x y z], as attitude.from_matrix (a test pins the equality) but
+    # without its orthonormality checks (40 us -> 5 us); the axes are orthonormal by construction.
+    m00, m11, m22 = x[0], y[1], z[2]
+    tr = m00 + m11 + m22
+    i = int(np.argmax((m00, m11, m22, tr)))
+    if i == 3:
+        w = 0.5 * math.sqrt(1.0 + tr)
+        q = np.array([y[2] - z[1], z[0] - x[2], x[1] - y[0], 4.0 * w * w]) / (4.0 * w)
+    elif i == 0:
+        s = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
+        q = np.array([0.25 * s * s, x[1] + y[0], z[0] + x[2], y[2] - z[1]]) / s
+    elif i == 1:
+        s = 2.0 * math.sqrt(1.0 + m11 - m00 - m22)
+        q = np.array([x[1] + y[0], 0.25 * s * s, y[2] + z[1], z[0] - x[2]]) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 + m22 - m00 - m11)
+        q = np.array([z[0] + x[2], y[2] + z[1], 0.25 * s * s, x[1] - y[0]]) / s
+    return -q if q[3] < 0.0 else q
+
+
+# ------------------------------------------------------------------------------ orbits
+class CircularOrbit:
+    """Keplerian circular orbit (O1, O2) around a point-mass Earth.
+
+    Parameters
+    ----------
+    altitude_m : float
+        Height above ``R_EARTH`` [m], > 0.
+    inclination_rad : float
+        Inclination [rad], in [0, pi].
+    raan_rad : float
+        Right ascension of the ascending node [rad] (from the ECI x axis).
+    arg_latitude0_rad : float
+        Argument of latitude at ``t = 0`` [rad].
+    epoch : datetime
+        Timezone-aware UTC instant of ``t = 0`` (the orbit itself does not depend on it).
+
+    Raises
+    ------
+    ValueError
+        On a non-finite or out-of-range argument, or a naive ``epoch``.
+    """
+
+    def __init__(self, altitude_m: float, inclination_rad: float, raan_rad: float = 0.0,
+                 arg_latitude0_rad: float = 0.0, *, epoch: datetime) -> None:
+        altitude_m = _finite(altitude_m, 'altitude_m')
+        if altitude_m <= 0.0:
+            raise ValueError(f'altitude_m must be > 0, got {altitude_m}')
+        inc = _finite(inclination_rad, 'inclination_rad')
+        if not 0.0 <= inc <= math.pi:
+            raise ValueError(f'inclination_rad must be in [0, pi], got {inc}')
+        self.raan = _finite(raan_rad, 'raan_rad')
+        self.arg_latitude0 = _finite(arg_latitude0_rad, 'arg_latitude0_rad')
+        self.epoch = _utc(epoch)
+        self.inclination = inc
+        self.radius = R_EARTH + altitude_m
+        self._n = math.sqrt(MU_EARTH / self.radius ** 3)
+        # Columns p1 (node), p2 (in-plane, 90 deg ahead), p3 (orbit normal) of Rz(raan) Rx(i).
+        self._p = attitude.to_matrix(attitude.multiply(
+            attitude.from_axis_angle([0.0, 0.0, 1.0], self.raan),
+            attitude.from_axis_angle([1.0, 0.0, 0.0], inc)))
+        self._omega = self._n * self._p[:, 2]
+
+    @property
+    def mean_motion(self) -> float:
+        """Orbital rate ``n = sqrt(mu / a^3)`` [rad/s]."""
+        return self._n
+
+    @property
+    def period(self) -> float:
+        """Orbital period ``2 pi / n`` [s]."""
+        return _TWO_PI / self._n
+
+    def state(self, t: float) -> OrbitState:
+        """:class:`OrbitState` at ``t`` seconds after :attr:`epoch`."""
+        u = (self.arg_latitude0 + self._n * float(t)) % _TWO_PI
+        c, s = math.cos(u), math.sin(u)
+        p1, p2 = self._p[:, 0], self._p[:, 1]
+        zen = c * p1 + s * p2
+        along = c * p2 - s * p1
+        normal = self._p[:, 2]
+        return OrbitState(self.radius * zen, self.radius * self._n * along,
+                          _quat_from_axes(along, normal, zen), self._omega.copy(), self._n, u)
+
+
+class Sgp4Orbit:
+    """SGP4/SDP4 propagation of a two-line element set with the ``sgp4`` library.
+
+    Positions and velocities are SGP4's TEME frame, used as "eci" (see the module docstring
+    for the size of that approximation), converted from km and km/s to m and m/s. The elements
+    are parsed with the WGS 72 constants, as TLEs are generated.
+
+    Parameters
+    ----------
+    line1, line2 : str
+        The two TLE lines (69 characters each, valid checksums).
+    epoch : datetime or None
+        Timezone-aware instant of ``t = 0``; ``None`` uses the TLE epoch.
+
+    Raises
+    ------
+    ValueError
+        On a malformed TLE (length, line numbers, checksum, satellite number, parse error),
+        elements that SGP4 rejects at the epoch, or a naive ``epoch``.
+    """
+
+    def __init__(self, line1: str, line2: str, epoch: datetime | None = None) -> None:
+        from sgp4.api import WGS72, Satrec
+        from sgp4.conveniences import sat_epoch_datetime
+
+        line1, line2 = _check_tle_line(line1, 1), _check_tle_line(line2, 2)
+        if line1[2:7] != line2[2:7]:
+            raise ValueError(f'TLE satellite numbers differ: {line1[2:7]!r} vs {line2[2:7]!r}')
+        try:
+            self._sat = Satrec.twoline2rv(line1, line2, WGS72)
+        except Exception as exc:  # the parser raises assorted types on bad fields
+            raise ValueError(f'malformed TLE: {exc}') from None
+        if self._sat.error:
+            raise ValueError(f'malformed TLE (sgp4 error {self._sat.error})')
+        self.tle_epoch = sat_epoch_datetime(self._sat).astimezone(timezone.utc)
+        self.epoch = self.tle_epoch if epoch is None else _utc(epoch)
+        self._t0_min = (self.epoch - self.tle_epoch) / timedelta(minutes=1)
+        try:
+            self.state(0.0)
+        except RuntimeError as exc:
+            raise ValueError(f'TLE cannot be propagated to the epoch: {exc}') from None
+
+    @property
+    def mean_motion(self) -> float:
+        """TLE (Kozai) mean motion [rad/s]."""
+        return self._sat.no_kozai / 60.0
+
+    @property
+    def period(self) -> float:
+        """Period from the TLE mean motion, ``2 pi / n`` [s]."""
+        return _TWO_PI / self.mean_motion
+
+    def state(self, t: float) -> OrbitState:
+        """:class:`OrbitState` at ``t`` seconds after :attr:`epoch` (TEME as ECI).
+
+        Raises
+        ------
+        RuntimeError
+            If SGP4 fails at that time (e.g. the satellite has decayed).
+        """
+        err, r_km, v_kms = self._sat.sgp4_tsince(self._t0_min + float(t) / 60.0)
+        if err or not math.isfinite(r_km[0] + v_kms[0]):
+            from sgp4.api import SGP4_ERRORS
+
+            raise RuntimeError(f'SGP4 error {err}: {SGP4_ERRORS.get(err, "non-finite state")}')
+        return state_from_rv(np.multiply(r_km, 1e3), np.multiply(v_kms, 1e3))
+
+
+def _check_tle_line(line: str, number: int) -> str:
+    if not isinstance(line, str):
+        raise ValueError(f'TLE line{number} must be a string, got {line!r}')
+    line = line.strip()
+    if len(line) != 69 or not line.startswith(f'{number} '):
+        raise ValueError(f'TLE line{number} must be 69 characters starting with "{number} ", '
+                         f'got {line!r}')
+    total = sum(int(c) if c.isdigit() else (1 if c == '-' else 0) for c in line[:68])
+    if not line[68].isdigit() or int(line[68]) != total % 10:
+        raise ValueError(f'TLE line{number} checksum is {line[68]!r}, expected {total % 10}')
+    return line
+
+
+# ----------------------------------------------------------------------------- factory
+_ORBIT_KEYS = {
+    'circular': ({'type', 'altitude_km', 'inclination_deg'}, {'raan_deg', 'arg_latitude0_deg'}),
+    'tle': ({'type', 'line1', 'line2'}, set()),
+}
+
+
+def make_orbit(cfg: Mapping, epoch: datetime) -> CircularOrbit | Sgp4Orbit:
+    """Build an orbit model from a scenario mapping.
+
+    Parameters
+    ----------
+    cfg : mapping
+        ``{'type': 'circular', 'altitude_km', 'inclination_deg', 'raan_deg'=0,
+        'arg_latitude0_deg'=0}`` or ``{'type': 'tle', 'line1', 'line2'}``.
+    epoch : datetime
+        Timezone-aware scenario epoch (``t = 0``), also used for a TLE.
+
+    Raises
+    ------
+    ValueError
+        On an unknown type, a missing or unknown key (named in the message), or a bad value.
+    """
+    if not isinstance(cfg, Mapping) or 'type' not in cfg:
+        raise ValueError("orbit config must be a mapping with a 'type' key")
+    kind = cfg['type']
+    if kind not in _ORBIT_KEYS:
+        raise ValueError(f'unknown orbit type {kind!r}; expected one of {sorted(_ORBIT_KEYS)}')
+    required, optional = _ORBIT_KEYS[kind]
+    missing = sorted(required - set(cfg))
+    if missing:
+        raise ValueError(f'orbit config of type {kind!r} is missing key(s) {missing}')
+    unknown = sorted(set(cfg) - required - optional)
+    if unknown:
+        raise ValueError(f'orbit config of type {kind!r} has unknown key(s) {unknown}')
+    if kind == 'tle':
+        return Sgp4Orbit(cfg['line1'], cfg['line2'], epoch=epoch)
+    return CircularOrbit(_finite(cfg['altitude_km'], 'altitude_km') * 1e3,
+                         math.radians(_finite(cfg['inclination_deg'], 'inclination_deg')),
+                         math.radians(_finite(cfg.get('raan_deg', 0.0), 'raan_deg')),
+                         math.radians(_finite(cfg.get('arg_latitude0_deg', 0.0),
+                                              'arg_latitude0_deg')),
+                         epoch=epoch)
