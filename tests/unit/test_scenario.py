@@ -98,3 +98,9 @@ def test_free_tumble_graph_converts_paper_conventions():
     assert 'sub:sim/environment=1' in dyn['expected_matches']
     text = params_file_text(list(nodes.values()))
     assert '/dynamics:' in text and 'ros__parameters' in text
+
+
+def test_docs_scenarios_md_is_generated_from_the_schema():
+    from adcs_nodes.tools.scenario import schema_markdown
+    with open(os.path.join(ROOT, 'docs', 'scenarios.md')) as fh:
+        assert fh.read() == schema_markdown(), 'run: ros2_ws/run.sh adcs schema > docs/scenarios.md'

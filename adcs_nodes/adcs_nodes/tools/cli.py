@@ -10,6 +10,8 @@ Commands
     Scenarios (with their description) and the known nodes.
 ``adcs validate SCENARIO``
     Check a scenario file only (errors name the key and the line).
+``adcs schema``
+    Every scenario key with type, default and meaning (this is ``docs/scenarios.md``).
 ``adcs export BAG --csv DIR``
     One CSV per topic, flattened fields, time column ``t`` in seconds.
 ``adcs report BAG [--out DIR]``
@@ -92,6 +94,12 @@ def cmd_validate(args) -> int:
     return 0
 
 
+def cmd_schema(args) -> int:
+    from adcs_nodes.tools.scenario import schema_markdown
+    print(schema_markdown(), end='')
+    return 0
+
+
 def cmd_export(args) -> int:
     from adcs_nodes.tools.export import export_csv
     try:
@@ -149,6 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('validate', help='check a scenario file')
     p.add_argument('scenario')
     p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser('schema', help='print every scenario key (Markdown table)')
+    p.set_defaults(func=cmd_schema)
 
     p = sub.add_parser('export', help='export a bag to CSV files')
     p.add_argument('bag')
