@@ -1,0 +1,422 @@
+"""Recorder node: every topic (or a list), raw CDR, into a rosbag2 MCAP bag via ``rosbags``.
+
+``ros2 bag`` is not available as a PyPI wheel (DESIGN section 3), so this node is the
+project's recorder. It subscribes with ``raw=True`` and writes the serialized bytes unchanged;
+the bag is a rosbag2 directory (``metadata.yaml`` version 8, readable by Jazzy and Kilted)
+with one ``.mcap`` file whose schemas embed the full ``ros2msg`` definitions (RIHS01 hashes equal
+to the installed interfaces), so ``ros2 bag info``, Foxglove and ``rosbags`` read it.
+
+Parameters
+----------
+output : str
+    Bag directory to create, default ``adcs_bag_<UTC date-time>``. An existing path is an
+    error (never overwritten).
+topics : string array
+    Absolute or relative topic names to record; empty (default) records every topic found on
+    the graph, re-scanned every ``discovery_period_s``.
+exclude : string array
+    Topics never recorded (exact names or ``fnmatch`` patterns), default
+    ``['/rosout', '/parameter_events']``. The recorder's own status topic is always excluded.
+discovery_period_s : float
+    Wall-clock period of the graph scan [s], default 0.5.
+status_period_s : float
+    Wall-clock period of ``recorder/status`` [s], default 0.5.
+
+Topics
+------
+``recorder/status`` (``adcs_msgs/LockstepStatus``): ``node`` = node name, ``frames`` = messages
+written, ``header.stamp`` = latest ``/clock`` seen, ``missed_frames`` = messages the middleware
+reported lost, ``last_missed_input`` = topic of the last loss, ``wall_time`` = wall seconds
+since the first message written. A launcher waits on it (clock stamp reached the end of the
+run, frame count stable) before stopping the recorder. A launcher that needs every message of
+a topic waits, before starting the simulation, until :func:`recorder_subscribed` is true.
+
+QoS
+---
+A topic is subscribed once it has at least one publisher: reliable (best effort if any
+publisher is best effort, since a reliable reader would not match it), KEEP_LAST 1000, and
+TRANSIENT_LOCAL when every publisher is transient local (latched topics such as
+``adcs/controller_status``: the value published before the recorder started is recorded),
+else VOLATILE. The publishers' QoS are stored as ``offered_qos_profiles``.
+
+Time stamps
+-----------
+The log time of a message is its receive time in the node's clock (sim time when the launcher
+sets ``use_sim_time``). Before the first ``/clock`` arrives (node clock at 0) it is the
+message's own stamp (``header.stamp``, or ``clock`` of ``rosgraph_msgs/Clock``), else the
+latest log time written, else wall time. Log times are kept non-decreasing per topic, so
+reading a topic in log-time order gives the arrival order. Log times differ between two runs of
+the same simulation; message contents and counts do not (reliable, deep queues, no
+reordering within a topic). The analysis tools (:mod:`adcs_nodes.tools.bag`, export, report)
+use header stamps, never log times.
+"""
+from __future__ import annotations
+
+import fnmatch
+import importlib
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Set
+
+from adcs_msgs.msg import LockstepStatus
+from builtin_interfaces.msg import Time
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import ParameterUninitializedException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
+                                QosTime)
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosgraph_msgs.msg import Clock as ClockMsg
+
+from adcs_nodes.nodes import runtime
+from adcs_nodes.tools.bag import cdr_stamp_ns, ensure_type, make_typestore, stamp_kind
+
+DEFAULT_EXCLUDE = ['/rosout', '/parameter_events']
+QUEUE_DEPTH = 1000
+BAG_VERSION = 8
+STATUS_TOPIC = 'recorder/status'
+CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
+
+
+class OutputExistsError(FileExistsError, ValueError):
+    """The bag output path exists already (a configuration error: choose another ``output``)."""
+
+
+def default_output() -> str:
+    """Default bag directory name ``adcs_bag_YYYY_MM_DD-HH_MM_SS`` (UTC)."""
+    return 'adcs_bag_' + datetime.now(timezone.utc).strftime('%Y_%m_%d-%H_%M_%S')
+
+
+def import_message_class(msgtype: str):
+    """Python class of the ROS interface ``pkg/msg/Name`` (no ``rosidl_runtime_py`` needed).
+
+    Raises
+    ------
+    ValueError
+        If the name is malformed; ``ImportError`` / ``AttributeError`` if not installed.
+    """
+    parts = msgtype.split('/')
+    if len(parts) != 3:
+        raise ValueError(f'message type must look like pkg/msg/Name, got {msgtype!r}')
+    pkg, iface, name = parts
+    return getattr(importlib.import_module(f'{pkg}.{iface}'), name)
+
+
+def recorder_subscribed(node: Node, topics: Sequence[str], recorder_name: str = 'recorder'
+                        ) -> bool:
+    """Whether the node ``recorder_name`` has a subscription on every one of ``topics``.
+
+    For a launcher: wait for this (spinning) before starting the simulation, so that the bag
+    holds every message from the first frame on.
+    """
+    for topic in topics:
+        infos = node.get_subscriptions_info_by_topic(topic)
+        if not any(info.node_name == recorder_name for info in infos):
+            return False
+    return True
+
+
+def _qos_time(duration) -> QosTime:
+    sec, nsec = divmod(int(duration.nanoseconds), 1_000_000_000)
+    return QosTime(sec, nsec)
+
+
+def _to_bag_qos(profile: QoSProfile) -> Qos:
+    """rosbags ``Qos`` of an rclpy ``QoSProfile`` (enum members are matched by name)."""
+    def conv(enum_cls, policy):
+        name = getattr(policy, 'name', None)
+        if name is None:
+            return enum_cls(int(policy))
+        return enum_cls[name] if name in enum_cls.__members__ else enum_cls.UNKNOWN
+
+    return Qos(
+        history=conv(QosHistory, profile.history),
+        depth=int(profile.depth),
+        reliability=conv(QosReliability, profile.reliability),
+        durability=conv(QosDurability, profile.durability),
+        deadline=_qos_time(profile.deadline),
+        lifespan=_qos_time(profile.lifespan),
+        liveliness=conv(QosLiveliness, profile.liveliness),
+        liveliness_lease_duration=_qos_time(profile.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions),
+    )
+
+
+def subscription_qos(publisher_profiles: Sequence[QoSProfile]) -> QoSProfile:
+    """QoS the recorder uses for a topic with these publishers (see the module docstring)."""
+    best_effort = any(p.reliability == ReliabilityPolicy.BEST_EFFORT
+                      for p in publisher_profiles)
+    latched = bool(publisher_profiles) and all(
+        p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publisher_profiles)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=QUEUE_DEPTH,
+        reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )
+
+
+@dataclass
+class _Topic:
+    """Book-keeping of one recorded topic."""
+
+    name: str
+    msgtype: str
+    connection: object
+    subscription: object
+    stamp_kind: Optional[str]
+    count: int = 0
+    last_ns: int = 0
+    lost: int = 0
+
+
+class RecorderNode(Node):
+    """Record topics raw into a rosbag2 MCAP bag (parameters and QoS: module docstring).
+
+    Parameters
+    ----------
+    node_name : str
+        ROS node name, default ``'recorder'``.
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ...).
+
+    Raises
+    ------
+    OutputExistsError
+        If ``output`` exists (a ``ValueError``: the runtime reports it as a configuration
+        error).
+    """
+
+    def __init__(self, node_name: str = 'recorder', **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        self._writer: Optional[Writer] = None
+        try:
+            self._configure()
+        except Exception:
+            if self._writer is not None:  # opened before the failure: leave a valid bag
+                self._writer.close()
+                self._writer = None
+            super().destroy_node()
+            raise
+
+    def _configure(self) -> None:
+        """Read the parameters, open the bag, create the timers and the status publisher."""
+        self.declare_parameter('output', '', ParameterDescriptor(
+            description='bag directory to create (default adcs_bag_<UTC time>)'))
+        # no default value: rclpy would type an empty list as a byte array
+        self.declare_parameter('topics', Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+            description='topics to record; unset or empty: every topic'))
+        self.declare_parameter('exclude', list(DEFAULT_EXCLUDE), ParameterDescriptor(
+            description='topics (or fnmatch patterns) never recorded'))
+        self.declare_parameter('discovery_period_s', 0.5)
+        self.declare_parameter('status_period_s', 0.5)
+
+        output = str(self.get_parameter('output').value or '') or default_output()
+        self.output = Path(output)
+        if self.output.exists():
+            raise OutputExistsError(f"output {self.output} exists already, not overwriting "
+                                    "(choose another 'output')")
+        try:
+            wanted = [str(t) for t in (self.get_parameter('topics').value or []) if str(t)]
+        except ParameterUninitializedException:
+            wanted = []
+        self._wanted: Optional[Set[str]] = {self._resolve(t) for t in wanted} or None
+        self._exclude = [self._resolve(t) for t in (self.get_parameter('exclude').value or [])]
+        discovery_s = float(self.get_parameter('discovery_period_s').value)
+        status_s = float(self.get_parameter('status_period_s').value)
+        if discovery_s <= 0.0 or status_s <= 0.0:
+            raise ValueError('discovery_period_s and status_period_s must be > 0')
+
+        self._store = make_typestore()
+        self._writer = Writer(self.output, version=BAG_VERSION,
+                              storage_plugin=StoragePlugin.MCAP)
+        self._writer.open()
+        self._writer.set_custom_data('recorder', 'adcs_nodes.nodes.recorder')
+
+        self._topics: Dict[str, _Topic] = {}
+        self._skipped: Set[str] = set()
+        self.messages_written = 0
+        self.messages_lost = 0
+        self._last_lost_topic = ''
+        self._last_log_ns = 0
+        self._latest_clock_ns = 0
+        self._first_write_wall: Optional[float] = None
+
+        self._status_pub = self.create_publisher(LockstepStatus, STATUS_TOPIC, 10)
+        self._status_topic = self._status_pub.topic_name
+        self.create_subscription(ClockMsg, '/clock', self._on_clock,
+                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._discovery_timer = self.create_timer(discovery_s, self.discover, clock=steady)
+        self._status_timer = self.create_timer(status_s, self.publish_status, clock=steady)
+        what = 'every topic' if self._wanted is None else ', '.join(sorted(self._wanted))
+        self.get_logger().info(f'recording {what} into {self.output} '
+                               f'(excluding {", ".join(self._exclude) or "nothing"})')
+        self.discover()
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def counts(self) -> Dict[str, int]:
+        """Messages written per topic."""
+        return {name: rec.count for name, rec in self._topics.items()}
+
+    @property
+    def topics(self) -> List[str]:
+        """Topics being recorded, in the order they were added."""
+        return list(self._topics)
+
+    @property
+    def is_open(self) -> bool:
+        """Whether the bag is still open for writing."""
+        return self._writer is not None
+
+    # ------------------------------------------------------------------ discovery
+    def _resolve(self, topic: str) -> str:
+        try:
+            return self.resolve_topic_name(topic)
+        except Exception:  # noqa: BLE001 - older rclpy without it, or an invalid name
+            return topic if topic.startswith('/') else '/' + topic
+
+    def _excluded(self, topic: str) -> bool:
+        if topic == self._status_topic:
+            return True
+        return any(topic == pat or fnmatch.fnmatchcase(topic, pat) for pat in self._exclude)
+
+    def discover(self) -> None:
+        """Scan the graph once and subscribe to every new topic that has a publisher."""
+        if self._writer is None:
+            return
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._topics or topic in self._skipped or self._excluded(topic):
+                continue
+            if self._wanted is not None and topic not in self._wanted:
+                continue
+            publishers = self.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue  # the publishers' QoS decide ours: wait for one
+            self._add_topic(topic, types, publishers)
+
+    def _skip(self, topic: str, why: str) -> None:
+        self._skipped.add(topic)
+        self.get_logger().warning(f'not recording {topic}: {why}')
+
+    def _add_topic(self, topic: str, types: Sequence[str], publishers) -> None:
+        msgtype = types[0]
+        if len(types) > 1:
+            self.get_logger().warning(f'{topic} has several types {list(types)}; '
+                                      f'recording {msgtype}')
+        try:
+            msg_class = import_message_class(msgtype)
+        except (ImportError, AttributeError, ValueError) as exc:
+            self._skip(topic, f'cannot import {msgtype} ({exc})')
+            return
+        if not ensure_type(self._store, msgtype):
+            self._skip(topic, f'no .msg definition found for {msgtype}')
+            return
+        profiles = [info.qos_profile for info in publishers]
+        qos = subscription_qos(profiles)
+        connection = self._writer.add_connection(
+            topic, msgtype, typestore=self._store,
+            offered_qos_profiles=[_to_bag_qos(p) for p in profiles])
+        rec = _Topic(topic, msgtype, connection, None, stamp_kind(self._store, msgtype))
+        events = SubscriptionEventCallbacks(
+            message_lost=lambda info, r=rec: self._on_lost(r, info))
+        rec.subscription = self.create_subscription(
+            msg_class, topic, lambda raw, r=rec: self._on_message(r, raw), qos,
+            event_callbacks=events, raw=True)
+        self._topics[topic] = rec
+        self.get_logger().info(
+            f'recording {topic} [{msgtype}] ({qos.reliability.name.lower()}, '
+            f'{qos.durability.name.lower()}, {len(publishers)} publisher(s))')
+
+    # ------------------------------------------------------------------ callbacks
+    def _log_time_ns(self, rec: _Topic, raw: bytes) -> int:
+        """Log time of a message (module docstring, 'Time stamps')."""
+        t_ns = self.get_clock().now().nanoseconds
+        if t_ns <= 0:  # sim time active, no /clock yet
+            stamp = cdr_stamp_ns(raw) if rec.stamp_kind else None
+            if stamp is not None and stamp > 0:
+                t_ns = stamp
+            elif self._last_log_ns > 0:
+                t_ns = self._last_log_ns
+            else:
+                t_ns = time.time_ns()
+        t_ns = max(t_ns, rec.last_ns)
+        rec.last_ns = t_ns
+        self._last_log_ns = max(self._last_log_ns, t_ns)
+        return t_ns
+
+    def _on_message(self, rec: _Topic, raw: bytes) -> None:
+        if self._writer is None:
+            return
+        if rec.msgtype == CLOCK_TYPE:
+            stamp = cdr_stamp_ns(raw)
+            if stamp is not None:
+                self._latest_clock_ns = max(self._latest_clock_ns, stamp)
+        self._writer.write(rec.connection, self._log_time_ns(rec, raw), raw)
+        rec.count += 1
+        self.messages_written += 1
+        if self._first_write_wall is None:
+            self._first_write_wall = time.monotonic()
+
+    def _on_lost(self, rec: _Topic, info) -> None:
+        lost = int(getattr(info, 'total_count_change', 1) or 1)
+        rec.lost += lost
+        self.messages_lost += lost
+        self._last_lost_topic = rec.name
+        self.get_logger().warning(f'{lost} message(s) lost on {rec.name}')
+
+    def _on_clock(self, msg: ClockMsg) -> None:
+        stamp = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+        self._latest_clock_ns = max(self._latest_clock_ns, stamp)
+
+    def publish_status(self) -> None:
+        """Publish ``recorder/status`` now (also called by the wall-clock timer)."""
+        msg = LockstepStatus()
+        sec, nanosec = divmod(self._latest_clock_ns, 1_000_000_000)
+        msg.header.stamp = Time(sec=int(sec), nanosec=int(nanosec))
+        msg.node = self.get_name()
+        msg.frames = self.messages_written
+        msg.missed_frames = min(self.messages_lost, 2**32 - 1)
+        msg.last_missed_input = self._last_lost_topic
+        if self._first_write_wall is not None:
+            msg.wall_time = time.monotonic() - self._first_write_wall
+        self._status_pub.publish(msg)
+
+    # ------------------------------------------------------------------ shutdown
+    def close(self) -> None:
+        """Stop recording and finalise the bag (MCAP summary + ``metadata.yaml``). Idempotent."""
+        writer, self._writer = getattr(self, '_writer', None), None
+        if writer is None:
+            return
+        self._discovery_timer.cancel()
+        for rec in self._topics.values():
+            self.destroy_subscription(rec.subscription)
+        try:
+            writer.close()
+        except Exception as exc:  # noqa: BLE001 - report, the node is going down anyway
+            self.get_logger().error(f'closing {self.output} failed: {exc}')
+            raise
+        self.publish_status()
+        self.get_logger().info(f'bag {self.output} closed: {self.messages_written} messages '
+                               f'on {len(self._topics)} topics')
+
+    def destroy_node(self) -> None:
+        """Close the bag (if still open) before destroying the node."""
+        self.close()
+        super().destroy_node()
+
+
+def main(args=None) -> int:
+    """Entry point ``ros2 run adcs_nodes recorder``."""
+    return runtime.run(RecorderNode, args=args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,388 @@
+"""rosbag2 (MCAP) helpers on top of the ``rosbags`` library: typestore, reading, summaries.
+
+The bags written by :mod:`adcs_nodes.nodes.recorder` are rosbag2 directories (``metadata.yaml``
+plus one ``.mcap`` file) whose MCAP schemas carry the full ``ros2msg`` definition of every
+type, so ``rosbags``, Foxglove and ``ros2 bag`` read them without this package. The helpers
+here add what the analysis tools need:
+
+* :func:`make_typestore` -- the standard ROS 2 types of the running distribution plus every
+  ``adcs_msgs`` message (from the installed share directory, else the source tree);
+* :func:`ensure_type` -- load any other installed ``pkg/msg/Name`` from its ``.msg`` file;
+* :func:`read_messages`, :func:`topic_summary` -- deserialised reading with clear errors
+  (``FileNotFoundError`` for a missing bag, ``ValueError`` naming the path for a corrupt one);
+* :func:`flatten_message`, :func:`header_stamp_ns`, :func:`content_digest` -- the flat view used
+  by the CSV export, the report and determinism checks.
+
+Time: the bag's log time of a message is its receive time in the recorder's clock and differs
+between runs of the same simulation. Every analysis tool uses the message's ``header.stamp``
+(the simulated time the value belongs to) and falls back to the log time only for types
+without a header.
+
+The module imports neither ``rclpy`` nor any generated message package.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import os
+import struct
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+from typing import Any, Dict, Iterable, Iterator, List, Optional, Sequence, Tuple
+
+import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
+
+ADCS_PACKAGE = 'adcs_msgs'
+
+#: Types whose content depends on the wall clock (``wall_time``, per-second publication), so
+#: two runs of the same deterministic simulation legitimately differ in them.
+NONDETERMINISTIC_TYPES = ('adcs_msgs/msg/LockstepStatus',)
+
+#: Header-like first fields: a message whose first field has one of these types is stamped.
+_STAMP_FIELD_TYPES = {
+    'std_msgs/msg/Header': True,          # stamp inside the header
+    'builtin_interfaces/msg/Time': False,  # the field itself is the stamp (rosgraph_msgs/Clock)
+}
+
+_PREFERRED_STORES = ('ros2_kilted', 'ros2_jazzy')
+
+
+def _store_for_distro() -> Stores:
+    """Typestore of ``$ROS_DISTRO`` when rosbags has it, else the newest of Kilted / Jazzy."""
+    distro = os.environ.get('ROS_DISTRO', '').strip().lower()
+    names = ([f'ros2_{distro}'] if distro else []) + list(_PREFERRED_STORES)
+    for name in names:
+        try:
+            return Stores(name)
+        except ValueError:
+            continue
+    return Stores.LATEST
+
+
+def _share_msg_dir(package: str) -> Optional[Path]:
+    """``share/<package>/msg`` found through the ament index, or ``None``."""
+    try:
+        from ament_index_python.packages import (PackageNotFoundError,
+                                                 get_package_share_directory)
+    except ImportError:
+        return None
+    try:
+        path = Path(get_package_share_directory(package)) / 'msg'
+    except (PackageNotFoundError, ValueError, LookupError, OSError):
+        return None
+    return path if path.is_dir() else None
+
+
+def adcs_msg_dir() -> Path:
+    """Directory with the ``adcs_msgs`` ``.msg`` files.
+
+    The installed share directory (ament index) wins; without an install the source tree next
+    to this package (``<repo>/adcs_msgs/msg``) is used.
+
+    Raises
+    ------
+    FileNotFoundError
+        If neither location holds ``.msg`` files.
+    """
+    share = _share_msg_dir(ADCS_PACKAGE)
+    if share is not None and any(share.glob('*.msg')):
+        return share
+    source = Path(__file__).resolve().parents[3] / ADCS_PACKAGE / 'msg'
+    if source.is_dir() and any(source.glob('*.msg')):
+        return source
+    raise FileNotFoundError(
+        f'cannot find the {ADCS_PACKAGE} .msg files (not installed, and no {source})')
+
+
+def make_typestore() -> Typestore:
+    """Return a new rosbags typestore: standard ROS 2 types plus every ``adcs_msgs`` message.
+
+    The standard store is the one of ``$ROS_DISTRO`` when rosbags ships it, else Kilted (the
+    distribution of the PyPI wheels), else Jazzy. Its type hashes (RIHS01) equal those of the
+    installed interfaces, so bags written with it carry the same hashes as ``ros2 bag`` would.
+
+    Returns
+    -------
+    rosbags.typesys.store.Typestore
+        A fresh store; callers may register more types in it.
+    """
+    store = get_typestore(_store_for_distro())
+    types: Dict[str, Any] = {}
+    for path in sorted(adcs_msg_dir().glob('*.msg')):
+        types.update(get_types_from_msg(path.read_text(), f'{ADCS_PACKAGE}/msg/{path.stem}'))
+    store.register(types)
+    return store
+
+
+def _referenced_types(fielddef: Any) -> Iterator[str]:
+    """Names of the message types referenced by one rosbags field descriptor."""
+    node, arg = fielddef
+    if getattr(node, 'name', '') == 'NAME':
+        yield arg
+    elif getattr(node, 'name', '') in ('ARRAY', 'SEQUENCE'):
+        yield from _referenced_types(arg[0])
+
+
+def ensure_type(store: Typestore, msgtype: str) -> bool:
+    """Make ``msgtype`` (``pkg/msg/Name``) and its dependencies known to ``store``.
+
+    Types missing from the store are parsed from the installed ``share/<pkg>/msg/<Name>.msg``
+    (ament index), recursively for the types they reference.
+
+    Returns
+    -------
+    bool
+        ``True`` when the type (and all it references) is now in the store, ``False`` when a
+        definition cannot be found (not installed, or not a ``msg`` type).
+    """
+    if msgtype in store.fielddefs:
+        return True
+    parts = msgtype.split('/')
+    if len(parts) != 3 or parts[1] != 'msg':
+        return False
+    pkg, _, name = parts
+    msg_dir = _share_msg_dir(pkg)
+    if msg_dir is None and pkg == ADCS_PACKAGE:
+        msg_dir = adcs_msg_dir()
+    path = msg_dir / f'{name}.msg' if msg_dir is not None else None
+    if path is None or not path.is_file():
+        return False
+    try:
+        types = get_types_from_msg(path.read_text(), msgtype)
+        store.register(types)
+    except TypesysError:
+        return False
+    for _, fields in types.values():
+        for _, fielddef in fields:
+            for dep in _referenced_types(fielddef):
+                if not ensure_type(store, dep):
+                    return False
+    return True
+
+
+def stamp_kind(store: Typestore, msgtype: str) -> Optional[str]:
+    """How a CDR message of ``msgtype`` carries its time stamp.
+
+    Returns
+    -------
+    str or None
+        ``'header'`` when the first field is a ``std_msgs/Header``, ``'time'`` when it is a
+        ``builtin_interfaces/Time`` (``rosgraph_msgs/Clock``), ``None`` otherwise. In both stamped
+        cases the stamp is the first member of the CDR payload (see :func:`cdr_stamp_ns`).
+    """
+    fielddef = store.fielddefs.get(msgtype)
+    if not fielddef or not fielddef[1]:
+        return None
+    _, (node, arg) = fielddef[1][0]
+    if getattr(node, 'name', '') == 'NAME' and arg in _STAMP_FIELD_TYPES:
+        return 'header' if _STAMP_FIELD_TYPES[arg] else 'time'
+    return None
+
+
+def cdr_stamp_ns(raw: bytes) -> Optional[int]:
+    """Time stamp [ns] at the start of a serialised CDR message, or ``None`` if unreadable.
+
+    Valid for types where :func:`stamp_kind` is not ``None``: the payload after the 4-byte
+    encapsulation header starts with ``int32 sec, uint32 nanosec``.
+    """
+    if len(raw) < 12:
+        return None
+    fmt = '<iI' if raw[1] & 0x01 else '>iI'
+    sec, nanosec = struct.unpack_from(fmt, raw, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+def header_stamp_ns(msg: Any) -> Optional[int]:
+    """``header.stamp`` (or the ``clock`` of ``rosgraph_msgs/Clock``) in ns, else ``None``."""
+    stamp = getattr(getattr(msg, 'header', None), 'stamp', None)
+    if stamp is None:
+        stamp = getattr(msg, 'clock', None)
+    if stamp is None or not hasattr(stamp, 'nanosec'):
+        return None
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def _is_message(value: Any) -> bool:
+    return dataclasses.is_dataclass(value) and not isinstance(value, type)
+
+
+def _message_fields(msg: Any) -> Iterator[Tuple[str, Any]]:
+    for field in dataclasses.fields(msg):
+        name = field.name
+        if name.startswith('__') or name == 'structure_needs_at_least_one_member':
+            continue
+        yield name, getattr(msg, name)
+
+
+def _scalar(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def flatten_message(msg: Any, prefix: str = '') -> List[Tuple[str, Any]]:
+    """Flatten a deserialised rosbags message into ``(dotted_name, scalar)`` pairs.
+
+    Nested messages give ``r_eci.x``; arrays (fixed and variable) give ``name[0]``,
+    ``name[1]``, ..., recursively (``poses[2].position.x``). Values are Python scalars
+    (``float``, ``int``, ``bool``, ``str``); ``uint8[]`` stays one element per column.
+    """
+    out: List[Tuple[str, Any]] = []
+    for name, value in _message_fields(msg):
+        key = f'{prefix}{name}'
+        _flatten_value(key, value, out)
+    return out
+
+
+def _flatten_value(key: str, value: Any, out: List[Tuple[str, Any]]) -> None:
+    if _is_message(value):
+        out.extend(flatten_message(value, f'{key}.'))
+    elif isinstance(value, (np.ndarray, list, tuple, bytes, bytearray)):
+        for i, item in enumerate(value):
+            _flatten_value(f'{key}[{i}]', item, out)
+    else:
+        out.append((key, _scalar(value)))
+
+
+def _resolve(bag_path: os.PathLike | str) -> Path:
+    """Path handed to rosbags: the bag directory, or its single ``.mcap`` if metadata is gone."""
+    path = Path(bag_path)
+    if not path.exists():
+        raise FileNotFoundError(f'bag not found: {path}')
+    if path.is_dir() and not (path / 'metadata.yaml').exists():
+        mcaps = sorted(path.glob('*.mcap'))
+        if len(mcaps) != 1:
+            raise ValueError(f'{path}: not a rosbag2 bag (no metadata.yaml and '
+                             f'{len(mcaps)} .mcap files)')
+        return mcaps[0]
+    return path
+
+
+@contextmanager
+def open_bag(bag_path: os.PathLike | str) -> Iterator[AnyReader]:
+    """Open a rosbag2 bag (directory or ``.mcap`` file) as an open rosbags ``AnyReader``.
+
+    Types come from the definitions embedded in the bag; :func:`make_typestore` serves bags
+    without embedded definitions.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``bag_path`` does not exist.
+    ValueError
+        If it is not a readable bag (message names the path and the reason).
+    """
+    path = _resolve(bag_path)
+    try:
+        reader = AnyReader([path], default_typestore=make_typestore())
+        reader.open()
+    except FileNotFoundError:
+        raise
+    except Exception as exc:  # rosbags raises several unrelated error types for bad files
+        raise ValueError(f'{bag_path}: cannot read bag: {exc}') from exc
+    try:
+        yield reader
+    finally:
+        try:
+            reader.close()
+        except Exception:  # noqa: BLE001 - closing a broken reader must not mask the error
+            pass
+
+
+def read_messages(bag_path: os.PathLike | str, topics: Optional[Iterable[str]] = None
+                  ) -> Iterator[Tuple[str, int, Any]]:
+    """Yield ``(topic, log_time_ns, message)`` in log-time order, messages deserialised.
+
+    Parameters
+    ----------
+    bag_path : path-like
+        Bag directory (``metadata.yaml`` + ``.mcap``) or a ``.mcap`` file.
+    topics : iterable of str, optional
+        Only these topics (absolute names, e.g. ``/sim/state``); all when ``None``.
+
+    Notes
+    -----
+    Within one topic the order is the recording order: the recorder keeps log times
+    non-decreasing per topic. Use :func:`header_stamp_ns` for the simulated time.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        See :func:`open_bag`; ``ValueError`` also for a corrupt chunk found while reading.
+    """
+    wanted = None if topics is None else set(topics)
+    stack = ExitStack()
+    reader = stack.enter_context(open_bag(bag_path))  # errors raise here, not on first next()
+    return _iterate(stack, reader, wanted, bag_path)
+
+
+def _iterate(stack: ExitStack, reader: AnyReader, wanted: Optional[set],
+             bag_path: os.PathLike | str) -> Iterator[Tuple[str, int, Any]]:
+    with stack:
+        conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        if not conns:
+            return
+        try:
+            for conn, t_ns, raw in reader.messages(connections=conns):
+                yield conn.topic, t_ns, reader.deserialize(raw, conn.msgtype)
+        except Exception as exc:
+            raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
+
+
+def list_topics(bag_path: os.PathLike | str) -> Dict[str, str]:
+    """``{topic: msgtype}`` of the bag's connections (no message is read)."""
+    with open_bag(bag_path) as reader:
+        return {c.topic: c.msgtype for c in sorted(reader.connections, key=lambda c: c.topic)}
+
+
+def topic_summary(bag_path: os.PathLike | str) -> Dict[str, Tuple[str, int, int, int]]:
+    """Per topic: ``(msgtype, count, first_log_ns, last_log_ns)`` (times 0 when empty).
+
+    Counts and times come from reading every record (not deserialised), so they are exact
+    even for a bag whose metadata is missing.
+    """
+    out: Dict[str, List[Any]] = {}
+    with open_bag(bag_path) as reader:
+        for conn in reader.connections:
+            out.setdefault(conn.topic, [conn.msgtype, 0, 0, 0])
+        try:
+            for conn, t_ns, _ in reader.messages():
+                entry = out[conn.topic]
+                if entry[1] == 0:
+                    entry[2] = entry[3] = t_ns
+                entry[1] += 1
+                entry[2] = min(entry[2], t_ns)
+                entry[3] = max(entry[3], t_ns)
+        except Exception as exc:
+            raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
+    return {topic: tuple(entry) for topic, entry in sorted(out.items())}
+
+
+def content_digest(bag_path: os.PathLike | str,
+                   exclude_types: Sequence[str] = NONDETERMINISTIC_TYPES
+                   ) -> Dict[str, Tuple[int, str]]:
+    """Per topic ``(count, sha256)`` of the message contents in recording order.
+
+    Log times are ignored; two runs of the same deterministic simulation give equal digests
+    for every topic whose type is not in ``exclude_types`` (by default the wall-clock status
+    types of :data:`NONDETERMINISTIC_TYPES`). The hash is over the flattened, deserialised
+    values (``repr`` of floats is exact), not over raw CDR bytes whose padding is unspecified.
+    """
+    hashes: Dict[str, Any] = {}
+    counts: Dict[str, int] = {}
+    with open_bag(bag_path) as reader:
+        conns = [c for c in reader.connections if c.msgtype not in set(exclude_types)]
+        if conns:
+            for conn, _, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                h = hashes.setdefault(conn.topic, hashlib.sha256())
+                h.update(repr(flatten_message(msg)).encode())
+                h.update(b'\n')
+                counts[conn.topic] = counts.get(conn.topic, 0) + 1
+        for conn in conns:
+            hashes.setdefault(conn.topic, hashlib.sha256())
+            counts.setdefault(conn.topic, 0)
+    return {t: (counts[t], hashes[t].hexdigest()) for t in sorted(hashes)}
