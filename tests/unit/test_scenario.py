@@ -103,4 +103,5 @@ def test_free_tumble_graph_converts_paper_conventions():
 def test_docs_scenarios_md_is_generated_from_the_schema():
     from adcs_nodes.tools.scenario import schema_markdown
     with open(os.path.join(ROOT, 'docs', 'scenarios.md')) as fh:
-        assert fh.read() == schema_markdown(), 'run: ros2_ws/run.sh adcs schema > docs/scenarios.md'
+        assert fh.read() == schema_markdown(), \
+            'regenerate: ros2_ws/run.sh adcs schema > docs/scenarios.md'
