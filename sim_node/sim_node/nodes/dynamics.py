@@ -217,6 +217,8 @@ class DynamicsNode(LockstepNode):
     # ------------------------------------------------------------------ real time
     def on_rt_tick(self) -> None:
         """Real-time mode: publish frame k, then step with the latest inputs (no waiting)."""
+        if self.done:
+            return
         t = self.t_ns
         self.clock_pub.publish(Clock(clock=self.stamp(t)))
         env_msg = self.sync.value('env', t)
