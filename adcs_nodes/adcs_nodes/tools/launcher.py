@@ -10,6 +10,8 @@
   recorder has seen the final clock, then stops every child with SIGINT (SIGKILL after a grace
   period). A child that dies first stops the run with a message naming it and the tail of its log.
 * Ctrl-C stops every child the same way; the bag is closed and valid.
+* While a run is active, ``~/.cache/adcs/runs/active-<pid>.json`` names its domain, run
+  directory, bag and node PIDs (for ``adcs switch``/``adcs status`` and the tests).
 """
 from __future__ import annotations
 
@@ -253,6 +255,9 @@ class Launcher:
         code, message = 0, ''
         try:
             self._spawn(env, params_path)
+            manifest['pids'] = {name: proc.pid for name, proc in self.procs.items()}
+            with open(manifest_path, 'w') as fh:
+                json.dump(manifest, fh)
             code, message = self._watch(monitor, t0)
         finally:
             self._stop_all()
