@@ -103,9 +103,13 @@ class LockstepNode(Node):
         return default if value is None else value
 
     def section(self, prefix: str, defaults: Dict[str, Any]) -> Dict[str, Any]:
-        """Parameters ``prefix.*`` as a dict merged over ``defaults`` (for model factories)."""
+        """Parameters ``prefix.*`` as a dict (for model factories); ``defaults`` if none given.
+
+        The defaults are not merged into a given section: a section selects its own variant
+        (``orbit.type: tle`` has other keys than the default circular orbit).
+        """
         given = {k: p.value for k, p in self.get_parameters_by_prefix(prefix).items()}
-        return {**defaults, **given}
+        return given if given else dict(defaults)
 
     # ------------------------------------------------------------------ endpoints
     def publisher(self, msg_type, topic: str, qos: QoSProfile = QOS_DATA):

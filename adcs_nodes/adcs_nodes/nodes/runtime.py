@@ -71,6 +71,15 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
         executor.shutdown()
 
 
+def _node_name(args, factory) -> str:
+    """Node name from ``-r __node:=NAME`` in the arguments, else the factory's name."""
+    argv = list(args) if args is not None else sys.argv
+    for item in argv:
+        if item.startswith('__node:='):
+            return item.split(':=', 1)[1]
+    return getattr(factory, '__name__', 'node')
+
+
 def run(factory: Callable[[], Node], args=None) -> int:
     """Entry point body of a node executable: init rclpy, build the node, spin, shut down.
 
@@ -85,7 +94,7 @@ def run(factory: Callable[[], Node], args=None) -> int:
         spin_nodes([node])
         code = int(getattr(node, 'exit_code', 0))
     except ValueError as exc:  # configuration errors: one clear line, no traceback
-        name = node.get_name() if node is not None else getattr(factory, '__name__', 'node')
+        name = node.get_name() if node is not None else _node_name(args, factory)
         print(f'[{name}] configuration error: {exc}', file=sys.stderr)
         code = 2
     finally:

@@ -60,8 +60,10 @@ def cmd_run(args) -> int:
         return 2
     result = launcher.run()
     rtf = result.sim_time_s / result.wall_time_s if result.wall_time_s else 0.0
-    print(f'[adcs] {result.message}: {result.sim_time_s:g} s sim in {result.wall_time_s:.1f} s '
-          f'wall ({rtf:.1f}x real time), missed frames {result.missed_frames}')
+    stream = sys.stdout if result.exit_code == 0 else sys.stderr
+    print(f'[adcs] {result.message}', file=stream)
+    print(f'[adcs] {result.sim_time_s:g} s sim in {result.wall_time_s:.1f} s wall '
+          f'({rtf:.1f}x real time), missed frames {result.missed_frames}')
     if result.bag:
         print(f'[adcs] bag: {result.bag}')
     if result.exit_code == 0 and args.report and result.bag:
