@@ -166,8 +166,8 @@ class LockstepNode(Node):
             waited = time.monotonic() - self._hs_t0
             if waited - self._hs_warned > 10.0:
                 self._hs_warned = waited
-                self.get_logger().warning(f'still waiting for endpoints after {waited:.0f} s: '
-                                       + ', '.join(missing))
+                self.get_logger().warning(
+                    f'still waiting for endpoints after {waited:.0f} s: ' + ', '.join(missing))
             return
         self._hs_timer.cancel()
         self.destroy_timer(self._hs_timer)
