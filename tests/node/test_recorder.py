@@ -147,7 +147,10 @@ def test_records_every_message_latched_and_schemas(context, executor, tmp_path):
                                       and recorder.counts.get('/chatter') == N
                                       and recorder.counts.get('/clock') == 1),
                    what='all messages recorded')
-        spin_until(executor, lambda: statuses and statuses[-1].frames == 2 * N + 2,
+        # + the latched lockstep/ready of the recorder itself (no expectations: ready at once)
+        spin_until(executor, lambda: recorder.counts.get('/lockstep/ready') == 1,
+                   what='own lockstep/ready')
+        spin_until(executor, lambda: statuses and statuses[-1].frames == 2 * N + 3,
                    what='recorder/status')
         assert statuses[-1].node == 'recorder'
         assert (statuses[-1].header.stamp.sec, statuses[-1].header.stamp.nanosec) == (
@@ -175,7 +178,9 @@ def test_records_every_message_latched_and_schemas(context, executor, tmp_path):
     summary = topic_summary(bag)
     assert summary['/sim/environment'][:2] == ('adcs_msgs/msg/Environment', N)
     assert summary['/chatter'][:2] == ('std_msgs/msg/String', N)
-    assert set(summary) == {'/sim/environment', '/chatter', '/clock', '/adcs/controller_status'}
+    assert set(summary) == {'/sim/environment', '/chatter', '/clock', '/adcs/controller_status',
+                            '/lockstep/ready'}
+    assert [m.data for m in got['/lockstep/ready']] == ['recorder']
 
     # metadata.yaml carries the RIHS01 hashes of the installed interfaces
     with Reader(bag) as reader:
@@ -197,7 +202,7 @@ def test_records_every_message_latched_and_schemas(context, executor, tmp_path):
         env_def = next(c for c in reader.connections if c.topic == '/sim/environment')
         assert env_def.msgdef.data.startswith('std_msgs/Header header\n')
         assert 'MSG: geometry_msgs/Vector3' in env_def.msgdef.data
-        assert len(list(reader.messages())) == 2 * N + 2
+        assert len(list(reader.messages())) == 2 * N + 3
     raw = mcap_files[0].read_bytes()
     assert raw.startswith(b'\x89MCAP0\r\n') and raw.endswith(b'\x89MCAP0\r\n')
     assert b'ros2msg' in raw and b'adcs_msgs/msg/ControllerStatus' in raw
@@ -250,3 +255,47 @@ def test_existing_output_is_an_error(context, tmp_path):
     assert isinstance(info.value, ValueError)  # the runtime reports it as a config error
     assert [p.name for p in out.iterdir()] == ['keep.txt']
     assert (out / 'keep.txt').read_text() == 'precious'
+
+
+def test_handshake_typed_topics_and_clock_log_time(context, executor, tmp_path):
+    """``lockstep/ready`` only once the expected publishers matched; without use_sim_time the
+    log time is the latest /clock; /clock is subscribed once (one DDS match per topic)."""
+    talker = Node('talker3', context=context)
+    ready = []
+    talker.create_subscription(String, 'lockstep/ready', lambda m: ready.append(m.data),
+                               QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                          durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    clock_pub = talker.create_publisher(Clock, '/clock', 10)
+    executor.add_node(talker)
+    bag = tmp_path / 'hsbag'
+    recorder = RecorderNode(context=context, parameter_overrides=[
+        Parameter('output', value=str(bag)),
+        Parameter('topics', value=['hs=std_msgs/msg/String', '/clock']),
+        Parameter('expected_matches', value=['sub:hs=1', 'sub:/clock=1'])])
+    executor.add_node(recorder)
+    try:
+        spin_until(executor, lambda: '/clock' in recorder.topics, what='/clock subscription')
+        deadline = time.monotonic() + 0.3
+        spin_until(executor, lambda: time.monotonic() > deadline, what='idle')
+        assert not recorder.ready and ready == []  # no publisher on hs yet
+        hs_pub = talker.create_publisher(String, 'hs', 10)
+        spin_until(executor, lambda: 'recorder' in ready, what='lockstep/ready')
+        assert recorder.ready and recorder.unmatched() == []
+        clock_subs = [i for i in talker.get_subscriptions_info_by_topic('/clock')
+                      if i.node_name == 'recorder']
+        assert len(clock_subs) == 1
+        spin_until(executor, lambda: clock_pub.get_subscription_count() > 0, what='clock match')
+        clock = Clock()
+        clock.clock.sec = 1_900_000_000
+        clock_pub.publish(clock)
+        spin_until(executor, lambda: recorder.counts.get('/clock') == 1, what='clock recorded')
+        hs_pub.publish(String(data='after clock'))
+        spin_until(executor, lambda: recorder.counts.get('/hs') == 1, what='hs recorded')
+    finally:
+        recorder.close()
+        executor.remove_node(recorder)
+        recorder.destroy_node()
+        executor.remove_node(talker)
+        talker.destroy_node()
+    got = [(topic, t) for topic, t, _ in read_messages(bag)]
+    assert got == [('/clock', 1_900_000_000 * 10**9), ('/hs', 1_900_000_000 * 10**9)]

@@ -250,3 +250,40 @@ def test_tools_import_without_rclpy():
                          text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert int(out.stdout.strip()) > 100
+
+
+def _small_bag(path, log_offset_s, order, value=1.0):
+    store = make_typestore()
+    T = store.types
+    with Writer(path, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        env = writer.add_connection('/sim/wheels', 'adcs_msgs/msg/WheelState', typestore=store)
+        ready = writer.add_connection('/lockstep/ready', 'std_msgs/msg/String', typestore=store)
+        status = writer.add_connection('/lockstep/status', 'adcs_msgs/msg/LockstepStatus',
+                                       typestore=store)
+        for k in range(5):
+            msg = T['adcs_msgs/msg/WheelState'](
+                header=T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
+                    sec=EPOCH_S + k, nanosec=0), frame_id='body'),
+                names=['w'], momentum=np.array([value * k]), speed=np.zeros(1),
+                torque=np.zeros(1), h_wheels_body=T['geometry_msgs/msg/Vector3'](x=0, y=0, z=0))
+            t_log = (EPOCH_S + k + log_offset_s) * 10**9
+            writer.write(env, t_log, store.serialize_cdr(msg, 'adcs_msgs/msg/WheelState'))
+            st = T['adcs_msgs/msg/LockstepStatus'](
+                header=msg.header, node='x', frames=k, missed_frames=0, last_missed_input='',
+                wall_time=log_offset_s + 0.1 * k)
+            writer.write(status, t_log, store.serialize_cdr(st, 'adcs_msgs/msg/LockstepStatus'))
+        for i, name in enumerate(order):
+            writer.write(ready, (EPOCH_S + log_offset_s) * 10**9 + i,
+                         store.serialize_cdr(T['std_msgs/msg/String'](data=name),
+                                             'std_msgs/msg/String'))
+
+
+def test_content_digest_ignores_log_times_and_publisher_interleaving(tmp_path):
+    _small_bag(tmp_path / 'a', 0, ['dynamics', 'environment', 'recorder'])
+    _small_bag(tmp_path / 'b', 77, ['recorder', 'dynamics', 'environment'])
+    _small_bag(tmp_path / 'c', 0, ['dynamics', 'environment', 'recorder'], value=1.0 + 1e-15)
+    a, b, c = (content_digest(tmp_path / x) for x in 'abc')
+    assert a == b
+    assert '/lockstep/status' not in a  # wall-clock content, excluded by default
+    assert a['/sim/wheels'][0] == 5 and a['/lockstep/ready'][0] == 3
+    assert c['/sim/wheels'] != a['/sim/wheels'] and c['/lockstep/ready'] == a['/lockstep/ready']

@@ -12,8 +12,9 @@ output : str
     Bag directory to create, default ``adcs_bag_<UTC date-time>``. An existing path is an
     error (never overwritten).
 topics : string array
-    Absolute or relative topic names to record; empty (default) records every topic found on
-    the graph, re-scanned every ``discovery_period_s``.
+    Topics to record, absolute or relative, optionally with their type as ``topic=pkg/msg/Name``
+    (the graph's type wins, with a warning, if they differ); unset or empty (default) records
+    every topic found on the graph. The graph is re-scanned every ``discovery_period_s``.
 exclude : string array
     Topics never recorded (exact names or ``fnmatch`` patterns), default
     ``['/rosout', '/parameter_events']``. The recorder's own status topic is always excluded.
@@ -21,6 +22,12 @@ discovery_period_s : float
     Wall-clock period of the graph scan [s], default 0.5.
 status_period_s : float
     Wall-clock period of ``recorder/status`` [s], default 0.5.
+expected_matches : string array
+    Lockstep start handshake (as :mod:`adcs_nodes.nodes.lockstep_node`): entries
+    ``sub:<topic>=<n>`` (the recording subscription of ``topic`` has ``n`` matched publishers)
+    or ``pub:<topic>=<n>``. When all hold, the node publishes its name once on the latched
+    ``lockstep/ready``, so the clock master starts only when the recorder listens. Unset: ready
+    at once.
 
 Topics
 ------
@@ -29,7 +36,10 @@ written, ``header.stamp`` = latest ``/clock`` seen, ``missed_frames`` = messages
 reported lost, ``last_missed_input`` = topic of the last loss, ``wall_time`` = wall seconds
 since the first message written. A launcher waits on it (clock stamp reached the end of the
 run, frame count stable) before stopping the recorder. A launcher that needs every message of
-a topic waits, before starting the simulation, until :func:`recorder_subscribed` is true.
+a topic gives ``expected_matches`` and waits for ``lockstep/ready``, or waits until
+:func:`recorder_subscribed` is true, before starting the simulation. ``/clock`` is subscribed
+once only (the recording subscription when ``/clock`` is recorded), so the recorder adds
+exactly one DDS match per recorded topic to the publishers' handshakes.
 
 QoS
 ---
@@ -41,10 +51,13 @@ else VOLATILE. The publishers' QoS are stored as ``offered_qos_profiles``.
 
 Time stamps
 -----------
-The log time of a message is its receive time in the node's clock (sim time when the launcher
-sets ``use_sim_time``). Before the first ``/clock`` arrives (node clock at 0) it is the
-message's own stamp (``header.stamp``, or ``clock`` of ``rosgraph_msgs/Clock``), else the
-latest log time written, else wall time. Log times are kept non-decreasing per topic, so
+The log time of a message is its receive time in simulated time when there is a simulation:
+the node's clock with ``use_sim_time``, else the latest ``/clock`` the recorder received (the
+lockstep launcher does not set ``use_sim_time``: its time-source subscription would be one more
+DDS match on ``/clock``). Without any ``/clock`` publisher it is the system time, as with
+``ros2 bag record``. In a simulation whose clock has not ticked yet it is the message's own
+stamp (``header.stamp``, or ``clock`` of ``rosgraph_msgs/Clock``), else the latest log time
+written, else wall time. Log times are kept non-decreasing per topic, so
 reading a topic in log-time order gives the arrival order. Log times differ between two runs of
 the same simulation; message contents and counts do not (reliable, deep queues, no
 reordering within a topic). The analysis tools (:mod:`adcs_nodes.tools.bag`, export, report)
@@ -73,6 +86,7 @@ from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, Q
                                 QosTime)
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosgraph_msgs.msg import Clock as ClockMsg
+from std_msgs.msg import String
 
 from adcs_nodes.nodes import runtime
 from adcs_nodes.tools.bag import cdr_stamp_ns, ensure_type, make_typestore, stamp_kind
@@ -81,6 +95,12 @@ DEFAULT_EXCLUDE = ['/rosout', '/parameter_events']
 QUEUE_DEPTH = 1000
 BAG_VERSION = 8
 STATUS_TOPIC = 'recorder/status'
+READY_TOPIC = 'lockstep/ready'
+#: Same QoS as the lockstep nodes' ready topic: reliable, transient local.
+QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                       history=HistoryPolicy.KEEP_LAST,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+HANDSHAKE_PERIOD_S = 0.02
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 
 
@@ -216,6 +236,10 @@ class RecorderNode(Node):
             description='topics (or fnmatch patterns) never recorded'))
         self.declare_parameter('discovery_period_s', 0.5)
         self.declare_parameter('status_period_s', 0.5)
+        self.declare_parameter('expected_matches', Parameter.Type.STRING_ARRAY,
+                               ParameterDescriptor(description=(
+                                   'start handshake: "sub:<topic>=<n>" publishers matched to '
+                                   'our subscription (lockstep/ready when all hold)')))
 
         output = str(self.get_parameter('output').value or '') or default_output()
         self.output = Path(output)
@@ -223,11 +247,20 @@ class RecorderNode(Node):
             raise OutputExistsError(f"output {self.output} exists already, not overwriting "
                                     "(choose another 'output')")
         try:
-            wanted = [str(t) for t in (self.get_parameter('topics').value or []) if str(t)]
+            entries = [str(t) for t in (self.get_parameter('topics').value or []) if str(t)]
         except ParameterUninitializedException:
-            wanted = []
-        self._wanted: Optional[Set[str]] = {self._resolve(t) for t in wanted} or None
+            entries = []
+        self._declared_types: Dict[str, str] = {}
+        wanted = set()
+        for entry in entries:
+            topic, _, msgtype = entry.partition('=')
+            topic = self._resolve(topic.strip())
+            wanted.add(topic)
+            if msgtype.strip():
+                self._declared_types[topic] = msgtype.strip()
+        self._wanted: Optional[Set[str]] = wanted or None
         self._exclude = [self._resolve(t) for t in (self.get_parameter('exclude').value or [])]
+        self._expected = self._parse_expected()
         discovery_s = float(self.get_parameter('discovery_period_s').value)
         status_s = float(self.get_parameter('status_period_s').value)
         if discovery_s <= 0.0 or status_s <= 0.0:
@@ -246,15 +279,26 @@ class RecorderNode(Node):
         self._last_lost_topic = ''
         self._last_log_ns = 0
         self._latest_clock_ns = 0
+        self._clock_in_graph = False
         self._first_write_wall: Optional[float] = None
 
         self._status_pub = self.create_publisher(LockstepStatus, STATUS_TOPIC, 10)
         self._status_topic = self._status_pub.topic_name
-        self.create_subscription(ClockMsg, '/clock', self._on_clock,
-                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        self._ready_pub = self.create_publisher(String, READY_TOPIC, QOS_READY)
+        self.ready = False
+        records_clock = not self._excluded('/clock') and (
+            self._wanted is None or '/clock' in self._wanted)
+        if not records_clock:
+            # /clock recorded: its raw callback gives the latest clock, and a second
+            # subscription would be an extra DDS match in the lockstep start handshake
+            self.create_subscription(ClockMsg, '/clock', self._on_clock, QoSProfile(
+                depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._last_discovery = 0.0
         self._discovery_timer = self.create_timer(discovery_s, self.discover, clock=steady)
         self._status_timer = self.create_timer(status_s, self.publish_status, clock=steady)
+        self._handshake_timer = self.create_timer(HANDSHAKE_PERIOD_S, self._check_ready,
+                                                  clock=steady)
         what = 'every topic' if self._wanted is None else ', '.join(sorted(self._wanted))
         self.get_logger().info(f'recording {what} into {self.output} '
                                f'(excluding {", ".join(self._exclude) or "nothing"})')
@@ -284,7 +328,7 @@ class RecorderNode(Node):
             return topic if topic.startswith('/') else '/' + topic
 
     def _excluded(self, topic: str) -> bool:
-        if topic == self._status_topic:
+        if topic == getattr(self, '_status_topic', None):
             return True
         return any(topic == pat or fnmatch.fnmatchcase(topic, pat) for pat in self._exclude)
 
@@ -292,7 +336,10 @@ class RecorderNode(Node):
         """Scan the graph once and subscribe to every new topic that has a publisher."""
         if self._writer is None:
             return
+        self._last_discovery = time.monotonic()
         for topic, types in self.get_topic_names_and_types():
+            if topic == '/clock' and not self._clock_in_graph:
+                self._clock_in_graph = bool(self.get_publishers_info_by_topic(topic))
             if topic in self._topics or topic in self._skipped or self._excluded(topic):
                 continue
             if self._wanted is not None and topic not in self._wanted:
@@ -307,10 +354,14 @@ class RecorderNode(Node):
         self.get_logger().warning(f'not recording {topic}: {why}')
 
     def _add_topic(self, topic: str, types: Sequence[str], publishers) -> None:
-        msgtype = types[0]
+        declared = self._declared_types.get(topic)
+        msgtype = declared if declared in types else types[0]
         if len(types) > 1:
             self.get_logger().warning(f'{topic} has several types {list(types)}; '
                                       f'recording {msgtype}')
+        if declared and declared != msgtype:
+            self.get_logger().warning(f'{topic}: declared type {declared} but the graph has '
+                                      f'{msgtype}; recording {msgtype}')
         try:
             msg_class = import_message_class(msgtype)
         except (ImportError, AttributeError, ValueError) as exc:
@@ -335,11 +386,75 @@ class RecorderNode(Node):
             f'recording {topic} [{msgtype}] ({qos.reliability.name.lower()}, '
             f'{qos.durability.name.lower()}, {len(publishers)} publisher(s))')
 
+    # ------------------------------------------------------------------ handshake
+    def _parse_expected(self) -> List[tuple]:
+        try:
+            items = list(self.get_parameter('expected_matches').value or [])
+        except ParameterUninitializedException:
+            items = []
+        out = []
+        for item in items:
+            if not item:
+                continue
+            try:
+                kind, rest = str(item).split(':', 1)
+                topic, n = rest.rsplit('=', 1)
+                if kind not in ('sub', 'pub'):
+                    raise ValueError(kind)
+                out.append((kind, self._resolve(topic.strip()), int(n)))
+            except ValueError as exc:
+                raise ValueError(f'bad expected_matches entry {item!r} '
+                                 '(want "sub:<topic>=<n>" or "pub:<topic>=<n>")') from exc
+        return out
+
+    def unmatched(self) -> List[str]:
+        """Start-handshake expectations not met yet, as readable strings.
+
+        ``sub:<topic>=<n>``: the recording subscription of ``topic`` has at least ``n`` matched
+        publishers; ``pub:<topic>=<n>``: the recorder's publisher (``recorder/status``) has at
+        least ``n`` matched subscriptions.
+        """
+        missing = []
+        pubs = {self._status_topic: self._status_pub}
+        for kind, topic, n in self._expected:
+            if kind == 'sub':
+                rec = self._topics.get(topic)
+                have = rec.subscription.get_publisher_count() if rec is not None else 0
+            else:
+                pub = pubs.get(topic)
+                have = pub.get_subscription_count() if pub is not None else 0
+            if have < n:
+                missing.append(f'{kind}:{topic} {have}/{n}')
+        return missing
+
+    def _check_ready(self) -> None:
+        """Handshake timer: publish our name on ``lockstep/ready`` once every match holds."""
+        missing = self.unmatched()
+        if missing:
+            # scan faster than discovery_period_s while topics we wait for are not subscribed
+            if time.monotonic() - self._last_discovery > 0.1 and any(
+                    kind == 'sub' and topic not in self._topics
+                    for kind, topic, _ in self._expected):
+                self.discover()
+            return
+        self._handshake_timer.cancel()
+        self.ready = True
+        self._ready_pub.publish(String(data=self.get_name()))
+        self.get_logger().info(f'ready: {len(self._expected)} expected match(es) hold')
+
     # ------------------------------------------------------------------ callbacks
     def _log_time_ns(self, rec: _Topic, raw: bytes) -> int:
         """Log time of a message (module docstring, 'Time stamps')."""
-        t_ns = self.get_clock().now().nanoseconds
-        if t_ns <= 0:  # sim time active, no /clock yet
+        clock = self.get_clock()
+        if getattr(clock, 'ros_time_is_active', False):
+            t_ns = clock.now().nanoseconds  # use_sim_time: 0 until the first /clock
+        elif self._latest_clock_ns > 0:
+            t_ns = self._latest_clock_ns  # a simulation without use_sim_time: latest /clock
+        elif self._clock_in_graph:
+            t_ns = 0  # a simulation whose clock has not ticked yet
+        else:
+            t_ns = clock.now().nanoseconds  # no simulation: system time, as ros2 bag
+        if t_ns <= 0:
             stamp = cdr_stamp_ns(raw) if rec.stamp_kind else None
             if stamp is not None and stamp > 0:
                 t_ns = stamp
@@ -396,6 +511,7 @@ class RecorderNode(Node):
         if writer is None:
             return
         self._discovery_timer.cancel()
+        self._handshake_timer.cancel()
         for rec in self._topics.values():
             self.destroy_subscription(rec.subscription)
         try:

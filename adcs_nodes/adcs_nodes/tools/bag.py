@@ -364,25 +364,36 @@ def topic_summary(bag_path: os.PathLike | str) -> Dict[str, Tuple[str, int, int,
 def content_digest(bag_path: os.PathLike | str,
                    exclude_types: Sequence[str] = NONDETERMINISTIC_TYPES
                    ) -> Dict[str, Tuple[int, str]]:
-    """Per topic ``(count, sha256)`` of the message contents in recording order.
+    """Per topic ``(count, sha256)`` of the message contents, independent of log times.
 
-    Log times are ignored; two runs of the same deterministic simulation give equal digests
-    for every topic whose type is not in ``exclude_types`` (by default the wall-clock status
-    types of :data:`NONDETERMINISTIC_TYPES`). The hash is over the flattened, deserialised
-    values (``repr`` of floats is exact), not over raw CDR bytes whose padding is unspecified.
+    Two runs of the same deterministic simulation give equal digests for every topic whose
+    type is not in ``exclude_types`` (by default the wall-clock status types of
+    :data:`NONDETERMINISTIC_TYPES`). Each message is hashed from its flattened, deserialised
+    values (``repr`` of floats is exact; raw CDR padding bytes are unspecified), and the
+    per-message hashes are combined in canonical order: sorted by header stamp, then by
+    content. Within a single-publisher topic with increasing stamps that is the recording
+    order; on topics with several publishers (``lockstep/ready``) the interleaving of
+    publishers, which DDS does not fix, does not change the digest.
     """
-    hashes: Dict[str, Any] = {}
-    counts: Dict[str, int] = {}
+    excluded = set(exclude_types)
+    items: Dict[str, List[Tuple[int, bytes]]] = {}
     with open_bag(bag_path) as reader:
-        conns = [c for c in reader.connections if c.msgtype not in set(exclude_types)]
-        if conns:
-            for conn, _, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, conn.msgtype)
-                h = hashes.setdefault(conn.topic, hashlib.sha256())
-                h.update(repr(flatten_message(msg)).encode())
-                h.update(b'\n')
-                counts[conn.topic] = counts.get(conn.topic, 0) + 1
+        conns = [c for c in reader.connections if c.msgtype not in excluded]
         for conn in conns:
-            hashes.setdefault(conn.topic, hashlib.sha256())
-            counts.setdefault(conn.topic, 0)
-    return {t: (counts[t], hashes[t].hexdigest()) for t in sorted(hashes)}
+            items.setdefault(conn.topic, [])
+        if conns:
+            try:
+                for conn, _, raw in reader.messages(connections=conns):
+                    msg = reader.deserialize(raw, conn.msgtype)
+                    stamp = header_stamp_ns(msg)
+                    digest = hashlib.sha256(repr(flatten_message(msg)).encode()).digest()
+                    items[conn.topic].append((-1 if stamp is None else stamp, digest))
+            except Exception as exc:
+                raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
+    out: Dict[str, Tuple[int, str]] = {}
+    for topic in sorted(items):
+        total = hashlib.sha256()
+        for stamp, digest in sorted(items[topic]):
+            total.update(stamp.to_bytes(8, 'little', signed=True) + digest)
+        out[topic] = (len(items[topic]), total.hexdigest())
+    return out
