@@ -1,0 +1,59 @@
+"""Helpers for tests that launch the graph with the real `adcs` command."""
+import glob
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCENARIOS = os.path.join(ROOT, 'scenarios')
+RUNS = os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'runs')
+
+pytest.importorskip('rclpy')
+
+
+def adcs(*args, timeout=300, check=True):
+    """Run ``adcs ARGS`` to completion; returns the CompletedProcess (text output)."""
+    proc = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.cli', *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout)
+    if check and proc.returncode != 0:
+        raise AssertionError(f'adcs {" ".join(args)} failed ({proc.returncode}):\n'
+                             f'{proc.stdout}\n{proc.stderr}')
+    return proc
+
+
+def start_adcs(*args):
+    """Start ``adcs ARGS`` in the background; returns the Popen."""
+    return subprocess.Popen([sys.executable, '-m', 'adcs_nodes.tools.cli', *args], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def wait_manifest(proc, timeout=30.0):
+    """The active-run manifest of launcher ``proc`` once its nodes are spawned."""
+    path = os.path.join(RUNS, f'active-{proc.pid}.json')
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if os.path.exists(path):
+            with open(path) as fh:
+                try:
+                    data = json.load(fh)
+                except ValueError:
+                    data = {}
+            if 'pids' in data:
+                return data
+        if proc.poll() is not None:
+            raise AssertionError(f'launcher exited early: {proc.communicate()}')
+        time.sleep(0.05)
+    raise AssertionError('no run manifest')
+
+
+def node_log(run_dir, name):
+    with open(os.path.join(run_dir, 'logs', f'{name}.log')) as fh:
+        return fh.read()
+
+
+def latest_run_dir():
+    return max(glob.glob(os.path.join(RUNS, '2*')), key=os.path.getmtime)
