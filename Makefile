@@ -20,7 +20,7 @@ lint:  ## flake8 at 99 columns on the packages and tests
 	$(RUN) python -m flake8 adcs_nodes sim_node tests
 
 bench:  ## lockstep throughput table: transport ring, graph, composed graph, plain loop
-	$(RUN) python -m adcs_nodes.tools.bench
+	$(RUN) python -m sim_node.tools.bench
 
 reproduce:  ## long paper reproductions with their pass/fail tables
 	$(RUN) python -m pytest -m slow tests

@@ -3,7 +3,7 @@ import os
 import subprocess
 import sys
 
-from adcs_nodes.tools.bench import Row, Stat, format_table, parse_cases, verdict
+from sim_node.tools.bench import Row, Stat, format_table, parse_cases, verdict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -25,7 +25,7 @@ def test_bench_runs_at_tiny_size(tmp_path):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [os.path.join(ROOT, 'adcs_nodes'), os.path.join(ROOT, 'sim_node'),
          os.environ.get('PYTHONPATH', '')]))
-    proc = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.bench', '--frames', '20',
+    proc = subprocess.run([sys.executable, '-m', 'sim_node.tools.bench', '--frames', '20',
                            '--repeats', '1', '--cases', '1.0:10', '--out', str(out)],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr[-3000:]

@@ -102,13 +102,17 @@ class LockstepNode(Node):
         value = self.get_parameter(name).value
         return default if value is None else value
 
-    def section(self, prefix: str, defaults: Dict[str, Any]) -> Dict[str, Any]:
-        """Parameters ``prefix.*`` as a dict (for model factories); ``defaults`` if none given.
+    def section(self, prefix: str, defaults: Dict[str, Any],
+                merge: bool = True) -> Dict[str, Any]:
+        """Parameters ``prefix.*`` as a dict (for model factories).
 
-        The defaults are not merged into a given section: a section selects its own variant
+        With ``merge`` the given keys override ``defaults``; without it ``defaults`` are used
+        only when no key is given, for sections that select their own variant
         (``orbit.type: tle`` has other keys than the default circular orbit).
         """
         given = {k: p.value for k, p in self.get_parameters_by_prefix(prefix).items()}
+        if merge:
+            return {**defaults, **given}
         return given if given else dict(defaults)
 
     # ------------------------------------------------------------------ endpoints

@@ -306,7 +306,14 @@ class Launcher:
                            f'last lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
 
     def _finish(self, monitor: _Monitor, total_ns: int):
-        monitor.spin(0.2)  # take the master's final status
+        # the master's final status (frames = all frames) says how fast the lockstep ran
+        frames = int(round(total_ns / (self.sc['timing']['frame_s'] * 1e9)))
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline:
+            dyn = monitor.status.get('dynamics')
+            if dyn is not None and dyn.frames >= frames:
+                break
+            monitor.spin(0.05)
         monitor.sim_ns = max(monitor.sim_ns, total_ns)
         if self.record and not self.compose:
             deadline = time.monotonic() + 15.0

@@ -30,8 +30,8 @@ class EnvironmentNode(LockstepNode):
 
     def __init__(self, name: str = 'environment', **kwargs) -> None:
         super().__init__(name, **kwargs)
-        self.orbit = make_orbit(self.section('orbit', DEFAULT_ORBIT), self.epoch)
-        self.field = make_field(self.section('field', DEFAULT_FIELD), self.epoch)
+        self.orbit = make_orbit(self.section('orbit', DEFAULT_ORBIT, merge=False), self.epoch)
+        self.field = make_field(self.section('field', DEFAULT_FIELD, merge=False), self.epoch)
         self.pub = self.publisher(Environment, 'sim/environment')
         self.subscription(Clock, '/clock', self.on_clock)
         self._last_ns = None

@@ -3,7 +3,7 @@
 Rows (DESIGN section 6):
 
 1. transport limit: a bare 2-process ping-pong ring with the hop count of a world frame
-   (:mod:`adcs_nodes.tools.bench_ring`);
+   (:mod:`sim_node.tools.bench_ring`);
 2. the world graph of ``scenarios/free_tumble.yaml`` (``environment`` + ``dynamics``), one
    process per node, in lockstep, at 1 s frames (10 RK4 substeps) and 0.1 s frames (1 substep),
    so the integration step is 0.1 s in both;
@@ -21,7 +21,7 @@ lowers them (the report prints the load average).
 
 Usage::
 
-    python -m adcs_nodes.tools.bench [--frames 3000] [--repeats 3] [--quick]
+    python -m sim_node.tools.bench [--frames 3000] [--repeats 3] [--quick]
 """
 from __future__ import annotations
 
@@ -30,7 +30,6 @@ import copy
 import functools
 import os
 import platform
-import re
 import shutil
 import statistics
 import sys
@@ -40,7 +39,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
-from adcs_nodes.tools.bench_ring import RingError, RingResult, run_ring
+from sim_node.tools.bench_ring import RingError, RingResult, run_ring
 
 DEFAULT_SCENARIO = 'scenarios/free_tumble.yaml'
 #: Free body + gravity gradient RK4 steps per wall second of Basilisk (C++) for this case.
@@ -122,13 +121,8 @@ def scenario_with(sc: dict, frame_s: float, substeps: int) -> dict:
 
 
 def graph_fps(sc: dict, frame_s: float, substeps: int, frames: int, compose: bool) -> float:
-    """Lockstep frames per wall second of one launcher run (measured by the clock master).
-
-    Read from the master's final log line (``done: ... (<n> frames/s)``: frames from frame 0
-    to the end over the wall time since frame 0). ``RunResult.frames_per_s`` is only the
-    fallback: it is the latest ``lockstep/status`` the launcher received, which is often a
-    periodic one from mid-run (or none: 0) when the final status does not arrive in time.
-    """
+    """Lockstep frames per wall second of one launcher run, measured by the clock master
+    from frame 0 to its end (its final ``lockstep/status``, ``RunResult.frames_per_s``)."""
     from adcs_nodes.tools.launcher import Launcher
 
     what = f'graph run (frame {frame_s:g} s, compose={compose})'
@@ -141,26 +135,12 @@ def graph_fps(sc: dict, frame_s: float, substeps: int, frames: int, compose: boo
             raise BenchError(f'{what} failed: exit {res.exit_code}, {res.message}')
         if res.missed_frames:
             raise BenchError(f'{what} missed {res.missed_frames} frames: not lockstep')
-        fps = _fps_from_logs(os.path.join(run_dir, 'logs')) or res.frames_per_s
+        fps = res.frames_per_s
         if not fps > 0.0:
-            raise BenchError(f'{what}: no frames/s from the clock master (status or log)')
+            raise BenchError(f'{what}: no final status from the clock master')
         return fps
     finally:
         shutil.rmtree(run_dir, ignore_errors=True)
-
-
-_DONE_RE = re.compile(r'\[dynamics\]: done: .*\(.*, (\d+(?:\.\d+)?) frames/s\)')
-
-
-def _fps_from_logs(log_dir: str) -> float:
-    """Frames/s of the clock master's final log line in ``log_dir`` (0 if not found)."""
-    for name in sorted(os.listdir(log_dir)) if os.path.isdir(log_dir) else []:
-        with open(os.path.join(log_dir, name), encoding='utf-8', errors='replace') as fh:
-            for line in fh:
-                m = _DONE_RE.search(line)
-                if m:
-                    return float(m.group(1))
-    return 0.0
 
 
 # ---------------------------------------------------------------------- (4) plain loop

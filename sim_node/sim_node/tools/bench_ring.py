@@ -15,8 +15,8 @@ file next to the launcher's 1..100) with localhost-only discovery.
 
 Usage (what :func:`run_ring` does)::
 
-    python -m adcs_nodes.tools.bench_ring pong &
-    python -m adcs_nodes.tools.bench_ring ping --frames 3000 --warmup 200
+    python -m sim_node.tools.bench_ring pong &
+    python -m sim_node.tools.bench_ring ping --frames 3000 --warmup 200
 """
 from __future__ import annotations
 
@@ -246,7 +246,7 @@ def run_ring(frames: int, warmup: int = 200, timeout_s: float = 60.0) -> RingRes
     domain, lock = acquire_bench_domain()
     env: Dict[str, str] = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
                                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    cmd: List[str] = [sys.executable, '-m', 'adcs_nodes.tools.bench_ring']
+    cmd: List[str] = [sys.executable, '-m', 'sim_node.tools.bench_ring']
     pong = subprocess.Popen(cmd + ['pong', '--timeout', str(timeout_s + 10.0)], env=env,
                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True)
