@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 from datetime import datetime, timezone
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -25,8 +25,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_msgs.msg import String
 
 from adcs_msgs.msg import LockstepStatus
-from adcs_nodes.core.lockstep import NS_PER_S, seconds_to_ns
-from adcs_nodes.nodes.convert import to_stamp
+from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, seconds_to_ns
+from adcs_nodes.nodes.convert import stamp_ns, to_stamp
 
 #: Reliable, keep-last QoS deep enough that no frame is lost in lockstep.
 QOS_DATA = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
@@ -127,6 +127,86 @@ class LockstepNode(Node):
         sub = self.create_subscription(msg_type, topic, callback, qos)
         self._subs[sub.topic_name] = sub
         return sub
+
+    # ------------------------------------------------------------------ frame inputs
+    def lockstep_inputs(self, inputs: Dict[str, Tuple[Any, str, float]], period_s: float,
+                        on_frame: Callable[[int, Dict[str, Any], List[str]], None]) -> None:
+        """Fire ``on_frame`` at t = 0, P, 2P, ... when the inputs due then have arrived.
+
+        Parameters
+        ----------
+        inputs : dict
+            ``{name: (msg_type, topic, period_s)}``; ``period_s`` is the producer's period
+            (0: never waited for, always the latest). Messages need ``header.stamp``.
+        period_s : float
+            This node's own period P (a multiple of ``frame_period_s``).
+        on_frame : callable
+            ``on_frame(t_ns, msgs, missing)``: elapsed sim time, ``{name: msg or None}`` (the
+            message stamped t if present, else the latest before t), and the due inputs that
+            timed out (empty in a normal frame).
+
+        Notes
+        -----
+        Frame t is considered once any input stamped >= t has arrived (so a node never runs
+        ahead of the simulation). A due input missing ``timeout_s`` of wall time after that
+        is counted as a missed frame and the frame fires with the latest values. In
+        ``real_time`` mode the node never waits: it fires with the latest values as soon as
+        time has reached t.
+        """
+        self._own_period_ns = seconds_to_ns(period_s)
+        if self._own_period_ns <= 0 or self._own_period_ns % self.frame_ns:
+            raise ValueError(f'period {period_s} s is not a positive multiple of the frame '
+                             f'{self.frame_ns / NS_PER_S:g} s')
+        periods = {}
+        self._topics_of: Dict[str, str] = {}
+        for name, (msg_type, topic, p_s) in inputs.items():
+            p_ns = seconds_to_ns(p_s) if p_s else 0
+            if p_ns % self.frame_ns:
+                raise ValueError(f'input {name}: period {p_s} s is not a multiple of the frame')
+            periods[name] = p_ns
+            sub = self.subscription(msg_type, topic, self._input_cb(name))
+            self._topics_of[name] = sub.topic_name
+        self.sync = FrameSync(periods)
+        self._on_frame = on_frame
+        self._next_t = 0
+        self._seen_t = -1
+        self._wait_since: Optional[float] = None
+        self.create_timer(min(0.05, self.timeout_s / 4.0), self._frame_watchdog)
+
+    def _input_cb(self, name: str) -> Callable[[Any], None]:
+        def cb(msg: Any) -> None:
+            t = self.elapsed_ns(stamp_ns(msg.header.stamp))
+            self.sync.add(name, t, msg)
+            if t > self._seen_t:
+                self._seen_t = t
+            self._try_fire()
+        return cb
+
+    def _try_fire(self) -> None:
+        while self._seen_t >= self._next_t:
+            t = self._next_t
+            if not self.real_time and not self.sync.ready(t):
+                if self._wait_since is None:
+                    self._wait_since = time.monotonic()
+                return
+            self._fire(t, [])
+
+    def _fire(self, t: int, missing: List[str]) -> None:
+        msgs = {name: self.sync.value(name, t) for name in self.sync.names}
+        self._wait_since = None
+        self._next_t = t + self._own_period_ns
+        self.sync.prune(t)
+        self.frames += 1
+        self._on_frame(t, msgs, missing)
+
+    def _frame_watchdog(self) -> None:
+        if self._wait_since is None or time.monotonic() - self._wait_since < self.timeout_s:
+            return
+        t = self._next_t
+        missing = [self._topics_of[n] for n in self.sync.missing(t)]
+        self.count_missed(missing, t)
+        self._fire(t, missing)
+        self._try_fire()
 
     # ------------------------------------------------------------------ handshake
     def _expectations(self) -> List[tuple]:
