@@ -1,14 +1,12 @@
-"""Unit tests of sim_node.models.geomag against independent truth (no ROS)."""
-import importlib
+"""Unit tests of adcs_nodes.core.geomag against independent truth (no ROS)."""
 import math
-import sys
 from datetime import datetime, timedelta, timezone
 
 import numpy as np
 import pytest
 
-from sim_node.models import orbit
-from sim_node.models.geomag import DipoleField, IgrfField, make_field
+from adcs_nodes.core import orbit
+from adcs_nodes.core.geomag import DipoleField, IgrfField, make_field
 
 UTC = timezone.utc
 EPOCH = datetime(2025, 3, 20, 6, 0, 0, tzinfo=UTC)
@@ -252,17 +250,3 @@ def test_make_field_errors_name_the_key(cfg, word):
 def test_bad_inputs_raise_value_error(build):
     with pytest.raises(ValueError):
         build()
-
-
-def test_models_import_without_ros(monkeypatch):
-    """core/models rule (DESIGN 2): importable with rclpy and the message packages blocked."""
-    for name in ('rclpy', 'adcs_msgs', 'std_msgs', 'geometry_msgs', 'sensor_msgs'):
-        monkeypatch.setitem(sys.modules, name, None)
-    package = sys.modules['sim_node.models']
-    for name in ('orbit', 'geomag'):   # restore the original modules afterwards
-        monkeypatch.setattr(package, name, getattr(package, name))
-        monkeypatch.delitem(sys.modules, f'sim_node.models.{name}')
-    orb_mod = importlib.import_module('sim_node.models.orbit')
-    geo_mod = importlib.import_module('sim_node.models.geomag')
-    orb = orb_mod.CircularOrbit(690e3, 1.7, epoch=EPOCH)
-    assert geo_mod.DipoleField(EPOCH).field_and_rate(orb, 0.0)[0].shape == (3,)

@@ -1,4 +1,4 @@
-"""Unit tests of sim_node.models.orbit against independent truth (no ROS)."""
+"""Unit tests of adcs_nodes.core.orbit against independent truth (no ROS)."""
 import math
 from datetime import datetime, timedelta, timezone
 
@@ -7,8 +7,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from adcs_nodes.core import attitude
-from sim_node.models import orbit
-from sim_node.models.orbit import (MU_EARTH, R_EARTH, CircularOrbit, Sgp4Orbit, make_orbit)
+from adcs_nodes.core import orbit
+from adcs_nodes.core.orbit import (MU_EARTH, R_EARTH, CircularOrbit, Sgp4Orbit, make_orbit)
 
 UTC = timezone.utc
 EPOCH = datetime(2025, 3, 20, 6, 0, 0, tzinfo=UTC)

@@ -33,9 +33,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from adcs_nodes.core import attitude
-
-MU_EARTH = 3.986004418e14
-"""Earth's gravitational parameter [m^3/s^2] (WGS-84 / EGM-96)."""
+from adcs_nodes.core.orbit import MU_EARTH  # one value for the whole project
 
 _INDEX_TOL = 1e-9   # [periods]: t = j T minus a rounding error still belongs to period j
 

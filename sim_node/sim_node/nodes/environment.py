@@ -2,7 +2,7 @@
 
 Subscribes ``/clock``; for every clock tick t_k publishes ``sim/environment`` stamped t_k:
 r, v (ECI), q_eci_orbit, orbit rate, argument of latitude, B (ECI) and dB/dt, q_eci_ecef.
-Models: ``sim_node.models.orbit`` and ``sim_node.models.geomag``, configured by the
+Models: ``adcs_nodes.core.orbit`` and ``adcs_nodes.core.geomag``, configured by the
 parameters ``orbit.*`` and ``field.*`` (same keys as the scenario YAML sections).
 """
 from __future__ import annotations
@@ -16,8 +16,8 @@ from adcs_nodes.core.lockstep import ns_to_seconds
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import stamp_ns, to_quat, to_vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
-from sim_node.models.geomag import make_field
-from sim_node.models.orbit import make_orbit, q_eci_ecef
+from adcs_nodes.core.geomag import make_field
+from adcs_nodes.core.orbit import make_orbit, q_eci_ecef
 
 #: Defaults when run alone: paper 000's 690 km, 98 deg circular orbit and a tilted dipole.
 DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,

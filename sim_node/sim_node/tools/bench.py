@@ -154,8 +154,8 @@ class PlainWorld:
         from adcs_nodes.core.lockstep import derive_seed
         from adcs_nodes.nodes.lockstep_node import parse_epoch
         from adcs_nodes.tools.graph import build_graph
-        from sim_node.models.geomag import make_field
-        from sim_node.models.orbit import make_orbit
+        from adcs_nodes.core.geomag import make_field
+        from adcs_nodes.core.orbit import make_orbit
         from sim_node.models.spacecraft_config import DEFAULT_INITIAL, spacecraft_from_config
 
         nodes = {n.name: n.params for n in build_graph(sc, 1.0)}
@@ -176,7 +176,7 @@ class PlainWorld:
     def frame(self, k: int) -> None:
         """Frame k: environment at t_k (as ``EnvironmentNode.compute``), then integrate."""
         from sim_node.models.dynamics import FrameEnvironment
-        from sim_node.models.orbit import q_eci_ecef
+        from adcs_nodes.core.orbit import q_eci_ecef
         from sim_node.models.spacecraft_config import initial_state
 
         t = k * self.frame_ns / 1e9

@@ -65,7 +65,7 @@ from typing import Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sim_node.models.orbit import OrbitModel, _finite, _utc, _vec3, gmst
+from adcs_nodes.core.orbit import OrbitModel, _finite, _utc, _vec3, gmst
 
 R_REF_M = 6371200.0
 """Geomagnetic reference radius [m] (IGRF)."""
