@@ -74,6 +74,7 @@ class DynamicsNode(LockstepNode):
 
         self.k = 0
         self.state: Optional[SpacecraftState] = None
+        self._last_q_orbit_body: Optional[np.ndarray] = None
         self.phase = 'idle'          # idle -> wait_env -> wait_cmd -> (integrate) -> wait_env
         self.wait_since = 0.0
         self.last_cmd = self.spacecraft.zero_command()
@@ -244,8 +245,11 @@ class DynamicsNode(LockstepNode):
         msg.header.stamp = self.stamp(self.t_ns)
         msg.header.frame_id = 'body'
         msg.q_eci_body = to_quat(st.q_eci_body)
-        msg.q_orbit_body = to_quat(att.canonical(
-            att.multiply(att.conjugate(q_eci_orbit), st.q_eci_body)))
+        q_orbit_body = att.multiply(att.conjugate(q_eci_orbit), st.q_eci_body)
+        if self._last_q_orbit_body is not None and q_orbit_body @ self._last_q_orbit_body < 0:
+            q_orbit_body = -q_orbit_body     # keep the published sign continuous in time
+        self._last_q_orbit_body = q_orbit_body
+        msg.q_orbit_body = to_quat(q_orbit_body)
         msg.omega_body_eci_body = to_vec3(st.omega_body_eci_body)
         msg.omega_body_orbit_body = to_vec3(st.omega_body_eci_body
                                             - r_body_eci @ omega_orbit_eci_eci)
