@@ -6,6 +6,9 @@ Commands
 [--report]``
     Validate the scenario, start its nodes (one process each, or composed), show progress,
     stop everything cleanly at the end, on Ctrl-C or when a node dies.
+``adcs switch NAME [--run PID]`` / ``adcs status [--run PID]``
+    Switch the active controller of a graph started by ``adcs run``, or show its controllers
+    and lockstep health (missed frames per node).
 ``adcs list [--dir scenarios]``
     Scenarios (with their description) and the known nodes.
 ``adcs validate SCENARIO``
@@ -96,6 +99,26 @@ def cmd_validate(args) -> int:
     return 0
 
 
+def cmd_switch(args) -> int:
+    from adcs_nodes.tools.live import LiveError, switch
+    try:
+        print(switch(args.controller, args.run))
+    except LiveError as exc:
+        print(f'adcs switch: {exc}', file=sys.stderr)
+        return 2
+    return 0
+
+
+def cmd_status(args) -> int:
+    from adcs_nodes.tools.live import LiveError, status
+    try:
+        print(status(args.run))
+    except LiveError as exc:
+        print(f'adcs status: {exc}', file=sys.stderr)
+        return 2
+    return 0
+
+
 def cmd_schema(args) -> int:
     from adcs_nodes.tools.scenario import schema_markdown
     print(schema_markdown(), end='')
@@ -159,6 +182,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('validate', help='check a scenario file')
     p.add_argument('scenario')
     p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser('switch', help='switch the active controller of a running graph')
+    p.add_argument('controller', help='controller name (see `adcs status`)')
+    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
+    p.set_defaults(func=cmd_switch)
+
+    p = sub.add_parser('status', help='controllers and lockstep health of a running graph')
+    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
+    p.set_defaults(func=cmd_status)
 
     p = sub.add_parser('schema', help='print every scenario key (Markdown table)')
     p.set_defaults(func=cmd_schema)

@@ -294,7 +294,8 @@ class Launcher:
                 last_print = now
                 self._print_progress(monitor, now - t0, total_ns)
             if self._stop_requested:
-                return 130, 'interrupted (Ctrl-C): nodes stopped, bag closed'
+                return 130, ('interrupted (Ctrl-C): nodes stopped'
+                             + (', bag closed' if self.record else ''))
             for name, proc in self.procs.items():
                 rc = proc.poll()
                 if rc is None:

@@ -1,0 +1,152 @@
+"""Talk to a running graph started by ``adcs run``: ``adcs switch`` and ``adcs status``.
+
+A run announces itself in ``~/.cache/adcs/runs/active-<launcher pid>.json`` (domain id,
+scenario, bag, node PIDs). These commands join that ROS domain with a short-lived node, call
+the controller manager's services or read the latched status, and leave.
+"""
+from __future__ import annotations
+
+import glob
+import json
+import os
+import time
+from typing import Dict, List, Optional
+
+from adcs_nodes.tools.launcher import RUNS_DIR
+
+MANAGER = 'controller_manager'
+
+
+class LiveError(RuntimeError):
+    """No run to talk to, or it did not answer; the message says what to do."""
+
+
+def active_runs() -> List[Dict]:
+    """Manifests of the runs whose launcher process is alive (stale files are removed)."""
+    runs = []
+    for path in sorted(glob.glob(os.path.join(RUNS_DIR, 'active-*.json'))):
+        try:
+            with open(path) as fh:
+                data = json.load(fh)
+            os.kill(int(data['pid']), 0)
+        except (OSError, ValueError, KeyError):
+            try:
+                os.unlink(path)     # launcher gone (killed): forget the run
+            except OSError:
+                pass
+            continue
+        runs.append(data)
+    return runs
+
+
+def pick_run(pid: Optional[int]) -> Dict:
+    """The run to talk to: the one with launcher ``pid``, or the only active one."""
+    runs = active_runs()
+    if pid is not None:
+        for run in runs:
+            if int(run['pid']) == pid:
+                return run
+        raise LiveError(f'no active adcs run with launcher pid {pid}')
+    if not runs:
+        raise LiveError('no active adcs run (start one with `adcs run SCENARIO`)')
+    if len(runs) > 1:
+        listing = ', '.join(f'{r["pid"]} ({os.path.basename(r["scenario"])})' for r in runs)
+        raise LiveError(f'{len(runs)} runs are active: {listing}; choose one with --run PID')
+    return runs[0]
+
+
+class _Session:
+    """A short-lived rclpy context on the run's domain."""
+
+    def __init__(self, run: Dict) -> None:
+        os.environ['ROS_DOMAIN_ID'] = str(run['domain'])
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        import rclpy
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('adcs_cli', context=self.context,
+                                      start_parameter_services=False)
+        from rclpy.executors import SingleThreadedExecutor
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def call(self, srv_type, name: str, request, timeout_s: float = 10.0):
+        client = self.node.create_client(srv_type, name)
+        if not client.wait_for_service(timeout_sec=timeout_s):
+            raise LiveError(f'service {name} not available within {timeout_s:g} s '
+                            '(does this scenario run a controller manager?)')
+        future = client.call_async(request)
+        self.executor.spin_until_future_complete(future, timeout_sec=timeout_s)
+        if not future.done():
+            raise LiveError(f'service {name} did not answer within {timeout_s:g} s')
+        return future.result()
+
+    def spin(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.shutdown(context=self.context)
+
+
+def switch(name: str, pid: Optional[int] = None) -> str:
+    """Switch the active controller of a running graph; returns the manager's answer.
+
+    Raises
+    ------
+    LiveError
+        No run, no manager, or the manager refused (unknown name: the message lists the
+        known controllers).
+    """
+    from adcs_msgs.srv import SwitchController
+    session = _Session(pick_run(pid))
+    try:
+        res = session.call(SwitchController, f'/{MANAGER}/switch_controller',
+                           SwitchController.Request(name=name))
+    finally:
+        session.close()
+    if not res.success:
+        raise LiveError(res.message)
+    return f'{res.message} (active: {res.active})'
+
+
+def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
+    """Human-readable status of a running graph: controllers and lockstep health.
+
+    Listens ``wait_s`` (discovery of a new participant takes up to ~3 s).
+    """
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from adcs_msgs.msg import ControllerStatus, LockstepStatus
+    run = pick_run(pid)
+    session = _Session(run)
+    ctrl: List = []
+    nodes: Dict[str, LockstepStatus] = {}
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    try:
+        session.node.create_subscription(ControllerStatus, 'adcs/controller_status',
+                                         ctrl.append, latched)
+        session.node.create_subscription(LockstepStatus, 'lockstep/status',
+                                         lambda m: nodes.__setitem__(m.node, m), 50)
+        session.spin(wait_s)
+    finally:
+        session.close()
+    lines = [f'run {run["pid"]}: {run["scenario"]} (ROS_DOMAIN_ID={run["domain"]}, '
+             f'bag {run.get("bag") or "none"})']
+    if ctrl:
+        c = ctrl[-1]
+        lines.append(f'controller: {c.active}  mode: {c.mode or "-"}  available: '
+                     f'{", ".join(c.available)}  switches: {c.switch_count}  missed frames: '
+                     f'{c.missed_frames}  last fault: {c.last_fault or "-"}')
+    else:
+        lines.append('controller: no controller manager in this run')
+    for name in sorted(nodes):
+        s = nodes[name]
+        lines.append(f'  {name:22s} frames {s.frames:8d}  missed {s.missed_frames}'
+                     + (f' (last: {s.last_missed_input})' if s.last_missed_input else ''))
+    return '\n'.join(lines)
