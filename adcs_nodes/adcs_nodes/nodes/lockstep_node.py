@@ -83,6 +83,7 @@ class LockstepNode(Node):
         self.seed = int(self.param('seed', 0))
         self.real_time = bool(self.param('real_time', False))
         self.frames = 0
+        self.sim_t_ns = 0            # elapsed sim time of the last frame this node processed
         self.missed_frames = 0
         self.last_missed_input = ''
         self._wall0 = time.monotonic()
@@ -197,6 +198,7 @@ class LockstepNode(Node):
         self._next_t = t + self._own_period_ns
         self.sync.prune(t)
         self.frames += 1
+        self.sim_t_ns = t
         self._on_frame(t, msgs, missing)
 
     def _frame_watchdog(self) -> None:
@@ -288,7 +290,7 @@ class LockstepNode(Node):
             return
         self._final_sent = bool(final)
         msg = LockstepStatus()
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = self.stamp(self.sim_t_ns)   # sim time of the last frame
         msg.node = self.get_name()
         msg.frames = int(self.frames)
         msg.missed_frames = int(self.missed_frames)

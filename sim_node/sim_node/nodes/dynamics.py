@@ -240,6 +240,7 @@ class DynamicsNode(LockstepNode):
             self.state = initial_state(self.initial_cfg, q_eci_orbit, omega_orbit_eci_eci,
                                        self.spacecraft, self.wheel_h0)
         st = self.state
+        self.sim_t_ns = self.t_ns
         r_body_eci = att.to_matrix(st.q_eci_body).T
         msg = AttitudeState()
         msg.header.stamp = self.stamp(self.t_ns)

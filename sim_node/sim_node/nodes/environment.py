@@ -64,6 +64,7 @@ class EnvironmentNode(LockstepNode):
         self._last_ns = t_ns
         self.pub.publish(self.compute(t_ns))
         self.frames += 1
+        self.sim_t_ns = t_ns
 
 
 def main(args=None) -> int:
