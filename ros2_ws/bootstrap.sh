@@ -35,6 +35,11 @@ fi
 
 say() { printf '[bootstrap] %s\n' "$*"; }
 
+# one bootstrap at a time (parallel `make` targets, test helpers): the others wait here
+mkdir -p "$WS/log"
+exec 9> "$WS/log/.bootstrap.lock"
+flock 9
+
 hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -d' ' -f1; }
 
 # 1. virtual environment + pinned wheels
