@@ -35,6 +35,11 @@ class F:
 REQUIRED = object()
 OPTIONAL = None
 
+
+class Opt(dict):
+    """A schema section that exists only when the scenario gives it (a sensor, a node)."""
+
+
 _ORBIT_COMMON = {'type': F('str', 'circular', 'orbit model', ('circular', 'tle'))}
 ORBIT_VARIANTS = {
     'circular': {
@@ -105,6 +110,65 @@ SCHEMA: Dict[str, Any] = {
         'omega_body_orbit_body_deg_s': F('vec3', OPTIONAL,
                                          'initial rate w.r.t. the orbit frame, body axes [deg/s]'),
     },
+    'sensors': {
+        'magnetometer': Opt({
+            'period_s': F('float', 10.0, 'sample period [s] (paper 000: 10 s)'),
+            'noise_std_T': F('vec3', [375e-9, 25e-9, 65e-9], 'white noise std per sensor '
+                             'axis [T] (paper 000 example)'),
+            'bias_T': F('vec3', [0.0, 0.0, 0.0], 'constant bias, sensor axes [T]'),
+            'misalignment_deg': F('vec3', [0.0, 0.0, 0.0], 'small rotation body -> sensor '
+                                  '(rotation vector) [deg]'),
+            'scale_factor_error': F('vec3', [0.0, 0.0, 0.0], 'measured = (1 + s) true, '
+                                    'per axis [-]'),
+            'lsb_T': F('float', 20e-9, 'quantisation step [T] (0: none)'),
+            'saturation_T': F('float', 0.0, 'per-axis range [T] (0: none)'),
+            'dropout_probability': F('float', 0.0, 'probability that a sample is lost [-]'),
+            'q_body_sensor_xyzw': F('quat', [0.0, 0.0, 0.0, 1.0],
+                                    'nominal mounting, sensor -> body, scalar last'),
+        }),
+        'horizon_sensor': Opt({
+            'period_s': F('float', 1.0, 'sample period [s]'),
+            'noise_std_deg': F('vec2', [0.1, 0.1], 'white noise std of roll, pitch [deg]'),
+            'bias_deg': F('vec2', [0.0, 0.0], 'bias of roll, pitch [deg]'),
+            'scale_factor_error': F('vec2', [0.0, 0.0], 'scale-factor error of roll, pitch '
+                                    '[-] (paper 004: 0.05 on one channel)'),
+            'fov_deg': F('float', 30.0, 'largest |roll|, |pitch| with a valid output [deg]'),
+        }),
+        'star_tracker': Opt({
+            'period_s': F('float', 1.0, 'sample period [s]'),
+            'noise_std_deg': F('vec3', [0.02 / 3] * 3, 'attitude noise std per body axis '
+                               '[deg] (0.02 deg 3-sigma)'),
+        }),
+        'gyro': Opt({
+            'period_s': F('float', 1.0, 'sample period [s]'),
+            'noise_std_deg_s': F('vec3', [1e-4] * 3, 'rate white noise std [deg/s]'),
+            'bias_initial_deg_h': F('vec3', [0.0, 0.0, 0.0], 'initial bias [deg/h]'),
+            'bias_walk_deg_h_sqrt_h': F('vec3', [0.01 / 3] * 3,
+                                        'bias random walk density [deg/h/sqrt(h)]'),
+        }),
+    },
+    'estimator': Opt({
+        'algorithm': F('str', 'magnetic_filter', 'attitude estimator',
+                       ('magnetic_filter', 'triad', 'horizon_mag_yaw')),
+        'period_s': F('float', 2.0, 'estimator period [s] (paper 000: prediction every 2 s)'),
+        'theta_T2': F('float', 9e-14, 'magnetic_filter theta of (38) [T^2]'),
+        'tau': F('float', 0.01, 'magnetic_filter tau of (38) [-]'),
+        'p0_diag': F('list9', [10.0] * 3 + [0.0036] * 3 + [1e-14] * 3,
+                     'magnetic_filter initial covariance diagonal: attitude (phi or mu) [-], '
+                     'rate [rad^2/s^2], disturbance [1/s^4]'),
+        'measurement_form': F('str', 'phi', 'magnetic_filter measurement model, (36) phi or '
+                              '(37) mu', ('phi', 'mu')),
+        'literal_update': F('bool', False, "magnetic_filter: the paper's literal (38) (raw "
+                            'residuals summed) instead of sequential innovations'),
+        'substeps': F('int', 1, 'magnetic_filter RK4 substeps per prediction'),
+        'initial_q_orbit_body_xyzw': F('quat', [0.0, 0.0, 0.0, 1.0],
+                                       'initial attitude estimate (paper 000: identity)'),
+        'initial_omega_body_orbit_body_deg_s': F('vec3', [0.0, 0.0, 0.0],
+                                                 'initial relative rate estimate [deg/s] '
+                                                 '(paper 000: omega\' = (0, omega0, 0))'),
+        'onboard_orbit': 'ORBIT?',
+        'onboard_field': 'FIELD?',
+    }),
     'record': {
         'topics': F('strlist', [], 'topics to record (empty: every topic of the graph)'),
     },
@@ -174,13 +238,15 @@ class _Checker:
             full = prefix + key
             kline = lines.get(key, line)
             if isinstance(spec, dict):
-                if key not in data and _has_required(spec):
-                    continue  # a section with required keys is optional as a whole
+                if key not in data and (isinstance(spec, Opt) or _has_required(spec)):
+                    continue  # optional section, or one with required keys: absent as a whole
                 out[key] = self.mapping(data.get(key), spec, full + '.', kline)
-            elif spec == 'ORBIT':
+            elif spec in ('ORBIT?', 'FIELD?') and key not in data:
+                continue  # optional variant section (the caller supplies a default)
+            elif spec in ('ORBIT', 'ORBIT?'):
                 out[key] = self.variant(data.get(key), _ORBIT_COMMON, 'type', ORBIT_VARIANTS,
                                         full, kline)
-            elif spec == 'FIELD':
+            elif spec in ('FIELD', 'FIELD?'):
                 out[key] = self.variant(data.get(key), _FIELD_COMMON, 'model', FIELD_VARIANTS,
                                         full, kline)
             elif key in data:
@@ -248,6 +314,10 @@ def _convert(value: Any, spec: F) -> Any:
         return value
     if kind == 'vec3':
         return _vector(value, 3)
+    if kind == 'vec2':
+        return _vector(value, 2)
+    if kind == 'list9':
+        return _vector(value, 9)
     if kind == 'quat':
         q = _vector(value, 4)
         norm = math.sqrt(sum(c * c for c in q))
@@ -345,6 +415,9 @@ def load_scenario(path: str) -> Dict[str, Any]:
     sc_lines = getattr(data.get('spacecraft') or {}, 'lines', {})
     out['spacecraft']['wheels'] = _check_wheels(
         checker, out['spacecraft'].get('wheels', []), sc_lines.get('wheels'))
+    if 'estimator' in out:   # the flight software's own models default to the truth's
+        out['estimator'].setdefault('onboard_orbit', dict(out['orbit']))
+        out['estimator'].setdefault('onboard_field', dict(out['field']))
     _check_consistency(checker, out, getattr(data, 'lines', {}))
     out['_path'] = os.path.abspath(path)
     return out
@@ -384,9 +457,9 @@ def schema_markdown() -> str:
             full = prefix + key
             if isinstance(spec, dict):
                 walk(full + '.', spec)
-            elif spec in ('ORBIT', 'FIELD'):
+            elif spec in ('ORBIT', 'FIELD', 'ORBIT?', 'FIELD?'):
                 sel, common, variants = (('type', _ORBIT_COMMON, ORBIT_VARIANTS)
-                                         if spec == 'ORBIT' else
+                                         if spec.startswith('ORBIT') else
                                          ('model', _FIELD_COMMON, FIELD_VARIANTS))
                 walk(full + '.', common)
                 for name, keys in variants.items():
