@@ -21,6 +21,7 @@ setup(
         'console_scripts': [
             'adcs = adcs_nodes.tools.cli:main',
             'recorder = adcs_nodes.nodes.recorder:main',
+            'estimator = adcs_nodes.nodes.estimator:main',
             'compose = adcs_nodes.tools.compose:main',
         ],
     },

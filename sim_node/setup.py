@@ -21,6 +21,10 @@ setup(
         'console_scripts': [
             'dynamics = sim_node.nodes.dynamics:main',
             'environment = sim_node.nodes.environment:main',
+            'magnetometer = sim_node.nodes.magnetometer:main',
+            'horizon_sensor = sim_node.nodes.horizon_sensor:main',
+            'star_tracker = sim_node.nodes.star_tracker:main',
+            'gyro = sim_node.nodes.gyro:main',
         ],
     },
 )

@@ -55,7 +55,72 @@ TOPIC_TYPES = {
     'sim/wheels': 'adcs_msgs/msg/WheelState',
     'adcs/actuator_command': 'adcs_msgs/msg/ActuatorCommand',
     'lockstep/status': 'adcs_msgs/msg/LockstepStatus',
+    'sensors/magnetometer': 'sensor_msgs/msg/MagneticField',
+    'sensors/horizon': 'adcs_msgs/msg/HorizonSensor',
+    'sensors/star_tracker': 'sensor_msgs/msg/Imu',
+    'sensors/gyro': 'sensor_msgs/msg/Imu',
+    'adcs/attitude_estimate': 'adcs_msgs/msg/AttitudeState',
+    'adcs/estimator/diagnostics': 'adcs_msgs/msg/FilterDiagnostics',
 }
+
+#: Sensor nodes: scenario key -> (executable/module name, class, output topic).
+SENSORS = {
+    'magnetometer': ('magnetometer', 'MagnetometerNode', 'sensors/magnetometer'),
+    'horizon_sensor': ('horizon_sensor', 'HorizonSensorNode', 'sensors/horizon'),
+    'star_tracker': ('star_tracker', 'StarTrackerNode', 'sensors/star_tracker'),
+    'gyro': ('gyro', 'GyroNode', 'sensors/gyro'),
+}
+
+
+def _rad(values) -> List[float]:
+    return [math.radians(v) for v in values]
+
+
+def _sensor_params(key: str, cfg: Dict[str, Any]) -> Dict[str, Any]:
+    """Node parameters of a sensor (SI, radians) from its scenario section (degrees)."""
+    p: Dict[str, Any] = {'period_s': cfg['period_s']}
+    if key == 'magnetometer':
+        p.update(noise_std_T=cfg['noise_std_T'], bias_T=cfg['bias_T'],
+                 misalignment_rad=_rad(cfg['misalignment_deg']),
+                 scale_factor_error=cfg['scale_factor_error'], lsb_T=cfg['lsb_T'],
+                 saturation_T=cfg['saturation_T'],
+                 dropout_probability=cfg['dropout_probability'],
+                 q_body_sensor=cfg['q_body_sensor_xyzw'])
+    elif key == 'horizon_sensor':
+        p.update(noise_std_rad=_rad(cfg['noise_std_deg']), bias_rad=_rad(cfg['bias_deg']),
+                 scale_factor_error=cfg['scale_factor_error'],
+                 fov_rad=math.radians(cfg['fov_deg']))
+    elif key == 'star_tracker':
+        p.update(noise_std_rad=_rad(cfg['noise_std_deg']))
+    elif key == 'gyro':
+        p.update(noise_std_rad_s=_rad(cfg['noise_std_deg_s']),
+                 bias_initial_rad_s=[math.radians(v) / 3600.0
+                                     for v in cfg['bias_initial_deg_h']],
+                 bias_walk_std_rad_s_sqrt_s=[math.radians(v) / 3600.0 / 60.0
+                                             for v in cfg['bias_walk_deg_h_sqrt_h']])
+    return p
+
+
+def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
+    est = sc['estimator']
+    sensors = sc['sensors']
+    inertia = [float(v) for row in sc['spacecraft']['inertia_kgm2'] for v in row]
+    p: Dict[str, Any] = {
+        'algorithm': est['algorithm'], 'period_s': est['period_s'],
+        'theta_T2': est['theta_T2'], 'tau': est['tau'], 'p0_diag': est['p0_diag'],
+        'measurement_form': est['measurement_form'], 'literal_update': est['literal_update'],
+        'substeps': est['substeps'], 'inertia_kgm2': inertia,
+        'initial_q_orbit_body': est['initial_q_orbit_body_xyzw'],
+        'initial_omega_body_orbit_body': _rad(est['initial_omega_body_orbit_body_deg_s']),
+    }
+    if 'magnetometer' in sensors:
+        p['magnetometer_period_s'] = sensors['magnetometer']['period_s']
+        p['magnetometer_q_body_sensor'] = sensors['magnetometer']['q_body_sensor_xyzw']
+    if 'horizon_sensor' in sensors:
+        p['horizon_period_s'] = sensors['horizon_sensor']['period_s']
+    _flatten('onboard_orbit', est['onboard_orbit'], p)
+    _flatten('onboard_field', est['onboard_field'], p)
+    return p
 
 
 def _flatten(prefix: str, data: Dict[str, Any], out: Dict[str, Any]) -> None:
@@ -131,6 +196,28 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                  publishes=['/clock', 'sim/state', 'sim/wheels'],
                  subscribes=['sim/environment', 'adcs/actuator_command']),
     ]
+    for key, (exe, cls, topic) in SENSORS.items():
+        if key in sc['sensors']:
+            nodes.append(NodeSpec(key, 'sim_node', exe, f'sim_node.nodes.{exe}', cls,
+                                  {**common, **_sensor_params(key, sc['sensors'][key])},
+                                  publishes=[topic],
+                                  subscribes=['sim/state', 'sim/environment']))
+    if 'estimator' in sc:
+        est = sc['estimator']
+        if 'magnetometer' not in sc['sensors']:
+            raise ValueError('estimator: needs sensors.magnetometer')
+        subs = ['sensors/magnetometer', 'adcs/actuator_command']
+        if est['algorithm'] in ('triad', 'horizon_mag_yaw'):
+            if 'horizon_sensor' not in sc['sensors']:
+                raise ValueError(f'estimator.algorithm {est["algorithm"]} needs '
+                                 'sensors.horizon_sensor')
+            subs.insert(1, 'sensors/horizon')
+        nodes.append(NodeSpec('estimator', 'adcs_nodes', 'estimator',
+                              'adcs_nodes.nodes.estimator', 'EstimatorNode',
+                              {**common, **_estimator_params(sc)},
+                              publishes=['adcs/attitude_estimate',
+                                         'adcs/estimator/diagnostics'],
+                              subscribes=subs))
     if record:
         topics = list(sc['record']['topics']) or sorted(
             {t for n in nodes for t in n.publishes} | {'lockstep/status'})
@@ -162,10 +249,17 @@ def _add_handshake(nodes: List[NodeSpec]) -> None:
         master.params['wait_for_nodes'] = others
 
 
+class _NoAliasDumper(yaml.SafeDumper):
+    """The rcl parameter-file parser knows no YAML anchors/aliases: write every value out."""
+
+    def ignore_aliases(self, data: Any) -> bool:
+        return True
+
+
 def params_file_text(nodes: List[NodeSpec]) -> str:
     """ROS 2 parameter file (``--params-file``) for every node of the graph."""
     doc = {f'/{n.name}': {'ros__parameters': _nest(n.params)} for n in nodes}
-    return yaml.safe_dump(doc, sort_keys=True, default_flow_style=None)
+    return yaml.dump(doc, Dumper=_NoAliasDumper, sort_keys=True, default_flow_style=None)
 
 
 def _nest(flat: Dict[str, Any]) -> Dict[str, Any]:

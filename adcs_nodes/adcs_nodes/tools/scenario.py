@@ -374,6 +374,21 @@ def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, i
     if 'omega_body_eci_body_deg_s' in init and 'omega_body_orbit_body_deg_s' in init:
         checker.fail(lines.get('initial'), 'initial',
                      'give omega_body_eci_body_deg_s or omega_body_orbit_body_deg_s, not both')
+    if 'estimator' in sc:
+        sensors = sc.get('sensors', {})
+        if 'magnetometer' not in sensors:
+            checker.fail(lines.get('estimator'), 'estimator', 'needs sensors.magnetometer')
+        if sc['estimator']['algorithm'] != 'magnetic_filter' and 'horizon_sensor' not in sensors:
+            checker.fail(lines.get('estimator'), 'estimator.algorithm',
+                         f'{sc["estimator"]["algorithm"]} needs sensors.horizon_sensor')
+    frame = timing['frame_s']
+    periods = [('estimator.period_s', sc.get('estimator', {}).get('period_s'))]
+    periods += [(f'sensors.{k}.period_s', v['period_s']) for k, v in sc['sensors'].items()]
+    for key, period in periods:
+        if period is not None and (period <= 0 or abs(period / frame - round(period / frame))
+                                   > 1e-9):
+            checker.fail(lines.get(key.split('.')[0]), key,
+                         f'{period} s is not a positive multiple of the frame {frame} s')
     inertia = sc['spacecraft']['inertia_kgm2']
     sym = all(abs(inertia[i][j] - inertia[j][i]) <= 1e-9 * max(1.0, abs(inertia[i][j]))
               for i in range(3) for j in range(3))
