@@ -1,0 +1,435 @@
+"""Seeded attitude-sensor models of the simulated world: magnetometer, horizon, star tracker, gyro.
+
+Every model takes truth (numpy arrays, SI units, radians) and returns one measurement per
+call. Randomness comes only from ``numpy.random.Generator`` objects created from the ``seed``
+given at construction (one independent child stream per error source, via
+``numpy.random.SeedSequence(seed).spawn``), so a model is deterministic for a given seed and
+sequence of calls. Every error source draws its random numbers on every call, whatever the
+outcome (dropout, invalid output), so the streams never shift.
+
+Magnetometer (paper 000, digest sections 5.1-5.2: bias up to 120 nT, misalignment up to
+10 deg, LSB 20 nT, noise std 375/25/65 nT). Effects in this order::
+
+    b_nom  = R(q_body_sensor)^T b_body          nominal mounting (sensor axes, no error)   (M1)
+    b_mis  = R(exp(delta))^T b_nom              misalignment: the real sensor axes are the
+                                                nominal ones rotated by the rotation vector
+                                                delta (small, |delta| <= pi/2)             (M2)
+    b_sf   = (1 + s_i) b_mis,i                  scale-factor error per sensor axis          (M3)
+    b_bias = b_sf + bias                        constant bias, sensor axes                 (M4)
+    b_n    = b_bias + sigma_i n_i,  n ~ N(0,I)  white Gaussian noise                       (M5)
+    b_sat  = clip(b_n,i, -S_i, S_i)             saturation, per axis (S_i = 0: none)       (M6)
+    b_out  = L round(b_sat / L)                 quantisation to the LSB L (0: none)        (M7)
+
+and with probability ``p`` the sample is lost (dropout: ``None``). (M1)-(M3) are one constant
+matrix ``M = diag(1 + s) R(exp(delta))^T R(q_body_sensor)^T``.
+
+Horizon (Earth) sensor (paper 004, digest section 3). Roll and pitch are the 3-2-1 angles of
+the body w.r.t. the orbit frame (x along-track, y orbit normal, z zenith)::
+
+    C = R(q_orbit_body)^T = R1(phi) R2(theta) R3(psi)                          (orbit -> body)
+    z_b = C z0 = (-s theta, c theta s phi, c theta c phi),   z0 = (0, 0, 1)    (zenith, body)
+    theta = -asin(z_b,x),   phi = atan2(z_b,y, z_b,z)                                     (H1)
+    phi_m = (1 + s_r) phi + b_r + sigma_r n_r,  theta_m = (1 + s_p) theta + b_p + sigma_p n_p
+                                                                                          (H2)
+
+Yaw does not enter ``z_b``. The sensor looks along body ``-z`` (its boresight is nadir when
+the body is aligned with the orbit frame). The output is valid when the Earth is inside the
+field of view: ``z_b,z > 0`` (nadir less than 90 deg off the boresight) and the TRUE
+``|phi| <= fov_roll``, ``|theta| <= fov_pitch``. An invalid sample carries NaN angles.
+
+Star tracker (paper 001: 0.02 deg 3-sigma per axis -> sigma = 0.00667 deg)::
+
+    delta = sigma * n,  n ~ N(0, I3)            small error rotation, body axes
+    q_eci_body_m = q_eci_body (x) exp(delta)                                              (S1)
+
+Gyro (rate-integrating model with a random-walk bias)::
+
+    beta_k = beta_{k-1} + sigma_w sqrt(dt_k) w_k,   w_k ~ N(0, I3),   beta_0 = bias_initial
+    omega_m = omega_body_eci_body + beta_k + sigma_v v_k,   v_k ~ N(0, I3)                (G1)
+
+so ``Var(beta_k - beta_0) = sigma_w^2 t_k`` per axis, linear in time. ``sigma_w`` is the rate
+random-walk density [rad/s/sqrt(s)]. Paper 001 (digest section 4) quotes a "random drift"
+of 0.01 deg/h (3-sigma); :data:`GYRO_DRIFT_WALK_RAD_S_SQRT_S` is the ``sigma_w`` whose bias
+random walk reaches that 3-sigma value one hour after start:
+``sigma_w = (0.01 / 3 deg/h) / sqrt(3600 s) = 2.69e-10 rad/s/sqrt(s)``.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple, Optional
+
+import numpy as np
+
+from adcs_nodes.core import attitude as att
+
+#: Gyro rate random walk [rad/s/sqrt(s)] whose bias reaches 0.01 deg/h (3-sigma) after 1 h.
+GYRO_DRIFT_WALK_RAD_S_SQRT_S = math.radians(0.01 / 3.0) / 3600.0 / math.sqrt(3600.0)
+#: Star tracker noise [rad] per body axis for paper 001's 0.02 deg (3-sigma).
+STAR_TRACKER_STD_RAD = math.radians(0.02 / 3.0)
+
+_UNIT_TOL = 1e-6   # accepted deviation of a configured quaternion from unit norm
+
+
+def _vector(value, n: int, name: str, nonneg: bool = False,
+            scalar_ok: bool = True) -> np.ndarray:
+    """Validate a finite (n,) vector (or a scalar broadcast to it); ValueError if bad."""
+    a = np.array(value, dtype=float)
+    if a.shape == () and scalar_ok:
+        a = np.full(n, float(a))
+    if a.shape != (n,):
+        raise ValueError(f'{name} must have shape ({n},)'
+                         + (' or be a scalar' if scalar_ok else '') + f', got {a.tolist()}')
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f'{name} must be finite, got {a.tolist()}')
+    if nonneg and np.any(a < 0.0):
+        raise ValueError(f'{name} must be >= 0, got {a.tolist()}')
+    return a
+
+
+def _scale_factor(value, n: int, name: str = 'scale_factor_error') -> np.ndarray:
+    s = _vector(value, n, name)
+    if np.any(s <= -1.0):
+        raise ValueError(f'{name} must be > -1 (measured = (1 + s) true), got {s.tolist()}')
+    return s
+
+
+def _nonneg_scalar(value, name: str) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name} must be a number, got {value!r}') from exc
+    if not (math.isfinite(x) and x >= 0.0):
+        raise ValueError(f'{name} must be finite and >= 0, got {value!r}')
+    return x
+
+
+def _unit_quaternion(value, name: str) -> np.ndarray:
+    q = np.array(value, dtype=float)
+    if q.shape != (4,) or not np.all(np.isfinite(q)):
+        raise ValueError(f'{name} must be a finite (4,) quaternion [x, y, z, w], got {value!r}')
+    if abs(np.linalg.norm(q) - 1.0) > _UNIT_TOL:
+        raise ValueError(f'{name} must have unit norm, got |q| = {np.linalg.norm(q)}')
+    return q / np.linalg.norm(q)
+
+
+def _streams(seed, n: int):
+    """``n`` independent generators from a non-negative integer seed."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
+    return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(n)]
+
+
+def _input_vec3(v, name: str) -> np.ndarray:
+    a = np.asarray(v, dtype=float)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f'{name} must be a finite (3,) vector, got {v!r}')
+    return a
+
+
+class Magnetometer:
+    """Three-axis magnetometer, equations (M1)-(M7) of the module docstring.
+
+    Parameters
+    ----------
+    noise_std_T : float or array_like, shape (3,)
+        White Gaussian noise std per sensor axis [T], ``>= 0``.
+    bias_T : float or array_like, shape (3,)
+        Constant bias, sensor axes [T].
+    misalignment_rad : array_like, shape (3,)
+        Rotation vector ``delta`` [rad] carrying the nominal sensor axes into the real ones
+        (small: ``|delta| <= pi/2``; large rotations belong in ``q_body_sensor``).
+    scale_factor_error : float or array_like, shape (3,)
+        ``s_i`` in ``measured_i = (1 + s_i) true_i``; each ``> -1``.
+    lsb_T : float
+        Quantisation step [T], ``>= 0`` (0: no quantisation).
+    saturation_T : float or array_like, shape (3,)
+        Per-axis full scale [T]: outputs are clipped to ``[-S_i, S_i]``; ``S_i = 0``: none.
+    dropout_probability : float
+        Probability in ``[0, 1]`` that a sample is lost.
+    q_body_sensor : array_like, shape (4,)
+        Nominal mounting, scalar last, unit norm: ``v_body = R(q_body_sensor) v_sensor``.
+    seed : int
+        Non-negative seed of the noise and dropout streams.
+
+    Raises
+    ------
+    ValueError
+        On any malformed, non-finite or out-of-range parameter.
+    """
+
+    def __init__(self, noise_std_T=0.0, bias_T=0.0, misalignment_rad=(0.0, 0.0, 0.0),
+                 scale_factor_error=0.0, lsb_T: float = 0.0, saturation_T=0.0,
+                 dropout_probability: float = 0.0, q_body_sensor=(0.0, 0.0, 0.0, 1.0),
+                 seed: int = 0) -> None:
+        self.noise_std_T = _vector(noise_std_T, 3, 'noise_std_T', nonneg=True)
+        self.bias_T = _vector(bias_T, 3, 'bias_T')
+        self.misalignment_rad = _vector(misalignment_rad, 3, 'misalignment_rad',
+                                        scalar_ok=False)
+        if np.linalg.norm(self.misalignment_rad) > math.pi / 2:
+            raise ValueError('misalignment_rad is a small rotation (|delta| <= pi/2 rad); put a '
+                             'large mounting rotation in q_body_sensor')
+        self.scale_factor_error = _scale_factor(scale_factor_error, 3)
+        self.lsb_T = _nonneg_scalar(lsb_T, 'lsb_T')
+        self.saturation_T = _vector(saturation_T, 3, 'saturation_T', nonneg=True)
+        p = _nonneg_scalar(dropout_probability, 'dropout_probability')
+        if p > 1.0:
+            raise ValueError(f'dropout_probability must be in [0, 1], got {p}')
+        self.dropout_probability = p
+        self.q_body_sensor = _unit_quaternion(q_body_sensor, 'q_body_sensor')
+        r_nom_mis = att.to_matrix(att.from_rotation_vector(self.misalignment_rad))
+        #: (3, 3) constant map body -> sensor including scale factor, (M1)-(M3).
+        self.matrix = (np.diag(1.0 + self.scale_factor_error) @ r_nom_mis.T
+                       @ att.to_matrix(self.q_body_sensor).T)
+        self._noise_rng, self._drop_rng = _streams(seed, 2)
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """White-noise covariance ``diag(noise_std_T^2)`` [T^2], sensor axes, shape (3, 3)."""
+        return np.diag(self.noise_std_T ** 2)
+
+    def measure(self, b_body) -> Optional[np.ndarray]:
+        """One sample of the field.
+
+        Parameters
+        ----------
+        b_body : array_like, shape (3,)
+            True geomagnetic field, body axes [T].
+
+        Returns
+        -------
+        numpy.ndarray, shape (3,), or None
+            Measured field, sensor axes [T]; ``None`` when the sample dropped out.
+
+        Raises
+        ------
+        ValueError
+            If ``b_body`` is not a finite (3,) vector.
+        """
+        b = self.matrix @ _input_vec3(b_body, 'b_body') + self.bias_T
+        b = b + self.noise_std_T * self._noise_rng.standard_normal(3)
+        lost = self._drop_rng.random() < self.dropout_probability
+        sat = self.saturation_T
+        b = np.where(sat > 0.0, np.clip(b, -sat, sat), b)
+        if self.lsb_T > 0.0:
+            b = self.lsb_T * np.round(b / self.lsb_T)
+        return None if lost else b
+
+
+class HorizonMeasurement(NamedTuple):
+    """Output of :meth:`HorizonSensor.measure`: angles [rad] (NaN when not valid) and validity."""
+
+    roll: float
+    pitch: float
+    valid: bool
+
+
+def roll_pitch_of_zenith(zenith_body) -> tuple:
+    """True roll and pitch [rad] from the zenith direction in body axes, equation (H1).
+
+    Parameters
+    ----------
+    zenith_body : array_like, shape (3,)
+        Local vertical "up" (orbit-frame z) in body components; any non-zero length.
+
+    Returns
+    -------
+    tuple of float
+        ``(roll, pitch)``: roll in (-pi, pi], pitch in [-pi/2, pi/2].
+    """
+    z = _input_vec3(zenith_body, 'zenith_body')
+    n = np.linalg.norm(z)
+    if n == 0.0:
+        raise ValueError('zenith_body must not be zero')
+    z = z / n
+    pitch = -math.asin(min(1.0, max(-1.0, float(z[0]))))
+    roll = math.atan2(float(z[1]), float(z[2]))
+    return roll, pitch
+
+
+class HorizonSensor:
+    """Earth horizon sensor giving roll and pitch, equations (H1)-(H2) of the module docstring.
+
+    Parameters
+    ----------
+    noise_std_rad : float or array_like, shape (2,)
+        White Gaussian noise std of (roll, pitch) [rad], ``>= 0``.
+    bias_rad : float or array_like, shape (2,)
+        Constant bias of (roll, pitch) [rad].
+    scale_factor_error : float or array_like, shape (2,)
+        ``s`` in ``measured = (1 + s) true`` for (roll, pitch); each ``> -1``.
+    fov_rad : float or array_like, shape (2,)
+        Largest true ``|roll|``, ``|pitch|`` [rad] with a valid output; each in ``(0, pi/2]``.
+    seed : int
+        Non-negative seed of the noise stream.
+
+    Raises
+    ------
+    ValueError
+        On any malformed, non-finite or out-of-range parameter.
+    """
+
+    def __init__(self, noise_std_rad=0.0, bias_rad=0.0, scale_factor_error=0.0,
+                 fov_rad=math.radians(30.0), seed: int = 0) -> None:
+        self.noise_std_rad = _vector(noise_std_rad, 2, 'noise_std_rad', nonneg=True)
+        self.bias_rad = _vector(bias_rad, 2, 'bias_rad')
+        self.scale_factor_error = _scale_factor(scale_factor_error, 2)
+        self.fov_rad = _vector(fov_rad, 2, 'fov_rad')
+        if np.any(self.fov_rad <= 0.0) or np.any(self.fov_rad > math.pi / 2):
+            raise ValueError(f'fov_rad must be in (0, pi/2], got {self.fov_rad.tolist()}')
+        (self._noise_rng,) = _streams(seed, 1)
+
+    @property
+    def variance(self) -> np.ndarray:
+        """Noise variance of (roll, pitch) [rad^2], shape (2,)."""
+        return self.noise_std_rad ** 2
+
+    def measure_zenith(self, zenith_body) -> HorizonMeasurement:
+        """Measure from the zenith direction (orbit-frame z) in body axes.
+
+        Parameters
+        ----------
+        zenith_body : array_like, shape (3,)
+            Local vertical "up" in body components (``R(q_eci_body)^T r_eci`` or
+            ``R(q_orbit_body)^T z0``); any non-zero length.
+
+        Returns
+        -------
+        HorizonMeasurement
+            Measured roll and pitch [rad] and validity (NaN angles when not valid).
+        """
+        z = _input_vec3(zenith_body, 'zenith_body')
+        roll, pitch = roll_pitch_of_zenith(z)
+        noise = self.noise_std_rad * self._noise_rng.standard_normal(2)
+        valid = bool(z[2] > 0.0 and abs(roll) <= self.fov_rad[0]
+                     and abs(pitch) <= self.fov_rad[1])
+        if not valid:
+            return HorizonMeasurement(math.nan, math.nan, False)
+        true = np.array([roll, pitch])
+        out = (1.0 + self.scale_factor_error) * true + self.bias_rad + noise
+        return HorizonMeasurement(float(out[0]), float(out[1]), True)
+
+    def measure(self, q_orbit_body) -> HorizonMeasurement:
+        """Measure roll and pitch of the body w.r.t. the orbit frame.
+
+        Parameters
+        ----------
+        q_orbit_body : array_like, shape (4,)
+            True attitude, scalar last; rotates body components into the orbit frame.
+
+        Returns
+        -------
+        HorizonMeasurement
+            ``(roll, pitch, valid)``, angles [rad], NaN when not valid.
+        """
+        return self.measure_zenith(att.to_matrix(q_orbit_body)[2, :])
+
+
+class StarTracker:
+    """Star tracker: the true attitude times a small random rotation in body axes, (S1).
+
+    Parameters
+    ----------
+    noise_std_rad : float or array_like, shape (3,)
+        Std of the error rotation about each body axis [rad], ``>= 0``
+        (:data:`STAR_TRACKER_STD_RAD` for paper 001's 0.02 deg 3-sigma).
+    seed : int
+        Non-negative seed of the noise stream.
+
+    Raises
+    ------
+    ValueError
+        On a malformed, negative or non-finite parameter.
+    """
+
+    def __init__(self, noise_std_rad=STAR_TRACKER_STD_RAD, seed: int = 0) -> None:
+        self.noise_std_rad = _vector(noise_std_rad, 3, 'noise_std_rad', nonneg=True)
+        (self._noise_rng,) = _streams(seed, 1)
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Small-angle attitude error covariance [rad^2], body axes, shape (3, 3)."""
+        return np.diag(self.noise_std_rad ** 2)
+
+    def measure(self, q_eci_body) -> np.ndarray:
+        """Measured attitude.
+
+        Parameters
+        ----------
+        q_eci_body : array_like, shape (4,)
+            True attitude, scalar last (normalised here).
+
+        Returns
+        -------
+        numpy.ndarray, shape (4,)
+            ``q_eci_body`` measured, unit norm, same hemisphere as the input.
+        """
+        q = att.normalize(q_eci_body)
+        delta = self.noise_std_rad * self._noise_rng.standard_normal(3)
+        return att.normalize(att.multiply(q, att.from_rotation_vector(delta)))
+
+
+class Gyro:
+    """Three-axis rate gyro with white noise and a random-walk bias, equation (G1).
+
+    Parameters
+    ----------
+    noise_std_rad_s : float or array_like, shape (3,)
+        White noise std per sample and body axis [rad/s], ``>= 0``.
+    bias_initial_rad_s : float or array_like, shape (3,)
+        Bias at the first sample, body axes [rad/s].
+    bias_walk_std_rad_s_sqrt_s : float or array_like, shape (3,)
+        Rate random-walk density ``sigma_w`` [rad/s/sqrt(s)], ``>= 0``; see
+        :data:`GYRO_DRIFT_WALK_RAD_S_SQRT_S`.
+    seed : int
+        Non-negative seed of the bias-walk and noise streams.
+
+    Raises
+    ------
+    ValueError
+        On a malformed, negative or non-finite parameter.
+    """
+
+    def __init__(self, noise_std_rad_s=0.0, bias_initial_rad_s=0.0,
+                 bias_walk_std_rad_s_sqrt_s=0.0, seed: int = 0) -> None:
+        self.noise_std_rad_s = _vector(noise_std_rad_s, 3, 'noise_std_rad_s', nonneg=True)
+        self.bias_initial_rad_s = _vector(bias_initial_rad_s, 3, 'bias_initial_rad_s')
+        self.bias_walk_std_rad_s_sqrt_s = _vector(
+            bias_walk_std_rad_s_sqrt_s, 3, 'bias_walk_std_rad_s_sqrt_s', nonneg=True)
+        self._bias = self.bias_initial_rad_s.copy()
+        self._walk_rng, self._noise_rng = _streams(seed, 2)
+
+    @property
+    def bias(self) -> np.ndarray:
+        """Current bias [rad/s], body axes, shape (3,) (a copy)."""
+        return self._bias.copy()
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """White-noise covariance ``diag(noise_std_rad_s^2)`` [(rad/s)^2], shape (3, 3)."""
+        return np.diag(self.noise_std_rad_s ** 2)
+
+    def measure(self, omega_body_eci_body, dt: float) -> np.ndarray:
+        """Advance the bias by ``dt`` and return one rate sample.
+
+        Parameters
+        ----------
+        omega_body_eci_body : array_like, shape (3,)
+            True rate of the body w.r.t. ECI, body axes [rad/s].
+        dt : float
+            Time since the previous sample [s], ``>= 0`` (0 for the first one).
+
+        Returns
+        -------
+        numpy.ndarray, shape (3,)
+            Measured rate, body axes [rad/s].
+
+        Raises
+        ------
+        ValueError
+            If the rate is not a finite (3,) vector or ``dt`` is negative or not finite.
+        """
+        w = _input_vec3(omega_body_eci_body, 'omega_body_eci_body')
+        dt = _nonneg_scalar(dt, 'dt')
+        walk = self._walk_rng.standard_normal(3)
+        self._bias = self._bias + self.bias_walk_std_rad_s_sqrt_s * math.sqrt(dt) * walk
+        return w + self._bias + self.noise_std_rad_s * self._noise_rng.standard_normal(3)

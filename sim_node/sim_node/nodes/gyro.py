@@ -1,0 +1,92 @@
+"""``gyro`` node: the simulated three-axis rate gyro.
+
+Subscribes ``sim/state`` (every frame; the gyro needs no environment, DESIGN section 5);
+every ``period_s`` of sim time t publishes ``sensors/gyro`` (``sensor_msgs/Imu``) stamped t:
+``angular_velocity`` = measured ``omega_body_eci_body`` [rad/s, body axes],
+``angular_velocity_covariance`` = ``diag(noise_std_rad_s^2)`` (white part only; the bias is
+not in it), ``orientation_covariance[0] = linear_acceleration_covariance[0] = -1`` (ROS
+convention: not provided), ``header.frame_id`` = ``frame_id`` (default ``gyro``; the gyro axes
+are the body axes). Errors: :class:`sim_node.models.sensors.Gyro`, its bias random walk
+integrated over the sim time between two samples (0 before the first). A missing or
+non-finite truth publishes nothing and logs a warning (the bias walk then spans the gap).
+
+Parameters (SI, radians; defaults from paper 001's "random drift 0.01 deg/h 3-sigma"):
+``period_s`` (1.0), ``noise_std_rad_s`` (0.01/3 deg/h = 1.616e-8 rad/s per axis),
+``bias_initial_rad_s`` ([0, 0, 0]), ``bias_walk_std_rad_s_sqrt_s`` (2.69e-10 rad/s/sqrt(s):
+the bias reaches 0.01 deg/h 3-sigma after 1 h), ``frame_id`` ('gyro'), plus the common ones
+of :class:`~adcs_nodes.nodes.lockstep_node.LockstepNode`. Seed: ``derive_seed(seed, node
+name)``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Dict, List, Optional
+
+from sensor_msgs.msg import Imu
+
+from adcs_msgs.msg import AttitudeState
+from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.convert import all_finite, to_vec3, vec3
+from adcs_nodes.nodes.lockstep_node import LockstepNode
+from sim_node.models.sensors import GYRO_DRIFT_WALK_RAD_S_SQRT_S, Gyro
+
+#: Defaults when run alone (paper 001, digest section 4: drift 0.01 deg/h 3-sigma).
+DEFAULTS: Dict[str, Any] = {
+    'period_s': 1.0,
+    'noise_std_rad_s': [math.radians(0.01 / 3.0) / 3600.0] * 3,
+    'bias_initial_rad_s': [0.0, 0.0, 0.0],
+    'bias_walk_std_rad_s_sqrt_s': [GYRO_DRIFT_WALK_RAD_S_SQRT_S] * 3,
+    'frame_id': 'gyro',
+}
+
+
+class GyroNode(LockstepNode):
+    """Publishes gyro samples of the truth rate (see module docstring)."""
+
+    def __init__(self, name: str = 'gyro', **kwargs) -> None:
+        super().__init__(name, **kwargs)
+        p = {k: self.param(k, v) for k, v in DEFAULTS.items()}
+        self.frame_id = str(p['frame_id'])
+        self.model = Gyro(noise_std_rad_s=p['noise_std_rad_s'],
+                          bias_initial_rad_s=p['bias_initial_rad_s'],
+                          bias_walk_std_rad_s_sqrt_s=p['bias_walk_std_rad_s_sqrt_s'],
+                          seed=derive_seed(self.seed, self.get_name()))
+        self.covariance = self.model.covariance.reshape(-1).tolist()
+        self._last_t_ns: Optional[int] = None
+        self.pub = self.publisher(Imu, 'sensors/gyro')
+        frame_s = self.frame_ns / NS_PER_S
+        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s)},
+                             float(p['period_s']), self.on_frame)
+        self.start_handshake()
+
+    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+        """Measure the rate at sim time ``t_ns`` and publish it (see module)."""
+        state = msgs['state']
+        if state is None:
+            self.get_logger().warning(f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
+            return
+        omega = vec3(state.omega_body_eci_body)
+        if not all_finite(omega):
+            self.get_logger().warning(
+                f't={t_ns / NS_PER_S:.3f} s: non-finite truth omega_body_eci_body, no sample')
+            return
+        dt = 0.0 if self._last_t_ns is None else (t_ns - self._last_t_ns) / NS_PER_S
+        self._last_t_ns = t_ns
+        msg = Imu()
+        msg.header.stamp = self.stamp(t_ns)
+        msg.header.frame_id = self.frame_id
+        msg.angular_velocity = to_vec3(self.model.measure(omega, dt))
+        msg.angular_velocity_covariance = self.covariance
+        msg.orientation_covariance[0] = -1.0
+        msg.linear_acceleration_covariance[0] = -1.0
+        self.pub.publish(msg)
+
+
+def main(args=None) -> int:
+    """``ros2 run sim_node gyro``."""
+    return runtime.run(GyroNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

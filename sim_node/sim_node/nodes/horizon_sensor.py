@@ -1,0 +1,96 @@
+"""``horizon_sensor`` node: the simulated Earth horizon sensor (roll and pitch, paper 004).
+
+Subscribes ``sim/state`` and ``sim/environment`` (both every frame); every ``period_s`` of sim
+time t publishes ``sensors/horizon`` (``adcs_msgs/HorizonSensor``) stamped t, with
+``header.frame_id`` = ``frame_id`` (default ``horizon_sensor``). The sensor sees the Earth:
+the zenith in body axes is ``R(q_eci_body)^T r_eci / |r_eci|`` (the orbit frame's z axis), from
+which :class:`sim_node.models.sensors.HorizonSensor` gives the 3-2-1 roll and pitch of the
+body w.r.t. the orbit frame. It always publishes: ``valid = false`` (NaN angles) when the
+Earth is outside the field of view, so the estimator can count invalid data. A missing or
+non-finite truth publishes nothing and logs a warning.
+
+Parameters (SI, radians; paper 004 gives no error model, the defaults are typical of a
+static infrared Earth sensor): ``period_s`` (1.0), ``noise_std_rad`` (0.1 deg for roll and
+pitch), ``bias_rad`` ([0, 0]), ``scale_factor_error`` ([0, 0]), ``fov_rad`` (30 deg; scalar or
+[roll, pitch]), ``frame_id`` ('horizon_sensor'), plus the common ones of
+:class:`~adcs_nodes.nodes.lockstep_node.LockstepNode`. Seed: ``derive_seed(seed, node name)``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Dict, List
+
+import numpy as np
+
+from adcs_msgs.msg import AttitudeState, Environment, HorizonSensor as HorizonMsg
+from adcs_nodes.core import attitude as att
+from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.convert import all_finite, quat, vec3
+from adcs_nodes.nodes.lockstep_node import LockstepNode
+from sim_node.models.sensors import HorizonSensor
+
+#: Defaults when run alone (ASSUMPTION: 0.1 deg noise, +-30 deg field of view).
+DEFAULTS: Dict[str, Any] = {
+    'period_s': 1.0,
+    'noise_std_rad': [math.radians(0.1), math.radians(0.1)],
+    'bias_rad': [0.0, 0.0],
+    'scale_factor_error': [0.0, 0.0],
+    'fov_rad': math.radians(30.0),
+    'frame_id': 'horizon_sensor',
+}
+
+
+class HorizonSensorNode(LockstepNode):
+    """Publishes roll/pitch samples of the truth attitude (see module docstring)."""
+
+    def __init__(self, name: str = 'horizon_sensor', **kwargs) -> None:
+        super().__init__(name, **kwargs)
+        p = {k: self.param(k, v) for k, v in DEFAULTS.items()}
+        self.frame_id = str(p['frame_id'])
+        self.model = HorizonSensor(
+            noise_std_rad=p['noise_std_rad'], bias_rad=p['bias_rad'],
+            scale_factor_error=p['scale_factor_error'], fov_rad=p['fov_rad'],
+            seed=derive_seed(self.seed, self.get_name()))
+        self.invalid = 0
+        self.pub = self.publisher(HorizonMsg, 'sensors/horizon')
+        frame_s = self.frame_ns / NS_PER_S
+        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s),
+                              'env': (Environment, 'sim/environment', frame_s)},
+                             float(p['period_s']), self.on_frame)
+        self.start_handshake()
+
+    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+        """Measure roll and pitch at sim time ``t_ns`` and publish them (see module)."""
+        state, env = msgs['state'], msgs['env']
+        if state is None or env is None:
+            self.get_logger().warning(f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
+            return
+        q_eci_body, r_eci = quat(state.q_eci_body), vec3(env.r_eci)
+        if not all_finite(q_eci_body, r_eci) or not np.any(q_eci_body) or not np.any(r_eci):
+            self.get_logger().warning(
+                f't={t_ns / NS_PER_S:.3f} s: non-finite truth (q_eci_body or r_eci), no sample')
+            return
+        zenith_body = att.to_matrix(q_eci_body).T @ (r_eci / np.linalg.norm(r_eci))
+        m = self.model.measure_zenith(zenith_body)
+        if not m.valid:
+            self.invalid += 1
+        var = self.model.variance
+        msg = HorizonMsg()
+        msg.header.stamp = self.stamp(t_ns)
+        msg.header.frame_id = self.frame_id
+        msg.roll = float(m.roll)
+        msg.pitch = float(m.pitch)
+        msg.roll_variance = float(var[0])
+        msg.pitch_variance = float(var[1])
+        msg.valid = bool(m.valid)
+        self.pub.publish(msg)
+
+
+def main(args=None) -> int:
+    """``ros2 run sim_node horizon_sensor``."""
+    return runtime.run(HorizonSensorNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,100 @@
+"""``magnetometer`` node: the simulated three-axis magnetometer.
+
+Subscribes ``sim/state`` and ``sim/environment`` (both every frame); every ``period_s`` of sim
+time t publishes ``sensors/magnetometer`` (``sensor_msgs/MagneticField``) stamped t: the field
+in the sensor frame [T], ``header.frame_id`` = ``frame_id`` (default ``magnetometer``),
+covariance ``diag(noise_std_T^2)``. Truth: ``b_body = R(q_eci_body)^T b_eci``; errors:
+:class:`sim_node.models.sensors.Magnetometer`. A dropout publishes nothing for that frame
+(counted in ``dropouts``); a missing or non-finite truth publishes nothing and logs a warning.
+
+Parameters (SI, radians; defaults: paper 000's noise and LSB, no other error):
+``period_s`` (1.0), ``noise_std_T`` ([375e-9, 25e-9, 65e-9]), ``bias_T`` ([0, 0, 0]),
+``misalignment_rad`` ([0, 0, 0]), ``scale_factor_error`` ([0, 0, 0]), ``lsb_T`` (20e-9),
+``saturation_T`` (0.0: none; scalar or 3 values), ``dropout_probability`` (0.0),
+``q_body_sensor`` ([0, 0, 0, 1]), ``frame_id`` ('magnetometer'), plus the common ones of
+:class:`~adcs_nodes.nodes.lockstep_node.LockstepNode`. Seed: ``derive_seed(seed, node name)``.
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, List
+
+import numpy as np
+from sensor_msgs.msg import MagneticField
+
+from adcs_msgs.msg import AttitudeState, Environment
+from adcs_nodes.core import attitude as att
+from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.convert import all_finite, quat, to_vec3, vec3
+from adcs_nodes.nodes.lockstep_node import LockstepNode
+from sim_node.models.sensors import Magnetometer
+
+#: Defaults when run alone (paper 000, digest section 5.1: noise std 375/25/65 nT, LSB 20 nT).
+DEFAULTS: Dict[str, Any] = {
+    'period_s': 1.0,
+    'noise_std_T': [375e-9, 25e-9, 65e-9],
+    'bias_T': [0.0, 0.0, 0.0],
+    'misalignment_rad': [0.0, 0.0, 0.0],
+    'scale_factor_error': [0.0, 0.0, 0.0],
+    'lsb_T': 20e-9,
+    'saturation_T': 0.0,
+    'dropout_probability': 0.0,
+    'q_body_sensor': [0.0, 0.0, 0.0, 1.0],
+    'frame_id': 'magnetometer',
+}
+
+
+class MagnetometerNode(LockstepNode):
+    """Publishes magnetometer samples of the truth field (see module docstring)."""
+
+    def __init__(self, name: str = 'magnetometer', **kwargs) -> None:
+        super().__init__(name, **kwargs)
+        p = {k: self.param(k, v) for k, v in DEFAULTS.items()}
+        self.frame_id = str(p['frame_id'])
+        self.model = Magnetometer(
+            noise_std_T=p['noise_std_T'], bias_T=p['bias_T'],
+            misalignment_rad=p['misalignment_rad'],
+            scale_factor_error=p['scale_factor_error'], lsb_T=p['lsb_T'],
+            saturation_T=p['saturation_T'], dropout_probability=p['dropout_probability'],
+            q_body_sensor=p['q_body_sensor'], seed=derive_seed(self.seed, self.get_name()))
+        self.covariance = self.model.covariance.reshape(-1).tolist()
+        self.dropouts = 0
+        self.pub = self.publisher(MagneticField, 'sensors/magnetometer')
+        frame_s = self.frame_ns / NS_PER_S
+        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s),
+                              'env': (Environment, 'sim/environment', frame_s)},
+                             float(p['period_s']), self.on_frame)
+        self.start_handshake()
+
+    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+        """Measure the field at sim time ``t_ns`` and publish it (or nothing, see module)."""
+        state, env = msgs['state'], msgs['env']
+        if state is None or env is None:
+            self.get_logger().warning(f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
+            return
+        q_eci_body, b_eci = quat(state.q_eci_body), vec3(env.b_eci)
+        if not all_finite(q_eci_body, b_eci) or not np.any(q_eci_body):
+            self.get_logger().warning(
+                f't={t_ns / NS_PER_S:.3f} s: non-finite truth (q_eci_body or b_eci), no sample')
+            return
+        b_body = att.to_matrix(q_eci_body).T @ b_eci
+        b_sensor = self.model.measure(b_body)
+        if b_sensor is None:
+            self.dropouts += 1
+            self.get_logger().debug(f't={t_ns / NS_PER_S:.3f} s: dropout ({self.dropouts})')
+            return
+        msg = MagneticField()
+        msg.header.stamp = self.stamp(t_ns)
+        msg.header.frame_id = self.frame_id
+        msg.magnetic_field = to_vec3(b_sensor)
+        msg.magnetic_field_covariance = self.covariance
+        self.pub.publish(msg)
+
+
+def main(args=None) -> int:
+    """``ros2 run sim_node magnetometer``."""
+    return runtime.run(MagnetometerNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

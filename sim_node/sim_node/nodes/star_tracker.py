@@ -1,0 +1,82 @@
+"""``star_tracker`` node: the simulated star tracker (attitude w.r.t. ECI).
+
+Subscribes ``sim/state`` (every frame; the star tracker needs no environment, DESIGN section
+5); every ``period_s`` of sim time t publishes ``sensors/star_tracker`` (``sensor_msgs/Imu``)
+stamped t: ``orientation`` = measured ``q_eci_body`` (the tracker's mounting is taken as the
+body frame), ``orientation_covariance`` = ``diag(noise_std_rad^2)`` (small-angle error,
+body axes), ``angular_velocity_covariance[0] = linear_acceleration_covariance[0] = -1``
+(ROS convention: not provided), ``header.frame_id`` = ``frame_id`` (default ``star_tracker``).
+Errors: :class:`sim_node.models.sensors.StarTracker`. A missing or non-finite truth publishes
+nothing and logs a warning.
+
+Parameters (SI, radians): ``period_s`` (1.0), ``noise_std_rad`` (paper 001's 0.02 deg
+3-sigma: 0.00667 deg = 1.1636e-4 rad per axis), ``frame_id`` ('star_tracker'), plus the common
+ones of :class:`~adcs_nodes.nodes.lockstep_node.LockstepNode`. Seed: ``derive_seed(seed, node
+name)``.
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, List
+
+import numpy as np
+from sensor_msgs.msg import Imu
+
+from adcs_msgs.msg import AttitudeState
+from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.convert import all_finite, quat, to_quat
+from adcs_nodes.nodes.lockstep_node import LockstepNode
+from sim_node.models.sensors import STAR_TRACKER_STD_RAD, StarTracker
+
+#: Defaults when run alone (paper 001: 0.02 deg 3-sigma per axis).
+DEFAULTS: Dict[str, Any] = {
+    'period_s': 1.0,
+    'noise_std_rad': [STAR_TRACKER_STD_RAD] * 3,
+    'frame_id': 'star_tracker',
+}
+
+
+class StarTrackerNode(LockstepNode):
+    """Publishes star-tracker attitude samples of the truth (see module docstring)."""
+
+    def __init__(self, name: str = 'star_tracker', **kwargs) -> None:
+        super().__init__(name, **kwargs)
+        p = {k: self.param(k, v) for k, v in DEFAULTS.items()}
+        self.frame_id = str(p['frame_id'])
+        self.model = StarTracker(noise_std_rad=p['noise_std_rad'],
+                                 seed=derive_seed(self.seed, self.get_name()))
+        self.covariance = self.model.covariance.reshape(-1).tolist()
+        self.pub = self.publisher(Imu, 'sensors/star_tracker')
+        frame_s = self.frame_ns / NS_PER_S
+        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s)},
+                             float(p['period_s']), self.on_frame)
+        self.start_handshake()
+
+    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+        """Measure the attitude at sim time ``t_ns`` and publish it (see module)."""
+        state = msgs['state']
+        if state is None:
+            self.get_logger().warning(f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
+            return
+        q_eci_body = quat(state.q_eci_body)
+        if not all_finite(q_eci_body) or not np.any(q_eci_body):
+            self.get_logger().warning(
+                f't={t_ns / NS_PER_S:.3f} s: non-finite truth q_eci_body, no sample')
+            return
+        msg = Imu()
+        msg.header.stamp = self.stamp(t_ns)
+        msg.header.frame_id = self.frame_id
+        msg.orientation = to_quat(self.model.measure(q_eci_body))
+        msg.orientation_covariance = self.covariance
+        msg.angular_velocity_covariance[0] = -1.0
+        msg.linear_acceleration_covariance[0] = -1.0
+        self.pub.publish(msg)
+
+
+def main(args=None) -> int:
+    """``ros2 run sim_node star_tracker``."""
+    return runtime.run(StarTrackerNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,231 @@
+"""Sensor nodes in process: outputs against truth, stamps, periods, frame ids, bad input.
+
+Truth is built here independently of the nodes: attitudes with scipy's ``Rotation`` and
+``attitude.from_euler_321``, the field in body axes as ``R_eci_body^T b_eci``.
+"""
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import Imu, MagneticField
+
+from adcs_msgs.msg import AttitudeState, Environment, HorizonSensor
+from adcs_nodes.core import attitude as att
+from adcs_nodes.core.lockstep import derive_seed
+from adcs_nodes.nodes.convert import quat, stamp_ns, to_quat, to_stamp, to_vec3, vec3
+from sim_node.models.sensors import StarTracker
+from sim_node.nodes.gyro import GyroNode
+from sim_node.nodes.horizon_sensor import HorizonSensorNode
+from sim_node.nodes.magnetometer import MagnetometerNode
+from sim_node.nodes.star_tracker import StarTrackerNode
+
+EPOCH_NS = 1767225600 * 10**9          # 2026-01-01T00:00:00Z
+S = 10**9
+DEG = math.pi / 180.0
+R_ECI_ORBIT = Rotation.from_euler('zxz', [30, 98, 10], degrees=True)   # RAAN, i, u
+B_ECI = np.array([12e-6, -25e-6, 31e-6])
+W_BODY = np.array([0.01, -0.02, 0.03])
+
+
+def params(**kw):
+    return [Parameter(k, value=v) for k, v in kw.items()]
+
+
+def truth(t_s, q_orbit_body=None, nan=None):
+    """(state, env) messages stamped t_s with the given orbit-relative attitude."""
+    if q_orbit_body is None:
+        q_orbit_body = att.from_euler_321(0.1 * t_s, -0.05, 0.3 + 0.2 * t_s)
+    r_eci_body = R_ECI_ORBIT * Rotation.from_quat(q_orbit_body)
+    stamp = to_stamp(EPOCH_NS + int(t_s * S))
+    st = AttitudeState()
+    st.header.stamp, st.header.frame_id = stamp, 'body'
+    st.q_eci_body = to_quat(r_eci_body.as_quat())
+    st.q_orbit_body = to_quat(q_orbit_body)
+    st.omega_body_eci_body = to_vec3(W_BODY)
+    env = Environment()
+    env.header.stamp, env.header.frame_id = stamp, 'eci'
+    env.r_eci = to_vec3(7.0e6 * R_ECI_ORBIT.as_matrix()[:, 2])
+    env.q_eci_orbit = to_quat(R_ECI_ORBIT.as_quat())
+    env.b_eci = to_vec3(B_ECI)
+    if nan == 'state':
+        st.q_eci_body.x = float('nan')
+        st.omega_body_eci_body.y = float('nan')
+    elif nan == 'env':
+        env.b_eci.x = float('nan')
+        env.r_eci.z = float('nan')
+    return st, env, r_eci_body
+
+
+class Rig:
+    """A probe node feeding sim/state + sim/environment and collecting the sensor topic."""
+
+    def __init__(self, ctx, spin, node, msg_type, topic):
+        self.node, self.spin = node, spin
+        self.probe = rclpy.create_node('probe', context=ctx)
+        self.got = []
+        self.probe.create_subscription(msg_type, topic, self.got.append, 100)
+        self.state_pub = self.probe.create_publisher(AttitudeState, 'sim/state', 100)
+        self.env_pub = self.probe.create_publisher(Environment, 'sim/environment', 100)
+        needs_env = 'env' in node.sync.names
+        assert spin([node, self.probe], lambda: (
+            node.pub.get_subscription_count() > 0 and self.state_pub.get_subscription_count() > 0
+            and (not needs_env or self.env_pub.get_subscription_count() > 0)))
+
+    def feed(self, frames, expect):
+        """Publish (state, env) per frame; spin until ``expect`` outputs (then a bit more)."""
+        for st, env in frames:
+            self.env_pub.publish(env)
+            self.state_pub.publish(st)
+        ok = self.spin([self.node, self.probe], lambda: len(self.got) >= expect, timeout=5.0)
+        self.spin([self.node, self.probe], lambda: False, timeout=0.3)
+        return ok
+
+    def stamps(self):
+        return [(stamp_ns(m.header.stamp) - EPOCH_NS) / S for m in self.got]
+
+    def close(self):
+        self.probe.destroy_node()
+        self.node.destroy_node()
+
+
+def test_magnetometer_period_stamps_and_field(ros_context, spin):
+    std = np.array([1e-9, 2e-9, 3e-9])
+    node = MagnetometerNode(context=ros_context, parameter_overrides=params(
+        period_s=2.0, noise_std_T=std.tolist(), lsb_T=0.0))
+    rig = Rig(ros_context, spin, node, MagneticField, 'sensors/magnetometer')
+    frames = [truth(t) for t in range(6)]
+    assert rig.feed([f[:2] for f in frames], 3)
+    assert rig.stamps() == [0.0, 2.0, 4.0]                 # never at 1, 3, 5
+    for m, t in zip(rig.got, (0, 2, 4)):
+        b_body = frames[t][2].inv().apply(B_ECI)
+        assert m.header.frame_id == 'magnetometer'
+        assert np.all(np.abs(vec3(m.magnetic_field) - b_body) < 6 * std)
+        assert np.allclose(np.reshape(m.magnetic_field_covariance, (3, 3)), np.diag(std ** 2),
+                           rtol=1e-12, atol=0)
+    assert node.missed_frames == 0 and node.dropouts == 0
+    rig.close()
+
+
+def test_magnetometer_nan_input_publishes_nothing(ros_context, spin):
+    node = MagnetometerNode(context=ros_context, parameter_overrides=params(
+        noise_std_T=[0.0, 0.0, 0.0], lsb_T=0.0,
+        misalignment_rad=[0.0, 0.0, 0.1]))
+    rig = Rig(ros_context, spin, node, MagneticField, 'sensors/magnetometer')
+    frames = [truth(0), truth(1, nan='state'), truth(2, nan='env'), truth(3)]
+    assert rig.feed([f[:2] for f in frames], 2)
+    assert rig.stamps() == [0.0, 3.0]
+    assert node.frames == 4                                # fired, skipped, no crash
+    b_body = frames[3][2].inv().apply(B_ECI)
+    b_sensor = Rotation.from_rotvec([0.0, 0.0, 0.1]).inv().apply(b_body)
+    assert np.allclose(vec3(rig.got[1].magnetic_field), b_sensor, rtol=0, atol=1e-18)
+    rig.close()
+
+
+def test_magnetometer_dropouts_are_counted(ros_context, spin):
+    node = MagnetometerNode(context=ros_context, parameter_overrides=params(
+        dropout_probability=1.0))
+    rig = Rig(ros_context, spin, node, MagneticField, 'sensors/magnetometer')
+    rig.feed([truth(t)[:2] for t in range(3)], 0)
+    assert spin([node, rig.probe], lambda: node.frames == 3)
+    assert rig.got == [] and node.dropouts == 3
+    rig.close()
+
+
+def test_horizon_sensor_roll_pitch_and_validity(ros_context, spin):
+    node = HorizonSensorNode(context=ros_context, parameter_overrides=params(
+        noise_std_rad=[0.0, 0.0], fov_rad=30 * DEG))
+    rig = Rig(ros_context, spin, node, HorizonSensor, 'sensors/horizon')
+    roll, pitch, yaw = 4 * DEG, 3 * DEG, 5 * DEG          # paper 004's attitude
+    frames = [truth(0, att.from_euler_321(roll, pitch, yaw)),
+              truth(1, att.from_euler_321(40 * DEG, 0.0, 1.0)),      # Earth out of view
+              truth(2, nan='env'),
+              truth(3, att.from_euler_321(-roll, pitch, -2.0))]
+    assert rig.feed([f[:2] for f in frames], 3)
+    assert rig.stamps() == [0.0, 1.0, 3.0]
+    a, b, c = rig.got
+    assert a.valid and a.roll == pytest.approx(roll, abs=1e-12)
+    assert a.pitch == pytest.approx(pitch, abs=1e-12)
+    assert not b.valid and math.isnan(b.roll) and math.isnan(b.pitch)
+    assert c.valid and c.roll == pytest.approx(-roll, abs=1e-12)
+    assert all(m.header.frame_id == 'horizon_sensor' for m in rig.got)
+    assert (a.roll_variance, a.pitch_variance) == (0.0, 0.0)
+    assert node.invalid == 1
+    rig.close()
+
+
+def test_star_tracker_output_matches_its_seeded_model(ros_context, spin):
+    std = 1e-4
+    node = StarTrackerNode(context=ros_context, parameter_overrides=params(
+        seed=42, noise_std_rad=[std, std, std]))
+    rig = Rig(ros_context, spin, node, Imu, 'sensors/star_tracker')
+    frames = [truth(t) for t in range(3)]
+    assert rig.feed([f[:2] for f in frames], 3)
+    assert rig.stamps() == [0.0, 1.0, 2.0]
+    ref = StarTracker(noise_std_rad=std, seed=derive_seed(42, 'star_tracker'))
+    for m, f in zip(rig.got, frames):
+        q_meas = quat(m.orientation)
+        err = (f[2].inv() * Rotation.from_quat(q_meas)).as_rotvec()
+        assert np.linalg.norm(err) < 6 * std * math.sqrt(3)
+        assert np.array_equal(q_meas, ref.measure(quat(f[0].q_eci_body)))
+        assert m.header.frame_id == 'star_tracker'
+        assert np.allclose(np.reshape(m.orientation_covariance, (3, 3)), std ** 2 * np.eye(3))
+        assert m.angular_velocity_covariance[0] == -1.0
+        assert m.linear_acceleration_covariance[0] == -1.0
+    rig.close()
+
+
+def test_gyro_rate_and_covariances(ros_context, spin):
+    bias = [1e-4, -2e-4, 3e-4]
+    node = GyroNode(context=ros_context, parameter_overrides=params(
+        noise_std_rad_s=[0.0, 0.0, 0.0], bias_walk_std_rad_s_sqrt_s=[0.0, 0.0, 0.0],
+        bias_initial_rad_s=bias, period_s=2.0))
+    rig = Rig(ros_context, spin, node, Imu, 'sensors/gyro')
+    frames = [truth(0), truth(1), truth(2, nan='state'), truth(3), truth(4)]
+    assert rig.feed([f[:2] for f in frames], 2)
+    assert rig.stamps() == [0.0, 4.0]                      # 2 s had a NaN rate
+    for m in rig.got:
+        assert np.allclose(vec3(m.angular_velocity), W_BODY + bias, rtol=0, atol=1e-18)
+        assert m.header.frame_id == 'gyro'
+        assert np.array_equal(m.angular_velocity_covariance, np.zeros(9))
+        assert m.orientation_covariance[0] == -1.0
+        assert m.linear_acceleration_covariance[0] == -1.0
+    rig.close()
+
+
+@pytest.mark.parametrize('bad', [dict(period_s=1.5), dict(noise_std_T=[-1.0, 0.0, 0.0])])
+def test_bad_parameters_raise(ros_context, bad):
+    with pytest.raises(ValueError):
+        MagnetometerNode(context=ros_context, parameter_overrides=params(
+            frame_period_s=1.0, **bad))
+
+
+def test_each_node_runs_alone_with_defaults():
+    """``python -m sim_node.nodes.<name>`` starts, spins and stops cleanly on SIGINT."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(100 + os.getpid() % 50),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    names = ('magnetometer', 'horizon_sensor', 'star_tracker', 'gyro')
+    procs = [subprocess.Popen([sys.executable, '-m', f'sim_node.nodes.{n}'], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for n in names]
+    try:
+        time.sleep(3.0)
+        assert [p.poll() for p in procs] == [None] * 4, [p.communicate() for p in procs]
+        for p in procs:
+            p.send_signal(signal.SIGINT)
+        for p in procs:
+            _, err = p.communicate(timeout=10)
+            assert p.returncode == 0, err
+            assert 'Traceback' not in err
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
