@@ -200,6 +200,27 @@ def test_gyro_rate_and_covariances(ros_context, spin):
     rig.close()
 
 
+def test_every_sensor_passes_the_launcher_handshake(ros_context, spin):
+    """With the graph's expected_matches (state + environment in, topic out) each gets ready."""
+    specs = [(MagnetometerNode, MagneticField, 'sensors/magnetometer'),
+             (HorizonSensorNode, HorizonSensor, 'sensors/horizon'),
+             (StarTrackerNode, Imu, 'sensors/star_tracker'),
+             (GyroNode, Imu, 'sensors/gyro')]
+    nodes = [cls(context=ros_context, parameter_overrides=params(expected_matches=[
+        f'pub:{topic}=1', 'sub:sim/state=1', 'sub:sim/environment=1'])) for cls, _, topic in specs]
+    probe = rclpy.create_node('probe', context=ros_context)
+    probe.create_publisher(AttitudeState, 'sim/state', 10)
+    probe.create_publisher(Environment, 'sim/environment', 10)
+    spin(nodes + [probe], lambda: False, timeout=0.3)
+    assert not any(n._ready_sent for n in nodes)           # outputs not matched yet
+    for _, msg_type, topic in specs:
+        probe.create_subscription(msg_type, topic, lambda m: None, 10)
+    assert spin(nodes + [probe], lambda: all(n._ready_sent for n in nodes))
+    probe.destroy_node()
+    for n in nodes:
+        n.destroy_node()
+
+
 @pytest.mark.parametrize('bad', [dict(period_s=1.5), dict(noise_std_T=[-1.0, 0.0, 0.0])])
 def test_bad_parameters_raise(ros_context, bad):
     with pytest.raises(ValueError):

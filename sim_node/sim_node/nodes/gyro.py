@@ -1,7 +1,8 @@
 """``gyro`` node: the simulated three-axis rate gyro.
 
-Subscribes ``sim/state`` (every frame; the gyro needs no environment, DESIGN section 5);
-every ``period_s`` of sim time t publishes ``sensors/gyro`` (``sensor_msgs/Imu``) stamped t:
+Subscribes ``sim/state`` and ``sim/environment`` (both every frame, like every sensor node, so
+the launcher wires all sensors alike; only the state is used); every ``period_s`` of sim time
+t publishes ``sensors/gyro`` (``sensor_msgs/Imu``) stamped t:
 ``angular_velocity`` = measured ``omega_body_eci_body`` [rad/s, body axes],
 ``angular_velocity_covariance`` = ``diag(noise_std_rad_s^2)`` (white part only; the bias is
 not in it), ``orientation_covariance[0] = linear_acceleration_covariance[0] = -1`` (ROS
@@ -24,7 +25,7 @@ from typing import Any, Dict, List, Optional
 
 from sensor_msgs.msg import Imu
 
-from adcs_msgs.msg import AttitudeState
+from adcs_msgs.msg import AttitudeState, Environment
 from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, to_vec3, vec3
@@ -56,7 +57,8 @@ class GyroNode(LockstepNode):
         self._last_t_ns: Optional[int] = None
         self.pub = self.publisher(Imu, 'sensors/gyro')
         frame_s = self.frame_ns / NS_PER_S
-        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s)},
+        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s),
+                              'env': (Environment, 'sim/environment', frame_s)},
                              float(p['period_s']), self.on_frame)
         self.start_handshake()
 

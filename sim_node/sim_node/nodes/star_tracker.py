@@ -1,7 +1,8 @@
 """``star_tracker`` node: the simulated star tracker (attitude w.r.t. ECI).
 
-Subscribes ``sim/state`` (every frame; the star tracker needs no environment, DESIGN section
-5); every ``period_s`` of sim time t publishes ``sensors/star_tracker`` (``sensor_msgs/Imu``)
+Subscribes ``sim/state`` and ``sim/environment`` (both every frame, like every sensor node, so
+the launcher wires all sensors alike; only the state is used); every ``period_s`` of sim time
+t publishes ``sensors/star_tracker`` (``sensor_msgs/Imu``)
 stamped t: ``orientation`` = measured ``q_eci_body`` (the tracker's mounting is taken as the
 body frame), ``orientation_covariance`` = ``diag(noise_std_rad^2)`` (small-angle error,
 body axes), ``angular_velocity_covariance[0] = linear_acceleration_covariance[0] = -1``
@@ -21,7 +22,7 @@ from typing import Any, Dict, List
 import numpy as np
 from sensor_msgs.msg import Imu
 
-from adcs_msgs.msg import AttitudeState
+from adcs_msgs.msg import AttitudeState, Environment
 from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, quat, to_quat
@@ -48,7 +49,8 @@ class StarTrackerNode(LockstepNode):
         self.covariance = self.model.covariance.reshape(-1).tolist()
         self.pub = self.publisher(Imu, 'sensors/star_tracker')
         frame_s = self.frame_ns / NS_PER_S
-        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s)},
+        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s),
+                              'env': (Environment, 'sim/environment', frame_s)},
                              float(p['period_s']), self.on_frame)
         self.start_handshake()
 
