@@ -129,13 +129,14 @@ def test_magnetometer_nan_input_publishes_nothing(ros_context, spin):
     rig.close()
 
 
-def test_magnetometer_dropouts_are_counted(ros_context, spin):
+def test_magnetometer_dropouts_are_counted_and_published_as_nan(ros_context, spin):
     node = MagnetometerNode(context=ros_context, parameter_overrides=params(
         dropout_probability=1.0))
     rig = Rig(ros_context, spin, node, MagneticField, 'sensors/magnetometer')
     rig.feed([truth(t)[:2] for t in range(3)], 0)
-    assert spin([node, rig.probe], lambda: node.frames == 3)
-    assert rig.got == [] and node.dropouts == 3
+    assert spin([node, rig.probe], lambda: node.frames == 3 and len(rig.got) == 3)
+    assert node.dropouts == 3
+    assert all(np.all(np.isnan(vec3(m.magnetic_field))) for m in rig.got)
     rig.close()
 
 

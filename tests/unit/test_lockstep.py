@@ -80,3 +80,15 @@ def test_derived_seeds_are_stable_and_distinct():
     assert a != derive_seed(2, 'dynamics/disturbance')
     assert a != derive_seed(1, 'magnetometer')
     assert 0 <= a < 2 ** 64
+
+
+def test_an_input_can_stop_being_awaited_and_come_back():
+    sync = FrameSync({'ctrl': S, 'est': S})
+    sync.add('est', 0, 'e0')
+    assert sync.missing(0) == ['ctrl']
+    sync.set_period('ctrl', 0)          # producer declared dead
+    assert sync.ready(0) and sync.period('ctrl') == 0
+    sync.set_period('ctrl', S)          # it published again
+    assert sync.missing(0) == ['ctrl']
+    with pytest.raises(ValueError):
+        sync.set_period('ctrl', -1)

@@ -93,6 +93,16 @@ class FrameSync:
         """Names of the declared inputs."""
         return list(self._inputs)
 
+    def set_period(self, name: str, period_ns: int) -> None:
+        """Change the period of input ``name`` (0: stop waiting for it, e.g. a dead producer)."""
+        if int(period_ns) < 0:
+            raise ValueError(f'input {name!r}: period must be >= 0, got {period_ns}')
+        self._inputs[name].period_ns = int(period_ns)
+
+    def period(self, name: str) -> int:
+        """Current period of input ``name`` [ns]."""
+        return self._inputs[name].period_ns
+
     def due(self, name: str, t_ns: int) -> bool:
         """True when input ``name`` must have a message stamped exactly ``t_ns``."""
         p = self._inputs[name].period_ns

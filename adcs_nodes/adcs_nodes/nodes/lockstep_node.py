@@ -174,8 +174,12 @@ class LockstepNode(Node):
         self._wait_since: Optional[float] = None
         self.create_timer(min(0.05, self.timeout_s / 4.0), self._frame_watchdog)
 
+    def input_arrived(self, name: str) -> None:
+        """Hook called on every message of a lockstep input before it is stored."""
+
     def _input_cb(self, name: str) -> Callable[[Any], None]:
         def cb(msg: Any) -> None:
+            self.input_arrived(name)
             t = self.elapsed_ns(stamp_ns(msg.header.stamp))
             self.sync.add(name, t, msg)
             if t > self._seen_t:

@@ -4,7 +4,7 @@ Subscribes ``sim/state`` and ``sim/environment`` (both every frame); every ``per
 time t publishes ``sensors/magnetometer`` (``sensor_msgs/MagneticField``) stamped t: the field
 in the sensor frame [T], ``header.frame_id`` = ``frame_id`` (default ``magnetometer``),
 covariance ``diag(noise_std_T^2)``. Truth: ``b_body = R(q_eci_body)^T b_eci``; errors:
-:class:`sim_node.models.sensors.Magnetometer`. A dropout publishes nothing for that frame
+:class:`sim_node.models.sensors.Magnetometer`. A dropout publishes a NaN field for that frame
 (counted in ``dropouts``); a missing or non-finite truth publishes nothing and logs a warning.
 
 Parameters (SI, radians; defaults: paper 000's noise and LSB, no other error):
@@ -80,9 +80,11 @@ class MagnetometerNode(LockstepNode):
         b_body = att.to_matrix(q_eci_body).T @ b_eci
         b_sensor = self.model.measure(b_body)
         if b_sensor is None:
+            # a lost sample is published as NaN (the ROS convention for "no data"), so the
+            # lockstep goes on and the estimator counts it as rejected instead of waiting
             self.dropouts += 1
             self.get_logger().debug(f't={t_ns / NS_PER_S:.3f} s: dropout ({self.dropouts})')
-            return
+            b_sensor = np.full(3, np.nan)
         msg = MagneticField()
         msg.header.stamp = self.stamp(t_ns)
         msg.header.frame_id = self.frame_id
