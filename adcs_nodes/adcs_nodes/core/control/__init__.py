@@ -1,0 +1,230 @@
+"""Controller cores: the common interface (DESIGN section 7) and shared helpers (pure numpy).
+
+Interface
+---------
+Every controller core has ``reset()`` and::
+
+    update(estimate, target, b_body, t, dt) -> Command
+
+* ``estimate``: :class:`Estimate`, the flight software's attitude and rate estimate.
+* ``target``: :class:`Target`, the guidance target (``None``: the orbital frame, zero rate).
+* ``b_body``: measured geomagnetic field, body axes, shape (3,) [T]; ``None`` or non-finite when
+  no valid measurement is available: the controller then returns a zero command with a reason.
+* ``t``, ``dt``: frame time and frame period [s] (float seconds, DESIGN section 2).
+
+A controller never raises on bad *data* (it returns a zero :class:`Command` with
+``reason`` set); it raises ``ValueError`` only on bad *configuration*, at construction.
+
+Direction-preserving scaling onto the actuator box (paper 000, eq. (31))::
+
+    phi   = max_i |v_i| / l_i
+    sigma = 1 if phi <= 1 else 1 / phi                                                  (31)
+    v_out = sigma v
+
+so every component satisfies ``|v_out,i| <= l_i`` and ``v_out`` is parallel to ``v`` (the
+paper writes ``u_i = sigma L*_i / l_i`` with ``u`` in the unit cube (6); ``L = l o u``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = ['Estimate', 'Target', 'Command', 'Controller', 'scale_to_limits', 'limits_vector',
+           'finite_vector', 'cross3']
+
+
+def cross3(a: ArrayLike, b: ArrayLike) -> np.ndarray:
+    """Cross product ``a x b`` of two (3,) vectors (``np.cross`` costs ~10x more per call)."""
+    a1, a2, a3 = (float(x) for x in a)
+    b1, b2, b3 = (float(x) for x in b)
+    return np.array([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1])
+
+
+def finite_vector(value: ArrayLike, name: str, shape: tuple) -> np.ndarray:
+    """Return ``value`` as a finite float array of ``shape``, else raise ``ValueError``."""
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be numeric with shape {shape}, got {value!r}') from None
+    if arr.shape != shape:
+        raise ValueError(f'{name} must have shape {shape}, got {arr.shape}')
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f'{name} must be finite, got {arr}')
+    return arr
+
+
+def limits_vector(value: ArrayLike, name: str, n: int, allow_zero: bool = True,
+                  allow_inf: bool = True) -> np.ndarray:
+    """Per-axis actuator limits as a float array of shape (n,).
+
+    Parameters
+    ----------
+    value : float or array_like, shape (n,)
+        Limit(s); a scalar is broadcast to all ``n`` axes.
+    name : str
+        Parameter name for the error message.
+    n : int
+        Number of axes.
+    allow_zero, allow_inf : bool
+        Whether a zero limit (actuator absent) or ``inf`` (no limit) is accepted.
+
+    Raises
+    ------
+    ValueError
+        On NaN, negative, or (when not allowed) zero or infinite limits, or a bad shape.
+    """
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be numeric, got {value!r}') from None
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f'{name} must be a scalar or have shape ({n},), got {arr.shape}')
+    if np.any(np.isnan(arr)) or np.any(arr < 0.0):
+        raise ValueError(f'{name} must be >= 0 (not NaN), got {arr}')
+    if not allow_zero and np.any(arr == 0.0):
+        raise ValueError(f'{name} must be > 0, got {arr}')
+    if not allow_inf and np.any(np.isinf(arr)):
+        raise ValueError(f'{name} must be finite, got {arr}')
+    return arr
+
+
+def scale_to_limits(v: ArrayLike, limits: ArrayLike) -> tuple[np.ndarray, float]:
+    """Scale ``v`` by one factor so every component fits its limit, eq. (31).
+
+    Parameters
+    ----------
+    v : array_like, shape (n,)
+        Demanded actuator vector (e.g. the dipole ``L*``, body axes [A m^2]); finite.
+    limits : array_like, shape (n,)
+        Per-axis limits ``l_i >= 0`` in the units of ``v``; ``inf`` means no limit. A zero
+        limit with a non-zero demand on that axis gives ``sigma = 0`` (the direction cannot be
+        kept, so nothing is commanded).
+
+    Returns
+    -------
+    v_out : ndarray, shape (n,)
+        ``sigma * v``: ``|v_out_i| <= l_i`` and ``v_out`` parallel to ``v``.
+    sigma : float
+        The factor in [0, 1] (1 when ``v`` already fits).
+    """
+    v = np.asarray(v, dtype=float)
+    lim = np.asarray(limits, dtype=float)
+    mag = np.abs(v)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        ratio = np.where(mag > 0.0, mag / lim, 0.0)
+    phi = float(np.max(ratio)) if ratio.size else 0.0
+    if phi <= 1.0:
+        return v.copy(), 1.0
+    sigma = 1.0 / phi                                                                 # (31)
+    out = sigma * v
+    # Rounding can leave |out_i| one ulp above l_i on the saturated axis: pin it.
+    return np.clip(out, -lim, lim), sigma
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Attitude and rate estimate handed to a controller.
+
+    Attributes
+    ----------
+    q_orbit_body : ndarray, shape (4,)
+        Attitude, scalar last ``[x, y, z, w]``: rotates body vectors into the orbital frame
+        (x along-track, y orbit normal, z zenith). Paper 000's ``Lambda`` (scalar first).
+    omega_body_eci_body : ndarray, shape (3,)
+        Absolute angular rate of the body w.r.t. ECI, body axes [rad/s] (paper's ``omega``).
+    omega0 : float
+        Orbit rate [rad/s] (paper's ``omega_0``).
+    valid : bool
+        False while the estimator has no usable solution; controllers then command zero.
+    """
+
+    q_orbit_body: np.ndarray
+    omega_body_eci_body: np.ndarray
+    omega0: float
+    valid: bool = True
+
+    def is_usable(self) -> bool:
+        """True when ``valid`` and every field is finite with the right shape."""
+        try:
+            q = np.asarray(self.q_orbit_body, dtype=float)
+            w = np.asarray(self.omega_body_eci_body, dtype=float)
+            w0 = float(self.omega0)
+        except (TypeError, ValueError):
+            return False
+        return (bool(self.valid) and q.shape == (4,) and w.shape == (3,)
+                and bool(np.all(np.isfinite(q))) and bool(np.all(np.isfinite(w)))
+                and np.isfinite(w0) and float(np.linalg.norm(q)) > 1e-9)
+
+
+def _identity_quat() -> np.ndarray:
+    return np.array([0.0, 0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class Target:
+    """Attitude target from guidance, relative to the orbital frame.
+
+    Attributes
+    ----------
+    q_orbit_body_ref : ndarray, shape (4,)
+        Target attitude, scalar last: rotates target-body vectors into the orbital frame.
+        Default identity: body axes on the orbital axes (paper 000's ``Lambda* = 1``, (11)).
+    omega_body_ref_body : ndarray, shape (3,)
+        Target rate of the body w.r.t. the reference (orbital) frame, body axes [rad/s];
+        used as a feed-forward relative rate. Default zero.
+    """
+
+    q_orbit_body_ref: np.ndarray = field(default_factory=_identity_quat)
+    omega_body_ref_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+@dataclass
+class Command:
+    """Actuator command produced by a controller (or forwarded by the manager).
+
+    Attributes
+    ----------
+    dipole_body : ndarray, shape (3,)
+        Magnetorquer dipole, body axes [A m^2].
+    wheel_torque : ndarray, shape (n,)
+        Reaction-wheel motor torques in scenario order [N m]; shape (0,) for a controller that
+        does not use wheels (the manager reads an empty vector as zero torque on every wheel).
+    torque_body : ndarray, shape (3,)
+        Ideal body torque (thrusters / ideal actuator), body axes [N m].
+    reason : str
+        Why the command is zero or degraded ('' when nominal).
+    info : dict
+        Diagnostics of the law (e.g. demanded torque, scaling factor), for logs and tests.
+    """
+
+    dipole_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    wheel_torque: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    torque_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    reason: str = ''
+    info: dict = field(default_factory=dict)
+
+    @classmethod
+    def zero(cls, n_wheels: int = 0, reason: str = '') -> 'Command':
+        """All-zero command with ``n_wheels`` wheel torques and a ``reason``."""
+        return cls(np.zeros(3), np.zeros(n_wheels), np.zeros(3), reason)
+
+    def is_finite(self) -> bool:
+        """True when every actuator field is finite."""
+        return all(bool(np.all(np.isfinite(np.asarray(a, dtype=float))))
+                   for a in (self.dipole_body, self.wheel_torque, self.torque_body))
+
+
+class Controller(Protocol):
+    """Structural type of a controller core (DESIGN section 7)."""
+
+    def reset(self) -> None:
+        """Forget all internal state (filters, stages, previous samples)."""
+
+    def update(self, estimate: Optional[Estimate], target: Optional[Target],
+               b_body: Optional[ArrayLike], t: float, dt: float) -> Command:
+        """Command for frame time ``t`` [s] (frame period ``dt`` [s])."""

@@ -1,0 +1,389 @@
+"""Magnetorquer-only attitude control to the orbital frame (paper 000, section 2; pure numpy).
+
+Lebedev, Tkachenko, Shtepa, "Magnetic system for controlling the angular motion of a
+micro-satellite" (seed paper 000; digest ``papers/magnetic-microsatellite.md``, sections 1-3).
+Equation numbers are the paper's; (derived) marks what the digest derived.
+
+Frames and state
+----------------
+``Lambda = lambda0 + lambda`` (scalar first) is our ``q_orbit_body`` (scalar last), converted
+only by :func:`adcs_nodes.core.attitude.to_scalar_first`. Body components of the orbit normal
+``j2`` and the vertical ``j3`` (zenith)::
+
+    e_R = [2(l1 l3 - l0 l2), 2(l2 l3 + l0 l1), l0^2 - l1^2 - l2^2 + l3^2]^T              (10)
+    e_N = [2(l1 l2 + l0 l3), l0^2 - l1^2 + l2^2 - l3^2, 2(l2 l3 - l0 l1)]^T
+
+    y = omega - omega0 e_N          relative rate of the body w.r.t. the orbital frame       (7)
+    2 dLambda/dt = Lambda . y                                                               (8)
+
+Three-axis law (Lyapunov, two stages)::
+
+    y* = -2 alpha lambda sign(lambda0) / (1 + |lambda0|)       kinematic law, rho = 2(1-|l0|) (16)
+    M* = -k (y - y*)                                            torque demand             (27)
+       = -k (y + 2 alpha lambda sign(lambda0) / (1 + |lambda0|))                           (29)
+
+``sign(0) = +1`` (paper). Under (16) alone ``rho(t) = rho(0) exp(-alpha t)`` exactly
+(derived; digest 6.2).
+
+One-axis law (``xi`` a body axis, ``s`` a direction fixed in the orbital frame, both in body
+components; ``ds/dt = s x y`` (18))::
+
+    y* = -alpha (s x xi) / (1 + xi^T s)                         rho = 1 - xi^T s          (21)
+    M* = -k (y - y*)                                                                      (32)
+
+Magnetorquers only realise the part of ``M*`` perpendicular to ``B`` (body, measured)::
+
+    M_u = L x B = M* - b (b^T M*),   b = B / |B|                                          (4), (22)
+    Phi(B) L* = -M*  (pseudo-solution)  ->  L* = (B x M*) / |B|^2                         (30)
+    L = sigma L*,  sigma = min(1, 1 / max_i(|L*_i| / l_i))                                (31)
+
+**Sign of (30).** The paper prints ``L* = -k Phi^+(B) Y``; with ``Phi^+(B) = -Phi(B)/|B|^2`` and
+``M* = -k Y`` that is ``L* x B = -(M* - b b^T M*)``: positive feedback (digest 3.4, pitfall 1).
+This module implements the pseudo-solution of (30) itself, ``L* = B x M* / |B|^2``, so
+``M_u . M* = |M* - b b^T M*|^2 >= 0``; a unit test pins it.
+
+Gain condition
+--------------
+With ``V = 1/2 Y^T I Y + beta |lambda|^2`` (25), ``beta > 0``, the paper needs::
+
+    k > beta / (2 alpha)                                                                  (28)
+    k > beta / (2 alpha Sigma*),   Sigma* = min_t sigma(t)   with the scaling (31)
+
+``beta`` appears only in the proof and is free, so the condition restricts nothing by itself:
+the start-up check is about the *configured* ``beta`` (and ``Sigma*``, default 1). Without a
+configured ``beta`` only ``alpha > 0`` and ``k > 0`` are checked. The same check is applied in
+every mode (the paper states it for the three-axis law).
+
+Assumptions (not in the paper)
+------------------------------
+* Default gains ``alpha = 3e-3 1/s``, ``k = 0.2 N m s``, ``l_i = 40 A m^2``: the digest's
+  proposals (3.6), not the paper's values.
+* Target other than the orbital frame: the error quaternion ``q_err = conj(q_ref) (x) q``
+  (``= q_ref_body``) replaces ``Lambda`` in (16)/(29); ``y`` stays the rate relative to the
+  orbital frame (the reference is fixed in it) and the target rate ``omega_body_ref_body`` is
+  added to ``y*`` as a feed-forward. For the one-axis law the orbit-fixed direction is where
+  ``xi`` points at the target attitude: ``s = R(q)^T R(q_ref) xi`` (``= e_R`` for the
+  identity target and ``xi = z``).
+* Two-stage switching (the paper gives no criterion): one-axis law until the angle between
+  ``xi`` and ``s`` is below ``switch_angle_deg`` AND ``|y - y_ref|`` is below
+  ``switch_rate_deg_s`` (digest proposal: 15 deg, 0.2 deg/s), then the three-axis law until
+  :meth:`MagneticController.reset` (no way back: one switch, as in the paper's description).
+* (21) is singular at ``s = -xi``: its denominator ``1 + xi^T s`` is floored at 0.01
+  (beyond ~171.9 deg ``|y*|`` stays below ~14 alpha); exactly at ``s = -xi`` ``y* = 0`` and the
+  law only damps ``y`` until any motion leaves that unstable point.
+* ``|B| < b_min_T`` (default 1e-9 T): zero dipole with a reason (guarded pseudo-inverse,
+  pitfall 8). ``B`` is the measured field (digest 3.6).
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from adcs_nodes.core import attitude
+from adcs_nodes.core.control import (Command, Estimate, Target, cross3, finite_vector,
+                                     limits_vector, scale_to_limits)
+
+MODES = ('three_axis', 'one_axis', 'two_stage')
+"""Accepted values of ``mode``."""
+B_MIN_DEFAULT_T = 1e-9
+"""Field magnitude below which no dipole is commanded [T]."""
+ONE_AXIS_DENOMINATOR_FLOOR = 0.01
+"""Floor of ``1 + xi^T s`` in (21) (assumption, see the module docstring)."""
+
+
+def sign0(x: float) -> float:
+    """The paper's ``sign``: +1 for ``x >= 0`` (so ``sign(0) = +1``), -1 otherwise."""
+    return 1.0 if x >= 0.0 else -1.0
+
+
+def orbit_axes_in_body(q_orbit_body: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Body components of the vertical ``e_R`` and the orbit normal ``e_N``, eq. (10).
+
+    Parameters
+    ----------
+    q_orbit_body : array_like, shape (4,)
+        Attitude, scalar last (normalised here).
+
+    Returns
+    -------
+    e_R, e_N : ndarray, shape (3,)
+        Unit vectors, body axes (zenith ``j3`` and orbit normal ``j2``).
+    """
+    l0, l1, l2, l3 = attitude.to_scalar_first(attitude.normalize(q_orbit_body))
+    e_r = np.array([2.0 * (l1 * l3 - l0 * l2), 2.0 * (l2 * l3 + l0 * l1),
+                    l0 * l0 - l1 * l1 - l2 * l2 + l3 * l3])                           # (10)
+    e_n = np.array([2.0 * (l1 * l2 + l0 * l3), l0 * l0 - l1 * l1 + l2 * l2 - l3 * l3,
+                    2.0 * (l2 * l3 - l0 * l1)])                                       # (10)
+    return e_r, e_n
+
+
+def relative_rate(q_orbit_body: ArrayLike, omega_body_eci_body: ArrayLike,
+                  omega0: float) -> np.ndarray:
+    """Rate of the body w.r.t. the orbital frame, body axes [rad/s]: ``y = omega - omega0 e_N``
+    (7)."""
+    _, e_n = orbit_axes_in_body(q_orbit_body)
+    return np.asarray(omega_body_eci_body, dtype=float) - float(omega0) * e_n         # (7)
+
+
+def target_rate_three_axis(q_err: ArrayLike, alpha: float) -> np.ndarray:
+    """Kinematic three-axis law (16).
+
+    Parameters
+    ----------
+    q_err : array_like, shape (4,)
+        Attitude error, scalar last (``Lambda`` of the paper, scalar moved to the end).
+    alpha : float
+        Kinematic gain [1/s].
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        ``y* = -2 alpha lambda sign(lambda0) / (1 + |lambda0|)``, body axes [rad/s].
+    """
+    q = attitude.normalize(q_err)
+    lam, lam0 = q[:3], q[3]
+    return -2.0 * alpha * lam * sign0(lam0) / (1.0 + abs(lam0))                       # (16)
+
+
+def target_rate_one_axis(s: ArrayLike, xi: ArrayLike, alpha: float) -> np.ndarray:
+    """Kinematic one-axis law (21), ``y* = -alpha (s x xi) / (1 + xi^T s)`` [rad/s].
+
+    Parameters
+    ----------
+    s : array_like, shape (3,)
+        Unit direction fixed in the orbital frame, body components.
+    xi : array_like, shape (3,)
+        Unit body axis to align with ``s``.
+    alpha : float
+        Kinematic gain [1/s].
+
+    Notes
+    -----
+    The denominator is floored at :data:`ONE_AXIS_DENOMINATOR_FLOOR` near ``s = -xi``.
+    """
+    s = np.asarray(s, dtype=float)
+    xi = np.asarray(xi, dtype=float)
+    den = max(1.0 + float(xi @ s), ONE_AXIS_DENOMINATOR_FLOOR)
+    return -alpha * cross3(s, xi) / den                                               # (21)
+
+
+def torque_demand(y: ArrayLike, y_star: ArrayLike, k: float) -> np.ndarray:
+    """Torque demand ``M* = -k (y - y*)`` [N m], body axes, eqs. (27), (29), (32)."""
+    return -float(k) * (np.asarray(y, dtype=float) - np.asarray(y_star, dtype=float))
+
+
+def dipole_from_torque(m_star: ArrayLike, b_body: ArrayLike) -> np.ndarray:
+    """Pseudo-solution of ``Phi(B) L* = -M*`` (30), sign as in the digest (3.4).
+
+    Parameters
+    ----------
+    m_star : array_like, shape (3,)
+        Demanded torque, body axes [N m].
+    b_body : array_like, shape (3,)
+        Geomagnetic field, body axes [T]; must be non-zero (the caller guards ``|B|``).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        ``L* = (B x M*) / |B|^2`` [A m^2], perpendicular to ``B``, with
+        ``L* x B = M* - b (b^T M*)`` (22).
+    """
+    b = np.asarray(b_body, dtype=float)
+    return cross3(b, np.asarray(m_star, dtype=float)) / float(b @ b)                  # (30)
+
+
+def _positive(value, name: str, unit: str) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be a number [{unit}], got {value!r}') from None
+    if not (math.isfinite(x) and x > 0.0):
+        raise ValueError(f'{name} must be finite and > 0 [{unit}], got {value!r}')
+    return x
+
+
+def check_gains(alpha: float, k: float, beta: Optional[float] = None,
+                sigma_star: float = 1.0) -> None:
+    """Start-up gain check, eqs. (12), (27), (28) and the scaled form after (31).
+
+    Parameters
+    ----------
+    alpha : float
+        Kinematic gain [1/s], must be > 0 (12).
+    k : float
+        Rate gain [N m s], must be > 0 (27).
+    beta : float, optional
+        Lyapunov weight of (25) [J]; when given, ``k > beta / (2 alpha Sigma*)`` must hold.
+    sigma_star : float
+        ``Sigma*``, the smallest scaling factor (31) expected, in (0, 1].
+
+    Raises
+    ------
+    ValueError
+        Naming the parameters and the violated condition.
+    """
+    alpha = _positive(alpha, 'alpha', '1/s')
+    k = _positive(k, 'k', 'N m s')
+    sigma_star = _positive(sigma_star, 'sigma_star', '-')
+    if sigma_star > 1.0:
+        raise ValueError(f'sigma_star (Sigma*, smallest scaling factor of eq. (31)) must be in '
+                         f'(0, 1], got {sigma_star}')
+    if beta is None:
+        return
+    beta = _positive(beta, 'beta', 'J')
+    bound = beta / (2.0 * alpha * sigma_star)
+    if not k > bound:
+        raise ValueError(
+            f'gain condition of paper 000 eq. (28) violated: need k > beta / (2 alpha Sigma*) '
+            f'= {beta:g} / (2 * {alpha:g} * {sigma_star:g}) = {bound:g} N m s, got k = {k:g} '
+            f'(raise k or alpha, or lower beta below 2 alpha k Sigma* = '
+            f'{2.0 * alpha * k * sigma_star:g})')
+
+
+class MagneticController:
+    """Paper 000's magnetorquer laws: three-axis (29), one-axis (32), or two-stage.
+
+    Parameters
+    ----------
+    mode : {'three_axis', 'one_axis', 'two_stage'}
+        Control law.
+    alpha : float
+        Kinematic gain [1/s] of (16)/(21). Default 3e-3 (digest proposal, assumption).
+    k : float
+        Rate gain [N m s] of (27)/(32). Default 0.2 (digest proposal, assumption).
+    max_dipole_Am2 : float or array_like, shape (3,)
+        Coil limits ``l_i`` [A m^2], body axes, > 0. Default 40 (digest proposal).
+    beta : float, optional
+        Lyapunov weight of (25) [J], used only by the start-up check (28).
+    sigma_star : float
+        ``Sigma*`` in (0, 1] for the scaled gain condition; default 1 (no scaling assumed).
+    switch_angle_deg : float
+        Two-stage: angle between ``xi`` and ``s`` below which the three-axis law takes over
+        [deg], in (0, 180). Default 15 (assumption).
+    switch_rate_deg_s : float
+        Two-stage: bound on ``|y - y_ref|`` for the switch [deg/s], > 0. Default 0.2.
+    xi_body : array_like, shape (3,)
+        Body axis of the one-axis law (normalised). Default body z (paper's two-stage variant).
+    n_wheels : int
+        Length of the (zero) wheel-torque vector in the command.
+    b_min_T : float
+        Field magnitude below which the dipole is zero [T], > 0. Default 1e-9.
+
+    Raises
+    ------
+    ValueError
+        On an unknown mode, bad gains (see :func:`check_gains`), limits or thresholds.
+    """
+
+    def __init__(self, mode: str = 'three_axis', alpha: float = 3e-3, k: float = 0.2,
+                 max_dipole_Am2: ArrayLike = 40.0, beta: Optional[float] = None,
+                 sigma_star: float = 1.0, switch_angle_deg: float = 15.0,
+                 switch_rate_deg_s: float = 0.2, xi_body: ArrayLike = (0.0, 0.0, 1.0),
+                 n_wheels: int = 0, b_min_T: float = B_MIN_DEFAULT_T) -> None:
+        if mode not in MODES:
+            raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
+        check_gains(alpha, k, beta, sigma_star)
+        self.mode = mode
+        self.alpha = float(alpha)
+        self.k = float(k)
+        self.beta = None if beta is None else float(beta)
+        self.sigma_star = float(sigma_star)
+        self.max_dipole = limits_vector(max_dipole_Am2, 'max_dipole_Am2', 3,
+                                        allow_zero=False, allow_inf=False)
+        angle = _positive(switch_angle_deg, 'switch_angle_deg', 'deg')
+        if angle >= 180.0:
+            raise ValueError(f'switch_angle_deg must be in (0, 180) deg, got {angle}')
+        self.switch_angle = math.radians(angle)
+        self.switch_rate = math.radians(_positive(switch_rate_deg_s, 'switch_rate_deg_s',
+                                                  'deg/s'))
+        xi = finite_vector(xi_body, 'xi_body', (3,))
+        if np.linalg.norm(xi) < 1e-9:
+            raise ValueError(f'xi_body must be a non-zero vector, got {xi}')
+        self.xi = xi / np.linalg.norm(xi)
+        if int(n_wheels) != n_wheels or n_wheels < 0:
+            raise ValueError(f'n_wheels must be an integer >= 0, got {n_wheels!r}')
+        self.n_wheels = int(n_wheels)
+        self.b_min = _positive(b_min_T, 'b_min_T', 'T')
+        self.stage = ''
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the first stage (two-stage mode); the laws have no other state."""
+        self.stage = 'three_axis' if self.mode == 'three_axis' else 'one_axis'
+
+    def _zero(self, reason: str) -> Command:
+        cmd = Command.zero(self.n_wheels, reason)
+        cmd.info = {'stage': self.stage}
+        return cmd
+
+    def update(self, estimate: Optional[Estimate], target: Optional[Target],
+               b_body: Optional[ArrayLike], t: float, dt: float) -> Command:
+        """Dipole command for frame ``t`` (the laws are static: ``t``, ``dt`` are unused).
+
+        Parameters
+        ----------
+        estimate : Estimate or None
+            Attitude ``q_orbit_body`` and rate ``omega_body_eci_body``; invalid -> zero.
+        target : Target or None
+            Target relative to the orbital frame; ``None`` is the orbital frame itself (11).
+        b_body : array_like, shape (3,), or None
+            Measured field, body axes [T]; missing, non-finite or ``|B| < b_min_T`` -> zero.
+        t, dt : float
+            Frame time and period [s].
+
+        Returns
+        -------
+        Command
+            ``dipole_body`` = ``sigma L*`` [A m^2], zero wheel and body torques; ``info`` holds
+            ``stage``, ``y``, ``y_star``, ``torque_demand``, ``dipole_demand``, ``sigma``,
+            ``torque_applied`` (``L x B``), ``angle_rad`` (attitude error of the active law),
+            ``axis_angle_rad`` (angle between ``xi`` and ``s``, the one-axis error).
+        """
+        if estimate is None or not estimate.is_usable():
+            return self._zero('no valid attitude estimate')
+        if b_body is None:
+            return self._zero('no magnetic field measurement')
+        b = np.asarray(b_body, dtype=float)
+        if b.shape != (3,) or not np.all(np.isfinite(b)):
+            return self._zero(f'magnetic field measurement not finite or not (3,): {b}')
+        b_norm = float(np.linalg.norm(b))
+        if b_norm < self.b_min:
+            return self._zero(f'|B| = {b_norm:.3g} T below {self.b_min:.3g} T: dipole set to '
+                              f'zero (pseudo-inverse of eq. (30) guarded)')
+        target = Target() if target is None else target
+        q_ref = np.asarray(target.q_orbit_body_ref, dtype=float)
+        y_ref = np.asarray(target.omega_body_ref_body, dtype=float)
+        if (q_ref.shape != (4,) or y_ref.shape != (3,) or not np.all(np.isfinite(q_ref))
+                or not np.all(np.isfinite(y_ref)) or np.linalg.norm(q_ref) < 1e-9):
+            return self._zero('target not finite or malformed')
+
+        q = attitude.normalize(estimate.q_orbit_body)
+        q_err = attitude.multiply(attitude.conjugate(attitude.normalize(q_ref)), q)
+        y = relative_rate(q, estimate.omega_body_eci_body, estimate.omega0)           # (7)
+        # Orbit-fixed direction of the one-axis law, body components: where xi points at the
+        # target attitude (= e_R for the identity target and xi = z).
+        s = attitude.rotate(attitude.conjugate(q_err), self.xi)
+        one_axis_angle = math.acos(min(1.0, max(-1.0, float(self.xi @ s))))
+        if (self.stage == 'one_axis' and self.mode == 'two_stage'
+                and one_axis_angle < self.switch_angle
+                and float(np.linalg.norm(y - y_ref)) < self.switch_rate):
+            self.stage = 'three_axis'                                                 # assumption
+
+        if self.stage == 'three_axis':
+            y_star = y_ref + target_rate_three_axis(q_err, self.alpha)                # (16)
+            angle = attitude.angle_between(q_err, attitude.identity())
+        else:
+            y_star = y_ref + target_rate_one_axis(s, self.xi, self.alpha)             # (21)
+            angle = one_axis_angle
+        m_star = torque_demand(y, y_star, self.k)                                     # (29) / (32)
+        l_star = dipole_from_torque(m_star, b)                                        # (30)
+        dipole, sigma = scale_to_limits(l_star, self.max_dipole)                      # (31)
+        cmd = Command(dipole, np.zeros(self.n_wheels), np.zeros(3))
+        cmd.info = {'stage': self.stage, 'y': y, 'y_star': y_star, 'torque_demand': m_star,
+                    'dipole_demand': l_star, 'sigma': sigma,
+                    'torque_applied': cross3(dipole, b), 'angle_rad': angle,          # (4)
+                    'axis_angle_rad': one_axis_angle}
+        return cmd
