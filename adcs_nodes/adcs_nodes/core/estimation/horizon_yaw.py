@@ -1,0 +1,224 @@
+"""Yaw from an Earth (horizon) sensor and a magnetometer, paper 004 (Ryzhkov, Holembiovskyi 2022).
+
+The horizon sensor gives roll ``phi`` and pitch ``theta`` of the body w.r.t. the orbit frame
+(x along-track, y orbit normal, z zenith); the magnetometer gives the field in body axes
+``a = (a_x, a_y, a_z)``; the onboard model gives it in orbit axes ``a0 = (a_x0, a_y0, a_z0)``.
+
+Equations (paper 004 numbers)
+-----------------------------
+3-2-1 Euler angles (yaw ``psi`` about z0, pitch about the new y, roll about the new x),
+``a = C a0`` with ``C = R1(phi) R2(theta) R3(psi) = R(q_orbit_body)^T``::
+
+    a_x = a_x0 cpsi ctheta + a_y0 spsi ctheta - a_z0 stheta                               (1)
+    a_y = a_x0 (-spsi cphi + cpsi sphi stheta) + a_y0 (cpsi cphi + spsi sphi stheta)
+          + a_z0 ctheta sphi
+    a_z = a_x0 (spsi sphi + cpsi cphi stheta) + a_y0 (-cpsi sphi + spsi cphi stheta)
+          + a_z0 ctheta cphi
+
+The zenith z0 seen in body axes (what the horizon sensor measures) is column 3 of ``C``::
+
+    z_body = (-stheta, ctheta sphi, ctheta cphi)                                          (H1)
+
+Yaw, paper formula (3), with ``mu1 = a_x + a_z0 stheta``, ``mu2 = a_z sphi - a_y cphi``::
+
+    sin psi = (mu2 a_x0 ctheta + mu1 a_y0) / (ctheta (a_x0^2 + a_y0^2))                   (3)
+
+The paper normalises every field component by ``lambda = M / r^3`` (its second form); any
+common scale cancels, so this module uses tesla throughout (dividing by ``|a0|`` only for the
+conditioning number). From (1), exactly (the ``a_z0`` terms cancel; digest section 4)::
+
+    mu1 = ctheta (a_x0 cpsi + a_y0 spsi),   mu2 = a_x0 spsi - a_y0 cpsi                   (Y1)
+
+so besides (3) (digest section 4, not printed in the paper)::
+
+    cos psi = (mu1 a_x0 - mu2 a_y0 ctheta) / (ctheta (a_x0^2 + a_y0^2))                   (Y2)
+    psi = atan2(sin psi, cos psi)   in (-pi, pi]                                          (Y3)
+
+(Y3) is the default: the paper's ``psi = arcsin(sin psi)`` only recovers ``|psi| <= 90 deg``
+and is kept as ``method='asin'``.
+
+Degradation
+-----------
+The denominator ``ctheta (a_x0^2 + a_y0^2)`` vanishes when the model field has no horizontal
+(x0, y0) component, i.e. the field is along the vertical, or at ``theta = +-90 deg``. For the
+direct dipole (paper 004 eq. (2)), ``a_x0^2 + a_y0^2 = lambda^2 (cos^2 u sin^2 i + cos^2 i)``,
+which becomes small for near-polar orbits (``i -> 90 deg``) near ``u = 90`` and ``270 deg`` (over
+the magnetic poles): yaw is unobservable there, and magnetometer errors are amplified by about
+``|a0| / sqrt(a_x0^2 + a_y0^2)``. TRIAD on the vertical and the field degrades at the same place
+(the two vectors become parallel). :func:`yaw_conditioning` returns the normalised denominator
+
+    kappa = |ctheta| (a_x0^2 + a_y0^2) / |a0|^2   in [0, 1]                               (Y4)
+
+and :func:`yaw_from_horizon_and_field` raises ``ValueError`` below a threshold, so the caller
+can hold or propagate yaw instead.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from adcs_nodes.core import attitude
+from adcs_nodes.core.estimation.triad import MIN_SIN_ANGLE, triad
+
+MIN_YAW_CONDITIONING = 1e-6
+"""Default smallest ``kappa`` (Y4) accepted by :func:`yaw_from_horizon_and_field`."""
+
+
+def _vec(v: ArrayLike, name: str) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f'{name} must be a finite array of shape (3,), got {v!r}')
+    return v
+
+
+def _angle(x: float, name: str) -> float:
+    x = float(x)
+    if not math.isfinite(x):
+        raise ValueError(f'{name} must be finite, got {x}')
+    return x
+
+
+def zenith_body(roll: float, pitch: float) -> np.ndarray:
+    """Unit zenith (orbit z0) in body axes from the horizon sensor's angles (H1).
+
+    Parameters
+    ----------
+    roll, pitch : float
+        3-2-1 roll ``phi`` and pitch ``theta`` [rad] of the body w.r.t. the orbit frame.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``z_body`` (3,), body axes, unit norm (independent of yaw).
+    """
+    phi, theta = _angle(roll, 'roll'), _angle(pitch, 'pitch')
+    return np.array([-math.sin(theta), math.cos(theta) * math.sin(phi),
+                     math.cos(theta) * math.cos(phi)])  # (H1)
+
+
+def yaw_conditioning(pitch: float, b_orbit: ArrayLike) -> float:
+    """Normalised denominator ``kappa`` of formula (3), equation (Y4), in [0, 1].
+
+    Parameters
+    ----------
+    pitch : float
+        Pitch ``theta`` [rad].
+    b_orbit : array_like
+        Model field (3,) [T], orbit axes.
+
+    Returns
+    -------
+    float
+        ``|cos theta| (a_x0^2 + a_y0^2) / |a0|^2``; 0 means yaw is unobservable.
+    """
+    a0 = _vec(b_orbit, 'b_orbit')
+    n2 = float(a0 @ a0)
+    if n2 == 0.0:
+        return 0.0
+    return abs(math.cos(_angle(pitch, 'pitch'))) * float(a0[0] ** 2 + a0[1] ** 2) / n2
+
+
+def yaw_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike, b_orbit: ArrayLike,
+                               method: str = 'atan2',
+                               min_conditioning: float = MIN_YAW_CONDITIONING) -> float:
+    """Yaw from roll, pitch, measured and model field, paper 004 formula (3).
+
+    Parameters
+    ----------
+    roll, pitch : float
+        3-2-1 roll ``phi`` and pitch ``theta`` [rad] of the body w.r.t. the orbit frame
+        (from the horizon sensor).
+    b_body : array_like
+        Measured field (3,) [T], body axes (``a_x, a_y, a_z``).
+    b_orbit : array_like
+        Model field (3,) [T], orbit axes (``a_x0, a_y0, a_z0``); same unit as ``b_body``.
+    method : {'atan2', 'asin'}
+        ``'atan2'`` (default): (3) with its companion (Y2), yaw in (-pi, pi] (Y3).
+        ``'asin'``: the paper's literal ``arcsin`` of (3), clipped to [-1, 1], valid only for
+        ``|yaw| <= pi/2``.
+    min_conditioning : float
+        Smallest accepted ``kappa`` (Y4).
+
+    Returns
+    -------
+    float
+        Yaw ``psi`` [rad].
+
+    Raises
+    ------
+    ValueError
+        On non-finite input, an unknown ``method``, or ``kappa < min_conditioning`` (field
+        nearly vertical, e.g. a near-polar orbit near ``u = 90/270 deg``, or pitch near 90 deg).
+    """
+    if method not in ('atan2', 'asin'):
+        raise ValueError(f"method must be 'atan2' or 'asin', got {method!r}")
+    phi, theta = _angle(roll, 'roll'), _angle(pitch, 'pitch')
+    a, a0 = _vec(b_body, 'b_body'), _vec(b_orbit, 'b_orbit')
+    kappa = yaw_conditioning(theta, a0)
+    if kappa < min_conditioning:
+        raise ValueError(f'yaw is unobservable: conditioning {kappa:.3g} < {min_conditioning:.3g}'
+                         ' (model field nearly vertical or pitch near +-90 deg)')
+    scale = 1.0 / math.sqrt(float(a0 @ a0))  # common scale: the paper's 1 / lambda
+    ax, ay, az = a * scale
+    ax0, ay0, az0 = a0 * scale
+    st, ct, sp, cp = math.sin(theta), math.cos(theta), math.sin(phi), math.cos(phi)
+    mu1 = ax + az0 * st
+    mu2 = az * sp - ay * cp
+    den = ct * (ax0 * ax0 + ay0 * ay0)
+    s_num = mu2 * ax0 * ct + mu1 * ay0  # (3) numerator
+    if method == 'asin':
+        return math.asin(min(1.0, max(-1.0, s_num / den)))  # (3), paper: psi = arcsin
+    c_num = mu1 * ax0 - mu2 * ay0 * ct  # (Y2) numerator
+    sgn = 1.0 if den > 0.0 else -1.0
+    return math.atan2(sgn * s_num, sgn * c_num)  # (Y3)
+
+
+def attitude_from_horizon_and_yaw(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """``q_orbit_body`` of the 3-2-1 angles of paper 004 (1).
+
+    ``R(q)^T = C = R1(roll) R2(pitch) R3(yaw)`` (orbit -> body).
+
+    Parameters
+    ----------
+    roll, pitch, yaw : float
+        3-2-1 Euler angles [rad] of the body w.r.t. the orbit frame.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``q_orbit_body`` (4,), scalar last: ``v_orbit = R(q) v_body``.
+    """
+    return attitude.from_euler_321(_angle(roll, 'roll'), _angle(pitch, 'pitch'),
+                                   _angle(yaw, 'yaw'))
+
+
+def triad_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike,
+                                 b_orbit: ArrayLike,
+                                 min_sin_angle: float = MIN_SIN_ANGLE) -> np.ndarray:
+    """TRIAD attitude from the horizon-sensor zenith (anchor, H1) and the field (paper 004).
+
+    Parameters
+    ----------
+    roll, pitch : float
+        3-2-1 roll and pitch [rad] of the body w.r.t. the orbit frame.
+    b_body : array_like
+        Measured field (3,) [T], body axes.
+    b_orbit : array_like
+        Model field (3,) [T], orbit axes.
+    min_sin_angle : float
+        Smallest accepted ``sin`` of the angle between the zenith and the field.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``q_orbit_body`` (4,), scalar last, ``w >= 0``.
+
+    Raises
+    ------
+    ValueError
+        On non-finite or zero input, or a field (nearly) along the vertical.
+    """
+    return triad(zenith_body(roll, pitch), b_body, np.array([0.0, 0.0, 1.0]), b_orbit,
+                 min_sin_angle)

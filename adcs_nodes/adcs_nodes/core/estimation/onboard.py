@@ -1,0 +1,154 @@
+"""The flight software's own reference: orbit state and geomagnetic field in the ORBIT frame.
+
+The estimators compare a measured field (body axes) with a model field in the orbit frame
+(paper 000: ``B*``; paper 004: ``a_x0, a_y0, a_z0``). The flight software computes that model
+itself from the scenario's configuration (DESIGN section 5: it never reads ``sim/*``); it may
+differ from the truth models on purpose.
+
+Equations
+---------
+Orbit frame (papers 000/004; :mod:`adcs_nodes.core.orbit` (O3)): x along-track, y orbit normal,
+z zenith; ``v_eci = R(q_eci_orbit) v_orbit``. The model field in orbit axes::
+
+    b_orbit = R(q_eci_orbit)^T b_eci(r_eci, t)                                       (R1)
+
+Direct (axial) dipole in orbit axes, paper 004 eq. (2) (ref. [4] of that paper)::
+
+    b_orbit = (mu_e / r^3) [cos u sin i,  cos i,  -2 sin u sin i]^T                    (2)
+
+with ``u`` the argument of latitude, ``i`` the inclination, ``r`` the orbit radius and
+``mu_e = B0 R^3`` the Earth's dipole moment in T m^3. It equals (R1) for
+:class:`~adcs_nodes.core.geomag.DipoleField` with ``pole_colatitude_rad = 0`` (a unit test
+pins it). The dipole moment points to the geographic south (``b`` points north on the
+equator, down at the north pole).
+"""
+from __future__ import annotations
+
+import math
+from datetime import datetime
+from typing import Mapping, NamedTuple
+
+import numpy as np
+
+from adcs_nodes.core import attitude
+from adcs_nodes.core.geomag import B0_DEFAULT_T, R_REF_M, GeomagneticField, make_field
+from adcs_nodes.core.orbit import OrbitModel, make_orbit
+
+MU_E_DEFAULT = B0_DEFAULT_T * R_REF_M ** 3
+"""Default Earth dipole moment ``B0 R^3`` [T m^3] (about 7.76e15; digest 5.2 assumption)."""
+
+
+class OnboardState(NamedTuple):
+    """Onboard reference at one instant (unpacks as a 5-tuple).
+
+    Attributes
+    ----------
+    q_eci_orbit : numpy.ndarray
+        Orbit-frame attitude, shape (4,), scalar last: ``v_eci = R(q) v_orbit``.
+    b_orbit : numpy.ndarray
+        Model geomagnetic field, shape (3,) [T], ORBIT axes (paper 000's ``B*``).
+    omega0 : float
+        Orbit rate [rad/s]; the orbit frame turns at ``omega0`` about its y axis.
+    u : float
+        Argument of latitude [rad], in [0, 2 pi).
+    r_eci : numpy.ndarray
+        Position, shape (3,) [m], ECI.
+    """
+
+    q_eci_orbit: np.ndarray
+    b_orbit: np.ndarray
+    omega0: float
+    u: float
+    r_eci: np.ndarray
+
+
+class OnboardReference:
+    """Orbit plus field model of the flight software, evaluated in the orbit frame (R1).
+
+    Parameters
+    ----------
+    orbit : OrbitModel
+        Anything with ``epoch`` and ``state(t)`` (:mod:`adcs_nodes.core.orbit`).
+    field : GeomagneticField
+        Field model with the same ``epoch`` (:mod:`adcs_nodes.core.geomag`).
+
+    Raises
+    ------
+    ValueError
+        If the two models have different epochs (their ``t`` would disagree).
+    """
+
+    def __init__(self, orbit: OrbitModel, field: GeomagneticField) -> None:
+        if getattr(orbit, 'epoch', None) != getattr(field, 'epoch', None):
+            raise ValueError(f'orbit epoch {getattr(orbit, "epoch", None)} differs from field '
+                             f'epoch {getattr(field, "epoch", None)}')
+        self.orbit = orbit
+        self.field = field
+
+    def at(self, t: float) -> OnboardState:
+        """Reference at ``t`` seconds after the epoch.
+
+        Returns
+        -------
+        OnboardState
+            ``(q_eci_orbit (4,), b_orbit (3,) [T] orbit axes, omega0 [rad/s], u [rad],
+            r_eci (3,) [m])``.
+        """
+        st = self.orbit.state(float(t))
+        b_eci = self.field.field_eci(st.r_eci, float(t))
+        b_orbit = attitude.to_matrix(st.q_eci_orbit).T @ b_eci  # (R1)
+        return OnboardState(st.q_eci_orbit, b_orbit, float(st.orbit_rate),
+                            float(st.argument_of_latitude), st.r_eci)
+
+
+def make_onboard_reference(orbit_cfg: Mapping, field_cfg: Mapping,
+                           epoch: datetime) -> OnboardReference:
+    """Build the onboard reference from scenario mappings.
+
+    Parameters
+    ----------
+    orbit_cfg : mapping
+        As :func:`adcs_nodes.core.orbit.make_orbit`.
+    field_cfg : mapping
+        As :func:`adcs_nodes.core.geomag.make_field`.
+    epoch : datetime
+        Timezone-aware scenario epoch (``t = 0``).
+
+    Raises
+    ------
+    ValueError
+        On a bad configuration (message from the model factories).
+    """
+    return OnboardReference(make_orbit(orbit_cfg, epoch), make_field(field_cfg, epoch))
+
+
+def b_orbit_direct_dipole(u: float, i: float, r: float, mu_e: float = MU_E_DEFAULT) -> np.ndarray:
+    """Direct-dipole field in orbit axes, paper 004 eq. (2).
+
+    Parameters
+    ----------
+    u : float
+        Argument of latitude [rad].
+    i : float
+        Orbit inclination [rad].
+    r : float
+        Distance from the Earth's centre [m], > 0.
+    mu_e : float
+        Earth dipole moment ``B0 R^3`` [T m^3] (``lambda = mu_e / r^3`` in the paper).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``b_orbit`` (3,) [T], orbit axes (x along-track, y orbit normal, z zenith).
+
+    Raises
+    ------
+    ValueError
+        On a non-finite input or ``r <= 0``.
+    """
+    vals = [float(u), float(i), float(r), float(mu_e)]
+    if not all(math.isfinite(v) for v in vals) or vals[2] <= 0.0:
+        raise ValueError(f'u, i, r, mu_e must be finite with r > 0, got {vals}')
+    lam = mu_e / r ** 3
+    return lam * np.array([math.cos(u) * math.sin(i), math.cos(i),
+                           -2.0 * math.sin(u) * math.sin(i)])  # (2)

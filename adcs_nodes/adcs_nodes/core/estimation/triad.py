@@ -1,0 +1,80 @@
+"""TRIAD: deterministic attitude from two vector observations (Black 1964; Shuster & Oh 1981).
+
+Equations (numbered here, T1-T3; paper 004 section "TRIAD", digest section 5)
+-----------------------------------------------------------------------------
+For each set of two vectors (body: measured; ref: model), the orthonormal triad::
+
+    t1 = v1 / |v1|,   t2 = (v1 x v2) / |v1 x v2|,   t3 = t1 x t2                         (T1)
+
+With ``M_body = [t1 t2 t3]_body`` and ``M_ref = [t1 t2 t3]_ref`` (columns), the attitude matrix
+mapping body components to reference components is::
+
+    R_ref_body = M_ref M_body^T,     v_ref = R_ref_body v_body                            (T2)
+
+``v1`` is the anchor: its body direction is reproduced exactly, ``v2`` only fixes the rotation
+about ``v1``; so ``v1`` should be the more accurate vector (paper 004: the Earth-sensor vertical).
+The solution degrades as ``v1`` and ``v2`` become parallel::
+
+    sin(angle(v1, v2)) = |v1 x v2| / (|v1| |v2|)  ->  0                                    (T3)
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from adcs_nodes.core import attitude
+
+MIN_SIN_ANGLE = 1e-8
+"""Default smallest ``sin`` of the angle between ``v1`` and ``v2`` accepted by :func:`triad`."""
+
+
+def _vec(v: ArrayLike, name: str) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f'{name} must be a finite array of shape (3,), got {v!r}')
+    return v
+
+
+def _triad_frame(v1: np.ndarray, v2: np.ndarray, which: str, min_sin: float) -> np.ndarray:
+    n1, n2 = np.linalg.norm(v1), np.linalg.norm(v2)
+    if n1 == 0.0 or n2 == 0.0:
+        raise ValueError(f'TRIAD {which} vectors must be non-zero, got |v1| = {n1}, |v2| = {n2}')
+    t1 = v1 / n1
+    c = np.cross(t1, v2 / n2)
+    s = np.linalg.norm(c)
+    if s < min_sin:  # (T3)
+        raise ValueError(f'TRIAD {which} vectors are (nearly) parallel: sin(angle) = {s:.3g} '
+                         f'< {min_sin:.3g}')
+    t2 = c / s
+    return np.column_stack((t1, t2, np.cross(t1, t2)))  # (T1)
+
+
+def triad(v1_body: ArrayLike, v2_body: ArrayLike, v1_ref: ArrayLike, v2_ref: ArrayLike,
+          min_sin_angle: float = MIN_SIN_ANGLE) -> np.ndarray:
+    """Attitude ``q_ref_body`` from two vectors seen in body and reference axes (T1, T2).
+
+    Parameters
+    ----------
+    v1_body, v2_body : array_like
+        Measured directions, shape (3,), body axes, any (common or not) units; ``v1`` is the
+        more accurate (anchor) vector.
+    v1_ref, v2_ref : array_like
+        The same directions, shape (3,), reference axes (e.g. orbit frame).
+    min_sin_angle : float
+        Smallest accepted ``sin`` of the angle between ``v1`` and ``v2`` in either frame (T3).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``q_ref_body`` (4,), scalar last, ``w >= 0``: ``v_ref = R(q) v_body``.
+
+    Raises
+    ------
+    ValueError
+        On non-finite or zero vectors, or (nearly) parallel ``v1`` and ``v2``.
+    """
+    m_body = _triad_frame(_vec(v1_body, 'v1_body'), _vec(v2_body, 'v2_body'), 'body',
+                          min_sin_angle)
+    m_ref = _triad_frame(_vec(v1_ref, 'v1_ref'), _vec(v2_ref, 'v2_ref'), 'reference',
+                         min_sin_angle)
+    return attitude.from_matrix(m_ref @ m_body.T)  # (T2)
