@@ -22,6 +22,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from adcs_msgs.msg import LockstepStatus
@@ -148,9 +149,10 @@ class LockstepNode(Node):
 
         Notes
         -----
-        Frame t is considered once any input stamped >= t has arrived (so a node never runs
-        ahead of the simulation). A due input missing ``timeout_s`` of wall time after that
-        is counted as a missed frame and the frame fires with the latest values. In
+        Frame t is considered once ``/clock`` or any input stamped >= t has arrived (so a
+        node never runs ahead of the simulation). A due input missing ``timeout_s`` of wall
+        time after that is counted as a missed frame and the frame fires with the latest
+        values. In
         ``real_time`` mode the node never waits: it fires with the latest values as soon as
         time has reached t.
         """
@@ -172,7 +174,16 @@ class LockstepNode(Node):
         self._next_t = 0
         self._seen_t = -1
         self._wait_since: Optional[float] = None
+        # /clock says that time has reached t even when no input is due then (a 2 s
+        # estimator between 10 s magnetometer samples); it is never waited for
+        self.subscription(Clock, '/clock', self._on_clock_tick)
         self.create_timer(min(0.05, self.timeout_s / 4.0), self._frame_watchdog)
+
+    def _on_clock_tick(self, msg: Clock) -> None:
+        t = self.elapsed_ns(stamp_ns(msg.clock))
+        if t > self._seen_t:
+            self._seen_t = t
+            self._try_fire()
 
     def input_arrived(self, name: str) -> None:
         """Hook called on every message of a lockstep input before it is stored."""

@@ -36,6 +36,18 @@ from adcs_nodes.tools.scenario import ScenarioError, list_scenarios, load_scenar
 KNOWN_NODES = [
     ('sim_node', 'environment', 'orbit + geomagnetic field (sim/environment)'),
     ('sim_node', 'dynamics', 'rigid-body dynamics, actuators, clock master (/clock, sim/state)'),
+    ('sim_node', 'magnetometer', 'magnetometer model (sensors/magnetometer)'),
+    ('sim_node', 'horizon_sensor', 'Earth horizon sensor, roll + pitch (sensors/horizon)'),
+    ('sim_node', 'star_tracker', 'star tracker attitude (sensors/star_tracker)'),
+    ('sim_node', 'gyro', 'rate gyro (sensors/gyro)'),
+    ('adcs_nodes', 'estimator', 'attitude estimator: magnetic_filter | triad | '
+     'horizon_mag_yaw (adcs/attitude_estimate)'),
+    ('adcs_nodes', 'magnetic_controller', 'paper 000 magnetorquer law '
+     '(adcs/controllers/magnetic/command)'),
+    ('adcs_nodes', 'bdot_controller', 'B-dot detumbling, safe mode '
+     '(adcs/controllers/bdot/command)'),
+    ('adcs_nodes', 'controller_manager', 'forwards the active controller, switching and '
+     'fallback (adcs/actuator_command)'),
     ('adcs_nodes', 'recorder', 'rosbag2 MCAP recorder of every topic'),
 ]
 

@@ -61,6 +61,9 @@ TOPIC_TYPES = {
     'sensors/gyro': 'sensor_msgs/msg/Imu',
     'adcs/attitude_estimate': 'adcs_msgs/msg/AttitudeState',
     'adcs/estimator/diagnostics': 'adcs_msgs/msg/FilterDiagnostics',
+    'adcs/controller_status': 'adcs_msgs/msg/ControllerStatus',
+    'adcs/controllers/magnetic/command': 'adcs_msgs/msg/ActuatorCommand',
+    'adcs/controllers/bdot/command': 'adcs_msgs/msg/ActuatorCommand',
 }
 
 #: Sensor nodes: scenario key -> (executable/module name, class, output topic).
@@ -201,23 +204,27 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
             nodes.append(NodeSpec(key, 'sim_node', exe, f'sim_node.nodes.{exe}', cls,
                                   {**common, **_sensor_params(key, sc['sensors'][key])},
                                   publishes=[topic],
-                                  subscribes=['sim/state', 'sim/environment']))
+                                  subscribes=['/clock', 'sim/state', 'sim/environment']))
     if 'estimator' in sc:
         est = sc['estimator']
         if 'magnetometer' not in sc['sensors']:
             raise ValueError('estimator: needs sensors.magnetometer')
-        subs = ['sensors/magnetometer', 'adcs/actuator_command']
+        subs = ['/clock', 'sensors/magnetometer', 'adcs/actuator_command']
         if est['algorithm'] in ('triad', 'horizon_mag_yaw'):
             if 'horizon_sensor' not in sc['sensors']:
                 raise ValueError(f'estimator.algorithm {est["algorithm"]} needs '
                                  'sensors.horizon_sensor')
-            subs.insert(1, 'sensors/horizon')
+            subs.insert(2, 'sensors/horizon')
         nodes.append(NodeSpec('estimator', 'adcs_nodes', 'estimator',
                               'adcs_nodes.nodes.estimator', 'EstimatorNode',
                               {**common, **_estimator_params(sc)},
                               publishes=['adcs/attitude_estimate',
                                          'adcs/estimator/diagnostics'],
                               subscribes=subs))
+    if 'controllers' in sc:
+        nodes += _control_nodes(sc, common)
+        dyn = next(n for n in nodes if n.name == 'dynamics')
+        dyn.params['command_period_s'] = sc['controllers']['period_s']
     if record:
         topics = list(sc['record']['topics']) or sorted(
             {t for n in nodes for t in n.publishes} | {'lockstep/status'})
@@ -226,6 +233,54 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
             {'topics': [f'{t}={TOPIC_TYPES[t]}' if t in TOPIC_TYPES else t for t in topics]},
             publishes=[], subscribes=topics, lockstep=True))
     _add_handshake(nodes)
+    return nodes
+
+
+def _control_nodes(sc: Dict[str, Any], common: Dict[str, Any]) -> List[NodeSpec]:
+    """Controller nodes (one per configured law) and the controller manager."""
+    ctrl = sc['controllers']
+    sensors = sc['sensors']
+    est_period = sc['estimator']['period_s'] if 'estimator' in sc else 0.0
+    limits = sc['spacecraft']['magnetorquer']['max_dipole_Am2']
+    wheels = sc['spacecraft'].get('wheels') or []
+    shared = {**common, 'period_s': ctrl['period_s'], 'estimator_period_s': est_period,
+              'magnetometer_period_s': sensors['magnetometer']['period_s'],
+              'magnetometer_q_body_sensor': sensors['magnetometer']['q_body_sensor_xyzw'],
+              'max_dipole_Am2': limits, 'n_wheels': len(wheels)}
+    nodes = []
+    names = [k for k in ('magnetic', 'bdot') if k in ctrl]
+    for name in names:
+        params = {**shared, 'kind': name, 'controller_name': name, **ctrl[name]}
+        if name == 'magnetic':
+            _flatten('onboard_orbit', sc['estimator']['onboard_orbit'], params)
+            _flatten('onboard_field', sc['estimator']['onboard_field'], params)
+        subs = ['/clock', 'sensors/magnetometer'] + (['adcs/attitude_estimate']
+                                                     if est_period else [])
+        nodes.append(NodeSpec(f'{name}_controller', 'adcs_nodes', f'{name}_controller',
+                              'adcs_nodes.nodes.controller',
+                              f'{name.capitalize()}ControllerNode', params,
+                              publishes=[f'adcs/controllers/{name}/command'], subscribes=subs))
+    man = sc.get('manager') or {'safe': 'bdot' if 'bdot' in names else names[0],
+                                'initial': '', 'stale_after_s': 0.0, 'schedule': []}
+    mparams: Dict[str, Any] = {
+        **common, 'controllers': names, 'safe': man['safe'], 'initial': man['initial'],
+        'period_s': ctrl['period_s'], 'controller_period_s': ctrl['period_s'],
+        'estimator_period_s': est_period if 'auto' in man else 0.0,
+        'stale_after_s': man['stale_after_s'], 'max_dipole_Am2': limits}
+    if wheels:
+        mparams['max_wheel_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
+    if man['schedule']:
+        mparams['schedule_t_s'] = [e['t_s'] for e in man['schedule']]
+        mparams['schedule_controller'] = [e['controller'] for e in man['schedule']]
+    if 'auto' in man:
+        _flatten('auto', man['auto'], mparams)
+    subs = ['/clock'] + [f'adcs/controllers/{n}/command' for n in names]
+    if 'auto' in man:
+        subs.append('adcs/attitude_estimate')
+    nodes.append(NodeSpec('controller_manager', 'adcs_nodes', 'controller_manager',
+                          'adcs_nodes.nodes.controller_manager', 'ControllerManagerNode',
+                          mparams, publishes=['adcs/actuator_command', 'adcs/controller_status'],
+                          subscribes=subs))
     return nodes
 
 

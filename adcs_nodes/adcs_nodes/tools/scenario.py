@@ -12,6 +12,7 @@ from __future__ import annotations
 import difflib
 import math
 import os
+import re
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -169,6 +170,41 @@ SCHEMA: Dict[str, Any] = {
         'onboard_orbit': 'ORBIT?',
         'onboard_field': 'FIELD?',
     }),
+    'controllers': Opt({
+        'period_s': F('float', 2.0, 'control period of every controller [s] (paper 000 '
+                      'assumption: 2 s, dipole held in between)'),
+        'magnetic': Opt({
+            'mode': F('str', 'three_axis', 'paper 000 law',
+                      ('three_axis', 'one_axis', 'two_stage')),
+            'alpha_per_s': F('float', 3e-3, 'kinematic gain alpha of (16) [1/s]'),
+            'k_Nms': F('float', 0.2, 'rate gain k of (27) [N m s]'),
+            'beta': F('float', 0.0, 'Lyapunov weight of (25) for the start-up check '
+                      'k > beta/(2 alpha) (28) [J]; 0: no check'),
+            'switch_angle_deg': F('float', 15.0, 'two_stage: switch below this angle [deg]'),
+            'switch_rate_deg_s': F('float', 0.2, 'two_stage: and below this rate [deg/s]'),
+        }),
+        'bdot': Opt({
+            'gain_Am2s_per_T': F('float', 1.0e6, 'B-dot gain k: m = -k dB/dt [A m^2 s/T]'),
+            'filter_time_constant_s': F('float', 0.0, 'low-pass of dB/dt [s] (0: none)'),
+        }),
+    }),
+    'manager': Opt({
+        'safe': F('str', 'bdot', 'safe-mode controller (fallback)'),
+        'initial': F('str', '', 'controller active at start (default: auto detumble or safe)'),
+        'stale_after_s': F('float', 0.0, 'a command older than this is stale [s] (0: the '
+                           'frame stamp only)'),
+        'schedule': F('schedule', [], 'scripted switches: list of {t_s, controller}'),
+        'auto': Opt({
+            'detumble': F('str', 'bdot', 'controller of the detumble mode'),
+            'acquire': F('str', 'magnetic', 'controller of the acquire mode'),
+            'rate_enter_deg_s': F('float', 0.5, 'detumble -> acquire below this rate [deg/s]'),
+            'rate_exit_deg_s': F('float', 1.0, 'acquire -> detumble above this rate [deg/s]'),
+            'confirm_frames': F('int', 10, 'frames the forward condition must hold'),
+            'exit_confirm_frames': F('int', 1, 'frames the back condition must hold'),
+            'rate_frame': F('str', 'eci', 'rate compared: w.r.t. ECI or the orbit frame',
+                            ('eci', 'orbit')),
+        }),
+    }),
     'record': {
         'topics': F('strlist', [], 'topics to record (empty: every topic of the graph)'),
     },
@@ -210,6 +246,11 @@ class _Map(dict):
 
 
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+# YAML 1.1 (PyYAML) reads 1e-5 and 2.0e6 as text; engineers write them: read them as floats
+_LineLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$'),
+    list('-+0123456789.'))
 
 
 # ---------------------------------------------------------------------- validation
@@ -336,6 +377,15 @@ def _convert(value: Any, spec: F) -> Any:
         if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
             raise ValueError(f'expected a list of text, got {value!r}')
         return value
+    if kind == 'schedule':
+        if not isinstance(value, list):
+            raise ValueError(f'expected a list of {{t_s, controller}}, got {value!r}')
+        out = []
+        for item in value:
+            if not isinstance(item, dict) or set(item) != {'t_s', 'controller'}:
+                raise ValueError(f'schedule entries need exactly t_s and controller: {item!r}')
+            out.append({'t_s': _finite(item['t_s']), 'controller': str(item['controller'])})
+        return sorted(out, key=lambda e: e['t_s'])
     if kind == 'wheels':
         if not isinstance(value, list):
             raise ValueError(f'expected a list of wheels, got {value!r}')
@@ -381,8 +431,33 @@ def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, i
         if sc['estimator']['algorithm'] != 'magnetic_filter' and 'horizon_sensor' not in sensors:
             checker.fail(lines.get('estimator'), 'estimator.algorithm',
                          f'{sc["estimator"]["algorithm"]} needs sensors.horizon_sensor')
+    if 'controllers' in sc:
+        names = [k for k in ('magnetic', 'bdot') if k in sc['controllers']]
+        if not names:
+            checker.fail(lines.get('controllers'), 'controllers', 'no controller configured '
+                         '(magnetic and/or bdot)')
+        if 'magnetorquer' not in sc['spacecraft']:
+            checker.fail(lines.get('controllers'), 'controllers',
+                         'needs spacecraft.magnetorquer')
+        if 'magnetometer' not in sc.get('sensors', {}):
+            checker.fail(lines.get('controllers'), 'controllers', 'needs sensors.magnetometer')
+        if 'magnetic' in names and 'estimator' not in sc:
+            checker.fail(lines.get('controllers'), 'controllers.magnetic', 'needs an estimator')
+        man = sc.get('manager', {'safe': 'bdot', 'initial': '', 'schedule': []})
+        allowed = names + (['auto'] if 'auto' in man else [])
+        for key in ('safe', 'initial'):
+            if man.get(key) and man[key] not in names:
+                checker.fail(lines.get('manager'), f'manager.{key}',
+                             f'{man[key]!r} is not a configured controller ({names})')
+        for entry in man.get('schedule', []):
+            if entry['controller'] not in allowed:
+                checker.fail(lines.get('manager'), 'manager.schedule',
+                             f'{entry["controller"]!r} is not one of {allowed}')
+    elif 'manager' in sc:
+        checker.fail(lines.get('manager'), 'manager', 'needs a controllers section')
     frame = timing['frame_s']
-    periods = [('estimator.period_s', sc.get('estimator', {}).get('period_s'))]
+    periods = [('estimator.period_s', sc.get('estimator', {}).get('period_s')),
+               ('controllers.period_s', sc.get('controllers', {}).get('period_s'))]
     periods += [(f'sensors.{k}.period_s', v['period_s']) for k, v in sc['sensors'].items()]
     for key, period in periods:
         if period is not None and (period <= 0 or abs(period / frame - round(period / frame))

@@ -1,0 +1,156 @@
+"""``controller_manager`` node: forwards the active controller's command to the actuators.
+
+Wraps :class:`adcs_nodes.core.manager.ControllerManagerCore` (switching at frame boundaries
+with one zero frame, schedule, automatic mode sequence, fallback to the safe controller on a
+stale, NaN or out-of-range command; the command sent is always finite and inside the limits).
+
+Subscribes ``adcs/controllers/<name>/command`` of every controller (awaited each command
+frame) and ``adcs/attitude_estimate`` (for the automatic sequence). Publishes
+``adcs/actuator_command`` (stamped with the frame) and the latched
+``adcs/controller_status``. Services ``~/switch_controller`` and ``~/list_controllers``.
+
+A controller that misses a frame (its process died) stops being waited for, so the graph goes
+on at full speed on the fallback; it is awaited again as soon as it publishes.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from adcs_msgs.msg import ActuatorCommand, AttitudeState, ControllerStatus
+from adcs_msgs.srv import ListControllers, SwitchController
+from adcs_nodes.core.control import Command
+from adcs_nodes.core.lockstep import NS_PER_S, seconds_to_ns
+from adcs_nodes.core.manager import AutoSequence, ControllerManagerCore
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.controller import command_msg, estimate_from_msg
+from adcs_nodes.nodes.convert import stamp_ns, vec3
+from adcs_nodes.nodes.lockstep_node import QOS_LATCHED, LockstepNode
+
+
+class ControllerManagerNode(LockstepNode):
+    """Controller manager (see module docstring)."""
+
+    def __init__(self, name: str = 'controller_manager', **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self.names: List[str] = [n for n in self.param('controllers', ['bdot']) if n]
+        safe = str(self.param('safe', 'bdot'))
+        initial = str(self.param('initial', '')) or None
+        period_s = float(self.param('period_s', 2.0))
+        ctrl_period_s = float(self.param('controller_period_s', period_s))
+        est_period_s = float(self.param('estimator_period_s', 0.0))
+        sched_t = list(self.param('schedule_t_s', [-1.0]))
+        sched_name = list(self.param('schedule_controller', ['']))
+        if len(sched_t) != len(sched_name):
+            raise ValueError('schedule_t_s and schedule_controller differ in length')
+        schedule = [(float(t), str(n)) for t, n in zip(sched_t, sched_name) if n]
+        auto_cfg = self.section('auto', {}, merge=False)
+        auto = AutoSequence.from_dict(auto_cfg) if auto_cfg else None
+        wheel_limits = list(self.param('max_wheel_torque_Nm', [-1.0]))
+        self.core = ControllerManagerCore(
+            self.names, safe, initial=initial,
+            max_dipole_Am2=list(self.param('max_dipole_Am2', [40.0, 40.0, 40.0])),
+            max_wheel_torque=[] if wheel_limits == [-1.0] else wheel_limits,
+            max_torque=list(self.param('max_torque_Nm', [0.0, 0.0, 0.0])),
+            stale_after_s=float(self.param('stale_after_s', 0.0)),
+            schedule=schedule, auto=auto)
+        self._ctrl_period_ns = seconds_to_ns(ctrl_period_s)
+        inputs: Dict[str, tuple] = {
+            n: (ActuatorCommand, f'adcs/controllers/{n}/command', ctrl_period_s)
+            for n in self.names}
+        if est_period_s > 0:
+            inputs['_estimate'] = (AttitudeState, 'adcs/attitude_estimate', est_period_s)
+        self.cmd_pub = self.publisher(ActuatorCommand, 'adcs/actuator_command')
+        self.status_pub = self.publisher(ControllerStatus, 'adcs/controller_status',
+                                         QOS_LATCHED)
+        self.create_service(SwitchController, '~/switch_controller', self.on_switch)
+        self.create_service(ListControllers, '~/list_controllers', self.on_list)
+        self._last_status: Optional[Tuple] = None
+        self._last_status_wall = 0.0
+        self._t_last: Optional[float] = None
+        self.lockstep_inputs(inputs, period_s, self.on_frame)
+        self._publish_status(force=True)
+        self.start_handshake()
+
+    # ------------------------------------------------------------------ services
+    def on_switch(self, request, response):
+        """``~/switch_controller``: validate now, apply at the next frame boundary."""
+        ok, message = self.core.request_switch(request.name, self._t_last)
+        response.success = ok
+        response.message = message
+        response.active = self.core.active
+        log = self.get_logger().info if ok else self.get_logger().warning
+        log(f'switch_controller({request.name!r}): {message}')
+        return response
+
+    def on_list(self, request, response):
+        """``~/list_controllers``."""
+        names, active, safe = self.core.list_controllers()
+        response.names = names
+        response.active = active
+        response.safe = safe
+        return response
+
+    # ------------------------------------------------------------------ frames
+    def input_arrived(self, name: str) -> None:
+        """A controller that was given up publishes again: await it again."""
+        if name in self.names and self.sync.period(name) == 0:
+            self.sync.set_period(name, self._ctrl_period_ns)
+            self.get_logger().info(f'controller {name} publishes again: awaited again')
+
+    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+        """Decide and publish the actuator command of frame ``t_ns``."""
+        t = t_ns / NS_PER_S
+        self._t_last = t
+        commands: Dict[str, Tuple[float, Optional[Command]]] = {}
+        for n in self.names:
+            m = msgs.get(n)
+            if m is None:
+                continue
+            commands[n] = (self.elapsed_ns(stamp_ns(m.header.stamp)) / NS_PER_S,
+                           Command(vec3(m.dipole_body), np.asarray(m.wheel_torque, float),
+                                   vec3(m.torque_body)))
+        for n in self.names:
+            if self._topics_of[n] in missing and self.sync.period(n):
+                self.sync.set_period(n, 0)
+                self.get_logger().error(f'controller {n} missed frame t={t:g} s: no longer '
+                                        'awaited until it publishes again')
+        est = estimate_from_msg(msgs.get('_estimate'))
+        cmd, status = self.core.step(t, commands, est)
+        if status.get('fault'):
+            self.get_logger().warning(f't={t:g} s: {status["fault"]}')
+        out = command_msg(cmd, self.stamp(t_ns), status.get('source') or 'zero')
+        self.cmd_pub.publish(out)
+        self._publish_status()
+
+    def _publish_status(self, force: bool = False) -> None:
+        st = self.core.status()
+        key = (st.get('active', self.core.active), st.get('mode', ''),
+               st.get('switch_count', 0), st.get('last_fault', ''))
+        now = time.monotonic()
+        if not force and key == self._last_status and now - self._last_status_wall < 1.0:
+            return
+        if key != self._last_status and self._last_status is not None:
+            self.get_logger().info(f'controller status: active {key[0]}, mode {key[1] or "-"}'
+                                   f', switches {key[2]}')
+        self._last_status, self._last_status_wall = key, now
+        msg = ControllerStatus()
+        msg.header.stamp = self.stamp(self.sim_t_ns)
+        msg.active = str(key[0])
+        msg.available = list(self.names)
+        msg.mode = str(key[1] or '')
+        msg.switch_count = int(key[2])
+        msg.missed_frames = int(st.get('missed_frames', 0))
+        msg.last_fault = str(key[3] or '')
+        self.status_pub.publish(msg)
+
+
+def main(args=None) -> int:
+    """``ros2 run adcs_nodes controller_manager``."""
+    return runtime.run(ControllerManagerNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
