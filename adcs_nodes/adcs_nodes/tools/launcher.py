@@ -27,6 +27,8 @@ import time
 from dataclasses import dataclass
 from typing import Dict, List, Optional
 
+import yaml
+
 from adcs_nodes.tools.graph import NodeSpec, build_graph, params_file_text
 
 DOMAIN_LOCK_DIR = os.path.join(tempfile.gettempdir(), 'adcs-domain-locks')
@@ -274,8 +276,23 @@ class Launcher:
             signal.signal(signal.SIGTERM, old_term)
             os.unlink(manifest_path)
             lock.close()
+            self._save_scenario()
         return RunResult(code, sim_s, wall, frames, missed, self.record, self.run_dir, message,
                          fps)
+
+    def _save_scenario(self) -> None:
+        """Store the effective scenario (defaults filled in) beside the bag's files.
+
+        ``<bag>/scenario.yaml`` lets ``adcs report`` pick the paper comparison and lets a
+        campaign check what each run really used; rosbag2 readers ignore the extra file.
+        """
+        if not self.record or not os.path.isdir(self.record):
+            return
+        sc = {k: v for k, v in self.sc.items() if not k.startswith('_')}
+        sc['duration_s'] = self.duration_s
+        with open(os.path.join(self.record, 'scenario.yaml'), 'w') as fh:
+            fh.write(f'# effective scenario of this bag (from {self.sc.get("_path", "?")})\n')
+            yaml.safe_dump(sc, fh, sort_keys=False)
 
     def _on_signal(self, signum, frame) -> None:
         self._stop_requested = True
