@@ -8,7 +8,10 @@
   ``lockstep/status`` by a small monitor node in the launcher process.
 * End: the clock master (dynamics) exits 0 after the last frame; the launcher waits until the
   recorder has seen the final clock, then stops every child with SIGINT (SIGKILL after a grace
-  period). A child that dies first stops the run with a message naming it and the tail of its log.
+  period). An essential child (world, recorder) that dies first stops the run with a message
+  naming it and the tail of its log; a flight-software node that dies is reported and the run
+  goes on (its consumers time out and fall back). A configuration error (exit code 2) of any
+  node stops the run.
 * Ctrl-C stops every child the same way; the bag is closed and valid.
 * While a run is active, ``~/.cache/adcs/runs/active-<pid>.json`` names its domain, run
   directory, bag and node PIDs (for ``adcs switch``/``adcs status`` and the tests).
@@ -33,6 +36,9 @@ from adcs_nodes.tools.graph import NodeSpec, build_graph, params_file_text
 
 DOMAIN_LOCK_DIR = os.path.join(tempfile.gettempdir(), 'adcs-domain-locks')
 RUNS_DIR = os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'runs')
+#: Nodes whose death ends the run: the simulated world, the recorder, the composed process.
+#: Any other node (flight software) may die; the run goes on and its consumers fall back.
+ESSENTIAL = {'dynamics', 'environment', 'recorder', 'composed'}
 
 
 class LaunchError(RuntimeError):
@@ -178,6 +184,7 @@ class Launcher:
             rec = next(n for n in self.nodes if n.name == 'recorder')
             rec.params['output'] = self.record
         self.procs: Dict[str, subprocess.Popen] = {}
+        self.lost: set = set()     # non-essential nodes that died during the run
         self._stop_requested = False
 
     # ------------------------------------------------------------------ processes
@@ -315,11 +322,18 @@ class Launcher:
                              + (', bag closed' if self.record else ''))
             for name, proc in self.procs.items():
                 rc = proc.poll()
-                if rc is None:
+                if rc is None or name in self.lost:
                     continue
                 if name == master and rc == 0:
                     return self._finish(monitor, total_ns)
                 tail = self._log_tail(name)
+                if name not in ESSENTIAL and rc != 2:
+                    # flight software died (a crash, a kill): the graph goes on without it;
+                    # its consumers time out and fall back (manager -> safe controller)
+                    self.lost.add(name)
+                    self.log(f'[adcs] WARNING: node {name} exited with code {rc}; the graph '
+                             f'goes on without it (log: {self.run_dir}/logs/{name}.log)')
+                    continue
                 return 1, (f'node {name} exited with code {rc} before the end of the run; '
                            f'last lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
 
