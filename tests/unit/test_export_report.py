@@ -270,7 +270,7 @@ def _small_bag(path, log_offset_s, order, value=1.0):
             writer.write(env, t_log, store.serialize_cdr(msg, 'adcs_msgs/msg/WheelState'))
             st = T['adcs_msgs/msg/LockstepStatus'](
                 header=msg.header, node='x', frames=k, missed_frames=0, last_missed_input='',
-                wall_time=log_offset_s + 0.1 * k)
+                wall_time=log_offset_s + 0.1 * k, final=False)
             writer.write(status, t_log, store.serialize_cdr(st, 'adcs_msgs/msg/LockstepStatus'))
         for i, name in enumerate(order):
             writer.write(ready, (EPOCH_S + log_offset_s) * 10**9 + i,

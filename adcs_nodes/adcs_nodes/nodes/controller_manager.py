@@ -70,6 +70,7 @@ class ControllerManagerNode(LockstepNode):
         self._last_status: Optional[Tuple] = None
         self._last_status_wall = 0.0
         self._t_last: Optional[float] = None
+        self._fault_kind: List[str] = []
         self.lockstep_inputs(inputs, period_s, self.on_frame)
         self._publish_status(force=True)
         self.start_handshake()
@@ -81,8 +82,11 @@ class ControllerManagerNode(LockstepNode):
         response.success = ok
         response.message = message
         response.active = self.core.active
-        log = self.get_logger().info if ok else self.get_logger().warning
-        log(f'switch_controller({request.name!r}): {message}')
+        text = f'switch_controller({request.name!r}): {message}'
+        if ok:   # (rclpy refuses one call site logging at two severities)
+            self.get_logger().info(text)
+        else:
+            self.get_logger().warning(text)
         return response
 
     def on_list(self, request, response):
@@ -119,22 +123,29 @@ class ControllerManagerNode(LockstepNode):
                                         'awaited until it publishes again')
         est = estimate_from_msg(msgs.get('_estimate'))
         cmd, status = self.core.step(t, commands, est)
-        if status.get('fault'):
-            self.get_logger().warning(f't={t:g} s: {status["fault"]}')
+        fault_kind = status.get('fault', '').split(' ', 2)[:2]   # e.g. ['magnetic:', 'stale:']
+        if fault_kind != self._fault_kind:
+            if status.get('fault'):
+                self.get_logger().warning(f't={t:g} s: {status["fault"]} (logged once)')
+            else:
+                self.get_logger().info(f't={t:g} s: fault cleared')
+            self._fault_kind = fault_kind
         out = command_msg(cmd, self.stamp(t_ns), status.get('source') or 'zero')
         self.cmd_pub.publish(out)
         self._publish_status()
 
     def _publish_status(self, force: bool = False) -> None:
         st = self.core.status()
+        # published on a change of what is forwarded (not of the fault text, which carries
+        # times) and once per wall second
         key = (st.get('active', self.core.active), st.get('mode', ''),
-               st.get('switch_count', 0), st.get('last_fault', ''))
+               st.get('switch_count', 0), st.get('source', ''))
         now = time.monotonic()
         if not force and key == self._last_status and now - self._last_status_wall < 1.0:
             return
         if key != self._last_status and self._last_status is not None:
             self.get_logger().info(f'controller status: active {key[0]}, mode {key[1] or "-"}'
-                                   f', switches {key[2]}')
+                                   f', switches {key[2]}, forwarding {key[3] or "zero"}')
         self._last_status, self._last_status_wall = key, now
         msg = ControllerStatus()
         msg.header.stamp = self.stamp(self.sim_t_ns)
@@ -143,7 +154,7 @@ class ControllerManagerNode(LockstepNode):
         msg.mode = str(key[1] or '')
         msg.switch_count = int(key[2])
         msg.missed_frames = int(st.get('missed_frames', 0))
-        msg.last_fault = str(key[3] or '')
+        msg.last_fault = str(st.get('last_fault', ''))
         self.status_pub.publish(msg)
 
 

@@ -41,6 +41,11 @@ QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 DEFAULT_EPOCH = '2026-01-01T00:00:00Z'
+#: A node reports its progress every this many base frames.
+PROGRESS_EVERY = 10
+#: The clock master waits when a node is more than this many frames behind (the data QoS
+#: keeps 100 messages per topic, so nothing a lagging node has not read yet is dropped).
+MAX_LAG_FRAMES = 40
 
 
 def parse_epoch(text: str) -> datetime:
@@ -91,6 +96,12 @@ class LockstepNode(Node):
         self._ready_sent = False
         self._ready_pub = self.create_publisher(String, 'lockstep/ready', QOS_READY)
         self._status_pub = self.create_publisher(LockstepStatus, 'lockstep/status', QOS_DATA)
+        # flow control: every PROGRESS_EVERY frames (and at the last frame of the run) a node
+        # reports how far it got; the clock master never runs more than MAX_LAG_FRAMES ahead
+        self._progress_pub = self.create_publisher(LockstepStatus, 'lockstep/progress',
+                                                   QOS_DATA)
+        self.duration_ns = seconds_to_ns(self.param('duration_s', 0.0))
+        self._progress_mark = -1
         self._pubs: Dict[str, Any] = {}
         self._subs: Dict[str, Any] = {}
         self._on_ready: Optional[Callable[[], None]] = None
@@ -184,6 +195,7 @@ class LockstepNode(Node):
         if t > self._seen_t:
             self._seen_t = t
             self._try_fire()
+            self.report_progress(self._seen_t)
 
     def input_arrived(self, name: str) -> None:
         """Hook called on every message of a lockstep input before it is stored."""
@@ -215,6 +227,8 @@ class LockstepNode(Node):
         self.frames += 1
         self.sim_t_ns = t
         self._on_frame(t, msgs, missing)
+        if self.is_last_frame(t, self._own_period_ns):
+            self.report_progress(max(t, self._seen_t), final=True)
 
     def _frame_watchdog(self) -> None:
         if self._wait_since is None or time.monotonic() - self._wait_since < self.timeout_s:
@@ -294,6 +308,27 @@ class LockstepNode(Node):
             f'frame t={t_ns / NS_PER_S:.3f} s: no {self.last_missed_input} within '
             f'{self.timeout_s:g} s wall; going on with the last value '
             f'(missed frames: {self.missed_frames})')
+
+    def report_progress(self, seen_ns: int, final: bool = False) -> None:
+        """Publish ``lockstep/progress`` every PROGRESS_EVERY frames of sim time this node
+        has received (``seen_ns``: every message stamped up to it is read) and once when it
+        has processed its last frame of the run (``final``); the clock master uses it for
+        flow control and to end the run only when every node is done."""
+        mark = seen_ns // (PROGRESS_EVERY * self.frame_ns)
+        if mark == self._progress_mark and not final:
+            return
+        self._progress_mark = mark
+        msg = LockstepStatus()
+        msg.header.stamp = self.stamp(seen_ns)
+        msg.node = self.get_name()
+        msg.frames = int(self.frames)
+        msg.missed_frames = int(self.missed_frames)
+        msg.final = bool(final)
+        self._progress_pub.publish(msg)
+
+    def is_last_frame(self, t_ns: int, period_ns: int) -> bool:
+        """True when frame ``t_ns`` is this node's last one of a run of ``duration_s``."""
+        return self.duration_ns > 0 and t_ns + period_ns > self.duration_ns
 
     def publish_status(self, final: bool = False) -> None:
         """Publish ``lockstep/status`` (frames, missed frames, wall time).

@@ -83,21 +83,19 @@ def _node_name(args, factory) -> str:
 def run(factory: Callable[[], Node], args=None) -> int:
     """Entry point body of a node executable: init rclpy, build the node, spin, shut down.
 
-    Returns the process exit code: 0 on a normal end, 1 when the node raised (the error is
-    printed with the node's name so the launcher can report it).
+    Returns the process exit code: 0 on a normal end, 2 on a configuration error (a
+    ``ValueError`` while building the node: one clear line naming the node, no traceback).
+    An exception while running propagates (traceback, exit code 1) so the launcher reports it.
     """
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    code = 0
-    node = None
     try:
-        node = factory()
+        try:
+            node = factory()
+        except ValueError as exc:
+            print(f'[{_node_name(args, factory)}] configuration error: {exc}', file=sys.stderr)
+            return 2
         spin_nodes([node])
-        code = int(getattr(node, 'exit_code', 0))
-    except ValueError as exc:  # configuration errors: one clear line, no traceback
-        name = node.get_name() if node is not None else _node_name(args, factory)
-        print(f'[{name}] configuration error: {exc}', file=sys.stderr)
-        code = 2
+        return int(getattr(node, 'exit_code', 0))
     finally:
         if rclpy.ok():
             rclpy.shutdown()
-    return code

@@ -184,6 +184,7 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
     """Node specs of a validated scenario (see :func:`adcs_nodes.tools.scenario.load_scenario`)."""
     common = _common(sc)
     common['real_time'] = bool(real_time)
+    common['duration_s'] = float(duration_s)   # every node knows its last frame
     env_params = dict(common)
     _flatten('orbit', sc['orbit'], env_params)
     _flatten('field', sc['field'], env_params)
@@ -193,6 +194,9 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                  subscribes=['/clock']),
         NodeSpec('dynamics', 'sim_node', 'dynamics', 'sim_node.nodes.dynamics', 'DynamicsNode',
                  {**common, 'duration_s': float(duration_s),
+                  # the clock master waits longest, so a fallback upstream (manager -> safe
+                  # controller after timeout_s) delivers its command before the master gives up
+                  'timeout_s': 2.0 * common['timeout_s'],
                   'substeps': int(sc['timing']['substeps']),
                   'rate_factor': float(rate_factor), **_spacecraft_params(sc),
                   **_initial_params(sc)},
@@ -230,7 +234,8 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
             {t for n in nodes for t in n.publishes} | {'lockstep/status'})
         nodes.append(NodeSpec(
             'recorder', 'adcs_nodes', 'recorder', 'adcs_nodes.nodes.recorder', 'RecorderNode',
-            {'topics': [f'{t}={TOPIC_TYPES[t]}' if t in TOPIC_TYPES else t for t in topics]},
+            {'topics': [f'{t}={TOPIC_TYPES[t]}' if t in TOPIC_TYPES else t for t in topics],
+             'status_period_s': 0.1},           # its progress, for the clock's flow control
             publishes=[], subscribes=topics, lockstep=True))
     _add_handshake(nodes)
     return nodes

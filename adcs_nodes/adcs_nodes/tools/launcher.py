@@ -248,6 +248,7 @@ class Launcher:
         os.environ.update({'ROS_DOMAIN_ID': env['ROS_DOMAIN_ID'],
                            'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'})
         manifest = {'pid': os.getpid(), 'domain': domain, 'scenario': self.sc['_path'],
+                    'epoch': self.sc['epoch'],
                     'bag': self.record, 'run_dir': self.run_dir, 'compose': self.compose}
         os.makedirs(RUNS_DIR, exist_ok=True)
         manifest_path = os.path.join(RUNS_DIR, f'active-{os.getpid()}.json')

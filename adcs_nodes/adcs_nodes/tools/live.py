@@ -76,11 +76,16 @@ class _Session:
         if not client.wait_for_service(timeout_sec=timeout_s):
             raise LiveError(f'service {name} not available within {timeout_s:g} s '
                             '(does this scenario run a controller manager?)')
-        future = client.call_async(request)
-        self.executor.spin_until_future_complete(future, timeout_sec=timeout_s)
-        if not future.done():
-            raise LiveError(f'service {name} did not answer within {timeout_s:g} s')
-        return future.result()
+        # wait_for_service sees the graph, not the DDS match: a request sent before the server's
+        # reader matched ours is lost. Requests here are idempotent, so resend until answered.
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            future = client.call_async(request)
+            self.executor.spin_until_future_complete(future, timeout_sec=1.0)
+            if future.done():
+                return future.result()
+            client.remove_pending_request(future)
+        raise LiveError(f'service {name} did not answer within {timeout_s:g} s')
 
     def spin(self, seconds: float) -> None:
         deadline = time.monotonic() + seconds
@@ -140,6 +145,11 @@ def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
              f'bag {run.get("bag") or "none"})']
     if ctrl:
         c = ctrl[-1]
+        if run.get('epoch'):
+            from adcs_nodes.nodes.convert import stamp_ns
+            from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
+            t = (stamp_ns(c.header.stamp) - epoch_to_ns(parse_epoch(run['epoch']))) / 1e9
+            lines.append(f'sim time: {t:.1f} s (last controller frame)')
         lines.append(f'controller: {c.active}  mode: {c.mode or "-"}  available: '
                      f'{", ".join(c.available)}  switches: {c.switch_count}  missed frames: '
                      f'{c.missed_frames}  last fault: {c.last_fault or "-"}')

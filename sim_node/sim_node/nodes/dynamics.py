@@ -18,24 +18,28 @@ same model with the latest inputs, without waiting.
 from __future__ import annotations
 
 import time
-from typing import Optional
+from typing import Dict, Optional, Set
 
 import numpy as np
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
-from adcs_msgs.msg import ActuatorCommand, AttitudeState, Environment, WheelState
+from adcs_msgs.msg import (ActuatorCommand, AttitudeState, Environment, LockstepStatus,
+                           WheelState)
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import FrameSync, derive_seed, ns_to_seconds, seconds_to_ns
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
-from adcs_nodes.nodes.lockstep_node import QOS_DATA, QOS_READY, LockstepNode
+from adcs_nodes.nodes.lockstep_node import (MAX_LAG_FRAMES, QOS_DATA, QOS_READY,
+                                            LockstepNode)
 from sim_node.models.dynamics import ActuatorCommand as Command
 from sim_node.models.dynamics import FrameEnvironment, SpacecraftState
 from sim_node.models.spacecraft_config import (DEFAULT_INITIAL, DEFAULT_SPACECRAFT,
                                                initial_state, spacecraft_from_config)
 
 QOS_CLOCK = QOS_DATA
+#: The recorder's queues are 1000 deep: it may lag further than the lockstep nodes.
+RECORDER_LAG_FRAMES = 400
 
 
 class DynamicsNode(LockstepNode):
@@ -71,6 +75,13 @@ class DynamicsNode(LockstepNode):
         self.subscription(ActuatorCommand, 'adcs/actuator_command', self.on_command)
         self.ready_nodes = set()
         self.create_subscription(String, 'lockstep/ready', self.on_ready_msg, QOS_READY)
+        # flow control and end of run: how far every other node got (lockstep/progress)
+        self.progress: Dict[str, int] = {}
+        self.final_nodes: Set[str] = set()
+        self.create_subscription(LockstepStatus, 'lockstep/progress', self.on_progress,
+                                 QOS_DATA)
+        self.create_subscription(LockstepStatus, 'recorder/status', self.on_recorder, 10)
+        self.throttled_frames = 0
 
         self.k = 0
         self.state: Optional[SpacecraftState] = None
@@ -82,6 +93,8 @@ class DynamicsNode(LockstepNode):
         self.applied_wheel_torque = np.zeros(self.spacecraft.n_wheels)
         self.started = False
         self.create_timer(min(0.05, self.timeout_s / 4.0), self.on_watchdog)
+        self.start_timeout_s = float(self.param('start_timeout_s', 120.0))
+        self._created = time.monotonic()
         self.start_handshake(self.try_start)
 
     # ------------------------------------------------------------------ start
@@ -113,8 +126,50 @@ class DynamicsNode(LockstepNode):
         """Elapsed sim time of the current frame."""
         return self.k * self.frame_ns
 
+    def on_progress(self, msg: LockstepStatus) -> None:
+        """A node reports the sim time it has read up to (and whether it is done)."""
+        t = self.elapsed_ns(stamp_ns(msg.header.stamp))
+        self.progress[msg.node] = max(t, self.progress.get(msg.node, -1))
+        if msg.final:
+            self.final_nodes.add(msg.node)
+        self._resume()
+
+    def on_recorder(self, msg: LockstepStatus) -> None:
+        """The recorder reports the latest /clock it has written (its progress)."""
+        self.progress['recorder'] = max(self.elapsed_ns(stamp_ns(msg.header.stamp)),
+                                        self.progress.get('recorder', -1))
+        self._resume()
+
+    def _resume(self) -> None:
+        if self.phase == 'throttled' and not self._lagging():
+            self.begin_frame()
+        elif self.phase == 'wait_final' and self._all_final():
+            self.finish()
+
+    def _lagging(self) -> Optional[str]:
+        """Name of a node too far behind frame k to publish its clock, or None."""
+        for node in self.wait_for_nodes:
+            lag = RECORDER_LAG_FRAMES if node == 'recorder' else MAX_LAG_FRAMES
+            if self.t_ns - self.progress.get(node, 0) > lag * self.frame_ns:
+                return node
+        return None
+
+    def _all_final(self) -> bool:
+        return all(n in self.final_nodes for n in self.wait_for_nodes if n != 'recorder')
+
     def begin_frame(self) -> None:
-        """Phase A: publish the clock of frame k and wait for its environment."""
+        """Phase A: publish the clock of frame k and wait for its environment.
+
+        Flow control: when a node is more than MAX_LAG_FRAMES behind (it has not read the
+        messages of those frames yet), the clock waits for it, so no queue overflows and
+        the run stays deterministic however slow a node is.
+        """
+        if self._lagging():
+            if self.phase != 'throttled':
+                self.throttled_frames += 1
+            self.phase = 'throttled'
+            self.wait_since = time.monotonic()
+            return
         self.phase = 'wait_env'
         self.wait_since = time.monotonic()
         self.clock_pub.publish(Clock(clock=self.stamp(self.t_ns)))
@@ -160,7 +215,9 @@ class DynamicsNode(LockstepNode):
         if self.phase == 'wait_env' and self.sync.has('env', t):
             self.publish_state(self.sync.value('env', t))
             if self.duration_ns and t >= self.duration_ns:
-                self.finish()
+                self.phase = 'wait_final'          # every node processes its last frame
+                self.wait_since = time.monotonic()
+                self._resume()
                 return
             self.phase = 'wait_cmd'
             self.wait_since = time.monotonic()
@@ -196,11 +253,36 @@ class DynamicsNode(LockstepNode):
 
     def on_watchdog(self) -> None:
         """Wall-clock timeout of the current wait: count a missed frame and go on."""
-        if not self.started or self.real_time or self.done:
+        if not self.started:
+            waited = time.monotonic() - self._created
+            if waited > self.start_timeout_s and not self.done:
+                missing = sorted(set(self.wait_for_nodes) - self.ready_nodes)
+                self.get_logger().error(
+                    f'lockstep not started after {waited:.0f} s: no ready from '
+                    f'{", ".join(missing) or "(own endpoints: " + ", ".join(self.unmatched())}'
+                    ' (did a node die during start-up?)')
+                self.exit_code = 1
+                self.done = True
+            return
+        if self.real_time or self.done:
             return
         if time.monotonic() - self.wait_since < self.timeout_s:
             return
         t = self.t_ns
+        if self.phase == 'throttled':
+            self.get_logger().warning(
+                f'frame t={t / 1e9:g} s: {self._lagging()} is more than '
+                f'{MAX_LAG_FRAMES} frames behind for {self.timeout_s:g} s; going on')
+            self.progress[self._lagging()] = t    # a dead node must not stop the world
+            self.begin_frame()
+            return
+        if self.phase == 'wait_final':
+            missing = [n for n in self.wait_for_nodes
+                       if n != 'recorder' and n not in self.final_nodes]
+            self.get_logger().warning(f'end of run: no final frame from {", ".join(missing)} '
+                                      f'within {self.timeout_s:g} s; finishing')
+            self.finish()
+            return
         if self.phase == 'wait_env':
             if self.sync.value('env', t) is None:
                 # nothing to go on with (frame 0): keep waiting but say so, and re-send clock
@@ -269,6 +351,9 @@ class DynamicsNode(LockstepNode):
 
     def finish(self) -> None:
         """End of the scenario: report and let the runtime stop the process."""
+        if self.done:
+            return
+        self.phase = 'done'
         wall = time.monotonic() - self.wall_start
         sim = ns_to_seconds(self.t_ns)
         self.get_logger().info(

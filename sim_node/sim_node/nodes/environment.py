@@ -65,6 +65,7 @@ class EnvironmentNode(LockstepNode):
         self.pub.publish(self.compute(t_ns))
         self.frames += 1
         self.sim_t_ns = t_ns
+        self.report_progress(t_ns, final=self.is_last_frame(t_ns, self.frame_ns))
 
 
 def main(args=None) -> int:

@@ -1,0 +1,147 @@
+"""The closed-loop graph: run-time switching, unknown names, a killed controller, estimation.
+
+Runs go through the real ``adcs`` command; switches through ``adcs switch`` on the running
+graph (a long lockstep run, stopped with Ctrl-C once the checks are done).
+"""
+import os
+import re
+import signal
+import time
+
+import numpy as np
+import yaml
+
+from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
+from adcs_nodes.core import attitude as att
+from adcs_nodes.tools.bag import header_stamp_ns, read_messages, topic_summary
+
+EPOCH_NS = 1767225600 * 10**9
+
+
+def control_scenario(tmp_path, **changes):
+    """paper000_control with a 2 s magnetometer (B-dot needs samples) and a short timeout."""
+    with open(os.path.join(SCENARIOS, 'paper000_control.yaml')) as fh:
+        sc = yaml.safe_load(fh)
+    sc['sensors']['magnetometer']['period_s'] = 2.0
+    sc['timing']['timeout_s'] = 1.0
+    for key, value in changes.items():
+        sc[key] = value
+    path = tmp_path / 'control.yaml'
+    path.write_text(yaml.safe_dump(sc))
+    return str(path)
+
+
+def commands(bag):
+    out = []
+    for _, _, m in read_messages(bag, ['/adcs/actuator_command']):
+        out.append(((header_stamp_ns(m) - EPOCH_NS) / 1e9, m.source,
+                    np.array([m.dipole_body.x, m.dipole_body.y, m.dipole_body.z])))
+    return out
+
+
+def running(status_text, sim_s=20.0):
+    """True once the controller manager has run past ``sim_s`` (the lockstep is going)."""
+    m = re.search(r'sim time: ([0-9.]+) s', status_text)
+    return m is not None and float(m.group(1)) >= sim_s
+
+
+def wait_status(pid, predicate, timeout=30.0):
+    deadline = time.monotonic() + timeout
+    out = None
+    while time.monotonic() < deadline:
+        out = adcs('status', '--run', str(pid), check=False)
+        if out.returncode == 0 and predicate(out.stdout):
+            return out.stdout
+        time.sleep(0.5)
+    raise AssertionError(f'status condition not reached; last: {out.stdout} {out.stderr}')
+
+
+def test_switch_mid_run_gives_one_zero_frame_each_and_unknown_is_refused(tmp_path):
+    bag = str(tmp_path / 'switching')
+    proc = start_adcs('run', control_scenario(tmp_path), '--record', bag,
+                      '--duration', '200000', '--quiet')
+    try:
+        wait_manifest(proc)
+        wait_status(proc.pid, lambda s: 'controller: magnetic' in s and running(s))
+        bad = adcs('switch', 'fuzzy', '--run', str(proc.pid), check=False)
+        assert bad.returncode == 2
+        assert "unknown controller 'fuzzy'" in bad.stderr and 'magnetic' in bad.stderr
+        assert 'switch magnetic -> bdot' in adcs('switch', 'bdot', '--run', str(proc.pid)).stdout
+        wait_status(proc.pid, lambda s: 'controller: bdot' in s and 'switches: 1' in s)
+        time.sleep(1.0)
+        back = adcs('switch', 'magnetic', '--run', str(proc.pid)).stdout
+        assert 'switch bdot -> magnetic' in back
+        wait_status(proc.pid, lambda s: 'controller: magnetic' in s and 'switches: 2' in s)
+        time.sleep(1.0)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, out + err
+    cmds = commands(bag)
+    sources = [s for _, s, _ in cmds]
+    # runs of sources: magnetic..., zero, bdot..., zero, magnetic...
+    runs = [sources[0]] + [s for a, s in zip(sources, sources[1:]) if s != a]
+    assert runs == ['magnetic', 'zero', 'bdot', 'zero', 'magnetic'], runs
+    zero_idx = [i for i, s in enumerate(sources) if s == 'zero']
+    assert len(zero_idx) == 2                                  # exactly one frame each
+    for i in zero_idx:
+        assert np.all(cmds[i][2] == 0.0)
+    # every command is stamped on the 2 s control grid, none missing
+    times = [t for t, _, _ in cmds]
+    assert np.allclose(np.diff(times), 2.0)
+    status = [m for _, _, m in read_messages(bag, ['/adcs/controller_status'])]
+    assert status[-1].switch_count == 2 and status[-1].active == 'magnetic'
+
+
+def test_killed_controller_falls_back_to_bdot_and_the_graph_goes_on(tmp_path):
+    bag = str(tmp_path / 'killed')
+    proc = start_adcs('run', control_scenario(tmp_path), '--record', bag,
+                      '--duration', '200000', '--quiet')
+    try:
+        manifest = wait_manifest(proc)
+        wait_status(proc.pid, lambda s: 'controller: magnetic' in s and running(s))
+        t_kill = time.monotonic()
+        os.kill(manifest['pids']['magnetic_controller'], signal.SIGKILL)
+        status = wait_status(proc.pid, lambda s: 'fallback to bdot' in s, timeout=20.0)
+        assert time.monotonic() - t_kill < 10.0
+        time.sleep(2.0)                  # the graph keeps running on the fallback
+        assert proc.poll() is None, 'the run stopped when a controller died'
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, out + err
+    assert 'magnetic_controller exited with code -9' in out + err
+    assert 'stale' in status or 'no command' in status or 'fallback' in status
+    cmds = commands(bag)
+    sources = [s for _, s, _ in cmds]
+    assert sources[0] == 'magnetic' and sources[-1] == 'bdot'
+    after = sources[sources.index('bdot'):]
+    assert len(after) > 5 and set(after) == {'bdot'}            # fallback holds
+    summary = topic_summary(bag)                                 # the bag is valid
+    assert summary['/sim/state'][1] >= len(cmds)
+
+
+def test_estimator_converges_in_the_launched_graph(tmp_path):
+    """paper000_estimation shortened: below 2 deg after 1200 s (paper: within T/2)."""
+    bag = str(tmp_path / 'estimation')
+    adcs('run', os.path.join(SCENARIOS, 'paper000_estimation.yaml'), '--duration', '1600',
+         '--record', bag, '--quiet')
+    truth = {header_stamp_ns(m): m for _, _, m in read_messages(bag, ['/sim/state'])}
+    errors = []
+    stamps = []
+    for _, _, m in read_messages(bag, ['/adcs/attitude_estimate']):
+        t = header_stamp_ns(m)
+        s = truth[t]
+        q_est = [m.q_orbit_body.x, m.q_orbit_body.y, m.q_orbit_body.z, m.q_orbit_body.w]
+        q_true = [s.q_orbit_body.x, s.q_orbit_body.y, s.q_orbit_body.z, s.q_orbit_body.w]
+        errors.append(np.degrees(att.angle_between(q_est, q_true)))
+        stamps.append((t - EPOCH_NS) / 1e9)
+    expected = list(np.arange(0.0, 1600.1, 2.0))                   # one estimate per 2 s
+    assert len(stamps) == len(expected), (len(stamps), stamps[:3], stamps[-3:])
+    assert np.allclose(stamps, expected)
+    errors = np.array(errors)
+    late = errors[np.array(stamps) >= 1200.0]
+    assert errors[0] > 30.0                                       # started far off
+    assert late.max() < 2.0, f'max error after 1200 s: {late.max():.2f} deg'
+    diag = [m for _, _, m in read_messages(bag, ['/adcs/estimator/diagnostics'])]
+    assert diag[-1].update_count == 161 and diag[-1].rejected_count == 0

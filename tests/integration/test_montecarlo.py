@@ -1,0 +1,284 @@
+"""``adcs montecarlo``: dispersions reach their runs, parallel runs, Dask, resume, Ctrl-C.
+
+Campaigns go through the real command (``python -m adcs_nodes.tools.montecarlo``, the same
+code as ``adcs montecarlo``) on ``paper000_control`` shortened to 60 s (30 frames); each run is
+a full recorded graph. The checks read every run's bag independently of the tool.
+"""
+import dataclasses
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+from adcs_launch import ROOT, SCENARIOS
+
+from adcs_nodes.tools import montecarlo as mc
+from adcs_nodes.tools.bag import read_messages
+
+SCENARIO = os.path.join(SCENARIOS, 'paper000_control.yaml')
+DURATION = 60.0
+QUAT = ('x', 'y', 'z', 'w')
+VEC = ('x', 'y', 'z')
+
+
+def campaign_cmd(out, *args, duration=DURATION):
+    return [sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
+            '--duration', f'{duration:g}', '--out', str(out), *args]
+
+
+def campaign(out, *args, check=True, timeout=240):
+    """Run a campaign to its end; returns the CompletedProcess (text output)."""
+    proc = subprocess.run(campaign_cmd(out, *args), cwd=ROOT, capture_output=True, text=True,
+                          timeout=timeout)
+    if check and proc.returncode != 0:
+        raise AssertionError(f'campaign failed ({proc.returncode}):\n{proc.stdout}\n'
+                             f'{proc.stderr}')
+    return proc
+
+
+def table(out):
+    return mc.read_table(os.path.join(str(out), 'campaign.csv'))
+
+
+def vec(row, pattern, names):
+    return np.array([float(row[pattern.format(n)]) for n in names])
+
+
+def config_of(out):
+    with open(os.path.join(str(out), 'campaign.json')) as fh:
+        data = json.load(fh)
+    names = {f.name for f in dataclasses.fields(mc.CampaignConfig)}
+    return mc.CampaignConfig(**{k: v for k, v in data.items() if k in names})
+
+
+def first_state(bag):
+    """q_orbit_body (xyzw) and omega_body_eci_body [deg/s] of the bag's first /sim/state."""
+    _, _, msg = next(iter(read_messages(bag, ['/sim/state'])))
+    q = msg.q_orbit_body
+    w = msg.omega_body_eci_body
+    return np.array([q.x, q.y, q.z, q.w]), np.degrees([w.x, w.y, w.z])
+
+
+def quat_close(a, b, tol):
+    return min(np.abs(a - b).max(), np.abs(a + b).max()) < tol
+
+
+def result_mtime(out, index):
+    return os.stat(os.path.join(mc.run_dir_of(str(out), index), 'result.json')).st_mtime_ns
+
+
+@pytest.fixture(scope='module')
+def three_runs(tmp_path_factory):
+    """A 3-run campaign, 2 runs at a time, one process per node (the default)."""
+    out = tmp_path_factory.mktemp('montecarlo') / 'campaign'
+    t0 = time.monotonic()
+    proc = campaign(out, '--runs', '3', '--jobs', '2')
+    print(f'3-run campaign, --jobs 2: {time.monotonic() - t0:.1f} s wall')
+    return out, proc
+
+
+# ---------------------------------------------------------------------- pure functions
+def test_capture_index_is_the_start_of_the_final_stay_below():
+    assert mc.capture_index(np.array([50.0, 4.0, 6.0, 3.0, 2.0]), 5.0) == 3
+    assert mc.capture_index(np.array([1.0, 2.0]), 5.0) == 0
+    assert mc.capture_index(np.array([1.0, 6.0]), 5.0) is None
+    assert mc.capture_index(np.array([]), 5.0) is None
+
+
+def test_dispersions_are_deterministic_bounded_and_uniform_on_so3():
+    cfg = mc.CampaignConfig('x.yaml', 'h', runs=4000, seed=7, duration_s=10.0)
+    assert mc.draw_dispersion(cfg, 3) == mc.draw_dispersion(cfg, 3)
+    assert mc.draw_dispersion(cfg, 3) != mc.draw_dispersion(cfg, 4)
+    draws = [mc.draw_dispersion(cfg, i) for i in range(cfg.runs)]
+    q = np.array([d.q_orbit_body_xyzw for d in draws])
+    assert np.allclose(np.linalg.norm(q, axis=1), 1.0) and np.all(q[:, 3] >= 0.0)
+    # uniform on S^3: w has density (2/pi) sqrt(1 - w^2), so E|w| = 4 / (3 pi)
+    assert abs(np.abs(q[:, 3]).mean() - 4.0 / (3.0 * math.pi)) < 0.02
+    assert np.abs(q[:, :3].mean(axis=0)).max() < 0.03
+    w = np.array([d.omega_body_eci_body_deg_s for d in draws])
+    assert np.abs(w).max() <= 3.0 and np.abs(w).max() > 2.9
+    assert np.abs(np.array([d.mag_bias_T for d in draws])).max() <= 120e-9
+    assert np.abs(np.array([d.mag_misalignment_deg for d in draws])).max() <= 1.0
+    assert len({d.seed for d in draws}) == cfg.runs
+
+
+def test_apply_dispersion_replaces_the_initial_state_and_sensor_errors():
+    from adcs_nodes.tools.scenario import load_scenario
+    base = load_scenario(SCENARIO)
+    cfg = mc.CampaignConfig(SCENARIO, 'h', runs=1, seed=1, duration_s=DURATION)
+    disp = mc.draw_dispersion(cfg, 0)
+    sc = mc.apply_dispersion(base, disp, DURATION)
+    assert 'q_orbit_body_wxyz' not in sc['initial'] and '_path' not in sc
+    assert sc['initial']['q_orbit_body_xyzw'] == disp.q_orbit_body_xyzw
+    assert sc['sensors']['magnetometer']['bias_T'] == disp.mag_bias_T
+    assert sc['seed'] == disp.seed and sc['duration_s'] == DURATION
+    assert base['initial']['q_orbit_body_wxyz'] == [0.36, 0.48, -0.48, 0.64]  # base untouched
+
+
+def test_summary_and_plot_from_synthetic_results(tmp_path):
+    cfg = mc.CampaignConfig(SCENARIO, 'h', runs=4, seed=1, duration_s=1000.0)
+    results = []
+    for i, (status, t_cap) in enumerate([('captured', 300.0), ('captured', 500.0),
+                                         ('not_captured', None), ('error', None)]):
+        results.append({'index': i, 'status': status, 'capture_time_s': t_cap,
+                        'final_angle_deg': 1.0 if t_cap else 90.0, 'missed_frames': 0,
+                        'dispersion': dataclasses.asdict(mc.draw_dispersion(cfg, i))})
+    text = mc.summary_markdown(cfg, results, {'name': 'x', 'orbit': {'type': 'circular',
+                                                                     'altitude_km': 690.0}})
+    assert '| runs completed | 3 of 4 |' in text
+    assert '2/3 = 66.7 %' in text
+    assert '| capture time, median [s] | 400 (0.07 orbits) |' in text
+    png = tmp_path / 'plot.png'
+    mc.plot_capture_vs_rate(str(png), cfg, results)
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+# ---------------------------------------------------------------------- campaigns
+def test_three_runs_in_parallel_and_every_dispersion_reached_its_run(three_runs):
+    out, proc = three_runs
+    rows = table(out)
+    assert [int(r['index']) for r in rows] == [0, 1, 2]
+    assert all(r['status'] in ('captured', 'not_captured') for r in rows), rows
+    for k in (1, 2, 3):
+        assert f'] {k}/3 run ' in proc.stdout, proc.stdout
+    cfg = config_of(out)
+    for row in rows:
+        i = int(row['index'])
+        disp = mc.draw_dispersion(cfg, i)       # the table holds the campaign's draws
+        q_disp = vec(row, 'disp_q_orbit_body_{}', QUAT)
+        w_disp = vec(row, 'disp_omega_body_eci_body_{}_deg_s', VEC)
+        assert np.array_equal(q_disp, disp.q_orbit_body_xyzw)
+        assert np.array_equal(w_disp, disp.omega_body_eci_body_deg_s)
+        assert int(row['seed']) == disp.seed
+        # read back from the run's own bag, independently of the tool
+        bag = os.path.join(mc.run_dir_of(str(out), i), 'bag')
+        q_bag, w_bag = first_state(bag)
+        assert quat_close(q_bag, q_disp, 1e-9), (i, q_bag, q_disp)
+        assert np.abs(w_bag - w_disp).max() < 1e-9, (i, w_bag, w_disp)
+        # ... and as the tool tabulated it
+        assert quat_close(vec(row, 'bag_q_orbit_body_{}', QUAT), q_disp, 1e-9)
+        assert np.abs(vec(row, 'bag_omega_body_eci_body_{}_deg_s', VEC) - w_disp).max() < 1e-9
+        # sensor errors and seed: the effective scenario the launcher stored in the bag
+        with open(os.path.join(bag, 'scenario.yaml')) as fh:
+            eff = yaml.safe_load(fh)
+        mag = eff['sensors']['magnetometer']
+        assert eff['seed'] == disp.seed
+        assert np.abs(np.array(mag['bias_T'])
+                      - vec(row, 'disp_mag_bias_{}_T', VEC)).max() < 1e-18
+        assert np.abs(np.array(mag['misalignment_deg'])
+                      - vec(row, 'disp_mag_misalignment_{}_deg', VEC)).max() < 1e-12
+        assert float(row['sim_time_s']) == DURATION
+    # the runs differ from each other
+    qs = [vec(r, 'disp_q_orbit_body_{}', QUAT) for r in rows]
+    ws = [vec(r, 'disp_omega_body_eci_body_{}_deg_s', VEC) for r in rows]
+    for a in range(3):
+        for b in range(a + 1, 3):
+            assert not quat_close(qs[a], qs[b], 1e-3)
+            assert np.abs(ws[a] - ws[b]).max() > 1e-3
+    assert len({r['seed'] for r in rows}) == 3
+    assert (out / 'summary.md').read_text().count('| runs completed | 3 of 3 |') == 1
+    assert (out / 'capture_vs_rate.png').read_bytes()[:4] == b'\x89PNG'
+
+
+def test_restart_reruns_only_incomplete_runs(three_runs, tmp_path):
+    src, _ = three_runs
+    out = tmp_path / 'campaign'
+    shutil.copytree(src, out)
+    before = table(out)
+    os.unlink(os.path.join(mc.run_dir_of(str(out), 1), 'result.json'))  # bag stays: half-done
+    shutil.rmtree(os.path.join(mc.run_dir_of(str(out), 2), 'bag'))      # result without bag
+    kept = result_mtime(out, 0)
+    t0 = time.monotonic()
+    proc = campaign(out, '--runs', '3', '--jobs', '2')
+    print(f'restart with 2 incomplete runs: {time.monotonic() - t0:.1f} s wall')
+    assert 'resuming: 1 of 3 runs already done, 2 to run' in proc.stdout, proc.stdout
+    assert 'executed 2 run(s)' in proc.stdout, proc.stdout
+    assert ' run 0:' not in proc.stdout
+    assert result_mtime(out, 0) == kept
+    after = table(out)
+    assert len(after) == 3 and all(r['status'] in ('captured', 'not_captured') for r in after)
+    disp_cols = [c for c in mc.CSV_COLUMNS if c.startswith('disp_')] + ['seed']
+    for old, new in zip(before, after):
+        assert {c: old[c] for c in disp_cols} == {c: new[c] for c in disp_cols}
+    # nothing done: the same command only rewrites the table
+    proc = campaign(out, '--runs', '3')
+    assert 'executed 0 run(s)' in proc.stdout and result_mtime(out, 0) == kept
+
+
+def test_restart_with_other_arguments_is_refused(three_runs):
+    out, _ = three_runs
+    with open(out / 'campaign.json', 'rb') as fh:
+        identity = fh.read()
+    kept = result_mtime(out, 0)
+    for args, key in ((['--seed', '5'], 'seed: 21 in'), (['--max-rate-deg-s', '2'],
+                                                         'max_rate_deg_s: 3.0 in'),
+                      (['--capture-deg', '1'], 'capture_deg: 5.0 in')):
+        proc = campaign(out, '--runs', '3', *args, check=False, timeout=60)
+        assert proc.returncode == 2, proc.stdout + proc.stderr
+        assert 'other arguments' in proc.stderr and 'Repeat its arguments' in proc.stderr
+        assert key in proc.stderr, proc.stderr
+    proc = subprocess.run(campaign_cmd(out, '--runs', '3', duration=120.0), cwd=ROOT,
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and 'duration_s: 60.0 in campaign.json, 120.0 now' \
+        in proc.stderr, proc.stderr
+    with open(out / 'campaign.json', 'rb') as fh:
+        assert fh.read() == identity
+    assert result_mtime(out, 0) == kept
+
+
+def test_dask_scheduler_runs_the_campaign(three_runs, tmp_path):
+    distributed = pytest.importorskip('distributed')
+    out = tmp_path / 'dask'
+    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        worker_pids = set(client.run(os.getpid).values())
+        t0 = time.monotonic()
+        proc = campaign(out, '--runs', '2', '--scheduler', cluster.scheduler_address,
+                        '--compose')
+        print(f'2-run campaign on a 2-worker LocalCluster: {time.monotonic() - t0:.1f} s wall')
+    assert 'on the Dask scheduler' in proc.stdout
+    rows = table(out)
+    assert [int(r['index']) for r in rows] == [0, 1]
+    local = table(three_runs[0])
+    for row in rows:
+        assert row['status'] in ('captured', 'not_captured'), row
+        assert int(row['supervisor_pid']) in worker_pids, (row['supervisor_pid'], worker_pids)
+        # same seed and index: the same draws as the local campaign
+        assert row['seed'] == local[int(row['index'])]['seed']
+        q_disp = vec(row, 'disp_q_orbit_body_{}', QUAT)
+        q_bag, w_bag = first_state(os.path.join(mc.run_dir_of(str(out), int(row['index'])),
+                                                'bag'))
+        assert quat_close(q_bag, q_disp, 1e-9)
+        assert np.abs(w_bag - vec(row, 'disp_omega_body_eci_body_{}_deg_s', VEC)).max() < 1e-9
+
+
+def test_ctrl_c_keeps_finished_runs(tmp_path):
+    out = tmp_path / 'interrupted'
+    proc = subprocess.Popen(campaign_cmd(out, '--runs', '2', '--jobs', '1', '--compose',
+                                         duration=1200.0),
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = os.path.join(mc.run_dir_of(str(out), 0), 'result.json')
+    deadline = time.monotonic() + 120.0
+    while not os.path.exists(first) and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    assert os.path.exists(first), 'run 0 did not finish'
+    time.sleep(2.0)                     # run 1 is under way
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=90)
+    assert proc.returncode == 130, stdout + stderr
+    assert 'interrupted' in stdout
+    rows = table(out)
+    assert rows[0]['status'] in ('captured', 'not_captured')
+    assert rows[1]['status'] == 'interrupted', rows[1]
+    assert not os.path.exists(os.path.join(mc.run_dir_of(str(out), 1), 'result.json'))
+    assert mc.load_result(mc.run_dir_of(str(out), 0)) is not None
