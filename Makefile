@@ -22,8 +22,8 @@ lint:  ## flake8 at 99 columns on the packages and tests
 bench:  ## lockstep throughput table: transport ring, graph, composed graph, plain loop
 	$(RUN) python -m sim_node.tools.bench
 
-reproduce:  ## long paper reproductions with their pass/fail tables
-	$(RUN) python -m pytest -m slow tests
+reproduce:  ## long paper reproductions (papers 000, 004): pass/fail tables against the papers
+	$(RUN) python -m pytest -m slow -s -p no:warnings tests/reproductions
 
 clean:  ## remove build products (keeps the venv and your bags in out/)
 	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log

@@ -151,9 +151,11 @@ def cmd_export(args) -> int:
 
 def cmd_report(args) -> int:
     from adcs_nodes.tools.report import make_report
+    from adcs_nodes.tools.reproductions import expectations_for
     out = args.out or os.path.normpath(args.bag.rstrip('/')) + '_report'
     try:
-        make_report(args.bag, out)
+        _, rows = expectations_for(args.bag)
+        make_report(args.bag, out, expectations=rows)
     except (FileNotFoundError, ValueError) as exc:
         print(f'adcs report: {exc}', file=sys.stderr)
         return 2

@@ -945,6 +945,7 @@ def plot_capture_vs_rate(path: str, cfg: CampaignConfig,
     if miss:
         ax1.plot([_rate_of(r) for r in miss], [cfg.duration_s] * len(miss), 'rx',
                  label='not captured (plotted at the run end)')
+    ax1.set_ylim(bottom=0.0)
     ax1.set_ylabel('capture time [s]')
     ax1.set_title(f'capture (< {cfg.capture_deg:g} deg to the orbit frame), '
                   f'{len(done)} runs')
