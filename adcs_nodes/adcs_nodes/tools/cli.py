@@ -15,6 +15,9 @@ Commands
     Check a scenario file only (errors name the key and the line).
 ``adcs schema``
     Every scenario key with type, default and meaning (this is ``docs/scenarios.md``).
+``adcs montecarlo SCENARIO --runs N [--jobs J] [--scheduler ADDRESS] [--out DIR]``
+    Dispersed runs (attitude, rate, magnetometer errors, seeds) in parallel or on a Dask
+    cluster; resumable; ``campaign.csv``, ``summary.md``, ``capture_vs_rate.png``.
 ``adcs export BAG --csv DIR``
     One CSV per topic, flattened fields, time column ``t`` in seconds.
 ``adcs report BAG [--out DIR]``
@@ -205,6 +208,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('status', help='controllers and lockstep health of a running graph')
     p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_status)
+
+    from adcs_nodes.tools import montecarlo
+    p = sub.add_parser('montecarlo', help='dispersed Monte Carlo campaign (parallel, resumable)')
+    montecarlo.add_arguments(p)
+    p.set_defaults(func=montecarlo.run_from_args)
 
     p = sub.add_parser('schema', help='print every scenario key (Markdown table)')
     p.set_defaults(func=cmd_schema)

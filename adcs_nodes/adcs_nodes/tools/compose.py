@@ -25,22 +25,14 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from adcs_nodes.nodes.runtime import spin_nodes
-
-
-def _flat(prefix: str, data: Dict[str, Any], out: Dict[str, Any]) -> None:
-    for key, value in data.items():
-        name = f'{prefix}.{key}' if prefix else key
-        if isinstance(value, dict):
-            _flat(name, value, out)
-        else:
-            out[name] = value
+from adcs_nodes.tools.graph import flatten
 
 
 def overrides_for(params_doc: Dict[str, Any], name: str) -> List[Parameter]:
     """Parameter overrides of node ``name`` from a ROS 2 parameter-file document."""
     section = params_doc.get(f'/{name}', params_doc.get(name, {})).get('ros__parameters', {})
     flat: Dict[str, Any] = {}
-    _flat('', section, flat)
+    flatten('', section, flat)
     return [Parameter(k, value=v) for k, v in flat.items()]
 
 

@@ -121,16 +121,17 @@ def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
         p['magnetometer_q_body_sensor'] = sensors['magnetometer']['q_body_sensor_xyzw']
     if 'horizon_sensor' in sensors:
         p['horizon_period_s'] = sensors['horizon_sensor']['period_s']
-    _flatten('onboard_orbit', est['onboard_orbit'], p)
-    _flatten('onboard_field', est['onboard_field'], p)
+    flatten('onboard_orbit', est['onboard_orbit'], p)
+    flatten('onboard_field', est['onboard_field'], p)
     return p
 
 
-def _flatten(prefix: str, data: Dict[str, Any], out: Dict[str, Any]) -> None:
+def flatten(prefix: str, data: Dict[str, Any], out: Dict[str, Any]) -> None:
+    """Nested dict -> ``out`` with dotted keys (``orbit.altitude_km``)."""
     for key, value in data.items():
         name = f'{prefix}.{key}' if prefix else key
         if isinstance(value, dict):
-            _flatten(name, value, out)
+            flatten(name, value, out)
         else:
             out[name] = value
 
@@ -186,8 +187,8 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
     common['real_time'] = bool(real_time)
     common['duration_s'] = float(duration_s)   # every node knows its last frame
     env_params = dict(common)
-    _flatten('orbit', sc['orbit'], env_params)
-    _flatten('field', sc['field'], env_params)
+    flatten('orbit', sc['orbit'], env_params)
+    flatten('field', sc['field'], env_params)
     nodes = [
         NodeSpec('environment', 'sim_node', 'environment', 'sim_node.nodes.environment',
                  'EnvironmentNode', env_params, publishes=['sim/environment'],
@@ -257,8 +258,8 @@ def _control_nodes(sc: Dict[str, Any], common: Dict[str, Any]) -> List[NodeSpec]
     for name in names:
         params = {**shared, 'kind': name, 'controller_name': name, **ctrl[name]}
         if name == 'magnetic':
-            _flatten('onboard_orbit', sc['estimator']['onboard_orbit'], params)
-            _flatten('onboard_field', sc['estimator']['onboard_field'], params)
+            flatten('onboard_orbit', sc['estimator']['onboard_orbit'], params)
+            flatten('onboard_field', sc['estimator']['onboard_field'], params)
         subs = ['/clock', 'sensors/magnetometer'] + (['adcs/attitude_estimate']
                                                      if est_period else [])
         nodes.append(NodeSpec(f'{name}_controller', 'adcs_nodes', f'{name}_controller',
@@ -278,7 +279,7 @@ def _control_nodes(sc: Dict[str, Any], common: Dict[str, Any]) -> List[NodeSpec]
         mparams['schedule_t_s'] = [e['t_s'] for e in man['schedule']]
         mparams['schedule_controller'] = [e['controller'] for e in man['schedule']]
     if 'auto' in man:
-        _flatten('auto', man['auto'], mparams)
+        flatten('auto', man['auto'], mparams)
     subs = ['/clock'] + [f'adcs/controllers/{n}/command' for n in names]
     if 'auto' in man:
         subs.append('adcs/attitude_estimate')

@@ -28,7 +28,7 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass
-from typing import Dict, List, Optional
+from typing import Dict, Iterable, List, Optional
 
 import yaml
 
@@ -61,10 +61,13 @@ class RunResult:
     frames_per_s: float = 0.0
 
 
-def acquire_domain():
-    """Claim a free ROS_DOMAIN_ID in 1..100 with an exclusive lock file; returns (id, fh)."""
+def acquire_domain(domains: Iterable[int] = range(1, 101)):
+    """Claim a free ROS_DOMAIN_ID of ``domains`` with an exclusive lock file.
+
+    Returns ``(id, handle)``; the domain stays claimed until the handle is closed.
+    """
     os.makedirs(DOMAIN_LOCK_DIR, exist_ok=True)
-    ids = list(range(1, 101))
+    ids = list(domains)
     random.shuffle(ids)
     for dom in ids:
         fh = open(os.path.join(DOMAIN_LOCK_DIR, f'{dom}.lock'), 'w')
@@ -74,7 +77,8 @@ def acquire_domain():
             fh.close()
             continue
         return dom, fh
-    raise LaunchError('no free ROS_DOMAIN_ID in 1..100 (100 runs at once?)')
+    raise LaunchError(f'no free ROS_DOMAIN_ID in {ids[0] if ids else "?"}.. '
+                      f'({len(ids)} runs at once?)')
 
 
 def child_env(domain: int) -> Dict[str, str]:
@@ -183,6 +187,9 @@ class Launcher:
         if self.record:
             rec = next(n for n in self.nodes if n.name == 'recorder')
             rec.params['output'] = self.record
+        self.result_file = os.path.join(self.run_dir, 'dynamics_result.json')
+        next(n for n in self.nodes if n.name == 'dynamics').params['result_file'] = \
+            self.result_file
         self.procs: Dict[str, subprocess.Popen] = {}
         self.lost: set = set()     # non-essential nodes that died during the run
         self._stop_requested = False
@@ -277,8 +284,7 @@ class Launcher:
             sim_s = monitor.sim_ns / 1e9
             frames = int(round(sim_s / self.sc['timing']['frame_s']))
             missed = monitor.missed_frames
-            dyn = monitor.status.get('dynamics')
-            fps = dyn.frames / dyn.wall_time if dyn is not None and dyn.wall_time > 0 else 0.0
+            fps = self._master_fps()
             monitor.close()
             signal.signal(signal.SIGINT, old_int)
             signal.signal(signal.SIGTERM, old_term)
@@ -287,6 +293,14 @@ class Launcher:
             self._save_scenario()
         return RunResult(code, sim_s, wall, frames, missed, self.record, self.run_dir, message,
                          fps)
+
+    def _master_fps(self) -> float:
+        """Lockstep frames/s measured by the clock master (its result file), 0 if none."""
+        try:
+            with open(self.result_file) as fh:
+                return float(json.load(fh)['frames_per_s'])
+        except (OSError, ValueError, KeyError):
+            return 0.0
 
     def _save_scenario(self) -> None:
         """Store the effective scenario (defaults filled in) beside the bag's files.
@@ -339,14 +353,6 @@ class Launcher:
                            f'last lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
 
     def _finish(self, monitor: _Monitor, total_ns: int):
-        # the master's final status (frames = all frames) says how fast the lockstep ran
-        frames = int(round(total_ns / (self.sc['timing']['frame_s'] * 1e9)))
-        deadline = time.monotonic() + 3.0
-        while time.monotonic() < deadline:
-            dyn = monitor.status.get('dynamics')
-            if dyn is not None and dyn.frames >= frames:
-                break
-            monitor.spin(0.05)
         monitor.sim_ns = max(monitor.sim_ns, total_ns)
         if self.record and not self.compose:
             deadline = time.monotonic() + 15.0
@@ -354,7 +360,12 @@ class Launcher:
                 if self.procs['recorder'].poll() is not None:
                     break
                 monitor.spin(0.1)
-            monitor.spin(0.3)  # the final frame's last messages after its clock
+            # every node has done its last frame (the master waited for them): the recorder
+            # has everything once its message count stops growing
+            last = -1
+            while monitor.recorder_count != last and time.monotonic() < deadline:
+                last = monitor.recorder_count
+                monitor.spin(0.3)
             if monitor.recorder_clock_ns < total_ns:
                 return 1, ('recorder did not receive the final frame within 15 s: '
                            'the bag may miss the end of the run')

@@ -17,6 +17,8 @@ same model with the latest inputs, without waiting.
 """
 from __future__ import annotations
 
+import json
+import os
 import time
 from typing import Dict, Optional, Set
 
@@ -59,6 +61,7 @@ class DynamicsNode(LockstepNode):
         if cmd_ns % self.frame_ns:
             raise ValueError('command_period_s must be a multiple of frame_period_s')
         self.wait_for_nodes = [n for n in self.param('wait_for_nodes', ['']) if n]
+        self.result_file = str(self.param('result_file', ''))
         cfg = self.section('spacecraft', DEFAULT_SPACECRAFT)
         self.spacecraft = spacecraft_from_config(
             cfg, seed=derive_seed(self.seed, 'dynamics/disturbance'))
@@ -361,6 +364,14 @@ class DynamicsNode(LockstepNode):
             f'time, {self.frames / max(wall, 1e-9):.0f} frames/s), missed frames '
             f'{self.missed_frames}')
         self.publish_status(final=True)
+        if self.result_file:     # for the launcher: no DDS race with a process that exits
+            with open(self.result_file + '.tmp', 'w') as fh:
+                json.dump({'frames': self.frames, 'wall_time_s': wall,
+                           'frames_per_s': self.frames / max(wall, 1e-9),
+                           'missed_frames': self.missed_frames,
+                           'throttled_frames': self.throttled_frames,
+                           'rejected_commands': self.rejected_commands}, fh)
+            os.replace(self.result_file + '.tmp', self.result_file)
         self.done = True  # the runtime lingers briefly (DDS resends) and exits
 
 

@@ -21,10 +21,8 @@ Usage (what :func:`run_ring` does)::
 from __future__ import annotations
 
 import argparse
-import fcntl
 import json
 import os
-import random
 import signal
 import subprocess
 import sys
@@ -32,7 +30,7 @@ import time
 from dataclasses import dataclass
 from typing import Dict, List, Tuple
 
-from adcs_nodes.tools.launcher import DOMAIN_LOCK_DIR
+from adcs_nodes.tools.launcher import LaunchError, acquire_domain
 
 PING, PONG = 'bench/ping', 'bench/pong'
 #: ``ROS_DOMAIN_ID`` range of the bench rings (the launcher uses 1..100).
@@ -191,22 +189,11 @@ def pong_main(timeout_s: float) -> int:
 
 # ---------------------------------------------------------------------- driver
 def acquire_bench_domain() -> Tuple[int, object]:
-    """Claim a free ``ROS_DOMAIN_ID`` in 101..200 with a lock file; returns ``(id, handle)``.
-
-    The domain stays claimed until the handle is closed.
-    """
-    os.makedirs(DOMAIN_LOCK_DIR, exist_ok=True)
-    ids = list(DOMAINS)
-    random.shuffle(ids)
-    for dom in ids:
-        fh = open(os.path.join(DOMAIN_LOCK_DIR, f'{dom}.lock'), 'w')
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            fh.close()
-            continue
-        return dom, fh
-    raise RingError('no free ROS_DOMAIN_ID in 101..200')
+    """Claim a free ``ROS_DOMAIN_ID`` in 101..200 (apart from ``adcs run``'s 1..100)."""
+    try:
+        return acquire_domain(DOMAINS)
+    except LaunchError as exc:
+        raise RingError(str(exc)) from None
 
 
 def _stop(proc: subprocess.Popen, grace_s: float = 5.0) -> None:
