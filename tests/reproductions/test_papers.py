@@ -27,6 +27,7 @@ def reproduce(name, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)
 @pytest.mark.parametrize('name', ['paper000_estimation', 'paper004_yaw', 'paper000_control'])
 def test_reproduction(name, tmp_path):
     rows = reproduce(name, tmp_path)
