@@ -5,7 +5,7 @@ import textwrap
 
 import pytest
 
-from adcs_nodes.tools.graph import build_graph, params_file_text
+from adcs_nodes.tools.graph import TOPIC_TYPES, build_graph, params_file_text
 from adcs_nodes.tools.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -113,3 +113,14 @@ def test_exponent_floats_without_a_sign_or_dot_are_numbers(tmp_path):
     assert sc['duration_s'] == 10.0
     assert sc['spacecraft']['inertia_kgm2'][0][0] == 2.0e6
     assert sc['spacecraft']['inertia_kgm2'][2][2] == 0.35
+
+
+@pytest.mark.parametrize('fname', sorted(f for f in os.listdir(SCEN) if f.endswith('.yaml')))
+def test_flight_software_never_subscribes_to_the_simulator(fname):
+    sc = load_scenario(os.path.join(SCEN, fname))
+    for node in build_graph(sc, sc['duration_s'], record=False):
+        if node.package == 'adcs_nodes':
+            assert not [t for t in node.subscribes if t.startswith('sim/')], node.name
+        # every published topic has a message type for the recorder
+        for topic in node.publishes:
+            assert topic in TOPIC_TYPES, topic
