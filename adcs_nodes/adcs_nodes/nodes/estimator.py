@@ -66,6 +66,8 @@ class EstimatorNode(LockstepNode):
                                                 [0.0, 0.0, 0.0]), dtype=float)
         inputs = {'mag': (MagneticField, 'sensors/magnetometer', mag_period_s),
                   'cmd': (ActuatorCommand, 'adcs/actuator_command', 0.0)}
+        self.max_rate = float(self.param('max_rate_rad_s', 1.0))
+        self.resets = 0
         if self.algorithm == 'magnetic_filter':
             inertia = np.asarray(self.param('inertia_kgm2', [118.0, 118.0, 19.6]), float)
             inertia = np.diag(inertia) if inertia.size == 3 else inertia.reshape(3, 3)
@@ -78,7 +80,7 @@ class EstimatorNode(LockstepNode):
                 substeps=int(self.param('substeps', 1)),
                 # sanity bounds on a correction (not in the paper): only divergence guards,
                 # far above the paper's case (3 deg/s tumble, |m| ~ 3e-8 s^-2)
-                max_rate_rad_s=float(self.param('max_rate_rad_s', 1.0)),
+                max_rate_rad_s=self.max_rate,
                 max_disturbance_rad_s2=float(self.param('max_disturbance_rad_s2', 1e-2)))
         else:
             inputs['horizon'] = (HorizonSensor, 'sensors/horizon', horizon_period_s)
@@ -134,20 +136,25 @@ class EstimatorNode(LockstepNode):
 
     def _filter_step(self, t_ns: int, ref, msgs: Dict[str, Any]) -> bool:
         f = self.filter
+        omega_abs0 = self.omega_rel0 + att.to_matrix(self.q0).T @ np.array(
+            [0.0, ref.omega0, 0.0])
         if self._last_t is None:
-            omega_abs0 = self.omega_rel0 + att.to_matrix(self.q0).T @ np.array(
-                [0.0, ref.omega0, 0.0])
             f.reset(self.q0, omega_abs0)
         else:
             cmd = msgs.get('cmd')
             dipole = vec3(cmd.dipole_body) if cmd is not None else np.zeros(3)
             if not all_finite(dipole):
                 dipole = np.zeros(3)
-            if not f.predict((t_ns - self._last_t) / NS_PER_S, ref.omega0, dipole,
-                             b_orbit_for_torque=ref.b_orbit):
-                self.get_logger().error('prediction became non-finite: estimate reset')
-                f.reset(self.q0, f.omega_body_eci_body if all_finite(
-                    f.omega_body_eci_body) else np.zeros(3))
+            ok = f.predict((t_ns - self._last_t) / NS_PER_S, ref.omega0, dipole,
+                           b_orbit_for_torque=ref.b_orbit)
+            w = f.omega_body_eci_body
+            if not ok or not all_finite(w) or float(np.linalg.norm(w)) > self.max_rate:
+                # diverged (e.g. the literal update (38)): start again from the initial
+                # estimate, as the paper's filter does at t0, instead of publishing nonsense
+                self.resets += 1
+                self._reject(f'filter diverged (|omega\'| beyond {self.max_rate:g} rad/s or '
+                             f'not finite): reset to the initial estimate ({self.resets})')
+                f.reset(self.q0, omega_abs0)
         mag = msgs.get('mag')
         if self._fresh(mag, t_ns):
             b_body = self._field_body(mag)
