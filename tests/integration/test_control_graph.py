@@ -171,3 +171,41 @@ def test_paper004_yaw_reproduction_in_the_launched_graph(tmp_path):
         yaw_est = att.to_euler_321([q_est.x, q_est.y, q_est.z, q_est.w])[2]
         yaw_true = att.to_euler_321([q_true.x, q_true.y, q_true.z, q_true.w])[2]
         assert np.degrees(yaw_est - yaw_true) == pytest.approx(err, abs=1e-9)
+
+
+def test_scheduled_switch_happens_at_the_exact_sim_time(tmp_path):
+    """manager.schedule from the scenario: magnetic until 20 s, zero at 20 s, bdot after."""
+    bag = str(tmp_path / 'scheduled')
+    path = control_scenario(tmp_path)
+    with open(path) as fh:
+        sc = yaml.safe_load(fh)
+    sc['manager']['schedule'] = [{'t_s': 20.0, 'controller': 'bdot'}]
+    with open(path, 'w') as fh:
+        yaml.safe_dump(sc, fh)
+    adcs('run', path, '--record', bag, '--duration', '40', '--quiet')
+    cmds = commands(bag)
+    assert [t for t, _, _ in cmds] == [float(t) for t in range(0, 41, 2)]
+    by_t = {t: s for t, s, _ in cmds}
+    assert all(by_t[t] == 'magnetic' for t in range(0, 20, 2))
+    assert by_t[20.0] == 'zero'
+    assert all(by_t[t] == 'bdot' for t in range(22, 41, 2))
+
+
+def test_automatic_sequence_detumble_then_acquire(tmp_path):
+    """manager.auto: B-dot until the estimated rate is below the threshold for 3 frames."""
+    bag = str(tmp_path / 'auto')
+    path = control_scenario(tmp_path)
+    with open(path) as fh:
+        sc = yaml.safe_load(fh)
+    sc['manager'] = {'safe': 'bdot', 'auto': {
+        'detumble': 'bdot', 'acquire': 'magnetic', 'rate_enter_deg_s': 8.0,
+        'rate_exit_deg_s': 30.0, 'confirm_frames': 3}}
+    with open(path, 'w') as fh:
+        yaml.safe_dump(sc, fh)
+    adcs('run', path, '--record', bag, '--duration', '60', '--quiet')
+    sources = [s for _, s, _ in commands(bag)]
+    runs = [sources[0]] + [s for a, s in zip(sources, sources[1:]) if s != a]
+    assert runs == ['bdot', 'zero', 'magnetic'], runs
+    assert sources.count('zero') == 1
+    status = [m for _, _, m in read_messages(bag, ['/adcs/controller_status'])]
+    assert status[-1].mode == 'acquire' and status[-1].active == 'magnetic'
