@@ -21,16 +21,16 @@ name)``.
 from __future__ import annotations
 
 import math
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, Optional
 
 from sensor_msgs.msg import Imu
 
 from adcs_msgs.msg import AttitudeState, Environment
-from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
+from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, to_vec3, vec3
-from adcs_nodes.nodes.lockstep_node import LockstepNode
 from sim_node.models.sensors import GYRO_DRIFT_WALK_RAD_S_SQRT_S, Gyro
+from sim_node.nodes.sensor_node import SensorNode
 
 #: Defaults when run alone (paper 001, digest section 4: drift 0.01 deg/h 3-sigma).
 DEFAULTS: Dict[str, Any] = {
@@ -42,42 +42,31 @@ DEFAULTS: Dict[str, Any] = {
 }
 
 
-class GyroNode(LockstepNode):
+class GyroNode(SensorNode):
     """Publishes gyro samples of the truth rate (see module docstring)."""
 
+    DEFAULTS = DEFAULTS
+
     def __init__(self, name: str = 'gyro', **kwargs) -> None:
-        super().__init__(name, **kwargs)
-        p = {k: self.param(k, v) for k, v in DEFAULTS.items()}
-        self.frame_id = str(p['frame_id'])
+        super().__init__(name, Imu, 'sensors/gyro', **kwargs)
+        p = self.p
         self.model = Gyro(noise_std_rad_s=p['noise_std_rad_s'],
                           bias_initial_rad_s=p['bias_initial_rad_s'],
                           bias_walk_std_rad_s_sqrt_s=p['bias_walk_std_rad_s_sqrt_s'],
-                          seed=derive_seed(self.seed, self.get_name()))
+                          seed=self.sensor_seed)
         self.covariance = self.model.covariance.reshape(-1).tolist()
         self._last_t_ns: Optional[int] = None
-        self.pub = self.publisher(Imu, 'sensors/gyro')
-        frame_s = self.frame_ns / NS_PER_S
-        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s),
-                              'env': (Environment, 'sim/environment', frame_s)},
-                             float(p['period_s']), self.on_frame)
-        self.start_handshake()
+        self.start()
 
-    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+    def sample(self, t_ns: int, state: AttitudeState, env: Environment) -> None:
         """Measure the rate at sim time ``t_ns`` and publish it (see module)."""
-        state = msgs['state']
-        if state is None:
-            self.get_logger().warning(f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
-            return
         omega = vec3(state.omega_body_eci_body)
         if not all_finite(omega):
-            self.get_logger().warning(
-                f't={t_ns / NS_PER_S:.3f} s: non-finite truth omega_body_eci_body, no sample')
+            self.truth_ok(t_ns, 'omega_body_eci_body', omega)   # logs the warning
             return
         dt = 0.0 if self._last_t_ns is None else (t_ns - self._last_t_ns) / NS_PER_S
         self._last_t_ns = t_ns
-        msg = Imu()
-        msg.header.stamp = self.stamp(t_ns)
-        msg.header.frame_id = self.frame_id
+        msg = self.header(Imu(), t_ns)
         msg.angular_velocity = to_vec3(self.model.measure(omega, dt))
         msg.angular_velocity_covariance = self.covariance
         msg.orientation_covariance[0] = -1.0

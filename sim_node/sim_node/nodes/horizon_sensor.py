@@ -18,17 +18,16 @@ pitch), ``bias_rad`` ([0, 0]), ``scale_factor_error`` ([0, 0]), ``fov_rad`` (30 
 from __future__ import annotations
 
 import math
-from typing import Any, Dict, List
+from typing import Any, Dict
 
 import numpy as np
 
 from adcs_msgs.msg import AttitudeState, Environment, HorizonSensor as HorizonMsg
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import all_finite, quat, vec3
-from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.convert import quat, vec3
 from sim_node.models.sensors import HorizonSensor
+from sim_node.nodes.sensor_node import SensorNode
 
 #: Defaults when run alone (ASSUMPTION: 0.1 deg noise, +-30 deg field of view).
 DEFAULTS: Dict[str, Any] = {
@@ -41,44 +40,32 @@ DEFAULTS: Dict[str, Any] = {
 }
 
 
-class HorizonSensorNode(LockstepNode):
+class HorizonSensorNode(SensorNode):
     """Publishes roll/pitch samples of the truth attitude (see module docstring)."""
 
+    DEFAULTS = DEFAULTS
+
     def __init__(self, name: str = 'horizon_sensor', **kwargs) -> None:
-        super().__init__(name, **kwargs)
-        p = {k: self.param(k, v) for k, v in DEFAULTS.items()}
-        self.frame_id = str(p['frame_id'])
+        super().__init__(name, HorizonMsg, 'sensors/horizon', **kwargs)
+        p = self.p
         self.model = HorizonSensor(
             noise_std_rad=p['noise_std_rad'], bias_rad=p['bias_rad'],
             scale_factor_error=p['scale_factor_error'], fov_rad=p['fov_rad'],
-            seed=derive_seed(self.seed, self.get_name()))
+            seed=self.sensor_seed)
         self.invalid = 0
-        self.pub = self.publisher(HorizonMsg, 'sensors/horizon')
-        frame_s = self.frame_ns / NS_PER_S
-        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s),
-                              'env': (Environment, 'sim/environment', frame_s)},
-                             float(p['period_s']), self.on_frame)
-        self.start_handshake()
+        self.start()
 
-    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+    def sample(self, t_ns: int, state: AttitudeState, env: Environment) -> None:
         """Measure roll and pitch at sim time ``t_ns`` and publish them (see module)."""
-        state, env = msgs['state'], msgs['env']
-        if state is None or env is None:
-            self.get_logger().warning(f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
-            return
         q_eci_body, r_eci = quat(state.q_eci_body), vec3(env.r_eci)
-        if not all_finite(q_eci_body, r_eci) or not np.any(q_eci_body) or not np.any(r_eci):
-            self.get_logger().warning(
-                f't={t_ns / NS_PER_S:.3f} s: non-finite truth (q_eci_body or r_eci), no sample')
+        if not self.truth_ok(t_ns, 'q_eci_body or r_eci', q_eci_body, r_eci):
             return
         zenith_body = att.to_matrix(q_eci_body).T @ (r_eci / np.linalg.norm(r_eci))
         m = self.model.measure_zenith(zenith_body)
         if not m.valid:
             self.invalid += 1
         var = self.model.variance
-        msg = HorizonMsg()
-        msg.header.stamp = self.stamp(t_ns)
-        msg.header.frame_id = self.frame_id
+        msg = self.header(HorizonMsg(), t_ns)
         msg.roll = float(m.roll)
         msg.pitch = float(m.pitch)
         msg.roll_variance = float(var[0])

@@ -16,18 +16,18 @@ Parameters (SI, radians; defaults: paper 000's noise and LSB, no other error):
 """
 from __future__ import annotations
 
-from typing import Any, Dict, List
+from typing import Any, Dict
 
 import numpy as np
 from sensor_msgs.msg import MagneticField
 
 from adcs_msgs.msg import AttitudeState, Environment
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
+from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import all_finite, quat, to_vec3, vec3
-from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.convert import quat, to_vec3, vec3
 from sim_node.models.sensors import Magnetometer
+from sim_node.nodes.sensor_node import SensorNode
 
 #: Defaults when run alone (paper 000, digest section 5.1: noise std 375/25/65 nT, LSB 20 nT).
 DEFAULTS: Dict[str, Any] = {
@@ -44,50 +44,37 @@ DEFAULTS: Dict[str, Any] = {
 }
 
 
-class MagnetometerNode(LockstepNode):
+class MagnetometerNode(SensorNode):
     """Publishes magnetometer samples of the truth field (see module docstring)."""
 
+    DEFAULTS = DEFAULTS
+
     def __init__(self, name: str = 'magnetometer', **kwargs) -> None:
-        super().__init__(name, **kwargs)
-        p = {k: self.param(k, v) for k, v in DEFAULTS.items()}
-        self.frame_id = str(p['frame_id'])
+        super().__init__(name, MagneticField, 'sensors/magnetometer', **kwargs)
+        p = self.p
         self.model = Magnetometer(
             noise_std_T=p['noise_std_T'], bias_T=p['bias_T'],
             misalignment_rad=p['misalignment_rad'],
             scale_factor_error=p['scale_factor_error'], lsb_T=p['lsb_T'],
             saturation_T=p['saturation_T'], dropout_probability=p['dropout_probability'],
-            q_body_sensor=p['q_body_sensor'], seed=derive_seed(self.seed, self.get_name()))
+            q_body_sensor=p['q_body_sensor'], seed=self.sensor_seed)
         self.covariance = self.model.covariance.reshape(-1).tolist()
         self.dropouts = 0
-        self.pub = self.publisher(MagneticField, 'sensors/magnetometer')
-        frame_s = self.frame_ns / NS_PER_S
-        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s),
-                              'env': (Environment, 'sim/environment', frame_s)},
-                             float(p['period_s']), self.on_frame)
-        self.start_handshake()
+        self.start()
 
-    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
-        """Measure the field at sim time ``t_ns`` and publish it (or nothing, see module)."""
-        state, env = msgs['state'], msgs['env']
-        if state is None or env is None:
-            self.get_logger().warning(f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
-            return
+    def sample(self, t_ns: int, state: AttitudeState, env: Environment) -> None:
+        """Measure the field at sim time ``t_ns`` and publish it (NaN on a dropout)."""
         q_eci_body, b_eci = quat(state.q_eci_body), vec3(env.b_eci)
-        if not all_finite(q_eci_body, b_eci) or not np.any(q_eci_body):
-            self.get_logger().warning(
-                f't={t_ns / NS_PER_S:.3f} s: non-finite truth (q_eci_body or b_eci), no sample')
+        if not self.truth_ok(t_ns, 'q_eci_body or b_eci', q_eci_body, b_eci):
             return
-        b_body = att.to_matrix(q_eci_body).T @ b_eci
-        b_sensor = self.model.measure(b_body)
+        b_sensor = self.model.measure(att.to_matrix(q_eci_body).T @ b_eci)
         if b_sensor is None:
             # a lost sample is published as NaN (the ROS convention for "no data"), so the
             # lockstep goes on and the estimator counts it as rejected instead of waiting
             self.dropouts += 1
             self.get_logger().debug(f't={t_ns / NS_PER_S:.3f} s: dropout ({self.dropouts})')
             b_sensor = np.full(3, np.nan)
-        msg = MagneticField()
-        msg.header.stamp = self.stamp(t_ns)
-        msg.header.frame_id = self.frame_id
+        msg = self.header(MagneticField(), t_ns)
         msg.magnetic_field = to_vec3(b_sensor)
         msg.magnetic_field_covariance = self.covariance
         self.pub.publish(msg)

@@ -17,17 +17,15 @@ name)``.
 """
 from __future__ import annotations
 
-from typing import Any, Dict, List
+from typing import Any, Dict
 
-import numpy as np
 from sensor_msgs.msg import Imu
 
 from adcs_msgs.msg import AttitudeState, Environment
-from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import all_finite, quat, to_quat
-from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.convert import quat, to_quat
 from sim_node.models.sensors import STAR_TRACKER_STD_RAD, StarTracker
+from sim_node.nodes.sensor_node import SensorNode
 
 #: Defaults when run alone (paper 001: 0.02 deg 3-sigma per axis).
 DEFAULTS: Dict[str, Any] = {
@@ -37,37 +35,23 @@ DEFAULTS: Dict[str, Any] = {
 }
 
 
-class StarTrackerNode(LockstepNode):
+class StarTrackerNode(SensorNode):
     """Publishes star-tracker attitude samples of the truth (see module docstring)."""
 
-    def __init__(self, name: str = 'star_tracker', **kwargs) -> None:
-        super().__init__(name, **kwargs)
-        p = {k: self.param(k, v) for k, v in DEFAULTS.items()}
-        self.frame_id = str(p['frame_id'])
-        self.model = StarTracker(noise_std_rad=p['noise_std_rad'],
-                                 seed=derive_seed(self.seed, self.get_name()))
-        self.covariance = self.model.covariance.reshape(-1).tolist()
-        self.pub = self.publisher(Imu, 'sensors/star_tracker')
-        frame_s = self.frame_ns / NS_PER_S
-        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s),
-                              'env': (Environment, 'sim/environment', frame_s)},
-                             float(p['period_s']), self.on_frame)
-        self.start_handshake()
+    DEFAULTS = DEFAULTS
 
-    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+    def __init__(self, name: str = 'star_tracker', **kwargs) -> None:
+        super().__init__(name, Imu, 'sensors/star_tracker', **kwargs)
+        self.model = StarTracker(noise_std_rad=self.p['noise_std_rad'], seed=self.sensor_seed)
+        self.covariance = self.model.covariance.reshape(-1).tolist()
+        self.start()
+
+    def sample(self, t_ns: int, state: AttitudeState, env: Environment) -> None:
         """Measure the attitude at sim time ``t_ns`` and publish it (see module)."""
-        state = msgs['state']
-        if state is None:
-            self.get_logger().warning(f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
-            return
         q_eci_body = quat(state.q_eci_body)
-        if not all_finite(q_eci_body) or not np.any(q_eci_body):
-            self.get_logger().warning(
-                f't={t_ns / NS_PER_S:.3f} s: non-finite truth q_eci_body, no sample')
+        if not self.truth_ok(t_ns, 'q_eci_body', q_eci_body):
             return
-        msg = Imu()
-        msg.header.stamp = self.stamp(t_ns)
-        msg.header.frame_id = self.frame_id
+        msg = self.header(Imu(), t_ns)
         msg.orientation = to_quat(self.model.measure(q_eci_body))
         msg.orientation_covariance = self.covariance
         msg.angular_velocity_covariance[0] = -1.0

@@ -1,0 +1,74 @@
+"""Common part of the simulated sensor nodes.
+
+Every sensor node reads its parameters (``DEFAULTS`` of the subclass, plus the common ones of
+:class:`~adcs_nodes.nodes.lockstep_node.LockstepNode`), draws its noise from
+``derive_seed(seed, node name)``, and fires every ``period_s`` on the truth of that frame:
+``sim/state`` and ``sim/environment`` (both published every frame). A missing or non-finite
+truth publishes nothing and logs a warning. The subclass builds its model and implements
+:meth:`SensorNode.sample`.
+"""
+from __future__ import annotations
+
+import abc
+from typing import Any, Dict, List
+
+import numpy as np
+
+from adcs_msgs.msg import AttitudeState, Environment
+from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
+from adcs_nodes.nodes.convert import all_finite
+from adcs_nodes.nodes.lockstep_node import LockstepNode
+
+
+class SensorNode(LockstepNode, metaclass=abc.ABCMeta):
+    """Base of ``magnetometer``, ``horizon_sensor``, ``star_tracker`` and ``gyro``.
+
+    Parameters
+    ----------
+    name : str
+        Node name.
+    msg_type, topic
+        Output message type and topic.
+    """
+
+    DEFAULTS: Dict[str, Any] = {'period_s': 1.0, 'frame_id': 'sensor'}
+
+    def __init__(self, name: str, msg_type, topic: str, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self.p = {k: self.param(k, v) for k, v in self.DEFAULTS.items()}
+        self.frame_id = str(self.p['frame_id'])
+        self.sensor_seed = derive_seed(self.seed, self.get_name())
+        self.pub = self.publisher(msg_type, topic)
+
+    def start(self) -> None:
+        """Subscribe to the truth in lockstep and announce readiness (end of __init__)."""
+        frame_s = self.frame_ns / NS_PER_S
+        self.lockstep_inputs({'state': (AttitudeState, 'sim/state', frame_s),
+                              'env': (Environment, 'sim/environment', frame_s)},
+                             float(self.p['period_s']), self._on_frame)
+        self.start_handshake()
+
+    def _on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+        state, env = msgs['state'], msgs['env']
+        if state is None or env is None:
+            self.get_logger().warning(f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
+            return
+        self.sample(t_ns, state, env)
+
+    def truth_ok(self, t_ns: int, what: str, *arrays: np.ndarray) -> bool:
+        """True when every truth array is finite and non-zero; else warn (no sample)."""
+        if all_finite(*arrays) and all(np.any(a) for a in arrays):
+            return True
+        self.get_logger().warning(
+            f't={t_ns / NS_PER_S:.3f} s: non-finite truth ({what}), no sample')
+        return False
+
+    def header(self, msg: Any, t_ns: int) -> Any:
+        """Stamp ``msg`` with frame ``t_ns`` and this sensor's frame id; returns it."""
+        msg.header.stamp = self.stamp(t_ns)
+        msg.header.frame_id = self.frame_id
+        return msg
+
+    @abc.abstractmethod
+    def sample(self, t_ns: int, state: AttitudeState, env: Environment) -> None:
+        """Measure at frame ``t_ns`` from the truth and publish."""
