@@ -222,15 +222,18 @@ class Launcher:
         except OSError:
             return ''
 
-    def _stop_all(self, grace_s: float = 10.0) -> None:
-        for proc in self.procs.values():
+    def _signal_and_wait(self, names: List[str], grace_s: float) -> None:
+        """SIGINT the named children, wait up to ``grace_s``, SIGKILL what is left."""
+        for name in names:
+            proc = self.procs[name]
             if proc.poll() is None:
                 try:
                     os.killpg(proc.pid, signal.SIGINT)
                 except ProcessLookupError:
                     pass
         deadline = time.monotonic() + grace_s
-        for name, proc in self.procs.items():
+        for name in names:
+            proc = self.procs[name]
             try:
                 proc.wait(timeout=max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
@@ -240,6 +243,21 @@ class Launcher:
                 except ProcessLookupError:
                     pass
                 proc.wait()
+
+    def _stop_all(self, monitor: Optional['_Monitor'] = None, grace_s: float = 10.0) -> None:
+        """Stop every child: the graph first, then the recorder once it has written
+        everything that was published (its message count stops growing), so an
+        interrupted run loses no recorded data."""
+        others = [n for n in self.procs if n != 'recorder']
+        self._signal_and_wait(others, grace_s)
+        if 'recorder' in self.procs:
+            if monitor is not None and self.procs['recorder'].poll() is None:
+                deadline = time.monotonic() + grace_s
+                last = -1
+                while monitor.recorder_count != last and time.monotonic() < deadline:
+                    last = monitor.recorder_count
+                    monitor.spin(0.3)
+            self._signal_and_wait(['recorder'], grace_s)
 
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
@@ -277,7 +295,7 @@ class Launcher:
                 json.dump(manifest, fh)
             code, message = self._watch(monitor, t0)
         finally:
-            self._stop_all()
+            self._stop_all(monitor)
             if self.progress:
                 sys.stderr.write('\n')
             wall = time.monotonic() - t0
