@@ -34,7 +34,8 @@ def _as_quat(q) -> np.ndarray:
     return q
 
 
-def _as_vec3(v, name: str = 'vector') -> np.ndarray:
+def as_vec3(v, name: str = 'vector') -> np.ndarray:
+    """``v`` as a finite float array of shape (3,); ``ValueError`` naming ``name`` if not."""
     v = np.asarray(v, dtype=float)
     if v.shape != (3,):
         raise ValueError(f'{name} must have shape (3,), got {v.shape}')
@@ -134,12 +135,12 @@ def from_matrix(dcm) -> np.ndarray:
 
 def rotate(q_a_b, v_b) -> np.ndarray:
     """Components in frame A of the vector with components ``v_b`` in frame B."""
-    return to_matrix(q_a_b) @ _as_vec3(v_b)
+    return to_matrix(q_a_b) @ as_vec3(v_b)
 
 
 def from_axis_angle(axis, angle: float) -> np.ndarray:
     """Quaternion of a right-handed rotation by ``angle`` [rad] about unit ``axis``."""
-    axis = _as_vec3(axis, 'axis')
+    axis = as_vec3(axis, 'axis')
     n = np.linalg.norm(axis)
     if n < _EPS_NORM:
         raise ValueError('rotation axis has zero norm')
@@ -149,7 +150,7 @@ def from_axis_angle(axis, angle: float) -> np.ndarray:
 
 def from_rotation_vector(phi) -> np.ndarray:
     """Quaternion of the rotation vector ``phi`` (axis * angle, rad); exact for any size."""
-    phi = _as_vec3(phi, 'rotation vector')
+    phi = as_vec3(phi, 'rotation vector')
     angle = np.linalg.norm(phi)
     if angle < 1e-12:
         q = np.concatenate([0.5 * phi, [1.0]])
@@ -175,13 +176,13 @@ def angle_between(q1, q2) -> float:
 
 def skew(v) -> np.ndarray:
     """Cross-product matrix ``Phi(v)`` with ``Phi(v) @ p = v x p`` (paper 000 notation)."""
-    x, y, z = _as_vec3(v)
+    x, y, z = as_vec3(v)
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def derivative(q_a_b, omega_b_a_b) -> np.ndarray:
     """Time derivative of ``q_A_B`` for the rate ``omega_B_A_B`` [rad/s], equation (K1)."""
-    w = _as_vec3(omega_b_a_b, 'rate')
+    w = as_vec3(omega_b_a_b, 'rate')
     return 0.5 * multiply(q_a_b, np.array([w[0], w[1], w[2], 0.0]))
 
 

@@ -66,13 +66,6 @@ MIN_YAW_CONDITIONING = 1e-6
 """Default smallest ``kappa`` (Y4) accepted by :func:`yaw_from_horizon_and_field`."""
 
 
-def _vec(v: ArrayLike, name: str) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f'{name} must be a finite array of shape (3,), got {v!r}')
-    return v
-
-
 def _angle(x: float, name: str) -> float:
     x = float(x)
     if not math.isfinite(x):
@@ -113,7 +106,7 @@ def yaw_conditioning(pitch: float, b_orbit: ArrayLike) -> float:
     float
         ``|cos theta| (a_x0^2 + a_y0^2) / |a0|^2``; 0 means yaw is unobservable.
     """
-    a0 = _vec(b_orbit, 'b_orbit')
+    a0 = attitude.as_vec3(b_orbit, 'b_orbit')
     n2 = float(a0 @ a0)
     if n2 == 0.0:
         return 0.0
@@ -155,7 +148,7 @@ def yaw_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike, b_o
     if method not in ('atan2', 'asin'):
         raise ValueError(f"method must be 'atan2' or 'asin', got {method!r}")
     phi, theta = _angle(roll, 'roll'), _angle(pitch, 'pitch')
-    a, a0 = _vec(b_body, 'b_body'), _vec(b_orbit, 'b_orbit')
+    a, a0 = attitude.as_vec3(b_body, 'b_body'), attitude.as_vec3(b_orbit, 'b_orbit')
     kappa = yaw_conditioning(theta, a0)
     if kappa < min_conditioning:
         raise ValueError(f'yaw is unobservable: conditioning {kappa:.3g} < {min_conditioning:.3g}'

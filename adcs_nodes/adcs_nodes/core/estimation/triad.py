@@ -28,13 +28,6 @@ MIN_SIN_ANGLE = 1e-8
 """Default smallest ``sin`` of the angle between ``v1`` and ``v2`` accepted by :func:`triad`."""
 
 
-def _vec(v: ArrayLike, name: str) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f'{name} must be a finite array of shape (3,), got {v!r}')
-    return v
-
-
 def _triad_frame(v1: np.ndarray, v2: np.ndarray, which: str, min_sin: float) -> np.ndarray:
     n1, n2 = np.linalg.norm(v1), np.linalg.norm(v2)
     if n1 == 0.0 or n2 == 0.0:
@@ -73,8 +66,9 @@ def triad(v1_body: ArrayLike, v2_body: ArrayLike, v1_ref: ArrayLike, v2_ref: Arr
     ValueError
         On non-finite or zero vectors, or (nearly) parallel ``v1`` and ``v2``.
     """
-    m_body = _triad_frame(_vec(v1_body, 'v1_body'), _vec(v2_body, 'v2_body'), 'body',
+    vec = attitude.as_vec3
+    m_body = _triad_frame(vec(v1_body, 'v1_body'), vec(v2_body, 'v2_body'), 'body',
                           min_sin_angle)
-    m_ref = _triad_frame(_vec(v1_ref, 'v1_ref'), _vec(v2_ref, 'v2_ref'), 'reference',
+    m_ref = _triad_frame(vec(v1_ref, 'v1_ref'), vec(v2_ref, 'v2_ref'), 'reference',
                          min_sin_angle)
     return attitude.from_matrix(m_ref @ m_body.T)  # (T2)
