@@ -12,6 +12,7 @@ def ros_context():
     """A fresh rclpy context on this test's own domain (localhost discovery)."""
     os.environ['ROS_DOMAIN_ID'] = str(150 + os.getpid() % 50)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')   # as the launcher does
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     yield ctx

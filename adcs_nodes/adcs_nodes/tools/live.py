@@ -59,8 +59,11 @@ class _Session:
     """A short-lived rclpy context on the run's domain."""
 
     def __init__(self, run: Dict) -> None:
-        os.environ['ROS_DOMAIN_ID'] = str(run['domain'])
-        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        from adcs_nodes.tools.launcher import child_env
+        env = child_env(int(run['domain']))
+        for key in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
+                    'FASTDDS_BUILTIN_TRANSPORTS'):
+            os.environ[key] = env[key]
         import rclpy
         self.rclpy = rclpy
         self.context = rclpy.Context()

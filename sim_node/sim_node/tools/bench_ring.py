@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -30,7 +29,7 @@ import time
 from dataclasses import dataclass
 from typing import Dict, List, Tuple
 
-from adcs_nodes.tools.launcher import LaunchError, acquire_domain
+from adcs_nodes.tools.launcher import LaunchError, acquire_domain, child_env
 
 PING, PONG = 'bench/ping', 'bench/pong'
 #: ``ROS_DOMAIN_ID`` range of the bench rings (the launcher uses 1..100).
@@ -231,8 +230,7 @@ def run_ring(frames: int, warmup: int = 200, timeout_s: float = 60.0) -> RingRes
     if frames < 1:
         raise ValueError(f'frames must be >= 1, got {frames}')
     domain, lock = acquire_bench_domain()
-    env: Dict[str, str] = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
-                               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    env: Dict[str, str] = child_env(domain)     # the same transport as the graph runs
     cmd: List[str] = [sys.executable, '-m', 'sim_node.tools.bench_ring']
     pong = subprocess.Popen(cmd + ['pong', '--timeout', str(timeout_s + 10.0)], env=env,
                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
