@@ -54,7 +54,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
-from adcs_nodes.core.control import Command, Estimate, Target, limits_vector
+from adcs_nodes.core.control import Command, Estimate, Target, limits_vector, positive
 
 AUTO = 'auto'
 """Pseudo-controller name that (re)starts the automatic mode sequence."""
@@ -64,15 +64,7 @@ _LIMIT_RTOL = 1e-9
 
 
 def _opt_positive(value, name: str, unit: str) -> Optional[float]:
-    if value is None:
-        return None
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f'{name} must be a number [{unit}], got {value!r}') from None
-    if not (math.isfinite(x) and x > 0.0):
-        raise ValueError(f'{name} must be finite and > 0 [{unit}], got {value!r}')
-    return x
+    return None if value is None else positive(value, name, unit)
 
 
 def _count(value, name: str) -> int:

@@ -26,6 +26,7 @@ paper writes ``u_i = sigma L*_i / l_i`` with ``u`` in the unit cube (6); ``L = l
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Optional, Protocol
 
@@ -41,6 +42,17 @@ def cross3(a: ArrayLike, b: ArrayLike) -> np.ndarray:
     a1, a2, a3 = (float(x) for x in a)
     b1, b2, b3 = (float(x) for x in b)
     return np.array([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1])
+
+
+def positive(value, name: str, unit: str) -> float:
+    """``value`` as a finite float > 0; ``ValueError`` naming ``name`` and ``unit`` if not."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be a number [{unit}], got {value!r}') from None
+    if not (math.isfinite(x) and x > 0.0):
+        raise ValueError(f'{name} must be finite and > 0 [{unit}], got {value!r}')
+    return x
 
 
 def finite_vector(value: ArrayLike, name: str, shape: tuple) -> np.ndarray:

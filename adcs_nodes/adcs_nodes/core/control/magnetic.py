@@ -84,7 +84,7 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
 from adcs_nodes.core.control import (Command, Estimate, Target, cross3, finite_vector,
-                                     limits_vector, scale_to_limits)
+                                     limits_vector, positive, scale_to_limits)
 
 MODES = ('three_axis', 'one_axis', 'two_stage')
 """Accepted values of ``mode``."""
@@ -195,16 +195,6 @@ def dipole_from_torque(m_star: ArrayLike, b_body: ArrayLike) -> np.ndarray:
     return cross3(b, np.asarray(m_star, dtype=float)) / float(b @ b)                  # (30)
 
 
-def _positive(value, name: str, unit: str) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f'{name} must be a number [{unit}], got {value!r}') from None
-    if not (math.isfinite(x) and x > 0.0):
-        raise ValueError(f'{name} must be finite and > 0 [{unit}], got {value!r}')
-    return x
-
-
 def check_gains(alpha: float, k: float, beta: Optional[float] = None,
                 sigma_star: float = 1.0) -> None:
     """Start-up gain check, eqs. (12), (27), (28) and the scaled form after (31).
@@ -225,15 +215,15 @@ def check_gains(alpha: float, k: float, beta: Optional[float] = None,
     ValueError
         Naming the parameters and the violated condition.
     """
-    alpha = _positive(alpha, 'alpha', '1/s')
-    k = _positive(k, 'k', 'N m s')
-    sigma_star = _positive(sigma_star, 'sigma_star', '-')
+    alpha = positive(alpha, 'alpha', '1/s')
+    k = positive(k, 'k', 'N m s')
+    sigma_star = positive(sigma_star, 'sigma_star', '-')
     if sigma_star > 1.0:
         raise ValueError(f'sigma_star (Sigma*, smallest scaling factor of eq. (31)) must be in '
                          f'(0, 1], got {sigma_star}')
     if beta is None:
         return
-    beta = _positive(beta, 'beta', 'J')
+    beta = positive(beta, 'beta', 'J')
     bound = beta / (2.0 * alpha * sigma_star)
     if not k > bound:
         raise ValueError(
@@ -293,12 +283,12 @@ class MagneticController:
         self.sigma_star = float(sigma_star)
         self.max_dipole = limits_vector(max_dipole_Am2, 'max_dipole_Am2', 3,
                                         allow_zero=False, allow_inf=False)
-        angle = _positive(switch_angle_deg, 'switch_angle_deg', 'deg')
+        angle = positive(switch_angle_deg, 'switch_angle_deg', 'deg')
         if angle >= 180.0:
             raise ValueError(f'switch_angle_deg must be in (0, 180) deg, got {angle}')
         self.switch_angle = math.radians(angle)
-        self.switch_rate = math.radians(_positive(switch_rate_deg_s, 'switch_rate_deg_s',
-                                                  'deg/s'))
+        self.switch_rate = math.radians(positive(switch_rate_deg_s, 'switch_rate_deg_s',
+                                                 'deg/s'))
         xi = finite_vector(xi_body, 'xi_body', (3,))
         if np.linalg.norm(xi) < 1e-9:
             raise ValueError(f'xi_body must be a non-zero vector, got {xi}')
@@ -306,7 +296,7 @@ class MagneticController:
         if int(n_wheels) != n_wheels or n_wheels < 0:
             raise ValueError(f'n_wheels must be an integer >= 0, got {n_wheels!r}')
         self.n_wheels = int(n_wheels)
-        self.b_min = _positive(b_min_T, 'b_min_T', 'T')
+        self.b_min = positive(b_min_T, 'b_min_T', 'T')
         self.stage = ''
         self.reset()
 
