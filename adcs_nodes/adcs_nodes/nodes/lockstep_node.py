@@ -20,7 +20,6 @@ from datetime import datetime, timezone
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
@@ -347,8 +346,3 @@ class LockstepNode(Node):
         msg.last_missed_input = self.last_missed_input
         msg.wall_time = time.monotonic() - self._wall0
         self._status_pub.publish(msg)
-
-
-def use_sim_time_override() -> List[Parameter]:
-    """Parameter override that makes a node follow ``/clock``."""
-    return [Parameter('use_sim_time', Parameter.Type.BOOL, True)]

@@ -18,14 +18,17 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 
-def make_executor():
-    """Return an ``EventsExecutor`` when rclpy has one, else a ``SingleThreadedExecutor``."""
+def make_executor(context=None):
+    """Return an ``EventsExecutor`` when rclpy has one, else a ``SingleThreadedExecutor``.
+
+    ``context``: the rclpy context to bind it to (default: the global one).
+    """
     try:
         from rclpy.experimental import EventsExecutor
-        return EventsExecutor()
+        return EventsExecutor(context=context)
     except ImportError:  # older rclpy
         from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor()
+        return SingleThreadedExecutor(context=context)
 
 
 def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None,

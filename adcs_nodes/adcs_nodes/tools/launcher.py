@@ -122,7 +122,7 @@ class _Monitor:
         self.node.create_subscription(Clock, '/clock', self._on_clock, be)
         self.node.create_subscription(LockstepStatus, 'lockstep/status', self._on_status, 50)
         self.node.create_subscription(LockstepStatus, 'recorder/status', self._on_rec, 10)
-        self.executor = make_executor_in(self.context, make_executor)
+        self.executor = make_executor(self.context)
         self.executor.add_node(self.node)
 
     def _on_clock(self, msg) -> None:
@@ -148,16 +148,6 @@ class _Monitor:
         self.node.destroy_node()
         self.executor.shutdown()
         self._rclpy.shutdown(context=self.context)
-
-
-def make_executor_in(context, factory):
-    """Executor bound to ``context`` (EventsExecutor when available)."""
-    try:
-        from rclpy.experimental import EventsExecutor
-        return EventsExecutor(context=context)
-    except ImportError:
-        from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor(context=context)
 
 
 class Launcher:
