@@ -32,7 +32,7 @@ from adcs_nodes.core import attitude as att
 from adcs_nodes.core.estimation.horizon_yaw import (attitude_from_horizon_and_yaw,
                                                     triad_from_horizon_and_field,
                                                     yaw_from_horizon_and_field)
-from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
+from adcs_nodes.core.estimation.magnetic_filter import MAX_DISTURBANCE_DEFAULT, MagneticFilter
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import runtime
@@ -78,10 +78,10 @@ class EstimatorNode(LockstepNode):
                 measurement_form=str(self.param('measurement_form', 'phi')),
                 literal_update=bool(self.param('literal_update', False)),
                 substeps=int(self.param('substeps', 1)),
-                # sanity bounds on a correction (not in the paper): only divergence guards,
-                # far above the paper's case (3 deg/s tumble, |m| ~ 3e-8 s^-2)
+                # sanity bounds on a correction (not in the paper): divergence guards only
                 max_rate_rad_s=self.max_rate,
-                max_disturbance_rad_s2=float(self.param('max_disturbance_rad_s2', 1e-2)))
+                max_disturbance_rad_s2=float(self.param('max_disturbance_rad_s2',
+                                                        MAX_DISTURBANCE_DEFAULT)))
         else:
             inputs['horizon'] = (HorizonSensor, 'sensors/horizon', horizon_period_s)
         self.est_pub = self.publisher(AttitudeState, 'adcs/attitude_estimate')
