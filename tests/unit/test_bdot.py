@@ -14,9 +14,9 @@ B2 = np.array([1.1e-5, 1.9e-5, 3.0e-5])    # dB/dt over 2 s = (5e-7, -5e-7, 0) T
 def test_first_call_is_zero_then_minus_k_bdot():
     """m = -k dB/dt (B1), (B3): k = 1e7 A m^2 s/T, dB/dt = (5e-7, -5e-7, 0) T/s -> (-5, 5, 0)."""
     ctrl = BdotController(1e7, 40.0)
-    first = ctrl.update(None, None, B1, 0.0, 2.0)
+    first = ctrl.law(None, None, B1, 0.0, 2.0)
     assert np.array_equal(first.dipole_body, np.zeros(3)) and 'first' in first.reason
-    cmd = ctrl.update(None, None, B2, 2.0, 2.0)
+    cmd = ctrl.law(None, None, B2, 2.0, 2.0)
     assert cmd.reason == ''
     assert np.allclose(cmd.info['b_dot'], [5e-7, -5e-7, 0.0], rtol=1e-9, atol=1e-20)
     assert np.allclose(cmd.dipole_body, [-5.0, 5.0, 0.0], rtol=1e-9, atol=1e-12)
@@ -28,28 +28,28 @@ def test_scaling_onto_per_axis_limits_keeps_the_direction():
     (10, 40, 40) -> sigma 0.2 -> (-10, 10, 0) (eq. (31))."""
     for lim, expect in ((40.0, [-40.0, 40.0, 0.0]), ([10.0, 40.0, 40.0], [-10.0, 10.0, 0.0])):
         ctrl = BdotController(1e8, lim)
-        ctrl.update(None, None, B1, 0.0, 2.0)
-        cmd = ctrl.update(None, None, B2, 2.0, 2.0)
+        ctrl.law(None, None, B1, 0.0, 2.0)
+        cmd = ctrl.law(None, None, B2, 2.0, 2.0)
         assert np.allclose(cmd.info['dipole_demand'], [-50.0, 50.0, 0.0])
         assert np.allclose(cmd.dipole_body, expect)
 
 
 def test_missing_sample_is_skipped_and_the_real_gap_is_used():
     ctrl = BdotController(1e7, 40.0)
-    ctrl.update(None, None, B1, 0.0, 2.0)
+    ctrl.law(None, None, B1, 0.0, 2.0)
     for bad in (None, [np.nan, 0.0, 0.0], [1.0, 2.0]):
-        cmd = ctrl.update(None, None, bad, 2.0, 2.0)
+        cmd = ctrl.law(None, None, bad, 2.0, 2.0)
         assert np.all(cmd.dipole_body == 0.0) and 'no valid' in cmd.reason
-    cmd = ctrl.update(None, None, B2, 4.0, 2.0)                   # gap 4 s: half the rate
+    cmd = ctrl.law(None, None, B2, 4.0, 2.0)                   # gap 4 s: half the rate
     assert np.allclose(cmd.dipole_body, [-2.5, 2.5, 0.0])
 
 
 def test_external_bdot_is_used_directly():
     ctrl = BdotController(1e7, 40.0)
-    cmd = ctrl.update(None, None, None, 0.0, 2.0, b_dot_body=[1e-6, 0.0, -2e-6])
+    cmd = ctrl.law(None, None, None, 0.0, 2.0, b_dot_body=[1e-6, 0.0, -2e-6])
     assert np.allclose(cmd.dipole_body, [-10.0, 0.0, 20.0]) and cmd.reason == ''
     # a non-finite external value falls back to the finite difference
-    cmd = ctrl.update(None, None, B1, 2.0, 2.0, b_dot_body=[np.nan, 0.0, 0.0])
+    cmd = ctrl.law(None, None, B1, 2.0, 2.0, b_dot_body=[np.nan, 0.0, 0.0])
     assert 'first' in cmd.reason
 
 
@@ -57,30 +57,30 @@ def test_low_pass_filter_first_order():
     """tau = 10 s, steps of 2 s: f2 = f1 + (1 - exp(-0.2)) (raw2 - f1), 1 - exp(-0.2) =
     0.18126925 (B4); the first derivative initialises the filter."""
     ctrl = BdotController(1e7, 1e3, filter_time_constant_s=10.0)
-    ctrl.update(None, None, B1, 0.0, 2.0)
-    c1 = ctrl.update(None, None, B2, 2.0, 2.0)                    # raw1 = (5e-7, -5e-7, 0)
+    ctrl.law(None, None, B1, 0.0, 2.0)
+    c1 = ctrl.law(None, None, B2, 2.0, 2.0)                    # raw1 = (5e-7, -5e-7, 0)
     assert np.allclose(c1.info['b_dot'], [5e-7, -5e-7, 0.0])
     b3 = B2 + np.array([0.0, 0.0, 2e-6])                          # raw2 = (0, 0, 1e-6)
-    c2 = ctrl.update(None, None, b3, 4.0, 2.0)
+    c2 = ctrl.law(None, None, b3, 4.0, 2.0)
     a = 0.18126925
     expect = np.array([5e-7, -5e-7, 0.0]) + a * (np.array([0.0, 0.0, 1e-6])
                                                  - np.array([5e-7, -5e-7, 0.0]))
     assert np.allclose(c2.info['b_dot'], expect, rtol=1e-7, atol=1e-20)
     assert np.allclose(c2.dipole_body, -1e7 * expect, rtol=1e-7)
     # the external derivative goes through the same filter
-    c3 = ctrl.update(None, None, None, 6.0, 2.0, b_dot_body=[0.0, 0.0, 0.0])
+    c3 = ctrl.law(None, None, None, 6.0, 2.0, b_dot_body=[0.0, 0.0, 0.0])
     assert np.allclose(c3.info['b_dot'], (1 - a) * expect, rtol=1e-7, atol=1e-20)
 
 
 def test_time_not_advancing_restarts_and_reset_forgets():
     ctrl = BdotController(1e7, 40.0, filter_time_constant_s=5.0)
-    ctrl.update(None, None, B1, 10.0, 2.0)
-    cmd = ctrl.update(None, None, B2, 10.0, 2.0)
+    ctrl.law(None, None, B1, 10.0, 2.0)
+    cmd = ctrl.law(None, None, B2, 10.0, 2.0)
     assert 'did not advance' in cmd.reason and np.all(cmd.dipole_body == 0.0)
-    cmd = ctrl.update(None, None, B1, 12.0, 2.0)                  # against B2 at t = 10
+    cmd = ctrl.law(None, None, B1, 12.0, 2.0)                  # against B2 at t = 10
     assert np.allclose(cmd.dipole_body, [5.0, -5.0, 0.0])
     ctrl.reset()
-    assert 'first' in ctrl.update(None, None, B2, 14.0, 2.0).reason
+    assert 'first' in ctrl.law(None, None, B2, 14.0, 2.0).reason
 
 
 def test_dissipation_with_the_kinematic_field_rate_and_limits():
@@ -92,7 +92,7 @@ def test_dissipation_with_the_kinematic_field_rate_and_limits():
     for _ in range(500):
         w = rng.normal(size=3) * 0.05
         b = rng.normal(size=3) * 3e-5
-        cmd = ctrl.update(None, None, b, 0.0, 2.0, b_dot_body=-np.cross(w, b))
+        cmd = ctrl.law(None, None, b, 0.0, 2.0, b_dot_body=-np.cross(w, b))
         assert np.all(np.abs(cmd.dipole_body) <= lim)
         assert w @ np.cross(cmd.dipole_body, b) <= 1e-18
         assert cmd.is_finite()
@@ -101,7 +101,7 @@ def test_dissipation_with_the_kinematic_field_rate_and_limits():
 def test_interface_accepts_estimate_and_wheels():
     est = Estimate(np.array([0, 0, 0, 1.0]), np.zeros(3), 1e-3)
     ctrl = BdotController(1e7, 40.0, n_wheels=3)
-    cmd = ctrl.update(est, None, B1, 0.0, 2.0)
+    cmd = ctrl.law(est, None, B1, 0.0, 2.0)
     assert cmd.wheel_torque.shape == (3,) and np.all(cmd.torque_body == 0.0)
 
 
@@ -113,6 +113,6 @@ def test_interface_accepts_estimate_and_wheels():
     ({'n_wheels': 1.5}, 'n_wheels')])
 def test_bad_configuration_raises(kw, word):
     args = {'gain': 1e7, 'max_dipole_Am2': 40.0}
-    args.update(kw)
+    args.law(kw)
     with pytest.raises(ValueError, match=word):
         BdotController(**args)

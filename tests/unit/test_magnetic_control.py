@@ -71,7 +71,7 @@ def test_three_axis_law_hand_case():
     """
     ctrl = MagneticController(alpha=ALPHA, k=K, max_dipole_Am2=L_MAX)
     q = attitude.from_scalar_first(LAMBDA0)
-    cmd = ctrl.update(_est(q, np.radians(OMEGA0_DEG)), None, [0.0, 0.0, 3e-5], 0.0, 2.0)
+    cmd = ctrl.law(_est(q, np.radians(OMEGA0_DEG)), None, [0.0, 0.0, 3e-5], 0.0, 2.0)
     info = cmd.info
     assert cmd.reason == '' and info['stage'] == 'three_axis'
     assert np.allclose(info['y'], [-0.05235988, 0.05265738, 0.05337988], atol=1e-8)
@@ -98,8 +98,8 @@ def test_three_axis_law_sign_of_lambda0_and_antipodal_quaternion():
         q, w, b = _random_quat(rng), rng.normal(size=3) * 0.01, rng.normal(size=3) * 3e-5
         if abs(q[3]) < 1e-6:
             continue
-        c1 = ctrl.update(_est(q, w), None, b, 0.0, 2.0)
-        c2 = ctrl.update(_est(-q, w), None, b, 0.0, 2.0)
+        c1 = ctrl.law(_est(q, w), None, b, 0.0, 2.0)
+        c2 = ctrl.law(_est(-q, w), None, b, 0.0, 2.0)
         assert np.allclose(c1.dipole_body, c2.dipole_body, atol=1e-12)
 
 
@@ -113,7 +113,7 @@ def test_one_axis_law_hand_case():
     """
     ctrl = MagneticController(mode='one_axis', alpha=ALPHA, k=K)
     q = attitude.from_scalar_first([math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0])
-    cmd = ctrl.update(_est(q, np.zeros(3)), None, [0.0, 2e-5, 2e-5], 0.0, 2.0)
+    cmd = ctrl.law(_est(q, np.zeros(3)), None, [0.0, 2e-5, 2e-5], 0.0, 2.0)
     assert np.allclose(cmd.info['y_star'], [-3e-3, 0.0, 0.0], atol=1e-12)
     assert np.allclose(cmd.info['torque_demand'], [-6e-4, 0.0, -2.125e-4], atol=1e-12)
     assert cmd.info['angle_rad'] == pytest.approx(math.pi / 2)
@@ -126,17 +126,17 @@ def test_target_other_than_orbit_frame_uses_error_quaternion():
     for _ in range(20):
         q, q_ref = _random_quat(rng), _random_quat(rng)
         w, b = rng.normal(size=3) * 0.01, rng.normal(size=3) * 3e-5
-        cmd = ctrl.update(_est(q, w), Target(q_ref, np.zeros(3)), b, 0.0, 2.0)
+        cmd = ctrl.law(_est(q, w), Target(q_ref, np.zeros(3)), b, 0.0, 2.0)
         q_err = attitude.multiply(attitude.conjugate(q_ref), q)
         assert np.allclose(cmd.info['y_star'], target_rate_three_axis(q_err, ALPHA))
     # on the target and moving with the orbital frame: nothing to do
     q = _random_quat(rng)
     _, e_n = orbit_axes_in_body(q)
-    cmd = ctrl.update(_est(q, W0 * e_n), Target(q, np.zeros(3)), [1e-5, 2e-5, 3e-5], 0, 2)
+    cmd = ctrl.law(_est(q, W0 * e_n), Target(q, np.zeros(3)), [1e-5, 2e-5, 3e-5], 0, 2)
     assert np.allclose(cmd.dipole_body, 0.0, atol=1e-12)
     # the target rate is a feed-forward of y*
     y_ref = np.array([1e-3, -2e-3, 5e-4])
-    cmd = ctrl.update(_est(q, W0 * e_n), Target(q, y_ref), [1e-5, 2e-5, 3e-5], 0, 2)
+    cmd = ctrl.law(_est(q, W0 * e_n), Target(q, y_ref), [1e-5, 2e-5, 3e-5], 0, 2)
     assert np.allclose(cmd.info['torque_demand'], K * y_ref)
 
 
@@ -162,7 +162,7 @@ def test_dipole_sign_pin_eq22_and_printed_formula_is_positive_feedback():
     ctrl = MagneticController()
     for _ in range(200):
         q, w, b = _random_quat(rng), rng.normal(size=3) * 0.05, rng.normal(size=3) * 3e-5
-        cmd = ctrl.update(_est(q, w), None, b, 0.0, 2.0)
+        cmd = ctrl.law(_est(q, w), None, b, 0.0, 2.0)
         applied = np.cross(cmd.dipole_body, b)
         assert np.allclose(applied, cmd.info['torque_applied'], atol=1e-15)
         assert applied @ cmd.info['torque_demand'] >= 0.0
@@ -186,7 +186,7 @@ def test_sigma_scaling_keeps_every_coil_inside_and_the_direction():
     ctrl = MagneticController(max_dipole_Am2=lim)
     for _ in range(500):
         q, w, b = _random_quat(rng), rng.normal(size=3) * 0.1, rng.normal(size=3) * 3e-5
-        cmd = ctrl.update(_est(q, w), None, b, 0.0, 2.0)
+        cmd = ctrl.law(_est(q, w), None, b, 0.0, 2.0)
         assert np.all(np.abs(cmd.dipole_body) <= lim)
         demand = cmd.info['dipole_demand']
         assert np.linalg.norm(np.cross(cmd.dipole_body, demand)) <= \
@@ -208,13 +208,13 @@ def test_zero_command_with_reason_on_bad_field_or_estimate():
         (None, [0.0, 0.0, 3e-5], 'estimate'),
     ]
     for est, b, word in cases:
-        cmd = ctrl.update(est, None, b, 0.0, 2.0)
+        cmd = ctrl.law(est, None, b, 0.0, 2.0)
         assert np.array_equal(cmd.dipole_body, np.zeros(3)) and cmd.is_finite()
         assert word in cmd.reason, cmd.reason
     # just above the guard: a finite (scaled) dipole
-    cmd = ctrl.update(_est(q, w), None, [2e-9, 0.0, 0.0], 0.0, 2.0)
+    cmd = ctrl.law(_est(q, w), None, [2e-9, 0.0, 0.0], 0.0, 2.0)
     assert cmd.reason == '' and cmd.is_finite() and np.all(np.abs(cmd.dipole_body) <= L_MAX)
-    cmd = ctrl.update(_est(q, w), Target(np.array([np.nan, 0, 0, 1.0])), [0, 0, 3e-5], 0, 2)
+    cmd = ctrl.law(_est(q, w), Target(np.array([np.nan, 0, 0, 1.0])), [0, 0, 3e-5], 0, 2)
     assert 'target' in cmd.reason and np.all(cmd.dipole_body == 0.0)
 
 
@@ -269,14 +269,14 @@ def test_two_stage_switches_once_on_angle_and_rate_then_resets():
     _, e_n10 = orbit_axes_in_body(q10)
     slow = W0 * e_n10 + np.radians([0.1, 0.0, 0.0])          # |y| = 0.1 deg/s
     fast = W0 * e_n10 + np.radians([0.3, 0.0, 0.0])          # |y| = 0.3 deg/s
-    assert ctrl.update(_est(q10, fast), None, b, 0, 2).info['stage'] == 'one_axis'
-    assert ctrl.update(_est(q20, np.zeros(3)), None, b, 2, 2).info['stage'] == 'one_axis'
-    assert ctrl.update(_est(q10, slow), None, b, 4, 2).info['stage'] == 'three_axis'
-    assert ctrl.update(_est(q20, fast), None, b, 6, 2).info['stage'] == 'three_axis'  # latched
+    assert ctrl.law(_est(q10, fast), None, b, 0, 2).info['stage'] == 'one_axis'
+    assert ctrl.law(_est(q20, np.zeros(3)), None, b, 2, 2).info['stage'] == 'one_axis'
+    assert ctrl.law(_est(q10, slow), None, b, 4, 2).info['stage'] == 'three_axis'
+    assert ctrl.law(_est(q20, fast), None, b, 6, 2).info['stage'] == 'three_axis'  # latched
     ctrl.reset()
     assert ctrl.stage == 'one_axis'
     one = MagneticController(mode='one_axis')
-    assert one.update(_est(q10, slow), None, b, 0, 2).info['stage'] == 'one_axis'
+    assert one.law(_est(q10, slow), None, b, 0, 2).info['stage'] == 'one_axis'
 
 
 def test_gain_check_refuses_bad_gains():
@@ -306,7 +306,7 @@ def test_gain_check_refuses_bad_gains():
                      ({'b_min_T': 0.0}, 'b_min_T')]:
         with pytest.raises(ValueError, match=word):
             MagneticController(**kw)
-    assert MagneticController(n_wheels=4).update(
+    assert MagneticController(n_wheels=4).law(
         _est([0, 0, 0, 1.0], np.zeros(3)), None, [0, 0, 3e-5], 0, 2).wheel_torque.shape == (4,)
 
 
@@ -392,7 +392,7 @@ class _World:
             q_eo = self.q_eci_orbit(t)
             q_ob = self.qmul([-q_eo[0], -q_eo[1], -q_eo[2], q_eo[3]], q)
             b = self.qmat(q).T @ self.b_eci(t, self.r_hat(t))
-            cmd = ctrl.update(Estimate(q_ob, w.copy(), self.w0, True), None, b, t, h)
+            cmd = ctrl.law(Estimate(q_ob, w.copy(), self.w0, True), None, b, t, h)
             ts.append(t)
             errs.append(math.degrees(2 * math.acos(min(1.0, abs(q_ob[3])))))
             rates.append(math.degrees(np.linalg.norm(w)))

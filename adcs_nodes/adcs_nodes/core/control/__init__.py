@@ -4,16 +4,23 @@ Interface
 ---------
 Every controller core has ``reset()`` and::
 
-    update(estimate, target, b_body, t, dt) -> Command
+    update(inputs: ControlInputs, t, dt) -> Command
 
-* ``estimate``: :class:`Estimate`, the flight software's attitude and rate estimate.
-* ``target``: :class:`Target`, the guidance target (``None``: the orbital frame, zero rate).
-* ``b_body``: measured geomagnetic field, body axes, shape (3,) [T]; ``None`` or non-finite when
-  no valid measurement is available: the controller then returns a zero command with a reason.
+* ``inputs.estimate``: :class:`Estimate`, the flight software's attitude and rate estimate
+  (orbit and inertial attitude).
+* ``inputs.target``: :class:`Target`, the guidance target in its own frame (``orbit`` or
+  ``eci``; ``None``: the orbital frame, zero rate).
+* ``inputs.b_body``: fresh magnetometer sample, body axes, shape (3,) [T]; ``None`` when no
+  new sample arrived this frame. ``inputs.b_body_model``: the onboard model field rotated
+  with the estimate (``None`` without a valid estimate).
+* ``inputs.wheel_speed_rad_s``: measured wheel speeds, scenario order (``None``: no
+  tachometer); ``inputs.wheel_momentum_Nms``: the same times the wheel inertias.
 * ``t``, ``dt``: frame time and frame period [s] (float seconds, DESIGN section 2).
 
 A controller never raises on bad *data* (it returns a zero :class:`Command` with
 ``reason`` set); it raises ``ValueError`` only on bad *configuration*, at construction.
+Each controller is registered once in :mod:`adcs_nodes.registry` (name, parameters with
+units and ranges, inputs, actuators); nothing else in the project names it.
 
 Direction-preserving scaling onto the actuator box (paper 000, eq. (31))::
 
@@ -33,8 +40,8 @@ from typing import Optional, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ['Estimate', 'Target', 'Command', 'Controller', 'scale_to_limits', 'limits_vector',
-           'finite_vector', 'cross3']
+__all__ = ['Estimate', 'Target', 'Command', 'ControlInputs', 'Controller', 'scale_to_limits',
+           'limits_vector', 'finite_vector', 'cross3']
 
 
 def cross3(a: ArrayLike, b: ArrayLike) -> np.ndarray:
@@ -153,12 +160,23 @@ class Estimate:
         Orbit rate [rad/s] (paper's ``omega_0``).
     valid : bool
         False while the estimator has no usable solution; controllers then command zero.
+    q_eci_body : ndarray, shape (4,), or None
+        Inertial attitude, scalar last (rotates body vectors into ECI); ``None`` if unknown.
     """
 
     q_orbit_body: np.ndarray
     omega_body_eci_body: np.ndarray
     omega0: float
     valid: bool = True
+    q_eci_body: Optional[np.ndarray] = None
+
+    def q_eci_orbit(self) -> Optional[np.ndarray]:
+        """Orbit frame in ECI from the two attitudes, ``q_eci_body q_orbit_body^*``."""
+        if self.q_eci_body is None:
+            return None
+        from adcs_nodes.core import attitude
+        return attitude.multiply(attitude.normalize(self.q_eci_body),
+                                 attitude.conjugate(attitude.normalize(self.q_orbit_body)))
 
     def is_usable(self) -> bool:
         """True when ``valid`` and every field is finite with the right shape."""
@@ -179,20 +197,58 @@ def _identity_quat() -> np.ndarray:
 
 @dataclass(frozen=True)
 class Target:
-    """Attitude target from guidance, relative to the orbital frame.
+    """Attitude target from guidance, in the frame ``frame``.
 
     Attributes
     ----------
-    q_orbit_body_ref : ndarray, shape (4,)
-        Target attitude, scalar last: rotates target-body vectors into the orbital frame.
+    q_ref_body : ndarray, shape (4,)
+        Target attitude, scalar last: rotates target-body vectors into the frame ``frame``.
         Default identity: body axes on the orbital axes (paper 000's ``Lambda* = 1``, (11)).
     omega_body_ref_body : ndarray, shape (3,)
-        Target rate of the body w.r.t. the reference (orbital) frame, body axes [rad/s];
-        used as a feed-forward relative rate. Default zero.
+        Target rate of the body w.r.t. the reference frame, body axes [rad/s]; a
+        feed-forward relative rate. Default zero.
+    omega_dot_body_ref_body : ndarray, shape (3,)
+        Target angular acceleration w.r.t. the reference frame, body axes [rad/s^2].
+    frame : str
+        ``'orbit'`` (papers 000/004 orbital frame) or ``'eci'`` (inertial).
+    time_to_go_s : float
+        Time left in the current maneuver [s]; 0 when holding or tracking.
     """
 
-    q_orbit_body_ref: np.ndarray = field(default_factory=_identity_quat)
+    q_ref_body: np.ndarray = field(default_factory=_identity_quat)
     omega_body_ref_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    omega_dot_body_ref_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    frame: str = 'orbit'
+    time_to_go_s: float = 0.0
+
+    @property
+    def q_orbit_body_ref(self) -> np.ndarray:
+        """The target attitude w.r.t. the orbital frame (only for ``frame == 'orbit'``)."""
+        if self.frame != 'orbit':
+            raise ValueError(f'target is in frame {self.frame!r}; convert it with '
+                             'Target.in_frame("orbit", estimate) first')
+        return self.q_ref_body
+
+    def in_frame(self, frame: str, estimate: Optional['Estimate']) -> 'Target':
+        """The same target expressed against ``frame`` (``'orbit'`` or ``'eci'``).
+
+        Uses the estimate's orbit frame in ECI (``q_eci_orbit``); the rates are relative rates
+        and are kept (the difference is the orbit rate, which the laws add themselves).
+        Raises ``ValueError`` when a conversion is needed and the estimate lacks ``q_eci_body``.
+        """
+        if frame == self.frame:
+            return self
+        from adcs_nodes.core import attitude
+        q_eci_orbit = None if estimate is None else estimate.q_eci_orbit()
+        if q_eci_orbit is None:
+            raise ValueError(f'cannot convert a {self.frame!r} target to {frame!r}: the '
+                             'estimate has no inertial attitude')
+        if frame == 'orbit':       # q_orbit_ref = q_eci_orbit^* q_eci_ref
+            q = attitude.multiply(attitude.conjugate(q_eci_orbit), self.q_ref_body)
+        else:                      # q_eci_ref = q_eci_orbit q_orbit_ref
+            q = attitude.multiply(q_eci_orbit, self.q_ref_body)
+        return Target(q, self.omega_body_ref_body, self.omega_dot_body_ref_body, frame,
+                      self.time_to_go_s)
 
 
 @dataclass
@@ -231,12 +287,31 @@ class Command:
                    for a in (self.dipole_body, self.wheel_torque, self.torque_body))
 
 
+@dataclass(frozen=True)
+class ControlInputs:
+    """Everything a controller core may read in one frame (see the module docstring).
+
+    A controller reads only what its registry entry declares under ``inputs``; the node
+    fills the rest with ``None``.
+    """
+
+    estimate: Optional[Estimate] = None
+    target: Optional[Target] = None
+    b_body: Optional[np.ndarray] = None
+    b_body_model: Optional[np.ndarray] = None
+    wheel_speed_rad_s: Optional[np.ndarray] = None
+    wheel_momentum_Nms: Optional[np.ndarray] = None
+
+    def field_body(self) -> Optional[np.ndarray]:
+        """The fresh measurement when there is one, else the onboard-model field."""
+        return self.b_body if self.b_body is not None else self.b_body_model
+
+
 class Controller(Protocol):
     """Structural type of a controller core (DESIGN section 7)."""
 
     def reset(self) -> None:
         """Forget all internal state (filters, stages, previous samples)."""
 
-    def update(self, estimate: Optional[Estimate], target: Optional[Target],
-               b_body: Optional[ArrayLike], t: float, dt: float) -> Command:
+    def update(self, inputs: ControlInputs, t: float, dt: float) -> Command:
         """Command for frame time ``t`` [s] (frame period ``dt`` [s])."""

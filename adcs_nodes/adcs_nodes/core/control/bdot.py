@@ -39,7 +39,8 @@ from typing import Optional
 import numpy as np
 from numpy.typing import ArrayLike
 
-from adcs_nodes.core.control import Command, Estimate, Target, limits_vector, scale_to_limits
+from adcs_nodes.core.control import (Command, ControlInputs, Estimate, Target, limits_vector,
+                                     scale_to_limits)
 
 
 def _valid_vec3(v) -> Optional[np.ndarray]:
@@ -96,18 +97,33 @@ class BdotController:
         self._t_prev = 0.0
         self._f: Optional[np.ndarray] = None
         self._t_f = 0.0
+        self._last: Optional[Command] = None
 
     def reset(self) -> None:
-        """Forget the previous measurement and the filter state."""
+        """Forget the previous measurement, the filter state and the held command."""
         self._b_prev = None
         self._f = None
+        self._last: Optional[Command] = None
 
     def _zero(self, reason: str) -> Command:
         return Command.zero(self.n_wheels, reason)
 
-    def update(self, estimate: Optional[Estimate], target: Optional[Target],
-               b_body: Optional[ArrayLike], t: float, dt: float,
-               b_dot_body: Optional[ArrayLike] = None) -> Command:
+    def update(self, inputs: ControlInputs, t: float, dt: float) -> Command:
+        """Registry interface: needs only the magnetometer (the safe-mode rule).
+
+        A frame without a fresh sample holds the last command (the derivative needs a new
+        sample); the estimate and target are never read.
+        """
+        if inputs.b_body is None:
+            if self._last is not None:
+                return self._last
+            return self._zero('no magnetic field sample yet')
+        self._last = self.law(None, None, inputs.b_body, t, dt)
+        return self._last
+
+    def law(self, estimate: Optional[Estimate], target: Optional[Target],
+            b_body: Optional[ArrayLike], t: float, dt: float,
+            b_dot_body: Optional[ArrayLike] = None) -> Command:
         """Dipole command for frame ``t``.
 
         Parameters

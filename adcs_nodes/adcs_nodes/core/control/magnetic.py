@@ -83,8 +83,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
-from adcs_nodes.core.control import (Command, Estimate, Target, cross3, finite_vector,
-                                     limits_vector, positive, scale_to_limits)
+from adcs_nodes.core.control import (Command, ControlInputs, Estimate, Target, cross3,
+                                     finite_vector, limits_vector, positive, scale_to_limits)
 
 MODES = ('three_axis', 'one_axis', 'two_stage')
 """Accepted values of ``mode``."""
@@ -309,8 +309,23 @@ class MagneticController:
         cmd.info = {'stage': self.stage}
         return cmd
 
-    def update(self, estimate: Optional[Estimate], target: Optional[Target],
-               b_body: Optional[ArrayLike], t: float, dt: float) -> Command:
+    def update(self, inputs: ControlInputs, t: float, dt: float) -> Command:
+        """Registry interface: the law with the fresh field, else the onboard model field.
+
+        Between magnetometer samples the field in body axes is the onboard model
+        ``n* = R(q_orbit_body)^T B*`` (paper 000's alternative to the measured ``n``). A target
+        in another frame is converted to the orbital frame with the estimate.
+        """
+        target = inputs.target
+        if target is not None and target.frame != 'orbit':
+            try:
+                target = target.in_frame('orbit', inputs.estimate)
+            except ValueError as exc:
+                return self._zero(str(exc))
+        return self.law(inputs.estimate, target, inputs.field_body(), t, dt)
+
+    def law(self, estimate: Optional[Estimate], target: Optional[Target],
+            b_body: Optional[ArrayLike], t: float, dt: float) -> Command:
         """Dipole command for frame ``t`` (the laws are static: ``t``, ``dt`` are unused).
 
         Parameters
