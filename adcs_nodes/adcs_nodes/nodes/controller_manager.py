@@ -7,7 +7,9 @@ stale, NaN or out-of-range command; the command sent is always finite and inside
 Subscribes ``adcs/controllers/<name>/command`` of every controller (awaited each command
 frame) and ``adcs/attitude_estimate`` (for the automatic sequence). Publishes
 ``adcs/actuator_command`` (stamped with the frame) and the latched
-``adcs/controller_status``. Services ``~/switch_controller`` and ``~/list_controllers``.
+``adcs/controller_status``. Services ``adcs/switch_controller`` and ``adcs/list_controllers``
+(the project's namespace: never ros2_control's ``/controller_manager/...`` names, whose types
+differ, so the two can share a graph).
 
 A controller that misses a frame (its process died) stops being waited for, so the graph goes
 on at full speed on the fallback; it is awaited again as soon as it publishes.
@@ -28,6 +30,11 @@ from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.controller import command_msg, estimate_from_msg
 from adcs_nodes.nodes.convert import stamp_ns, vec3
 from adcs_nodes.nodes.lockstep_node import QOS_LATCHED, LockstepNode
+
+
+#: Service names (relative: under the node's namespace; ``/adcs/...`` when started at the root).
+SWITCH_SERVICE = 'adcs/switch_controller'
+LIST_SERVICE = 'adcs/list_controllers'
 
 
 class ControllerManagerNode(LockstepNode):
@@ -65,8 +72,8 @@ class ControllerManagerNode(LockstepNode):
         self.cmd_pub = self.publisher(ActuatorCommand, 'adcs/actuator_command')
         self.status_pub = self.publisher(ControllerStatus, 'adcs/controller_status',
                                          QOS_LATCHED)
-        self.create_service(SwitchController, '~/switch_controller', self.on_switch)
-        self.create_service(ListControllers, '~/list_controllers', self.on_list)
+        self.create_service(SwitchController, SWITCH_SERVICE, self.on_switch)
+        self.create_service(ListControllers, LIST_SERVICE, self.on_list)
         self._last_status: Optional[Tuple] = None
         self._last_status_wall = 0.0
         self._t_last: Optional[float] = None
@@ -77,7 +84,7 @@ class ControllerManagerNode(LockstepNode):
 
     # ------------------------------------------------------------------ services
     def on_switch(self, request, response):
-        """``~/switch_controller``: validate now, apply at the next frame boundary."""
+        """``adcs/switch_controller``: validate now, apply at the next frame boundary."""
         ok, message = self.core.request_switch(request.name, self._t_last)
         response.success = ok
         response.message = message
@@ -90,7 +97,7 @@ class ControllerManagerNode(LockstepNode):
         return response
 
     def on_list(self, request, response):
-        """``~/list_controllers``."""
+        """``adcs/list_controllers``."""
         names, active, safe = self.core.list_controllers()
         response.names = names
         response.active = active

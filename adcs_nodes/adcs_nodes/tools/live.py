@@ -113,7 +113,7 @@ def switch(name: str, pid: Optional[int] = None) -> str:
     from adcs_msgs.srv import SwitchController
     session = _Session(pick_run(pid))
     try:
-        res = session.call(SwitchController, f'/{MANAGER}/switch_controller',
+        res = session.call(SwitchController, '/adcs/switch_controller',
                            SwitchController.Request(name=name))
     finally:
         session.close()
