@@ -24,7 +24,7 @@ import yaml
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
-from adcs_nodes.nodes.runtime import spin_nodes
+from adcs_nodes.nodes.runtime import limit_blas_threads, spin_nodes
 from adcs_nodes.tools.graph import flatten
 
 
@@ -72,6 +72,7 @@ def main(argv=None) -> int:
         except ValueError as exc:
             print(f'[compose] configuration error: {exc}', file=sys.stderr)
             return 2
+        limit_blas_threads()   # again after the node modules' imports (idempotent)
         master = next((n for n in nodes if n.get_name() == 'dynamics'), None)
         drain = {'until': None}
 
