@@ -1,0 +1,227 @@
+"""Estimator algorithms behind one interface (registry entries; the node only dispatches).
+
+Interface
+---------
+Every algorithm has ``initialise(q_orbit_body0, omega_body_orbit_body0)`` and::
+
+    step(inputs: EstimatorInputs, t, dt) -> Step
+
+``dt`` is the time since the previous step [s] (0 at the first). ``Step.estimate`` is None
+while there is nothing to publish; ``Step.rejections`` lists why samples were refused.
+
+Algorithms here:
+
+* :class:`MagneticFilterEstimator`: paper 000's filter (33)-(39) with its divergence reset
+  (a restart from the initial estimate, as the paper's filter does at t0) and the mapping of
+  its covariance to the published 6x6 attitude-angle/rate covariance: for small angles the
+  error angle is ``2 phi`` (or ``2 mu``), so ``P_angle = 4 P_phi``, ``P_angle,rate = 2 P_phi,w``.
+* :class:`GeometricEstimator`: TRIAD or paper 004's horizon + magnetometer yaw (formula (3)),
+  with the rate as the finite difference of successive attitudes::
+
+      omega_body_orbit_body = rotvec(q_prev^* q) / dt
+
+Rate frames: ``omega_body_eci_body = omega_body_orbit_body + R(q_orbit_body)^T [0, omega0, 0]``
+(the orbit frame turns at ``omega0`` about its y axis, the orbit normal).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import List, Optional
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from adcs_nodes.core import attitude as att
+from adcs_nodes.core.estimation.horizon_yaw import (attitude_from_horizon_and_yaw,
+                                                    triad_from_horizon_and_field,
+                                                    yaw_from_horizon_and_field)
+from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
+from adcs_nodes.core.estimation.onboard import OnboardState
+
+
+@dataclass(frozen=True)
+class EstimatorInputs:
+    """One frame of estimator input (fresh samples only; None = no new sample).
+
+    Attributes
+    ----------
+    ref : OnboardState
+        Onboard reference at t: ``q_eci_orbit``, ``b_orbit`` [T], ``omega0`` [rad/s].
+    b_body : ndarray (3,) or None
+        Fresh magnetometer sample rotated into body axes [T] (already range-checked).
+    horizon_roll_pitch : tuple of float or None
+        Fresh valid horizon-sensor roll and pitch [rad].
+    dipole_body : ndarray (3,)
+        Magnetorquer dipole applied over the last interval, body axes [A m^2].
+    gyro_rate_body : ndarray (3,) or None
+        Fresh gyro rate ``omega_body_eci_body`` [rad/s].
+    q_eci_body_meas : ndarray (4,) or None
+        Fresh star-tracker attitude, scalar last.
+    """
+
+    ref: OnboardState
+    b_body: Optional[np.ndarray] = None
+    horizon_roll_pitch: Optional[tuple] = None
+    dipole_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gyro_rate_body: Optional[np.ndarray] = None
+    q_eci_body_meas: Optional[np.ndarray] = None
+
+
+@dataclass
+class Estimate6:
+    """Published estimate: attitude to the orbit frame, absolute rate, 6x6 covariance."""
+
+    q_orbit_body: np.ndarray
+    omega_body_eci_body: np.ndarray
+    covariance: np.ndarray            # (6, 6): [angle (body, rad); rate (body, rad/s)]
+
+
+@dataclass
+class Step:
+    """Result of one step: the estimate (or None) and the bookkeeping of the step."""
+
+    estimate: Optional[Estimate6]
+    updates: int = 0
+    rejections: List[str] = field(default_factory=list)
+    innovation: List[float] = field(default_factory=list)
+    covariance_trace: float = 0.0
+
+
+def omega_eci_from_orbit(q_orbit_body: ArrayLike, omega_body_orbit_body: ArrayLike,
+                         omega0: float) -> np.ndarray:
+    """``omega_body_eci_body = omega_body_orbit_body + R(q)^T [0, omega0, 0]`` [rad/s]."""
+    return np.asarray(omega_body_orbit_body, float) + att.to_matrix(q_orbit_body).T @ np.array(
+        [0.0, omega0, 0.0])
+
+
+def omega_orbit_from_eci(q_orbit_body: ArrayLike, omega_body_eci_body: ArrayLike,
+                         omega0: float) -> np.ndarray:
+    """Inverse of :func:`omega_eci_from_orbit`."""
+    return np.asarray(omega_body_eci_body, float) - att.to_matrix(q_orbit_body).T @ np.array(
+        [0.0, omega0, 0.0])
+
+
+def _finite(*arrays) -> bool:
+    return all(bool(np.all(np.isfinite(a))) for a in arrays)
+
+
+class MagneticFilterEstimator:
+    """Paper 000's filter with a divergence reset and the 6x6 covariance (module docstring).
+
+    Parameters are those of :class:`~adcs_nodes.core.estimation.magnetic_filter.MagneticFilter`
+    plus ``max_rate_rad_s`` (an estimated rate beyond it is a divergence).
+    """
+
+    def __init__(self, inertia: ArrayLike, max_rate_rad_s: float = 1.0, **filter_args) -> None:
+        self.filter = MagneticFilter(inertia, max_rate_rad_s=max_rate_rad_s, **filter_args)
+        self.max_rate = float(max_rate_rad_s)
+        self.q0 = att.identity()
+        self.omega_rel0 = np.zeros(3)
+        self.resets = 0
+        self._started = False
+
+    def initialise(self, q_orbit_body0: ArrayLike, omega_body_orbit_body0: ArrayLike) -> None:
+        """Initial estimate (applied at the first step, when omega0 is known)."""
+        self.q0 = att.normalize(q_orbit_body0)
+        self.omega_rel0 = np.asarray(omega_body_orbit_body0, dtype=float)
+        self._started = False
+
+    def step(self, inputs: EstimatorInputs, t: float, dt: float) -> Step:
+        """Predict over ``dt`` with the applied dipole, then update with a fresh sample."""
+        f, ref, out = self.filter, inputs.ref, Step(None)
+        omega_abs0 = omega_eci_from_orbit(self.q0, self.omega_rel0, ref.omega0)
+        if not self._started:
+            f.reset(self.q0, omega_abs0)
+            self._started = True
+        elif dt > 0:
+            dipole = inputs.dipole_body if _finite(inputs.dipole_body) else np.zeros(3)
+            ok = f.predict(dt, ref.omega0, dipole, b_orbit_for_torque=ref.b_orbit)
+            w = f.omega_body_eci_body
+            if not ok or not _finite(w) or float(np.linalg.norm(w)) > self.max_rate:
+                self.resets += 1
+                out.rejections.append(
+                    f"filter diverged (|omega'| beyond {self.max_rate:g} rad/s or not finite): "
+                    f'reset to the initial estimate ({self.resets})')
+                f.reset(self.q0, omega_abs0)
+        if inputs.b_body is not None:
+            res = f.update(inputs.b_body, ref.b_orbit)
+            if res.get('accepted', False):
+                out.updates = 1
+                out.innovation = [float(v) for v in res['innovation']]
+            else:
+                out.rejections.append(str(res.get('reason', 'update refused')))
+        q, omega, p = f.q_orbit_body, f.omega_body_eci_body, f.P
+        out.covariance_trace = float(np.trace(p))
+        if not _finite(q, omega):
+            out.rejections.append('filter state not finite: not published')
+            return out
+        cov = np.zeros((6, 6))
+        cov[:3, :3] = 4.0 * p[:3, :3]     # small angle: error angle ~ 2 mu (or 2 phi)
+        cov[3:, 3:] = p[3:6, 3:6]
+        cov[:3, 3:] = 2.0 * p[:3, 3:6]
+        cov[3:, :3] = cov[:3, 3:].T
+        out.estimate = Estimate6(q, omega, cov)
+        return out
+
+
+class GeometricEstimator:
+    """TRIAD or horizon + magnetometer yaw, with a finite-difference rate.
+
+    Parameters
+    ----------
+    method : {'triad', 'horizon_mag_yaw'}
+    """
+
+    METHODS = ('triad', 'horizon_mag_yaw')
+
+    def __init__(self, method: str) -> None:
+        if method not in self.METHODS:
+            raise ValueError(f'method must be one of {self.METHODS}, got {method!r}')
+        self.method = method
+        self._q_prev: Optional[np.ndarray] = None
+        self._omega_rel = np.zeros(3)
+        self._q = att.identity()
+
+    def initialise(self, q_orbit_body0: ArrayLike, omega_body_orbit_body0: ArrayLike) -> None:
+        """Only the initial relative rate is used (until two attitudes exist)."""
+        self._q_prev = None
+        self._omega_rel = np.asarray(omega_body_orbit_body0, dtype=float)
+
+    def step(self, inputs: EstimatorInputs, t: float, dt: float) -> Step:
+        """A new attitude from a fresh (horizon, field) pair, else hold the last one."""
+        out = Step(None)
+        held = self._held(inputs)
+        if inputs.horizon_roll_pitch is None or inputs.b_body is None:
+            out.estimate = held
+            return out
+        roll, pitch = inputs.horizon_roll_pitch
+        try:
+            if self.method == 'triad':
+                q = triad_from_horizon_and_field(roll, pitch, inputs.b_body, inputs.ref.b_orbit)
+            else:
+                yaw = yaw_from_horizon_and_field(roll, pitch, inputs.b_body, inputs.ref.b_orbit)
+                q = attitude_from_horizon_and_yaw(roll, pitch, yaw)
+        except ValueError as exc:
+            out.rejections.append(f'{self.method}: {exc}')
+            out.estimate = held
+            return out
+        if self._q_prev is not None and dt > 0:
+            dq = att.multiply(att.conjugate(self._q_prev), q)
+            self._omega_rel = att.to_rotation_vector(dq) / dt
+            if float(q @ self._q_prev) < 0:
+                q = -q
+        self._q_prev = self._q = q
+        out.updates = 1
+        out.estimate = self._held(inputs)
+        return out
+
+    def _held(self, inputs: EstimatorInputs) -> Optional[Estimate6]:
+        if self._q_prev is None:
+            return None
+        omega = omega_eci_from_orbit(self._q, self._omega_rel, inputs.ref.omega0)
+        return Estimate6(self._q, omega, _UNKNOWN.copy())
+
+
+#: Covariance of an estimator that has none: -1 in element 0 ("unknown", AttitudeState.msg).
+_UNKNOWN = np.zeros((6, 6))
+_UNKNOWN[0, 0] = -1.0

@@ -1,0 +1,145 @@
+"""Built-in registry entries: controllers and estimator algorithms of the flight software.
+
+One entry per component (see :mod:`adcs_nodes.registry`). A ``build(params, ctx)`` function
+turns validated parameters plus the graph context into the core object. The context ``ctx``
+(a dict, filled by the node from its parameters) holds:
+
+* ``inertia_kgm2``: (3, 3) onboard inertia [kg m^2];
+* ``max_dipole_Am2``: (3,) coil limits [A m^2], or None without magnetorquers;
+* ``wheel_axes_body``: (n, 3) spin axes; ``wheel_max_torque_Nm``, ``wheel_max_momentum_Nms``,
+  ``wheel_inertia_kgm2``: (n,) each (n = 0 without wheels);
+* ``period_s``: the component's period [s]; ``epoch``: aware datetime of t = 0;
+* ``reference``: the onboard orbit/field model (:class:`~adcs_nodes.core.estimation.onboard.
+  OnboardReference`), or None;
+* ``seed``: the component's random seed.
+
+Adding a controller: write its core module (``reset()``, ``update(ControlInputs, t, dt) ->
+Command``), then add one ``register(Entry(...))`` here (or in a plugin module): nothing else.
+"""
+from __future__ import annotations
+
+from typing import Any, Dict
+
+import numpy as np
+
+from adcs_nodes.registry import Entry, Param, register
+
+# ---------------------------------------------------------------------- controllers
+
+
+def _n_wheels(ctx: Dict[str, Any]) -> int:
+    return len(ctx.get('wheel_max_torque_Nm') or [])
+
+
+def _build_magnetic(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from adcs_nodes.core.control.magnetic import MagneticController
+    return MagneticController(
+        mode=p['mode'], alpha=p['alpha_per_s'], k=p['k_Nms'],
+        max_dipole_Am2=ctx['max_dipole_Am2'], beta=p['beta'] if p['beta'] > 0 else None,
+        switch_angle_deg=p['switch_angle_deg'], switch_rate_deg_s=p['switch_rate_deg_s'],
+        n_wheels=_n_wheels(ctx))
+
+
+register(Entry(
+    'controller', 'magnetic',
+    'paper 000 magnetorquer laws to the orbital frame: three-axis (29)-(31), one-axis, '
+    'two-stage',
+    'adcs_nodes.core.control.magnetic:MagneticController',
+    (Param('mode', 'str', 'three_axis', '-', 'paper 000 law',
+           choices=('three_axis', 'one_axis', 'two_stage')),
+     Param('alpha_per_s', 'float', 3e-3, '1/s', 'kinematic gain alpha of (16)', positive=True),
+     Param('k_Nms', 'float', 0.2, 'N m s', 'rate gain k of (27)', positive=True),
+     Param('beta', 'float', 0.0, 'J', 'Lyapunov weight of (25) for the start-up check '
+           'k > beta/(2 alpha) (28); 0: no check', min=0.0),
+     Param('switch_angle_deg', 'float', 15.0, 'deg', 'two_stage: switch below this angle',
+           positive=True, max=180.0),
+     Param('switch_rate_deg_s', 'float', 0.2, 'deg/s', 'two_stage: and below this rate',
+           positive=True)),
+    _build_magnetic, inputs=('estimate', 'target', 'magnetometer'),
+    actuators=('magnetorquer',)))
+
+
+def _build_bdot(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from adcs_nodes.core.control.bdot import BdotController
+    return BdotController(gain=p['gain_Am2s_per_T'], max_dipole_Am2=ctx['max_dipole_Am2'],
+                          filter_time_constant_s=p['filter_time_constant_s'],
+                          n_wheels=_n_wheels(ctx))
+
+
+register(Entry(
+    'controller', 'bdot',
+    'B-dot detumbling, the safe mode: needs nothing but the magnetometer',
+    'adcs_nodes.core.control.bdot:BdotController',
+    (Param('gain_Am2s_per_T', 'float', 1.0e6, 'A m^2 s/T', 'B-dot gain k: m = -k dB/dt',
+           positive=True),
+     Param('filter_time_constant_s', 'float', 0.0, 's', 'low-pass of dB/dt (0: none)',
+           min=0.0)),
+    _build_bdot, inputs=('magnetometer',), actuators=('magnetorquer',)))
+
+
+# ---------------------------------------------------------------------- estimators
+_P0_HELP = ('initial covariance diagonal: attitude (phi or mu) [-], rate [rad^2/s^2], '
+            'disturbance [1/s^4]; empty: the default of the measurement form')
+
+
+def _build_magnetic_filter(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from adcs_nodes.core.estimation.algorithms import MagneticFilterEstimator
+    return MagneticFilterEstimator(
+        ctx['inertia_kgm2'], theta=p['theta_T2'], tau=p['tau'],
+        p0_diag=p['p0_diag'] or None, measurement_form=p['measurement_form'],
+        literal_update=p['literal_update'], substeps=p['substeps'],
+        max_rate_rad_s=p['max_rate_rad_s'], max_disturbance_rad_s2=p['max_disturbance_rad_s2'])
+
+
+MAGNETIC_FILTER_PARAMS = (
+    Param('theta_T2', 'float', 9e-14, 'T^2', 'theta of (38): measurement noise bound',
+          positive=True),
+    Param('tau', 'float', 0.01, '-', 'tau of (38): covariance inflation', min=0.0),
+    Param('p0_diag', 'float[]', [], '-', _P0_HELP, positive=True),
+    Param('measurement_form', 'str', 'phi', '-', 'measurement model: (36) phi or (37) mu',
+          choices=('phi', 'mu')),
+    Param('literal_update', 'bool', False, '-', "the paper's literal (38) (raw residuals "
+          'summed) instead of sequential innovations'),
+    Param('substeps', 'int', 1, '-', 'RK4 substeps per prediction', min=1, max=1000),
+    Param('max_rate_rad_s', 'float', 1.0, 'rad/s', 'divergence guard: a larger estimated '
+          'rate restarts the filter (not in the paper)', positive=True),
+    Param('max_disturbance_rad_s2', 'float', 1e-2, 'rad/s^2', 'divergence guard on the '
+          'disturbance state (not in the paper)', positive=True),
+)
+
+register(Entry(
+    'estimator', 'magnetic_filter',
+    'paper 000 magnetometer-only attitude, rate and disturbance filter (33)-(39)',
+    'adcs_nodes.core.estimation.algorithms:MagneticFilterEstimator',
+    MAGNETIC_FILTER_PARAMS, _build_magnetic_filter,
+    inputs=('magnetometer', 'actuator_command')))
+
+
+def _build_geometric(method: str):
+    def build(p: Dict[str, Any], ctx: Dict[str, Any]):
+        from adcs_nodes.core.estimation.algorithms import GeometricEstimator
+        return GeometricEstimator(method)
+    return build
+
+
+register(Entry(
+    'estimator', 'triad',
+    'TRIAD of the nadir (horizon sensor) and the field; rate by finite difference',
+    'adcs_nodes.core.estimation.algorithms:GeometricEstimator', (),
+    _build_geometric('triad'), inputs=('magnetometer', 'horizon')))
+
+register(Entry(
+    'estimator', 'horizon_mag_yaw',
+    'paper 004: roll, pitch from the horizon sensor, yaw from formula (3); rate by finite '
+    'difference',
+    'adcs_nodes.core.estimation.algorithms:GeometricEstimator', (),
+    _build_geometric('horizon_mag_yaw'), inputs=('magnetometer', 'horizon')))
+
+
+def wheel_momentum(speed_rad_s: Any, ctx: Dict[str, Any]) -> Any:
+    """Wheel momenta [N m s] from speeds [rad/s] and the context's wheel inertias."""
+    if speed_rad_s is None:
+        return None
+    j = np.asarray(ctx.get('wheel_inertia_kgm2') or [], dtype=float)
+    s = np.asarray(speed_rad_s, dtype=float)
+    return s * j if s.shape == j.shape else None
