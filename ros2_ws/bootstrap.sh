@@ -7,7 +7,9 @@
 #      the wheel builder's Python and numpy include paths; they are rewritten to this
 #      interpreter's sysconfig include dir and numpy.get_include(),
 #   3. `colcon build --symlink-install` of adcs_msgs, adcs_nodes and sim_node into
-#      ros2_ws/install, with -DPython3_EXECUTABLE set.
+#      ros2_ws/install, with -DPython3_EXECUTABLE set; plus the fallback interface package
+#      ros2_ws/extra/tf2_msgs (the upstream TFMessage definition, same type hash) only when
+#      the environment has no tf2_msgs (the PyPI wheels do not ship it; a ROS 2 install does).
 #
 # Each step is skipped when its inputs did not change (stamp files in .venv/), so a second run
 # takes about a second. On a machine with ROS 2 installed, you do not need this script:
@@ -88,14 +90,34 @@ fi
 export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
 export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
 cd "$WS"
-build_inputs=$(find -L src -maxdepth 3 \( -name package.xml -o -name CMakeLists.txt -o -name setup.py \
-    -o -name setup.cfg -o -name '*.msg' -o -name '*.srv' -o -name '*.action' \) | sort)
+# fallback packages (ros2_ws/extra, COLCON_IGNOREd for a plain `colcon build`): built only when
+# no underlay (the venv, or a sourced ROS 2 install; never our own install/) provides them
+installed_pkg() {
+    local prefix
+    local IFS=:
+    for prefix in $AMENT_PREFIX_PATH; do
+        case "$prefix" in "$WS/install"|"$WS/install/"*) continue ;; esac
+        [ -e "$prefix/share/ament_index/resource_index/packages/$1" ] && return 0
+    done
+    return 1
+}
+base_paths=(src)
+for pkg in tf2_msgs; do
+    if installed_pkg "$pkg"; then
+        rm -rf "install/$pkg" "build/$pkg"     # a former fallback must not shadow the real one
+    else
+        base_paths+=("extra/$pkg")
+    fi
+done
+build_inputs=$(find -L "${base_paths[@]}" -maxdepth 3 \( -name package.xml -o -name CMakeLists.txt \
+    -o -name setup.py -o -name setup.cfg -o -name '*.msg' -o -name '*.srv' -o -name '*.action' \) \
+    | sort)
 build_hash="$( (echo "$build_inputs"; hash_of $build_inputs) | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.build.sha256" 2>/dev/null)" != "$build_hash" ] || [ ! -f install/local_setup.bash ]; then
-    say "colcon build (adcs_msgs, adcs_nodes, sim_node)"
+    say "colcon build (${base_paths[*]})"
     # shellcheck disable=SC1091
     source "$VENV/bin/activate"
-    if ! colcon --log-base log build --symlink-install --base-paths src \
+    if ! colcon --log-base log build --symlink-install --base-paths "${base_paths[@]}" \
             --event-handlers console_cohesion- summary+ status- \
             --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \
             > "$WS/log/colcon-build.out" 2>&1 < /dev/null; then
