@@ -92,3 +92,66 @@ def test_an_input_can_stop_being_awaited_and_come_back():
     assert sync.missing(0) == ['ctrl']
     with pytest.raises(ValueError):
         sync.set_period('ctrl', -1)
+
+
+# ------------------------------------------------------------------ previous-frame inputs
+def test_previous_frame_input_is_awaited_with_the_stamp_before_t():
+    # estimator every 2 s, command every 2 s: at t = 4 s it needs the command of t = 2 s
+    sync = FrameSync({'mag': (10 * S, 'frame'), 'cmd': (2 * S, 'previous')})
+    assert sync.required_stamp('cmd', 0) is None          # nothing before the first frame
+    assert sync.required_stamp('cmd', 4 * S) == 2 * S
+    assert sync.required_stamp('cmd', 5 * S) == 4 * S      # off-grid consumer frame
+    assert sync.required_stamp('cmd', 12 * S) == 10 * S
+    sync.add('mag', 0, 'm0')
+    assert sync.ready(0) and sync.value('cmd', 0) is None
+    sync.add('cmd', 0, 'c0')
+    sync.add('cmd', 2 * S, 'c2')       # arrived early: must not be used for t = 2 s
+    assert sync.ready(2 * S)
+    assert sync.value('cmd', 2 * S) == 'c0'
+    assert sync.missing(6 * S) == ['cmd']                  # c4 not there yet
+    assert sync.value('cmd', 6 * S) is None                # never "whatever arrived"
+
+
+def test_previous_input_with_a_slower_producer_keeps_the_held_command():
+    # producer every 10 s, consumer every 2 s: t = 12..20 s all need the command of 10 s
+    sync = FrameSync({'cmd': (10 * S, 'previous')})
+    for k in range(3):
+        sync.add('cmd', 10 * k * S, f'c{10 * k}')
+    for t in (12, 14, 16, 18, 20):
+        sync.prune((t - 2) * S)
+        assert sync.value('cmd', t * S) == 'c10'
+    assert sync.value('cmd', 22 * S) == 'c20'
+
+
+def test_unknown_kind_and_latest_with_period_raise():
+    with pytest.raises(ValueError, match='unknown input kind'):
+        FrameSync({'a': (S, 'sometimes')})
+    with pytest.raises(ValueError, match='period 0'):
+        FrameSync({'a': (S, 'latest')})
+    with pytest.raises(ValueError, match='dead_after'):
+        FrameSync({'a': S}, dead_after=-1)
+
+
+# ------------------------------------------------------------------ dead producers
+def test_producer_dead_after_n_misses_in_a_row_and_revived_by_a_message():
+    sync = FrameSync({'ctrl': S, 'mag': S}, dead_after=3)
+    sync.add('mag', 0, 'm')
+    assert sync.record_misses(0) == []            # 1st miss
+    sync.add('ctrl', S, 'c1')                     # a message resets the count
+    for k in range(1, 5):
+        sync.add('mag', k * S, 'm')               # mag is never missed
+    assert sync.record_misses(2 * S) == []        # 1
+    assert sync.record_misses(3 * S) == []        # 2
+    assert sync.record_misses(4 * S) == ['ctrl']  # 3 in a row: dead
+    assert sync.is_dead('ctrl') and sync.dead() == ['ctrl']
+    assert 'ctrl' not in sync.missing(5 * S) and not sync.due('ctrl', 5 * S)
+    assert sync.add('ctrl', 5 * S, 'c5') is True  # revived ...
+    assert sync.due('ctrl', 6 * S) and sync.missing(6 * S) == ['ctrl', 'mag']
+    assert sync.add('ctrl', 6 * S, 'c6') is False
+
+
+def test_dead_after_zero_never_gives_up():
+    sync = FrameSync({'a': S})
+    for k in range(10):
+        assert sync.record_misses(k * S) == []
+    assert sync.missing(10 * S) == ['a']

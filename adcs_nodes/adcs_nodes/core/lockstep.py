@@ -1,22 +1,39 @@
-"""Deterministic lockstep timing: integer-nanosecond frames and the exact-stamp ``FrameSync``.
+"""Deterministic lockstep timing: integer-nanosecond frames, ``FrameSync`` and the clock master.
 
 Timing model (DESIGN section 6)
 -------------------------------
 * Sim time is kept in integer nanoseconds; every period is an integer multiple of the base
   frame ``frame_ns``. Frame k is at ``t_k = k * frame_ns``.
-* An input with period ``p`` is *due* at ``t`` when ``t % p == 0``. A node fires for ``t_k`` when
-  every due input has arrived with exactly that stamp; inputs that are not due are taken as the
-  latest value stamped at or before ``t_k``.
+* An input of kind ``frame`` with period ``p`` is *due* at ``t`` when ``t % p == 0``: the node
+  fires for ``t_k`` only when it has arrived with exactly that stamp. Between its due frames it
+  is taken as the latest value stamped at or before ``t_k``.
+* An input of kind ``previous`` (e.g. the actuator command an estimator needs for its
+  prediction over ``[t_{k-1}, t_k]``) is due at every frame ``t > 0`` of the node with the stamp
+  ``s(t) = p * floor((t - 1 ns) / p)``, the last producer frame strictly before ``t``; its value
+  is exactly that message, or ``None`` when it timed out (never "whatever arrived").
+* An input of kind ``latest`` (period 0) is never waited for. It must not influence the
+  node's output in lockstep (that would make the output depend on arrival order).
+* Dead producers: a due input that times out ``dead_after`` frames in a row is *dead*: it is
+  no longer awaited until a message of it arrives again (:meth:`FrameSync.add` revives it).
 * Seeds: one scenario seed; each node derives its own stream with :func:`derive_seed`, so
   adding a node never changes another node's random numbers.
 
-Pure Python (no rclpy): the nodes feed it stamps converted at the edge.
+Clock master (frame k, :class:`ClockMaster`)::
+
+    THROTTLED -- a node lags > max lag --> wait for its progress
+    WAIT_ENV:  /clock(t_k) published, wait sim/environment(t_k)  -> publish sim/state(t_k)
+    WAIT_CMD:  wait the actuator command stamped t_k (when due)  -> step t_k -> t_k+1
+    WAIT_FINAL (t_k = duration): wait every node's final progress -> DONE
+
+Pure Python (no rclpy): the nodes feed it stamps converted at the edge and execute the
+returned actions. No equations of motion here; the reference is DESIGN section 6.
 """
 from __future__ import annotations
 
+import enum
 import hashlib
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Tuple, Union
 
 NS_PER_S = 1_000_000_000
 
@@ -50,11 +67,31 @@ def derive_seed(scenario_seed: int, name: str) -> int:
     return int.from_bytes(digest[:8], 'little')
 
 
+class InputKind(str, enum.Enum):
+    """How a lockstep input is synchronised (see the module docstring)."""
+
+    FRAME = 'frame'          #: awaited with the stamp of the frame when due
+    PREVIOUS = 'previous'    #: awaited with the stamp of the producer frame before t
+    LATEST = 'latest'        #: never awaited (period 0)
+
+
+def input_kind(kind: Union[str, InputKind]) -> InputKind:
+    """Parse an input kind; ``ValueError`` naming the known ones."""
+    try:
+        return InputKind(kind)
+    except ValueError:
+        raise ValueError(f'unknown input kind {kind!r}; known: '
+                         f'{", ".join(k.value for k in InputKind)}') from None
+
+
 @dataclass
 class _Input:
     period_ns: int
+    kind: InputKind = InputKind.FRAME
     by_stamp: Dict[int, Any] = field(default_factory=dict)
     latest: Optional[Tuple[int, Any]] = None
+    misses: int = 0           # due frames missed in a row
+    dead: bool = False
 
 
 class FrameSync:
@@ -63,53 +100,95 @@ class FrameSync:
     Parameters
     ----------
     inputs : dict
-        ``{name: period_ns}``. ``period_ns = 0`` marks an input that is never waited for (always
-        taken as latest).
+        ``{name: period_ns}`` or ``{name: (period_ns, kind)}`` with ``kind`` one of
+        :class:`InputKind` (default ``frame``). ``period_ns = 0`` marks an input that is never
+        waited for (always taken as latest).
     history : int
         Frames of early-arrived messages kept per input (messages may arrive for ``t_{k+1}``
         before frame ``t_k`` fired).
+    dead_after : int
+        A due input missed (:meth:`record_misses`) this many frames in a row is dead: no
+        longer awaited until it publishes again. 0: never.
 
     Examples
     --------
     >>> s = FrameSync({'env': 10, 'cmd': 20})
-    >>> s.add('env', 0, 'e0'); s.ready(0)
+    >>> _ = s.add('env', 0, 'e0'); s.ready(0)
     False
-    >>> s.add('cmd', 0, 'c0'); s.ready(0)
+    >>> _ = s.add('cmd', 0, 'c0'); s.ready(0)
     True
-    >>> s.add('env', 10, 'e1'); s.ready(10), s.value('cmd', 10)
+    >>> _ = s.add('env', 10, 'e1'); s.ready(10), s.value('cmd', 10)
     (True, 'c0')
+    >>> p = FrameSync({'cmd': (20, 'previous')})
+    >>> p.ready(0), p.missing(20), p.required_stamp('cmd', 30)
+    (True, ['cmd'], 20)
     """
 
-    def __init__(self, inputs: Dict[str, int], history: int = 64) -> None:
+    def __init__(self, inputs: Mapping[str, Any], history: int = 64,
+                 dead_after: int = 0) -> None:
         self._inputs: Dict[str, _Input] = {}
-        for name, period in inputs.items():
+        for name, spec in inputs.items():
+            period, kind = spec if isinstance(spec, tuple) else (spec, InputKind.FRAME)
             if int(period) < 0:
                 raise ValueError(f'input {name!r}: period must be >= 0, got {period}')
-            self._inputs[name] = _Input(int(period))
+            kind = input_kind(kind)
+            if int(period) == 0:
+                kind = InputKind.LATEST
+            elif kind is InputKind.LATEST:
+                raise ValueError(f'input {name!r}: kind latest needs period 0, got {period}')
+            self._inputs[name] = _Input(int(period), kind)
+        if int(history) < 1:
+            raise ValueError(f'history must be >= 1, got {history}')
         self._history = int(history)
+        if isinstance(dead_after, bool) or int(dead_after) != dead_after or dead_after < 0:
+            raise ValueError(f'dead_after must be an integer >= 0, got {dead_after!r}')
+        self.dead_after = int(dead_after)
 
     @property
     def names(self) -> List[str]:
         """Names of the declared inputs."""
         return list(self._inputs)
 
+    def kind(self, name: str) -> InputKind:
+        """Kind of input ``name``."""
+        return self._inputs[name].kind
+
     def set_period(self, name: str, period_ns: int) -> None:
-        """Change the period of input ``name`` (0: stop waiting for it, e.g. a dead producer)."""
+        """Change the period of input ``name`` (0: stop waiting for it)."""
         if int(period_ns) < 0:
             raise ValueError(f'input {name!r}: period must be >= 0, got {period_ns}')
-        self._inputs[name].period_ns = int(period_ns)
+        inp = self._inputs[name]
+        inp.period_ns = int(period_ns)
+        if inp.period_ns == 0:
+            inp.kind = InputKind.LATEST
+        elif inp.kind is InputKind.LATEST:
+            inp.kind = InputKind.FRAME
 
     def period(self, name: str) -> int:
         """Current period of input ``name`` [ns]."""
         return self._inputs[name].period_ns
 
-    def due(self, name: str, t_ns: int) -> bool:
-        """True when input ``name`` must have a message stamped exactly ``t_ns``."""
-        p = self._inputs[name].period_ns
-        return p > 0 and t_ns % p == 0
+    def required_stamp(self, name: str, t_ns: int) -> Optional[int]:
+        """Stamp input ``name`` must have for frame ``t_ns`` (None: nothing required then)."""
+        inp = self._inputs[name]
+        p, t_ns = inp.period_ns, int(t_ns)
+        if p <= 0:
+            return None
+        if inp.kind is InputKind.PREVIOUS:
+            return None if t_ns <= 0 else ((t_ns - 1) // p) * p
+        return t_ns if t_ns % p == 0 else None
 
-    def add(self, name: str, stamp_ns: int, value: Any) -> None:
+    def due(self, name: str, t_ns: int) -> bool:
+        """True when input ``name`` must have arrived (with its required stamp) for ``t_ns``."""
+        return not self._inputs[name].dead and self.required_stamp(name, t_ns) is not None
+
+    def add(self, name: str, stamp_ns: int, value: Any) -> bool:
         """Store a message of input ``name`` with stamp ``stamp_ns``.
+
+        Returns
+        -------
+        bool
+            True when the input was dead and is awaited again from now on.
 
         Raises
         ------
@@ -123,28 +202,59 @@ class FrameSync:
             del inp.by_stamp[min(inp.by_stamp)]
         if inp.latest is None or stamp_ns >= inp.latest[0]:
             inp.latest = (stamp_ns, value)
+        inp.misses = 0
+        revived, inp.dead = inp.dead, False
+        return revived
 
     def has(self, name: str, t_ns: int) -> bool:
         """True when input ``name`` has a message stamped exactly ``t_ns``."""
         return int(t_ns) in self._inputs[name].by_stamp
 
     def missing(self, t_ns: int) -> List[str]:
-        """Inputs due at ``t_ns`` whose message with that stamp has not arrived."""
-        return [n for n in self._inputs if self.due(n, t_ns) and not self.has(n, t_ns)]
+        """Inputs due at ``t_ns`` whose message with the required stamp has not arrived."""
+        return [n for n in self._inputs
+                if self.due(n, t_ns) and not self.has(n, self.required_stamp(n, t_ns))]
 
     def ready(self, t_ns: int) -> bool:
-        """True when every input due at ``t_ns`` has arrived with exactly that stamp."""
+        """True when every input due at ``t_ns`` has arrived with its required stamp."""
         return not self.missing(t_ns)
 
-    def value(self, name: str, t_ns: Optional[int] = None) -> Any:
-        """Message of ``name`` stamped ``t_ns`` if present, else the latest one at or before it.
+    def record_misses(self, t_ns: int) -> List[str]:
+        """Count a timed-out frame ``t_ns`` against every input missing then.
 
-        Returns ``None`` when nothing usable has arrived.
+        Returns the inputs that became dead with this miss (``dead_after`` in a row).
+        """
+        newly = []
+        for name in self.missing(t_ns):
+            inp = self._inputs[name]
+            inp.misses += 1
+            if self.dead_after and inp.misses >= self.dead_after:
+                inp.dead = True
+                newly.append(name)
+        return newly
+
+    def is_dead(self, name: str) -> bool:
+        """True when input ``name`` is treated as dead (not awaited)."""
+        return self._inputs[name].dead
+
+    def dead(self) -> List[str]:
+        """Names of the dead inputs."""
+        return [n for n, inp in self._inputs.items() if inp.dead]
+
+    def value(self, name: str, t_ns: Optional[int] = None) -> Any:
+        """The message of ``name`` for frame ``t_ns``.
+
+        ``frame`` and ``latest`` inputs: the one stamped ``t_ns`` if present, else the latest
+        at or before it (``t_ns = None``: the latest). ``previous`` inputs: exactly the one
+        stamped :meth:`required_stamp`. ``None`` when nothing usable has arrived.
         """
         inp = self._inputs[name]
         if t_ns is None:
             return None if inp.latest is None else inp.latest[1]
         t_ns = int(t_ns)
+        if inp.kind is InputKind.PREVIOUS:
+            s = self.required_stamp(name, t_ns)
+            return None if s is None else inp.by_stamp.get(s)
         if t_ns in inp.by_stamp:
             return inp.by_stamp[t_ns]
         older = [s for s in inp.by_stamp if s <= t_ns]
@@ -160,3 +270,244 @@ class FrameSync:
             old = sorted(s for s in inp.by_stamp if s < t_ns)
             for s in old[:-1]:
                 del inp.by_stamp[s]
+
+
+# ---------------------------------------------------------------------------- clock master
+class MasterPhase(enum.Enum):
+    """States of the clock master (see the module docstring)."""
+
+    IDLE = 'idle'                 #: not started (handshake) or real-time mode
+    THROTTLED = 'throttled'       #: a node lags more than the allowed frames: wait for it
+    WAIT_ENV = 'wait_env'         #: /clock(t_k) published, waiting for sim/environment(t_k)
+    WAIT_CMD = 'wait_cmd'         #: sim/state(t_k) published, waiting for the command
+    WAIT_FINAL = 'wait_final'     #: last frame published, waiting for every node's final
+    DONE = 'done'                 #: run finished
+
+
+class Act(enum.Enum):
+    """What the node has to do (the master itself never touches ROS)."""
+
+    CLOCK = 'clock'               #: publish /clock = t_ns
+    STATE = 'state'               #: publish sim/state(t_ns) from ``value`` (environment)
+    STEP = 'step'                 #: integrate t_ns -> t_ns + frame; ``value`` = (env, cmd)
+    MISSED = 'missed'             #: a missed frame: ``value`` = inputs, ``text`` = applied
+    LOG = 'log'                   #: log ``text`` at level ``value`` ('info', 'warning', ...)
+    FINISH = 'finish'             #: the run is over
+
+
+#: Command value of a STEP that applies a zero command (timeout or dead producer).
+ZERO = 'zero'
+#: Command value of a STEP that holds the previous command (no command due this frame).
+HOLD = None
+
+
+@dataclass(frozen=True)
+class Action:
+    """One step for the node to execute, in order."""
+
+    kind: Act
+    t_ns: int
+    value: Any = None
+    text: str = ''
+
+
+class ClockMaster:
+    """The clock master's frame state machine (pure; wall time is passed in as ``now``).
+
+    Parameters
+    ----------
+    frame_ns : int
+        Base frame [ns] (> 0).
+    duration_ns : int
+        Run length [ns]; 0 = endless.
+    command_period_ns : int
+        Period of ``adcs/actuator_command`` [ns]; 0 = no command (free body).
+    wait_for_nodes : iterable of str
+        Nodes whose progress gates the clock (flow control) and whose final frame ends the run.
+    timeout_s : float
+        Wall-clock wait [s] for a missing input before going on (> 0).
+    max_lag_frames : int
+        A node may lag this many frames behind the clock.
+    lag_frames : mapping str -> int, optional
+        Per-node override of ``max_lag_frames`` (the recorder's deeper queues).
+    dead_after : int
+        Command frames missed in a row after which the command producer is dead: a zero
+        command is applied without waiting until it publishes again (>= 1).
+    no_final : iterable of str
+        Nodes not waited for at the end (they report no final frame, e.g. the recorder).
+    """
+
+    def __init__(self, frame_ns: int, duration_ns: int = 0, command_period_ns: int = 0,
+                 wait_for_nodes: Iterable[str] = (), timeout_s: float = 5.0,
+                 max_lag_frames: int = 40, lag_frames: Optional[Mapping[str, int]] = None,
+                 dead_after: int = 3, no_final: Iterable[str] = ()) -> None:
+        self.frame_ns = int(frame_ns)
+        if self.frame_ns <= 0:
+            raise ValueError(f'frame must be positive, got {frame_ns} ns')
+        self.duration_ns = int(duration_ns)
+        if self.duration_ns < 0:
+            raise ValueError(f'duration must be >= 0, got {duration_ns} ns')
+        cmd = int(command_period_ns)
+        if cmd < 0 or cmd % self.frame_ns:
+            raise ValueError(f'command period {cmd} ns must be a non-negative multiple of the '
+                             f'frame {self.frame_ns} ns')
+        if not float(timeout_s) > 0:
+            raise ValueError(f'timeout_s must be positive, got {timeout_s}')
+        if int(dead_after) < 1:
+            raise ValueError(f'dead_after must be >= 1, got {dead_after}')
+        self.timeout_s = float(timeout_s)
+        self.wait_for_nodes = [n for n in wait_for_nodes if n]
+        self.max_lag_frames = int(max_lag_frames)
+        self.lag_frames = dict(lag_frames or {})
+        self.no_final = set(no_final)
+        self.sync = FrameSync({'env': self.frame_ns, 'cmd': cmd}, dead_after=int(dead_after))
+        self.phase = MasterPhase.IDLE
+        self.k = 0
+        self.wait_since = 0.0
+        self.progress: Dict[str, int] = {}
+        self.final_nodes: set = set()
+        self.missed_frames = 0
+        self.throttled_frames = 0
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def t_ns(self) -> int:
+        """Elapsed sim time of the current frame [ns]."""
+        return self.k * self.frame_ns
+
+    def lagging(self) -> Optional[str]:
+        """Name of a node too far behind frame k, or None."""
+        for node in self.wait_for_nodes:
+            lag = self.lag_frames.get(node, self.max_lag_frames)
+            if self.t_ns - self.progress.get(node, 0) > lag * self.frame_ns:
+                return node
+        return None
+
+    def all_final(self) -> bool:
+        """True when every awaited node reported its final frame."""
+        return all(n in self.final_nodes for n in self.wait_for_nodes if n not in self.no_final)
+
+    # ------------------------------------------------------------------ events
+    def start(self, now: float) -> List[Action]:
+        """Start frame 0 (after the handshake)."""
+        if self.phase is not MasterPhase.IDLE:
+            return []
+        return self._begin_frame(now)
+
+    def on_environment(self, t_ns: int, env: Any, now: float) -> List[Action]:
+        """An environment message stamped ``t_ns`` (elapsed) arrived."""
+        self.sync.add('env', t_ns, env)
+        return self._advance(now)
+
+    def on_command(self, t_ns: int, cmd: Any, now: float) -> List[Action]:
+        """An actuator command stamped ``t_ns`` arrived (``cmd`` already checked)."""
+        out = []
+        if self.sync.add('cmd', t_ns, cmd):
+            out.append(Action(Act.LOG, t_ns, 'info', 'adcs/actuator_command publishes again: '
+                              'awaited again'))
+        return out + self._advance(now)
+
+    def on_progress(self, node: str, t_ns: int, final: bool, now: float) -> List[Action]:
+        """Node ``node`` has read everything up to ``t_ns`` (``final``: its last frame)."""
+        self.progress[node] = max(int(t_ns), self.progress.get(node, -1))
+        if final:
+            self.final_nodes.add(node)
+        if self.phase is MasterPhase.THROTTLED and not self.lagging():
+            return self._begin_frame(now)
+        if self.phase is MasterPhase.WAIT_FINAL and self.all_final():
+            return self._finish()
+        return []
+
+    def tick(self, now: float) -> List[Action]:
+        """Watchdog: act on a wait longer than ``timeout_s`` of wall time."""
+        if self.phase in (MasterPhase.IDLE, MasterPhase.DONE):
+            return []
+        if now - self.wait_since < self.timeout_s:
+            return []
+        t = self.t_ns
+        if self.phase is MasterPhase.THROTTLED:
+            node = self.lagging()
+            out = [Action(Act.LOG, t, 'warning',
+                          f'frame t={t / NS_PER_S:g} s: {node} is more than '
+                          f'{self.lag_frames.get(node, self.max_lag_frames)} frames behind '
+                          f'for {self.timeout_s:g} s; going on without it')]
+            if node is not None:
+                self.progress[node] = t           # a dead node must not stop the world
+            return out + self._begin_frame(now)
+        if self.phase is MasterPhase.WAIT_FINAL:
+            missing = [n for n in self.wait_for_nodes
+                       if n not in self.no_final and n not in self.final_nodes]
+            return [Action(Act.LOG, t, 'warning',
+                           f'end of run: no final frame from {", ".join(missing)} within '
+                           f'{self.timeout_s:g} s; finishing')] + self._finish()
+        if self.phase is MasterPhase.WAIT_ENV:
+            self.missed_frames += 1
+            self.wait_since = now
+            last = self.sync.value('env', t)
+            if last is None:    # nothing to go on with (frame 0): keep waiting, re-send clock
+                return [Action(Act.MISSED, t, ['sim/environment'],
+                               'still waiting (no environment yet); /clock re-sent'),
+                        Action(Act.CLOCK, t)]
+            self.sync.add('env', t, last)
+            return [Action(Act.MISSED, t, ['sim/environment'],
+                           'going on with the last environment, extrapolated by its rates')
+                    ] + self._advance(now)
+        # WAIT_CMD
+        self.missed_frames += 1
+        out = [Action(Act.MISSED, t, ['adcs/actuator_command'], 'applying a zero command')]
+        for name in self.sync.record_misses(t):
+            out.append(Action(Act.LOG, t, 'error',
+                              f'adcs/actuator_command missed {self.sync.dead_after} command '
+                              'frames in a row: its producer is treated as dead and no longer '
+                              'awaited; a zero command is applied until it publishes again'
+                              if name == 'cmd' else f'{name} treated as dead'))
+        return out + self._step(ZERO, now)
+
+    # ------------------------------------------------------------------ internals
+    def _begin_frame(self, now: float) -> List[Action]:
+        self.wait_since = now
+        if self.lagging():
+            if self.phase is not MasterPhase.THROTTLED:
+                self.throttled_frames += 1
+            self.phase = MasterPhase.THROTTLED
+            return []
+        self.phase = MasterPhase.WAIT_ENV
+        return [Action(Act.CLOCK, self.t_ns)] + self._advance(now)
+
+    def _advance(self, now: float) -> List[Action]:
+        t = self.t_ns
+        out: List[Action] = []
+        if self.phase is MasterPhase.WAIT_ENV and self.sync.has('env', t):
+            out.append(Action(Act.STATE, t, self.sync.value('env', t)))
+            if self.duration_ns and t >= self.duration_ns:
+                self.phase = MasterPhase.WAIT_FINAL   # every node processes its last frame
+                self.wait_since = now
+                if self.all_final():
+                    out += self._finish()
+                return out
+            self.phase = MasterPhase.WAIT_CMD
+            self.wait_since = now
+        if self.phase is MasterPhase.WAIT_CMD and not self.sync.missing(t):
+            out += self._step(self._command(t), now)
+        return out
+
+    def _command(self, t: int) -> Any:
+        """Command to apply over frame t: the one stamped t, ZERO (dead producer) or HOLD."""
+        if self.sync.required_stamp('cmd', t) is None:
+            return HOLD                            # not a command frame (or no commands)
+        if self.sync.is_dead('cmd'):
+            return ZERO
+        return self.sync.value('cmd', t)
+
+    def _step(self, cmd: Any, now: float) -> List[Action]:
+        t = self.t_ns
+        out = [Action(Act.STEP, t, (self.sync.value('env', t), cmd))]
+        self.sync.prune(t)
+        self.k += 1
+        return out + self._begin_frame(now)
+
+    def _finish(self) -> List[Action]:
+        if self.phase is MasterPhase.DONE:
+            return []
+        self.phase = MasterPhase.DONE
+        return [Action(Act.FINISH, self.t_ns)]

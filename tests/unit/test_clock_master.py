@@ -1,0 +1,149 @@
+"""The clock master's frame state machine without DDS: frame order, zero command on timeout,
+dead command producer after N misses, flow control, end of run.
+
+Wall time is injected (``now``), so every timeout is exercised without sleeping.
+"""
+import pytest
+
+from adcs_nodes.core.lockstep import ZERO, Act, ClockMaster, MasterPhase
+
+S = 1_000_000_000
+
+
+def kinds(actions):
+    return [(a.kind, a.t_ns // S) for a in actions]
+
+
+def steps(actions):
+    return [(a.t_ns // S, a.value[1]) for a in actions if a.kind is Act.STEP]
+
+
+def test_free_body_frames_in_order_and_done_at_the_duration():
+    m = ClockMaster(S, duration_ns=2 * S)
+    out = m.start(now=0.0)
+    assert kinds(out) == [(Act.CLOCK, 0)] and m.phase is MasterPhase.WAIT_ENV
+    out = m.on_environment(0, 'e0', now=0.0)
+    assert kinds(out) == [(Act.STATE, 0), (Act.STEP, 0), (Act.CLOCK, 1)]
+    assert out[1].value == ('e0', None)            # no command: hold (the zero start)
+    m.on_environment(S, 'e1', now=0.0)
+    out = m.on_environment(2 * S, 'e2', now=0.0)
+    assert kinds(out) == [(Act.STATE, 2), (Act.FINISH, 2)]   # no node to wait for
+    assert m.phase is MasterPhase.DONE and m.missed_frames == 0
+
+
+def test_waits_for_the_command_due_then_holds_it_between_command_frames():
+    m = ClockMaster(S, command_period_ns=2 * S)
+    m.start(0.0)
+    out = m.on_environment(0, 'e0', 0.0)
+    assert kinds(out) == [(Act.STATE, 0)] and m.phase is MasterPhase.WAIT_CMD
+    m.on_command(2 * S, 'c2', 0.0)                 # early command of frame 2 does not count
+    assert m.phase is MasterPhase.WAIT_CMD
+    out = m.on_command(0, 'c0', 0.0)
+    assert steps(out) == [(0, 'c0')]
+    out = m.on_environment(S, 'e1', 0.0)           # frame 1: no command due -> hold
+    assert steps(out) == [(1, None)]
+    out = m.on_environment(2 * S, 'e2', 0.0)       # frame 2: c2 arrived early, used now
+    assert steps(out) == [(2, 'c2')]
+
+
+def test_missing_command_gives_a_zero_command_after_the_timeout_and_says_so():
+    m = ClockMaster(S, command_period_ns=S, timeout_s=10.0)
+    m.start(0.0)
+    m.on_environment(0, 'e0', 0.0)
+    assert m.tick(9.9) == []                       # not yet
+    out = m.tick(10.0)
+    missed = [a for a in out if a.kind is Act.MISSED]
+    assert missed[0].value == ['adcs/actuator_command']
+    assert 'zero command' in missed[0].text and 'last value' not in missed[0].text
+    assert steps(out) == [(0, ZERO)] and m.missed_frames == 1
+
+
+def test_dead_manager_costs_n_timeouts_then_no_wait_until_it_publishes_again():
+    """Issue 12: a killed controller_manager made dynamics wait 2 x timeout every frame."""
+    m = ClockMaster(S, command_period_ns=S, timeout_s=10.0, dead_after=3)
+    now = 0.0
+    m.start(now)
+    m.on_environment(0, 'e0', now)
+    m.on_command(0, 'c0', now)
+    waited = 0.0
+    for k in range(1, 21):                          # the manager died after frame 0
+        out = m.on_environment(k * S, f'e{k}', now)
+        if m.phase is MasterPhase.WAIT_CMD:         # still awaited: time out
+            now += 10.0
+            waited += 10.0
+            out = m.tick(now)
+        assert steps(out) == [(k, ZERO)]
+    assert waited == 30.0                           # 3 timeouts, then 17 frames at once
+    assert m.missed_frames == 3 and m.sync.is_dead('cmd')
+    out = m.on_environment(21 * S, 'e21', now)
+    assert steps(out) == [(21, ZERO)]
+    logs = m.on_command(22 * S, 'c22', now)         # it publishes again ...
+    assert any(a.kind is Act.LOG and 'again' in a.text for a in logs)
+    out = m.on_environment(22 * S, 'e22', now)
+    assert steps(out) == [(22, 'c22')]              # ... and is awaited and applied again
+    m.on_environment(23 * S, 'e23', now)
+    assert m.phase is MasterPhase.WAIT_CMD
+
+
+def test_missing_environment_goes_on_with_the_last_one():
+    m = ClockMaster(S, timeout_s=1.0)
+    m.start(0.0)
+    out = m.tick(1.5)                               # frame 0: nothing to go on with
+    assert kinds(out) == [(Act.MISSED, 0), (Act.CLOCK, 0)] and m.phase is MasterPhase.WAIT_ENV
+    m.on_environment(0, 'e0', 1.5)
+    out = m.tick(3.0)                               # frame 1 never answered
+    assert [a.value for a in out if a.kind is Act.STATE] == ['e0']
+    assert steps(out) == [(1, None)] and m.missed_frames == 2
+
+
+def test_flow_control_throttles_and_resumes_on_progress():
+    m = ClockMaster(S, wait_for_nodes=['est', 'recorder'], max_lag_frames=2,
+                    lag_frames={'recorder': 5}, timeout_s=1.0, no_final=['recorder'])
+    m.start(0.0)
+    for k in range(3):
+        m.on_environment(k * S, 'e', 0.0)
+    assert m.phase is MasterPhase.THROTTLED and m.t_ns == 3 * S and m.lagging() == 'est'
+    assert m.on_progress('est', 0, False, 0.0) == []          # 3 frames behind: still
+    assert m.phase is MasterPhase.THROTTLED and m.throttled_frames == 1
+    out = m.on_progress('est', S, False, 0.0)                     # 2 behind: allowed
+    assert kinds(out) == [(Act.CLOCK, 3)]
+    m.on_progress('est', 10 * S, False, 0.0)
+    for k in range(3, 6):                                         # recorder may lag 5
+        m.on_environment(k * S, 'e', 0.0)
+    assert m.phase is MasterPhase.THROTTLED and m.lagging() == 'recorder' and m.t_ns == 6 * S
+
+
+def test_a_dead_lagging_node_does_not_stop_the_world():
+    m = ClockMaster(S, wait_for_nodes=['est'], max_lag_frames=1, timeout_s=1.0)
+    m.start(0.0)
+    m.on_environment(0, 'e', 0.0)
+    m.on_environment(S, 'e', 0.0)
+    assert m.phase is MasterPhase.THROTTLED and m.throttled_frames == 1
+    out = m.tick(1.0)
+    assert kinds(out)[:2] == [(Act.LOG, 2), (Act.CLOCK, 2)]
+    assert m.phase is MasterPhase.WAIT_ENV
+
+
+def test_end_waits_for_final_progress_then_finishes():
+    m = ClockMaster(S, duration_ns=S, wait_for_nodes=['est', 'recorder'],
+                    no_final=['recorder'], timeout_s=1.0)
+    m.start(0.0)
+    m.on_progress('est', 0, False, 0.0)
+    m.on_environment(0, 'e0', 0.0)
+    out = m.on_environment(S, 'e1', 0.0)
+    assert m.phase is MasterPhase.WAIT_FINAL and Act.FINISH not in [a.kind for a in out]
+    out = m.on_progress('est', S, True, 0.0)
+    assert [a.kind for a in out] == [Act.FINISH] and m.phase is MasterPhase.DONE
+    m2 = ClockMaster(S, duration_ns=0, wait_for_nodes=['est'], timeout_s=1.0)
+    assert m2.tick(100.0) == []                      # idle: nothing to time out
+
+
+def test_bad_configuration_raises():
+    with pytest.raises(ValueError, match='frame'):
+        ClockMaster(0)
+    with pytest.raises(ValueError, match='multiple'):
+        ClockMaster(S, command_period_ns=S // 2)
+    with pytest.raises(ValueError, match='timeout'):
+        ClockMaster(S, timeout_s=0.0)
+    with pytest.raises(ValueError, match='dead_after'):
+        ClockMaster(S, dead_after=0)
