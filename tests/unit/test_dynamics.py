@@ -39,6 +39,13 @@ def h_eci(q, inertia, w, axes=None, h_w=None):
     return attitude.to_matrix(q) @ h_body
 
 
+def angle(q1, q2):
+    """Rotation angle [rad] between two attitudes, resolving 1e-16 rad (``angle_between``'s
+    arccos cannot tell angles below 3e-8 rad from zero)."""
+    d = attitude.multiply(attitude.conjugate(attitude.normalize(q1)), attitude.normalize(q2))
+    return 2.0 * np.arctan2(np.linalg.norm(d[:3]), abs(d[3]))
+
+
 def run(sc, state, t_end, dt, substeps, env=ENV, command=None):
     command = command if command is not None else sc.zero_command()
     t = 0.0
@@ -141,7 +148,7 @@ def test_axisymmetric_torque_free_body_matches_closed_form():
         np.testing.assert_allclose(state.omega_body_eci_body, w_true, rtol=0, atol=1e-8)
         q_true = attitude.multiply(attitude.multiply(attitude.from_axis_angle(h_i, wp * t), Q0),
                                    attitude.from_axis_angle([0.0, 0.0, 1.0], -lam * t))
-        assert attitude.angle_between(state.q_eci_body, q_true) < 1e-8
+        assert angle(state.q_eci_body, q_true) < 1e-8
 
 
 def test_constant_torque_about_principal_axis_matches_closed_form():
@@ -156,7 +163,7 @@ def test_constant_torque_about_principal_axis_matches_closed_form():
     assert state.omega_body_eci_body[2] == pytest.approx(w0 + tau / 30.0 * t_end, rel=1e-12)
     q_true = attitude.multiply(Q0, attitude.from_axis_angle(
         [0.0, 0.0, 1.0], w0 * t_end + tau / 60.0 * t_end ** 2))
-    assert attitude.angle_between(state.q_eci_body, q_true) < 1e-9
+    assert angle(state.q_eci_body, q_true) < 1e-9
 
 
 # ---------------------------------------------------------------------- actuators in the loop
@@ -237,33 +244,44 @@ def test_no_magnetorquer_means_no_magnetic_torque():
 
 
 # --------------------------------------------------- whole model vs independent reference
-def _reference_rhs(inertia, axes, t0, env, dipole, tau_w, tau_ext):
-    """(E1)-(E5) re-written with numpy.cross / attitude helpers, for solve_ivp."""
+def _hermite_cubic(b0, d0, b1, d1, tau):
+    """Coefficients (4, 3) of p(s) = sum a_j s^j with p, p' = b0, d0 at s = -tau and b1, d1 at
+    s = 0, by solving the 4x4 interpolation system (not the model's closed form)."""
+    m = np.array([[1.0, -tau, tau ** 2, -tau ** 3], [0.0, 1.0, -2.0 * tau, 3.0 * tau ** 2],
+                  [1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
+    return np.linalg.solve(m, np.vstack([b0, d0, b1, d1]))
+
+
+def _reference_rhs(inertia, axes, t0, b_poly, dipole, tau_w, tau_ext):
+    """(E1)-(E4), (E6) re-written with numpy.cross / attitude helpers for solve_ivp; state
+    [q, w, h, r, v]; field b(s) = sum_j b_poly[j] s^j."""
     a = axes / np.linalg.norm(axes, axis=1, keepdims=True)
+    n = axes.shape[0]
 
     def f(t, x):
-        q, w, h = x[:4], x[4:7], x[7:]
+        q, w, h, r, v = x[:4], x[4:7], x[7:7 + n], x[7 + n:10 + n], x[10 + n:]
         s = t - t0
         c = attitude.to_matrix(q).T                       # ECI -> body
-        r_b = c @ (env.r_eci + env.v_eci * s)
-        b_b = c @ (env.b_eci + env.b_dot_eci * s)
+        r_b = c @ r
+        b_b = c @ sum(b_poly[j] * s ** j for j in range(4))
         rn = np.linalg.norm(r_b)
         tau = (3 * MU_EARTH / rn ** 3 * np.cross(r_b / rn, inertia @ (r_b / rn))
                + np.cross(dipole, b_b) + tau_ext - a.T @ tau_w)
         w_dot = np.linalg.solve(inertia, tau - np.cross(w, inertia @ w + a.T @ h))
-        return np.concatenate([attitude.derivative(q, w), w_dot, tau_w])
+        return np.concatenate([attitude.derivative(q, w), w_dot, tau_w, v,
+                               -MU_EARTH * r / np.linalg.norm(r) ** 3])
     return f
 
 
 def test_full_model_matches_independent_reference():
-    """GG with r(s) = r + v s, magnetorquer with b(s) = b + b_dot s, wheels, ideal torque and a
-    constant disturbance, over two 20 s frames, against DOP853 at rtol 1e-12."""
+    """GG on the two-body orbit (E6), magnetorquer in the field (E7): the line in the first
+    frame, the cubic Hermite through both frames' (b, b_dot) in the second (E8); wheels, ideal
+    torque and a constant disturbance; two 20 s frames against DOP853 at rtol 1e-12."""
     inertia = np.array([[1200.0, -800.0, -10.0], [-800.0, 2500.0, -25.0],
                         [-10.0, -25.0, 2800.0]])          # paper 001's plant, eq. (30)
     wheels = WheelCluster(PYRAMID, max_torque=1.0, max_momentum=55.0, inertia=0.1)
     mtq = Magnetorquer([30.0, 30.0, 30.0])
     dist = ConstantTorque([1e-4, -2e-4, 5e-5])
-    sc = Spacecraft(inertia, magnetorquer=mtq, wheels=wheels, disturbances=[dist])
     envs = [FrameEnvironment(np.array([R_ORBIT, 0.0, 0.0]), np.array([0.0, 1035.0, 7436.0]),
                              np.array([1.5e-5, -2.0e-5, 3.5e-5]),
                              np.array([4e-8, 2e-8, -5e-8])),
@@ -271,26 +289,42 @@ def test_full_model_matches_independent_reference():
                              np.array([-157.0, 1035.0, 7434.0]),
                              np.array([1.6e-5, -1.9e-5, 3.4e-5]),
                              np.array([3e-8, 3e-8, -4e-8]))]
+    dt = 20.0
+    b_polys = [np.vstack([envs[0].b_eci, envs[0].b_dot_eci, np.zeros((2, 3))]),
+               _hermite_cubic(envs[0].b_eci, envs[0].b_dot_eci, envs[1].b_eci,
+                              envs[1].b_dot_eci, dt)]
     cmds = [ActuatorCommand(np.array([20.0, -15.0, 45.0]), np.array([0.3, -0.2, 0.1, 0.05]),
                             np.array([0.01, 0.0, -0.02])),
             ActuatorCommand(np.array([-5.0, 25.0, 10.0]), np.array([-0.4, 0.0, 0.2, 0.3]),
                             np.zeros(3))]
     applied_dipoles = [np.array([20.0, -15.0, 30.0]), np.array([-5.0, 25.0, 10.0])]  # by hand
     h0 = np.array([5.0, -3.0, 2.0, 10.0])
-    state = SpacecraftState(Q0, np.array([0.01, -0.02, 0.015]), h0)
-    x_ref = pack_state(state)
-    dt = 20.0
-    for k, (env, cmd, m) in enumerate(zip(envs, cmds, applied_dipoles)):
+    s0 = SpacecraftState(Q0, np.array([0.01, -0.02, 0.015]), h0)
+    x_ref = pack_state(s0)
+    for k, (env, cmd, m, poly) in enumerate(zip(envs, cmds, applied_dipoles, b_polys)):
         t0 = k * dt
-        f = _reference_rhs(inertia, PYRAMID, t0, env, m, cmd.wheel_torque,
+        f = _reference_rhs(inertia, PYRAMID, t0, poly, m, cmd.wheel_torque,
                            cmd.torque_body + dist.torque_body)
-        sol = solve_ivp(f, (t0, t0 + dt), x_ref, method='DOP853', rtol=1e-12, atol=1e-14)
-        x_ref = sol.y[:, -1]
-        state, applied = sc.step(state, t0, dt, env, cmd, substeps=200)
-        np.testing.assert_array_equal(applied['dipole_body'], m)
-    assert attitude.angle_between(state.q_eci_body, x_ref[:4]) < 1e-9
+        sol = solve_ivp(f, (t0, t0 + dt), np.concatenate([x_ref, env.r_eci, env.v_eci]),
+                        method='DOP853', rtol=1e-12, atol=1e-14)
+        x_ref = sol.y[:11, -1]
+
+    def model(field_history):
+        sc = Spacecraft(inertia, magnetorquer=mtq, wheels=wheels, disturbances=[dist],
+                        field_history=field_history)
+        state = s0
+        for k, (env, cmd, m) in enumerate(zip(envs, cmds, applied_dipoles)):
+            state, applied = sc.step(state, k * dt, dt, env, cmd, substeps=200)
+            np.testing.assert_array_equal(applied['dipole_body'], m)
+        return state
+
+    state = model(True)
+    assert angle(state.q_eci_body, x_ref[:4]) < 1e-9
     np.testing.assert_allclose(state.omega_body_eci_body, x_ref[4:7], rtol=0, atol=1e-11)
     np.testing.assert_allclose(state.h_wheels, x_ref[7:], rtol=0, atol=1e-12)
+    # the comparison is sharp: the straight-line field in frame 2 is far outside it
+    line = model(False)
+    assert np.linalg.norm(line.omega_body_eci_body - x_ref[4:7]) > 1e-9
 
 
 def test_applied_telemetry_is_consistent():

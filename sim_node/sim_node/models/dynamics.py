@@ -17,25 +17,56 @@ Without external torque the inertial angular momentum ``R(q) (I omega + A h_w)``
 and without wheels also the kinetic energy ``1/2 omega . I omega``.
 
 Frame step (DESIGN section 6): from ``t_k`` to ``t_k + dt`` the command is held (zero-order
-hold) and the environment is extrapolated from its value and rate at ``t_k``::
+hold). The environment at ``t_k`` (the orbit model's ``r, v`` and the field model's ``b`` and
+``b_dot``) is carried through the frame, ``s = t - t_k``, as follows:
 
-    r_eci(t_k + s) = r_eci + v_eci s,     b_eci(t_k + s) = b_eci + b_dot_eci s            (E5)
+* Orbit: two-body motion integrated with the attitude in the same RK4 stages (E6), so the
+  position at every stage lies on the orbit, not on the straight line ``r + v s``::
 
-Integration: classical fixed-step RK4 with ``substeps`` equal substeps; the quaternion is
-renormalised after each substep; disturbance torques are sampled at each substep's midpoint
-and held over it. Inputs are validated once per frame, never inside the substep loop.
+      dr_eci/dt = v_eci,   dv_eci/dt = -mu r_eci / |r_eci|^3                             (E6)
+
+  For the Keplerian circular orbit this *is* the orbit model (RK4 truncation at a 0.1 s
+  substep: < 1e-9 m per frame). For SGP4 it leaves out the perturbations inside one frame
+  (J2 about 1e-2 m/s^2: < 1 m, 1e-7 rad of direction, over a 10 s frame); the next frame
+  starts again from the orbit model.
+* Field: a cubic in ``s`` (E7). With only ``b, b_dot`` it is the line ``b + b_dot s``. A
+  straight line biases ``|b|``: the field seen on an orbit turns at about twice the orbit
+  rate ``n``, so the line is off by ``(2 n s)^2 / 2`` relative at ``s`` (2e-4 at the end of a
+  10 s frame, 7e-5 on average, always with the same sign). :class:`Spacecraft` therefore
+  fits, when consecutive frames are stepped, the cubic Hermite polynomial through
+  ``(b, b_dot)`` at ``t_{k-1}`` and ``t_k`` and extrapolates it over the frame (E8); its
+  error is ``b''''/24 (s + tau)^2 s^2`` (about ``(2 n dt)^4 / 6`` relative at the frame end:
+  3e-8 at 10 s, 3e-12 at 1 s frames)::
+
+      b_eci(t_k + s) = b + b_dot s + b_ddot s^2 / 2 + b_dddot s^3 / 6                    (E7)
+      tau = t_k - t_{k-1},  D = b_k - b_{k-1}                                             (E8)
+      b_ddot  = 2 [(2 b_dot_k + b_dot_{k-1}) / tau - 3 D / tau^2]
+      b_dddot = 6 [(b_dot_k + b_dot_{k-1}) / tau^2 - 2 D / tau^3]
+
+  ASSUMPTION: the first frame and any frame after a gap (not consecutive with the previous
+  step, or :meth:`Spacecraft.reset_field_history`) use the line. The dynamics node cannot
+  see the field at ``t_{k+1}`` before it integrates frame k, so the cubic interpolates the
+  past instead of interpolating between the frame's ends.
+
+Integration: classical fixed-step RK4 with ``substeps`` equal substeps, compiled with numba in
+``kernels.frame_step`` (one call per frame; the same function runs as Python with
+``NUMBA_DISABLE_JIT=1``); the quaternion is renormalised after each substep; disturbance
+torques are sampled at each substep's midpoint and held over it. Inputs are validated once per
+frame, never inside the substep loop.
 """
 from __future__ import annotations
 
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
+from sim_node.models import kernels
 from sim_node.models.actuators import Magnetorquer, WheelCluster
-from sim_node.models.disturbances import MU_EARTH, Disturbance, check_inertia
+from sim_node.models.disturbances import (MU_EARTH, ConstantTorque, Disturbance, RandomTorque,
+                                          check_inertia)
 
 
 def _zeros3() -> np.ndarray:
@@ -68,7 +99,7 @@ class SpacecraftState:
 
 @dataclass
 class FrameEnvironment:
-    """Environment at the start ``t_k`` of a frame, with its rates for (E5).
+    """Environment at the start ``t_k`` of a frame, with the rates that carry it (E6), (E7).
 
     Attributes
     ----------
@@ -80,12 +111,17 @@ class FrameEnvironment:
         Geomagnetic field [T], ECI.
     b_dot_eci : numpy.ndarray, shape (3,)
         Time derivative of ``b_eci`` along the trajectory [T/s], ECI.
+    b_ddot_eci, b_dddot_eci : numpy.ndarray, shape (3,), optional
+        Second and third derivatives [T/s^2], [T/s^3], ECI, for (E7). ``None`` (the default)
+        lets :meth:`Spacecraft.step` take them from the previous frame (E8), or zero.
     """
 
     r_eci: np.ndarray
     v_eci: np.ndarray = field(default_factory=_zeros3)
     b_eci: np.ndarray = field(default_factory=_zeros3)
     b_dot_eci: np.ndarray = field(default_factory=_zeros3)
+    b_ddot_eci: Optional[np.ndarray] = None
+    b_dddot_eci: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -109,7 +145,7 @@ class ActuatorCommand:
 
 def rk4_step(f: Callable[[float, np.ndarray], np.ndarray], t: float, x: np.ndarray,
              h: float) -> np.ndarray:
-    """One classical Runge-Kutta step of ``dx/dt = f(t, x)``.
+    """One classical Runge-Kutta step of ``dx/dt = f(t, x)`` (the scheme of the kernel).
 
     Parameters
     ----------
@@ -145,31 +181,46 @@ def unpack_state(x: np.ndarray) -> SpacecraftState:
     return SpacecraftState(x[0:4].copy(), x[4:7].copy(), x[7:].copy())
 
 
-# The right-hand side works on 3-vectors as Python float tuples and (3, 3) matrices as
-# row-major 9-tuples: on 3 elements a numpy call costs ~1 us of overhead, a float operation
-# ~30 ns, which makes RK4 about twice as fast. Validation happens before, at the edges.
-Vec3 = tuple[float, float, float]
+def hermite_field_derivatives(b_prev, b_dot_prev, b, b_dot, tau: float
+                              ) -> tuple[np.ndarray, np.ndarray]:
+    """``(b_ddot, b_dddot)`` at the right end of the cubic Hermite polynomial (E8).
+
+    Parameters
+    ----------
+    b_prev, b_dot_prev : numpy.ndarray, shape (3,)
+        Field [T] and its rate [T/s] at ``t - tau``, ECI.
+    b, b_dot : numpy.ndarray, shape (3,)
+        Field [T] and its rate [T/s] at ``t``, ECI.
+    tau : float
+        Time between the two samples [s], ``> 0``.
+
+    Returns
+    -------
+    tuple of numpy.ndarray, shape (3,)
+        Second [T/s^2] and third [T/s^3] derivative of the cubic at ``t``.
+    """
+    d = b - b_prev
+    c2 = (2.0 * b_dot + b_dot_prev) / tau - 3.0 * d / tau ** 2
+    c3 = (b_dot + b_dot_prev) / tau ** 2 - 2.0 * d / tau ** 3
+    return 2.0 * c2, 6.0 * c3
 
 
-def _matvec(m: tuple, v: Vec3) -> Vec3:
-    """``M v`` for a row-major 9-tuple ``M``."""
-    x, y, z = v
-    return (m[0] * x + m[1] * y + m[2] * z,
-            m[3] * x + m[4] * y + m[5] * z,
-            m[6] * x + m[7] * y + m[8] * z)
+def propagate_environment(env: FrameEnvironment, ds: float,
+                          mu: float = MU_EARTH) -> FrameEnvironment:
+    """``env`` moved by ``ds`` [s]: ``r, v`` along the two-body orbit (E6), ``b`` along its
+    line ``b + b_dot ds`` (higher field terms dropped: they are not meant for long spans).
 
-
-def _cross(a: Vec3, b: Vec3) -> Vec3:
-    """``a x b``."""
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _body_from_eci(qx: float, qy: float, qz: float, qw: float) -> tuple:
-    """``R(q / |q|)^T`` as a row-major 9-tuple: ECI components to body components."""
-    k = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)
-    return (1.0 - k * (qy * qy + qz * qz), k * (qx * qy + qz * qw), k * (qx * qz - qy * qw),
-            k * (qx * qy - qz * qw), 1.0 - k * (qx * qx + qz * qz), k * (qy * qz + qx * qw),
-            k * (qx * qz + qy * qw), k * (qy * qz - qx * qw), 1.0 - k * (qx * qx + qy * qy))
+    For an environment sample that is late (a timeout, real-time mode); RK4 steps of at most
+    1 s.
+    """
+    r = np.asarray(env.r_eci, dtype=float)
+    v = np.asarray(env.v_eci, dtype=float)
+    if ds and r.any():
+        r, v = kernels.propagate_two_body(r, v, float(ds), float(mu),
+                                          max(1, int(math.ceil(abs(ds)))))
+    b_dot = np.asarray(env.b_dot_eci, dtype=float)
+    return FrameEnvironment(r_eci=r, v_eci=v, b_eci=np.asarray(env.b_eci, float) + b_dot * ds,
+                            b_dot_eci=b_dot)
 
 
 def _vec(value, name: str, n: int = 3) -> np.ndarray:
@@ -179,6 +230,14 @@ def _vec(value, name: str, n: int = 3) -> np.ndarray:
     if not np.isfinite(arr).all():
         raise ValueError(f'{name} is not finite: {arr}')
     return arr
+
+
+def _body_from_eci(qx: float, qy: float, qz: float, qw: float) -> tuple:
+    """``R(q / |q|)^T`` as a row-major 9-tuple: ECI components to body components."""
+    k = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)
+    return (1.0 - k * (qy * qy + qz * qz), k * (qx * qy + qz * qw), k * (qx * qz - qy * qw),
+            k * (qx * qy - qz * qw), 1.0 - k * (qx * qx + qz * qz), k * (qy * qz + qx * qw),
+            k * (qx * qz + qy * qw), k * (qy * qz - qx * qw), 1.0 - k * (qx * qx + qy * qy))
 
 
 class Spacecraft:
@@ -199,7 +258,10 @@ class Spacecraft:
     gravity_gradient : bool
         Include the gravity-gradient torque (D1).
     mu : float
-        Gravitational parameter [m^3/s^2] for (D1).
+        Gravitational parameter [m^3/s^2] for (D1) and the orbit (E6).
+    field_history : bool
+        Use the previous frame's field for the cubic (E8) when frames are consecutive;
+        ``False``: the line ``b + b_dot s`` in every frame.
 
     Raises
     ------
@@ -209,7 +271,8 @@ class Spacecraft:
 
     def __init__(self, inertia, magnetorquer: Magnetorquer | None = None,
                  wheels: WheelCluster | None = None, disturbances: Sequence = (),
-                 gravity_gradient: bool = True, mu: float = MU_EARTH) -> None:
+                 gravity_gradient: bool = True, mu: float = MU_EARTH,
+                 field_history: bool = True) -> None:
         self.inertia = check_inertia(inertia)
         self.inertia_inv = np.linalg.inv(self.inertia)
         if magnetorquer is not None and not isinstance(magnetorquer, Magnetorquer):
@@ -226,8 +289,21 @@ class Spacecraft:
         self.disturbances = list(disturbances)
         self.gravity_gradient = bool(gravity_gradient)
         self.mu = float(mu)
+        self.field_history = bool(field_history)
         self.n_wheels = wheels.n if wheels is not None else 0
-        self._A = wheels.A if wheels is not None else np.zeros((3, 0))
+        self._A = np.ascontiguousarray(wheels.A if wheels is not None else np.zeros((3, 0)))
+        # kernel constants (contiguous float64: one compiled specialisation)
+        self._inertia_c = np.ascontiguousarray(self.inertia)
+        self._inertia_inv_c = np.ascontiguousarray(self.inertia_inv)
+        self._dipole_max = (np.array(magnetorquer.max_dipole_Am2, dtype=float)
+                            if magnetorquer is not None else np.zeros(3))
+        if wheels is not None:
+            self._wheel_max_torque = np.array(wheels.max_torque, dtype=float)
+            self._wheel_max_momentum = np.array(wheels.max_momentum, dtype=float)
+        else:
+            self._wheel_max_torque = self._wheel_max_momentum = np.zeros(0)
+        self._no_dist: dict[int, np.ndarray] = {}
+        self._field_prev: Optional[tuple] = None     # (t, dt, b, b_dot) of the last frame
 
     # ----------------------------------------------------------------- validation (edges)
     def check_state(self, state: SpacecraftState) -> None:
@@ -243,84 +319,77 @@ class Spacecraft:
         """An all-zero :class:`ActuatorCommand` sized for this spacecraft."""
         return ActuatorCommand(wheel_torque=np.zeros(self.n_wheels))
 
-    def _saturate(self, command: ActuatorCommand, h_wheels: np.ndarray,
-                  dt: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Applied (dipole_body, wheel_torque, torque_ideal_body) of a command."""
-        dipole = _vec(command.dipole_body, 'dipole_body')
-        if self.magnetorquer is not None:
-            dipole = self.magnetorquer.apply(dipole)
-        else:
-            dipole = np.zeros(3)
+    def reset_field_history(self) -> None:
+        """Forget the previous frame's field: the next frame uses the line (E7)."""
+        self._field_prev = None
+
+    def _check_env(self, r_eci, v_eci, b_eci, b_dot_eci) -> tuple:
+        env = (_vec(r_eci, 'r_eci'), _vec(v_eci, 'v_eci'), _vec(b_eci, 'b_eci'),
+               _vec(b_dot_eci, 'b_dot_eci'))
+        if self.gravity_gradient and not env[0].any():
+            raise ValueError('r_eci must not be zero with gravity gradient on')
+        return env
+
+    def _wheel_command(self, command: ActuatorCommand) -> np.ndarray:
         cmd_w = np.asarray(command.wheel_torque, dtype=float).reshape(-1)
         if cmd_w.size == 0:
-            cmd_w = np.zeros(self.n_wheels)
-        cmd_w = _vec(cmd_w, 'wheel_torque', self.n_wheels)
-        tau_w = self.wheels.apply(cmd_w, h_wheels, dt) if self.wheels is not None else cmd_w
-        return dipole, tau_w, _vec(command.torque_body, 'torque_body').copy()
+            return np.zeros(self.n_wheels)
+        return _vec(cmd_w, 'wheel_torque', self.n_wheels)
 
-    # ---------------------------------------------------------------------- the model
-    def _make_rhs(self, t_k: float, r_eci: np.ndarray, v_eci: np.ndarray, b_eci: np.ndarray,
-                  b_dot_eci: np.ndarray, dipole_body: np.ndarray, tau_held_body: np.ndarray,
-                  tau_w: np.ndarray) -> tuple[Callable, Callable]:
-        """``f(t, x)`` of (E1)-(E5) with everything but the state held fixed.
+    def _kernel_state(self, state: SpacecraftState, r_eci, v_eci) -> np.ndarray:
+        """Kernel state (``kernels`` layout) of ``state`` at the position ``r_eci``, ``v_eci``."""
+        x = np.empty(kernels.state_size(self.n_wheels))
+        x[kernels.Q] = state.q_eci_body
+        x[kernels.W] = state.omega_body_eci_body
+        x[kernels.R] = r_eci
+        x[kernels.V] = v_eci
+        x[kernels.H0:] = state.h_wheels
+        return x
 
-        ``tau_held_body`` [N m] is the sum of the torques that do not depend on the state:
-        ideal, disturbances and the wheels' reaction ``-A tau_w``; it is read at every call, so
-        the caller may update it in place between substeps. Also returns
-        ``torques(q, s) -> (tau_gg, tau_magnetic)`` (tuples, body axes [N m]) at ``t_k + s``.
-        """
-        inertia = tuple(self.inertia.ravel().tolist())
-        inertia_inv = tuple(self.inertia_inv.ravel().tolist())
-        a_mat = self._A
-        use_gg = self.gravity_gradient
-        use_mtq = bool(np.any(dipole_body))
-        use_wheels = self.n_wheels > 0
-        three_mu = 3.0 * self.mu
-        r0, v0 = tuple(r_eci.tolist()), tuple(v_eci.tolist())
-        b0, b_dot = tuple(b_eci.tolist()), tuple(b_dot_eci.tolist())
-        dipole = tuple(dipole_body.tolist())
-        n_x = 7 + self.n_wheels
-        zero = (0.0, 0.0, 0.0)
+    def _field_coefficients(self, t: float, dt: float, env: FrameEnvironment, b_eci: np.ndarray,
+                            b_dot_eci: np.ndarray) -> np.ndarray:
+        """Polynomial (E7) in ``s`` as rows ``c_j`` [T/s^j] (4, 3), from ``env`` or (E8)."""
+        coef = np.zeros((4, 3))
+        coef[0] = b_eci
+        coef[1] = b_dot_eci
+        prev, self._field_prev = self._field_prev, (t, dt, b_eci.copy(), b_dot_eci.copy())
+        if env.b_ddot_eci is not None or env.b_dddot_eci is not None:
+            if env.b_ddot_eci is not None:
+                coef[2] = 0.5 * _vec(env.b_ddot_eci, 'b_ddot_eci')
+            if env.b_dddot_eci is not None:
+                coef[3] = _vec(env.b_dddot_eci, 'b_dddot_eci') / 6.0
+        elif self.field_history and prev is not None:
+            t_prev, tau, b_prev, b_dot_prev = prev
+            if abs(t_prev + tau - t) <= 1e-9 * tau:          # consecutive frames only
+                b_ddot, b_dddot = hermite_field_derivatives(b_prev, b_dot_prev, b_eci,
+                                                            b_dot_eci, tau)
+                coef[2] = 0.5 * b_ddot
+                coef[3] = b_dddot / 6.0
+        return coef
 
-        def torques(q: tuple, s: float) -> tuple[Vec3, Vec3]:
-            c = _body_from_eci(*q)
-            tau_gg = tau_mag = zero
-            if use_gg:
-                r = _matvec(c, (r0[0] + s * v0[0], r0[1] + s * v0[1], r0[2] + s * v0[2]))
-                r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
-                k = three_mu / (r2 * r2 * math.sqrt(r2))   # (D1) with r unnormalised
-                gx, gy, gz = _cross(r, _matvec(inertia, r))
-                tau_gg = (k * gx, k * gy, k * gz)
-            if use_mtq:
-                b = _matvec(c, (b0[0] + s * b_dot[0], b0[1] + s * b_dot[1],
-                                b0[2] + s * b_dot[2]))
-                tau_mag = _cross(dipole, b)                  # (A1)
-            return tau_gg, tau_mag
-
-        def rhs(t: float, x: np.ndarray) -> np.ndarray:
-            qx, qy, qz, qw, wx, wy, wz = x[:7].tolist()
-            tx, ty, tz = tau_held_body.tolist()
-            if use_gg or use_mtq:
-                (gx, gy, gz), (mx, my, mz) = torques((qx, qy, qz, qw), t - t_k)
-                tx += gx + mx
-                ty += gy + my
-                tz += gz + mz
-            hx, hy, hz = _matvec(inertia, (wx, wy, wz))
-            if use_wheels:
-                hwx, hwy, hwz = (a_mat @ x[7:]).tolist()
-                hx, hy, hz = hx + hwx, hy + hwy, hz + hwz
-            gyro = _cross((wx, wy, wz), (hx, hy, hz))
-            w_dot = _matvec(inertia_inv, (tx - gyro[0], ty - gyro[1], tz - gyro[2]))  # (E2)
-            x_dot = np.empty(n_x)
-            x_dot[:7] = (0.5 * (qw * wx + qy * wz - qz * wy),                          # (E1)
-                         0.5 * (qw * wy + qz * wx - qx * wz),
-                         0.5 * (qw * wz + qx * wy - qy * wx),
-                         -0.5 * (qx * wx + qy * wy + qz * wz),
-                         w_dot[0], w_dot[1], w_dot[2])
-            x_dot[7:] = tau_w                                                           # (E3)
-            return x_dot
-
-        return rhs, torques
+    def _disturbance_table(self, t: float, h: float, substeps: int) -> np.ndarray:
+        """Disturbance torque of each substep, sampled at its midpoint (substeps, 3) [N m]."""
+        if not self.disturbances:
+            table = self._no_dist.get(substeps)
+            if table is None:
+                table = self._no_dist[substeps] = np.zeros((substeps, 3))
+            return table
+        table = np.zeros((substeps, 3))
+        for d in self.disturbances:
+            if type(d) is ConstantTorque:
+                table += d.torque_body
+            elif type(d) is RandomTorque:          # one draw per hold period, not per call
+                last, value = None, None
+                for i in range(substeps):
+                    t_mid = t + i * h + 0.5 * h
+                    j = d.index(t_mid)
+                    if j != last:
+                        value, last = d.torque(t_mid), j
+                    table[i] += value
+            else:
+                for i in range(substeps):
+                    table[i] += d.torque(t + i * h + 0.5 * h)
+        return table
 
     def _disturbance_torque(self, t: float) -> np.ndarray:
         tau = np.zeros(3)
@@ -328,6 +397,7 @@ class Spacecraft:
             tau += d.torque(t)
         return tau
 
+    # ---------------------------------------------------------------------- the model
     def derivative(self, t: float, state: SpacecraftState, env_at_t: tuple,
                    applied: ActuatorCommand) -> SpacecraftState:
         """Right-hand side (E1)-(E4) at one instant.
@@ -352,31 +422,29 @@ class Spacecraft:
         """
         self.check_state(state)
         r_eci, b_eci = env_at_t
-        r_eci, b_eci = self._check_env(r_eci, np.zeros(3), b_eci, np.zeros(3))[::2]
-        wheel_torque = np.asarray(applied.wheel_torque, dtype=float).reshape(-1)
-        tau_w = np.zeros(self.n_wheels) if wheel_torque.size == 0 else \
-            _vec(wheel_torque, 'wheel_torque', self.n_wheels)
+        r_eci, _, b_eci, _ = self._check_env(r_eci, np.zeros(3), b_eci, np.zeros(3))
+        tau_w = self._wheel_command(applied)
         tau_held = (_vec(applied.torque_body, 'torque_body') + self._disturbance_torque(t)
                     - self._A @ tau_w)
         dipole = _vec(applied.dipole_body, 'dipole_body')
-        rhs, _ = self._make_rhs(t, r_eci, np.zeros(3), b_eci, np.zeros(3), dipole, tau_held,
-                                tau_w)
-        return unpack_state(rhs(t, pack_state(state)))
-
-    def _check_env(self, r_eci, v_eci, b_eci, b_dot_eci) -> tuple:
-        env = (_vec(r_eci, 'r_eci'), _vec(v_eci, 'v_eci'), _vec(b_eci, 'b_eci'),
-               _vec(b_dot_eci, 'b_dot_eci'))
-        if self.gravity_gradient and not env[0].any():
-            raise ValueError('r_eci must not be zero with gravity gradient on')
-        return env
+        coef = np.zeros((4, 3))
+        coef[0] = b_eci
+        x = self._kernel_state(state, r_eci, np.zeros(3))
+        x_dot = np.empty_like(x)
+        kernels.rhs(0.0, x, self._inertia_c, self._inertia_inv_c, self._A, self.mu,
+                    self.gravity_gradient, bool(dipole.any()), dipole, coef, tau_held, tau_w,
+                    np.empty(6), x_dot)
+        return SpacecraftState(x_dot[kernels.Q], x_dot[kernels.W], x_dot[kernels.H0:])
 
     def step(self, state: SpacecraftState, t: float, dt: float, env: FrameEnvironment,
              command: ActuatorCommand, substeps: int = 1) -> tuple[SpacecraftState, dict]:
         """Integrate one frame from ``t`` to ``t + dt`` with the command held constant.
 
         The command is saturated by the actuators once, at ``t`` (the wheel torque so that no
-        wheel passes its momentum limit within ``dt``), then held; the environment follows
-        (E5); fixed RK4 with ``substeps`` equal substeps, quaternion renormalised after each.
+        wheel passes its momentum limit within ``dt``), then held; the orbit follows (E6), the
+        field (E7) (with (E8) when this frame follows the previous call's frame); fixed RK4
+        with ``substeps`` equal substeps, quaternion renormalised after each, all in one
+        compiled call (``kernels.frame_step``).
 
         Parameters
         ----------
@@ -410,31 +478,26 @@ class Spacecraft:
         if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) \
                 or substeps < 1:
             raise ValueError(f'substeps must be an integer >= 1, got {substeps!r}')
+        substeps = int(substeps)
         self.check_state(state)
         r_eci, v_eci, b_eci, b_dot_eci = self._check_env(env.r_eci, env.v_eci, env.b_eci,
                                                          env.b_dot_eci)
-        dipole, tau_w, tau_ideal = self._saturate(command, state.h_wheels, dt)
-        tau_wheels = -(self._A @ tau_w)
-        tau_fixed = tau_ideal + tau_wheels
-        tau_held = tau_fixed.copy()
-        rhs, torques = self._make_rhs(t, r_eci, v_eci, b_eci, b_dot_eci, dipole, tau_held,
-                                      tau_w)
-
-        x = pack_state(state)
-        x[0:4] /= math.sqrt(x[0:4] @ x[0:4])
-        tau_gg, tau_mag = torques(tuple(x[0:4].tolist()), 0.0)
+        dipole_cmd = _vec(command.dipole_body, 'dipole_body')
+        wheel_cmd = self._wheel_command(command)
+        tau_ideal = _vec(command.torque_body, 'torque_body').copy()
+        coef = self._field_coefficients(t, dt, env, b_eci, b_dot_eci)
         h = dt / substeps
-        tau_dist_first = np.zeros(3)
-        for i in range(substeps):
-            t_i = t + i * h
-            if self.disturbances:
-                tau_dist = self._disturbance_torque(t_i + 0.5 * h)
-                tau_held[:] = tau_fixed + tau_dist
-                if i == 0:
-                    tau_dist_first = tau_dist
-            x = rk4_step(rhs, t_i, x, h)
-            x[0:4] /= math.sqrt(x[0:4] @ x[0:4])
+        tau_dist = self._disturbance_table(t, h, substeps)
 
+        x, dipole, tau_w, torques0 = kernels.frame_step(
+            self._kernel_state(state, r_eci, v_eci), dt, substeps, self._inertia_c,
+            self._inertia_inv_c, self._A, self.mu, self.gravity_gradient, dipole_cmd,
+            self._dipole_max, wheel_cmd, self._wheel_max_torque, self._wheel_max_momentum,
+            tau_ideal, tau_dist, coef)
+
+        tau_wheels = -(self._A @ tau_w)
+        tau_dist_first = tau_dist[0].copy()
+        tau_gg, tau_mag = torques0[:3], torques0[3:]
         tau_external = tau_ideal + tau_dist_first + tau_gg + tau_mag
         applied = {
             'dipole_body': dipole,
@@ -442,12 +505,12 @@ class Spacecraft:
             'torque_ideal_body': tau_ideal,
             'torque_wheels_body': tau_wheels,
             'torque_disturbance_body': tau_dist_first,
-            'torque_gg_body': np.array(tau_gg),
-            'torque_magnetic_body': np.array(tau_mag),
+            'torque_gg_body': tau_gg,
+            'torque_magnetic_body': tau_mag,
             'torque_external_body': tau_external,
             'torque_body': tau_external + tau_wheels,
         }
-        return unpack_state(x), applied
+        return SpacecraftState(x[kernels.Q], x[kernels.W], x[kernels.H0:]), applied
 
     # ------------------------------------------------------------------ diagnostics
     def angular_momentum_eci(self, state: SpacecraftState) -> np.ndarray:
@@ -473,6 +536,7 @@ def steps_per_second(n: int = 2000, substeps: int = 1) -> float:
                            v_eci=np.array([0.0, 1035.0, 7436.0]))
     command = sc.zero_command()
     t, dt = 0.0, 0.1
+    sc.step(state, t, dt, env, command, substeps)     # compile (or load the cache) first
     start = time.perf_counter()
     for _ in range(n):
         state, _ = sc.step(state, t, dt, env, command, substeps)

@@ -1,0 +1,326 @@
+"""Compiled world kernels: one frame of rigid body + wheels + orbit in fixed-step RK4 (numba).
+
+Equations
+---------
+The kernel integrates (E1)-(E3), (E6) of :mod:`sim_node.models.dynamics` with the torques of
+(E4) and the field of (E7), ``s = t - t_k`` the time since the frame start::
+
+    dq_eci_body/dt = 1/2 q_eci_body (x) [omega, 0]                                       (E1)
+    I domega/dt    = -omega x (I omega + A h_w) + tau_gg + m x b_body + tau_held         (E2)
+    dh_w/dt        = tau_w                                                               (E3)
+    tau_gg         = 3 mu / |r|^5  r_body x (I r_body),   r_body = R(q)^T r_eci          (D1)
+    dr_eci/dt = v_eci,   dv_eci/dt = -mu r_eci / |r_eci|^3                               (E6)
+    b_eci(t_k + s) = c0 + c1 s + c2 s^2 + c3 s^3                                         (E7)
+    m = clip(m_cmd, -m_max, m_max)                                                       (A2)
+    tau_w = clip(clip(tau_cmd, -tau_max, tau_max), lower, upper)                         (W4)
+    upper = max((h_max - h_w) / dt, 0),   lower = min((-h_max - h_w) / dt, 0)
+
+(D1), (A2), (W4) are ``disturbances`` and ``actuators``' equations (papers 000 eqs. (3)-(6),
+001 eq. (6)); ``tau_held = tau_ideal - A tau_w + tau_dist`` is constant over a substep (the
+disturbance is sampled by the caller at the substep midpoint, one row per substep).
+
+State layout
+------------
+The kernel's state is one float64 array ``x`` of :func:`state_size` entries; every model part
+owns a named slice, so a new part (e.g. the modal coordinates of flexible appendages) is one
+more slice appended after the wheels, its derivative written in :func:`rhs`::
+
+    x[Q]  q_eci_body (4, scalar last)        x[W]  omega_body_eci_body [rad/s] (3)
+    x[R]  r_eci [m] (3)                      x[V]  v_eci [m/s] (3)
+    x[H0:H0 + n_wheels]  h_wheels [N m s]
+
+The orbit (E6) is integrated with the attitude in the same RK4 stages, from the orbit model's
+``r, v`` at ``t_k``: the position at every stage is the two-body orbit, not a straight line.
+
+One implementation: the functions here are plain Python on numpy arrays, compiled by
+``numba.njit(cache=True)`` (no fastmath, so IEEE semantics are kept); with
+``NUMBA_DISABLE_JIT=1`` (or without numba) the very same functions run as Python.
+``tests/unit/test_kernels.py`` compares the two.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover - numba is pinned; this keeps the model importable
+    def njit(*args, **kwargs):
+        """Stand-in for ``numba.njit``: returns the function unchanged."""
+        if args and callable(args[0]):
+            return args[0]
+        return lambda f: f
+
+#: Slices of the kernel state (see module docstring).
+Q = slice(0, 4)
+W = slice(4, 7)
+R = slice(7, 10)
+V = slice(10, 13)
+#: First wheel momentum entry; wheels occupy ``H0 : H0 + n_wheels``.
+H0 = 13
+
+
+def state_size(n_wheels: int) -> int:
+    """Length of the kernel state for ``n_wheels`` wheels."""
+    return H0 + int(n_wheels)
+
+
+@njit(cache=True)
+def external_torques(s, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, out):
+    """Gravity-gradient (D1) and magnetic (A1) torques at ``t_k + s``, body axes [N m].
+
+    Parameters
+    ----------
+    s : float
+        Time since the frame start [s] (for the field polynomial (E7)).
+    x : numpy.ndarray, shape (N,)
+        Kernel state (``Q`` and ``R`` are read).
+    inertia : numpy.ndarray, shape (3, 3)
+        Inertia, body axes [kg m^2].
+    mu : float
+        Gravitational parameter [m^3/s^2].
+    use_gg, use_mtq : bool
+        Compute (D1), (A1); a term switched off is zero.
+    dipole : numpy.ndarray, shape (3,)
+        Applied dipole, body axes [A m^2].
+    b_coef : numpy.ndarray, shape (4, 3)
+        Field polynomial (E7), row j = ``c_j`` [T/s^j], ECI.
+    out : numpy.ndarray, shape (6,)
+        Written: ``tau_gg_body`` (3) then ``tau_magnetic_body`` (3).
+    """
+    qx, qy, qz, qw = x[0], x[1], x[2], x[3]
+    # R(q / |q|)^T: ECI components to body components
+    k = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)
+    c00 = 1.0 - k * (qy * qy + qz * qz)
+    c01 = k * (qx * qy + qz * qw)
+    c02 = k * (qx * qz - qy * qw)
+    c10 = k * (qx * qy - qz * qw)
+    c11 = 1.0 - k * (qx * qx + qz * qz)
+    c12 = k * (qy * qz + qx * qw)
+    c20 = k * (qx * qz + qy * qw)
+    c21 = k * (qy * qz - qx * qw)
+    c22 = 1.0 - k * (qx * qx + qy * qy)
+    for i in range(6):
+        out[i] = 0.0
+    if use_gg:
+        rx, ry, rz = x[7], x[8], x[9]
+        bx = c00 * rx + c01 * ry + c02 * rz
+        by = c10 * rx + c11 * ry + c12 * rz
+        bz = c20 * rx + c21 * ry + c22 * rz
+        r2 = bx * bx + by * by + bz * bz
+        kg = 3.0 * mu / (r2 * r2 * math.sqrt(r2))            # (D1) with r unnormalised
+        ix = inertia[0, 0] * bx + inertia[0, 1] * by + inertia[0, 2] * bz
+        iy = inertia[1, 0] * bx + inertia[1, 1] * by + inertia[1, 2] * bz
+        iz = inertia[2, 0] * bx + inertia[2, 1] * by + inertia[2, 2] * bz
+        out[0] = kg * (by * iz - bz * iy)
+        out[1] = kg * (bz * ix - bx * iz)
+        out[2] = kg * (bx * iy - by * ix)
+    if use_mtq:
+        ex = b_coef[0, 0] + s * (b_coef[1, 0] + s * (b_coef[2, 0] + s * b_coef[3, 0]))  # (E7)
+        ey = b_coef[0, 1] + s * (b_coef[1, 1] + s * (b_coef[2, 1] + s * b_coef[3, 1]))
+        ez = b_coef[0, 2] + s * (b_coef[1, 2] + s * (b_coef[2, 2] + s * b_coef[3, 2]))
+        bx = c00 * ex + c01 * ey + c02 * ez
+        by = c10 * ex + c11 * ey + c12 * ez
+        bz = c20 * ex + c21 * ey + c22 * ez
+        out[3] = dipole[1] * bz - dipole[2] * by                 # (A1)
+        out[4] = dipole[2] * bx - dipole[0] * bz
+        out[5] = dipole[0] * by - dipole[1] * bx
+
+
+@njit(cache=True)
+def rhs(s, x, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef, tau_held,
+        tau_w, work, xdot):
+    """Right-hand side (E1)-(E3), (E6) at ``t_k + s``; writes ``xdot`` (N,).
+
+    ``axes`` (3, n) are the wheel spin axes (columns), ``tau_held`` (3,) [N m] the torques
+    held over the substep, ``tau_w`` (n,) [N m] the motor torques, ``work`` (6,) scratch;
+    the other arguments as in :func:`external_torques`.
+    """
+    external_torques(s, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, work)
+    tx = tau_held[0] + work[0] + work[3]
+    ty = tau_held[1] + work[1] + work[4]
+    tz = tau_held[2] + work[2] + work[5]
+    qx, qy, qz, qw = x[0], x[1], x[2], x[3]
+    wx, wy, wz = x[4], x[5], x[6]
+    hx = inertia[0, 0] * wx + inertia[0, 1] * wy + inertia[0, 2] * wz
+    hy = inertia[1, 0] * wx + inertia[1, 1] * wy + inertia[1, 2] * wz
+    hz = inertia[2, 0] * wx + inertia[2, 1] * wy + inertia[2, 2] * wz
+    n_wheels = axes.shape[1]
+    for j in range(n_wheels):
+        hw = x[H0 + j]
+        hx += axes[0, j] * hw
+        hy += axes[1, j] * hw
+        hz += axes[2, j] * hw
+        xdot[H0 + j] = tau_w[j]                                              # (E3)
+    ux = tx - (wy * hz - wz * hy)
+    uy = ty - (wz * hx - wx * hz)
+    uz = tz - (wx * hy - wy * hx)
+    xdot[0] = 0.5 * (qw * wx + qy * wz - qz * wy)                           # (E1)
+    xdot[1] = 0.5 * (qw * wy + qz * wx - qx * wz)
+    xdot[2] = 0.5 * (qw * wz + qx * wy - qy * wx)
+    xdot[3] = -0.5 * (qx * wx + qy * wy + qz * wz)
+    xdot[4] = inertia_inv[0, 0] * ux + inertia_inv[0, 1] * uy + inertia_inv[0, 2] * uz  # (E2)
+    xdot[5] = inertia_inv[1, 0] * ux + inertia_inv[1, 1] * uy + inertia_inv[1, 2] * uz
+    xdot[6] = inertia_inv[2, 0] * ux + inertia_inv[2, 1] * uy + inertia_inv[2, 2] * uz
+    rx, ry, rz = x[7], x[8], x[9]
+    r2 = rx * rx + ry * ry + rz * rz
+    ko = -mu / (r2 * math.sqrt(r2)) if r2 > 0.0 else 0.0                     # (E6)
+    xdot[7] = x[10]
+    xdot[8] = x[11]
+    xdot[9] = x[12]
+    xdot[10] = ko * rx
+    xdot[11] = ko * ry
+    xdot[12] = ko * rz
+
+
+@njit(cache=True)
+def saturate(dt, dipole_cmd, dipole_max, wheel_cmd, wheel_max_torque, wheel_max_momentum,
+             h_wheels):
+    """Applied dipole (A2) [A m^2] (3,) and wheel torque (W4) [N m] (n,) of a command held
+    for ``dt`` [s] from wheel momenta ``h_wheels`` (n,) [N m s]; limits ``>= 0`` (``inf``:
+    none; a zero dipole limit means no magnetorquer)."""
+    dipole = np.empty(3)
+    for i in range(3):
+        lim = dipole_max[i]
+        dipole[i] = min(max(dipole_cmd[i], -lim), lim)
+    n = wheel_cmd.shape[0]
+    tau_w = np.empty(n)
+    for j in range(n):
+        lim = wheel_max_torque[j]
+        tau = min(max(wheel_cmd[j], -lim), lim)
+        upper = max((wheel_max_momentum[j] - h_wheels[j]) / dt, 0.0)
+        lower = min((-wheel_max_momentum[j] - h_wheels[j]) / dt, 0.0)
+        tau_w[j] = min(max(tau, lower), upper)
+    return dipole, tau_w
+
+
+@njit(cache=True)
+def frame_step(x0, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_cmd,
+               dipole_max, wheel_cmd, wheel_max_torque, wheel_max_momentum, tau_ideal,
+               tau_dist, b_coef):
+    """One frame ``t_k -> t_k + dt``: saturate the command once, hold it, RK4 in ``substeps``.
+
+    Parameters
+    ----------
+    x0 : numpy.ndarray, shape (N,)
+        Kernel state at ``t_k`` (layout in the module docstring); not modified.
+    dt : float
+        Frame length [s], ``> 0``.
+    substeps : int
+        RK4 substeps, ``>= 1``; the quaternion is renormalised after each.
+    inertia, inertia_inv : numpy.ndarray, shape (3, 3)
+        Inertia [kg m^2] and its inverse, body axes.
+    axes : numpy.ndarray, shape (3, n)
+        Wheel spin axes (columns), body axes.
+    mu : float
+        Gravitational parameter [m^3/s^2].
+    use_gg : bool
+        Gravity gradient (D1) on.
+    dipole_cmd, dipole_max : numpy.ndarray, shape (3,)
+        Requested dipole and per-axis limit [A m^2], body axes.
+    wheel_cmd, wheel_max_torque, wheel_max_momentum : numpy.ndarray, shape (n,)
+        Requested motor torque [N m], limits [N m], [N m s].
+    tau_ideal : numpy.ndarray, shape (3,)
+        Ideal external torque [N m], body axes.
+    tau_dist : numpy.ndarray, shape (substeps, 3)
+        Disturbance torque of each substep [N m], body axes.
+    b_coef : numpy.ndarray, shape (4, 3)
+        Field polynomial (E7) [T/s^j], ECI.
+
+    Returns
+    -------
+    x : numpy.ndarray, shape (N,)
+        Kernel state at ``t_k + dt``.
+    dipole : numpy.ndarray, shape (3,)
+        Applied dipole [A m^2].
+    tau_w : numpy.ndarray, shape (n,)
+        Applied motor torques [N m].
+    torques0 : numpy.ndarray, shape (6,)
+        ``tau_gg_body`` and ``tau_magnetic_body`` at ``t_k`` [N m].
+    """
+    n_x = x0.shape[0]
+    n_wheels = axes.shape[1]
+    x = x0.copy()
+    norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+    for i in range(4):
+        x[i] /= norm
+    h_w = np.empty(n_wheels)
+    for j in range(n_wheels):
+        h_w[j] = x[H0 + j]
+    dipole, tau_w = saturate(dt, dipole_cmd, dipole_max, wheel_cmd, wheel_max_torque,
+                             wheel_max_momentum, h_w)
+    use_mtq = dipole[0] != 0.0 or dipole[1] != 0.0 or dipole[2] != 0.0
+    tau_fixed = np.empty(3)                 # ideal + wheels' reaction -A tau_w (W3)
+    for i in range(3):
+        acc = 0.0
+        for j in range(n_wheels):
+            acc += axes[i, j] * tau_w[j]
+        tau_fixed[i] = tau_ideal[i] + -acc
+    torques0 = np.empty(6)
+    external_torques(0.0, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, torques0)
+
+    h = dt / substeps
+    half = 0.5 * h
+    sixth = h / 6.0
+    k1 = np.empty(n_x)
+    k2 = np.empty(n_x)
+    k3 = np.empty(n_x)
+    k4 = np.empty(n_x)
+    xt = np.empty(n_x)
+    tau_held = np.empty(3)
+    work = np.empty(6)
+    for i in range(substeps):
+        s = i * h
+        for c in range(3):
+            tau_held[c] = tau_fixed[c] + tau_dist[i, c]
+        rhs(s, x, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef, tau_held,
+            tau_w, work, k1)
+        for j in range(n_x):
+            xt[j] = x[j] + half * k1[j]
+        rhs(s + half, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef,
+            tau_held, tau_w, work, k2)
+        for j in range(n_x):
+            xt[j] = x[j] + half * k2[j]
+        rhs(s + half, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef,
+            tau_held, tau_w, work, k3)
+        for j in range(n_x):
+            xt[j] = x[j] + h * k3[j]
+        rhs(s + h, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef,
+            tau_held, tau_w, work, k4)
+        for j in range(n_x):
+            x[j] = x[j] + sixth * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
+        norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+        for c in range(4):
+            x[c] /= norm
+    return x, dipole, tau_w, torques0
+
+
+@njit(cache=True)
+def propagate_two_body(r0, v0, dt, mu, steps):
+    """Two-body orbit (E6) from ``r0`` [m], ``v0`` [m/s] (3,), ECI, over ``dt`` [s] (any
+    sign) in ``steps`` RK4 steps; returns ``(r, v)``."""
+    y = np.empty(6)
+    for i in range(3):
+        y[i] = r0[i]
+        y[3 + i] = v0[i]
+    h = dt / steps
+    k = np.empty((4, 6))
+    yt = np.empty(6)
+    for _ in range(steps):
+        for stage in range(4):
+            if stage == 0:
+                for i in range(6):
+                    yt[i] = y[i]
+            else:
+                f = h if stage == 3 else 0.5 * h
+                for i in range(6):
+                    yt[i] = y[i] + f * k[stage - 1, i]
+            r2 = yt[0] * yt[0] + yt[1] * yt[1] + yt[2] * yt[2]
+            ko = -mu / (r2 * math.sqrt(r2)) if r2 > 0.0 else 0.0
+            for i in range(3):
+                k[stage, i] = yt[3 + i]
+                k[stage, 3 + i] = ko * yt[i]
+        for i in range(6):
+            y[i] = y[i] + (h / 6.0) * (k[0, i] + 2.0 * (k[1, i] + k[2, i]) + k[3, i])
+    return y[:3].copy(), y[3:].copy()
