@@ -31,6 +31,7 @@ from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_vec3, vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.tf import MountTable
 
 KINDS = ('magnetic', 'bdot')
 DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
@@ -79,8 +80,7 @@ class ControllerNode(LockstepNode):
         period_s = float(self.param('period_s', 2.0))
         est_period_s = float(self.param('estimator_period_s', 2.0))
         mag_period_s = float(self.param('magnetometer_period_s', 10.0))
-        self.q_body_mag = att.normalize(self.param('magnetometer_q_body_sensor',
-                                                   [0.0, 0.0, 0.0, 1.0]))
+        self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
         n_wheels = int(self.param('n_wheels', 0))
         limits = list(self.param('max_dipole_Am2', [40.0, 40.0, 40.0]))
         if kind == 'magnetic':
@@ -118,7 +118,10 @@ class ControllerNode(LockstepNode):
         if msg is None or self.elapsed_ns(stamp_ns(msg.header.stamp)) != t_ns:
             return None
         b = vec3(msg.magnetic_field)
-        return att.rotate(self.q_body_mag, b) if all_finite(b) else None
+        q_body_sensor = self.mounts.lookup(msg.header.frame_id)   # None: no mount known yet
+        if q_body_sensor is None or not all_finite(b):
+            return None
+        return att.rotate(q_body_sensor, b)
 
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Compute and publish this controller's command for frame ``t_ns``."""

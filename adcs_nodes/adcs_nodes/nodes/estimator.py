@@ -38,6 +38,7 @@ from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, stamp_ns, to_quat, to_vec3, vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.tf import MountTable, TfPublisher, estimate_transforms
 
 ALGORITHMS = ('magnetic_filter', 'triad', 'horizon_mag_yaw')
 DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
@@ -56,8 +57,8 @@ class EstimatorNode(LockstepNode):
         period_s = float(self.param('period_s', 2.0))
         mag_period_s = float(self.param('magnetometer_period_s', 10.0))
         horizon_period_s = float(self.param('horizon_period_s', 1.0))
-        self.q_body_mag = att.normalize(self.param('magnetometer_q_body_sensor',
-                                                   [0.0, 0.0, 0.0, 1.0]))
+        self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
+        self.tf_pub = TfPublisher(self)   # /tf: eci -> body_estimate
         self.reference = make_onboard_reference(
             self.section('onboard_orbit', DEFAULT_ORBIT, merge=False),
             self.section('onboard_field', DEFAULT_FIELD, merge=False), self.epoch)
@@ -117,7 +118,11 @@ class EstimatorNode(LockstepNode):
         if not 1e-6 <= norm <= 1e-3:
             self._reject(f'magnetometer |B| = {norm:.3g} T outside [1e-6, 1e-3] T')
             return None
-        return att.rotate(self.q_body_mag, b_sensor)
+        q_body_sensor = self.mounts.lookup(msg.header.frame_id)
+        if q_body_sensor is None:
+            self._reject(f'no /tf_static mount body -> {msg.header.frame_id!r}')
+            return None
+        return att.rotate(q_body_sensor, b_sensor)
 
     # ------------------------------------------------------------------ frame
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
@@ -227,6 +232,7 @@ class EstimatorNode(LockstepNode):
         msg.omega_body_orbit_body = to_vec3(omega_rel)
         msg.covariance = [float(c) for c in self._cov]
         self.est_pub.publish(msg)
+        self.tf_pub.send(estimate_transforms(msg.header.stamp, ref.r_eci, q_eci_body))
         d = FilterDiagnostics()
         d.header = msg.header
         d.algorithm = self.algorithm

@@ -50,6 +50,8 @@ class NodeSpec:
 #: Message type of every topic the graph can carry (the recorder subscribes by type).
 TOPIC_TYPES = {
     '/clock': 'rosgraph_msgs/msg/Clock',
+    '/tf': 'tf2_msgs/msg/TFMessage',
+    '/tf_static': 'tf2_msgs/msg/TFMessage',
     'sim/environment': 'adcs_msgs/msg/Environment',
     'sim/state': 'adcs_msgs/msg/AttitudeState',
     'sim/wheels': 'adcs_msgs/msg/WheelState',
@@ -118,7 +120,6 @@ def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
     }
     if 'magnetometer' in sensors:
         p['magnetometer_period_s'] = sensors['magnetometer']['period_s']
-        p['magnetometer_q_body_sensor'] = sensors['magnetometer']['q_body_sensor_xyzw']
     if 'horizon_sensor' in sensors:
         p['horizon_period_s'] = sensors['horizon_sensor']['period_s']
     flatten('onboard_orbit', est['onboard_orbit'], p)
@@ -191,7 +192,7 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
     flatten('field', sc['field'], env_params)
     nodes = [
         NodeSpec('environment', 'sim_node', 'environment', 'sim_node.nodes.environment',
-                 'EnvironmentNode', env_params, publishes=['sim/environment'],
+                 'EnvironmentNode', env_params, publishes=['sim/environment', '/tf'],
                  subscribes=['/clock']),
         NodeSpec('dynamics', 'sim_node', 'dynamics', 'sim_node.nodes.dynamics', 'DynamicsNode',
                  {**common, 'duration_s': float(duration_s),
@@ -201,20 +202,20 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                   'substeps': int(sc['timing']['substeps']),
                   'rate_factor': float(rate_factor), **_spacecraft_params(sc),
                   **_initial_params(sc)},
-                 publishes=['/clock', 'sim/state', 'sim/wheels'],
+                 publishes=['/clock', 'sim/state', 'sim/wheels', '/tf'],
                  subscribes=['sim/environment', 'adcs/actuator_command']),
     ]
     for key, (exe, cls, topic) in SENSORS.items():
         if key in sc['sensors']:
             nodes.append(NodeSpec(key, 'sim_node', exe, f'sim_node.nodes.{exe}', cls,
                                   {**common, **_sensor_params(key, sc['sensors'][key])},
-                                  publishes=[topic],
+                                  publishes=[topic, '/tf_static'],
                                   subscribes=['/clock', 'sim/state', 'sim/environment']))
     if 'estimator' in sc:
         est = sc['estimator']
         if 'magnetometer' not in sc['sensors']:
             raise ValueError('estimator: needs sensors.magnetometer')
-        subs = ['/clock', 'sensors/magnetometer', 'adcs/actuator_command']
+        subs = ['/clock', 'sensors/magnetometer', 'adcs/actuator_command', '/tf_static']
         if est['algorithm'] in ('triad', 'horizon_mag_yaw'):
             if 'horizon_sensor' not in sc['sensors']:
                 raise ValueError(f'estimator.algorithm {est["algorithm"]} needs '
@@ -224,7 +225,7 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                               'adcs_nodes.nodes.estimator', 'EstimatorNode',
                               {**common, **_estimator_params(sc)},
                               publishes=['adcs/attitude_estimate',
-                                         'adcs/estimator/diagnostics'],
+                                         'adcs/estimator/diagnostics', '/tf'],
                               subscribes=subs))
     if 'controllers' in sc:
         nodes += _control_nodes(sc, common)
@@ -251,7 +252,6 @@ def _control_nodes(sc: Dict[str, Any], common: Dict[str, Any]) -> List[NodeSpec]
     wheels = sc['spacecraft'].get('wheels') or []
     shared = {**common, 'period_s': ctrl['period_s'], 'estimator_period_s': est_period,
               'magnetometer_period_s': sensors['magnetometer']['period_s'],
-              'magnetometer_q_body_sensor': sensors['magnetometer']['q_body_sensor_xyzw'],
               'max_dipole_Am2': limits, 'n_wheels': len(wheels)}
     nodes = []
     names = [k for k in ('magnetic', 'bdot') if k in ctrl]
@@ -260,8 +260,8 @@ def _control_nodes(sc: Dict[str, Any], common: Dict[str, Any]) -> List[NodeSpec]
         if name == 'magnetic':
             flatten('onboard_orbit', sc['estimator']['onboard_orbit'], params)
             flatten('onboard_field', sc['estimator']['onboard_field'], params)
-        subs = ['/clock', 'sensors/magnetometer'] + (['adcs/attitude_estimate']
-                                                     if est_period else [])
+        subs = ['/clock', 'sensors/magnetometer', '/tf_static'] + (
+            ['adcs/attitude_estimate'] if est_period else [])
         nodes.append(NodeSpec(f'{name}_controller', 'adcs_nodes', f'{name}_controller',
                               'adcs_nodes.nodes.controller',
                               f'{name.capitalize()}ControllerNode', params,

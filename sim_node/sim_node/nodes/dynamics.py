@@ -32,6 +32,7 @@ from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import FrameSync, derive_seed, ns_to_seconds, seconds_to_ns
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
+from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
 from adcs_nodes.nodes.lockstep_node import (MAX_LAG_FRAMES, QOS_DATA, QOS_READY,
                                             LockstepNode)
 from sim_node.models.dynamics import ActuatorCommand as Command
@@ -74,6 +75,7 @@ class DynamicsNode(LockstepNode):
         self.clock_pub = self.publisher(Clock, '/clock', QOS_CLOCK)
         self.state_pub = self.publisher(AttitudeState, 'sim/state')
         self.wheels_pub = self.publisher(WheelState, 'sim/wheels')
+        self.tf_pub = TfPublisher(self)             # /tf: eci -> orbit -> body (truth)
         self.subscription(Environment, 'sim/environment', self.on_environment)
         self.subscription(ActuatorCommand, 'adcs/actuator_command', self.on_command)
         self.ready_nodes = set()
@@ -340,6 +342,8 @@ class DynamicsNode(LockstepNode):
         msg.omega_body_orbit_body = to_vec3(st.omega_body_eci_body
                                             - r_body_eci @ omega_orbit_eci_eci)
         self.state_pub.publish(msg)
+        self.tf_pub.send(truth_transforms(msg.header.stamp, vec3(env_msg.r_eci), q_eci_orbit,
+                                          q_orbit_body))
         w = WheelState()
         w.header = msg.header
         w.names = self.wheel_names

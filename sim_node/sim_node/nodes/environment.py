@@ -14,8 +14,9 @@ from rosgraph_msgs.msg import Clock
 from adcs_msgs.msg import Environment
 from adcs_nodes.core.lockstep import ns_to_seconds
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import stamp_ns, to_quat, to_vec3
+from adcs_nodes.nodes.convert import quat, stamp_ns, to_quat, to_vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.tf import TfPublisher, earth_transforms
 from adcs_nodes.core.geomag import make_field
 from adcs_nodes.core.orbit import make_orbit, q_eci_ecef
 
@@ -33,6 +34,7 @@ class EnvironmentNode(LockstepNode):
         self.orbit = make_orbit(self.section('orbit', DEFAULT_ORBIT, merge=False), self.epoch)
         self.field = make_field(self.section('field', DEFAULT_FIELD, merge=False), self.epoch)
         self.pub = self.publisher(Environment, 'sim/environment')
+        self.tf_pub = TfPublisher(self)            # /tf: eci -> ecef
         self.subscription(Clock, '/clock', self.on_clock)
         self._last_ns = None
         self.start_handshake()
@@ -62,7 +64,9 @@ class EnvironmentNode(LockstepNode):
         if t_ns == self._last_ns:
             return
         self._last_ns = t_ns
-        self.pub.publish(self.compute(t_ns))
+        msg = self.compute(t_ns)
+        self.pub.publish(msg)
+        self.tf_pub.send(earth_transforms(msg.header.stamp, quat(msg.q_eci_ecef)))
         self.frames += 1
         self.sim_t_ns = t_ns
         self.report_progress(t_ns, final=self.is_last_frame(t_ns, self.frame_ns))

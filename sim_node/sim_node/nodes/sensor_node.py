@@ -18,6 +18,7 @@ from adcs_msgs.msg import AttitudeState, Environment
 from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
 from adcs_nodes.nodes.convert import all_finite
 from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.tf import TfPublisher, mount_transforms
 
 
 class SensorNode(LockstepNode, metaclass=abc.ABCMeta):
@@ -39,6 +40,11 @@ class SensorNode(LockstepNode, metaclass=abc.ABCMeta):
         self.frame_id = str(self.p['frame_id'])
         self.sensor_seed = derive_seed(self.seed, self.get_name())
         self.pub = self.publisher(msg_type, topic)
+        # the mount, defined once (parameter q_body_sensor, identity when the model has none)
+        # and published for every consumer on /tf_static: body -> frame_id
+        self.tf_static = TfPublisher(self, static=True)
+        self.tf_static.send(mount_transforms(self.stamp(0), {
+            self.frame_id: self.p.get('q_body_sensor', [0.0, 0.0, 0.0, 1.0])}))
 
     def start(self) -> None:
         """Subscribe to the truth in lockstep and announce readiness (end of __init__)."""
