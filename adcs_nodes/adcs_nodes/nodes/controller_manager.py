@@ -104,6 +104,17 @@ class ControllerManagerNode(LockstepNode):
         response.safe = safe
         return response
 
+    def diagnostic_values(self) -> Dict[str, str]:
+        """What ``/diagnostics`` shows of the manager (``adcs_nodes.nodes.diagnostics``)."""
+        st = self.core.status()
+        return {'active_controller': str(st.get('active', self.core.active)),
+                'mode': str(st.get('mode') or '-'),
+                'forwarding': str(st.get('source') or 'zero'),
+                'switches': str(st.get('switch_count', 0)),
+                'stale_commands': str(st.get('missed_frames', 0)),
+                'fallback': str(st.get('fault') or ''),
+                'last_fault': str(st.get('last_fault', ''))}
+
     # ------------------------------------------------------------------ frames
     def input_arrived(self, name: str) -> None:
         """A controller that was given up publishes again: await it again."""

@@ -52,6 +52,7 @@ TOPIC_TYPES = {
     '/clock': 'rosgraph_msgs/msg/Clock',
     '/tf': 'tf2_msgs/msg/TFMessage',
     '/tf_static': 'tf2_msgs/msg/TFMessage',
+    '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
     'sim/environment': 'adcs_msgs/msg/Environment',
     'sim/state': 'adcs_msgs/msg/AttitudeState',
     'sim/wheels': 'adcs_msgs/msg/WheelState',
@@ -231,6 +232,8 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         nodes += _control_nodes(sc, common)
         dyn = next(n for n in nodes if n.name == 'dynamics')
         dyn.params['command_period_s'] = sc['controllers']['period_s']
+    for node in nodes:      # every LockstepNode publishes /diagnostics once per sim second
+        node.publishes.append('/diagnostics')
     if record:
         topics = list(sc['record']['topics']) or sorted(
             {t for n in nodes for t in n.publishes} | {'lockstep/status'})

@@ -1,0 +1,134 @@
+"""``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) of any ADCS node.
+
+What ``rqt_robot_monitor``, Foxglove's diagnostics panel and ``diagnostic_aggregator`` read.
+Every lockstep node owns one :class:`Diagnostics` and calls :meth:`Diagnostics.frame` once per
+processed frame; a ``DiagnosticArray`` with one ``DiagnosticStatus`` (name = node name,
+hardware id ``adcs``) goes out once per ``period_s`` of sim time (default 1 s, the rate of
+``diagnostic_updater``), stamped with that sim time. Publishing from the frame path (not a
+wall timer) keeps the topic deterministic in lockstep, so it can be recorded and compared.
+
+Values (``KeyValue``, strings), in this order:
+
+* the node's ``timing_diagnostics()`` (every lockstep node: timing mode, frames, missed
+  frames, dead inputs, rejected samples by reason);
+* the node's attributes among :data:`ATTRIBUTES` when it has them (estimator:
+  ``rejected_count``, ``last_rejection``, ``update_count``, ``resets``; dynamics:
+  ``rejected_commands``; magnetometer: ``dropouts``);
+* the node's ``diagnostic_values()`` (controller manager: the active controller, mode,
+  forwarded source, ``fallback`` reason).
+
+Level: ``OK``; ``WARN`` when a counter of :data:`COUNTERS` grew during the last period or a
+``fallback`` is active (the message says which); ``ERROR`` when the node sets
+``diagnostic_error`` (a text).
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Tuple
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+TOPIC = '/diagnostics'
+HARDWARE_ID = 'adcs'
+#: ``diagnostic_updater``'s publisher QoS (reliable, volatile, keep last 10).
+QOS_DIAGNOSTICS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                             history=HistoryPolicy.KEEP_LAST,
+                             durability=DurabilityPolicy.VOLATILE)
+
+#: Node attributes reported when present (and not already in ``timing_diagnostics()``).
+ATTRIBUTES = ('frames', 'missed_frames', 'last_missed_input', 'update_count', 'rejected_count',
+              'last_rejection', 'resets', 'rejected_commands', 'dropouts')
+#: Values that count problems: their growth over a period makes the level WARN.
+COUNTERS = ('missed_frames', 'rejected_samples', 'rejected_count', 'resets',
+            'rejected_commands', 'dropouts')
+NS_PER_S = 1_000_000_000
+
+
+def _text(value: Any) -> str:
+    if isinstance(value, float):
+        return f'{value:.9g}'
+    if isinstance(value, (list, tuple)):
+        return ', '.join(_text(v) for v in value)
+    return str(value)
+
+
+class Diagnostics:
+    """``/diagnostics`` of one node (see module docstring).
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node; its ``publisher`` method is used when it has one (start handshake).
+    period_s : float
+        Sim-time period of the published status [s] (> 0).
+    """
+
+    def __init__(self, node: Any, period_s: float = 1.0) -> None:
+        if not period_s > 0:
+            raise ValueError(f'diagnostics period must be positive, got {period_s}')
+        self.node = node
+        self.period_ns = int(round(period_s * NS_PER_S))
+        make = getattr(node, 'publisher', None)
+        self.pub = (make(DiagnosticArray, TOPIC, QOS_DIAGNOSTICS) if make is not None
+                    else node.create_publisher(DiagnosticArray, TOPIC, QOS_DIAGNOSTICS))
+        self._next_ns = 0
+        self._last: Dict[str, int] = {}
+
+    def frame(self, t_ns: int) -> bool:
+        """Called once per processed frame (elapsed sim time ``t_ns``); publishes when a
+        period boundary is reached. Returns True when a status was published."""
+        if t_ns < self._next_ns:
+            return False
+        self._next_ns = (t_ns // self.period_ns + 1) * self.period_ns
+        self.publish(t_ns)
+        return True
+
+    def values(self) -> List[Tuple[str, Any]]:
+        """``(key, value)`` pairs (see module docstring for the order)."""
+        out: Dict[str, Any] = {}
+        for method in ('timing_diagnostics', None, 'diagnostic_values'):
+            if method is None:
+                out.update({name: getattr(self.node, name) for name in ATTRIBUTES
+                            if name not in out and hasattr(self.node, name)})
+                continue
+            fn = getattr(self.node, method, None)
+            if callable(fn):
+                out.update(fn())
+        return list(out.items())
+
+    def status(self) -> DiagnosticStatus:
+        """The node's ``DiagnosticStatus`` now (level and message from what changed)."""
+        problems = []
+        values = self.values()
+        given = dict(values)
+        for name in COUNTERS:
+            try:
+                value = int(given[name])
+            except (KeyError, TypeError, ValueError):
+                continue
+            grown = value - self._last.get(name, 0)
+            self._last[name] = value
+            if grown > 0:
+                problems.append(f'{grown} {name.replace("_", " ")}')
+        fallback = str(given.get('fallback', '') or '')
+        if fallback:
+            problems.append(f'fallback: {fallback}')
+        error = str(getattr(self.node, 'diagnostic_error', '') or '')
+        st = DiagnosticStatus()
+        st.name = self.node.get_name()
+        st.hardware_id = HARDWARE_ID
+        if error:
+            st.level, st.message = DiagnosticStatus.ERROR, error
+        elif problems:
+            st.level, st.message = DiagnosticStatus.WARN, '; '.join(problems)
+        else:
+            st.level, st.message = DiagnosticStatus.OK, 'OK'
+        st.values = [KeyValue(key=str(k), value=_text(v)) for k, v in values]
+        return st
+
+    def publish(self, t_ns: int) -> None:
+        """Publish the status stamped with elapsed sim time ``t_ns``."""
+        msg = DiagnosticArray()
+        msg.header.stamp = self.node.stamp(t_ns)
+        msg.status = [self.status()]
+        self.pub.publish(msg)

@@ -1,0 +1,74 @@
+"""/diagnostics helper: one DiagnosticArray per sim second from the frame path, stamped with
+that sim time, level WARN exactly in the periods where a problem counter grew or a fallback
+is active, every value a string KeyValue; received by a plain subscriber as
+``diagnostic_msgs/DiagnosticArray`` (what rqt_robot_monitor and Foxglove read)."""
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.node import Node
+
+from adcs_nodes.nodes.convert import stamp_ns, to_stamp
+from adcs_nodes.nodes.diagnostics import Diagnostics
+
+EPOCH_NS = 1767225600 * 10**9
+
+
+class _Node(Node):
+    def __init__(self, context):
+        super().__init__('fake_estimator', context=context)
+        self.rejected_count = 0
+        self.last_rejection = ''
+        self.fallback = ''
+
+    def stamp(self, t_ns):
+        return to_stamp(EPOCH_NS + t_ns)
+
+    def timing_diagnostics(self):
+        return {'timing_mode': 'lockstep', 'frames': '7', 'missed_frames': '0'}
+
+    def diagnostic_values(self):
+        return {'active': 'magnetic', 'fallback': self.fallback}
+
+
+def test_one_status_per_sim_second_with_levels(ros_context, spin):
+    node = _Node(ros_context)
+    diag = Diagnostics(node)
+    probe = rclpy.create_node('probe', context=ros_context)
+    got = []
+    probe.create_subscription(DiagnosticArray, '/diagnostics', got.append, 100)
+    assert spin([node, probe], lambda: diag.pub.get_subscription_count() == 1)
+    published = []
+    for k in range(9):                      # frames every 0.5 s: 0 .. 4 s
+        t_ns = k * 500_000_000
+        if k == 3:                          # 1.5 s: two rejected samples
+            node.rejected_count, node.last_rejection = 2, 'stale'
+        if k == 6:                          # 3.0 s: the manager falls back
+            node.fallback = 'magnetic stale'
+        published.append(diag.frame(t_ns))
+    assert published == [True, False, True, False, True, False, True, False, True]
+    assert spin([node, probe], lambda: len(got) == 5)
+    assert [(stamp_ns(m.header.stamp) - EPOCH_NS) / 1e9 for m in got] == [0, 1, 2, 3, 4]
+    levels = [m.status[0].level for m in got]
+    ok, warn = DiagnosticStatus.OK, DiagnosticStatus.WARN
+    assert levels == [ok, ok, warn, warn, warn]     # 2 s: rejections; 3, 4 s: fallback
+    assert got[2].status[0].message == '2 rejected count'
+    assert got[3].status[0].message == 'fallback: magnetic stale'
+    st = got[0].status[0]
+    assert st.name == 'fake_estimator' and st.hardware_id == 'adcs'
+    values = {kv.key: kv.value for kv in st.values}
+    assert values == {'timing_mode': 'lockstep', 'frames': '7', 'missed_frames': '0',
+                      'rejected_count': '0', 'last_rejection': '', 'active': 'magnetic',
+                      'fallback': ''}
+    probe.destroy_node()
+    node.destroy_node()
+
+
+def test_bad_period_is_refused(ros_context):
+    node = _Node(ros_context)
+    try:
+        Diagnostics(node, period_s=0.0)
+    except ValueError as exc:
+        assert 'positive' in str(exc)
+    else:
+        raise AssertionError('period 0 accepted')
+    finally:
+        node.destroy_node()
