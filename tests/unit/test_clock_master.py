@@ -147,3 +147,17 @@ def test_bad_configuration_raises():
         ClockMaster(S, timeout_s=0.0)
     with pytest.raises(ValueError, match='dead_after'):
         ClockMaster(S, dead_after=0)
+
+
+def test_real_time_mode_steps_with_the_latest_inputs_without_waiting():
+    m = ClockMaster(S, duration_ns=2 * S, command_period_ns=S)
+    assert kinds(m.free_running_frame()) == [(Act.CLOCK, 0)]       # no environment yet
+    m.on_environment(0, 'e0', 0.0)
+    out = m.free_running_frame()
+    assert kinds(out) == [(Act.CLOCK, 0), (Act.STATE, 0), (Act.STEP, 0)]
+    assert out[2].value == ('e0', None)
+    m.on_command(0, 'c0', 0.0)
+    out = m.free_running_frame()                 # frame 1: the environment of 0, command c0
+    assert out[2].value == ('e0', 'c0') and out[2].t_ns == S
+    out = m.free_running_frame()
+    assert kinds(out)[-1] == (Act.FINISH, 2) and m.free_running_frame() == []

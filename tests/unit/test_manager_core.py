@@ -359,3 +359,103 @@ def test_bad_auto_sequence(kw, word):
 def test_auto_is_a_reserved_name():
     with pytest.raises(ValueError, match='reserved'):
         ControllerManagerCore(['auto', 'bdot'], 'bdot', auto=AutoSequence(acquire='auto'))
+
+
+# ------------------------------------------------------------- rapid requests (issue 12)
+def test_rapid_requests_one_pending_the_last_wins_and_every_answer_says_so():
+    mgr = _mgr(controllers=['magnetic', 'bdot', 'mpi'])
+    mgr.step(0.0, {**_both(0.0), 'mpi': (0.0, _cmd(MAG))})
+    names = ['bdot', 'mpi'] * 50                     # 100 requests between two frames
+    answers = [mgr.request_switch(n, 0.0) for n in names]
+    assert all(ok for ok, _ in answers)
+    assert 'replaces the pending' not in answers[0][1]
+    assert 'queued: switch magnetic -> bdot' in answers[0][1]
+    for (ok, msg), prev in zip(answers[1:], names):
+        assert f'replaces the pending request for {prev}, which will not be applied' in msg
+    assert mgr.replaced_requests == 99
+    sources = []
+    for k in range(1, 4):
+        t = k * DT
+        out, st = mgr.step(t, {**_both(t), 'mpi': (t, _cmd(MAG))})
+        sources.append((st['active'], st['zero_frame']))
+    # exactly one switch (to the last request), one zero frame
+    assert sources == [('mpi', True), ('mpi', False), ('mpi', False)]
+    assert mgr.switch_count == 1 and mgr.status()['replaced_requests'] == 99
+
+
+def test_request_for_the_active_controller_cancels_a_pending_switch():
+    mgr = _mgr()
+    mgr.step(0.0, _both(0.0))
+    mgr.request_switch('bdot', 0.0)
+    ok, msg = mgr.request_switch('magnetic', 0.0)
+    assert ok and 'already active' in msg and 'replaces the pending request for bdot' in msg
+    cmd, st = mgr.step(DT, _both(DT))
+    assert _source(cmd) == 'magnetic' and not st['zero_frame'] and mgr.switch_count == 0
+
+
+def test_huge_unknown_name_is_not_echoed_in_full():
+    ok, msg = _mgr().request_switch('x' * 100_000, 0.0)
+    assert not ok and len(msg) < 300
+
+
+# ------------------------------------------------------------- estimator staleness
+def test_stale_estimate_falls_back_to_the_safe_controller_with_the_reason():
+    mgr = _mgr(estimate_period_s=DT)
+    est = _est(0.1)
+    cmd, st = mgr.step(0.0, _both(0.0), est, estimate_t=0.0)
+    assert _source(cmd) == 'magnetic' and st['estimate_fault'] == ''
+    # the estimator died: its last estimate is stamped 0 at t = 2, 4
+    for t in (DT, 2 * DT):
+        cmd, st = mgr.step(t, _both(t), est, estimate_t=0.0)
+        assert _source(cmd) == 'bdot' and st['fallback'] and st['source'] == 'bdot'
+        assert 'magnetic: estimator stale' in st['fault'] and 'fallback to bdot' in st['fault']
+    assert mgr.missed_frames == 2 and mgr.estimate_stale_frames == 2
+    cmd, st = mgr.step(3 * DT, _both(3 * DT), est, estimate_t=3 * DT)   # it is back
+    assert _source(cmd) == 'magnetic' and not st['fallback']
+    cmd, st = mgr.step(4 * DT, _both(4 * DT), None)                      # none at all
+    assert _source(cmd) == 'bdot' and 'no estimate received' in st['fault']
+
+
+def test_safe_controller_never_needs_the_estimate():
+    mgr = _mgr(initial='bdot', estimate_period_s=DT)
+    cmd, st = mgr.step(0.0, _both(0.0), None)
+    assert _source(cmd) == 'bdot' and st['fault'] == '' and mgr.missed_frames == 0
+    assert st['estimate_fault'] and mgr.estimate_stale_frames == 1
+
+
+def test_slower_estimator_is_not_stale_between_its_frames():
+    mgr = _mgr(estimate_period_s=10.0)
+    for t, stamp in ((10.0, 10.0), (12.0, 10.0), (18.0, 10.0), (20.0, 20.0)):
+        cmd, st = mgr.step(t, _both(t), _est(0.1), estimate_t=stamp)
+        assert _source(cmd) == 'magnetic', (t, st['fault'])
+    cmd, st = mgr.step(22.0, _both(22.0), _est(0.1), estimate_t=10.0)
+    assert _source(cmd) == 'bdot'
+
+
+def test_invalid_or_future_estimate_is_a_fault_and_the_output_stays_finite():
+    mgr = _mgr(estimate_period_s=DT, max_dipole_Am2=[1.0, 2.0, 3.0])
+    for est, stamp in ((_est(0.1, valid=False), 0.0), (_est(0.1), 5.0),
+                       (_est(float('nan')), 0.0), (_est(0.1), float('nan'))):
+        cmd, st = mgr.step(0.0, _both(0.0, bdot=[0.5, 0.5, 0.5]), est, estimate_t=stamp)
+        assert st['source'] == 'bdot' and st['estimate_fault']
+        assert np.all(np.isfinite(cmd.dipole_body))
+        assert np.all(np.abs(cmd.dipole_body) <= [1.0, 2.0, 3.0])
+
+
+def test_stale_estimate_holds_the_automatic_sequence():
+    mgr = _mgr(initial=None, estimate_period_s=DT,
+               auto=AutoSequence(confirm_frames=2))
+    for k in range(5):                       # slow rate, but the estimate is stale
+        t = k * DT
+        mgr.step(t, _both(t), _est(0.1), estimate_t=-10.0)
+    assert mgr.mode == 'detumble' and mgr.active == 'bdot'
+    mgr.step(10.0, _both(10.0), _est(0.1), estimate_t=10.0)     # fresh: counts start
+    mgr.step(12.0, _both(12.0), _est(0.1), estimate_t=12.0)
+    assert mgr.mode == 'acquire'
+
+
+def test_estimate_users_must_be_known():
+    with pytest.raises(ValueError, match='estimate_users'):
+        _mgr(estimate_users=['fuzzy'])
+    with pytest.raises(ValueError, match='estimate_period_s'):
+        _mgr(estimate_period_s=-1.0)

@@ -463,6 +463,24 @@ class ClockMaster:
                               if name == 'cmd' else f'{name} treated as dead'))
         return out + self._step(ZERO, now)
 
+    def free_running_frame(self) -> List[Action]:
+        """Real-time mode (paced by a wall timer, never waiting): frame k with the latest
+        inputs. Nothing happens (the clock is re-sent) until the first environment."""
+        if self.phase is MasterPhase.DONE:
+            return []
+        t = self.t_ns
+        out = [Action(Act.CLOCK, t)]
+        env = self.sync.value('env', t)
+        if env is None:
+            return out
+        out.append(Action(Act.STATE, t, env))
+        if self.duration_ns and t >= self.duration_ns:
+            return out + self._finish()
+        out.append(Action(Act.STEP, t, (env, self.sync.value('cmd', t))))
+        self.sync.prune(t)
+        self.k += 1
+        return out
+
     # ------------------------------------------------------------------ internals
     def _begin_frame(self, now: float) -> List[Action]:
         self.wait_since = now

@@ -13,6 +13,12 @@ Rules
   in which a switch takes effect outputs exactly one all-zero command; the new controller's
   command is forwarded from the following frame. A switch to the controller already active
   changes nothing (no zero frame, not counted).
+* **One pending request, the last one wins**: requests are not queued. A request made while
+  another is pending (before its frame boundary) replaces it; the answer says so (``replaces
+  the pending request for X, which will not be applied``) and ``replaced_requests`` counts it.
+  A request for the controller already active cancels a pending one. So 100 rapid requests
+  between two frames apply exactly one switch, the last one, and every answer says what will
+  happen when it is given.
 * **Schedule**: ``(t_s, name)`` entries apply at the frame whose time equals ``t_s`` (to 1 ns),
   or the first frame after ``t_s`` if none falls on it; that frame is the zero frame. When
   several entries are due in one frame the last one wins. A pending operator request made
@@ -29,7 +35,10 @@ Rules
   (request or schedule) restarts it in ``detumble``.
 * **Fallback**: the active controller's command is forwarded only if it is fresh (stamp equal
   to the frame time, or older by at most ``stale_after_s``; never from the future), has the
-  right shapes, is finite and is inside the actuator limits. Otherwise the safe controller's
+  right shapes, is finite and is inside the actuator limits, and, when the active controller
+  uses the estimate (``estimate_users``) and the estimate is monitored (``estimate_period_s``),
+  only if the estimate is fresh too (stamped at the estimator's last frame at or before ``t``,
+  or older by at most ``stale_after_s``) and usable. Otherwise the safe controller's
   command (same checks) is forwarded in the same frame, ``missed_frames`` counts the frame and
   ``last_fault`` says why (stale / non-finite / out of range, naming the component). With
   ``latch_fallback`` the safe controller also becomes the active one (a counted switch, no
@@ -196,6 +205,12 @@ class ControllerManagerCore:
         Automatic mode sequence (active from the start when given).
     latch_fallback : bool
         Make the safe controller the active one after a fault (default: per-frame fallback).
+    estimate_period_s : float, optional
+        Period of the attitude estimator [s]; given, the estimate passed to :meth:`step` is
+        checked for staleness (``None``: not monitored, e.g. no estimator).
+    estimate_users : iterable of str, optional
+        Controllers whose command depends on the estimate (default: all but ``safe``; the safe
+        controller, B-dot, needs the magnetometer only).
 
     Raises
     ------
@@ -207,7 +222,9 @@ class ControllerManagerCore:
                  max_dipole_Am2: ArrayLike = math.inf, max_wheel_torque: ArrayLike = (),
                  max_torque: ArrayLike = 0.0, stale_after_s: float = 0.0,
                  schedule: Iterable[tuple[float, str]] = (),
-                 auto: Optional[AutoSequence] = None, latch_fallback: bool = False) -> None:
+                 auto: Optional[AutoSequence] = None, latch_fallback: bool = False,
+                 estimate_period_s: Optional[float] = None,
+                 estimate_users: Optional[Iterable[str]] = None) -> None:
         names = list(controllers)
         if not names or any(not isinstance(n, str) or not n for n in names):
             raise ValueError(f'controllers must be a non-empty list of names, got {names!r}')
@@ -250,6 +267,13 @@ class ControllerManagerCore:
             raise ValueError(f'stale_after_s must be finite and >= 0 [s], got {stale_after_s!r}')
         self.schedule = self._check_schedule(schedule)
         self.latch_fallback = bool(latch_fallback)
+        self.estimate_period = _opt_positive(estimate_period_s, 'estimate_period_s', 's')
+        users = [n for n in names if n != safe] if estimate_users is None else \
+            list(estimate_users)
+        unknown = [n for n in users if n not in names]
+        if unknown:
+            raise ValueError(f'estimate_users: unknown controllers {unknown}; known: {names}')
+        self.estimate_users = set(users)
         self._initial = initial
         self.reset()
 
@@ -278,6 +302,8 @@ class ControllerManagerCore:
         self.active = self._initial
         self.switch_count = 0
         self.missed_frames = 0
+        self.estimate_stale_frames = 0
+        self.replaced_requests = 0
         self.last_fault = ''
         self._pending: Optional[tuple[str, Optional[float]]] = None
         self._sched_idx = 0
@@ -316,26 +342,41 @@ class ControllerManagerCore:
         success : bool
             False for an unknown name (nothing changes).
         message : str
-            Human-readable result.
+            What will happen: the switch and its frame, or that it replaces (or equals) the
+            pending request (one pending request; the last one before a frame wins).
         """
-        if name not in self._known():
-            return False, f'unknown controller {name!r}; known: {", ".join(self._known())}'
+        if not isinstance(name, str) or name not in self._known():
+            shown = repr(name) if len(repr(name)) <= 60 else repr(name)[:57] + '...'
+            return False, f'unknown controller {shown}; known: {", ".join(self._known())}'
         if t is not None:
             t = float(t)
             if not math.isfinite(t):
                 return False, f'request time must be finite, got {t}'
+        prev = self._pending[0] if self._pending is not None else None
         self._pending = (name, t)
         when = 'the next frame' if t is None else f'the next frame after t = {t:.9g} s'
+        if prev is not None and prev != name:
+            self.replaced_requests += 1
+            note = (f'; replaces the pending request for {prev}, which will not be applied '
+                    f'(replaced requests: {self.replaced_requests})')
+        elif prev == name:
+            note = '; the same request was already pending (applied once)'
+        else:
+            note = ''
+        note += '; a later request before then replaces this one'
         if name == AUTO:
-            return True, f'automatic sequence restarts in detumble at {when}'
+            return True, f'queued: automatic sequence restarts in detumble at {when}{note}'
         if name == self.active:
-            return True, f'{name} is already active (effective at {when}; no zero frame)'
-        return True, f'switch {self.active} -> {name} at {when}, one frame of zero command'
+            return True, (f'{name} is already active: stays active at {when}, no zero frame'
+                          f'{note}')
+        return True, (f'queued: switch {self.active} -> {name} at {when}, one frame of zero '
+                      f'command{note}')
 
     # ------------------------------------------------------------------- step
     def step(self, t: float, commands: Mapping[str, tuple[float, Optional[Command]]],
              estimate: Optional[Estimate] = None,
-             target: Optional[Target] = None) -> tuple[Command, dict]:
+             target: Optional[Target] = None,
+             estimate_t: Optional[float] = None) -> tuple[Command, dict]:
         """Decide and produce the actuator command of frame ``t``.
 
         Parameters
@@ -349,6 +390,9 @@ class ControllerManagerCore:
         target : Target, optional
             Target for the attitude-error threshold of the ``point`` mode (default the orbital
             frame).
+        estimate_t : float, optional
+            Stamp of ``estimate`` [s] (checked when ``estimate_period_s`` is set; a stale
+            estimate is not used by the automatic sequence either).
 
         Returns
         -------
@@ -358,17 +402,21 @@ class ControllerManagerCore:
             ``t``, ``mode``, ``active``, ``available``, ``safe``, ``source`` (controller whose
             command was forwarded, '' for zero), ``pending``, ``switch_count``,
             ``missed_frames``, ``last_fault``, ``fault`` (this frame, '' if none),
-            ``fallback`` (bool), ``zero_frame`` (bool).
+            ``fallback`` (bool), ``zero_frame`` (bool), ``estimate_fault`` (this frame),
+            ``estimate_stale_frames``, ``replaced_requests``.
         """
         t = float(t)
         if not math.isfinite(t):
             raise ValueError(f'frame time must be finite, got {t}')
+        est_fault = self._estimate_fault(t, estimate, estimate_t)
+        if est_fault:
+            self.estimate_stale_frames += 1
         request = self._due_request(t)
         old = self.active
         if request is not None:
             self._apply_request(request)
         elif self._auto_on:
-            self._auto_step(estimate, target)
+            self._auto_step(None if est_fault else estimate, target)
         if self.active != old:
             self.switch_count += 1
             cmd = self._zero(f'switch {old} -> {self.active}: zero command for one frame')
@@ -377,6 +425,8 @@ class ControllerManagerCore:
 
         fault = ''
         cmd, why = self._check(commands.get(self.active), t)
+        if cmd is not None and est_fault and self.active in self.estimate_users:
+            cmd, why = None, f'estimator {est_fault}'
         source = self.active
         if cmd is None:
             self.missed_frames += 1
@@ -384,6 +434,8 @@ class ControllerManagerCore:
             source = ''
             if self.active != self.safe:
                 cmd, why_safe = self._check(commands.get(self.safe), t)
+                if cmd is not None and est_fault and self.safe in self.estimate_users:
+                    cmd, why_safe = None, f'estimator {est_fault}'
                 if cmd is None:
                     fault += f'; safe controller {self.safe}: {why_safe}; zero command'
                 else:
@@ -397,10 +449,35 @@ class ControllerManagerCore:
                 self.switch_count += 1
                 self._auto_on = False
         out = self._zero(fault) if cmd is None else self._sanitize(cmd, fault)
-        self._status = self._make_status(t, source, fault, bool(fault) and bool(source))
+        self._status = self._make_status(t, source, fault, bool(fault) and bool(source),
+                                         estimate_fault=est_fault)
         return out, self.status()
 
     # -------------------------------------------------------------- internals
+    def _estimate_fault(self, t: float, estimate: Optional[Estimate],
+                        estimate_t: Optional[float]) -> str:
+        """'' when the estimate is fresh and usable (or not monitored), else why not."""
+        if self.estimate_period is None:
+            return ''
+        if estimate is None or estimate_t is None:
+            return 'stale: no estimate received'
+        try:
+            stamp = float(estimate_t)
+        except (TypeError, ValueError):
+            return f'stale: bad estimate stamp {estimate_t!r}'
+        if not math.isfinite(stamp):
+            return f'stale: estimate stamp not finite ({stamp})'
+        if stamp > t + TIME_TOL_S:
+            return f'stale: estimate stamp {stamp:.9g} s is ahead of the frame {t:.9g} s'
+        p = self.estimate_period
+        last_frame = p * math.floor((t + TIME_TOL_S) / p)       # estimator's frame <= t
+        if last_frame - stamp > self.stale_after + TIME_TOL_S:
+            return (f'stale: estimate stamped {stamp:.9g} s, the estimator\'s frame is '
+                    f'{last_frame:.9g} s (limit {self.stale_after:g} s)')
+        if not estimate.is_usable():
+            return 'invalid estimate (flagged invalid or not finite)'
+        return ''
+
     def _due_request(self, t: float) -> Optional[str]:
         scheduled = None
         while (self._sched_idx < len(self.schedule)
@@ -524,10 +601,12 @@ class ControllerManagerCore:
         return Command.zero(self.n_wheels, reason)
 
     def _make_status(self, t: Optional[float], source: str, fault: str, fallback: bool,
-                     zero_frame: bool = False) -> dict:
+                     zero_frame: bool = False, estimate_fault: str = '') -> dict:
         return {'t': t, 'mode': self.mode, 'active': self.active,
                 'available': list(self.names), 'safe': self.safe, 'source': source,
                 'pending': '' if self._pending is None else self._pending[0],
                 'switch_count': self.switch_count, 'missed_frames': self.missed_frames,
                 'last_fault': self.last_fault, 'fault': fault, 'fallback': fallback,
-                'zero_frame': zero_frame}
+                'zero_frame': zero_frame, 'estimate_fault': estimate_fault,
+                'estimate_stale_frames': self.estimate_stale_frames,
+                'replaced_requests': self.replaced_requests}
