@@ -121,3 +121,16 @@ def test_static_mount_is_the_one_the_sensor_model_uses(bag):
     # the wrong mount (identity) would give errors of the field size, ~20-50 uT
     assert len(errors) >= 10
     assert np.max(np.abs(errors)) < 2.0e-6
+
+
+def test_diagnostics_recorded(bag):
+    """/diagnostics is in the bag: the estimator reports its counters once per frame of 2 s
+    (one status per sim second at most), level OK when nothing was rejected."""
+    msgs, schemas = bag
+    assert schemas['/diagnostics'].name == 'diagnostic_msgs/msg/DiagnosticArray'
+    est = [m.status[0] for m in msgs['/diagnostics'] if m.status[0].name == 'estimator']
+    stamps = [_stamp(m) for m in msgs['/diagnostics'] if m.status[0].name == 'estimator']
+    assert len(est) >= 40 and stamps == sorted(set(stamps))
+    values = {kv.key: kv.value for kv in est[-1].values}
+    assert int(values['update_count']) >= 9 and values['rejected_count'] == '0'
+    assert est[-1].level == est[-1].OK

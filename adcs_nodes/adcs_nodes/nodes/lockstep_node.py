@@ -27,6 +27,7 @@ from std_msgs.msg import String
 from adcs_msgs.msg import LockstepStatus
 from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, seconds_to_ns
 from adcs_nodes.nodes.convert import stamp_ns, to_stamp
+from adcs_nodes.nodes.diagnostics import Diagnostics
 
 #: Reliable, keep-last QoS deep enough that no frame is lost in lockstep.
 QOS_DATA = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
@@ -103,6 +104,7 @@ class LockstepNode(Node):
         self._progress_mark = -1
         self._pubs: Dict[str, Any] = {}
         self._subs: Dict[str, Any] = {}
+        self.diagnostics = Diagnostics(self)     # /diagnostics once per sim second (frames)
         self._on_ready: Optional[Callable[[], None]] = None
         self.create_timer(1.0, self.publish_status)
 
@@ -226,6 +228,7 @@ class LockstepNode(Node):
         self.frames += 1
         self.sim_t_ns = t
         self._on_frame(t, msgs, missing)
+        self.diagnostics.frame(t)
         if self.is_last_frame(t, self._own_period_ns):
             self.report_progress(max(t, self._seen_t), final=True)
 
