@@ -4,8 +4,12 @@ The truth is what the test's own publisher sent; the bag is read back with ``ros
 bag directory, and the bare ``.mcap`` file whose embedded schemas are checked against the
 type hashes that ``rosidl`` generated for the installed interfaces).
 """
+import errno
 import json
 import os
+import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -299,3 +303,157 @@ def test_handshake_typed_topics_and_clock_log_time(context, executor, tmp_path):
         talker.destroy_node()
     got = [(topic, t) for topic, t, _ in read_messages(bag)]
     assert got == [('/clock', 1_900_000_000 * 10**9), ('/hs', 1_900_000_000 * 10**9)]
+
+
+# ---------------------------------------------------------------------- crash safety
+def _clock(t_ns: int) -> Clock:
+    msg = Clock()
+    msg.clock.sec, msg.clock.nanosec = divmod(t_ns, 10**9)
+    return msg
+
+
+def _wait_proc(proc, timeout: float) -> None:
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+        raise AssertionError('recorder process did not exit')
+
+
+def test_sigkill_keeps_everything_but_the_last_seconds(context, executor, tmp_path):
+    """A recorder killed with SIGKILL leaves a bag that reads back (recovery of the unfinished
+    MCAP) with every message logged more than ``flush_sim_s`` before its last one.
+
+    The truth is what this test published. Only the sim-time rule writes chunks here (the wall
+    clock rule is disabled with a huge ``flush_period_s``). Phase 1 (clocks 0..18 s, chatter)
+    is fully received before phase 2 (clocks 18.5..20 s) is published, so every phase-1
+    message is logged at <= 18 s = last log time - 2 s: all of it must survive the kill.
+    """
+    talker = Node('crash_talker', context=context)
+    clock_pub = talker.create_publisher(Clock, '/clock', 100)
+    chat_pub = talker.create_publisher(String, 'crash_chatter', 100)
+    statuses = []
+    talker.create_subscription(LockstepStatus, 'recorder/status', statuses.append, 10)
+    executor.add_node(talker)
+    bag = tmp_path / 'killed'
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'adcs_nodes.nodes.recorder', '--ros-args',
+         '-p', f'output:={bag}', '-p', 'discovery_period_s:=0.1', '-p', 'flush_sim_s:=2.0',
+         '-p', 'flush_period_s:=1000.0', '-p', 'fsync_period_s:=1000.0',
+         '-p', 'status_period_s:=0.1'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    phase1 = list(range(37))        # clocks 0 .. 18 s
+    phase2 = list(range(37, 41))    # clocks 18.5 .. 20 s
+    try:
+        spin_until(executor, lambda: (clock_pub.get_subscription_count() > 0
+                                      and chat_pub.get_subscription_count() > 0
+                                      and statuses),
+                   timeout=30.0, what='recorder subscribed')
+        written0 = statuses[-1].frames   # its own latched lockstep/ready, recorded or not yet
+
+        def publish(steps):
+            for i in steps:
+                clock_pub.publish(_clock(T0_NS + i * 500_000_000))
+                chat_pub.publish(String(data=f'm{i}'))
+
+        publish(phase1)
+        spin_until(executor, lambda: statuses[-1].frames >= written0 + 2 * len(phase1),
+                   timeout=20.0, what='phase 1 written')
+        publish(phase2)
+        spin_until(executor, lambda: statuses[-1].frames >= written0 + 2 * (len(phase1)
+                                                                            + len(phase2)),
+                   timeout=20.0, what='phase 2 written')
+        os.kill(proc.pid, signal.SIGKILL)
+        _wait_proc(proc, 10.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        executor.remove_node(talker)
+        talker.destroy_node()
+    assert not (bag / 'metadata.yaml').exists()   # really unfinished
+    got = {}
+    for topic, t_ns, msg in read_messages(bag):
+        got.setdefault(topic, []).append((t_ns, msg))
+    chatter = [m.data for _, m in got['/crash_chatter']]
+    sent = [f'm{i}' for i in phase1 + phase2]
+    assert chatter == sent[:len(chatter)]                 # in order, no gap, nothing invented
+    assert len(chatter) >= len(phase1), chatter
+    clocks = [t for t, _ in got['/clock']]
+    assert clocks[:len(phase1)] == [T0_NS + i * 500_000_000 for i in phase1]
+    last = max(t for items in got.values() for t, _ in items)
+    assert last >= T0_NS + 18 * 10**9
+
+
+class _FullDisk:
+    """Stands for the bag's file object once the disk is full: every write fails (ENOSPC)."""
+
+    def __init__(self, real) -> None:
+        self.real = real
+        self.attempts = 0
+
+    def write(self, data) -> int:
+        self.attempts += 1
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def flush(self) -> None:
+        pass
+
+    def fileno(self) -> int:
+        return self.real.fileno()
+
+    def tell(self) -> int:
+        return self.real.tell()
+
+    def close(self) -> None:
+        self.real.close()
+
+
+def test_disk_full_stops_recording_keeps_the_data(context, executor, tmp_path):
+    """ENOSPC while writing: no exception out of the callbacks, the node reports 'disk full'
+    (status and exit code) and stops; the bag keeps every chunk written before."""
+    from adcs_nodes.nodes.recorder import EXIT_WRITE_FAILED, WRITE_FAILED_PREFIX
+
+    talker = Node('full_talker', context=context)
+    clock_pub = talker.create_publisher(Clock, '/clock', 100)
+    chat_pub = talker.create_publisher(String, 'full_chatter', 100)
+    statuses = []
+    talker.create_subscription(LockstepStatus, 'recorder/status', statuses.append, 10)
+    executor.add_node(talker)
+    bag = tmp_path / 'full'
+    recorder = RecorderNode(context=context, parameter_overrides=[
+        Parameter('output', value=str(bag)), Parameter('discovery_period_s', value=0.1),
+        Parameter('flush_sim_s', value=1.0), Parameter('flush_period_s', value=1000.0)])
+    executor.add_node(recorder)
+    try:
+        spin_until(executor, lambda: (clock_pub.get_subscription_count() > 0
+                                      and chat_pub.get_subscription_count() > 0),
+                   what='recorder subscriptions')
+        for i in range(10):
+            clock_pub.publish(_clock(T0_NS + i * 10**9))
+            chat_pub.publish(String(data=f'before {i}'))
+        spin_until(executor, lambda: recorder.counts.get('/full_chatter') == 10,
+                   what='10 messages')
+        recorder.flush()
+        full = _FullDisk(recorder._writer.storage.bio)
+        recorder._writer.storage.bio = full
+        for i in range(10, 20):
+            clock_pub.publish(_clock(T0_NS + i * 10**9))
+            chat_pub.publish(String(data=f'after {i}'))
+        spin_until(executor, lambda: recorder.done, what='recorder stops on ENOSPC')
+        spin_until(executor, lambda: any(s.last_missed_input.startswith(WRITE_FAILED_PREFIX)
+                                         for s in statuses), what='status says it')
+        assert full.attempts >= 1
+        assert recorder.exit_code == EXIT_WRITE_FAILED
+        assert not recorder.is_open
+        assert 'disk full' in recorder.write_error
+        recorder.close()   # idempotent, no exception
+    finally:
+        recorder.close()
+        executor.remove_node(recorder)
+        recorder.destroy_node()
+        executor.remove_node(talker)
+        talker.destroy_node()
+    chatter = [m.data for topic, _, m in read_messages(bag) if topic == '/full_chatter']
+    assert chatter == [f'before {i}' for i in range(10)]

@@ -22,6 +22,13 @@ discovery_period_s : float
     Wall-clock period of the graph scan [s], default 0.5.
 status_period_s : float
     Wall-clock period of ``recorder/status`` [s], default 0.5.
+flush_sim_s : float
+    Crash safety: the pending chunk is written to the file (and flushed to the kernel) once it
+    spans this much log (simulated) time [s], default 2.0.
+flush_period_s : float
+    ... and at the latest after this much wall time [s], default 0.5.
+fsync_period_s : float
+    Wall-clock period of ``fsync`` of the bag file [s] (machine crash, power loss), default 2.0.
 expected_matches : string array
     Lockstep start handshake (as :mod:`adcs_nodes.nodes.lockstep_node`): entries
     ``sub:<topic>=<n>`` (the recording subscription of ``topic`` has ``n`` matched publishers)
@@ -49,6 +56,18 @@ TRANSIENT_LOCAL when every publisher is transient local (latched topics such as
 ``adcs/controller_status``: the value published before the recorder started is recorded),
 else VOLATILE. The publishers' QoS are stored as ``offered_qos_profiles``.
 
+Crash safety
+------------
+The rosbags MCAP writer keeps up to 1 MiB in memory; a recorder killed with SIGKILL once left a
+0-byte bag. The recorder closes the pending chunk every ``flush_sim_s`` of log time or
+``flush_period_s`` of wall time, whichever comes first, and flushes it
+(:func:`adcs_nodes.tools.bag.flush_writer`), so a killed recorder loses at most that much; the
+analysis tools read the unfinished file (:func:`adcs_nodes.tools.bag.recover_mcap`). A write
+error (``ENOSPC``: disk full) stops the recording, not the process with a traceback: the node
+logs what happened and how much the bag keeps, reports it in ``recorder/status``
+(``last_missed_input`` = ``disk full: ...``) and exits with :data:`EXIT_WRITE_FAILED`; the
+complete records written before stay readable.
+
 Time stamps
 -----------
 The log time of a message is its receive time in simulated time when there is a simulation:
@@ -65,6 +84,7 @@ use header stamps, never log times.
 """
 from __future__ import annotations
 
+import errno
 import fnmatch
 import importlib
 import time
@@ -89,7 +109,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import String
 
 from adcs_nodes.nodes import runtime
-from adcs_nodes.tools.bag import cdr_stamp_ns, ensure_type, make_typestore, stamp_kind
+from adcs_nodes.tools.bag import (cdr_stamp_ns, ensure_type, flush_writer, make_typestore,
+                                  stamp_kind)
 
 DEFAULT_EXCLUDE = ['/rosout', '/parameter_events']
 QUEUE_DEPTH = 1000
@@ -102,6 +123,11 @@ QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 HANDSHAKE_PERIOD_S = 0.02
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
+#: Exit code of a recorder stopped by a write error (disk full); the launcher names it.
+EXIT_WRITE_FAILED = 3
+#: Prefix of ``recorder/status.last_missed_input`` after a write error.
+WRITE_FAILED_PREFIX = 'write failed: '
+DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
 
 
 class OutputExistsError(FileExistsError, ValueError):
@@ -236,6 +262,12 @@ class RecorderNode(Node):
             description='topics (or fnmatch patterns) never recorded'))
         self.declare_parameter('discovery_period_s', 0.5)
         self.declare_parameter('status_period_s', 0.5)
+        self.declare_parameter('flush_sim_s', 2.0, ParameterDescriptor(
+            description='write the pending chunk once it spans this log time [s]'))
+        self.declare_parameter('flush_period_s', 0.5, ParameterDescriptor(
+            description='write the pending chunk at least this often (wall clock) [s]'))
+        self.declare_parameter('fsync_period_s', 2.0, ParameterDescriptor(
+            description='fsync the bag file this often (wall clock) [s]'))
         self.declare_parameter('expected_matches', Parameter.Type.STRING_ARRAY,
                                ParameterDescriptor(description=(
                                    'start handshake: "sub:<topic>=<n>" publishers matched to '
@@ -265,11 +297,26 @@ class RecorderNode(Node):
         status_s = float(self.get_parameter('status_period_s').value)
         if discovery_s <= 0.0 or status_s <= 0.0:
             raise ValueError('discovery_period_s and status_period_s must be > 0')
+        flush_sim_s = float(self.get_parameter('flush_sim_s').value)
+        flush_s = float(self.get_parameter('flush_period_s').value)
+        self._fsync_s = float(self.get_parameter('fsync_period_s').value)
+        if not (flush_sim_s > 0.0 and flush_s > 0.0 and self._fsync_s > 0.0):
+            raise ValueError('flush_sim_s, flush_period_s and fsync_period_s must be > 0')
+        self._flush_sim_ns = int(flush_sim_s * 1e9)
+        self._chunk_t0_ns: Optional[int] = None   # log time of the first pending message
+        self._last_fsync = time.monotonic()
+        self.write_error = ''
+        self.exit_code = 0
+        self.done = False
 
         self._store = make_typestore()
         self._writer = Writer(self.output, version=BAG_VERSION,
                               storage_plugin=StoragePlugin.MCAP)
-        self._writer.open()
+        try:
+            self._writer.open()
+        except OSError as exc:
+            raise ValueError(f'cannot create the bag {self.output}: {exc.strerror or exc}') \
+                from None
         self._writer.set_custom_data('recorder', 'adcs_nodes.nodes.recorder')
 
         self._topics: Dict[str, _Topic] = {}
@@ -299,6 +346,7 @@ class RecorderNode(Node):
         self._status_timer = self.create_timer(status_s, self.publish_status, clock=steady)
         self._handshake_timer = self.create_timer(HANDSHAKE_PERIOD_S, self._check_ready,
                                                   clock=steady)
+        self._flush_timer = self.create_timer(flush_s, self.flush, clock=steady)
         what = 'every topic' if self._wanted is None else ', '.join(sorted(self._wanted))
         self.get_logger().info(f'recording {what} into {self.output} '
                                f'(excluding {", ".join(self._exclude) or "nothing"})')
@@ -474,11 +522,61 @@ class RecorderNode(Node):
             stamp = cdr_stamp_ns(raw)
             if stamp is not None:
                 self._latest_clock_ns = max(self._latest_clock_ns, stamp)
-        self._writer.write(rec.connection, self._log_time_ns(rec, raw), raw)
+        t_ns = self._log_time_ns(rec, raw)
+        try:
+            self._writer.write(rec.connection, t_ns, raw)
+        except OSError as exc:
+            self._write_failed(exc)
+            return
+        if self._chunk_t0_ns is None:
+            self._chunk_t0_ns = t_ns
         rec.count += 1
         self.messages_written += 1
         if self._first_write_wall is None:
             self._first_write_wall = time.monotonic()
+        # abs: the log time may jump back once, from wall time to the first /clock
+        if abs(t_ns - self._chunk_t0_ns) >= self._flush_sim_ns:
+            self.flush()
+
+    def flush(self, fsync: Optional[bool] = None) -> None:
+        """Write the pending chunk and flush it to the kernel (module docstring, 'Crash safety').
+
+        ``fsync``: also force the file to the disk; default: when ``fsync_period_s`` has
+        passed since the last one. Also called by the wall-clock timer.
+        """
+        if self._writer is None:
+            return
+        now = time.monotonic()
+        if fsync is None:
+            fsync = now - self._last_fsync >= self._fsync_s
+        try:
+            flush_writer(self._writer, fsync=fsync)
+        except OSError as exc:
+            self._write_failed(exc)
+            return
+        self._chunk_t0_ns = None
+        if fsync:
+            self._last_fsync = now
+
+    def _write_failed(self, exc: OSError) -> None:
+        """A write error (disk full): stop recording, keep what is on disk, tell and exit."""
+        writer, self._writer = self._writer, None
+        full = exc.errno in DISK_FULL_ERRNOS
+        what = 'disk full' if full else 'write error'
+        self.write_error = f'{what}: {exc.strerror or exc}'
+        try:
+            writer.abort()   # no summary: the disk cannot take it; the records stay readable
+        except Exception:  # noqa: BLE001 - the file may refuse even its close
+            pass
+        self.get_logger().error(
+            f'{self.write_error} while writing {self.output}: recording stopped. The bag keeps '
+            f'the messages written before (about {self.messages_written}); adcs export / adcs '
+            'report read the unfinished file' + ('; free some space' if full else ''))
+        self.exit_code = EXIT_WRITE_FAILED
+        self.done = True
+        for timer in (self._discovery_timer, self._handshake_timer, self._flush_timer):
+            timer.cancel()
+        self.publish_status()
 
     def _on_lost(self, rec: _Topic, info) -> None:
         lost = int(getattr(info, 'total_count_change', 1) or 1)
@@ -499,7 +597,8 @@ class RecorderNode(Node):
         msg.node = self.get_name()
         msg.frames = self.messages_written
         msg.missed_frames = min(self.messages_lost, 2**32 - 1)
-        msg.last_missed_input = self._last_lost_topic
+        msg.last_missed_input = (WRITE_FAILED_PREFIX + self.write_error if self.write_error
+                                 else self._last_lost_topic)
         if self._first_write_wall is not None:
             msg.wall_time = time.monotonic() - self._first_write_wall
         self._status_pub.publish(msg)
@@ -512,10 +611,15 @@ class RecorderNode(Node):
             return
         self._discovery_timer.cancel()
         self._handshake_timer.cancel()
+        self._flush_timer.cancel()
         for rec in self._topics.values():
             self.destroy_subscription(rec.subscription)
         try:
             writer.close()
+        except OSError as exc:
+            self._writer = writer
+            self._write_failed(exc)
+            return
         except Exception as exc:  # noqa: BLE001 - report, the node is going down anyway
             self.get_logger().error(f'closing {self.output} failed: {exc}')
             raise

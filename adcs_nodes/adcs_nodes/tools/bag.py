@@ -247,6 +247,161 @@ def _flatten_value(key: str, value: Any, out: List[Tuple[str, Any]]) -> None:
         out.append((key, _scalar(value)))
 
 
+# ---------------------------------------------------------------------- crash safety
+#: MCAP file magic (start and end of a finished file).
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+
+
+def flush_writer(writer: Any, fsync: bool = False) -> bool:
+    """Write the pending MCAP chunk of an open rosbags ``Writer`` to the file now.
+
+    The rosbags MCAP writer keeps up to 1 MiB of messages in memory before it writes a chunk,
+    so a process killed with SIGKILL left a bag without any data. Closing the pending chunk
+    and flushing the file object puts every message written so far in the kernel's page cache
+    (it survives the death of the process); ``fsync=True`` also forces it to the disk (it then
+    survives a machine crash). A file cut after any complete record is read back by
+    :func:`recover_mcap` (``open_bag`` does it by itself).
+
+    Relies on the MCAP storage of rosbags 0.11 (``writer.storage.chunk``, ``close_chunk``,
+    ``bio``); with another storage it does nothing and returns ``False``.
+
+    Returns
+    -------
+    bool
+        Whether a chunk was written.
+
+    Raises
+    ------
+    OSError
+        From the file system, e.g. ``ENOSPC`` when the disk is full.
+    """
+    storage = getattr(writer, 'storage', None)
+    chunk = getattr(storage, 'chunk', None)
+    bio = getattr(storage, 'bio', None)
+    if chunk is None or bio is None or not hasattr(storage, 'close_chunk'):
+        return False
+    wrote = bool(chunk.msgs)  # schemas / channels alone wait for their first message
+    if wrote:
+        storage.close_chunk()
+    bio.flush()
+    if fsync:
+        os.fsync(bio.fileno())
+    return wrote
+
+
+class _Bounded:
+    """Read-only view of the first ``limit`` bytes of a binary file (for the stream reader)."""
+
+    def __init__(self, fh, limit: int) -> None:
+        self._fh, self._left = fh, limit
+
+    def read(self, n: int = -1) -> bytes:
+        n = self._left if n is None or n < 0 else min(n, self._left)
+        data = self._fh.read(n)
+        self._left -= len(data)
+        return data
+
+
+def _complete_records_end(fh, size: int) -> int:
+    """Offset just after the last complete top-level MCAP record of an open file (0: none)."""
+    fh.seek(0)
+    if fh.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+        return 0
+    pos = good = len(MCAP_MAGIC)
+    while pos + 9 <= size:
+        fh.seek(pos)
+        head = fh.read(9)
+        if len(head) < 9:
+            break
+        opcode, length = struct.unpack('<BQ', head)
+        end = pos + 9 + length
+        if opcode == 0 or end > size:
+            break  # zero bytes of a file extended but never written, or a cut record
+        pos = good = end
+        if opcode == 0x02:  # footer: the closing magic follows
+            break
+    return good
+
+
+def recover_mcap(src: os.PathLike | str, dst: os.PathLike | str) -> Tuple[int, int]:
+    """Copy every complete record of a possibly unfinished MCAP file into a finished one.
+
+    A recorder killed (SIGKILL, power loss) or stopped by a full disk leaves an MCAP file
+    without its summary and footer, possibly cut inside a record. The MCAP stream format is a
+    sequence of length-prefixed records, so everything up to the last complete record is read
+    (``mcap.stream_reader.StreamReader``, the non-seeking reader of the ``mcap`` package), and
+    schemas, channels and messages are written, in the original order, into ``dst`` with a
+    summary and footer (readable by rosbags, Foxglove, ``ros2 bag``).
+
+    Returns
+    -------
+    (int, int)
+        Messages recovered, bytes of the source after its last complete record (lost).
+
+    Raises
+    ------
+    ValueError
+        If ``src`` is not an MCAP file (wrong magic) or a complete record is corrupt.
+    """
+    from mcap.exceptions import EndOfFile, McapError
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+    from mcap.writer import CompressionType
+    from mcap.writer import Writer as McapStreamWriter
+
+    size = os.path.getsize(src)
+    count = 0
+    with open(src, 'rb') as fh, open(dst, 'wb') as out:
+        good = _complete_records_end(fh, size)
+        if good == 0:
+            raise ValueError(f'{src}: not an MCAP file (empty or wrong magic)' if size else
+                             f'{src}: empty file (the recorder wrote nothing)')
+        fh.seek(0)
+        writer = McapStreamWriter(out, compression=CompressionType.NONE)
+        writer.start(profile='ros2', library='adcs recover_mcap')
+        schemas: Dict[int, int] = {}
+        channels: Dict[int, int] = {}
+        try:
+            for rec in StreamReader(_Bounded(fh, good)).records:
+                if isinstance(rec, Schema) and rec.id not in schemas:
+                    schemas[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
+                elif isinstance(rec, Channel) and rec.id not in channels:
+                    channels[rec.id] = writer.register_channel(
+                        rec.topic, rec.message_encoding, schemas.get(rec.schema_id, 0),
+                        dict(rec.metadata))
+                elif isinstance(rec, Message) and rec.channel_id in channels:
+                    writer.add_message(channels[rec.channel_id], rec.log_time, rec.data,
+                                       rec.publish_time, rec.sequence)
+                    count += 1
+        except EndOfFile:
+            pass  # the end of the complete records
+        except (McapError, struct.error, UnicodeDecodeError, ValueError) as exc:
+            raise ValueError(f'{src}: corrupt MCAP record: {exc}') from exc
+        writer.finish()
+    return count, size - good
+
+
+def _mcap_finished(path: Path) -> bool:
+    """Whether an MCAP file ends with the closing magic (cheap check, no parsing)."""
+    try:
+        with open(path, 'rb') as fh:
+            fh.seek(0, os.SEEK_END)
+            if fh.tell() < 2 * len(MCAP_MAGIC):
+                return False
+            fh.seek(-len(MCAP_MAGIC), os.SEEK_END)
+            return fh.read() == MCAP_MAGIC
+    except OSError:
+        return False
+
+
+def _mcap_of(path: Path) -> Optional[Path]:
+    """The MCAP file of a bag path (the file itself, or a directory's single ``.mcap``)."""
+    if path.is_file():
+        return path if path.suffix == '.mcap' else None
+    mcaps = sorted(path.glob('*.mcap'))
+    return mcaps[0] if len(mcaps) == 1 else None
+
+
 def _resolve(bag_path: os.PathLike | str) -> Path:
     """Path handed to rosbags: the bag directory, or its single ``.mcap`` if metadata is gone."""
     path = Path(bag_path)
@@ -266,7 +421,10 @@ def open_bag(bag_path: os.PathLike | str) -> Iterator[AnyReader]:
     """Open a rosbag2 bag (directory or ``.mcap`` file) as an open rosbags ``AnyReader``.
 
     Types come from the definitions embedded in the bag; :func:`make_typestore` serves bags
-    without embedded definitions.
+    without embedded definitions. An unfinished bag (its recorder was killed, or the disk was
+    full: no ``metadata.yaml``, no MCAP footer) is read through :func:`recover_mcap` into a
+    temporary file, with a warning on the ``adcs_nodes.tools.bag`` logger naming how much was
+    recovered; the bag itself is not modified.
 
     Raises
     ------
@@ -276,20 +434,49 @@ def open_bag(bag_path: os.PathLike | str) -> Iterator[AnyReader]:
         If it is not a readable bag (message names the path and the reason).
     """
     path = _resolve(bag_path)
-    try:
-        reader = AnyReader([path], default_typestore=make_typestore())
-        reader.open()
-    except FileNotFoundError:
-        raise
-    except Exception as exc:  # rosbags raises several unrelated error types for bad files
-        raise ValueError(f'{bag_path}: cannot read bag: {exc}') from exc
-    try:
-        yield reader
-    finally:
+    with ExitStack() as stack:
+        mcap = _mcap_of(path)
+        if mcap is not None and not _mcap_finished(mcap):
+            path = _recovered(stack, mcap, bag_path)
         try:
-            reader.close()
-        except Exception:  # noqa: BLE001 - closing a broken reader must not mask the error
-            pass
+            reader = AnyReader([path], default_typestore=make_typestore())
+            reader.open()
+        except FileNotFoundError:
+            raise
+        except Exception as exc:  # rosbags raises several unrelated error types for bad files
+            raise ValueError(f'{bag_path}: cannot read bag: {exc}') from exc
+        try:
+            yield reader
+        finally:
+            try:
+                reader.close()
+            except Exception:  # noqa: BLE001 - closing a broken reader must not mask the error
+                pass
+
+
+#: Bags already reported as unfinished in this process (one warning per bag).
+_WARNED: set = set()
+
+
+def _recovered(stack: ExitStack, mcap: Path, bag_path: os.PathLike | str) -> Path:
+    """Recover an unfinished MCAP file into a temporary directory removed by ``stack``."""
+    import logging
+    import tempfile
+
+    tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix='adcs-recover-')))
+    out = tmp / mcap.name
+    try:
+        count, lost = recover_mcap(mcap, out)
+    except OSError as exc:
+        raise ValueError(f'{bag_path}: unfinished bag, recovery failed: {exc}') from exc
+    if str(bag_path) in _WARNED:
+        return out
+    _WARNED.add(str(bag_path))
+    logging.getLogger(__name__).warning(
+        '%s: unfinished bag (recorder killed or disk full?): read %d messages from its '
+        'complete records%s', bag_path, count,
+        f'; the last {lost} bytes are a cut record' if lost else '')
+    return out
 
 
 def read_messages(bag_path: os.PathLike | str, topics: Optional[Iterable[str]] = None
