@@ -1,0 +1,251 @@
+"""Eigenaxis (Euler axis) geometry of an attitude error (paper 003; pure numpy).
+
+Alekseev, Malyavin, Shadyan, "Extensive attitude control of a near-Earth satellite based on
+fuzzy logic" (seed paper 003; digest ``papers/fuzzy-eigenaxis-slew.md``, sections 2-3).
+Equation numbers are the paper's (it has no (11), (12)).
+
+Direction cosine matrix ``A`` (1): rows are body axes in the reference axes, ``v_body = A
+v_ref``; Euler-Krylov angles ``psi, theta, gamma`` (3-2-1), ``A = R1(gamma) R2(theta)
+R3(psi)``. The printed row 3 swaps ``sin psi`` and ``cos psi`` in its first products (a typo:
+the printed matrix is not orthogonal); the corrected row is::
+
+    a31 = cg st cp + sg sp,   a32 = cg st sp - sg cp,   a33 = cg ct                       (1)
+
+In our convention ``A = R(q_ref_body)^T`` (``q_ref_body`` rotates body vectors into the
+reference frame). For a target other than the reference axes the error DCM
+``A_err = A A_T^T`` (ASSUMPTION, digest section 3) replaces ``A``; it is
+``R(q_target_body)^T`` with ``q_target_body = q_ref_target^* q_ref_body``.
+
+Eigenangle and eigenaxis::
+
+    phi = arccos((tr A - 1) / 2)                                                          (7)
+    V_i = (a_{i+1,i+2} - a_{i+2,i+1}) / (2 sin phi),   i = 1..3 cyclic                     (6)
+
+``A = cos phi I + (1 - cos phi) e e^T - sin phi [e x]``, so ``e_phi = V`` is the rotation axis
+of ``A^T`` (target axes -> body axes) and ``d phi / dt = e_phi . omega`` (``omega`` the body
+rate relative to the target, body axes): ``phi`` decreases when ``omega`` points along
+``-e_phi``. Numerically (pitfalls 1-3 of the digest): ``phi = atan2(|v| / 2, (tr A - 1) / 2)``
+with ``v = 2 sin phi e_phi`` (accurate near 0 where ``arccos`` is not), ``e_phi = v / |v|``;
+near 180 deg ``v -> 0`` and the axis comes from the symmetric part
+``A + A^T = 2 cos phi I + 2 (1 - cos phi) e e^T``; its sign is free there (either is a
+shortest slew) and is kept from the previous axis (hysteresis) so the axis does not chatter.
+
+Torque directions (``J`` the inertia matrix; the paper's principal ``J_i`` are its diagonal)::
+
+    e_k  = J e_phi / J_k,   J_k  = |J e_phi| = sqrt(sum_i (J_i V_i)^2)                    (4)
+    e_gk = J e_g / J_gk,    J_gk = |J e_g|   = sqrt(sum_i (J_i mu_i)^2)                    (5)
+
+so a torque ``M_k e_k`` gives ``omega_dot = (M_k / J_k) e_phi`` (gyroscopic term aside).
+Parasitic (gyroscopic) rate and its direction::
+
+    phi_dot   = e_phi . omega
+    phidot_g  = omega - phi_dot e_phi                                                     (9)
+    e_g       = phidot_g / |phidot_g|                                                     (8)
+
+and the backward difference of its modulus (signed, despite the notation)::
+
+    |phiddot_g|_n = (|phidot_g|_n - |phidot_g|_{n-1}) / tau                              (15)
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional, Tuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = ['dcm_euler_321', 'eigen_from_dcm', 'eigen_from_quaternion', 'torque_direction',
+           'gyroscopic_rate', 'RateModulusDerivative']
+
+#: Below this |v| = 2 sin(phi) the axis from (6) is not trusted (near 0 or 180 deg).
+_SIN_EPS = 1e-9
+#: Default hysteresis band below 180 deg in which the previous axis sign is kept [rad].
+HYSTERESIS_RAD = math.radians(1.0)
+
+
+def dcm_euler_321(psi: float, theta: float, gamma: float) -> np.ndarray:
+    """The DCM ``A`` of eq. (1), row 3 corrected (reference axes -> body axes).
+
+    Parameters
+    ----------
+    psi, theta, gamma : float
+        Euler-Krylov angles [rad]: ``psi`` about x3, then ``theta`` about x'2, then ``gamma``
+        about x'1 (3-2-1; our yaw, pitch, roll).
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        ``A`` with ``v_body = A v_ref``; equals ``R(from_euler_321(gamma, theta, psi))^T``.
+    """
+    cp, sp = math.cos(psi), math.sin(psi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cg, sg = math.cos(gamma), math.sin(gamma)
+    return np.array([
+        [cp * ct, sp * ct, -st],                                                         # (1)
+        [sg * st * cp - cg * sp, sg * st * sp + cg * cp, sg * ct],
+        [cg * st * cp + sg * sp, cg * st * sp - sg * cp, cg * ct],   # row 3 typo corrected
+    ])
+
+
+def _keep_sign(phi: float, e: np.ndarray, axis_prev: Optional[np.ndarray],
+               hysteresis_rad: float) -> Tuple[float, np.ndarray]:
+    """Near 180 deg keep the previous axis: ``(phi, e) -> (2 pi - phi, -e)`` if flipped."""
+    if (axis_prev is not None and phi > math.pi - hysteresis_rad
+            and float(np.dot(e, axis_prev)) < 0.0):
+        return 2.0 * math.pi - phi, -e
+    return phi, e
+
+
+def eigen_from_dcm(A: ArrayLike, axis_prev: Optional[ArrayLike] = None,
+                   hysteresis_rad: float = HYSTERESIS_RAD) -> Tuple[float, np.ndarray]:
+    """Eigenangle (7) and eigenaxis (6) of a DCM, robust near 0 and 180 deg.
+
+    Parameters
+    ----------
+    A : array_like, shape (3, 3)
+        Proper rotation, ``v_body = A v_ref`` (eq. (1), or the error DCM).
+    axis_prev : array_like, shape (3,), optional
+        Previous eigenaxis (unit). Used when the axis is undefined (``phi = 0``) and, within
+        ``hysteresis_rad`` of 180 deg, to keep the axis sign (``phi`` may then exceed pi by up
+        to ``hysteresis_rad``: the same rotation the long way round).
+    hysteresis_rad : float
+        Width of the sign-keeping band below 180 deg [rad].
+
+    Returns
+    -------
+    phi : float
+        Eigenangle [rad], in [0, pi] (up to ``pi + hysteresis_rad`` with ``axis_prev``).
+    e_phi : ndarray, shape (3,)
+        Unit eigenaxis (body = reference components), the rotation axis of ``A^T``. At
+        ``phi = 0`` it is ``axis_prev`` (zeros without one): the axis is undefined there.
+    """
+    a = np.asarray(A, dtype=float)
+    v = np.array([a[1, 2] - a[2, 1], a[2, 0] - a[0, 2], a[0, 1] - a[1, 0]])   # 2 sin phi e
+    c = 0.5 * (np.trace(a) - 1.0)
+    nv = float(np.linalg.norm(v))
+    phi = math.atan2(0.5 * nv, c)                                            # (7), robust
+    prev = None if axis_prev is None else np.asarray(axis_prev, dtype=float)
+    if c < -0.5:
+        # Near 180 deg: the symmetric part gives |e_i| accurately; (6) only its sign.
+        d = np.clip((np.diag(a) - c) / (1.0 - c), 0.0, None)
+        i = int(np.argmax(d))
+        e = np.empty(3)
+        e[i] = math.sqrt(d[i])
+        for j in range(3):
+            if j != i:                                        # a_ij + a_ji = 2(1-c) e_i e_j
+                e[j] = (a[i, j] + a[j, i]) / (2.0 * (1.0 - c) * e[i])
+        e /= np.linalg.norm(e)
+        if nv > _SIN_EPS:
+            e = e if float(np.dot(e, v)) >= 0.0 else -e                         # (6) sign
+        elif prev is not None and float(np.dot(e, prev)) < 0.0:
+            e = -e
+        return _keep_sign(phi, e, prev, hysteresis_rad)
+    if nv > 0.0:
+        return phi, v / nv                                              # (6), normalised
+    return 0.0, (prev.copy() if prev is not None else np.zeros(3))
+
+
+def eigen_from_quaternion(q_target_body: ArrayLike, axis_prev: Optional[ArrayLike] = None,
+                          hysteresis_rad: float = HYSTERESIS_RAD) -> Tuple[float, np.ndarray]:
+    """Eigenangle and eigenaxis of an attitude error quaternion (same as (6), (7)).
+
+    Parameters
+    ----------
+    q_target_body : array_like, shape (4,)
+        Error quaternion, scalar last, rotating body vectors into the target axes
+        (``A_err = R(q)^T``); normalised here (must have non-zero norm).
+    axis_prev, hysteresis_rad
+        As in :func:`eigen_from_dcm`.
+
+    Returns
+    -------
+    phi : float
+        [rad], in [0, pi] (up to ``pi + hysteresis_rad`` with ``axis_prev``).
+    e_phi : ndarray, shape (3,)
+        Unit eigenaxis; ``axis_prev`` (or zeros) at ``phi = 0``.
+    """
+    q = np.asarray(q_target_body, dtype=float)
+    q = q / np.linalg.norm(q)
+    if q[3] < 0.0:
+        q = -q
+    s = float(np.linalg.norm(q[:3]))
+    prev = None if axis_prev is None else np.asarray(axis_prev, dtype=float)
+    if s == 0.0:
+        return 0.0, (prev.copy() if prev is not None else np.zeros(3))
+    phi = 2.0 * math.atan2(s, float(q[3]))
+    return _keep_sign(phi, q[:3] / s, prev, hysteresis_rad)
+
+
+def torque_direction(inertia: ArrayLike, e: ArrayLike) -> Tuple[np.ndarray, float]:
+    """Torque direction that accelerates along ``e``: eq. (4) (``e_phi``) or (5) (``e_g``).
+
+    Parameters
+    ----------
+    inertia : array_like, shape (3,) or (3, 3)
+        Principal inertias ``J_i`` or the inertia matrix [kg m^2], body axes.
+    e : array_like, shape (3,)
+        Unit direction, body axes.
+
+    Returns
+    -------
+    e_k : ndarray, shape (3,)
+        ``J e / |J e|`` (zeros if ``e`` is zero).
+    J_k : float
+        ``|J e|`` [kg m^2], the inertia "about ``e_k``" of the paper.
+    """
+    J = np.asarray(inertia, dtype=float)
+    je = (J @ np.asarray(e, dtype=float)) if J.ndim == 2 else J * np.asarray(e, dtype=float)
+    jk = float(np.linalg.norm(je))                                              # (4), (5)
+    if jk == 0.0:
+        return np.zeros(3), 0.0
+    return je / jk, jk
+
+
+def gyroscopic_rate(omega: ArrayLike, e_phi: ArrayLike) -> Tuple[float, np.ndarray, float]:
+    """Eigenaxis rate and the parasitic rate off the eigenaxis, eq. (9).
+
+    Parameters
+    ----------
+    omega : array_like, shape (3,)
+        Body rate relative to the target axes, body axes [rad/s].
+    e_phi : array_like, shape (3,)
+        Unit eigenaxis.
+
+    Returns
+    -------
+    phi_dot : float
+        ``e_phi . omega`` [rad/s] (= d phi / dt).
+    phidot_g : ndarray, shape (3,)
+        ``omega - phi_dot e_phi`` [rad/s], body axes (9).
+    g : float
+        ``|phidot_g|`` [rad/s].
+    """
+    w = np.asarray(omega, dtype=float)
+    e = np.asarray(e_phi, dtype=float)
+    phi_dot = float(np.dot(e, w))
+    wg = w - phi_dot * e                                                                  # (9)
+    return phi_dot, wg, float(np.linalg.norm(wg))
+
+
+class RateModulusDerivative:
+    """Backward difference of ``|phidot_g|``, eq. (15); 0 on the first sample (pitfall 5)."""
+
+    def __init__(self) -> None:
+        self._prev: Optional[float] = None
+
+    def reset(self) -> None:
+        """Forget the previous sample."""
+        self._prev = None
+
+    def update(self, g: float, tau: float) -> float:
+        """``(g - g_prev) / tau`` [rad/s^2] for ``g = |phidot_g|`` [rad/s], period ``tau`` [s].
+
+        Returns 0 for the first sample, a non-positive or non-finite ``tau`` or a non-finite
+        ``g`` (which is then not stored).
+        """
+        if not math.isfinite(g):
+            return 0.0
+        prev, self._prev = self._prev, float(g)
+        if prev is None or not (math.isfinite(tau) and tau > 0.0):
+            return 0.0
+        return (float(g) - prev) / float(tau)                                           # (15)

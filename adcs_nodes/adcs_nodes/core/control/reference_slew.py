@@ -1,0 +1,145 @@
+"""Reference rest-to-rest eigenaxis slew: bang-bang rate profile with a PD end (pure numpy).
+
+The comparison controller of paper 003 (digest ``papers/fuzzy-eigenaxis-slew.md``, section 10).
+The paper compares its fuzzy slew "with [7]" and gives neither the reference law nor its
+parameters (the citation is most likely the optimal spatial turn of Shklyar & Malshenko, its
+ref. [6]). This module is our stand-in (ASSUMPTION): a near time-optimal eigenaxis slew under
+the same per-axis torque limit, written as a rate-profile tracker.
+
+Law (``phi``, ``e_phi`` from (6), (7); ``omega`` the body rate relative to the target)::
+
+    a_max   = f_a min_i l_i / |(J e_phi)_i|        eigenaxis acceleration that fits the box
+    w_prof  = min(sqrt(2 a_max phi), lambda phi, w_max)      bang-bang switching curve,
+                                                             linear (PD) near the target
+    omega_d = -w_prof e_phi
+    M       = J k (omega_d - omega) + omega x J omega          rate tracking + gyroscopic
+    M       <- M / max(1, max_i |M_i| / l_i)                   same limit as the fuzzy law
+
+Far from the target ``omega_d`` is the rest-to-rest bang-bang profile (full acceleration,
+then the parabola ``|omega| = sqrt(2 a phi)`` down to rest); below the angle where
+``lambda phi < sqrt(2 a phi)`` it is the PD law ``M ~ -J k (lambda phi e + omega)``.
+``f_a < 1`` leaves torque for the gyroscopic term and the rate loop.
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from adcs_nodes.core.control import (Command, ControlInputs, cross3, finite_vector,
+                                     limits_vector, scale_to_limits)
+from adcs_nodes.core.control import eigenaxis as ea
+from adcs_nodes.core.control.fuzzy import error_state, realise
+
+__all__ = ['ReferenceSlewController']
+
+
+class ReferenceSlewController:
+    """Near time-optimal eigenaxis slew (interface of :mod:`adcs_nodes.core.control`).
+
+    Parameters
+    ----------
+    inertia_kgm2 : array_like, shape (3, 3) or (3,)
+        Onboard inertia [kg m^2], body axes.
+    max_torque_Nm : float or array_like, shape (3,)
+        Per-axis torque limit [N m].
+    accel_fraction : float
+        ``f_a`` in (0, 1]: fraction of the admissible eigenaxis acceleration planned.
+    rate_gain_per_s : float
+        ``k`` [1/s] of the rate loop.
+    linear_gain_per_s : float
+        ``lambda`` [1/s] of the linear (PD) end of the profile.
+    max_rate_deg_s : float
+        ``w_max`` [deg/s]; ``inf`` for none.
+    wheel_axes_body, wheel_max_torque_Nm : optional
+        Reaction wheels, as in :class:`~adcs_nodes.core.control.fuzzy.FuzzyEigenaxisController`.
+
+    Raises
+    ------
+    ValueError
+        On bad configuration.
+    """
+
+    def __init__(self, inertia_kgm2: ArrayLike, max_torque_Nm: ArrayLike = 1.0,
+                 accel_fraction: float = 0.9, rate_gain_per_s: float = 1.0,
+                 linear_gain_per_s: float = 0.15, max_rate_deg_s: float = math.inf,
+                 wheel_axes_body: Optional[ArrayLike] = None,
+                 wheel_max_torque_Nm: Optional[ArrayLike] = None) -> None:
+        J = np.asarray(inertia_kgm2, dtype=float)
+        if J.shape == (3,):
+            J = np.diag(J)
+        self.J = finite_vector(J, 'inertia_kgm2', (3, 3))
+        if not np.all(np.linalg.eigvalsh(0.5 * (self.J + self.J.T)) > 0.0):
+            raise ValueError('inertia_kgm2 must be symmetric positive definite')
+        self.limit = limits_vector(max_torque_Nm, 'max_torque_Nm', 3, allow_zero=False,
+                                   allow_inf=False)
+        for name, v in (('accel_fraction', accel_fraction),
+                        ('rate_gain_per_s', rate_gain_per_s),
+                        ('linear_gain_per_s', linear_gain_per_s),
+                        ('max_rate_deg_s', max_rate_deg_s)):
+            if math.isnan(float(v)) or not float(v) > 0.0:
+                raise ValueError(f'{name} must be > 0, got {v}')
+        if float(accel_fraction) > 1.0 or math.isinf(float(rate_gain_per_s)) \
+                or math.isinf(float(linear_gain_per_s)):
+            raise ValueError('accel_fraction must be <= 1 and the gains finite')
+        self.f_a = float(accel_fraction)
+        self.k = float(rate_gain_per_s)
+        self.lam = float(linear_gain_per_s)
+        self.w_max = math.radians(float(max_rate_deg_s))
+        if wheel_axes_body is not None and np.size(wheel_axes_body) > 0:
+            axes = np.asarray(wheel_axes_body, dtype=float).reshape(-1, 3)
+            n = axes.shape[0]
+            self.A_w = finite_vector(axes, 'wheel_axes_body', (n, 3)).T
+            if np.linalg.matrix_rank(self.A_w) < 3:
+                raise ValueError('wheel axes must span 3-D for three-axis slews')
+            self.A_w_pinv = np.linalg.pinv(self.A_w)
+            self.wheel_limit = limits_vector(wheel_max_torque_Nm, 'wheel_max_torque_Nm', n,
+                                             allow_zero=False)
+        else:
+            self.A_w = None
+        self._axis: Optional[np.ndarray] = None
+
+    @property
+    def n_wheels(self) -> int:
+        return 0 if self.A_w is None else self.A_w.shape[1]
+
+    def reset(self) -> None:
+        """Forget the previous eigenaxis."""
+        self._axis = None
+
+    def law(self, q_target_body: ArrayLike, omega_rel_body: ArrayLike,
+            omega_body_eci_body: Optional[ArrayLike] = None) -> dict:
+        """Torque [N m] (body axes, within the box) and diagnostics for one error state.
+
+        ``omega_body_eci_body`` (inertial rate, for the gyroscopic term) defaults to
+        ``omega_rel_body``.
+        """
+        w = np.asarray(omega_rel_body, dtype=float)
+        w_abs = w if omega_body_eci_body is None else np.asarray(omega_body_eci_body, float)
+        phi, e = ea.eigen_from_quaternion(q_target_body, self._axis)
+        if not np.any(e):
+            e = np.array([1.0, 0.0, 0.0])
+        self._axis = e
+        je = np.abs(self.J @ e)
+        with np.errstate(divide='ignore'):
+            a_max = self.f_a * float(np.min(np.where(je > 0.0, self.limit / je, np.inf)))
+        w_prof = min(math.sqrt(2.0 * a_max * phi), self.lam * phi, self.w_max)
+        omega_d = -w_prof * e
+        m = self.J @ (self.k * (omega_d - w)) + cross3(w_abs, self.J @ w_abs)
+        m_out, sigma = scale_to_limits(m, self.limit)
+        return dict(torque_body=m_out, phi=phi, phi_dot=float(e @ w), e_phi=e, a_max=a_max,
+                    w_prof=w_prof, sigma=sigma)
+
+    def update(self, inputs: ControlInputs, t: float, dt: float) -> Command:
+        """Command for frame time ``t`` (see :mod:`adcs_nodes.core.control`)."""
+        err = error_state(inputs)
+        if isinstance(err, str):
+            return Command.zero(self.n_wheels, err)
+        q_err, w_rel, w_abs = err
+        out = self.law(q_err, w_rel, w_abs)
+        torque = out.pop('torque_body')
+        if not np.all(np.isfinite(torque)):
+            return Command.zero(self.n_wheels, 'non-finite torque')
+        return realise(torque, w_abs, inputs, self, out)
