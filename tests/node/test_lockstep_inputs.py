@@ -1,6 +1,9 @@
-"""LockstepNode.lockstep_inputs: fires in order when due inputs arrive; timeout fallback."""
+"""LockstepNode.lockstep_inputs: fires in order when due inputs arrive; timeout fallback;
+dead producers; previous-frame inputs; status at sim seconds; timing mode; QoS overrides."""
+import pytest
 import rclpy
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
 from adcs_msgs.msg import LockstepStatus
@@ -12,15 +15,16 @@ S = 10**9
 
 
 class Probe(LockstepNode):
-    def __init__(self, context, timeout_s=5.0):
+    def __init__(self, context, timeout_s=5.0, inputs=None, extra=()):
         super().__init__('probe_node', context=context, parameter_overrides=[
-            Parameter('timeout_s', value=timeout_s)])
+            Parameter('timeout_s', value=timeout_s), Parameter('timing_mode', value='lockstep'),
+            *extra])
         self.fired = []
-        self.lockstep_inputs({'a': (LockstepStatus, 'in/a', 1.0),
-                              'b': (LockstepStatus, 'in/b', 2.0)}, 1.0, self.on_frame)
+        self.lockstep_inputs(inputs or {'a': (LockstepStatus, 'in/a', 1.0),
+                                        'b': (LockstepStatus, 'in/b', 2.0)}, 1.0, self.on_frame)
 
     def on_frame(self, t, msgs, missing):
-        self.fired.append((t // S, msgs['a'] and msgs['a'].node, msgs['b'] and msgs['b'].node,
+        self.fired.append((t // S, *(msgs[k] and msgs[k].node for k in sorted(msgs)),
                            tuple(missing)))
 
 
@@ -66,3 +70,111 @@ def test_missing_input_times_out_and_fires_with_latest(ros_context, spin):
     assert node.missed_frames == 1
     src.destroy_node()
     node.destroy_node()
+
+
+def _pubs(node, ros_context, spin, *topics):
+    src = rclpy.create_node('src', context=ros_context)
+    pubs = [src.create_publisher(LockstepStatus, t, 10) for t in topics]
+    assert spin([node, src], lambda: all(p.get_subscription_count() for p in pubs))
+    return src, pubs
+
+
+def test_dead_producer_is_no_longer_awaited_until_it_publishes_again(ros_context, spin):
+    """Issue 12: a dead producer cost a timeout per frame forever."""
+    node = Probe(ros_context, timeout_s=0.3, extra=[Parameter('dead_after_frames', value=2)])
+    src, (pa, pb) = _pubs(node, ros_context, spin, 'in/a', 'in/b')
+    pb.publish(msg(0, 'b0'))
+    for k in range(8):                       # b (due every 2 s) dies after t = 0
+        pa.publish(msg(k, f'a{k}'))
+    assert spin([node, src], lambda: len(node.fired) >= 8, timeout=10.0)
+    missing = {f[0]: f[-1] for f in node.fired}
+    assert missing[2] == ('/in/b',) and missing[4] == ('/in/b',)   # 2 timeouts ...
+    assert missing[6] == ()                                        # ... then not awaited
+    assert node.missed_frames == 2 and node.sync.is_dead('b')
+    assert node.timing_diagnostics()['dead_inputs'] == '/in/b'
+    pb.publish(msg(8, 'b8'))                 # it publishes again: awaited again
+    assert spin([node, src], lambda: not node.sync.is_dead('b'))
+    for k in (8, 9, 10):
+        pa.publish(msg(k, f'a{k}'))
+    assert spin([node, src], lambda: len(node.fired) >= 11, timeout=10.0)
+    assert node.fired[8] == (8, 'a8', 'b8', ())
+    assert node.fired[10] == (10, 'a10', 'b8', ('/in/b',)) and node.missed_frames == 3
+    src.destroy_node()
+    node.destroy_node()
+
+
+def test_previous_frame_input_gets_exactly_the_message_of_the_frame_before(ros_context, spin):
+    node = Probe(ros_context, timeout_s=5.0, inputs={
+        'a': (LockstepStatus, 'in/a', 1.0), 'c': (LockstepStatus, 'in/c', 1.0, 'previous')})
+    src, (pa, pc) = _pubs(node, ros_context, spin, 'in/a', 'in/c')
+    pa.publish(msg(0, 'a0'))
+    pa.publish(msg(1, 'a1'))
+    pc.publish(msg(1, 'c1'))                 # the command of frame 1 arrives first
+    assert spin([node, src], lambda: len(node.fired) >= 1)
+    spin([node, src], lambda: len(node.fired) >= 2, timeout=0.3)
+    assert node.fired == [(0, 'a0', None, ())]          # frame 1 waits for c stamped 0
+    pc.publish(msg(0, 'c0'))
+    assert spin([node, src], lambda: len(node.fired) >= 2)
+    assert node.fired[1] == (1, 'a1', 'c0', ())          # never "whatever arrived" (c1)
+    src.destroy_node()
+    node.destroy_node()
+
+
+def test_status_is_stamped_with_sim_time_once_per_sim_second(ros_context, spin):
+    """Issue 12: lockstep/status was recorded 1-7 times per run, all stamped t = 0."""
+    node = Probe(ros_context, inputs={'a': (LockstepStatus, 'in/a', 1.0)},
+                 extra=[Parameter('duration_s', value=5.0)])
+    got = []
+    src, (pa,) = _pubs(node, ros_context, spin, 'in/a')
+    src.create_subscription(LockstepStatus, 'lockstep/status', got.append, 100)
+    assert spin([node, src], lambda: node._status_pub.get_subscription_count() > 0)
+    for k in range(6):
+        pa.publish(msg(k, f'a{k}'))
+    assert spin([node, src], lambda: any(m.final for m in got), timeout=10.0)
+    stamps = [(m.header.stamp.sec * S + m.header.stamp.nanosec - EPOCH_NS) / S for m in got
+              if m.frames > 0]
+    assert stamps[:6] == [0, 1, 2, 3, 4, 5]
+    assert got[-1].final and got[-1].frames == 6
+    src.destroy_node()
+    node.destroy_node()
+
+
+def test_timing_mode_default_explicit_and_refused(ros_context):
+    def make(*params, cls=LockstepNode):
+        return cls('mode_probe', context=ros_context, parameter_overrides=list(params))
+    alone = make()
+    assert alone.timing_mode == 'live'                # started alone: live
+    alone.destroy_node()
+    launched = make(Parameter('duration_s', value=10.0))
+    assert launched.timing_mode == 'lockstep'         # launcher parameters: lockstep
+    launched.destroy_node()
+    forced = make(Parameter('duration_s', value=10.0), Parameter('timing_mode', value='live'))
+    assert forced.timing_mode == 'live'
+    forced.destroy_node()
+    with pytest.raises(ValueError, match='timing_mode'):
+        make(Parameter('timing_mode', value='realtime'))
+
+    class World(LockstepNode):
+        SIMULATED_WORLD = True
+    world = make(cls=World)
+    assert world.timing_mode == 'lockstep'
+    world.destroy_node()
+    with pytest.raises(ValueError, match='simulated world'):
+        make(Parameter('timing_mode', value='live'), cls=World)
+
+
+def test_qos_overrides_let_a_best_effort_driver_match(ros_context, spin):
+    best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+    plain = Probe(ros_context, inputs={'a': (LockstepStatus, 'in/a', 1.0)})
+    src = rclpy.create_node('src', context=ros_context)
+    pub = src.create_publisher(LockstepStatus, 'in/a', best_effort)
+    spin([plain, src], lambda: pub.get_subscription_count() > 0, timeout=1.0)
+    assert pub.get_subscription_count() == 0          # reliable subscription: no match
+    plain.destroy_node()
+    over = Probe(ros_context, inputs={'a': (LockstepStatus, 'in/a', 1.0)}, extra=[
+        Parameter('qos_overrides./in/a.subscription.reliability', value='best_effort')])
+    assert spin([over, src], lambda: pub.get_subscription_count() > 0)
+    pub.publish(msg(0, 'a0'))
+    assert spin([over, src], lambda: len(over.fired) >= 1)
+    src.destroy_node()
+    over.destroy_node()

@@ -12,6 +12,27 @@ expectations and is ready at once.
 
 Time: ``/clock`` carries ``epoch + elapsed``; nodes convert stamps to elapsed integer
 nanoseconds at the edge (``elapsed_ns``) so frame arithmetic is exact.
+
+Timing modes (parameter ``timing_mode``, DESIGN section 6)
+----------------------------------------------------------
+* ``lockstep``: deterministic with the simulator. Inputs are declared ``frame`` (awaited with
+  the frame's stamp when due), ``previous`` (awaited with the stamp of the producer frame before
+  t, e.g. the actuator command an estimator's prediction needs) or ``latest`` (never awaited;
+  only for inputs that do not change the output). A due input missing ``timeout_s`` of wall
+  time is a missed frame; after ``dead_after_frames`` misses in a row its producer is dead and
+  no longer awaited until it publishes again.
+* ``live``: against real drivers; the default of a flight-software node started alone (no
+  ``expected_matches``, ``duration_s`` or ``frame_period_s`` given; the launcher sets
+  ``timing_mode: lockstep``). Every ``period_s`` of the ROS clock (``use_sim_time`` or wall)
+  the node fires once with the newest sample of each input, at the newest new stamp of its
+  ``frame`` inputs (or the clock's time when none is new): the true time difference, no epoch
+  counting, no replay of missed frames. A sample stamped zero, more than ``max_future_s``
+  ahead of the clock, more than ``max_sample_age_s`` old, or not newer than the one before is
+  rejected and counted by reason (:attr:`LockstepNode.rejected_samples`).
+* QoS: every publisher and subscription accepts ``qos_overrides.<topic>.*`` parameters
+  (``QoSOverridingOptions.with_default_policies()``); in live mode ``sensors/*`` inputs are
+  subscribed best-effort (``SensorDataQoS``), which matches both kinds of driver.
+* Simulated-world nodes (``SIMULATED_WORLD = True``) run in lockstep only.
 """
 from __future__ import annotations
 
@@ -20,12 +41,14 @@ from datetime import datetime, timezone
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
+                       qos_profile_sensor_data)
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from adcs_msgs.msg import LockstepStatus
-from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, seconds_to_ns
+from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, InputKind, input_kind, seconds_to_ns
 from adcs_nodes.nodes.convert import stamp_ns, to_stamp
 from adcs_nodes.nodes.diagnostics import Diagnostics
 
@@ -46,6 +69,14 @@ PROGRESS_EVERY = 10
 #: The clock master waits when a node is more than this many frames behind (the data QoS
 #: keeps 100 messages per topic, so nothing a lagging node has not read yet is dropped).
 MAX_LAG_FRAMES = 40
+#: Timing modes of a node (see the module docstring).
+LOCKSTEP, LIVE = 'lockstep', 'live'
+#: Parameters only the launcher (or a lockstep test) gives: any of them means lockstep.
+LAUNCH_PARAMS = ('expected_matches', 'duration_s', 'frame_period_s')
+#: Topic prefixes subscribed best-effort (SensorDataQoS) in live mode.
+SENSOR_PREFIXES = ('sensors/', '/sensors/')
+#: Reasons a live sample is rejected (keys of ``LockstepNode.rejected_samples``).
+REJECT_REASONS = ('zero_stamp', 'future', 'too_old', 'out_of_order', 'late')
 
 
 def parse_epoch(text: str) -> datetime:
@@ -66,12 +97,18 @@ def epoch_to_ns(epoch: datetime) -> int:
 
 
 class LockstepNode(Node):
-    """rclpy node with the project's parameter, handshake and status conventions.
+    """rclpy node with the project's parameter, handshake, timing and status conventions.
 
     Parameters common to every node: ``epoch`` (ISO UTC of sim time 0), ``frame_period_s``
     (base frame), ``timeout_s`` (wall-clock wait for a missing input), ``seed``,
-    ``expected_matches`` (start handshake), ``real_time`` (latest-value mode).
+    ``expected_matches`` (start handshake), ``real_time`` (latest-value mode),
+    ``timing_mode`` (``lockstep`` | ``live``), ``dead_after_frames`` (missed frames in a row
+    before a producer is dead), ``status_period_s`` (sim seconds between ``lockstep/status``),
+    and in live mode ``max_sample_age_s`` and ``max_future_s``.
     """
+
+    #: True for the simulator's own nodes: they run in lockstep only.
+    SIMULATED_WORLD = False
 
     def __init__(self, name: str, **kwargs: Any) -> None:
         super().__init__(name, allow_undeclared_parameters=True,
@@ -88,6 +125,26 @@ class LockstepNode(Node):
             raise ValueError('timeout_s must be positive')
         self.seed = int(self.param('seed', 0))
         self.real_time = bool(self.param('real_time', False))
+        self.dead_after = self.param('dead_after_frames', 3)
+        if isinstance(self.dead_after, bool) or not isinstance(self.dead_after, int) \
+                or self.dead_after < 1:
+            raise ValueError(f'dead_after_frames must be an integer >= 1, got '
+                             f'{self.dead_after!r}')
+        # read once at start (read-only: the handshake polls it every 20 ms)
+        self._expected_raw = list(self.param('expected_matches', ['']) or [])
+        self.timing_mode = self._timing_mode()
+        self.max_sample_age_s = float(self.param('max_sample_age_s', 5.0))
+        self.max_future_s = float(self.param('max_future_s', 0.5))
+        if not (self.max_sample_age_s > 0 and self.max_future_s >= 0):
+            raise ValueError('max_sample_age_s must be > 0 and max_future_s >= 0')
+        self.status_period_ns = seconds_to_ns(self.param('status_period_s', 1.0))
+        if self.status_period_ns <= 0:
+            raise ValueError('status_period_s must be positive')
+        #: live mode: rejected samples by reason (see REJECT_REASONS), and the last reason
+        self.rejected_samples: Dict[str, int] = {r: 0 for r in REJECT_REASONS}
+        self.last_rejected_sample = ''
+        self._status_mark = -1
+        self._last_status_wall = time.monotonic()
         self.frames = 0
         self.sim_t_ns = 0            # elapsed sim time of the last frame this node processed
         self.missed_frames = 0
@@ -104,9 +161,11 @@ class LockstepNode(Node):
         self._progress_mark = -1
         self._pubs: Dict[str, Any] = {}
         self._subs: Dict[str, Any] = {}
-        self.diagnostics = Diagnostics(self)     # /diagnostics once per sim second (frames)
+        self.diagnostics = Diagnostics(self)     # /diagnostics once per sim second (frame_done)
         self._on_ready: Optional[Callable[[], None]] = None
-        self.create_timer(1.0, self.publish_status)
+        # lockstep/status: once per status_period_s of sim time (frame_done), plus once per
+        # wall second while the node is stalled (no frame for 2 s), plus the final one
+        self.create_timer(1.0, self._status_watchdog)
 
     # ------------------------------------------------------------------ parameters
     def param(self, name: str, default: Any) -> Any:
@@ -131,61 +190,115 @@ class LockstepNode(Node):
 
     # ------------------------------------------------------------------ endpoints
     def publisher(self, msg_type, topic: str, qos: QoSProfile = QOS_DATA):
-        """Create a publisher and register it for the start handshake."""
-        pub = self.create_publisher(msg_type, topic, qos)
+        """Create a publisher (QoS overridable by parameters) registered for the handshake."""
+        pub = self.create_publisher(
+            msg_type, topic, qos,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self._pubs[pub.topic_name] = pub
         return pub
 
     def subscription(self, msg_type, topic: str, callback, qos: QoSProfile = QOS_DATA):
-        """Create a subscription and register it for the start handshake."""
-        sub = self.create_subscription(msg_type, topic, callback, qos)
+        """Create a subscription (QoS overridable by parameters) registered for the handshake."""
+        sub = self.create_subscription(
+            msg_type, topic, callback, qos,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self._subs[sub.topic_name] = sub
         return sub
 
+    # ------------------------------------------------------------------ timing mode
+    def _timing_mode(self) -> str:
+        """``lockstep`` or ``live`` from ``timing_mode``, else from how the node was started."""
+        given = str(self.param('timing_mode', '') or '')
+        if given not in ('', LOCKSTEP, LIVE):
+            raise ValueError(f'timing_mode must be {LOCKSTEP!r} or {LIVE!r}, got {given!r}')
+        if self.SIMULATED_WORLD:
+            if given == LIVE:
+                raise ValueError(f'{self.get_name()} is part of the simulated world: '
+                                 'timing_mode live is for flight software only')
+            return LOCKSTEP
+        if given:
+            return given
+        given_params = getattr(self, '_parameter_overrides', {})   # params file, -p, overrides
+        launched = [n for n in LAUNCH_PARAMS if n in given_params
+                    and given_params[n].value not in (None, '', [''], [], 0, 0.0)]
+        if launched or self.real_time:
+            return LOCKSTEP
+        return LIVE
+
+    @property
+    def live(self) -> bool:
+        """True in live mode."""
+        return self.timing_mode == LIVE
+
     # ------------------------------------------------------------------ frame inputs
-    def lockstep_inputs(self, inputs: Dict[str, Tuple[Any, str, float]], period_s: float,
+    def lockstep_inputs(self, inputs: Dict[str, Tuple], period_s: float,
                         on_frame: Callable[[int, Dict[str, Any], List[str]], None]) -> None:
         """Fire ``on_frame`` at t = 0, P, 2P, ... when the inputs due then have arrived.
 
         Parameters
         ----------
         inputs : dict
-            ``{name: (msg_type, topic, period_s)}``; ``period_s`` is the producer's period
-            (0: never waited for, always the latest). Messages need ``header.stamp``.
+            ``{name: (msg_type, topic, period_s)}`` or ``{name: (msg_type, topic, period_s,
+            kind)}``; ``period_s`` is the producer's period (0: never waited for, always the
+            latest) and ``kind`` one of ``'frame'`` (default: awaited with the frame's stamp
+            when due), ``'previous'`` (awaited with the stamp of the producer's frame before
+            t; the value is exactly that message, or None when it timed out or its producer is
+            dead) or ``'latest'``. Messages need ``header.stamp``.
         period_s : float
             This node's own period P (a multiple of ``frame_period_s``).
         on_frame : callable
-            ``on_frame(t_ns, msgs, missing)``: elapsed sim time, ``{name: msg or None}`` (the
-            message stamped t if present, else the latest before t), and the due inputs that
-            timed out (empty in a normal frame).
+            ``on_frame(t_ns, msgs, missing)``: elapsed sim time, ``{name: msg or None}`` (see
+            ``kind``), and the due inputs that timed out (empty in a normal frame and always
+            in live mode).
 
         Notes
         -----
         Frame t is considered once ``/clock`` or any input stamped >= t has arrived (so a
         node never runs ahead of the simulation). A due input missing ``timeout_s`` of wall
-        time after that is counted as a missed frame and the frame fires with the latest
-        values. In
-        ``real_time`` mode the node never waits: it fires with the latest values as soon as
-        time has reached t.
+        time after that is counted as a missed frame and the frame fires without it; after
+        ``dead_after_frames`` such frames in a row it is no longer awaited until it publishes
+        again. In ``real_time`` mode the node never waits: it fires with the latest values as
+        soon as time has reached t. In live mode see the module docstring.
         """
         self._own_period_ns = seconds_to_ns(period_s)
-        if self._own_period_ns <= 0 or self._own_period_ns % self.frame_ns:
+        if self._own_period_ns <= 0 or (not self.live and self._own_period_ns % self.frame_ns):
             raise ValueError(f'period {period_s} s is not a positive multiple of the frame '
                              f'{self.frame_ns / NS_PER_S:g} s')
-        periods = {}
+        specs: Dict[str, Tuple[int, InputKind]] = {}
         self._topics_of: Dict[str, str] = {}
-        for name, (msg_type, topic, p_s) in inputs.items():
+        for name, spec in inputs.items():
+            if len(spec) not in (3, 4):
+                raise ValueError(f'input {name}: want (msg_type, topic, period_s[, kind])')
+            msg_type, topic, p_s = spec[:3]
+            kind = input_kind(spec[3] if len(spec) == 4 else InputKind.FRAME)
             p_ns = seconds_to_ns(p_s) if p_s else 0
-            if p_ns % self.frame_ns:
+            if not self.live and p_ns % self.frame_ns:
                 raise ValueError(f'input {name}: period {p_s} s is not a multiple of the frame')
-            periods[name] = p_ns
-            sub = self.subscription(msg_type, topic, self._input_cb(name))
+            if kind is InputKind.LATEST:
+                p_ns = 0
+            specs[name] = (p_ns, kind if p_ns else InputKind.LATEST)
+            qos = QOS_DATA
+            if self.live and topic.startswith(SENSOR_PREFIXES):
+                qos = qos_profile_sensor_data
+            cb = self._live_cb(name) if self.live else self._input_cb(name)
+            sub = self.subscription(msg_type, topic, cb, qos)
             self._topics_of[name] = sub.topic_name
-        self.sync = FrameSync(periods)
+        self.sync = FrameSync(specs, dead_after=self.dead_after)
         self._on_frame = on_frame
         self._next_t = 0
         self._seen_t = -1
         self._wait_since: Optional[float] = None
+        if self.live:
+            self._live_latest: Dict[str, Tuple[int, Any]] = {}
+            self._live_used: Dict[str, int] = {}
+            self._live_last_t: Optional[int] = None
+            self._live_triggers = [n for n, (p, k) in specs.items() if k is InputKind.FRAME]
+            self.create_timer(self._own_period_ns / NS_PER_S, self._live_tick)
+            self.get_logger().info(
+                f'timing_mode live: fires every {period_s:g} s of the ROS clock '
+                f'(use_sim_time={self.get_parameter("use_sim_time").value}) with the newest '
+                f'samples; set timing_mode:=lockstep to run with the simulator')
+            return
         # /clock says that time has reached t even when no input is due then (a 2 s
         # estimator between 10 s magnetometer samples); it is never waited for
         self.subscription(Clock, '/clock', self._on_clock_tick)
@@ -205,7 +318,9 @@ class LockstepNode(Node):
         def cb(msg: Any) -> None:
             self.input_arrived(name)
             t = self.elapsed_ns(stamp_ns(msg.header.stamp))
-            self.sync.add(name, t, msg)
+            if self.sync.add(name, t, msg):
+                self.get_logger().info(f'{self._topics_of[name]} publishes again: awaited '
+                                       'again')
             if t > self._seen_t:
                 self._seen_t = t
             self._try_fire()
@@ -228,23 +343,111 @@ class LockstepNode(Node):
         self.frames += 1
         self.sim_t_ns = t
         self._on_frame(t, msgs, missing)
-        self.diagnostics.frame(t)
-        if self.is_last_frame(t, self._own_period_ns):
+        last = self.is_last_frame(t, self._own_period_ns)
+        self.frame_done(t, final=last)
+        if last:
             self.report_progress(max(t, self._seen_t), final=True)
 
     def _frame_watchdog(self) -> None:
         if self._wait_since is None or time.monotonic() - self._wait_since < self.timeout_s:
             return
         t = self._next_t
-        missing = [self._topics_of[n] for n in self.sync.missing(t)]
-        self.count_missed(missing, t)
+        names = self.sync.missing(t)
+        missing = [self._topics_of[n] for n in names]
+        applied = ', '.join(
+            f'{self._topics_of[n]}: ' + ('none (a previous-frame input)'
+                                         if self.sync.kind(n) is InputKind.PREVIOUS
+                                         else 'its latest earlier sample, if any')
+            for n in names)
+        self.count_missed(missing, t, f'going on without it ({applied})')
+        for n in self.sync.record_misses(t):
+            self.get_logger().error(
+                f'{self._topics_of[n]} missed {self.dead_after} frames in a row: its producer '
+                'is treated as dead and no longer awaited until it publishes again')
         self._fire(t, missing)
         self._try_fire()
+
+    # ------------------------------------------------------------------ live mode
+    def _reject_sample(self, name: str, reason: str, text: str) -> None:
+        self.rejected_samples[reason] += 1
+        self.last_rejected_sample = f'{self._topics_of.get(name, name)}: {text}'
+        self.get_logger().warning(
+            f'sample rejected ({reason}): {self.last_rejected_sample} '
+            f'(rejected so far: {sum(self.rejected_samples.values())})',
+            throttle_duration_sec=5.0)
+
+    def _live_cb(self, name: str) -> Callable[[Any], None]:
+        def cb(msg: Any) -> None:
+            self.input_arrived(name)
+            s = stamp_ns(msg.header.stamp)
+            now = self.get_clock().now().nanoseconds
+            if s == 0:
+                self._reject_sample(name, 'zero_stamp', 'stamped zero')
+                return
+            if now > 0 and s > now + self.max_future_s * NS_PER_S:
+                self._reject_sample(name, 'future', f'stamped {(s - now) / NS_PER_S:.3f} s '
+                                    f'ahead of the clock (limit {self.max_future_s:g} s)')
+                return
+            if now > 0 and now - s > self.max_sample_age_s * NS_PER_S:
+                self._reject_sample(name, 'too_old', f'{(now - s) / NS_PER_S:.3f} s old '
+                                    f'(limit {self.max_sample_age_s:g} s)')
+                return
+            cur = self._live_latest.get(name)
+            if cur is not None and s <= cur[0]:
+                self._reject_sample(name, 'out_of_order', 'not newer than the sample before '
+                                    f'({(cur[0] - s) / NS_PER_S:.3f} s older)')
+                return
+            self._live_latest[name] = (s, msg)
+        return cb
+
+    def _live_tick(self) -> None:
+        """Live mode: one frame with the newest samples (see the module docstring)."""
+        now = self.get_clock().now().nanoseconds
+        if now <= 0:
+            return                              # use_sim_time and no /clock yet
+        last = self._live_last_t
+        new = []
+        for n in self._live_triggers:
+            ent = self._live_latest.get(n)
+            if ent is None or ent[0] <= self._live_used.get(n, -1):
+                continue
+            self._live_used[n] = ent[0]
+            if last is not None and self.elapsed_ns(ent[0]) <= last:
+                self._reject_sample(n, 'late', 'arrived after a later frame was processed')
+                continue
+            new.append(ent[0])
+        t = self.elapsed_ns(max(new) if new else now)
+        if last is not None and t <= last:
+            return                              # clock did not advance
+        max_age = self.max_sample_age_s * NS_PER_S
+        msgs = {}
+        for n in self.sync.names:
+            ent = self._live_latest.get(n)
+            msgs[n] = None if ent is None or now - ent[0] > max_age else ent[1]
+        self._live_last_t = t
+        self.frames += 1
+        self.sim_t_ns = t
+        self._on_frame(t, msgs, [])
+        self.frame_done(t)
+
+    def timing_diagnostics(self) -> Dict[str, str]:
+        """Key-value timing health for ``/diagnostics``: mode, frames, missed frames, dead
+        inputs, rejected samples by reason."""
+        sync = getattr(self, 'sync', None)
+        dead = [self._topics_of.get(n, n) for n in sync.dead()] if sync is not None else []
+        out = {'timing_mode': self.timing_mode, 'frames': str(self.frames),
+               'missed_frames': str(self.missed_frames),
+               'last_missed_input': self.last_missed_input,
+               'dead_inputs': ', '.join(dead),
+               'rejected_samples': str(sum(self.rejected_samples.values())),
+               'last_rejected_sample': self.last_rejected_sample}
+        out.update({f'rejected_{r}': str(v) for r, v in self.rejected_samples.items()})
+        return out
 
     # ------------------------------------------------------------------ handshake
     def _expectations(self) -> List[tuple]:
         out = []
-        for item in self.param('expected_matches', ['']):
+        for item in self._expected_raw:
             if not item:
                 continue
             try:
@@ -302,14 +505,14 @@ class LockstepNode(Node):
         """Absolute ``builtin_interfaces/Time`` of an elapsed sim time."""
         return to_stamp(self.epoch_ns + int(elapsed_ns))
 
-    def count_missed(self, inputs: List[str], t_ns: int) -> None:
-        """Record a frame whose inputs ``inputs`` timed out, and log it."""
+    def count_missed(self, inputs: List[str], t_ns: int,
+                     applied: str = 'going on without it') -> None:
+        """Record a frame whose inputs ``inputs`` timed out, and log what is applied."""
         self.missed_frames += 1
         self.last_missed_input = ','.join(inputs)
         self.get_logger().warning(
             f'frame t={t_ns / NS_PER_S:.3f} s: no {self.last_missed_input} within '
-            f'{self.timeout_s:g} s wall; going on with the last value '
-            f'(missed frames: {self.missed_frames})')
+            f'{self.timeout_s:g} s wall; {applied} (missed frames: {self.missed_frames})')
 
     def report_progress(self, seen_ns: int, final: bool = False) -> None:
         """Publish ``lockstep/progress`` every PROGRESS_EVERY frames of sim time this node
@@ -332,15 +535,32 @@ class LockstepNode(Node):
         """True when frame ``t_ns`` is this node's last one of a run of ``duration_s``."""
         return self.duration_ns > 0 and t_ns + period_ns > self.duration_ns
 
-    def publish_status(self, final: bool = False) -> None:
-        """Publish ``lockstep/status`` (frames, missed frames, wall time).
+    def frame_done(self, t_ns: int, final: bool = False) -> None:
+        """Bookkeeping after frame ``t_ns``: ``lockstep/status`` once per ``status_period_s``
+        of sim time (stamped with it) and at the node's last frame (``final``)."""
+        self.sim_t_ns = t_ns
+        self.diagnostics.frame(t_ns)
+        mark = t_ns // self.status_period_ns
+        if final or mark != self._status_mark:
+            self._status_mark = mark
+            self.publish_status(final=final)
 
-        After the ``final`` one, the periodic timer publishes nothing more, so the final
-        status stays the latest a listener has.
+    def _status_watchdog(self) -> None:
+        """A stalled node (no frame for 2 s of wall time) still reports once a second."""
+        if time.monotonic() - self._last_status_wall >= 2.0:
+            self.publish_status()
+
+    def publish_status(self, final: bool = False) -> None:
+        """Publish ``lockstep/status`` (frames, missed frames, wall time), stamped with the
+        sim time of the last frame processed.
+
+        After the ``final`` one nothing more is published, so the final status stays the
+        latest a listener has.
         """
         if getattr(self, '_final_sent', False):
             return
         self._final_sent = bool(final)
+        self._last_status_wall = time.monotonic()
         msg = LockstepStatus()
         msg.header.stamp = self.stamp(self.sim_t_ns)   # sim time of the last frame
         msg.node = self.get_name()
@@ -348,4 +568,5 @@ class LockstepNode(Node):
         msg.missed_frames = int(self.missed_frames)
         msg.last_missed_input = self.last_missed_input
         msg.wall_time = time.monotonic() - self._wall0
+        msg.final = bool(final)
         self._status_pub.publish(msg)

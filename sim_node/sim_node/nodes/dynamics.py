@@ -10,7 +10,10 @@ Frame k (DESIGN section 6), lockstep mode::
     D. k += 1, back to A (after the last frame: done, the process exits 0)
 
 Missing input past ``timeout_s`` of wall time: log, count a missed frame, and go on with the last
-environment (extrapolated by its rates inside the frame) or a zero command.
+environment (extrapolated by its rates inside the frame) or a zero command. A command producer
+that missed ``dead_after_frames`` command frames in a row is dead: a zero command is applied
+without waiting until it publishes again. The state machine is the pure
+:class:`adcs_nodes.core.lockstep.ClockMaster`; this node executes its actions.
 
 Real-time mode (``real_time: true``): a wall timer at ``frame_period_s / rate_factor`` steps the
 same model with the latest inputs, without waiting.
@@ -20,7 +23,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from typing import Dict, Optional, Set
+from typing import Any, List, Optional
 
 import numpy as np
 from rosgraph_msgs.msg import Clock
@@ -29,14 +32,15 @@ from std_msgs.msg import String
 from adcs_msgs.msg import (ActuatorCommand, AttitudeState, Environment, LockstepStatus,
                            WheelState)
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.lockstep import FrameSync, derive_seed, ns_to_seconds, seconds_to_ns
+from adcs_nodes.core.lockstep import (ZERO, Act, Action, ClockMaster, derive_seed,
+                                      ns_to_seconds, seconds_to_ns)
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
 from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
 from adcs_nodes.nodes.lockstep_node import (MAX_LAG_FRAMES, QOS_DATA, QOS_READY,
                                             LockstepNode)
 from sim_node.models.dynamics import ActuatorCommand as Command
-from sim_node.models.dynamics import FrameEnvironment, SpacecraftState
+from sim_node.models.dynamics import FrameEnvironment, SpacecraftState, propagate_environment
 from sim_node.models.spacecraft_config import (DEFAULT_INITIAL, DEFAULT_SPACECRAFT,
                                                initial_state, spacecraft_from_config)
 
@@ -47,6 +51,8 @@ RECORDER_LAG_FRAMES = 400
 
 class DynamicsNode(LockstepNode):
     """Clock master and rigid-body integrator (see module docstring)."""
+
+    SIMULATED_WORLD = True      # the simulator: lockstep only
 
     def __init__(self, name: str = 'dynamics', **kwargs) -> None:
         super().__init__(name, **kwargs)
@@ -71,7 +77,11 @@ class DynamicsNode(LockstepNode):
             f'wheel{i}' for i in range(self.spacecraft.n_wheels)]
         self.wheel_h0 = cfg.get('wheel_h0_Nms')
 
-        self.sync = FrameSync({'env': self.frame_ns, 'cmd': cmd_ns})
+        self.master = ClockMaster(
+            self.frame_ns, self.duration_ns, cmd_ns, self.wait_for_nodes, self.timeout_s,
+            max_lag_frames=MAX_LAG_FRAMES, lag_frames={'recorder': RECORDER_LAG_FRAMES},
+            dead_after=self.dead_after, no_final=['recorder'])
+        self._exec_t = 0              # frame of the action being executed
         self.clock_pub = self.publisher(Clock, '/clock', QOS_CLOCK)
         self.state_pub = self.publisher(AttitudeState, 'sim/state')
         self.wheels_pub = self.publisher(WheelState, 'sim/wheels')
@@ -81,18 +91,12 @@ class DynamicsNode(LockstepNode):
         self.ready_nodes = set()
         self.create_subscription(String, 'lockstep/ready', self.on_ready_msg, QOS_READY)
         # flow control and end of run: how far every other node got (lockstep/progress)
-        self.progress: Dict[str, int] = {}
-        self.final_nodes: Set[str] = set()
         self.create_subscription(LockstepStatus, 'lockstep/progress', self.on_progress,
                                  QOS_DATA)
         self.create_subscription(LockstepStatus, 'recorder/status', self.on_recorder, 10)
-        self.throttled_frames = 0
 
-        self.k = 0
         self.state: Optional[SpacecraftState] = None
         self._last_q_orbit_body: Optional[np.ndarray] = None
-        self.phase = 'idle'          # idle -> wait_env -> wait_cmd -> (integrate) -> wait_env
-        self.wait_since = 0.0
         self.last_cmd = self.spacecraft.zero_command()
         self.rejected_commands = 0
         self.applied_wheel_torque = np.zeros(self.spacecraft.n_wheels)
@@ -123,62 +127,55 @@ class DynamicsNode(LockstepNode):
         if self.real_time:
             self.create_timer(ns_to_seconds(self.frame_ns) / self.rate_factor, self.on_rt_tick)
         else:
-            self.begin_frame()
+            self._run(self.master.start(time.monotonic()))
 
     # ------------------------------------------------------------------ lockstep
     @property
     def t_ns(self) -> int:
-        """Elapsed sim time of the current frame."""
-        return self.k * self.frame_ns
+        """Elapsed sim time of the frame being published or integrated."""
+        return self._exec_t
+
+    @property
+    def sync(self):
+        """The clock master's ``FrameSync`` of ``env`` and ``cmd``."""
+        return self.master.sync
+
+    @property
+    def throttled_frames(self) -> int:
+        """Times the clock waited for a lagging node."""
+        return self.master.throttled_frames
+
+    def _run(self, actions: List[Action]) -> None:
+        """Execute the clock master's actions in order."""
+        for a in actions:
+            self._exec_t = a.t_ns
+            if a.kind is Act.CLOCK:
+                self.clock_pub.publish(Clock(clock=self.stamp(a.t_ns)))
+            elif a.kind is Act.STATE:
+                self.publish_state(a.value)
+                self.frame_done(a.t_ns)
+            elif a.kind is Act.STEP:
+                self.step_frame(a.t_ns, *a.value)
+            elif a.kind is Act.MISSED:
+                self.count_missed(a.value, a.t_ns, a.text)
+            elif a.kind is Act.FINISH:
+                self.finish()
+            elif a.value == 'error':     # (rclpy: one severity per call site)
+                self.get_logger().error(a.text)
+            elif a.value == 'warning':
+                self.get_logger().warning(a.text)
+            else:
+                self.get_logger().info(a.text)
 
     def on_progress(self, msg: LockstepStatus) -> None:
         """A node reports the sim time it has read up to (and whether it is done)."""
         t = self.elapsed_ns(stamp_ns(msg.header.stamp))
-        self.progress[msg.node] = max(t, self.progress.get(msg.node, -1))
-        if msg.final:
-            self.final_nodes.add(msg.node)
-        self._resume()
+        self._run(self.master.on_progress(msg.node, t, msg.final, time.monotonic()))
 
     def on_recorder(self, msg: LockstepStatus) -> None:
         """The recorder reports the latest /clock it has written (its progress)."""
-        self.progress['recorder'] = max(self.elapsed_ns(stamp_ns(msg.header.stamp)),
-                                        self.progress.get('recorder', -1))
-        self._resume()
-
-    def _resume(self) -> None:
-        if self.phase == 'throttled' and not self._lagging():
-            self.begin_frame()
-        elif self.phase == 'wait_final' and self._all_final():
-            self.finish()
-
-    def _lagging(self) -> Optional[str]:
-        """Name of a node too far behind frame k to publish its clock, or None."""
-        for node in self.wait_for_nodes:
-            lag = RECORDER_LAG_FRAMES if node == 'recorder' else MAX_LAG_FRAMES
-            if self.t_ns - self.progress.get(node, 0) > lag * self.frame_ns:
-                return node
-        return None
-
-    def _all_final(self) -> bool:
-        return all(n in self.final_nodes for n in self.wait_for_nodes if n != 'recorder')
-
-    def begin_frame(self) -> None:
-        """Phase A: publish the clock of frame k and wait for its environment.
-
-        Flow control: when a node is more than MAX_LAG_FRAMES behind (it has not read the
-        messages of those frames yet), the clock waits for it, so no queue overflows and
-        the run stays deterministic however slow a node is.
-        """
-        if self._lagging():
-            if self.phase != 'throttled':
-                self.throttled_frames += 1
-            self.phase = 'throttled'
-            self.wait_since = time.monotonic()
-            return
-        self.phase = 'wait_env'
-        self.wait_since = time.monotonic()
-        self.clock_pub.publish(Clock(clock=self.stamp(self.t_ns)))
-        self.advance()
+        t = self.elapsed_ns(stamp_ns(msg.header.stamp))
+        self._run(self.master.on_progress('recorder', t, False, time.monotonic()))
 
     def on_environment(self, msg: Environment) -> None:
         """Store an environment message (dropped with a warning if it holds NaN)."""
@@ -187,15 +184,13 @@ class DynamicsNode(LockstepNode):
         if not all_finite(*vals):
             self.get_logger().warning('sim/environment with non-finite values ignored')
             return
-        self.sync.add('env', self.elapsed_ns(stamp_ns(msg.header.stamp)), msg)
-        self.advance()
+        t = self.elapsed_ns(stamp_ns(msg.header.stamp))
+        self._run(self.master.on_environment(t, msg, time.monotonic()))
 
     def on_command(self, msg: ActuatorCommand) -> None:
         """Store an actuator command; a malformed one becomes a zero command (safe)."""
         t_ns = self.elapsed_ns(stamp_ns(msg.header.stamp))
-        cmd = self.to_command(msg)
-        self.sync.add('cmd', t_ns, cmd)
-        self.advance()
+        self._run(self.master.on_command(t_ns, self.to_command(msg), time.monotonic()))
 
     def to_command(self, msg: ActuatorCommand) -> Command:
         """Message -> model command; NaN or a wrong wheel count -> zero command, logged."""
@@ -212,49 +207,31 @@ class DynamicsNode(LockstepNode):
             return self.spacecraft.zero_command()
         return Command(dipole_body=dipole, wheel_torque=wheel, torque_body=torque)
 
-    def advance(self) -> None:
-        """Run the frame phases as far as the arrived inputs allow."""
-        if self.real_time or not self.started:
-            return
-        t = self.t_ns
-        if self.phase == 'wait_env' and self.sync.has('env', t):
-            self.publish_state(self.sync.value('env', t))
-            if self.duration_ns and t >= self.duration_ns:
-                self.phase = 'wait_final'          # every node processes its last frame
-                self.wait_since = time.monotonic()
-                self._resume()
-                return
-            self.phase = 'wait_cmd'
-            self.wait_since = time.monotonic()
-        if self.phase == 'wait_cmd' and not self.sync.missing(t):
-            self.integrate(self.sync.value('cmd', t))
+    def step_frame(self, t: int, env_msg: Environment, cmd: Any) -> None:
+        """Zero-order-hold the command and integrate from t_k to t_k+1.
 
-    def step_frame(self, cmd: Optional[Command]) -> None:
-        """Zero-order-hold the command and integrate from t_k to t_k+1."""
-        t = self.t_ns
-        env_msg = self.sync.value('env', t)
-        if cmd is not None:
+        ``cmd``: a model command, :data:`~adcs_nodes.core.lockstep.ZERO` (timeout or dead
+        producer) or ``None`` (no command due: hold the previous one).
+        """
+        if cmd is ZERO:
+            self.last_cmd = self.spacecraft.zero_command()
+        elif cmd is not None:
             self.last_cmd = cmd
         env = FrameEnvironment(r_eci=vec3(env_msg.r_eci), v_eci=vec3(env_msg.v_eci),
                                b_eci=vec3(env_msg.b_eci), b_dot_eci=vec3(env_msg.b_dot_eci))
-        # environment stamped earlier (timeout, real-time mode): extrapolate with its rates
+        # environment stamped earlier (timeout, real-time mode): carry it along its orbit and
+        # field line; such a sample is no base for the model's in-frame field cubic (E8)
         dt_env = ns_to_seconds(t - self.elapsed_ns(stamp_ns(env_msg.header.stamp)))
         if dt_env:
-            env = FrameEnvironment(r_eci=env.r_eci + env.v_eci * dt_env, v_eci=env.v_eci,
-                                   b_eci=env.b_eci + env.b_dot_eci * dt_env,
-                                   b_dot_eci=env.b_dot_eci)
+            env = propagate_environment(env, dt_env, self.spacecraft.mu)
+            self.spacecraft.reset_field_history()
         self.state, self.applied = self.spacecraft.step(
             self.state, ns_to_seconds(t), ns_to_seconds(self.frame_ns), env, self.last_cmd,
             self.substeps)
+        if dt_env:
+            self.spacecraft.reset_field_history()
         self.applied_wheel_torque = self.applied.get('wheel_torque', self.applied_wheel_torque)
-        self.sync.prune(t)
         self.frames += 1
-        self.k += 1
-
-    def integrate(self, cmd: Optional[Command]) -> None:
-        """Phase C+D of the lockstep: step the frame, then begin the next one."""
-        self.step_frame(cmd)
-        self.begin_frame()
 
     def on_watchdog(self) -> None:
         """Wall-clock timeout of the current wait: count a missed frame and go on."""
@@ -271,52 +248,13 @@ class DynamicsNode(LockstepNode):
             return
         if self.real_time or self.done:
             return
-        if time.monotonic() - self.wait_since < self.timeout_s:
-            return
-        t = self.t_ns
-        if self.phase == 'throttled':
-            self.get_logger().warning(
-                f'frame t={t / 1e9:g} s: {self._lagging()} is more than '
-                f'{MAX_LAG_FRAMES} frames behind for {self.timeout_s:g} s; going on')
-            self.progress[self._lagging()] = t    # a dead node must not stop the world
-            self.begin_frame()
-            return
-        if self.phase == 'wait_final':
-            missing = [n for n in self.wait_for_nodes
-                       if n != 'recorder' and n not in self.final_nodes]
-            self.get_logger().warning(f'end of run: no final frame from {", ".join(missing)} '
-                                      f'within {self.timeout_s:g} s; finishing')
-            self.finish()
-            return
-        if self.phase == 'wait_env':
-            if self.sync.value('env', t) is None:
-                # nothing to go on with (frame 0): keep waiting but say so, and re-send clock
-                self.count_missed(['sim/environment'], t)
-                self.wait_since = time.monotonic()
-                self.clock_pub.publish(Clock(clock=self.stamp(t)))
-                return
-            self.count_missed(['sim/environment'], t)
-            self.sync.add('env', t, self.sync.value('env', t))
-            self.advance()
-        elif self.phase == 'wait_cmd':
-            self.count_missed(['adcs/actuator_command'], t)
-            self.integrate(self.spacecraft.zero_command())
+        self._run(self.master.tick(time.monotonic()))
 
     # ------------------------------------------------------------------ real time
     def on_rt_tick(self) -> None:
         """Real-time mode: publish frame k, then step with the latest inputs (no waiting)."""
-        if self.done:
-            return
-        t = self.t_ns
-        self.clock_pub.publish(Clock(clock=self.stamp(t)))
-        env_msg = self.sync.value('env', t)
-        if env_msg is None:
-            return  # the environment has not answered yet: the sim waits at t = 0
-        self.publish_state(env_msg)
-        if self.duration_ns and t >= self.duration_ns:
-            self.finish()
-            return
-        self.step_frame(self.sync.value('cmd', t))
+        if not self.done:
+            self._run(self.master.free_running_frame())
 
     # ------------------------------------------------------------------ outputs
     def publish_state(self, env_msg: Environment) -> None:
@@ -360,7 +298,6 @@ class DynamicsNode(LockstepNode):
         """End of the scenario: report and let the runtime stop the process."""
         if self.done:
             return
-        self.phase = 'done'
         wall = time.monotonic() - self.wall_start
         sim = ns_to_seconds(self.t_ns)
         self.get_logger().info(
