@@ -5,14 +5,24 @@ with one zero frame, schedule, automatic mode sequence, fallback to the safe con
 stale, NaN or out-of-range command; the command sent is always finite and inside the limits).
 
 Subscribes ``adcs/controllers/<name>/command`` of every controller (awaited each command
-frame) and ``adcs/attitude_estimate`` (for the automatic sequence). Publishes
+frame) and, when ``estimator_period_s > 0``, ``adcs/attitude_estimate`` (awaited each estimator
+frame): a stale or invalid estimate makes the manager fall back to the safe controller when the
+active one uses the estimate (``estimate_users``, default all but ``safe``), and holds the
+automatic sequence. Publishes
 ``adcs/actuator_command`` (stamped with the frame) and the latched
 ``adcs/controller_status``. Services ``adcs/switch_controller`` and ``adcs/list_controllers``
 (the project's namespace: never ros2_control's ``/controller_manager/...`` names, whose types
 differ, so the two can share a graph).
 
-A controller that misses a frame (its process died) stops being waited for, so the graph goes
-on at full speed on the fallback; it is awaited again as soon as it publishes.
+A controller (or the estimator) that misses ``dead_after_frames`` frames in a row (its process
+died) stops being waited for (``LockstepNode``), so the graph goes on at full speed on the
+fallback; it is awaited again as soon as it publishes.
+
+Switch requests: one pending request, the last one before a frame boundary wins; every answer
+says what will happen (see :mod:`adcs_nodes.core.manager`).
+
+Live mode (``timing_mode: live``): stamps are not on a frame grid, so ``stale_after_s``
+defaults to 1.5 x the longest of the manager, controller and estimator periods (ASSUMPTION).
 """
 from __future__ import annotations
 
@@ -24,9 +34,10 @@ import numpy as np
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, ControllerStatus
 from adcs_msgs.srv import ListControllers, SwitchController
 from adcs_nodes.core.control import Command
-from adcs_nodes.core.lockstep import NS_PER_S, seconds_to_ns
+from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.core.manager import AutoSequence, ControllerManagerCore
 from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.actuator_topics import ActuatorTopics, wheel_names_for
 from adcs_nodes.nodes.controller import command_msg, estimate_from_msg
 from adcs_nodes.nodes.convert import stamp_ns, vec3
 from adcs_nodes.nodes.lockstep_node import QOS_LATCHED, LockstepNode
@@ -56,20 +67,27 @@ class ControllerManagerNode(LockstepNode):
         auto_cfg = self.section('auto', {}, merge=False)
         auto = AutoSequence.from_dict(auto_cfg) if auto_cfg else None
         wheel_limits = list(self.param('max_wheel_torque_Nm', [-1.0]))
+        users = [n for n in self.param('estimate_users', ['*']) if n]
+        stale_default = 1.5 * max(period_s, ctrl_period_s, est_period_s) if self.live else 0.0
         self.core = ControllerManagerCore(
             self.names, safe, initial=initial,
             max_dipole_Am2=list(self.param('max_dipole_Am2', [40.0, 40.0, 40.0])),
             max_wheel_torque=[] if wheel_limits == [-1.0] else wheel_limits,
             max_torque=list(self.param('max_torque_Nm', [0.0, 0.0, 0.0])),
-            stale_after_s=float(self.param('stale_after_s', 0.0)),
-            schedule=schedule, auto=auto)
-        self._ctrl_period_ns = seconds_to_ns(ctrl_period_s)
+            stale_after_s=float(self.param('stale_after_s', stale_default)),
+            schedule=schedule, auto=auto,
+            estimate_period_s=est_period_s if est_period_s > 0 else None,
+            estimate_users=None if users == ['*'] else users)
         inputs: Dict[str, tuple] = {
             n: (ActuatorCommand, f'adcs/controllers/{n}/command', ctrl_period_s)
             for n in self.names}
         if est_period_s > 0:
             inputs['_estimate'] = (AttitudeState, 'adcs/attitude_estimate', est_period_s)
         self.cmd_pub = self.publisher(ActuatorCommand, 'adcs/actuator_command')
+        self.actuators = ActuatorTopics(    # standard per-actuator topics, for drivers
+            self, bool(self.param('max_dipole_Am2', [40.0, 40.0, 40.0])), wheel_names_for(
+                0 if wheel_limits == [-1.0] else len(wheel_limits),
+                self.param('wheel_names', [''])))
         self.status_pub = self.publisher(ControllerStatus, 'adcs/controller_status',
                                          QOS_LATCHED)
         self.create_service(SwitchController, SWITCH_SERVICE, self.on_switch)
@@ -113,15 +131,11 @@ class ControllerManagerNode(LockstepNode):
                 'switches': str(st.get('switch_count', 0)),
                 'stale_commands': str(st.get('missed_frames', 0)),
                 'fallback': str(st.get('fault') or ''),
-                'last_fault': str(st.get('last_fault', ''))}
+                'last_fault': str(st.get('last_fault', '')),
+                'stale_estimate_frames': str(st.get('estimate_stale_frames', 0)),
+                'replaced_switch_requests': str(st.get('replaced_requests', 0))}
 
     # ------------------------------------------------------------------ frames
-    def input_arrived(self, name: str) -> None:
-        """A controller that was given up publishes again: await it again."""
-        if name in self.names and self.sync.period(name) == 0:
-            self.sync.set_period(name, self._ctrl_period_ns)
-            self.get_logger().info(f'controller {name} publishes again: awaited again')
-
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Decide and publish the actuator command of frame ``t_ns``."""
         t = t_ns / NS_PER_S
@@ -134,13 +148,10 @@ class ControllerManagerNode(LockstepNode):
             commands[n] = (self.elapsed_ns(stamp_ns(m.header.stamp)) / NS_PER_S,
                            Command(vec3(m.dipole_body), np.asarray(m.wheel_torque, float),
                                    vec3(m.torque_body)))
-        for n in self.names:
-            if self._topics_of[n] in missing and self.sync.period(n):
-                self.sync.set_period(n, 0)
-                self.get_logger().error(f'controller {n} missed frame t={t:g} s: no longer '
-                                        'awaited until it publishes again')
-        est = estimate_from_msg(msgs.get('_estimate'))
-        cmd, status = self.core.step(t, commands, est)
+        est_msg = msgs.get('_estimate')
+        est_t = None if est_msg is None else \
+            self.elapsed_ns(stamp_ns(est_msg.header.stamp)) / NS_PER_S
+        cmd, status = self.core.step(t, commands, estimate_from_msg(est_msg), estimate_t=est_t)
         fault_kind = status.get('fault', '').split(' ', 2)[:2]   # e.g. ['magnetic:', 'stale:']
         if fault_kind != self._fault_kind:
             if status.get('fault'):
@@ -150,6 +161,7 @@ class ControllerManagerNode(LockstepNode):
             self._fault_kind = fault_kind
         out = command_msg(cmd, self.stamp(t_ns), status.get('source') or 'zero')
         self.cmd_pub.publish(out)
+        self.actuators.publish(out)
         self._publish_status()
 
     def _publish_status(self, force: bool = False) -> None:
