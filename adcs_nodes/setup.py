@@ -24,6 +24,8 @@ setup(
             'estimator = adcs_nodes.nodes.estimator:main',
             'magnetic_controller = adcs_nodes.nodes.controller:main_magnetic',
             'bdot_controller = adcs_nodes.nodes.controller:main_bdot',
+            'controller = adcs_nodes.nodes.controller:main',
+            'guidance = adcs_nodes.nodes.guidance:main',
             'controller_manager = adcs_nodes.nodes.controller_manager:main',
             'compose = adcs_nodes.tools.compose:main',
         ],

@@ -25,6 +25,7 @@ setup(
             'horizon_sensor = sim_node.nodes.horizon_sensor:main',
             'star_tracker = sim_node.nodes.star_tracker:main',
             'gyro = sim_node.nodes.gyro:main',
+            'wheel_tachometer = sim_node.nodes.wheel_tachometer:main',
         ],
     },
 )

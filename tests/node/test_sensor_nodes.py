@@ -116,8 +116,8 @@ def test_magnetometer_period_stamps_and_field(ros_context, spin):
 
 def test_magnetometer_nan_input_publishes_nothing(ros_context, spin):
     node = MagnetometerNode(context=ros_context, parameter_overrides=params(
-        noise_std_T=[0.0, 0.0, 0.0], lsb_T=0.0,
-        misalignment_rad=[0.0, 0.0, 0.1]))
+        noise_std_T=[0.0, 0.0, 0.0], lsb_T=0.0, period_s=1.0,
+        misalignment_deg=[0.0, 0.0, math.degrees(0.1)]))
     rig = Rig(ros_context, spin, node, MagneticField, 'sensors/magnetometer')
     frames = [truth(0), truth(1, nan='state'), truth(2, nan='env'), truth(3)]
     assert rig.feed([f[:2] for f in frames], 2)
@@ -131,7 +131,7 @@ def test_magnetometer_nan_input_publishes_nothing(ros_context, spin):
 
 def test_magnetometer_dropouts_are_counted_and_published_as_nan(ros_context, spin):
     node = MagnetometerNode(context=ros_context, parameter_overrides=params(
-        dropout_probability=1.0))
+        dropout_probability=1.0, period_s=1.0))
     rig = Rig(ros_context, spin, node, MagneticField, 'sensors/magnetometer')
     rig.feed([truth(t)[:2] for t in range(3)], 0)
     assert spin([node, rig.probe], lambda: node.frames == 3 and len(rig.got) == 3)
@@ -142,7 +142,7 @@ def test_magnetometer_dropouts_are_counted_and_published_as_nan(ros_context, spi
 
 def test_horizon_sensor_roll_pitch_and_validity(ros_context, spin):
     node = HorizonSensorNode(context=ros_context, parameter_overrides=params(
-        noise_std_rad=[0.0, 0.0], fov_rad=30 * DEG))
+        noise_std_deg=[0.0, 0.0], fov_deg=30.0))
     rig = Rig(ros_context, spin, node, HorizonSensor, 'sensors/horizon')
     roll, pitch, yaw = 4 * DEG, 3 * DEG, 5 * DEG          # paper 004's attitude
     frames = [truth(0, att.from_euler_321(roll, pitch, yaw)),
@@ -165,7 +165,7 @@ def test_horizon_sensor_roll_pitch_and_validity(ros_context, spin):
 def test_star_tracker_output_matches_its_seeded_model(ros_context, spin):
     std = 1e-4
     node = StarTrackerNode(context=ros_context, parameter_overrides=params(
-        seed=42, noise_std_rad=[std, std, std]))
+        seed=42, noise_std_deg=[math.degrees(std)] * 3))
     rig = Rig(ros_context, spin, node, Imu, 'sensors/star_tracker')
     frames = [truth(t) for t in range(3)]
     assert rig.feed([f[:2] for f in frames], 3)
@@ -186,8 +186,8 @@ def test_star_tracker_output_matches_its_seeded_model(ros_context, spin):
 def test_gyro_rate_and_covariances(ros_context, spin):
     bias = [1e-4, -2e-4, 3e-4]
     node = GyroNode(context=ros_context, parameter_overrides=params(
-        noise_std_rad_s=[0.0, 0.0, 0.0], bias_walk_std_rad_s_sqrt_s=[0.0, 0.0, 0.0],
-        bias_initial_rad_s=bias, period_s=2.0))
+        noise_std_deg_s=[0.0, 0.0, 0.0], bias_walk_deg_h_sqrt_h=[0.0, 0.0, 0.0],
+        bias_initial_deg_h=[math.degrees(b) * 3600.0 for b in bias], period_s=2.0))
     rig = Rig(ros_context, spin, node, Imu, 'sensors/gyro')
     frames = [truth(0), truth(1), truth(2, nan='state'), truth(3), truth(4)]
     assert rig.feed([f[:2] for f in frames], 2)

@@ -113,6 +113,6 @@ def test_interface_accepts_estimate_and_wheels():
     ({'n_wheels': 1.5}, 'n_wheels')])
 def test_bad_configuration_raises(kw, word):
     args = {'gain': 1e7, 'max_dipole_Am2': 40.0}
-    args.law(kw)
+    args.update(kw)
     with pytest.raises(ValueError, match=word):
         BdotController(**args)

@@ -469,7 +469,7 @@ def test_closed_loop_bdot_reduces_the_tumble():
     assert 'first' in cmds[0].reason and np.all(dips[0] == 0.0)
 
     class _Off:
-        def update(self, *args):
+        def law(self, *args):
             return Command.zero()
 
     _, _, free, _, _ = world.run(_Off(), 0.25)

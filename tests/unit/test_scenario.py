@@ -5,7 +5,7 @@ import textwrap
 
 import pytest
 
-from adcs_nodes.tools.graph import TOPIC_TYPES, build_graph, params_file_text
+from adcs_nodes.tools.graph import build_graph, topic_type, params_file_text
 from adcs_nodes.tools.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -123,4 +123,4 @@ def test_flight_software_never_subscribes_to_the_simulator(fname):
             assert not [t for t in node.subscribes if t.startswith('sim/')], node.name
         # every published topic has a message type for the recorder
         for topic in node.publishes:
-            assert topic in TOPIC_TYPES, topic
+            assert topic_type(topic), topic

@@ -1,42 +1,88 @@
-"""Controller nodes: ``magnetic_controller`` (paper 000) and ``bdot_controller`` (safe mode).
+"""Generic controller node: runs any registered controller, chosen by parameter ``controller``.
 
 One process per controller. Every controller computes every frame of its period ("shadow
 mode", so a switch is bumpless) and publishes ``adcs/controllers/<name>/command``
 (``adcs_msgs/ActuatorCommand``, stamped with the frame it was computed for); the controller
 manager forwards the active one.
 
-Inputs: ``adcs/attitude_estimate`` (when the scenario has an estimator), the magnetometer
-``sensors/magnetometer`` (rotated from the sensor frame into body axes) and the latest
-``adcs/attitude_target``. Between magnetometer samples:
+What the node subscribes to comes from the registry entry's ``inputs`` (nothing else):
 
-* ``magnetic``: the field in body axes is the onboard model ``n* = R(q_orbit_body)^T B*``
-  from the estimate (paper 000's alternative to the measured ``n``; the digest's control
-  update every 2 s with measurements every 10 s needs it);
-* ``bdot``: the last command is held (the derivative needs a new sample).
+* ``estimate``: ``adcs/attitude_estimate`` (``adcs_msgs/AttitudeState``);
+* ``target``: ``adcs/attitude_target`` (``adcs_msgs/AttitudeTarget``, from ``guidance``);
+* ``magnetometer``: ``sensors/magnetometer`` (``sensor_msgs/MagneticField``, rotated from the
+  sensor frame into body axes with the mount from ``/tf_static``); with ``estimate`` too, the
+  onboard-model field ``n* = R(q_orbit_body)^T B*`` is offered between samples
+  (``ControlInputs.b_body_model``);
+* ``wheel_speeds``: ``sensors/wheels`` (``sensor_msgs/JointState`` velocities [rad/s]).
+
+So B-dot, whose entry declares only the magnetometer, keeps working when the estimator dies
+(the safe-mode rule). The parameters are the entry's own (``ros2 param describe`` shows each
+with unit and range) plus the spacecraft context below, all declared from typed specs.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any, Dict, List, Optional
 
 import numpy as np
-from sensor_msgs.msg import MagneticField
+from sensor_msgs.msg import JointState, MagneticField
 
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, AttitudeTarget
+from adcs_nodes import registry
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.control import Command, Estimate, Target
-from adcs_nodes.core.control.bdot import BdotController
-from adcs_nodes.core.control.magnetic import MagneticController
+from adcs_nodes.core.control import Command, ControlInputs, Estimate, Target
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.entries import wheel_momentum
+from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_vec3, vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 from adcs_nodes.nodes.tf import MountTable
+from adcs_nodes.registry import Param
 
-KINDS = ('magnetic', 'bdot')
 DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
                  'raan_deg': 0.0, 'arg_latitude0_deg': 0.0}
 DEFAULT_FIELD = {'model': 'dipole'}
+
+#: The spacecraft context every controller node knows (defaults: paper 000's satellite).
+CONTEXT_PARAMS = (
+    Param('controller', 'str', 'magnetic', '-', 'registered controller this node runs',
+          read_only=True),
+    Param('period_s', 'float', 2.0, 's', 'control period', positive=True, read_only=True),
+    Param('estimator_period_s', 'float', 2.0, 's', 'period of adcs/attitude_estimate',
+          positive=True, read_only=True),
+    Param('target_period_s', 'float', 2.0, 's', 'period of adcs/attitude_target (guidance)',
+          positive=True, read_only=True),
+    Param('magnetometer_period_s', 'float', 10.0, 's', 'period of sensors/magnetometer',
+          positive=True, read_only=True),
+    Param('tachometer_period_s', 'float', 1.0, 's', 'period of sensors/wheels',
+          positive=True, read_only=True),
+    Param('inertia_kgm2', 'float[]', [118.0, 118.0, 19.6], 'kg m^2',
+          "the controller's own inertia: 3 diagonal values or 9 (row-major)",
+          read_only=True),
+    Param('max_dipole_Am2', 'float[]', [40.0, 40.0, 40.0], 'A m^2',
+          'magnetorquer limits per body axis (empty: no magnetorquer)', positive=True,
+          read_only=True),
+    Param('wheel_axes_body', 'float[]', [], '-', 'wheel spin axes, body axes, 3 per wheel',
+          read_only=True),
+    Param('wheel_max_torque_Nm', 'float[]', [], 'N m', 'wheel motor torque limits',
+          positive=True, read_only=True),
+    Param('wheel_max_momentum_Nms', 'float[]', [], 'N m s', 'wheel momentum limits',
+          positive=True, read_only=True),
+    Param('wheel_inertia_kgm2', 'float[]', [], 'kg m^2', 'wheel inertias about their axes',
+          positive=True, read_only=True),
+)
+
+
+def inertia_matrix(values) -> np.ndarray:
+    """3 diagonal values or 9 row-major -> (3, 3) [kg m^2]; ValueError otherwise."""
+    a = np.asarray(values, dtype=float)
+    if a.size == 3:
+        return np.diag(a)
+    if a.size == 9:
+        return a.reshape(3, 3)
+    raise ValueError(f'inertia_kgm2 needs 3 or 9 values, got {a.size}')
 
 
 def estimate_from_msg(msg: Optional[AttitudeState]) -> Optional[Estimate]:
@@ -48,10 +94,22 @@ def estimate_from_msg(msg: Optional[AttitudeState]) -> Optional[Estimate]:
     if msg is None:
         return None
     w_abs, w_rel = vec3(msg.omega_body_eci_body), vec3(msg.omega_body_orbit_body)
-    q = quat(msg.q_orbit_body)
-    valid = all_finite(q, w_abs, w_rel)
+    q, q_eci = quat(msg.q_orbit_body), quat(msg.q_eci_body)
+    valid = all_finite(q, w_abs, w_rel, q_eci)
     omega0 = float(np.linalg.norm(w_abs - w_rel)) if valid else 0.0
-    return Estimate(q, w_abs, omega0, valid)
+    return Estimate(q, w_abs, omega0, valid, q_eci if valid else None)
+
+
+def target_from_msg(msg: Optional[AttitudeTarget]) -> Optional[Target]:
+    """Core target from ``adcs/attitude_target`` (None if absent or malformed)."""
+    if msg is None:
+        return None
+    q = quat(msg.q_ref_body)
+    w, a = vec3(msg.omega_body_ref_body), vec3(msg.omega_dot_body_ref_body)
+    frame = msg.header.frame_id or 'orbit'
+    if frame not in ('orbit', 'eci') or not all_finite(q, w, a) or np.linalg.norm(q) < 0.5:
+        return None
+    return Target(att.normalize(q), w, a, frame, float(msg.time_to_go_s))
 
 
 def command_msg(cmd: Command, stamp, source: str) -> ActuatorCommand:
@@ -67,55 +125,73 @@ def command_msg(cmd: Command, stamp, source: str) -> ActuatorCommand:
 
 
 class ControllerNode(LockstepNode):
-    """A controller core wrapped as a lockstep node (see module docstring)."""
+    """A registered controller core wrapped as a lockstep node (see module docstring)."""
 
-    def __init__(self, name: Optional[str] = None, kind: str = 'magnetic',
+    def __init__(self, name: Optional[str] = None, controller: Optional[str] = None,
                  **kwargs: Any) -> None:
-        super().__init__(name or f'{kind}_controller', **kwargs)
-        kind = str(self.param('kind', kind))
-        if kind not in KINDS:
-            raise ValueError(f'unknown controller kind {kind!r}; known: {KINDS}')
-        self.kind = kind
-        self.short = str(self.param('controller_name', kind))
-        period_s = float(self.param('period_s', 2.0))
-        est_period_s = float(self.param('estimator_period_s', 2.0))
-        mag_period_s = float(self.param('magnetometer_period_s', 10.0))
+        super().__init__(name or f'{controller or "magnetic"}_controller', **kwargs)
+        registry.load_plugins(self.param('plugins', []))
+        specs = {s.name: s for s in CONTEXT_PARAMS}
+        if controller is not None:   # the class fixes the controller: that is its default
+            specs['controller'] = replace(specs['controller'], default=controller)
+        ctx_p = node_params.declare_all(self, specs.values())
+        self.entry = registry.get('controller', ctx_p['controller'])
+        self.controller_name = self.entry.name
+        own = node_params.declare_all(self, self.entry.params)
+        node_params.refuse_unknown(self)
+        node_params.install_validator(self)
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
-        n_wheels = int(self.param('n_wheels', 0))
-        limits = list(self.param('max_dipole_Am2', [40.0, 40.0, 40.0]))
-        if kind == 'magnetic':
-            beta = float(self.param('beta', 0.0))
-            self.core = MagneticController(
-                mode=str(self.param('mode', 'three_axis')),
-                alpha=float(self.param('alpha_per_s', 3e-3)),
-                k=float(self.param('k_Nms', 0.2)), max_dipole_Am2=limits,
-                beta=beta if beta > 0 else None,
-                switch_angle_deg=float(self.param('switch_angle_deg', 15.0)),
-                switch_rate_deg_s=float(self.param('switch_rate_deg_s', 0.2)),
-                n_wheels=n_wheels)
-            self.reference = make_onboard_reference(
+        axes = np.asarray(ctx_p['wheel_axes_body'], dtype=float)
+        n_wheels = len(ctx_p['wheel_max_torque_Nm'])
+        if axes.size != 3 * n_wheels:
+            raise ValueError(f'wheel_axes_body needs 3 values per wheel ({n_wheels} wheels), '
+                             f'got {axes.size}')
+        self.ctx: Dict[str, Any] = {
+            'inertia_kgm2': inertia_matrix(ctx_p['inertia_kgm2']),
+            'max_dipole_Am2': ctx_p['max_dipole_Am2'] or None,
+            'wheel_axes_body': axes.reshape(n_wheels, 3),
+            'wheel_max_torque_Nm': ctx_p['wheel_max_torque_Nm'],
+            'wheel_max_momentum_Nms': ctx_p['wheel_max_momentum_Nms'],
+            'wheel_inertia_kgm2': ctx_p['wheel_inertia_kgm2'],
+            'period_s': ctx_p['period_s'], 'epoch': self.epoch, 'seed': self.seed,
+            'reference': None}
+        needs = set(self.entry.inputs)
+        if 'magnetorquer' in self.entry.actuators and self.ctx['max_dipole_Am2'] is None:
+            raise ValueError(f'controller {self.controller_name} commands magnetorquers but '
+                             'max_dipole_Am2 is empty (no magnetorquer)')
+        if 'wheels' in self.entry.actuators and n_wheels == 0:
+            raise ValueError(f'controller {self.controller_name} commands wheels but none '
+                             'are configured')
+        if {'estimate', 'magnetometer'} <= needs:
+            self.ctx['reference'] = make_onboard_reference(
                 self.section('onboard_orbit', DEFAULT_ORBIT, merge=False),
                 self.section('onboard_field', DEFAULT_FIELD, merge=False), self.epoch)
-        else:
-            self.core = BdotController(
-                gain=float(self.param('gain_Am2s_per_T', 1.0e6)), max_dipole_Am2=limits,
-                filter_time_constant_s=float(self.param('filter_time_constant_s', 0.0)),
-                n_wheels=n_wheels)
-            self.reference = None
-        inputs: Dict[str, tuple] = {
-            'mag': (MagneticField, 'sensors/magnetometer', mag_period_s),
-            'target': (AttitudeTarget, 'adcs/attitude_target', 0.0)}
-        if est_period_s > 0:
-            inputs['est'] = (AttitudeState, 'adcs/attitude_estimate', est_period_s)
-        self.pub = self.publisher(ActuatorCommand, f'adcs/controllers/{self.short}/command')
-        self._last_cmd = Command.zero(n_wheels, 'no command yet')
+        self.core = self.entry.build(own, self.ctx)
+        self.n_wheels = n_wheels
+        topics = {
+            'estimate': ('est', AttitudeState, 'adcs/attitude_estimate',
+                         ctx_p['estimator_period_s']),
+            'target': ('target', AttitudeTarget, 'adcs/attitude_target',
+                       ctx_p['target_period_s']),
+            'magnetometer': ('mag', MagneticField, 'sensors/magnetometer',
+                             ctx_p['magnetometer_period_s']),
+            'wheel_speeds': ('wheels', JointState, 'sensors/wheels',
+                             ctx_p['tachometer_period_s']),
+        }
+        inputs = {key: (mtype, topic, period) for need, (key, mtype, topic, period)
+                  in topics.items() if need in needs}
+        self.pub = self.publisher(ActuatorCommand,
+                                  f'adcs/controllers/{self.controller_name}/command')
         self._last_t: Optional[int] = None
-        self.lockstep_inputs(inputs, period_s, self.on_frame)
+        self.lockstep_inputs(inputs, ctx_p['period_s'], self.on_frame)
         self.start_handshake()
+
+    def _fresh(self, msg, t_ns: int) -> bool:
+        return msg is not None and self.elapsed_ns(stamp_ns(msg.header.stamp)) == t_ns
 
     def _field_body(self, msg: Optional[MagneticField], t_ns: int) -> Optional[np.ndarray]:
         """Fresh magnetometer sample in body axes, or None."""
-        if msg is None or self.elapsed_ns(stamp_ns(msg.header.stamp)) != t_ns:
+        if not self._fresh(msg, t_ns):
             return None
         b = vec3(msg.magnetic_field)
         q_body_sensor = self.mounts.lookup(msg.header.frame_id)   # None: no mount known yet
@@ -123,57 +199,46 @@ class ControllerNode(LockstepNode):
             return None
         return att.rotate(q_body_sensor, b)
 
+    def _wheel_speeds(self, msg: Optional[JointState]) -> Optional[np.ndarray]:
+        if msg is None or len(msg.velocity) != self.n_wheels:
+            return None
+        w = np.asarray(msg.velocity, dtype=float)
+        return w if all_finite(w) else None
+
+    def inputs_for(self, t_ns: int, msgs: Dict[str, Any]) -> ControlInputs:
+        """Messages of frame ``t_ns`` -> the core's :class:`ControlInputs`."""
+        t = t_ns / NS_PER_S
+        estimate = estimate_from_msg(msgs.get('est'))
+        b_model = None
+        ref = self.ctx['reference']
+        if ref is not None and estimate is not None and estimate.is_usable():
+            b_model = att.to_matrix(estimate.q_orbit_body).T @ ref.at(t).b_orbit  # n* = R^T B*
+        speeds = self._wheel_speeds(msgs.get('wheels'))
+        return ControlInputs(estimate, target_from_msg(msgs.get('target')),
+                             self._field_body(msgs.get('mag'), t_ns), b_model, speeds,
+                             wheel_momentum(speeds, self.ctx))
+
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Compute and publish this controller's command for frame ``t_ns``."""
-        t = t_ns / NS_PER_S
         dt = 0.0 if self._last_t is None else (t_ns - self._last_t) / NS_PER_S
         self._last_t = t_ns
-        estimate = estimate_from_msg(msgs.get('est'))
-        tgt = msgs.get('target')
-        target = None if tgt is None else Target(quat(tgt.q_ref_body),
-                                                 vec3(tgt.omega_body_ref_body))
-        b_body = self._field_body(msgs.get('mag'), t_ns)
-        if self.kind == 'bdot':
-            if b_body is None:
-                cmd = self._last_cmd              # no new sample: hold the last dipole
-            else:
-                cmd = self.core.update(estimate, target, b_body, t, dt)
-        else:
-            if b_body is None and estimate is not None and estimate.valid:
-                b_orbit = self.reference.at(t).b_orbit        # n* = R^T B* (onboard model)
-                b_body = att.to_matrix(estimate.q_orbit_body).T @ b_orbit
-            cmd = self.core.update(estimate, target, b_body, t, dt)
-        self._last_cmd = cmd
-        self.pub.publish(command_msg(cmd, self.stamp(t_ns), self.short))
+        cmd = self.core.update(self.inputs_for(t_ns, msgs), t_ns / NS_PER_S, dt)
+        self.pub.publish(command_msg(cmd, self.stamp(t_ns), self.controller_name))
 
 
 def main(args=None) -> int:
-    """``python -m adcs_nodes.nodes.controller``: the kind comes from parameter ``kind``."""
+    """``ros2 run adcs_nodes controller --ros-args -p controller:=NAME``."""
     return runtime.run(ControllerNode, args)
 
 
 def main_magnetic(args=None) -> int:
     """``ros2 run adcs_nodes magnetic_controller``."""
-    return runtime.run(lambda: ControllerNode(kind='magnetic'), args)
+    return runtime.run(lambda: ControllerNode(controller='magnetic'), args)
 
 
 def main_bdot(args=None) -> int:
     """``ros2 run adcs_nodes bdot_controller``."""
-    return runtime.run(lambda: ControllerNode(kind='bdot'), args)
-
-
-class MagneticControllerNode(ControllerNode):
-    """Composable class of the magnetic controller (``adcs run --compose``)."""
-
-    def __init__(self, name: str = 'magnetic_controller', **kwargs: Any) -> None:
-        super().__init__(name, kind='magnetic', **kwargs)
-
-
-class BdotControllerNode(ControllerNode):
-    """Composable class of the B-dot controller (``adcs run --compose``)."""
-
-    def __init__(self, name: str = 'bdot_controller', **kwargs: Any) -> None:
-        super().__init__(name, kind='bdot', **kwargs)
+    return runtime.run(lambda: ControllerNode(controller='bdot'), args)
 
 
 if __name__ == '__main__':

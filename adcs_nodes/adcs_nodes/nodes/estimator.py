@@ -1,23 +1,24 @@
 """``estimator`` node: attitude and rate estimate from the sensors (flight software).
 
-Algorithm by parameter ``algorithm``:
+The algorithm is a registered estimator (parameter ``algorithm``; ``adcs list`` shows them):
+the node converts messages to numpy, checks them, and calls the core's
+``step(EstimatorInputs, t, dt)`` (:mod:`adcs_nodes.core.estimation.algorithms`). What it
+subscribes to comes from the entry's ``inputs``:
 
-* ``magnetic_filter`` (paper 000): predicts every ``period_s`` with the nonlinear model (33)
-  and the last commanded dipole, updates with each fresh magnetometer sample (38)-(39).
-* ``triad``: TRIAD of the nadir direction (horizon sensor) and the field (paper 004's
-  comparison); the rate is the finite difference of successive attitudes.
-* ``horizon_mag_yaw``: roll and pitch from the horizon sensor, yaw from formula (3) of
-  paper 004; rate as for TRIAD.
+* ``magnetometer``: ``sensors/magnetometer`` (``sensor_msgs/MagneticField``, sensor frame;
+  rotated into body axes with the mount from ``/tf_static``);
+* ``horizon``: ``sensors/horizon`` (``adcs_msgs/HorizonSensor``);
+* ``star_tracker``, ``gyro``: ``sensors/star_tracker``, ``sensors/gyro`` (``sensor_msgs/Imu``);
+* ``actuator_command``: ``adcs/actuator_command`` (the applied dipole, for the prediction).
 
-Subscribes ``sensors/magnetometer`` (``sensor_msgs/MagneticField``, sensor frame),
-``sensors/horizon`` (for triad/horizon_mag_yaw) and ``adcs/actuator_command`` (the applied
-dipole, for the prediction). Never ``sim/*``: the reference field and orbit are the flight
-software's own models (``onboard_orbit.*``, ``onboard_field.*``).
+Never ``sim/*``: the reference field and orbit are the flight software's own models
+(``onboard_orbit.*``, ``onboard_field.*``).
 
 Publishes ``adcs/attitude_estimate`` (``adcs_msgs/AttitudeState``: q to the orbit frame and to
-ECI, rates, 6x6 covariance) and ``adcs/estimator/diagnostics`` (``adcs_msgs/FilterDiagnostics``).
-Bad input (NaN, zero or implausible field, stale or invalid sensor) is rejected with a
-warning and counted; a non-finite estimate is never published.
+ECI, rates, 6x6 covariance), ``adcs/estimator/diagnostics`` (``adcs_msgs/FilterDiagnostics``)
+and ``/tf`` (``eci -> body_estimate``). Bad input (NaN, zero or implausible field, stale or
+invalid sensor) is rejected with a warning and counted; a non-finite estimate is never
+published.
 """
 from __future__ import annotations
 
@@ -25,25 +26,53 @@ import math
 from typing import Any, Dict, List, Optional
 
 import numpy as np
-from sensor_msgs.msg import MagneticField
+from sensor_msgs.msg import Imu, MagneticField
 
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, FilterDiagnostics, HorizonSensor
+from adcs_nodes import registry
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.estimation.horizon_yaw import (attitude_from_horizon_and_yaw,
-                                                    triad_from_horizon_and_field,
-                                                    yaw_from_horizon_and_field)
-from adcs_nodes.core.estimation.magnetic_filter import MAX_DISTURBANCE_DEFAULT, MagneticFilter
+from adcs_nodes.core.estimation.algorithms import EstimatorInputs, omega_orbit_from_eci
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import all_finite, stamp_ns, to_quat, to_vec3, vec3
+from adcs_nodes.nodes.controller import inertia_matrix
+from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 from adcs_nodes.nodes.tf import MountTable, TfPublisher, estimate_transforms
+from adcs_nodes.registry import Param
 
-ALGORITHMS = ('magnetic_filter', 'triad', 'horizon_mag_yaw')
 DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
                  'raan_deg': 0.0, 'arg_latitude0_deg': 0.0}
 DEFAULT_FIELD = {'model': 'dipole'}
+
+#: What every estimator node knows besides its algorithm's own parameters.
+CONTEXT_PARAMS = (
+    Param('algorithm', 'str', 'magnetic_filter', '-', 'registered estimator algorithm',
+          read_only=True),
+    Param('period_s', 'float', 2.0, 's', 'estimator period', positive=True, read_only=True),
+    Param('magnetometer_period_s', 'float', 10.0, 's', 'period of sensors/magnetometer',
+          positive=True, read_only=True),
+    Param('horizon_period_s', 'float', 1.0, 's', 'period of sensors/horizon', positive=True,
+          read_only=True),
+    Param('star_tracker_period_s', 'float', 1.0, 's', 'period of sensors/star_tracker',
+          positive=True, read_only=True),
+    Param('gyro_period_s', 'float', 1.0, 's', 'period of sensors/gyro', positive=True,
+          read_only=True),
+    Param('command_period_s', 'float', 0.0, 's', 'period of adcs/actuator_command (0: the '
+          'latest command)', min=0.0, read_only=True),
+    Param('inertia_kgm2', 'float[]', [118.0, 118.0, 19.6], 'kg m^2',
+          'onboard inertia: 3 diagonal values or 9 (row-major)', read_only=True),
+    Param('initial_q_orbit_body', 'float[]', [0.0, 0.0, 0.0, 1.0], '-',
+          'initial attitude estimate, body -> orbit, scalar last', length=4, read_only=True),
+    Param('initial_omega_body_orbit_body', 'float[]', [0.0, 0.0, 0.0], 'rad/s',
+          'initial rate estimate w.r.t. the orbit frame, body axes', length=3,
+          read_only=True),
+    Param('min_field_T', 'float', 1e-6, 'T', 'smallest plausible |B| (smaller: rejected)',
+          positive=True),
+    Param('max_field_T', 'float', 1e-3, 'T', 'largest plausible |B| (larger: rejected)',
+          positive=True),
+)
 
 
 class EstimatorNode(LockstepNode):
@@ -51,51 +80,42 @@ class EstimatorNode(LockstepNode):
 
     def __init__(self, name: str = 'estimator', **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
-        self.algorithm = str(self.param('algorithm', 'magnetic_filter'))
-        if self.algorithm not in ALGORITHMS:
-            raise ValueError(f'unknown algorithm {self.algorithm!r}; known: {ALGORITHMS}')
-        period_s = float(self.param('period_s', 2.0))
-        mag_period_s = float(self.param('magnetometer_period_s', 10.0))
-        horizon_period_s = float(self.param('horizon_period_s', 1.0))
+        registry.load_plugins(self.param('plugins', []))
+        p = node_params.declare_all(self, CONTEXT_PARAMS)
+        self.entry = registry.get('estimator', p['algorithm'])
+        self.algorithm = self.entry.name
+        own = node_params.declare_all(self, self.entry.params)
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
         self.tf_pub = TfPublisher(self)   # /tf: eci -> body_estimate
         self.reference = make_onboard_reference(
             self.section('onboard_orbit', DEFAULT_ORBIT, merge=False),
             self.section('onboard_field', DEFAULT_FIELD, merge=False), self.epoch)
-        self.q0 = att.normalize(self.param('initial_q_orbit_body', [0.0, 0.0, 0.0, 1.0]))
-        self.omega_rel0 = np.asarray(self.param('initial_omega_body_orbit_body',
-                                                [0.0, 0.0, 0.0]), dtype=float)
-        inputs = {'mag': (MagneticField, 'sensors/magnetometer', mag_period_s),
-                  'cmd': (ActuatorCommand, 'adcs/actuator_command', 0.0)}
-        self.max_rate = float(self.param('max_rate_rad_s', 1.0))
-        self.resets = 0
-        if self.algorithm == 'magnetic_filter':
-            inertia = np.asarray(self.param('inertia_kgm2', [118.0, 118.0, 19.6]), float)
-            inertia = np.diag(inertia) if inertia.size == 3 else inertia.reshape(3, 3)
-            self.filter = MagneticFilter(
-                inertia, theta=float(self.param('theta_T2', 9e-14)),
-                tau=float(self.param('tau', 0.01)),
-                p0_diag=list(self.param('p0_diag', [10.0] * 3 + [0.0036] * 3 + [1e-14] * 3)),
-                measurement_form=str(self.param('measurement_form', 'phi')),
-                literal_update=bool(self.param('literal_update', False)),
-                substeps=int(self.param('substeps', 1)),
-                # sanity bounds on a correction (not in the paper): divergence guards only
-                max_rate_rad_s=self.max_rate,
-                max_disturbance_rad_s2=float(self.param('max_disturbance_rad_s2',
-                                                        MAX_DISTURBANCE_DEFAULT)))
-        else:
-            inputs['horizon'] = (HorizonSensor, 'sensors/horizon', horizon_period_s)
+        node_params.refuse_unknown(self)
+        node_params.install_validator(self)
+        self.field_range = (p['min_field_T'], p['max_field_T'])
+        ctx = {'inertia_kgm2': inertia_matrix(p['inertia_kgm2']), 'period_s': p['period_s'],
+               'epoch': self.epoch, 'seed': self.seed, 'reference': self.reference}
+        self.core = self.entry.build(own, ctx)
+        self.core.initialise(att.normalize(p['initial_q_orbit_body']),
+                             np.asarray(p['initial_omega_body_orbit_body'], dtype=float))
+        topics = {
+            'magnetometer': ('mag', MagneticField, 'sensors/magnetometer',
+                             p['magnetometer_period_s']),
+            'horizon': ('horizon', HorizonSensor, 'sensors/horizon', p['horizon_period_s']),
+            'star_tracker': ('star', Imu, 'sensors/star_tracker', p['star_tracker_period_s']),
+            'gyro': ('gyro', Imu, 'sensors/gyro', p['gyro_period_s']),
+            'actuator_command': ('cmd', ActuatorCommand, 'adcs/actuator_command',
+                                 p['command_period_s']),
+        }
+        inputs = {key: (mtype, topic, period) for need, (key, mtype, topic, period)
+                  in topics.items() if need in self.entry.inputs}
         self.est_pub = self.publisher(AttitudeState, 'adcs/attitude_estimate')
         self.diag_pub = self.publisher(FilterDiagnostics, 'adcs/estimator/diagnostics')
         self.update_count = 0
         self.rejected_count = 0
         self.last_rejection = ''
-        self.innovation: List[float] = []
         self._last_t: Optional[int] = None
-        self._q_prev: Optional[np.ndarray] = None
-        self._omega_rel = self.omega_rel0.copy()
-        self._cov = np.full(36, -1.0)          # "unknown" until the first estimate
-        self.lockstep_inputs(inputs, period_s, self.on_frame)
+        self.lockstep_inputs(inputs, p['period_s'], self.on_frame)
         self.start_handshake()
 
     # ------------------------------------------------------------------ inputs
@@ -108,6 +128,12 @@ class EstimatorNode(LockstepNode):
         """True when ``msg`` is stamped exactly t (a new sample this frame)."""
         return msg is not None and self.elapsed_ns(stamp_ns(msg.header.stamp)) == t_ns
 
+    def _mount(self, frame_id: str) -> Optional[np.ndarray]:
+        q_body_sensor = self.mounts.lookup(frame_id)
+        if q_body_sensor is None:
+            self._reject(f'no /tf_static mount body -> {frame_id!r}')
+        return q_body_sensor
+
     def _field_body(self, msg: MagneticField) -> Optional[np.ndarray]:
         """Magnetometer sample rotated into body axes, or None (rejected) if implausible."""
         b_sensor = vec3(msg.magnetic_field)
@@ -115,130 +141,84 @@ class EstimatorNode(LockstepNode):
             self._reject('magnetometer sample is not finite')
             return None
         norm = float(np.linalg.norm(b_sensor))
-        if not 1e-6 <= norm <= 1e-3:
-            self._reject(f'magnetometer |B| = {norm:.3g} T outside [1e-6, 1e-3] T')
+        lo, hi = self.field_range
+        if not lo <= norm <= hi:
+            self._reject(f'magnetometer |B| = {norm:.3g} T outside [{lo:g}, {hi:g}] T')
             return None
-        q_body_sensor = self.mounts.lookup(msg.header.frame_id)
-        if q_body_sensor is None:
-            self._reject(f'no /tf_static mount body -> {msg.header.frame_id!r}')
+        q_body_sensor = self._mount(msg.header.frame_id)
+        return None if q_body_sensor is None else att.rotate(q_body_sensor, b_sensor)
+
+    def _horizon(self, msg: HorizonSensor) -> Optional[tuple]:
+        if not msg.valid or not math.isfinite(msg.roll) or not math.isfinite(msg.pitch):
+            self._reject('horizon sensor sample invalid (out of view or not finite)')
             return None
-        return att.rotate(q_body_sensor, b_sensor)
+        return (float(msg.roll), float(msg.pitch))
+
+    def _gyro(self, msg: Imu) -> Optional[np.ndarray]:
+        w = vec3(msg.angular_velocity)
+        if not all_finite(w):
+            self._reject('gyro sample is not finite')
+            return None
+        q_body_sensor = self._mount(msg.header.frame_id)
+        return None if q_body_sensor is None else att.rotate(q_body_sensor, w)
+
+    def _star(self, msg: Imu) -> Optional[np.ndarray]:
+        q = quat(msg.orientation)
+        if not all_finite(q) or abs(float(np.linalg.norm(q)) - 1.0) > 1e-3:
+            self._reject('star tracker attitude not finite or not a unit quaternion')
+            return None
+        return att.normalize(q)
+
+    def inputs_for(self, t_ns: int, msgs: Dict[str, Any]) -> EstimatorInputs:
+        """Fresh, checked samples of frame ``t_ns`` -> the core's :class:`EstimatorInputs`."""
+        def fresh(key, convert):
+            msg = msgs.get(key)
+            return convert(msg) if self._fresh(msg, t_ns) else None
+        cmd = msgs.get('cmd')
+        dipole = vec3(cmd.dipole_body) if cmd is not None else np.zeros(3)
+        return EstimatorInputs(
+            self.reference.at(t_ns / NS_PER_S), b_body=fresh('mag', self._field_body),
+            horizon_roll_pitch=fresh('horizon', self._horizon),
+            dipole_body=dipole if all_finite(dipole) else np.zeros(3),
+            gyro_rate_body=fresh('gyro', self._gyro), q_eci_body_meas=fresh('star', self._star))
 
     # ------------------------------------------------------------------ frame
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """One estimator step at elapsed sim time ``t_ns``."""
         t = t_ns / NS_PER_S
-        ref = self.reference.at(t)
         for topic in missing:
             self._reject(f'stale input {topic} at t={t:g} s (timeout)')
-        if self.algorithm == 'magnetic_filter':
-            ok = self._filter_step(t_ns, ref, msgs)
-        else:
-            ok = self._geometric_step(t_ns, ref, msgs)
+        inputs = self.inputs_for(t_ns, msgs)
+        dt = 0.0 if self._last_t is None else (t_ns - self._last_t) / NS_PER_S
         self._last_t = t_ns
-        if ok:
-            self._publish(t_ns, ref)
-
-    def _filter_step(self, t_ns: int, ref, msgs: Dict[str, Any]) -> bool:
-        f = self.filter
-        omega_abs0 = self.omega_rel0 + att.to_matrix(self.q0).T @ np.array(
-            [0.0, ref.omega0, 0.0])
-        if self._last_t is None:
-            f.reset(self.q0, omega_abs0)
-        else:
-            cmd = msgs.get('cmd')
-            dipole = vec3(cmd.dipole_body) if cmd is not None else np.zeros(3)
-            if not all_finite(dipole):
-                dipole = np.zeros(3)
-            ok = f.predict((t_ns - self._last_t) / NS_PER_S, ref.omega0, dipole,
-                           b_orbit_for_torque=ref.b_orbit)
-            w = f.omega_body_eci_body
-            if not ok or not all_finite(w) or float(np.linalg.norm(w)) > self.max_rate:
-                # diverged (e.g. the literal update (38)): start again from the initial
-                # estimate, as the paper's filter does at t0, instead of publishing nonsense
-                self.resets += 1
-                self._reject(f'filter diverged (|omega\'| beyond {self.max_rate:g} rad/s or '
-                             f'not finite): reset to the initial estimate ({self.resets})')
-                f.reset(self.q0, omega_abs0)
-        mag = msgs.get('mag')
-        if self._fresh(mag, t_ns):
-            b_body = self._field_body(mag)
-            if b_body is not None:
-                res = f.update(b_body, ref.b_orbit)
-                if res.get('accepted', False):
-                    self.update_count += 1
-                    self.innovation = [float(v) for v in res['innovation']]
-                else:
-                    self._reject(str(res.get('reason', 'update refused')))
-        q = f.q_orbit_body
-        omega = f.omega_body_eci_body
-        if not all_finite(q, omega):
-            self._reject('filter state not finite: not published')
-            return False
-        self._q_orbit_body = q
-        self._omega_abs = omega
-        p = f.P
-        cov = np.zeros((6, 6))
-        cov[:3, :3] = 4.0 * p[:3, :3]     # small angle: error angle ~ 2 mu (or 2 phi)
-        cov[3:, 3:] = p[3:6, 3:6]
-        cov[:3, 3:] = 2.0 * p[:3, 3:6]
-        cov[3:, :3] = cov[:3, 3:].T
-        self._cov = cov.reshape(-1)
-        return True
-
-    def _geometric_step(self, t_ns: int, ref, msgs: Dict[str, Any]) -> bool:
-        mag, hor = msgs.get('mag'), msgs.get('horizon')
-        if not (self._fresh(mag, t_ns) and self._fresh(hor, t_ns)):
-            return self._q_prev is not None   # no fresh valid pair: hold the last estimate
-        if not hor.valid or not math.isfinite(hor.roll) or not math.isfinite(hor.pitch):
-            self._reject('horizon sensor sample invalid (out of view or not finite)')
-            return self._q_prev is not None   # no fresh valid pair: hold the last estimate
-        b_body = self._field_body(mag)
-        if b_body is None:
-            return self._q_prev is not None   # no fresh valid pair: hold the last estimate
-        try:
-            if self.algorithm == 'triad':
-                q = triad_from_horizon_and_field(hor.roll, hor.pitch, b_body, ref.b_orbit)
-            else:
-                yaw = yaw_from_horizon_and_field(hor.roll, hor.pitch, b_body, ref.b_orbit)
-                q = attitude_from_horizon_and_yaw(hor.roll, hor.pitch, yaw)
-        except ValueError as exc:
-            self._reject(f'{self.algorithm}: {exc}')
-            return self._q_prev is not None   # no fresh valid pair: hold the last estimate
-        if self._q_prev is not None and self._last_t is not None:
-            dt = (t_ns - self._last_t) / NS_PER_S
-            dq = att.multiply(att.conjugate(self._q_prev), q)
-            self._omega_rel = att.to_rotation_vector(dq) / dt
-            if float(q @ self._q_prev) < 0:
-                q = -q
-        self._q_prev = q
-        self.update_count += 1
-        self._q_orbit_body = q
-        self._omega_abs = self._omega_rel + att.to_matrix(q).T @ np.array([0.0, ref.omega0, 0.0])
-        return True
+        step = self.core.step(inputs, t, dt)
+        self.update_count += step.updates
+        for why in step.rejections:
+            self._reject(why)
+        if step.estimate is not None:
+            self._publish(t_ns, inputs.ref, step)
 
     # ------------------------------------------------------------------ output
-    def _publish(self, t_ns: int, ref) -> None:
-        q_orbit_body = self._q_orbit_body
+    def _publish(self, t_ns: int, ref, step) -> None:
+        est = step.estimate
+        q_orbit_body = est.q_orbit_body
         q_eci_body = att.multiply(ref.q_eci_orbit, q_orbit_body)
-        omega_rel = self._omega_abs - att.to_matrix(q_orbit_body).T @ np.array(
-            [0.0, ref.omega0, 0.0])
         msg = AttitudeState()
         msg.header.stamp = self.stamp(t_ns)
         msg.header.frame_id = 'body'
         msg.q_eci_body = to_quat(q_eci_body)
         msg.q_orbit_body = to_quat(q_orbit_body)
-        msg.omega_body_eci_body = to_vec3(self._omega_abs)
-        msg.omega_body_orbit_body = to_vec3(omega_rel)
-        msg.covariance = [float(c) for c in self._cov]
+        msg.omega_body_eci_body = to_vec3(est.omega_body_eci_body)
+        msg.omega_body_orbit_body = to_vec3(
+            omega_orbit_from_eci(q_orbit_body, est.omega_body_eci_body, ref.omega0))
+        msg.covariance = [float(c) for c in np.asarray(est.covariance).reshape(-1)]
         self.est_pub.publish(msg)
         self.tf_pub.send(estimate_transforms(msg.header.stamp, ref.r_eci, q_eci_body))
         d = FilterDiagnostics()
         d.header = msg.header
         d.algorithm = self.algorithm
-        d.innovation = self.innovation
-        d.covariance_trace = float(np.trace(self.filter.P)) \
-            if self.algorithm == 'magnetic_filter' else 0.0
+        d.innovation = list(step.innovation)
+        d.covariance_trace = float(step.covariance_trace)
         d.update_count = self.update_count
         d.rejected_count = self.rejected_count
         d.last_rejection = self.last_rejection

@@ -15,6 +15,8 @@ from typing import Any, Dict, List
 
 import yaml
 
+from adcs_nodes import registry
+
 
 @dataclass
 class NodeSpec:
@@ -65,64 +67,50 @@ TOPIC_TYPES = {
     'adcs/attitude_estimate': 'adcs_msgs/msg/AttitudeState',
     'adcs/estimator/diagnostics': 'adcs_msgs/msg/FilterDiagnostics',
     'adcs/controller_status': 'adcs_msgs/msg/ControllerStatus',
-    'adcs/controllers/magnetic/command': 'adcs_msgs/msg/ActuatorCommand',
-    'adcs/controllers/bdot/command': 'adcs_msgs/msg/ActuatorCommand',
+    'adcs/attitude_target': 'adcs_msgs/msg/AttitudeTarget',
+    'sensors/wheels': 'sensor_msgs/msg/JointState',
 }
+COMMAND_TYPE = 'adcs_msgs/msg/ActuatorCommand'
 
-#: Sensor nodes: scenario key -> (executable/module name, class, output topic).
-SENSORS = {
-    'magnetometer': ('magnetometer', 'MagnetometerNode', 'sensors/magnetometer'),
-    'horizon_sensor': ('horizon_sensor', 'HorizonSensorNode', 'sensors/horizon'),
-    'star_tracker': ('star_tracker', 'StarTrackerNode', 'sensors/star_tracker'),
-    'gyro': ('gyro', 'GyroNode', 'sensors/gyro'),
-}
+
+def topic_type(topic: str) -> str:
+    """Message type of ``topic`` (controller command topics and sensor topics included)."""
+    if topic.startswith('adcs/controllers/') and topic.endswith('/command'):
+        return COMMAND_TYPE
+    if topic in TOPIC_TYPES:
+        return TOPIC_TYPES[topic]
+    for entry in registry.entries('sensor').values():
+        if entry.node and entry.node[3] == topic:
+            return entry.node[4]
+    raise KeyError(topic)
 
 
 def _rad(values) -> List[float]:
     return [math.radians(v) for v in values]
 
 
-def _sensor_params(key: str, cfg: Dict[str, Any]) -> Dict[str, Any]:
-    """Node parameters of a sensor (SI, radians) from its scenario section (degrees)."""
-    p: Dict[str, Any] = {'period_s': cfg['period_s']}
-    if key == 'magnetometer':
-        p.update(noise_std_T=cfg['noise_std_T'], bias_T=cfg['bias_T'],
-                 misalignment_rad=_rad(cfg['misalignment_deg']),
-                 scale_factor_error=cfg['scale_factor_error'], lsb_T=cfg['lsb_T'],
-                 saturation_T=cfg['saturation_T'],
-                 dropout_probability=cfg['dropout_probability'],
-                 q_body_sensor=cfg['q_body_sensor_xyzw'])
-    elif key == 'horizon_sensor':
-        p.update(noise_std_rad=_rad(cfg['noise_std_deg']), bias_rad=_rad(cfg['bias_deg']),
-                 scale_factor_error=cfg['scale_factor_error'],
-                 fov_rad=math.radians(cfg['fov_deg']))
-    elif key == 'star_tracker':
-        p.update(noise_std_rad=_rad(cfg['noise_std_deg']))
-    elif key == 'gyro':
-        p.update(noise_std_rad_s=_rad(cfg['noise_std_deg_s']),
-                 bias_initial_rad_s=[math.radians(v) / 3600.0
-                                     for v in cfg['bias_initial_deg_h']],
-                 bias_walk_std_rad_s_sqrt_s=[math.radians(v) / 3600.0 / 60.0
-                                             for v in cfg['bias_walk_deg_h_sqrt_h']])
-    return p
+def _sensor_params(cfg: Dict[str, Any]) -> Dict[str, Any]:
+    """Node parameters of a sensor: its registry parameters as the scenario gives them."""
+    return {k: v for k, v in cfg.items() if k != 'external'}
 
 
 def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
     est = sc['estimator']
     sensors = sc['sensors']
+    entry = registry.get('estimator', est['algorithm'])
     inertia = [float(v) for row in sc['spacecraft']['inertia_kgm2'] for v in row]
     p: Dict[str, Any] = {
-        'algorithm': est['algorithm'], 'period_s': est['period_s'],
-        'theta_T2': est['theta_T2'], 'tau': est['tau'], 'p0_diag': est['p0_diag'],
-        'measurement_form': est['measurement_form'], 'literal_update': est['literal_update'],
-        'substeps': est['substeps'], 'inertia_kgm2': inertia,
+        'algorithm': est['algorithm'], 'period_s': est['period_s'], 'inertia_kgm2': inertia,
         'initial_q_orbit_body': est['initial_q_orbit_body_xyzw'],
         'initial_omega_body_orbit_body': _rad(est['initial_omega_body_orbit_body_deg_s']),
-    }
-    if 'magnetometer' in sensors:
-        p['magnetometer_period_s'] = sensors['magnetometer']['period_s']
-    if 'horizon_sensor' in sensors:
-        p['horizon_period_s'] = sensors['horizon_sensor']['period_s']
+        **{prm.name: est[prm.name] for prm in entry.params}}
+    for key, sensor in (('magnetometer_period_s', 'magnetometer'),
+                        ('horizon_period_s', 'horizon_sensor'),
+                        ('star_tracker_period_s', 'star_tracker'), ('gyro_period_s', 'gyro')):
+        if sensor in sensors:
+            p[key] = sensors[sensor]['period_s']
+    if 'controllers' in sc:
+        p['command_period_s'] = sc['controllers']['period_s']
     flatten('onboard_orbit', est['onboard_orbit'], p)
     flatten('onboard_field', est['onboard_field'], p)
     return p
@@ -206,30 +194,29 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                  publishes=['/clock', 'sim/state', 'sim/wheels', '/tf'],
                  subscribes=['sim/environment', 'adcs/actuator_command']),
     ]
-    for key, (exe, cls, topic) in SENSORS.items():
-        if key in sc['sensors']:
-            nodes.append(NodeSpec(key, 'sim_node', exe, f'sim_node.nodes.{exe}', cls,
-                                  {**common, **_sensor_params(key, sc['sensors'][key])},
-                                  publishes=[topic, '/tf_static'],
-                                  subscribes=['/clock', 'sim/state', 'sim/environment']))
+    flight = {**common, 'timing_mode': 'lockstep'}
+    if sc.get('plugins'):    # (an empty list has no type in a ROS parameter file)
+        flight['plugins'] = list(sc['plugins'])
+    for key, cfg in sc['sensors'].items():
+        if cfg.get('external'):
+            continue       # a real driver publishes this topic (the launcher says so)
+        package, module, cls, topic, _ = registry.get('sensor', key).node
+        inputs = ['sim/wheels'] if key == 'wheel_tachometer' else ['sim/state',
+                                                                   'sim/environment']
+        nodes.append(NodeSpec(key, package, module.rsplit('.', 1)[1], module, cls,
+                              {**common, **_sensor_params(cfg)},
+                              publishes=[topic, '/tf_static'], subscribes=['/clock'] + inputs))
     if 'estimator' in sc:
-        est = sc['estimator']
-        if 'magnetometer' not in sc['sensors']:
-            raise ValueError('estimator: needs sensors.magnetometer')
-        subs = ['/clock', 'sensors/magnetometer', 'adcs/actuator_command', '/tf_static']
-        if est['algorithm'] in ('triad', 'horizon_mag_yaw'):
-            if 'horizon_sensor' not in sc['sensors']:
-                raise ValueError(f'estimator.algorithm {est["algorithm"]} needs '
-                                 'sensors.horizon_sensor')
-            subs.insert(2, 'sensors/horizon')
+        entry = registry.get('estimator', sc['estimator']['algorithm'])
+        subs = ['/clock', '/tf_static'] + [_INPUT_TOPICS[i] for i in entry.inputs]
         nodes.append(NodeSpec('estimator', 'adcs_nodes', 'estimator',
                               'adcs_nodes.nodes.estimator', 'EstimatorNode',
-                              {**common, **_estimator_params(sc)},
+                              {**flight, **_estimator_params(sc)},
                               publishes=['adcs/attitude_estimate',
                                          'adcs/estimator/diagnostics', '/tf'],
                               subscribes=subs))
     if 'controllers' in sc:
-        nodes += _control_nodes(sc, common)
+        nodes += _control_nodes(sc, flight)
         dyn = next(n for n in nodes if n.name == 'dynamics')
         dyn.params['command_period_s'] = sc['controllers']['period_s']
     for node in nodes:      # every LockstepNode publishes /diagnostics once per sim second
@@ -239,40 +226,95 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
             {t for n in nodes for t in n.publishes} | {'lockstep/status'})
         nodes.append(NodeSpec(
             'recorder', 'adcs_nodes', 'recorder', 'adcs_nodes.nodes.recorder', 'RecorderNode',
-            {'topics': [f'{t}={TOPIC_TYPES[t]}' if t in TOPIC_TYPES else t for t in topics],
+            {'topics': [f'{t}={topic_type(t)}' for t in topics],
              'status_period_s': 0.1},           # its progress, for the clock's flow control
             publishes=[], subscribes=topics, lockstep=True))
     _add_handshake(nodes)
     return nodes
 
 
-def _control_nodes(sc: Dict[str, Any], common: Dict[str, Any]) -> List[NodeSpec]:
-    """Controller nodes (one per configured law) and the controller manager."""
+#: Registry input -> the topic a node subscribes to for it.
+_INPUT_TOPICS = {'estimate': 'adcs/attitude_estimate', 'target': 'adcs/attitude_target',
+                 'magnetometer': 'sensors/magnetometer', 'wheel_speeds': 'sensors/wheels',
+                 'horizon': 'sensors/horizon', 'star_tracker': 'sensors/star_tracker',
+                 'gyro': 'sensors/gyro', 'actuator_command': 'adcs/actuator_command'}
+
+
+def _spacecraft_context(sc: Dict[str, Any]) -> Dict[str, Any]:
+    """What every controller node knows of the spacecraft (``CONTEXT_PARAMS`` of the node)."""
+    craft = sc['spacecraft']
+    wheels = craft.get('wheels') or []
+    p: Dict[str, Any] = {
+        'inertia_kgm2': [float(v) for row in craft['inertia_kgm2'] for v in row],
+        'max_dipole_Am2': list(craft['magnetorquer']['max_dipole_Am2'])
+        if 'magnetorquer' in craft else []}
+    if wheels:
+        p['wheel_axes_body'] = [float(c) for w in wheels for c in w['axis']]
+        p['wheel_max_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
+        p['wheel_max_momentum_Nms'] = [w['max_momentum_Nms'] for w in wheels]
+        p['wheel_inertia_kgm2'] = [w['inertia_kgm2'] for w in wheels]
+    return p
+
+
+def _guidance_node(sc: Dict[str, Any], flight: Dict[str, Any]) -> NodeSpec:
+    """The guidance node: the scenario's profile (default: hold the orbital frame)."""
+    g = sc.get('guidance') or {}
+    prof = g.get('profile') or [{'t_s': 0.0, 'type': 'hold', 'q_xyzw': [0.0, 0.0, 0.0, 1.0],
+                                 'duration_s': 0.0, 'axis_body': [0.0, 0.0, 1.0],
+                                 'amplitude_deg': 0.0, 'period_s': 0.0}]
+    params = {**flight, 'period_s': g.get('period_s') or sc['controllers']['period_s'],
+              'frame': g.get('frame', 'orbit'),
+              'profile_t_s': [e['t_s'] for e in prof],
+              'profile_type': [e['type'] for e in prof],
+              'profile_q_xyzw': [c for e in prof for c in e['q_xyzw']],
+              'profile_duration_s': [e['duration_s'] for e in prof],
+              'profile_axis_body': [float(c) for e in prof for c in e['axis_body']],
+              'profile_amplitude_deg': [e['amplitude_deg'] for e in prof],
+              'profile_period_s': [e['period_s'] for e in prof]}
+    return NodeSpec('guidance', 'adcs_nodes', 'guidance', 'adcs_nodes.nodes.guidance',
+                    'GuidanceNode', params, publishes=['adcs/attitude_target'],
+                    subscribes=['/clock'])
+
+
+def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any]) -> List[NodeSpec]:
+    """Guidance, one node per configured controller (any registered one), the manager."""
     ctrl = sc['controllers']
     sensors = sc['sensors']
     est_period = sc['estimator']['period_s'] if 'estimator' in sc else 0.0
-    limits = sc['spacecraft']['magnetorquer']['max_dipole_Am2']
+    craft = _spacecraft_context(sc)
+    limits = craft['max_dipole_Am2'] or [0.0, 0.0, 0.0]
     wheels = sc['spacecraft'].get('wheels') or []
-    shared = {**common, 'period_s': ctrl['period_s'], 'estimator_period_s': est_period,
-              'magnetometer_period_s': sensors['magnetometer']['period_s'],
-              'max_dipole_Am2': limits, 'n_wheels': len(wheels)}
+    names = [k for k in ctrl if k != 'period_s']
+    entries = {n: registry.get('controller', n) for n in names}
+    target_period = (sc.get('guidance') or {}).get('period_s') or ctrl['period_s']
+    shared = {**flight, **craft, 'period_s': ctrl['period_s']}
+    periods = {'estimate': ('estimator_period_s', est_period),
+               'target': ('target_period_s', target_period),
+               'magnetometer': ('magnetometer_period_s',
+                                sensors.get('magnetometer', {}).get('period_s')),
+               'wheel_speeds': ('tachometer_period_s',
+                                sensors.get('wheel_tachometer', {}).get('period_s'))}
     nodes = []
-    names = [k for k in ('magnetic', 'bdot') if k in ctrl]
-    for name in names:
-        params = {**shared, 'kind': name, 'controller_name': name, **ctrl[name]}
-        if name == 'magnetic':
+    if any('target' in e.inputs for e in entries.values()):
+        nodes.append(_guidance_node(sc, flight))
+    for name, entry in entries.items():
+        params = {**shared, 'controller': name, **ctrl[name]}
+        for need in entry.inputs:
+            key, period = periods[need]
+            params[key] = period
+        if {'estimate', 'magnetometer'} <= set(entry.inputs):
             flatten('onboard_orbit', sc['estimator']['onboard_orbit'], params)
             flatten('onboard_field', sc['estimator']['onboard_field'], params)
-        subs = ['/clock', 'sensors/magnetometer', '/tf_static'] + (
-            ['adcs/attitude_estimate'] if est_period else [])
-        nodes.append(NodeSpec(f'{name}_controller', 'adcs_nodes', f'{name}_controller',
-                              'adcs_nodes.nodes.controller',
-                              f'{name.capitalize()}ControllerNode', params,
+        subs = ['/clock'] + [_INPUT_TOPICS[i] for i in entry.inputs]
+        if 'magnetometer' in entry.inputs:
+            subs.append('/tf_static')
+        nodes.append(NodeSpec(f'{name}_controller', 'adcs_nodes', 'controller',
+                              'adcs_nodes.nodes.controller', 'ControllerNode', params,
                               publishes=[f'adcs/controllers/{name}/command'], subscribes=subs))
     man = sc.get('manager') or {'safe': 'bdot' if 'bdot' in names else names[0],
                                 'initial': '', 'stale_after_s': 0.0, 'schedule': []}
     mparams: Dict[str, Any] = {
-        **common, 'controllers': names, 'safe': man['safe'], 'initial': man['initial'],
+        **flight, 'controllers': names, 'safe': man['safe'], 'initial': man['initial'],
         'period_s': ctrl['period_s'], 'controller_period_s': ctrl['period_s'],
         'estimator_period_s': est_period if 'auto' in man else 0.0,
         'stale_after_s': man['stale_after_s'], 'max_dipole_Am2': limits}

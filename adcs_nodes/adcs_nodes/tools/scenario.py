@@ -9,6 +9,8 @@ Pure Python + PyYAML; no rclpy.
 """
 from __future__ import annotations
 
+import datetime
+import copy
 import difflib
 import math
 import os
@@ -17,6 +19,9 @@ from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
+
+from adcs_nodes import registry
+from adcs_nodes.registry import Param
 
 
 class ScenarioError(ValueError):
@@ -79,6 +84,8 @@ SCHEMA: Dict[str, Any] = {
     'paper': F('str', '', 'source paper (file in papers/original) this scenario reproduces'),
     'epoch': F('str', '2026-01-01T00:00:00Z', 'UTC date-time of sim time 0 (ISO 8601)'),
     'seed': F('int', 0, 'scenario seed; every node derives its own random stream from it'),
+    'plugins': F('strlist', [], 'registry plugin modules or .py files (relative to the '
+                 'scenario) that register more controllers, estimators or sensors'),
     'duration_s': F('float', REQUIRED, 'simulated duration [s]'),
     'timing': {
         'frame_s': F('float', 1.0, 'base frame period [s]; every period is a multiple of it'),
@@ -111,82 +118,15 @@ SCHEMA: Dict[str, Any] = {
         'omega_body_orbit_body_deg_s': F('vec3', OPTIONAL,
                                          'initial rate w.r.t. the orbit frame, body axes [deg/s]'),
     },
-    'sensors': {
-        'magnetometer': Opt({
-            'period_s': F('float', 10.0, 'sample period [s] (paper 000: 10 s)'),
-            'noise_std_T': F('vec3', [375e-9, 25e-9, 65e-9], 'white noise std per sensor '
-                             'axis [T] (paper 000 example)'),
-            'bias_T': F('vec3', [0.0, 0.0, 0.0], 'constant bias, sensor axes [T]'),
-            'misalignment_deg': F('vec3', [0.0, 0.0, 0.0], 'small rotation body -> sensor '
-                                  '(rotation vector) [deg]'),
-            'scale_factor_error': F('vec3', [0.0, 0.0, 0.0], 'measured = (1 + s) true, '
-                                    'per axis [-]'),
-            'lsb_T': F('float', 20e-9, 'quantisation step [T] (0: none)'),
-            'saturation_T': F('float', 0.0, 'per-axis range [T] (0: none)'),
-            'dropout_probability': F('float', 0.0, 'probability that a sample is lost [-]'),
-            'q_body_sensor_xyzw': F('quat', [0.0, 0.0, 0.0, 1.0],
-                                    'nominal mounting, sensor -> body, scalar last'),
-        }),
-        'horizon_sensor': Opt({
-            'period_s': F('float', 1.0, 'sample period [s]'),
-            'noise_std_deg': F('vec2', [0.1, 0.1], 'white noise std of roll, pitch [deg]'),
-            'bias_deg': F('vec2', [0.0, 0.0], 'bias of roll, pitch [deg]'),
-            'scale_factor_error': F('vec2', [0.0, 0.0], 'scale-factor error of roll, pitch '
-                                    '[-] (paper 004: 0.05 on one channel)'),
-            'fov_deg': F('float', 30.0, 'largest |roll|, |pitch| with a valid output [deg]'),
-        }),
-        'star_tracker': Opt({
-            'period_s': F('float', 1.0, 'sample period [s]'),
-            'noise_std_deg': F('vec3', [0.02 / 3] * 3, 'attitude noise std per body axis '
-                               '[deg] (0.02 deg 3-sigma)'),
-        }),
-        'gyro': Opt({
-            'period_s': F('float', 1.0, 'sample period [s]'),
-            'noise_std_deg_s': F('vec3', [1e-4] * 3, 'rate white noise std [deg/s]'),
-            'bias_initial_deg_h': F('vec3', [0.0, 0.0, 0.0], 'initial bias [deg/h]'),
-            'bias_walk_deg_h_sqrt_h': F('vec3', [0.01 / 3] * 3,
-                                        'bias random walk density [deg/h/sqrt(h)]'),
-        }),
-    },
-    'estimator': Opt({
-        'algorithm': F('str', 'magnetic_filter', 'attitude estimator',
-                       ('magnetic_filter', 'triad', 'horizon_mag_yaw')),
-        'period_s': F('float', 2.0, 'estimator period [s] (paper 000: prediction every 2 s)'),
-        'theta_T2': F('float', 9e-14, 'magnetic_filter theta of (38) [T^2]'),
-        'tau': F('float', 0.01, 'magnetic_filter tau of (38) [-]'),
-        'p0_diag': F('list9', [10.0] * 3 + [0.0036] * 3 + [1e-14] * 3,
-                     'magnetic_filter initial covariance diagonal: attitude (phi or mu) [-], '
-                     'rate [rad^2/s^2], disturbance [1/s^4]'),
-        'measurement_form': F('str', 'phi', 'magnetic_filter measurement model, (36) phi or '
-                              '(37) mu', ('phi', 'mu')),
-        'literal_update': F('bool', False, "magnetic_filter: the paper's literal (38) (raw "
-                            'residuals summed) instead of sequential innovations'),
-        'substeps': F('int', 1, 'magnetic_filter RK4 substeps per prediction'),
-        'initial_q_orbit_body_xyzw': F('quat', [0.0, 0.0, 0.0, 1.0],
-                                       'initial attitude estimate (paper 000: identity)'),
-        'initial_omega_body_orbit_body_deg_s': F('vec3', [0.0, 0.0, 0.0],
-                                                 'initial relative rate estimate [deg/s] '
-                                                 '(paper 000: omega\' = (0, omega0, 0))'),
-        'onboard_orbit': 'ORBIT?',
-        'onboard_field': 'FIELD?',
-    }),
-    'controllers': Opt({
-        'period_s': F('float', 2.0, 'control period of every controller [s] (paper 000 '
-                      'assumption: 2 s, dipole held in between)'),
-        'magnetic': Opt({
-            'mode': F('str', 'three_axis', 'paper 000 law',
-                      ('three_axis', 'one_axis', 'two_stage')),
-            'alpha_per_s': F('float', 3e-3, 'kinematic gain alpha of (16) [1/s]'),
-            'k_Nms': F('float', 0.2, 'rate gain k of (27) [N m s]'),
-            'beta': F('float', 0.0, 'Lyapunov weight of (25) for the start-up check '
-                      'k > beta/(2 alpha) (28) [J]; 0: no check'),
-            'switch_angle_deg': F('float', 15.0, 'two_stage: switch below this angle [deg]'),
-            'switch_rate_deg_s': F('float', 0.2, 'two_stage: and below this rate [deg/s]'),
-        }),
-        'bdot': Opt({
-            'gain_Am2s_per_T': F('float', 1.0e6, 'B-dot gain k: m = -k dB/dt [A m^2 s/T]'),
-            'filter_time_constant_s': F('float', 0.0, 'low-pass of dB/dt [s] (0: none)'),
-        }),
+    'sensors': 'SENSORS',
+    'estimator': 'ESTIMATOR',
+    'controllers': 'CONTROLLERS',
+    'guidance': Opt({
+        'period_s': F('float', OPTIONAL, 'target period [s] (default: controllers.period_s)'),
+        'frame': F('str', 'orbit', 'frame of the profile attitudes', ('orbit', 'eci')),
+        'profile': F('profile', [], 'time-tagged segments: list of {t_s, type: hold|slew|'
+                     'track, q_xyzw, duration_s (slew), axis_body, amplitude_deg, period_s '
+                     '(track)}; empty: hold the orbital frame'),
     }),
     'manager': Opt({
         'safe': F('str', 'bdot', 'safe-mode controller (fallback)'),
@@ -219,17 +159,125 @@ _WHEEL_KEYS = {
     'h0_Nms': F('float', 0.0, 'initial wheel momentum [N m s]'),
 }
 
+#: Keys of the estimator section that every algorithm has (the rest come from its entry).
+_ESTIMATOR_COMMON = {
+    'algorithm': F('str', 'magnetic_filter', 'attitude estimator (a registered estimator; '
+                   '`adcs list`)'),
+    'period_s': F('float', 2.0, 'estimator period [s] (paper 000: prediction every 2 s)'),
+    'initial_q_orbit_body_xyzw': F('quat', [0.0, 0.0, 0.0, 1.0],
+                                   'initial attitude estimate (paper 000: identity)'),
+    'initial_omega_body_orbit_body_deg_s': F('vec3', [0.0, 0.0, 0.0],
+                                             'initial relative rate estimate [deg/s] '
+                                             "(paper 000: omega' = (0, omega0, 0))"),
+    'onboard_orbit': 'ORBIT?',
+    'onboard_field': 'FIELD?',
+}
+_EXTERNAL = F('bool', False, 'a real driver publishes this topic: the launcher starts no '
+              'simulated node for it and says so')
+
+
+def schema() -> Dict[str, Any]:
+    """The whole scenario schema, with the registry's sections filled in.
+
+    ``sensors.<name>``, ``estimator`` (per algorithm) and ``controllers.<name>`` come from the
+    registry entries' parameter specs (:mod:`adcs_nodes.registry`), so a plugin that registers
+    a controller gets its scenario keys with nothing else to write.
+    """
+    sensors = {name: Opt({**{p.name: p for p in e.params}, 'external': _EXTERNAL})
+               for name, e in registry.entries('sensor').items()}
+    estimator = Variant('algorithm', _ESTIMATOR_COMMON,
+                        {name: {p.name: p for p in e.params}
+                         for name, e in registry.entries('estimator').items()})
+    controllers = {'period_s': F('float', 2.0, 'control period of every controller [s] '
+                                 '(paper 000 assumption: 2 s, dipole held in between)')}
+    controllers.update({name: Opt({p.name: p for p in e.params})
+                        for name, e in registry.entries('controller').items()})
+    out = dict(SCHEMA)
+    out['sensors'] = sensors
+    out['estimator'] = estimator
+    out['controllers'] = Opt(controllers)
+    return out
+
+
+class Variant:
+    """A section whose keys depend on a selector key (``estimator.algorithm``)."""
+
+    def __init__(self, selector: str, common: Dict[str, Any], variants: Dict[str, Any]):
+        self.selector, self.common, self.variants = selector, common, variants
+
 
 # ---------------------------------------------------------------------- YAML with lines
+#: Largest scenario file read [bytes] (a real one is a few kB).
+MAX_FILE_BYTES = 1_000_000
+#: Largest number of YAML nodes after alias expansion (an alias bomb of a few hundred bytes
+#: expands to billions; a real scenario has a few hundred).
+MAX_NODES = 100_000
+#: Longest run of characters without a space echoed in an error message, and longest message.
+MAX_SHOWN = 80
+MAX_MESSAGE = 600
+
+
 class _LineLoader(yaml.SafeLoader):
-    """SafeLoader that remembers the line of every mapping key."""
+    """SafeLoader that remembers the line of every mapping key and refuses alias bombs."""
+
+    def construct_document(self, node):
+        _check_expansion(node)
+        return super().construct_document(node)
+
+
+def _check_expansion(root) -> None:
+    """Raise ``ScenarioError`` if the YAML node graph expands to more than ``MAX_NODES``.
+
+    Aliases make the composed graph a DAG: the expanded size of a node is computed once per
+    node (memoised, iterative: no recursion limit), so the check costs the size of the text.
+    """
+    size: Dict[int, int] = {}
+    open_nodes = set()
+    stack = [(root, False)]
+    while stack:
+        node, children_done = stack.pop()
+        if id(node) in size:
+            continue
+        if isinstance(node, yaml.ScalarNode):
+            size[id(node)] = 1
+            continue
+        kids = ([n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode)
+                else list(node.value))
+        if children_done:
+            open_nodes.discard(id(node))
+            total = 1 + sum(size[id(k)] for k in kids)
+            if total > MAX_NODES:
+                raise ScenarioError(
+                    f'line {node.start_mark.line + 1}: this value expands to more than '
+                    f'{MAX_NODES} YAML nodes (aliases of aliases?)')
+            size[id(node)] = total
+            continue
+        if id(node) in open_nodes:
+            raise ScenarioError(f'line {node.start_mark.line + 1}: a value that contains '
+                                'itself (recursive alias)')
+        open_nodes.add(id(node))
+        stack.append((node, True))
+        for kid in kids:
+            if id(kid) in open_nodes:
+                raise ScenarioError(f'line {kid.start_mark.line + 1}: a value that contains '
+                                    'itself (recursive alias)')
+            if id(kid) not in size:
+                stack.append((kid, False))
 
 
 def _construct_mapping(loader, node, deep=False):
     mapping = {}
     lines = {}
     for key_node, value_node in node.value:
+        if not isinstance(key_node, yaml.ScalarNode):
+            raise ScenarioError(f'line {key_node.start_mark.line + 1}: a mapping key must be '
+                                f'plain text, not a {key_node.id} (complex key "? ...")')
         key = loader.construct_object(key_node, deep=deep)
+        try:
+            hash(key)
+        except TypeError:
+            raise ScenarioError(f'line {key_node.start_mark.line + 1}: a mapping key must be '
+                                f'plain text, got {type(key).__name__}') from None
         if key in mapping:
             raise ScenarioError(f'line {key_node.start_mark.line + 1}: duplicate key {key!r}')
         mapping[key] = loader.construct_object(value_node, deep=True)
@@ -282,6 +330,13 @@ class _Checker:
                 if key not in data and (isinstance(spec, Opt) or _has_required(spec)):
                     continue  # optional section, or one with required keys: absent as a whole
                 out[key] = self.mapping(data.get(key), spec, full + '.', kline)
+            elif isinstance(spec, Variant):
+                if key in data:   # an optional section whose keys depend on its selector
+                    out[key] = self.variant(data[key], spec.common, spec.selector,
+                                            spec.variants, full, kline)
+            elif isinstance(spec, Param):
+                out[key] = (self.leaf(data[key], spec, full, kline) if key in data
+                            else copy.deepcopy(spec.default))
             elif spec in ('ORBIT?', 'FIELD?') and key not in data:
                 continue  # optional variant section (the caller supplies a default)
             elif spec in ('ORBIT', 'ORBIT?'):
@@ -304,12 +359,17 @@ class _Checker:
         if not isinstance(data, dict):
             self.fail(line, full, 'expected a mapping')
         sel = data.get(selector, common[selector].default)
-        if sel not in variants:
+        if not isinstance(sel, str) or sel not in variants:
             self.fail(getattr(data, 'lines', {}).get(selector, line), f'{full}.{selector}',
                       f'unknown {selector} {sel!r}; allowed: {", ".join(variants)}')
         return self.mapping(data, {**common, **variants[sel]}, full + '.', line)
 
     def leaf(self, value: Any, spec: F, key: str, line: Optional[int]) -> Any:
+        if isinstance(spec, Param):   # a registry parameter: its own type and range check
+            try:
+                return spec.validate(value)
+            except ValueError as exc:
+                self.fail(line, key, str(exc).split(': ', 1)[-1] + f' ({spec.doc()})')
         try:
             return _convert(value, spec)
         except (TypeError, ValueError) as exc:
@@ -386,11 +446,47 @@ def _convert(value: Any, spec: F) -> Any:
                 raise ValueError(f'schedule entries need exactly t_s and controller: {item!r}')
             out.append({'t_s': _finite(item['t_s']), 'controller': str(item['controller'])})
         return sorted(out, key=lambda e: e['t_s'])
+    if kind == 'profile':
+        return _profile(value)
     if kind == 'wheels':
         if not isinstance(value, list):
             raise ValueError(f'expected a list of wheels, got {value!r}')
         return value  # entries are checked by _check_wheels (with lines)
     raise AssertionError(f'unknown schema kind {kind}')
+
+
+_SEGMENT_KEYS = {'t_s', 'type', 'q_xyzw', 'duration_s', 'axis_body', 'amplitude_deg',
+                 'period_s'}
+
+
+def _profile(value: Any) -> List[dict]:
+    """A guidance profile: checked segments with every key filled in, sorted by ``t_s``."""
+    if not isinstance(value, list):
+        raise ValueError(f'expected a list of segments, got {registry.short(value)}')
+    out = []
+    for item in value:
+        if not isinstance(item, dict) or not {'t_s', 'type'} <= set(item) or \
+                not set(item) <= _SEGMENT_KEYS:
+            raise ValueError(f'a segment needs t_s and type, and only the keys '
+                             f'{sorted(_SEGMENT_KEYS)}: {registry.short(item)}')
+        seg = {'t_s': _finite(item['t_s']), 'type': item['type'],
+               'q_xyzw': _convert(item.get('q_xyzw', [0.0, 0.0, 0.0, 1.0]),
+                                  F('quat', None, 'segment attitude')),
+               'duration_s': _finite(item.get('duration_s', 0.0)),
+               'axis_body': _vector(item.get('axis_body', [0.0, 0.0, 1.0]), 3),
+               'amplitude_deg': _finite(item.get('amplitude_deg', 0.0)),
+               'period_s': _finite(item.get('period_s', 0.0))}
+        if seg['type'] not in ('hold', 'slew', 'track'):
+            raise ValueError(f'segment type {registry.short(seg["type"])} is not one of hold, '
+                             'slew, track')
+        if seg['t_s'] < 0 or seg['duration_s'] < 0 or seg['period_s'] < 0:
+            raise ValueError(f'segment times must be >= 0: {registry.short(item)}')
+        if seg['type'] == 'slew' and not seg['duration_s'] > 0:
+            raise ValueError(f'a slew needs duration_s > 0: {registry.short(item)}')
+        if seg['type'] == 'track' and not seg['period_s'] > 0:
+            raise ValueError(f'a track needs period_s > 0: {registry.short(item)}')
+        out.append(seg)
+    return sorted(out, key=lambda e: e['t_s'])
 
 
 def _check_wheels(checker: _Checker, wheels: List[Any], line: Optional[int]) -> List[dict]:
@@ -400,6 +496,38 @@ def _check_wheels(checker: _Checker, wheels: List[Any], line: Optional[int]) -> 
     names = [w['name'] for w in out]
     if len(set(names)) != len(names):
         checker.fail(line, 'spacecraft.wheels', f'duplicate wheel names {names}')
+    return out
+
+
+#: Registry input -> the sensor section that provides it.
+SENSOR_OF_INPUT = {'magnetometer': 'magnetometer', 'horizon': 'horizon_sensor',
+                   'star_tracker': 'star_tracker', 'gyro': 'gyro',
+                   'wheel_speeds': 'wheel_tachometer'}
+
+
+def controller_names(sc: Dict[str, Any]) -> List[str]:
+    """Names of the controllers a validated scenario configures, in file order."""
+    return [k for k in sc.get('controllers', {}) if k != 'period_s']
+
+
+def controller_problems(sc: Dict[str, Any], name: str) -> List[str]:
+    """Why controller ``name`` cannot run on this scenario's spacecraft (empty: it can)."""
+    entry = registry.get('controller', name)
+    craft, sensors, out = sc['spacecraft'], sc.get('sensors', {}), []
+    for need in entry.inputs:
+        sensor = SENSOR_OF_INPUT.get(need)
+        if sensor and sensor not in sensors:
+            out.append(f'needs sensors.{sensor} (input {need})')
+        if need == 'estimate' and 'estimator' not in sc:
+            out.append('needs an estimator')
+    if 'magnetorquer' in entry.actuators and 'magnetorquer' not in craft:
+        out.append('commands magnetorquers: needs spacecraft.magnetorquer')
+    if 'wheels' in entry.actuators and not craft.get('wheels'):
+        out.append('commands reaction wheels: needs spacecraft.wheels')
+    for section in entry.requires:
+        head, _, tail = section.partition('.')
+        if not (sc.get(head, {}).get(tail) if tail else sc.get(head)):
+            out.append(f'needs {section}')
     return out
 
 
@@ -424,25 +552,25 @@ def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, i
     if 'omega_body_eci_body_deg_s' in init and 'omega_body_orbit_body_deg_s' in init:
         checker.fail(lines.get('initial'), 'initial',
                      'give omega_body_eci_body_deg_s or omega_body_orbit_body_deg_s, not both')
+    sensors = sc.get('sensors', {})
     if 'estimator' in sc:
-        sensors = sc.get('sensors', {})
-        if 'magnetometer' not in sensors:
-            checker.fail(lines.get('estimator'), 'estimator', 'needs sensors.magnetometer')
-        if sc['estimator']['algorithm'] != 'magnetic_filter' and 'horizon_sensor' not in sensors:
-            checker.fail(lines.get('estimator'), 'estimator.algorithm',
-                         f'{sc["estimator"]["algorithm"]} needs sensors.horizon_sensor')
+        entry = registry.get('estimator', sc['estimator']['algorithm'])
+        for need in entry.inputs:
+            sensor = SENSOR_OF_INPUT.get(need)
+            if sensor and sensor not in sensors:
+                checker.fail(lines.get('estimator'), 'estimator.algorithm',
+                             f'{entry.name} needs sensors.{sensor}')
+    if 'wheel_tachometer' in sensors and not sc['spacecraft'].get('wheels'):
+        checker.fail(lines.get('sensors'), 'sensors.wheel_tachometer',
+                     'needs spacecraft.wheels')
     if 'controllers' in sc:
-        names = [k for k in ('magnetic', 'bdot') if k in sc['controllers']]
+        names = controller_names(sc)
         if not names:
             checker.fail(lines.get('controllers'), 'controllers', 'no controller configured '
-                         '(magnetic and/or bdot)')
-        if 'magnetorquer' not in sc['spacecraft']:
-            checker.fail(lines.get('controllers'), 'controllers',
-                         'needs spacecraft.magnetorquer')
-        if 'magnetometer' not in sc.get('sensors', {}):
-            checker.fail(lines.get('controllers'), 'controllers', 'needs sensors.magnetometer')
-        if 'magnetic' in names and 'estimator' not in sc:
-            checker.fail(lines.get('controllers'), 'controllers.magnetic', 'needs an estimator')
+                         f'(registered: {", ".join(registry.names("controller"))})')
+        for name in names:
+            for why in controller_problems(sc, name):
+                checker.fail(lines.get('controllers'), f'controllers.{name}', why)
         man = sc.get('manager', {'safe': 'bdot', 'initial': '', 'schedule': []})
         allowed = names + (['auto'] if 'auto' in man else [])
         for key in ('safe', 'initial'):
@@ -482,13 +610,51 @@ def load_scenario(path: str) -> Dict[str, Any]:
     Raises
     ------
     ScenarioError
-        On a missing file, YAML syntax error, unknown or missing key, or bad value; the
-        message names the file, the line and the key.
+        On a missing, too large (> ``MAX_FILE_BYTES``) or non-UTF-8 file, YAML syntax error,
+        alias bomb (> ``MAX_NODES`` nodes once expanded), unknown or missing key, bad value,
+        or a physically impossible value (:func:`_check_physical`); the message names the file,
+        the line and the key, with long values cut (``MAX_SHOWN`` characters).
     """
+    try:
+        return _load_scenario(path)
+    except ScenarioError as exc:
+        raise ScenarioError(shorten_message(str(exc))) from None
+
+
+def shorten_message(text: str, max_run: int = MAX_SHOWN, max_len: int = MAX_MESSAGE) -> str:
+    """``text`` with every run of more than ``max_run`` non-space characters cut in its middle,
+    and the whole cut to ``max_len`` characters (a rejected 100 kB value is not echoed)."""
+    def cut(match) -> str:
+        run = match.group(0)
+        return f'{run[:max_run // 2]}...<{len(run)} characters>...{run[-(max_run // 4):]}'
+
+    text = re.sub(r'\S{%d,}' % (max_run + 1), cut, text)
+    if len(text) > max_len:
+        text = f'{text[:max_len - 80]} ...<{len(text)} characters>... {text[-60:]}'
+    return text
+
+
+def _read_text(path: str) -> str:
+    """The file as text: size-limited, UTF-8 (``ScenarioError`` naming the problem)."""
     if not os.path.isfile(path):
         raise ScenarioError(f'{path}: no such scenario file')
-    with open(path, encoding='utf-8') as fh:
-        text = fh.read()
+    try:
+        with open(path, 'rb') as fh:
+            raw = fh.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise ScenarioError(f'{path}: cannot read: {exc.strerror or exc}') from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise ScenarioError(f'{path}: larger than {MAX_FILE_BYTES} bytes: not a scenario file')
+    try:
+        return raw.decode('utf-8')
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b'\n') + 1
+        raise ScenarioError(f'{path}:{line}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at '
+                            f'offset {exc.start})') from None
+
+
+def _load_scenario(path: str) -> Dict[str, Any]:
+    text = _read_text(path)
     try:
         data = yaml.load(text, Loader=_LineLoader)  # noqa: S506 - SafeLoader subclass
     except ScenarioError as exc:
@@ -498,10 +664,23 @@ def load_scenario(path: str) -> Dict[str, Any]:
         where = f'{path}:{mark.line + 1}' if mark else path
         raise ScenarioError(f'{where}: YAML syntax error: {getattr(exc, "problem", exc)}') \
             from None
+    except RecursionError:
+        raise ScenarioError(f'{path}: YAML nested too deeply') from None
     checker = _Checker(path)
     if not isinstance(data, dict):
         checker.fail(None, '<top>', 'a scenario must be a YAML mapping')
-    out = checker.mapping(data, SCHEMA, '', None)
+    plugins = data.get('plugins') or []
+    if not isinstance(plugins, list) or not all(isinstance(x, str) for x in plugins):
+        checker.fail(getattr(data, 'lines', {}).get('plugins'), 'plugins',
+                     'expected a list of module names or .py paths')
+    try:   # plugins register their components before the schema is built from the registry
+        registry.load_plugins(plugins, os.path.dirname(os.path.abspath(path)))
+    except ValueError as exc:
+        checker.fail(getattr(data, 'lines', {}).get('plugins'), 'plugins', str(exc))
+    out = checker.mapping(data, schema(), '', None)
+    base = os.path.dirname(os.path.abspath(path))   # plugin files: absolute for every node
+    out['plugins'] = [os.path.join(base, x) if x.endswith('.py') and not os.path.isabs(x)
+                      else x for x in out['plugins']]
     sc_lines = getattr(data.get('spacecraft') or {}, 'lines', {})
     out['spacecraft']['wheels'] = _check_wheels(
         checker, out['spacecraft'].get('wheels', []), sc_lines.get('wheels'))
@@ -509,8 +688,237 @@ def load_scenario(path: str) -> Dict[str, Any]:
         out['estimator'].setdefault('onboard_orbit', dict(out['orbit']))
         out['estimator'].setdefault('onboard_field', dict(out['field']))
     _check_consistency(checker, out, getattr(data, 'lines', {}))
+    _check_physical(checker, out, getattr(data, 'lines', {}))
     out['_path'] = os.path.abspath(path)
     return out
+
+
+# ---------------------------------------------------------------------- physical sanity
+#: Scenario names: they name the run directory (no ``/``, no ``..`` escape).
+NAME_PATTERN = re.compile(r'[A-Za-z0-9_.-]{1,100}')
+#: Mean equatorial radius [m] (WGS-84 a); a circular orbit must stay above the atmosphere.
+EARTH_RADIUS_M = 6378137.0
+#: ASSUMPTION: lowest circular-orbit altitude accepted [km] (the Karman line; below, an orbit
+#: decays within hours and the models have no drag) and highest [km] (beyond the Moon the
+#: two-body Earth orbit is meaningless).
+MIN_ALTITUDE_KM, MAX_ALTITUDE_KM = 100.0, 400_000.0
+#: ASSUMPTION: limits that catch typing errors, not design choices.
+MAX_RATE_DEG_S = 100.0          # initial body rate norm [deg/s]
+FRAME_S_RANGE = (1e-6, 86400.0)  # base frame period [s]
+MAX_SUBSTEPS = 10_000           # RK4 substeps per frame
+MAX_TIMEOUT_S = 3600.0          # wall-clock wait for an input [s]
+MAX_FRAMES = 100_000_000        # frames in one run
+MAX_INERTIA_KGM2 = 1e10         # largest principal moment [kg m^2]
+MAX_SEED = 2**63 - 1            # ROS integer parameters are int64
+#: ROS time stamps are int32 seconds since 1970: the run must end before 2038-01-19T03:14:07Z.
+_ROS_TIME_END = datetime.datetime(2038, 1, 19, 3, 14, 7, tzinfo=datetime.timezone.utc)
+_UNIX_EPOCH = datetime.datetime(1970, 1, 1, tzinfo=datetime.timezone.utc)
+
+
+def parse_epoch_text(text: Any) -> datetime.datetime:
+    """ISO-8601 text -> aware UTC ``datetime`` (naive means UTC); ``ValueError`` if not one."""
+    if not isinstance(text, str):
+        raise ValueError(f'expected ISO-8601 text, got {type(text).__name__}')
+    try:
+        dt = datetime.datetime.fromisoformat(text.strip().replace('Z', '+00:00'))
+    except ValueError:
+        raise ValueError(f'{text!r} is not an ISO-8601 date-time '
+                         '(e.g. 2026-01-01T00:00:00Z)') from None
+    if dt.tzinfo is None:
+        dt = dt.replace(tzinfo=datetime.timezone.utc)
+    return dt.astimezone(datetime.timezone.utc)
+
+
+def check_epoch(epoch: Any, duration_s: float, line: Optional[int] = None,
+                path: str = 'scenario') -> datetime.datetime:
+    """Parse ``epoch`` and check that ``[epoch, epoch + duration_s]`` fits ROS time stamps.
+
+    Raises
+    ------
+    ScenarioError
+        If the epoch does not parse, or the run starts before 1970 or ends after
+        2038-01-19T03:14:07Z (``builtin_interfaces/Time.sec`` is an int32).
+    """
+    checker = _Checker(path)
+    try:
+        start = parse_epoch_text(epoch)
+    except ValueError as exc:
+        checker.fail(line, 'epoch', str(exc))
+    if start < _UNIX_EPOCH:
+        checker.fail(line, 'epoch', f'{epoch} is before 1970 (ROS time starts in 1970)')
+    try:
+        end = start + datetime.timedelta(seconds=float(duration_s))
+    except OverflowError:
+        end = datetime.datetime.max.replace(tzinfo=datetime.timezone.utc)
+    if end > _ROS_TIME_END:
+        checker.fail(line, 'epoch', f'the run ({epoch} + {duration_s:g} s) ends after '
+                     '2038-01-19T03:14:07Z, the last ROS time stamp (int32 seconds)')
+    return start
+
+
+def _sym3_eigenvalues(m: List[List[float]]) -> List[float]:
+    """Eigenvalues (ascending) of a symmetric 3x3 matrix, closed form (Smith 1961)."""
+    p1 = m[0][1] ** 2 + m[0][2] ** 2 + m[1][2] ** 2
+    q = (m[0][0] + m[1][1] + m[2][2]) / 3.0
+    if p1 == 0.0:
+        return sorted([m[0][0], m[1][1], m[2][2]])
+    p2 = sum((m[i][i] - q) ** 2 for i in range(3)) + 2.0 * p1
+    p = math.sqrt(p2 / 6.0)
+    b = [[(m[i][j] - (q if i == j else 0.0)) / p for j in range(3)] for i in range(3)]
+    det_b = (b[0][0] * (b[1][1] * b[2][2] - b[1][2] * b[2][1])
+             - b[0][1] * (b[1][0] * b[2][2] - b[1][2] * b[2][0])
+             + b[0][2] * (b[1][0] * b[2][1] - b[1][1] * b[2][0]))
+    phi = math.acos(max(-1.0, min(1.0, det_b / 2.0))) / 3.0
+    e1 = q + 2.0 * p * math.cos(phi)
+    e3 = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+    return sorted([e3, 3.0 * q - e1 - e3, e1])
+
+
+#: Naming conventions checked in every section (whatever the registry checks besides):
+#: a key matching the pattern must hold values in the range (each element of a list).
+_CONVENTIONS = (
+    (re.compile(r'(^|_)std(_|$)|noise_std'), 0.0, math.inf, 'standard deviation'),
+    (re.compile(r'probability'), 0.0, 1.0, 'probability'),
+    (re.compile(r'^max_|_max$|limit|saturation|lsb'), 0.0, math.inf, 'limit'),
+    (re.compile(r'p0_diag'), 0.0, math.inf, 'covariance diagonal'),
+)
+
+
+def _check_conventions(checker: _Checker, data: Any, prefix: str,
+                       lines: Dict[str, int]) -> None:
+    if isinstance(data, dict):
+        for key, value in data.items():
+            full = f'{prefix}{key}'
+            for pattern, low, high, what in _CONVENTIONS:
+                if not pattern.search(str(key)):
+                    continue
+                values = value if isinstance(value, list) else [value]
+                for v in values:
+                    if isinstance(v, (int, float)) and not isinstance(v, bool) and not (
+                            low <= v <= high):
+                        checker.fail(lines.get(full.split('.')[0]), full,
+                                     f'{v!r} is not a valid {what} (must be in '
+                                     f'[{low:g}, {high:g}])')
+            _check_conventions(checker, value, full + '.', lines)
+    elif isinstance(data, list):
+        for i, item in enumerate(data):
+            _check_conventions(checker, item, f'{prefix[:-1]}[{i}].', lines)
+
+
+def _check_orbit(checker: _Checker, orbit: Dict[str, Any], key: str, line: Optional[int],
+                 epoch: datetime.datetime) -> None:
+    if orbit.get('type') == 'circular':
+        alt = orbit['altitude_km']
+        if not MIN_ALTITUDE_KM <= alt <= MAX_ALTITUDE_KM:
+            where = 'below the Earth\'s surface' if alt <= 0 else (
+                'inside the atmosphere' if alt < MIN_ALTITUDE_KM else 'beyond the Moon')
+            checker.fail(line, f'{key}.altitude_km', f'{alt:g} km is {where} (accepted: '
+                         f'{MIN_ALTITUDE_KM:g} to {MAX_ALTITUDE_KM:g} km)')
+        inc = orbit['inclination_deg']
+        if not 0.0 <= inc <= 180.0:
+            checker.fail(line, f'{key}.inclination_deg', f'{inc:g} deg is not in [0, 180]')
+        for angle in ('raan_deg', 'arg_latitude0_deg'):
+            if abs(orbit.get(angle, 0.0)) > 3600.0:
+                checker.fail(line, f'{key}.{angle}', f'{orbit[angle]:g} deg: give an angle '
+                             'within +-3600 deg')
+    elif orbit.get('type') == 'tle':
+        try:
+            from sgp4.api import Satrec, jday
+        except ImportError:  # pragma: no cover - pinned in ros2_ws/requirements.txt
+            return
+        try:
+            sat = Satrec.twoline2rv(orbit['line1'], orbit['line2'])
+            jd, fr = jday(epoch.year, epoch.month, epoch.day, epoch.hour, epoch.minute,
+                          epoch.second + epoch.microsecond * 1e-6)
+            err, r_km, _ = sat.sgp4(jd, fr)
+        except Exception as exc:  # noqa: BLE001 - sgp4 raises several types for bad text
+            checker.fail(line, key, f'the TLE does not parse: {exc}')
+        if err != 0 or not all(math.isfinite(c) for c in r_km):
+            checker.fail(line, key, f'SGP4 cannot propagate the TLE to the epoch {epoch} '
+                         f'(error code {err}: decayed or bad elements)')
+        radius = math.sqrt(sum(c * c for c in r_km)) * 1e3
+        if radius < EARTH_RADIUS_M + MIN_ALTITUDE_KM * 1e3:
+            checker.fail(line, key, f'the TLE puts the satellite at '
+                         f'{(radius - EARTH_RADIUS_M) / 1e3:.0f} km altitude at the epoch')
+
+
+def _check_physical(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, int]) -> None:
+    """Reject values no spacecraft can have or no run can do (after the schema checks).
+
+    Checks the scenario-level keys: ``name`` (``NAME_PATTERN``), ``seed`` (int64, >= 0),
+    ``epoch`` (parses; the run fits ROS time, :func:`check_epoch`), ``duration_s`` and
+    ``timing`` (``FRAME_S_RANGE``, ``MAX_SUBSTEPS``, ``MAX_TIMEOUT_S``, ``MAX_FRAMES``),
+    ``orbit`` and ``estimator.onboard_orbit`` (circular: altitude, inclination; TLE: SGP4
+    propagates it to the epoch, above the atmosphere), ``spacecraft`` (inertia positive
+    definite, principal moments obeying the triangle inequality, non-negative limits, wheels
+    with a spin axis, positive inertia and ``|h0| <= max_momentum``), ``initial`` (rate norm
+    at most ``MAX_RATE_DEG_S``) and, in every section, the naming conventions of
+    ``_CONVENTIONS`` (standard deviations >= 0, probabilities in [0, 1], limits >= 0).
+    Node parameter ranges are the registry's.
+    """
+    name = sc['name']
+    if not NAME_PATTERN.fullmatch(name):
+        checker.fail(lines.get('name'), 'name', f'{name!r}: use 1 to 100 letters, digits, '
+                     '"_", "." or "-" (it names the run directory)')
+    if not 0 <= sc['seed'] <= MAX_SEED:
+        checker.fail(lines.get('seed'), 'seed', f'{sc["seed"]} is not in [0, 2^63 - 1]')
+    timing = sc['timing']
+    frame = timing['frame_s']
+    if not FRAME_S_RANGE[0] <= frame <= FRAME_S_RANGE[1]:
+        checker.fail(lines.get('timing'), 'timing.frame_s', f'{frame:g} s is not in '
+                     f'[{FRAME_S_RANGE[0]:g}, {FRAME_S_RANGE[1]:g}] s')
+    if not 1 <= timing['substeps'] <= MAX_SUBSTEPS:
+        checker.fail(lines.get('timing'), 'timing.substeps', f'{timing["substeps"]} is not in '
+                     f'[1, {MAX_SUBSTEPS}]')
+    if not 0 < timing['timeout_s'] <= MAX_TIMEOUT_S:
+        checker.fail(lines.get('timing'), 'timing.timeout_s', f'{timing["timeout_s"]:g} s is '
+                     f'not in (0, {MAX_TIMEOUT_S:g}] s')
+    duration = sc['duration_s']
+    if not duration > 0 or duration / frame > MAX_FRAMES:
+        checker.fail(lines.get('duration_s'), 'duration_s', f'{duration:g} s is not in (0, '
+                     f'{MAX_FRAMES:g} frames of {frame:g} s]')
+    epoch = check_epoch(sc['epoch'], duration, lines.get('epoch'), checker.path)
+    _check_orbit(checker, sc['orbit'], 'orbit', lines.get('orbit'), epoch)
+    if 'onboard_orbit' in sc.get('estimator', {}):
+        _check_orbit(checker, sc['estimator']['onboard_orbit'], 'estimator.onboard_orbit',
+                     lines.get('estimator'), epoch)
+
+    craft, line = sc['spacecraft'], lines.get('spacecraft')
+    inertia = craft['inertia_kgm2']
+    sym = [[0.5 * (inertia[i][j] + inertia[j][i]) for j in range(3)] for i in range(3)]
+    moments = _sym3_eigenvalues(sym)
+    if moments[0] <= 0.0:
+        checker.fail(line, 'spacecraft.inertia_kgm2', 'not positive definite (principal '
+                     f'moments {", ".join(f"{m:.6g}" for m in moments)} kg m^2)')
+    if moments[2] > MAX_INERTIA_KGM2:
+        checker.fail(line, 'spacecraft.inertia_kgm2', f'principal moment {moments[2]:.6g} '
+                     f'kg m^2 is above {MAX_INERTIA_KGM2:g}')
+    if moments[2] > (moments[0] + moments[1]) * (1.0 + 1e-9):
+        checker.fail(line, 'spacecraft.inertia_kgm2', 'principal moments '
+                     f'{", ".join(f"{m:.6g}" for m in moments)} kg m^2 break the triangle '
+                     'inequality (largest <= sum of the others): no rigid body has them')
+    for i, wheel in enumerate(craft.get('wheels', [])):
+        key = f'spacecraft.wheels[{i}]'
+        if math.sqrt(sum(a * a for a in wheel['axis'])) < 1e-9:
+            checker.fail(line, f'{key}.axis', 'a spin axis of zero length')
+        if not wheel['inertia_kgm2'] > 0:
+            checker.fail(line, f'{key}.inertia_kgm2', 'must be positive')
+        if abs(wheel['h0_Nms']) > wheel['max_momentum_Nms']:
+            checker.fail(line, f'{key}.h0_Nms', f'|{wheel["h0_Nms"]:g}| N m s is above '
+                         f'max_momentum_Nms {wheel["max_momentum_Nms"]:g}')
+    dist = craft.get('disturbance', {})
+    if 'random_period_s' in dist and not dist['random_period_s'] > 0:
+        checker.fail(line, 'spacecraft.disturbance.random_period_s', 'must be positive')
+
+    init = sc['initial']
+    for key in ('omega_body_eci_body_deg_s', 'omega_body_orbit_body_deg_s'):
+        if key in init:
+            rate = math.sqrt(sum(w * w for w in init[key]))
+            if rate > MAX_RATE_DEG_S:
+                checker.fail(lines.get('initial'), f'initial.{key}', f'rate {rate:.6g} deg/s '
+                             f'is above {MAX_RATE_DEG_S:g} deg/s')
+    _check_conventions(checker, {k: v for k, v in sc.items() if not k.startswith('_')}, '',
+                       lines)
 
 
 def list_scenarios(directory: str) -> List[Tuple[str, str]]:
@@ -531,7 +939,8 @@ def list_scenarios(directory: str) -> List[Tuple[str, str]]:
 def schema_markdown() -> str:
     """The scenario keys as a Markdown table (``docs/scenarios.md`` is generated from this)."""
     rows = ['# Scenario keys', '',
-            'Generated by `adcs schema` from `adcs_nodes/tools/scenario.py`; do not edit.',
+            'Generated by `adcs schema` from `adcs_nodes/tools/scenario.py` and the registry '
+            '(`adcs_nodes/entries.py`, `sim_node/entries.py`); do not edit.',
             'Unknown keys are rejected. Angles in degrees only where the key ends in `_deg`.', '',
             '| key | type | default | meaning |', '|---|---|---|---|']
 
@@ -547,6 +956,12 @@ def schema_markdown() -> str:
             full = prefix + key
             if isinstance(spec, dict):
                 walk(full + '.', spec)
+            elif isinstance(spec, Variant):
+                walk(full + '.', spec.common)
+                for name, keys in spec.variants.items():
+                    walk(f'{full}.({spec.selector}={name}).', keys)
+            elif isinstance(spec, Param):
+                rows.append(f'| `{full}` | {spec.type} | `{spec.default}` | {spec.doc()} |')
             elif spec in ('ORBIT', 'FIELD', 'ORBIT?', 'FIELD?'):
                 sel, common, variants = (('type', _ORBIT_COMMON, ORBIT_VARIANTS)
                                          if spec.startswith('ORBIT') else
@@ -558,6 +973,6 @@ def schema_markdown() -> str:
                 choices = f' (one of {", ".join(spec.choices)})' if spec.choices else ''
                 rows.append(f'| `{full}` | {spec.kind} | {default(spec)} | {spec.doc}{choices} |')
 
-    walk('', SCHEMA)
+    walk('', schema())
     walk('spacecraft.wheels[i].', _WHEEL_KEYS)
     return '\n'.join(rows) + '\n'

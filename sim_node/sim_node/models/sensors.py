@@ -433,3 +433,36 @@ class Gyro:
         walk = self._walk_rng.standard_normal(3)
         self._bias = self._bias + self.bias_walk_std_rad_s_sqrt_s * math.sqrt(dt) * walk
         return w + self._bias + self.noise_std_rad_s * self._noise_rng.standard_normal(3)
+
+
+class WheelTachometer:
+    """Reaction-wheel tachometer: each measured speed is, per wheel i,
+
+        w_meas,i = q * round((w_i + n_i) / q),   n_i ~ N(0, noise_std^2)              (T1)
+
+    with ``q`` the speed resolution (``q = 0``: no quantisation).
+
+    Parameters
+    ----------
+    noise_std_rad_s : float
+        White noise std of each speed [rad/s], ``>= 0``.
+    quantization_rad_s : float
+        Speed resolution ``q`` [rad/s], ``>= 0``.
+    seed : int
+        Non-negative seed of the noise stream.
+    """
+
+    def __init__(self, noise_std_rad_s: float = 0.0, quantization_rad_s: float = 0.0,
+                 seed: int = 0) -> None:
+        self.noise_std_rad_s = _nonneg_scalar(noise_std_rad_s, 'noise_std_rad_s')
+        self.quantization_rad_s = _nonneg_scalar(quantization_rad_s, 'quantization_rad_s')
+        (self._rng,) = _streams(seed, 1)
+
+    def measure(self, speed_rad_s) -> np.ndarray:
+        """Measured speeds [rad/s] of the true speeds ``speed_rad_s`` (shape (n,)), (T1)."""
+        w = np.asarray(speed_rad_s, dtype=float)
+        if w.ndim != 1 or not np.all(np.isfinite(w)):
+            raise ValueError(f'speed_rad_s must be a finite 1-D array, got {w}')
+        meas = w + self.noise_std_rad_s * self._rng.standard_normal(w.size)
+        q = self.quantization_rad_s
+        return q * np.round(meas / q) if q > 0 else meas

@@ -20,8 +20,7 @@ name)``.
 """
 from __future__ import annotations
 
-import math
-from typing import Any, Dict, Optional
+from typing import Optional
 
 from sensor_msgs.msg import Imu
 
@@ -29,31 +28,14 @@ from adcs_msgs.msg import AttitudeState, Environment
 from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, to_vec3, vec3
-from sim_node.models.sensors import GYRO_DRIFT_WALK_RAD_S_SQRT_S, Gyro
 from sim_node.nodes.sensor_node import SensorNode
-
-#: Defaults when run alone (paper 001, digest section 4: drift 0.01 deg/h 3-sigma).
-DEFAULTS: Dict[str, Any] = {
-    'period_s': 1.0,
-    'noise_std_rad_s': [math.radians(0.01 / 3.0) / 3600.0] * 3,
-    'bias_initial_rad_s': [0.0, 0.0, 0.0],
-    'bias_walk_std_rad_s_sqrt_s': [GYRO_DRIFT_WALK_RAD_S_SQRT_S] * 3,
-    'frame_id': 'gyro',
-}
 
 
 class GyroNode(SensorNode):
     """Publishes gyro samples of the truth rate (see module docstring)."""
 
-    DEFAULTS = DEFAULTS
-
     def __init__(self, name: str = 'gyro', **kwargs) -> None:
-        super().__init__(name, Imu, 'sensors/gyro', **kwargs)
-        p = self.p
-        self.model = Gyro(noise_std_rad_s=p['noise_std_rad_s'],
-                          bias_initial_rad_s=p['bias_initial_rad_s'],
-                          bias_walk_std_rad_s_sqrt_s=p['bias_walk_std_rad_s_sqrt_s'],
-                          seed=self.sensor_seed)
+        super().__init__(name, 'gyro', Imu, **kwargs)
         self.covariance = self.model.covariance.reshape(-1).tolist()
         self._last_t_ns: Optional[int] = None
         self.start()

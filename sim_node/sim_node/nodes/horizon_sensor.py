@@ -17,8 +17,6 @@ pitch), ``bias_rad`` ([0, 0]), ``scale_factor_error`` ([0, 0]), ``fov_rad`` (30 
 """
 from __future__ import annotations
 
-import math
-from typing import Any, Dict
 
 import numpy as np
 
@@ -26,32 +24,14 @@ from adcs_msgs.msg import AttitudeState, Environment, HorizonSensor as HorizonMs
 from adcs_nodes.core import attitude as att
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import quat, vec3
-from sim_node.models.sensors import HorizonSensor
 from sim_node.nodes.sensor_node import SensorNode
-
-#: Defaults when run alone (ASSUMPTION: 0.1 deg noise, +-30 deg field of view).
-DEFAULTS: Dict[str, Any] = {
-    'period_s': 1.0,
-    'noise_std_rad': [math.radians(0.1), math.radians(0.1)],
-    'bias_rad': [0.0, 0.0],
-    'scale_factor_error': [0.0, 0.0],
-    'fov_rad': math.radians(30.0),
-    'frame_id': 'horizon_sensor',
-}
 
 
 class HorizonSensorNode(SensorNode):
     """Publishes roll/pitch samples of the truth attitude (see module docstring)."""
 
-    DEFAULTS = DEFAULTS
-
     def __init__(self, name: str = 'horizon_sensor', **kwargs) -> None:
-        super().__init__(name, HorizonMsg, 'sensors/horizon', **kwargs)
-        p = self.p
-        self.model = HorizonSensor(
-            noise_std_rad=p['noise_std_rad'], bias_rad=p['bias_rad'],
-            scale_factor_error=p['scale_factor_error'], fov_rad=p['fov_rad'],
-            seed=self.sensor_seed)
+        super().__init__(name, 'horizon_sensor', HorizonMsg, **kwargs)
         self.invalid = 0
         self.start()
 

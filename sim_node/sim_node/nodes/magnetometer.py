@@ -16,7 +16,6 @@ Parameters (SI, radians; defaults: paper 000's noise and LSB, no other error):
 """
 from __future__ import annotations
 
-from typing import Any, Dict
 
 import numpy as np
 from sensor_msgs.msg import MagneticField
@@ -26,38 +25,14 @@ from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import quat, to_vec3, vec3
-from sim_node.models.sensors import Magnetometer
 from sim_node.nodes.sensor_node import SensorNode
-
-#: Defaults when run alone (paper 000, digest section 5.1: noise std 375/25/65 nT, LSB 20 nT).
-DEFAULTS: Dict[str, Any] = {
-    'period_s': 1.0,
-    'noise_std_T': [375e-9, 25e-9, 65e-9],
-    'bias_T': [0.0, 0.0, 0.0],
-    'misalignment_rad': [0.0, 0.0, 0.0],
-    'scale_factor_error': [0.0, 0.0, 0.0],
-    'lsb_T': 20e-9,
-    'saturation_T': 0.0,
-    'dropout_probability': 0.0,
-    'q_body_sensor': [0.0, 0.0, 0.0, 1.0],
-    'frame_id': 'magnetometer',
-}
 
 
 class MagnetometerNode(SensorNode):
     """Publishes magnetometer samples of the truth field (see module docstring)."""
 
-    DEFAULTS = DEFAULTS
-
     def __init__(self, name: str = 'magnetometer', **kwargs) -> None:
-        super().__init__(name, MagneticField, 'sensors/magnetometer', **kwargs)
-        p = self.p
-        self.model = Magnetometer(
-            noise_std_T=p['noise_std_T'], bias_T=p['bias_T'],
-            misalignment_rad=p['misalignment_rad'],
-            scale_factor_error=p['scale_factor_error'], lsb_T=p['lsb_T'],
-            saturation_T=p['saturation_T'], dropout_probability=p['dropout_probability'],
-            q_body_sensor=p['q_body_sensor'], seed=self.sensor_seed)
+        super().__init__(name, 'magnetometer', MagneticField, **kwargs)
         self.covariance = self.model.covariance.reshape(-1).tolist()
         self.dropouts = 0
         self.start()

@@ -17,32 +17,20 @@ name)``.
 """
 from __future__ import annotations
 
-from typing import Any, Dict
 
 from sensor_msgs.msg import Imu
 
 from adcs_msgs.msg import AttitudeState, Environment
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import quat, to_quat
-from sim_node.models.sensors import STAR_TRACKER_STD_RAD, StarTracker
 from sim_node.nodes.sensor_node import SensorNode
-
-#: Defaults when run alone (paper 001: 0.02 deg 3-sigma per axis).
-DEFAULTS: Dict[str, Any] = {
-    'period_s': 1.0,
-    'noise_std_rad': [STAR_TRACKER_STD_RAD] * 3,
-    'frame_id': 'star_tracker',
-}
 
 
 class StarTrackerNode(SensorNode):
     """Publishes star-tracker attitude samples of the truth (see module docstring)."""
 
-    DEFAULTS = DEFAULTS
-
     def __init__(self, name: str = 'star_tracker', **kwargs) -> None:
-        super().__init__(name, Imu, 'sensors/star_tracker', **kwargs)
-        self.model = StarTracker(noise_std_rad=self.p['noise_std_rad'], seed=self.sensor_seed)
+        super().__init__(name, 'star_tracker', Imu, **kwargs)
         self.covariance = self.model.covariance.reshape(-1).tolist()
         self.start()
 

@@ -1,0 +1,79 @@
+"""``guidance`` node: publishes the attitude target from the scenario's profile.
+
+Every ``period_s`` of sim time t it publishes ``adcs/attitude_target``
+(``adcs_msgs/AttitudeTarget``) stamped t, ``header.frame_id`` = the profile's frame
+(``orbit`` or ``eci``): target attitude, rate, acceleration, time to go and the segment type.
+The profile (:mod:`adcs_nodes.core.guidance`) is given as per-segment arrays; the default
+holds the orbital frame (paper 000's target).
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, List
+
+from adcs_msgs.msg import AttitudeTarget
+from adcs_nodes.core.guidance import FRAMES, SEGMENT_TYPES, guidance_from_params
+from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.nodes import params as node_params
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.convert import to_quat, to_vec3
+from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.registry import Param
+
+PARAMS = (
+    Param('period_s', 'float', 2.0, 's', 'publication period', positive=True, read_only=True),
+    Param('frame', 'str', 'orbit', '-', 'frame of the profile attitudes', choices=FRAMES,
+          read_only=True),
+    Param('profile_t_s', 'float[]', [0.0], 's', 'start time of each segment', min=0.0,
+          read_only=True),
+    Param('profile_type', 'str[]', ['hold'], '-', 'type of each segment: '
+          + ', '.join(SEGMENT_TYPES), read_only=True),
+    Param('profile_q_xyzw', 'float[]', [0.0, 0.0, 0.0, 1.0], '-', 'attitude of each segment '
+          '(4 values each, scalar last)', min=-1.0, max=1.0, read_only=True),
+    Param('profile_duration_s', 'float[]', [0.0], 's', 'slew duration of each segment',
+          min=0.0, read_only=True),
+    Param('profile_axis_body', 'float[]', [0.0, 0.0, 1.0], '-', 'tracking axis of each '
+          'segment (3 values each)', read_only=True),
+    Param('profile_amplitude_deg', 'float[]', [0.0], 'deg', 'tracking amplitude of each '
+          'segment', min=0.0, max=180.0, read_only=True),
+    Param('profile_period_s', 'float[]', [0.0], 's', 'tracking period of each segment',
+          min=0.0, read_only=True),
+)
+
+
+class GuidanceNode(LockstepNode):
+    """Publishes the target of the profile (see module docstring)."""
+
+    def __init__(self, name: str = 'guidance', **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        p = node_params.declare_all(self, PARAMS)
+        node_params.refuse_unknown(self)
+        node_params.install_validator(self)
+        self.guidance = guidance_from_params(
+            p['profile_t_s'], p['profile_type'], p['profile_q_xyzw'], p['profile_duration_s'],
+            p['profile_axis_body'], p['profile_amplitude_deg'], p['profile_period_s'],
+            p['frame'])
+        self.pub = self.publisher(AttitudeTarget, 'adcs/attitude_target')
+        self.lockstep_inputs({}, p['period_s'], self.on_frame)
+        self.start_handshake()
+
+    def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
+        """Publish the target of frame ``t_ns``."""
+        s = self.guidance.at(t_ns / NS_PER_S)
+        msg = AttitudeTarget()
+        msg.header.stamp = self.stamp(t_ns)
+        msg.header.frame_id = s.frame
+        msg.q_ref_body = to_quat(s.q_ref_body)
+        msg.omega_body_ref_body = to_vec3(s.omega_body_ref_body)
+        msg.omega_dot_body_ref_body = to_vec3(s.omega_dot_body_ref_body)
+        msg.time_to_go_s = float(s.time_to_go_s)
+        msg.profile = s.profile
+        self.pub.publish(msg)
+
+
+def main(args=None) -> int:
+    """``ros2 run adcs_nodes guidance``."""
+    return runtime.run(GuidanceNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

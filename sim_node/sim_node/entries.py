@@ -1,0 +1,141 @@
+"""Registry entries of the simulated sensor models (see :mod:`adcs_nodes.registry`).
+
+Each entry's parameters are both the scenario keys ``sensors.<name>.*`` and the parameters of
+the sensor's node; ``build(params, ctx)`` converts them (degrees -> radians) into the model
+of :mod:`sim_node.models.sensors` with the node's random seed ``ctx['seed']``. A sensor node
+is ``(package, module, class, topic, message type)``; the flight software reads only the
+topic, so a real driver publishing it replaces the node.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Dict, List
+
+from adcs_nodes.registry import Entry, Param, register
+
+PERIOD_HELP = 'sample period'
+
+
+def _rad(values: List[float]) -> List[float]:
+    return [math.radians(v) for v in values]
+
+
+def _build_magnetometer(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from sim_node.models.sensors import Magnetometer
+    return Magnetometer(
+        noise_std_T=p['noise_std_T'], bias_T=p['bias_T'],
+        misalignment_rad=_rad(p['misalignment_deg']),
+        scale_factor_error=p['scale_factor_error'], lsb_T=p['lsb_T'],
+        saturation_T=p['saturation_T'], dropout_probability=p['dropout_probability'],
+        q_body_sensor=p['q_body_sensor_xyzw'], seed=ctx['seed'])
+
+
+register(Entry(
+    'sensor', 'magnetometer', 'three-axis magnetometer: noise, bias, misalignment, scale '
+    'factor, quantisation, saturation, dropout',
+    'sim_node.models.sensors:Magnetometer',
+    (Param('period_s', 'float', 10.0, 's', 'sample period (paper 000: 10 s)', positive=True),
+     Param('noise_std_T', 'float[]', [375e-9, 25e-9, 65e-9], 'T', 'white noise std per '
+           'sensor axis (paper 000 example)', length=3, min=0.0),
+     Param('bias_T', 'float[]', [0.0, 0.0, 0.0], 'T', 'constant bias, sensor axes', length=3,
+           min=-1e-3, max=1e-3),
+     Param('misalignment_deg', 'float[]', [0.0, 0.0, 0.0], 'deg', 'small rotation body -> '
+           'sensor (rotation vector)', length=3, min=-90.0, max=90.0),
+     Param('scale_factor_error', 'float[]', [0.0, 0.0, 0.0], '-', 'measured = (1 + s) true, '
+           'per axis', length=3, min=-0.99, max=10.0),
+     Param('lsb_T', 'float', 20e-9, 'T', 'quantisation step (0: none)', min=0.0, max=1e-4),
+     Param('saturation_T', 'float', 0.0, 'T', 'per-axis range (0: none)', min=0.0),
+     Param('dropout_probability', 'float', 0.0, '-', 'probability that a sample is lost',
+           min=0.0, max=1.0),
+     Param('q_body_sensor_xyzw', 'float[]', [0.0, 0.0, 0.0, 1.0], '-', 'nominal mounting, '
+           'sensor -> body, scalar last', length=4, min=-1.0, max=1.0)),
+    _build_magnetometer, inputs=(),
+    node=('sim_node', 'sim_node.nodes.magnetometer', 'MagnetometerNode',
+          'sensors/magnetometer', 'sensor_msgs/msg/MagneticField')))
+
+
+def _build_horizon(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from sim_node.models.sensors import HorizonSensor
+    return HorizonSensor(noise_std_rad=_rad(p['noise_std_deg']), bias_rad=_rad(p['bias_deg']),
+                         scale_factor_error=p['scale_factor_error'],
+                         fov_rad=math.radians(p['fov_deg']), seed=ctx['seed'])
+
+
+register(Entry(
+    'sensor', 'horizon_sensor', 'Earth horizon sensor: roll and pitch of the orbit frame, '
+    'noise, bias, scale factor, field of view',
+    'sim_node.models.sensors:HorizonSensor',
+    (Param('period_s', 'float', 1.0, 's', PERIOD_HELP, positive=True),
+     Param('noise_std_deg', 'float[]', [0.1, 0.1], 'deg', 'white noise std of roll, pitch '
+           '(ASSUMPTION)', length=2, min=0.0, max=90.0),
+     Param('bias_deg', 'float[]', [0.0, 0.0], 'deg', 'bias of roll, pitch', length=2,
+           min=-90.0, max=90.0),
+     Param('scale_factor_error', 'float[]', [0.0, 0.0], '-', 'scale-factor error of roll, '
+           'pitch (paper 004: 0.05 on one channel)', length=2, min=-0.99, max=10.0),
+     Param('fov_deg', 'float', 30.0, 'deg', 'largest |roll|, |pitch| with a valid output',
+           positive=True, max=90.0)),
+    _build_horizon,
+    node=('sim_node', 'sim_node.nodes.horizon_sensor', 'HorizonSensorNode',
+          'sensors/horizon', 'adcs_msgs/msg/HorizonSensor')))
+
+
+def _build_star_tracker(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from sim_node.models.sensors import StarTracker
+    return StarTracker(noise_std_rad=_rad(p['noise_std_deg']), seed=ctx['seed'])
+
+
+register(Entry(
+    'sensor', 'star_tracker', 'star tracker: inertial attitude with small-angle noise',
+    'sim_node.models.sensors:StarTracker',
+    (Param('period_s', 'float', 1.0, 's', PERIOD_HELP, positive=True),
+     Param('noise_std_deg', 'float[]', [0.02 / 3] * 3, 'deg', 'attitude noise std per body '
+           'axis (paper 001: 0.02 deg 3-sigma)', length=3, min=0.0, max=90.0)),
+    _build_star_tracker,
+    node=('sim_node', 'sim_node.nodes.star_tracker', 'StarTrackerNode',
+          'sensors/star_tracker', 'sensor_msgs/msg/Imu')))
+
+
+def _build_gyro(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from sim_node.models.sensors import Gyro
+    return Gyro(noise_std_rad_s=_rad(p['noise_std_deg_s']),
+                bias_initial_rad_s=[math.radians(v) / 3600.0 for v in p['bias_initial_deg_h']],
+                bias_walk_std_rad_s_sqrt_s=[math.radians(v) / 3600.0 / 60.0
+                                            for v in p['bias_walk_deg_h_sqrt_h']],
+                seed=ctx['seed'])
+
+
+register(Entry(
+    'sensor', 'gyro', 'three-axis rate gyro: white noise, initial bias, bias random walk',
+    'sim_node.models.sensors:Gyro',
+    (Param('period_s', 'float', 1.0, 's', PERIOD_HELP, positive=True),
+     Param('noise_std_deg_s', 'float[]', [1e-4] * 3, 'deg/s', 'rate white noise std '
+           '(ASSUMPTION)', length=3, min=0.0, max=10.0),
+     Param('bias_initial_deg_h', 'float[]', [0.0, 0.0, 0.0], 'deg/h', 'initial bias',
+           length=3, min=-3600.0, max=3600.0),
+     Param('bias_walk_deg_h_sqrt_h', 'float[]', [0.01 / 3] * 3, 'deg/h/sqrt(h)', 'bias '
+           'random walk density (paper 001: drift 0.01 deg/h 3-sigma)', length=3, min=0.0,
+           max=3600.0)),
+    _build_gyro,
+    node=('sim_node', 'sim_node.nodes.gyro', 'GyroNode', 'sensors/gyro',
+          'sensor_msgs/msg/Imu')))
+
+
+def _build_tachometer(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from sim_node.models.sensors import WheelTachometer
+    return WheelTachometer(noise_std_rad_s=p['noise_std_rad_s'],
+                           quantization_rad_s=p['quantization_rad_s'], seed=ctx['seed'])
+
+
+register(Entry(
+    'sensor', 'wheel_tachometer', 'reaction-wheel tachometer: measured wheel speeds with '
+    'noise and quantisation, as sensor_msgs/JointState (what a wheel driver publishes)',
+    'sim_node.models.sensors:WheelTachometer',
+    (Param('period_s', 'float', 1.0, 's', PERIOD_HELP, positive=True),
+     Param('noise_std_rad_s', 'float', 0.01, 'rad/s', 'white noise std of each speed '
+           '(ASSUMPTION)', min=0.0, max=100.0),
+     Param('quantization_rad_s', 'float', 2 * math.pi / 4096 / 0.1, 'rad/s', 'speed '
+           'resolution (ASSUMPTION: 4096 counts/rev over a 0.1 s gate); 0: none', min=0.0,
+           max=100.0)),
+    _build_tachometer,
+    node=('sim_node', 'sim_node.nodes.wheel_tachometer', 'WheelTachometerNode',
+          'sensors/wheels', 'sensor_msgs/msg/JointState')))
