@@ -49,6 +49,7 @@ from std_msgs.msg import String
 
 from adcs_msgs.msg import LockstepStatus
 from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, InputKind, input_kind, seconds_to_ns
+from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes.convert import stamp_ns, to_stamp
 from adcs_nodes.nodes.diagnostics import Diagnostics
 
@@ -169,7 +170,19 @@ class LockstepNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def param(self, name: str, default: Any) -> Any:
-        """Value of parameter ``name`` (declared with ``default`` if not given)."""
+        """Value of parameter ``name`` (declared with ``default`` if not given).
+
+        A name spec'd in :data:`adcs_nodes.nodes.params.COMMON` is declared with its
+        descriptor and validated; every name asked for is "known" to
+        :func:`adcs_nodes.nodes.params.refuse_unknown`.
+        """
+        self._asked = getattr(self, '_asked', set())
+        self._asked.add(name)
+        spec = node_params.COMMON.get(name)
+        if spec is not None:
+            if name in getattr(self, '_adcs_specs', {}):
+                return self.get_parameter(name).value
+            return node_params.declare(self, spec)
         if not self.has_parameter(name):
             self.declare_parameter(name, default)
         value = self.get_parameter(name).value
@@ -183,6 +196,7 @@ class LockstepNode(Node):
         only when no key is given, for sections that select their own variant
         (``orbit.type: tle`` has other keys than the default circular orbit).
         """
+        node_params.known_prefix(self, prefix)
         given = {k: p.value for k, p in self.get_parameters_by_prefix(prefix).items()}
         if merge:
             return {**defaults, **given}
