@@ -1,0 +1,101 @@
+"""Live mode (issue 11): the estimator node fed like a real driver would feed it.
+
+A best-effort publisher (``SensorDataQoS``, what most drivers use) sends magnetometer samples
+stamped with the wall clock, off any frame grid. The estimator started alone (no launcher
+parameters) is in live mode: it uses each sample with its own stamp, publishes estimates
+stamped with it, and rejects zero-stamped, future, stale and out-of-order samples with the
+reason counted. Truth: the body sits on the orbit frame, the field is the node's own onboard
+model at the sample time, so the estimate must stay at the identity attitude.
+"""
+import time
+
+import numpy as np
+import rclpy
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import MagneticField
+
+from adcs_msgs.msg import AttitudeState, FilterDiagnostics
+from adcs_nodes.core import attitude as att
+from adcs_nodes.core.estimation.onboard import make_onboard_reference
+from adcs_nodes.nodes.convert import stamp_ns, to_stamp, to_vec3
+from adcs_nodes.nodes.estimator import DEFAULT_FIELD, DEFAULT_ORBIT, EstimatorNode
+
+S = 10**9
+
+
+def _sample(ref, epoch_ns, t_abs_ns):
+    m = MagneticField()
+    m.header.stamp = to_stamp(t_abs_ns)
+    m.header.frame_id = 'body'
+    m.magnetic_field = to_vec3(ref.at((t_abs_ns - epoch_ns) / S).b_orbit)
+    return m
+
+
+def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros_context,
+                                                                             spin):
+    node = EstimatorNode(context=ros_context, parameter_overrides=[
+        Parameter('period_s', value=0.2)])
+    assert node.timing_mode == 'live'
+    driver = rclpy.create_node('fake_driver', context=ros_context)
+    est, diag = [], []
+    driver.create_subscription(AttitudeState, 'adcs/attitude_estimate', est.append, 100)
+    driver.create_subscription(FilterDiagnostics, 'adcs/estimator/diagnostics', diag.append,
+                               100)
+    mag = driver.create_publisher(MagneticField, 'sensors/magnetometer',
+                                  qos_profile_sensor_data)          # best effort
+    assert spin([node, driver], lambda: mag.get_subscription_count() > 0)
+    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    sent = []
+    for k in range(8):
+        s = time.time_ns() - 1_234_567 - 97_531 * k       # off-grid wall-clock stamp
+        sent.append(s)
+        mag.publish(_sample(ref, node.epoch_ns, s))
+        assert spin([node, driver], lambda: any(stamp_ns(m.header.stamp) == s for m in est),
+                    timeout=5.0), f'no estimate stamped with sample {k}'
+    stamps = [stamp_ns(m.header.stamp) for m in est]
+    assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)  # never replayed
+    assert set(sent) <= set(stamps)                   # each sample used at its own stamp
+    assert all(abs(s - time.time_ns()) < 60 * S for s in stamps)   # no epoch counting
+    for m in est:
+        q = [m.q_orbit_body.x, m.q_orbit_body.y, m.q_orbit_body.z, m.q_orbit_body.w]
+        assert np.all(np.isfinite(q))
+        assert np.degrees(att.angle_between(q, [0.0, 0.0, 0.0, 1.0])) < 1.0
+    assert spin([node, driver], lambda: diag and diag[-1].update_count >= 8)
+    assert sum(node.rejected_samples.values()) == 0
+
+    # bad stamps: each rejected with its reason, none used
+    now = time.time_ns()
+    n_est = len(est)
+    for stamp in (0, now + 10 * S, now - 100 * S, sent[-1] - S):
+        mag.publish(_sample(ref, node.epoch_ns, max(stamp, 1)) if stamp else
+                    _sample(ref, node.epoch_ns, 0))
+    assert spin([node, driver], lambda: sum(node.rejected_samples.values()) >= 4)
+    r = node.rejected_samples
+    assert (r['zero_stamp'], r['future'], r['too_old'], r['out_of_order']) == (1, 1, 1, 1)
+    assert node.timing_diagnostics()['rejected_samples'] == '4'
+    assert all(stamp_ns(m.header.stamp) not in (now + 10 * S, now - 100 * S)
+               for m in est[n_est:])
+    driver.destroy_node()
+    node.destroy_node()
+
+
+def test_same_node_in_lockstep_mode_gives_exact_frames(ros_context, spin):
+    """With the launcher's timing_mode the node keeps the exact frame stamps (the full
+    lockstep behaviour is tested in test_estimator_node.py)."""
+    node = EstimatorNode(context=ros_context, parameter_overrides=[
+        Parameter('period_s', value=2.0), Parameter('magnetometer_period_s', value=2.0),
+        Parameter('timing_mode', value='lockstep')])
+    assert node.timing_mode == 'lockstep'
+    driver = rclpy.create_node('sim', context=ros_context)
+    est = []
+    driver.create_subscription(AttitudeState, 'adcs/attitude_estimate', est.append, 100)
+    mag = driver.create_publisher(MagneticField, 'sensors/magnetometer', 100)
+    assert spin([node, driver], lambda: mag.get_subscription_count() > 0)
+    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    for k in range(4):
+        mag.publish(_sample(ref, node.epoch_ns, node.epoch_ns + 2 * k * S))
+    assert spin([node, driver], lambda: len(est) >= 4)
+    assert [stamp_ns(m.header.stamp) - node.epoch_ns for m in est] == [0, 2 * S, 4 * S, 6 * S]
+    driver.destroy_node()
+    node.destroy_node()
