@@ -191,6 +191,22 @@ class WheelCluster:
         lower = np.minimum((-self.max_momentum - h) / dt, 0.0)
         return np.clip(tau, lower, upper)
 
+    def saturation_status(self, torque_cmd, h_wheels, dt: float | None = None) -> dict:
+        """Which wheels :meth:`apply` limits, the status a wheel driver reports.
+
+        Returns
+        -------
+        dict of numpy.ndarray, shape (n,), bool
+            ``torque_limited``: the command exceeds the torque limit (W4);
+            ``momentum_limited``: the torque is cut by the momentum limit (the wheel is at, or
+            would pass within ``dt``, its ``max_momentum``).
+        """
+        cmd = self._per_wheel(torque_cmd, 'torque_cmd')
+        clipped = np.clip(cmd, -self.max_torque, self.max_torque)
+        applied = self.apply(cmd, h_wheels, dt)
+        return {'torque_limited': np.abs(cmd) > self.max_torque,
+                'momentum_limited': np.abs(applied - clipped) > 0.0}
+
     def h_body(self, h_wheels) -> np.ndarray:
         """Total wheel momentum in body axes ``A h_w`` (W1) [N m s], shape (3,)."""
         return self.A @ self._per_wheel(h_wheels, 'h_wheels')
@@ -216,3 +232,55 @@ class WheelCluster:
             return spin
         w = _vector(omega_body_eci_body, 'omega_body_eci_body', (3,))
         return spin - self.axes_body @ w
+
+
+class WheelMomentumError:
+    """Seeded momentum control error of a wheel cluster (paper 001: 0.01 N m s, 3-sigma).
+
+    The wheel momentum deviates from the commanded integral by ``e_j ~ N(0, sigma^2)`` per
+    wheel, redrawn every period ``T`` (index ``j = floor(t / T)``); it does not accumulate.
+    Realised as an extra motor torque held over period ``j``::
+
+        delta_tau_j = (e_j - e_{j-1}) / T,     e_{-1} = 0                                  (W5)
+
+    so ``h_w(j T) = h_cmd(j T) + e_{j-1}`` exactly. ``e_j`` comes from
+    ``numpy.random.default_rng([seed, j])`` (a pure function of the seed and the period, as
+    :class:`~sim_node.models.disturbances.RandomTorque`).
+
+    Parameters
+    ----------
+    std_Nms : float or array_like, shape (n,)
+        ``sigma`` per wheel [N m s], ``>= 0`` (paper 001: 0.01 / 3).
+    period_s : float
+        ``T`` [s], ``> 0`` (the control period).
+    n : int
+        Number of wheels.
+    seed : int
+        Non-negative seed.
+    """
+
+    def __init__(self, std_Nms, period_s: float, n: int, seed: int) -> None:
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f'n must be an integer >= 1, got {n!r}')
+        self.std_Nms = _limits(std_Nms, 'std_Nms', (int(n),))
+        if not np.all(np.isfinite(self.std_Nms)):
+            raise ValueError(f'std_Nms must be finite, got {self.std_Nms}')
+        period = float(period_s)
+        if not (np.isfinite(period) and period > 0.0):
+            raise ValueError(f'period_s must be > 0 and finite, got {period_s!r}')
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
+        self.period_s = period
+        self.n = int(n)
+        self.seed = int(seed)
+
+    def error(self, j: int) -> np.ndarray:
+        """``e_j`` [N m s], shape (n,); zero for ``j < 0``."""
+        if j < 0:
+            return np.zeros(self.n)
+        return self.std_Nms * np.random.default_rng([self.seed, int(j)]).standard_normal(self.n)
+
+    def torque(self, t: float) -> np.ndarray:
+        """Extra motor torque (W5) [N m] per wheel over the period containing ``t`` [s]."""
+        j = int(np.floor(t / self.period_s + 1e-9))
+        return (self.error(j) - self.error(j - 1)) / self.period_s

@@ -175,3 +175,131 @@ class RandomTorque:
             self._last_value = self.draw(j)
             self._last_index = j
         return self._last_value.copy()
+
+
+def _seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
+    return int(seed)
+
+
+def _vec3_nonneg(value, name: str) -> np.ndarray:
+    arr = np.array(value, dtype=float)
+    if arr.shape not in ((), (3,)) or not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
+        raise ValueError(f'{name} must be a finite scalar or (3,) vector >= 0, got {arr}')
+    return np.broadcast_to(arr, (3,)).copy()
+
+
+class HarmonicTorque:
+    """Body-fixed periodic torque with seeded phases (paper 001's environmental torques)::
+
+        tau_i(t) = a_i sin(w t + phi_i),   phi_i ~ U[0, 2 pi) from default_rng(seed)        (D4)
+
+    Paper 001 (Sec. 6) gives only magnitudes: gravity gradient 1e-5, aerodynamic 1e-6, solar
+    pressure 1e-5 N m. ASSUMPTION (digest section 6): gravity gradient at ``2 w0``, aero and
+    solar at ``w0`` (see :func:`paper001_disturbances`). ``w = 0`` gives a constant
+    ``a_i sin(phi_i)``.
+
+    Parameters
+    ----------
+    amplitude_Nm : float or array_like, shape (3,)
+        ``a`` per body axis [N m], ``>= 0``.
+    omega_rad_s : float
+        Angular frequency ``w`` [rad/s], ``>= 0``.
+    seed : int
+        Non-negative seed of the phases.
+    phase_rad : array_like, shape (3,), optional
+        Fixed phases instead of seeded ones [rad].
+    """
+
+    def __init__(self, amplitude_Nm, omega_rad_s: float, seed: int = 0,
+                 phase_rad=None) -> None:
+        self.amplitude_Nm = _vec3_nonneg(amplitude_Nm, 'amplitude_Nm')
+        w = float(omega_rad_s)
+        if not (math.isfinite(w) and w >= 0.0):
+            raise ValueError(f'omega_rad_s must be finite and >= 0, got {omega_rad_s!r}')
+        self.omega_rad_s = w
+        if phase_rad is None:
+            self.phase_rad = np.random.default_rng(_seed(seed)).uniform(0.0, 2.0 * math.pi, 3)
+        else:
+            ph = np.array(phase_rad, dtype=float)
+            if ph.shape != (3,) or not np.all(np.isfinite(ph)):
+                raise ValueError(f'phase_rad must be a finite (3,) vector, got {ph}')
+            self.phase_rad = ph
+
+    def torque(self, t: float) -> np.ndarray:
+        """(D4) [N m], body axes, shape (3,)."""
+        return self.amplitude_Nm * np.sin(self.omega_rad_s * t + self.phase_rad)
+
+
+class PeriodicPulseTorque:
+    """Constant body torque switched on for ``duration_s`` every ``period_s`` (momentum
+    unloading; paper 001: 1e-3 N m)::
+
+        tau(t) = s o a  if (t - t_start) mod T < d  and t >= t_start, else 0               (D5)
+
+    ``s`` in {-1, +1}^3: per-axis signs drawn from ``default_rng(seed)`` unless given.
+
+    Parameters
+    ----------
+    amplitude_Nm : float or array_like, shape (3,)
+        ``a`` per body axis [N m], ``>= 0``.
+    period_s, duration_s : float
+        ``T > 0`` and ``0 <= d <= T`` [s]; ``d = T`` is a constant torque.
+    start_s : float
+        First switch-on [s].
+    seed : int
+        Non-negative seed of the signs.
+    signs : array_like, shape (3,), optional
+        Fixed signs (+-1) instead of seeded ones.
+    """
+
+    def __init__(self, amplitude_Nm, period_s: float, duration_s: float, start_s: float = 0.0,
+                 seed: int = 0, signs=None) -> None:
+        self.amplitude_Nm = _vec3_nonneg(amplitude_Nm, 'amplitude_Nm')
+        period, dur, start = float(period_s), float(duration_s), float(start_s)
+        if not (math.isfinite(period) and period > 0.0):
+            raise ValueError(f'period_s must be > 0 and finite, got {period_s!r}')
+        if not (math.isfinite(dur) and 0.0 <= dur <= period):
+            raise ValueError(f'duration_s must be in [0, period_s], got {duration_s!r}')
+        if not math.isfinite(start):
+            raise ValueError(f'start_s must be finite, got {start_s!r}')
+        self.period_s, self.duration_s, self.start_s = period, dur, start
+        if signs is None:
+            rng = np.random.default_rng(_seed(seed))
+            self.signs = np.where(rng.random(3) < 0.5, -1.0, 1.0)
+        else:
+            sg = np.array(signs, dtype=float)
+            if sg.shape != (3,) or not np.all(np.abs(sg) == 1.0):
+                raise ValueError(f'signs must be three values of +1 or -1, got {sg}')
+            self.signs = sg
+
+    def torque(self, t: float) -> np.ndarray:
+        """(D5) [N m], body axes, shape (3,)."""
+        if t < self.start_s:
+            return np.zeros(3)
+        phase = (t - self.start_s) % self.period_s
+        on = phase < self.duration_s or self.duration_s >= self.period_s
+        return self.signs * self.amplitude_Nm if on else np.zeros(3)
+
+
+def paper001_disturbances(omega0: float, seed: int, unloading: bool = True,
+                          unloading_period_s: float = 600.0,
+                          unloading_duration_s: float = 60.0) -> list:
+    """Paper 001's disturbance set at its magnitudes (Sec. 6), each seeded from ``seed``.
+
+    ASSUMPTION (waveforms not in the paper, digest section 6): gravity gradient 1e-5 N m at
+    ``2 w0``; aerodynamic 1e-6 N m at ``w0``; solar pressure 1e-5 N m at ``w0``; residual
+    magnetic 1e-8 N m constant; unloading 1e-3 N m per axis, on ``unloading_duration_s``
+    every ``unloading_period_s``. The synthetic gravity gradient replaces the physical one
+    (D1), which is 10-300x larger for inertia (30) (digest P12).
+    """
+    w0 = float(omega0)
+    out = [HarmonicTorque(1e-5, 2.0 * w0, seed=seed * 8 + 1),
+           HarmonicTorque(1e-6, w0, seed=seed * 8 + 2),
+           HarmonicTorque(1e-5, w0, seed=seed * 8 + 3),
+           ConstantTorque([1e-8, 1e-8, 1e-8])]
+    if unloading:
+        out.append(PeriodicPulseTorque(1e-3, unloading_period_s, unloading_duration_s,
+                                       seed=seed * 8 + 4))
+    return out
