@@ -77,6 +77,90 @@ register(Entry(
     _build_bdot, inputs=('magnetometer',), actuators=('magnetorquer',)))
 
 
+def _wheel_kwargs(ctx: Dict[str, Any]) -> Dict[str, Any]:
+    """Reaction wheels of the context for a torque controller (none: ideal body torque)."""
+    if not _n_wheels(ctx):
+        return {}
+    return dict(wheel_axes_body=ctx['wheel_axes_body'],
+                wheel_max_torque_Nm=ctx['wheel_max_torque_Nm'])
+
+
+_FUZZY_BREAKPOINTS = ('phi_peaks_deg', 'dphi_peaks_deg_s', 'mk_peaks_Nm', 'mk_half_width_Nm',
+                      'mk_gain', 'g_peaks_deg_s', 'dg_peaks_deg_s2', 'mgk_peaks_Nm',
+                      'mgk_half_width_Nm')
+
+
+def _build_fuzzy(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from adcs_nodes.core.control.fuzzy import FuzzyEigenaxisController
+    return FuzzyEigenaxisController(
+        ctx['inertia_kgm2'], p['max_torque_Nm'], table1_rows=p['table1_rows'],
+        compensation=p['compensation'], saturation=p['saturation'], n_points=p['n_points'],
+        **_wheel_kwargs(ctx), **{k: p[k] for k in _FUZZY_BREAKPOINTS})
+
+
+_ASSUMED = 'ASSUMPTION (paper: figure only)'
+register(Entry(
+    'controller', 'fuzzy',
+    'paper 003 fuzzy eigenaxis slew: Mamdani Table 1 (angle, rate) + Table 2 (gyroscopic '
+    'compensation); any target attitude; ideal torque or wheels',
+    'adcs_nodes.core.control.fuzzy:FuzzyEigenaxisController',
+    (Param('max_torque_Nm', 'float', 1.0, 'N m', 'per-axis torque limit |M_i| (paper: 1)',
+           positive=True),
+     Param('table1_rows', 'str', 'reversed', '-', 'Table 1 row reading: reversed (rows in the '
+           "text's order of the phi terms; the one that settles) or as_printed",
+           choices=('reversed', 'as_printed')),
+     Param('compensation', 'bool', True, '-', 'run the gyroscopic compensation controller '
+           '(Table 2)'),
+     Param('saturation', 'str', 'scale', '-', 'torque limit: scale (keep the direction) or '
+           'clip per axis', choices=('scale', 'clip')),
+     Param('n_points', 'int', 501, '-', 'output grid points of the centroid', min=3,
+           max=100001),
+     Param('phi_peaks_deg', 'float[]', [0.0, 3.0, 12.0, 35.0, 90.0], 'deg',
+           f'term peaks of phi (Н, ОМ, М, С, Б); {_ASSUMED}', length=5, min=0.0, max=180.0),
+     Param('dphi_peaks_deg_s', 'float[]', [-4.0, -3.0, -1.5, -0.5, 0.0, 0.5, 1.5, 3.0, 4.0],
+           'deg/s', f'term peaks of phi_dot (ОБ .. ПБ); {_ASSUMED}', length=9),
+     Param('mk_peaks_Nm', 'float[]', [-1.0, -0.75, -0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0],
+           'N m', f'term peaks of M_k (ОБ .. ПБ); {_ASSUMED}', length=9),
+     Param('mk_half_width_Nm', 'float', 0.25, 'N m', f'half width of the M_k triangles; '
+           f'{_ASSUMED}', positive=True),
+     Param('mk_gain', 'float', 3.0, '-', 'gain on the defuzzified M_k before the limit '
+           '(ASSUMPTION: not in the paper)', positive=True),
+     Param('g_peaks_deg_s', 'float[]', [-0.2, -0.1, 0.0, 0.1, 0.2], 'deg/s',
+           f'term peaks of |phidot_g| (ОБ, ОС, Н, ПС, ПБ); {_ASSUMED}', length=5),
+     Param('dg_peaks_deg_s2', 'float[]', [-0.2, -0.1, 0.0, 0.1, 0.2], 'deg/s^2',
+           f'term peaks of d|phidot_g|/dt (15); {_ASSUMED}', length=5),
+     Param('mgk_peaks_Nm', 'float[]', [-0.5, -0.25, 0.0, 0.25, 0.5], 'N m',
+           f'term peaks of M_gk; {_ASSUMED}', length=5),
+     Param('mgk_half_width_Nm', 'float', 0.25, 'N m', f'half width of the M_gk triangles; '
+           f'{_ASSUMED}', positive=True)),
+    _build_fuzzy, inputs=('estimate', 'target'), actuators=('torque',)))
+
+
+def _build_reference_slew(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from adcs_nodes.core.control.reference_slew import ReferenceSlewController
+    return ReferenceSlewController(
+        ctx['inertia_kgm2'], p['max_torque_Nm'], accel_fraction=p['accel_fraction'],
+        rate_gain_per_s=p['rate_gain_per_s'], linear_gain_per_s=p['linear_gain_per_s'],
+        max_rate_deg_s=p['max_rate_deg_s'] if p['max_rate_deg_s'] > 0 else float('inf'),
+        **_wheel_kwargs(ctx))
+
+
+register(Entry(
+    'controller', 'reference_slew',
+    "paper 003's comparison: near time-optimal rest-to-rest eigenaxis slew (bang-bang rate "
+    'profile, PD end) under a per-axis torque limit; ideal torque or wheels',
+    'adcs_nodes.core.control.reference_slew:ReferenceSlewController',
+    (Param('max_torque_Nm', 'float', 1.0, 'N m', 'per-axis torque limit |M_i|', positive=True),
+     Param('accel_fraction', 'float', 0.9, '-', 'fraction of the admissible eigenaxis '
+           'acceleration planned', positive=True, max=1.0),
+     Param('rate_gain_per_s', 'float', 1.0, '1/s', 'rate-loop gain k', positive=True),
+     Param('linear_gain_per_s', 'float', 0.15, '1/s', 'slope lambda of the linear (PD) end '
+           'of the rate profile', positive=True),
+     Param('max_rate_deg_s', 'float', 0.0, 'deg/s', 'cap on the profile rate (0: none)',
+           min=0.0)),
+    _build_reference_slew, inputs=('estimate', 'target'), actuators=('torque',)))
+
+
 # ---------------------------------------------------------------------- estimators
 _P0_HELP = ('initial covariance diagonal: attitude (phi or mu) [-], rate [rad^2/s^2], '
             'disturbance [1/s^4]; empty: the default of the measurement form')

@@ -262,3 +262,17 @@ def test_wheel_allocation_realises_the_torque():
     assert cmd.wheel_torque.shape == (4,)
     np.testing.assert_allclose(-axes.T @ cmd.wheel_torque, cmd.info['torque_demand'],
                                atol=1e-12)
+
+
+def test_registry_entries_build_and_share_the_core_defaults():
+    from adcs_nodes import registry
+    entry = registry.get('controller', 'fuzzy')
+    defaults = entry.defaults()
+    for key, value in fz.DEFAULTS.items():
+        np.testing.assert_allclose(defaults[key], value, err_msg=key)
+    ctx = dict(inertia_kgm2=J, wheel_axes_body=np.zeros((0, 3)), wheel_max_torque_Nm=[])
+    assert isinstance(entry.build(entry.validate({}), ctx), fz.FuzzyEigenaxisController)
+    ref = registry.get('controller', 'reference_slew')
+    assert ref.build(ref.validate({}), ctx).n_wheels == 0
+    with pytest.raises(ValueError):
+        entry.validate({'table1_rows': 'sideways'})
