@@ -64,9 +64,9 @@ def test_switch_mid_run_gives_one_zero_frame_each_and_unknown_is_refused(tmp_pat
     try:
         wait_manifest(proc)
         wait_status(proc.pid, lambda s: 'controller: magnetic' in s and running(s))
-        bad = adcs('switch', 'fuzzy', '--run', str(proc.pid), check=False)
+        bad = adcs('switch', 'no_such_law', '--run', str(proc.pid), check=False)
         assert bad.returncode == 2
-        assert "unknown controller 'fuzzy'" in bad.stderr and 'magnetic' in bad.stderr
+        assert "unknown controller 'no_such_law'" in bad.stderr and 'magnetic' in bad.stderr
         assert 'switch magnetic -> bdot' in adcs('switch', 'bdot', '--run', str(proc.pid)).stdout
         wait_status(proc.pid, lambda s: 'controller: bdot' in s and 'switches: 1' in s)
         time.sleep(1.0)

@@ -138,8 +138,6 @@ class ControllerNode(LockstepNode):
         self.entry = registry.get('controller', ctx_p['controller'])
         self.controller_name = self.entry.name
         own = node_params.declare_all(self, self.entry.params)
-        node_params.refuse_unknown(self)
-        node_params.install_validator(self)
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
         axes = np.asarray(ctx_p['wheel_axes_body'], dtype=float)
         n_wheels = len(ctx_p['wheel_max_torque_Nm'])
@@ -166,6 +164,8 @@ class ControllerNode(LockstepNode):
             self.ctx['reference'] = make_onboard_reference(
                 self.section('onboard_orbit', DEFAULT_ORBIT, merge=False),
                 self.section('onboard_field', DEFAULT_FIELD, merge=False), self.epoch)
+        node_params.refuse_unknown(self)
+        node_params.install_validator(self)
         self.core = self.entry.build(own, self.ctx)
         self.n_wheels = n_wheels
         topics = {

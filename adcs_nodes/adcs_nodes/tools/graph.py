@@ -55,6 +55,8 @@ TOPIC_TYPES = {
     '/tf': 'tf2_msgs/msg/TFMessage',
     '/tf_static': 'tf2_msgs/msg/TFMessage',
     '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
+    'actuators/magnetorquer/command': 'geometry_msgs/msg/Vector3Stamped',
+    'actuators/wheels/command': 'sensor_msgs/msg/JointState',
     'sim/environment': 'adcs_msgs/msg/Environment',
     'sim/state': 'adcs_msgs/msg/AttitudeState',
     'sim/wheels': 'adcs_msgs/msg/WheelState',
@@ -195,8 +197,9 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                  subscribes=['sim/environment', 'adcs/actuator_command']),
     ]
     flight = {**common, 'timing_mode': 'lockstep'}
-    if sc.get('plugins'):    # (an empty list has no type in a ROS parameter file)
-        flight['plugins'] = list(sc['plugins'])
+    # nodes that build registry components load the scenario's plugins too
+    # (an empty list has no type in a ROS parameter file)
+    plugins = {'plugins': list(sc['plugins'])} if sc.get('plugins') else {}
     for key, cfg in sc['sensors'].items():
         if cfg.get('external'):
             continue       # a real driver publishes this topic (the launcher says so)
@@ -211,12 +214,12 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         subs = ['/clock', '/tf_static'] + [_INPUT_TOPICS[i] for i in entry.inputs]
         nodes.append(NodeSpec('estimator', 'adcs_nodes', 'estimator',
                               'adcs_nodes.nodes.estimator', 'EstimatorNode',
-                              {**flight, **_estimator_params(sc)},
+                              {**flight, **plugins, **_estimator_params(sc)},
                               publishes=['adcs/attitude_estimate',
                                          'adcs/estimator/diagnostics', '/tf'],
                               subscribes=subs))
     if 'controllers' in sc:
-        nodes += _control_nodes(sc, flight)
+        nodes += _control_nodes(sc, flight, plugins)
         dyn = next(n for n in nodes if n.name == 'dynamics')
         dyn.params['command_period_s'] = sc['controllers']['period_s']
     for node in nodes:      # every LockstepNode publishes /diagnostics once per sim second
@@ -276,7 +279,8 @@ def _guidance_node(sc: Dict[str, Any], flight: Dict[str, Any]) -> NodeSpec:
                     subscribes=['/clock'])
 
 
-def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any]) -> List[NodeSpec]:
+def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
+                   plugins: Dict[str, Any]) -> List[NodeSpec]:
     """Guidance, one node per configured controller (any registered one), the manager."""
     ctrl = sc['controllers']
     sensors = sc['sensors']
@@ -298,7 +302,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any]) -> List[NodeSpec]
     if any('target' in e.inputs for e in entries.values()):
         nodes.append(_guidance_node(sc, flight))
     for name, entry in entries.items():
-        params = {**shared, 'controller': name, **ctrl[name]}
+        params = {**shared, **plugins, 'controller': name, **ctrl[name]}
         for need in entry.inputs:
             key, period = periods[need]
             params[key] = period
@@ -320,6 +324,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any]) -> List[NodeSpec]
         'stale_after_s': man['stale_after_s'], 'max_dipole_Am2': limits}
     if wheels:
         mparams['max_wheel_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
+        mparams['wheel_names'] = [w['name'] for w in wheels]
     if man['schedule']:
         mparams['schedule_t_s'] = [e['t_s'] for e in man['schedule']]
         mparams['schedule_controller'] = [e['controller'] for e in man['schedule']]
@@ -330,7 +335,9 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any]) -> List[NodeSpec]
         subs.append('adcs/attitude_estimate')
     nodes.append(NodeSpec('controller_manager', 'adcs_nodes', 'controller_manager',
                           'adcs_nodes.nodes.controller_manager', 'ControllerManagerNode',
-                          mparams, publishes=['adcs/actuator_command', 'adcs/controller_status'],
+                          mparams, publishes=['adcs/actuator_command', 'adcs/controller_status',
+                                              'actuators/magnetorquer/command']
+                          + (['actuators/wheels/command'] if wheels else []),
                           subscribes=subs))
     return nodes
 
