@@ -577,7 +577,8 @@ class MagneticFilter:
         return True
 
     # ---------------------------------------------------------------------- update
-    def update(self, b_meas_body: ArrayLike, b_ref_orbit: ArrayLike) -> dict:
+    def update(self, b_meas_body: ArrayLike, b_ref_orbit: ArrayLike,
+               theta_axes: Optional[ArrayLike] = None) -> dict:
         """Process one magnetometer reading: (36)/(37), sequential (38), correction (39).
 
         Parameters
@@ -586,6 +587,10 @@ class MagneticFilter:
             Measured field ``n`` (3,) [T], body axes.
         b_ref_orbit : array_like
             Onboard model field ``B*`` (3,) [T], ORBIT axes, at the same instant.
+        theta_axes : array_like, optional
+            ``theta`` of (38) per body axis j (3,) [T^2] for this reading only (e.g. the
+            sensor's covariance rotated into body axes, floored at ``theta``); ``None``: the
+            filter's ``theta`` on every axis. Not 3 finite positive values: reading rejected.
 
         Returns
         -------
@@ -606,6 +611,14 @@ class MagneticFilter:
             return out
         reason = (_check_field(n, 'b_meas_body', *self.b_limits)
                   or _check_field(b_ref, 'b_ref_orbit', *self.b_limits))
+        theta = np.full(3, self.theta)
+        if theta_axes is not None and not reason:
+            try:
+                theta = np.asarray(theta_axes, dtype=float).reshape(-1)
+            except (TypeError, ValueError):
+                theta = np.zeros(0)
+            if theta.shape != (3,) or not np.all(np.isfinite(theta)) or np.any(theta <= 0):
+                reason = 'theta_axes must be 3 finite positive variances [T^2]'
         if reason:
             out['reason'] = reason
             return out
@@ -619,7 +632,7 @@ class MagneticFilter:
             for j in range(3):  # (38), sequential
                 h = h_mat[j]
                 ph = p @ h
-                s = self.theta + float(h @ ph)
+                s = float(theta[j]) + float(h @ ph)
                 k = ph / s
                 nu = z[j] if self.literal_update else z[j] - float(h @ w)
                 r_sig = nu if (self.sigma_from_innovation and not self.literal_update) else z[j]
