@@ -38,7 +38,6 @@ from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.core.manager import AutoSequence, ControllerManagerCore
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.actuator_topics import ActuatorTopics, wheel_names_for
-from adcs_nodes.nodes.actuator_topics import ActuatorTopics, wheel_names_for
 from adcs_nodes.nodes.controller import command_msg, estimate_from_msg
 from adcs_nodes.nodes.convert import stamp_ns, vec3
 from adcs_nodes.nodes.lockstep_node import QOS_LATCHED, LockstepNode
@@ -85,10 +84,6 @@ class ControllerManagerNode(LockstepNode):
         if est_period_s > 0:
             inputs['_estimate'] = (AttitudeState, 'adcs/attitude_estimate', est_period_s)
         self.cmd_pub = self.publisher(ActuatorCommand, 'adcs/actuator_command')
-        self.actuators = ActuatorTopics(    # standard per-actuator topics, for drivers
-            self, bool(self.param('max_dipole_Am2', [40.0, 40.0, 40.0])), wheel_names_for(
-                0 if wheel_limits == [-1.0] else len(wheel_limits),
-                self.param('wheel_names', [''])))
         self.actuators = ActuatorTopics(    # standard per-actuator topics, for drivers
             self, bool(self.param('max_dipole_Am2', [40.0, 40.0, 40.0])), wheel_names_for(
                 0 if wheel_limits == [-1.0] else len(wheel_limits),
@@ -166,7 +161,6 @@ class ControllerManagerNode(LockstepNode):
             self._fault_kind = fault_kind
         out = command_msg(cmd, self.stamp(t_ns), status.get('source') or 'zero')
         self.cmd_pub.publish(out)
-        self.actuators.publish(out)
         self.actuators.publish(out)
         self._publish_status()
 

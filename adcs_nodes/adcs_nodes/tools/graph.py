@@ -197,8 +197,9 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                  subscribes=['sim/environment', 'adcs/actuator_command']),
     ]
     flight = {**common, 'timing_mode': 'lockstep'}
-    if sc.get('plugins'):    # (an empty list has no type in a ROS parameter file)
-        flight['plugins'] = list(sc['plugins'])
+    # nodes that build registry components load the scenario's plugins too
+    # (an empty list has no type in a ROS parameter file)
+    plugins = {'plugins': list(sc['plugins'])} if sc.get('plugins') else {}
     for key, cfg in sc['sensors'].items():
         if cfg.get('external'):
             continue       # a real driver publishes this topic (the launcher says so)
@@ -213,12 +214,12 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         subs = ['/clock', '/tf_static'] + [_INPUT_TOPICS[i] for i in entry.inputs]
         nodes.append(NodeSpec('estimator', 'adcs_nodes', 'estimator',
                               'adcs_nodes.nodes.estimator', 'EstimatorNode',
-                              {**flight, **_estimator_params(sc)},
+                              {**flight, **plugins, **_estimator_params(sc)},
                               publishes=['adcs/attitude_estimate',
                                          'adcs/estimator/diagnostics', '/tf'],
                               subscribes=subs))
     if 'controllers' in sc:
-        nodes += _control_nodes(sc, flight)
+        nodes += _control_nodes(sc, flight, plugins)
         dyn = next(n for n in nodes if n.name == 'dynamics')
         dyn.params['command_period_s'] = sc['controllers']['period_s']
     for node in nodes:      # every LockstepNode publishes /diagnostics once per sim second
@@ -278,7 +279,8 @@ def _guidance_node(sc: Dict[str, Any], flight: Dict[str, Any]) -> NodeSpec:
                     subscribes=['/clock'])
 
 
-def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any]) -> List[NodeSpec]:
+def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
+                   plugins: Dict[str, Any]) -> List[NodeSpec]:
     """Guidance, one node per configured controller (any registered one), the manager."""
     ctrl = sc['controllers']
     sensors = sc['sensors']
@@ -300,7 +302,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any]) -> List[NodeSpec]
     if any('target' in e.inputs for e in entries.values()):
         nodes.append(_guidance_node(sc, flight))
     for name, entry in entries.items():
-        params = {**shared, 'controller': name, **ctrl[name]}
+        params = {**shared, **plugins, 'controller': name, **ctrl[name]}
         for need in entry.inputs:
             key, period = periods[need]
             params[key] = period
