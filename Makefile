@@ -19,7 +19,7 @@ test: lint  ## flake8 + unit, node and integration tests (not the long reproduct
 lint:  ## flake8 at 99 columns on the packages and tests
 	$(RUN) python -m flake8 adcs_nodes sim_node tests
 
-bench:  ## lockstep throughput table: transport ring, graph, composed graph, plain loop
+bench:  ## fair throughput table of paper000_control: ring, graph, composed, plain loop, Basilisk (< 5 min)
 	$(RUN) python -m sim_node.tools.bench
 
 reproduce:  ## long paper reproductions (papers 000, 004): pass/fail tables against the papers

@@ -3,21 +3,30 @@ import os
 import subprocess
 import sys
 
-from sim_node.tools.bench import Row, Stat, format_table, parse_cases, verdict
+from sim_node.tools.bench import Row, Sample, format_table, hop_pattern, verdict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def test_table_and_verdicts_format():
-    rows = [Row('(1)', 'ring', values=[100.0, 300.0, 200.0]),
-            Row('(2)', 'graph', 1.0, 10, values=[50.0]),
-            Row('ref', 'reference', kind='rk4', values=[5e4], note='not measured')]
-    assert Stat([3.0, 1.0, 2.0]).median == 2.0
+    samples = [Sample(10, r, 1.0, 2.0, 1e-3) for r in (100.0, 300.0, 200.0)]
+    rows = [Row('(1)', 'ring', samples=samples, loads=[0.5, 0.7, 0.6]),
+            Row('(6)', 'reference', unit='RK4 steps', step_s=0.1, skipped='not measured: x')]
     text = format_table(rows)
-    assert '200 (100-300)' in text and '500' in text and 'not measured' in text
+    assert '200 (100-300)' in text and 'not measured: x' in text and '0.60' in text
+    assert '1.000' in text   # CPU ms per frame
     assert len({len(line) for line in text.splitlines()[:2]}) == 1   # header as wide as rule
     assert 'NOT MET' in verdict('x', 0.4, 0.5, '') and ' MET ' in verdict('x', 0.6, 0.5, '')
-    assert parse_cases('1.0:10,0.1:1') == [(1.0, 10), (0.1, 1)]
+    assert 'NOT MEASURED' in verdict('x', None, 0.5, '')
+
+
+def test_hop_pattern_of_paper000_at_1s_frames():
+    # clock -> env -> dyn (2); command due every 2 s: clock -> est -> ctrl -> mgr -> dyn (4);
+    # magnetometer every 10 s on a command frame: 7 hops
+    sc = {'sensors': {'magnetometer': {'period_s': 10.0}}, 'controllers': {'period_s': 2.0}}
+    assert hop_pattern(sc, 1.0) == [7, 2, 4, 2, 4, 2, 4, 2, 4, 2]
+    assert hop_pattern(sc, 2.0) == [7, 4, 4, 4, 4]
+    assert hop_pattern({}, 1.0) == [2]
 
 
 def test_bench_runs_at_tiny_size(tmp_path):
@@ -25,13 +34,13 @@ def test_bench_runs_at_tiny_size(tmp_path):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [os.path.join(ROOT, 'adcs_nodes'), os.path.join(ROOT, 'sim_node'),
          os.environ.get('PYTHONPATH', '')]))
-    proc = subprocess.run([sys.executable, '-m', 'sim_node.tools.bench', '--frames', '20',
-                           '--repeats', '1', '--cases', '1.0:10', '--out', str(out)],
-                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
+    proc = subprocess.run([sys.executable, '-m', 'sim_node.tools.bench', '--frames', '25',
+                           '--repeats', '1', '--basilisk', 'skip', '--out', str(out)],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=150)
     assert proc.returncode == 0, proc.stderr[-3000:]
     text = out.read_text()
     assert text == proc.stdout
-    for label in ('(1)', '(2)', '(3)', '(4)', 'ref'):
+    for label in ('(1)', '(2)', '(3)', '(4)', '(5)', '(6)'):
         assert any(line.startswith(label) for line in text.splitlines()), label
-    assert 'reference, not measured here' in text
-    assert text.count('MET') >= 3 and 'nproc' in text
+    assert 'skipped (--basilisk skip)' in text and 'NOT MEASURED' in text
+    assert text.count('MET') >= 3 and 'nproc' in text and 'load average' in text

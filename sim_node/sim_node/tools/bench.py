@@ -1,55 +1,75 @@
-"""``make bench``: lockstep throughput of the world, side by side, in one table.
+"""``make bench``: a fair throughput bench of the paper-000 closed loop, in one table.
 
-Rows (DESIGN section 6):
+Every row is measured in the same run, on the same machine, at the same time (issue 13):
 
-1. transport limit: a bare 2-process ping-pong ring with the hop count of a world frame
+1. ``ring``: a bare 2-process rclpy relay with the hop count of the full graph's critical
+   path, frame by frame (:func:`hop_pattern`; at 1 s frames 7 hops on magnetometer frames, 4
+   on the other frames with a command due, 2 on the rest: 3.3 a frame on average)
    (:mod:`sim_node.tools.bench_ring`);
-2. the world graph of ``scenarios/free_tumble.yaml`` (``environment`` + ``dynamics``), one
-   process per node, in lockstep, at 1 s frames (10 RK4 substeps) and 0.1 s frames (1 substep),
-   so the integration step is 0.1 s in both;
-3. the same graph composed in one process (``Launcher(compose=True)``);
-4. the same models in a plain Python loop without ROS (environment as the ``environment``
-   node computes it, then ``Spacecraft.step``), and the free body + gravity-gradient RK4 rate
-   alone, next to Basilisk's (a reference number, not measured here).
+2. ``graph``: ``scenarios/paper000_control.yaml`` (environment, dynamics, magnetometer,
+   estimator, two controllers, controller manager), one process per node, in lockstep, at
+   1 s frames with 10 RK4 substeps (0.1 s truth step);
+3. ``composed``: the same graph in one process (``Launcher(compose=True)``);
+4. ``plain loop``: the same models in a plain Python loop without ROS (:class:`PlainLoop`:
+   environment, dynamics, magnetometer model, onboard references, filter predict/update,
+   both controller laws, the manager's choice);
+5. ``free body``: free rigid body + gravity gradient with this project's RK4
+   (``Spacecraft.step``, paper 000 inertia diag(118, 118, 19.6) kg m^2, 0.1 s step);
+6. ``Basilisk``: the same model set in Basilisk (``bsk`` from PyPI: ``Spacecraft`` hub with
+   ``GravityGradientEffector``, same inertia, same 0.1 s RK4 step; Basilisk also integrates
+   the orbit with point-mass gravity). Bench-only dependency: installed on demand into its own
+   virtual environment (``~/.cache/adcs/bsk-venv``, or ``$ADCS_BSK_VENV``) so its pins never
+   touch the workspace's; the row is skipped with the reason if that fails.
 
-Every measurement is repeated (``--repeats``, interleaved); the table gives the median and
-the min-max range. Then the design targets are checked, MET / NOT MET, as measured:
-(2) >= 0.5 x (1), (3) >= 3 x (2), and (4) "comparable with Basilisk", taken here as within a
-factor of 2 (>= 0.5 x its RK4 steps/s). The table goes to stdout and ``out/bench.txt``;
-progress goes to stderr. Numbers are wall-clock throughput: other load on the machine
-lowers them (the report prints the load average).
+Each row gives frames (or RK4 steps) per wall second, the wall time and the CPU seconds of
+all its processes (``resource.getrusage`` of this process and of its children, start-up
+included), the CPU per frame over the timed frames only (graph rows: the difference to a
+short run of the same graph, which removes the start-up), and the 1-minute load average
+when the row started. Repeats are interleaved; the table gives medians (rate: min-max).
+
+Targets, as ratios of this run (a target not met prints NOT MET with its ratio):
+(a) graph >= 0.5 x the matching ring; (b) composed >= 3 x graph; (c) composed paper000 at
+1 s frames >= 2000 x real time; (d) free-body plain loop >= 0.5 x Basilisk.
 
 Usage::
 
-    python -m sim_node.tools.bench [--frames 3000] [--repeats 3] [--quick]
+    python -m sim_node.tools.bench [--frames 2000] [--repeats 2] [--quick]
+                                   [--basilisk auto|skip] [--out out/bench.txt]
 """
 from __future__ import annotations
 
 import argparse
 import copy
-import functools
+import json
+import math
 import os
 import platform
+import resource
 import shutil
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
-from datetime import datetime, timedelta
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from datetime import datetime, timedelta, timezone
+from typing import Callable, Dict, List, Optional, Sequence
 
-from sim_node.tools.bench_ring import RingError, RingResult, run_ring
+from sim_node.tools.bench_ring import RingError, run_ring
 
-DEFAULT_SCENARIO = 'scenarios/free_tumble.yaml'
-#: Free body + gravity gradient RK4 steps per wall second of Basilisk (C++) for this case.
-BASILISK_RK4_STEPS_PER_S = 50_000.0
-#: (frame [s], RK4 substeps per frame): both integrate with a 0.1 s step.
-DEFAULT_CASES = ((1.0, 10), (0.1, 1))
-#: Design targets: graph >= 0.5 x ring; composed >= 3 x graph; plain loop >= 0.5 x Basilisk.
+DEFAULT_SCENARIO = 'scenarios/paper000_control.yaml'
+#: Bench frame [s] and RK4 substeps: the target (c) is stated at 1 s frames, 0.1 s step.
+FRAME_S, SUBSTEPS = 1.0, 10
+#: Frames of the short graph run whose CPU is subtracted (start-up) for the CPU per frame.
+SHORT_FRAMES = 20
+#: Paper 000 inertia [kg m^2] of the free-body rows (the scenario's).
+INERTIA_DIAG = (118.0, 118.0, 19.6)
 TARGET_GRAPH_VS_RING = 0.5
 TARGET_COMPOSED_VS_GRAPH = 3.0
+TARGET_REAL_TIME = 2000.0
 TARGET_LOOP_VS_BASILISK = 0.5
+BSK_VENV = os.environ.get('ADCS_BSK_VENV',
+                          os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'bsk-venv'))
 
 
 class BenchError(RuntimeError):
@@ -57,25 +77,60 @@ class BenchError(RuntimeError):
 
 
 @dataclass
-class Stat:
-    """Median and range of repeated measurements."""
+class Sample:
+    """One measurement: ``n`` frames (or RK4 steps) at ``rate`` per wall second.
 
-    values: List[float]
+    ``wall_s`` and ``cpu_s``: the whole measurement, start-up included, all processes;
+    ``cpu_per_unit_s``: CPU per frame over the timed frames only (``None``: not known).
+    """
+
+    n: int
+    rate: float
+    wall_s: float
+    cpu_s: float
+    cpu_per_unit_s: Optional[float] = None
+
+
+@dataclass
+class Row:
+    """One line of the table and the measurement that fills it (one call per repeat)."""
+
+    key: str
+    label: str
+    unit: str = 'frames'
+    step_s: float = FRAME_S
+    measure: Optional[Callable[[], Sample]] = None
+    note: str = ''
+    samples: List[Sample] = field(default_factory=list)
+    loads: List[float] = field(default_factory=list)
+    skipped: str = ''
+
+    def median(self, attr: str) -> Optional[float]:
+        """Median of a :class:`Sample` attribute over the repeats (``None`` if unknown)."""
+        vals = [getattr(s, attr) for s in self.samples if getattr(s, attr) is not None]
+        return statistics.median(vals) if vals else None
 
     @property
-    def median(self) -> float:
-        """Median of the values."""
-        return statistics.median(self.values)
+    def rate(self) -> Optional[float]:
+        """Median rate [1/s] (frames or RK4 steps per wall second)."""
+        return self.median('rate')
 
-    @property
-    def lo(self) -> float:
-        """Smallest value."""
-        return min(self.values)
 
-    @property
-    def hi(self) -> float:
-        """Largest value."""
-        return max(self.values)
+def _cpu_now() -> float:
+    """CPU seconds of this process plus its waited-for children."""
+    total = 0.0
+    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
+        ru = resource.getrusage(who)
+        total += ru.ru_utime + ru.ru_stime
+    return total
+
+
+def load1() -> float:
+    """1-minute load average (NaN if unknown)."""
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return float('nan')
 
 
 # ---------------------------------------------------------------------- machine
@@ -98,186 +153,379 @@ def machine_info() -> Dict[str, str]:
             'load': load}
 
 
-# ---------------------------------------------------------------------- (1) ring
-class RingMeasure:
-    """Frames/s of one :func:`run_ring` of ``frames`` round trips; keeps the last result."""
-
-    def __init__(self, frames: int) -> None:
-        self.frames = frames
-        self.last: Optional[RingResult] = None
-
-    def __call__(self) -> float:
-        self.last = run_ring(self.frames)
-        return self.last.frames_per_s
-
-
-# ---------------------------------------------------------------------- (2), (3) graph
-def scenario_with(sc: dict, frame_s: float, substeps: int) -> dict:
-    """Copy of scenario ``sc`` with another frame and substep count."""
+# ---------------------------------------------------------------------- scenario
+def bench_scenario(sc: dict, frame_s: float = FRAME_S, substeps: int = SUBSTEPS) -> dict:
+    """Copy of scenario ``sc`` with the bench's frame and substep count."""
     out = copy.deepcopy(sc)
     out['timing']['frame_s'] = float(frame_s)
     out['timing']['substeps'] = int(substeps)
     return out
 
 
-def graph_fps(sc: dict, frame_s: float, substeps: int, frames: int, compose: bool) -> float:
-    """Lockstep frames per wall second of one launcher run, measured by the clock master
-    from frame 0 to its end (its final ``lockstep/status``, ``RunResult.frames_per_s``)."""
+def _periods(sc: dict) -> Dict[str, float]:
+    mag = (sc.get('sensors') or {}).get('magnetometer') or {}
+    ctrl = sc.get('controllers') or {}
+    return {'mag': float(mag.get('period_s', 0.0)) if mag else 0.0,
+            'cmd': float(ctrl.get('period_s', 0.0)) if ctrl else 0.0}
+
+
+def hop_pattern(sc: dict, frame_s: float) -> List[int]:
+    """Messages on the critical path of each frame of one cycle of the graph.
+
+    The clock master starts frame k+1 when it has the environment and, when a command is due,
+    the command stamped t_k: ``/clock -> environment -> dynamics`` (2 hops); with a command
+    due, ``/clock -> estimator -> controller -> manager -> dynamics`` (4); when the
+    magnetometer also samples, ``/clock -> environment -> dynamics -> sim/state ->
+    magnetometer -> estimator -> controller -> manager -> dynamics`` (7, the estimator
+    waits for the sample). Periods not a multiple of the frame count as every frame.
+    """
+    per = _periods(sc)
+    steps = {k: max(1, int(round(v / frame_s))) if v > 0 else 0 for k, v in per.items()}
+    cycle = math.lcm(*(s for s in steps.values() if s)) if any(steps.values()) else 1
+    out = []
+    for k in range(cycle):
+        cmd = steps['cmd'] and k % steps['cmd'] == 0
+        mag = steps['mag'] and k % steps['mag'] == 0
+        out.append(7 if (cmd and mag) else 4 if cmd else 2)
+    return out
+
+
+# ---------------------------------------------------------------------- (1) ring
+def ring_sample(hops: Sequence[int], frames: int) -> Sample:
+    """Timed ring of ``frames`` frames with ``hops`` per frame."""
+    t0 = time.monotonic()
+    r = run_ring(frames, hops)
+    wall = time.monotonic() - t0
+    return Sample(frames, r.frames_per_s, wall, r.cpu_total_s, r.cpu_s / frames)
+
+
+# ---------------------------------------------------------------------- (2), (3) graph
+def graph_run(sc: dict, frames: int, compose: bool) -> Sample:
+    """One launcher run of ``frames`` frames: the clock master's frames/s, wall, CPU."""
     from adcs_nodes.tools.launcher import Launcher
 
-    what = f'graph run (frame {frame_s:g} s, compose={compose})'
+    what = f'graph run ({frames} frames, compose={compose})'
     run_dir = tempfile.mkdtemp(prefix='adcs-bench-')
+    frame_s = float(sc['timing']['frame_s'])
+    cpu0, t0 = _cpu_now(), time.monotonic()
     try:
-        res = Launcher(scenario_with(sc, frame_s, substeps),
-                       duration_s=round(frames * frame_s, 9), compose=compose,
+        res = Launcher(sc, duration_s=round(frames * frame_s, 9), compose=compose,
                        progress=False, run_dir=run_dir, log=lambda *a, **k: None).run()
         if res.exit_code != 0:
             raise BenchError(f'{what} failed: exit {res.exit_code}, {res.message}')
         if res.missed_frames:
             raise BenchError(f'{what} missed {res.missed_frames} frames: not lockstep')
-        fps = res.frames_per_s
-        if not fps > 0.0:
+        if not res.frames_per_s > 0.0:
             raise BenchError(f'{what}: no final status from the clock master')
-        return fps
+        return Sample(frames, res.frames_per_s, time.monotonic() - t0, _cpu_now() - cpu0)
     finally:
         shutil.rmtree(run_dir, ignore_errors=True)
 
 
+class GraphMeasure:
+    """Repeated graph runs; the first call also times a short run (start-up CPU)."""
+
+    def __init__(self, sc: dict, frames: int, compose: bool) -> None:
+        self.sc, self.frames, self.compose = sc, frames, compose
+        self.short: Optional[Sample] = None
+
+    def __call__(self) -> Sample:
+        if self.short is None:
+            self.short = graph_run(self.sc, SHORT_FRAMES, self.compose)
+        s = graph_run(self.sc, self.frames, self.compose)
+        if self.frames > SHORT_FRAMES:
+            extra = self.frames - SHORT_FRAMES
+            s.cpu_per_unit_s = max(0.0, s.cpu_s - self.short.cpu_s) / extra
+        return s
+
+
 # ---------------------------------------------------------------------- (4) plain loop
-class PlainWorld:
-    """The world's models in a plain loop: what the two nodes compute, without ROS.
-
-    Built from the same node parameters the launcher gives the nodes (``build_graph``).
-    """
-
-    def __init__(self, sc: dict, frame_s: float, substeps: int) -> None:
-        from adcs_nodes.core.lockstep import derive_seed
-        from adcs_nodes.nodes.lockstep_node import parse_epoch
-        from adcs_nodes.tools.graph import build_graph
-        from adcs_nodes.core.geomag import make_field
-        from adcs_nodes.core.orbit import make_orbit
-        from sim_node.models.spacecraft_config import DEFAULT_INITIAL, spacecraft_from_config
-
-        nodes = {n.name: n.params for n in build_graph(sc, 1.0)}
-        env, dyn = nodes['environment'], nodes['dynamics']
-        self.epoch = parse_epoch(sc['epoch'])
-        self.orbit = make_orbit(_section(env, 'orbit'), self.epoch)
-        self.field = make_field(_section(env, 'field'), self.epoch)
-        cfg = _section(dyn, 'spacecraft')
-        self.spacecraft = spacecraft_from_config(
-            cfg, seed=derive_seed(int(sc['seed']), 'dynamics/disturbance'))
-        self.initial = {**DEFAULT_INITIAL, **_section(dyn, 'initial')}
-        self.wheel_h0 = cfg.get('wheel_h0_Nms')
-        self.frame_ns = int(round(frame_s * 1e9))
-        self.substeps = int(substeps)
-        self.command = self.spacecraft.zero_command()
-        self.state = None
-
-    def frame(self, k: int) -> None:
-        """Frame k: environment at t_k (as ``EnvironmentNode.compute``), then integrate."""
-        from sim_node.models.dynamics import FrameEnvironment
-        from adcs_nodes.core.orbit import q_eci_ecef
-        from sim_node.models.spacecraft_config import initial_state
-
-        t = k * self.frame_ns / 1e9
-        st = self.orbit.state(t)
-        b_eci, b_dot_eci = self.field.field_and_rate(self.orbit, t)
-        q_eci_ecef(self.epoch + timedelta(seconds=t))   # published by the node, unused here
-        if self.state is None:
-            self.state = initial_state(self.initial, st.q_eci_orbit, st.omega_orbit_eci_eci,
-                                       self.spacecraft, self.wheel_h0)
-        env = FrameEnvironment(r_eci=st.r_eci, v_eci=st.v_eci, b_eci=b_eci, b_dot_eci=b_dot_eci)
-        self.state, _ = self.spacecraft.step(self.state, t, self.frame_ns / 1e9, env,
-                                             self.command, self.substeps)
-
-
 def _section(params: dict, prefix: str) -> dict:
     """Node parameters ``prefix.*`` without the prefix (as ``LockstepNode.section``)."""
     n = len(prefix) + 1
     return {k[n:]: v for k, v in params.items() if k.startswith(prefix + '.')}
 
 
-def plain_fps(sc: dict, frame_s: float, substeps: int, frames: int) -> float:
-    """Frames per wall second of :class:`PlainWorld` over ``frames`` frames."""
-    world = PlainWorld(sc, frame_s, substeps)
-    world.frame(0)   # initial state, imports
-    start = time.perf_counter()
-    for k in range(1, frames + 1):
-        world.frame(k)
-    return frames / (time.perf_counter() - start)
+class PlainLoop:
+    """The paper-000 closed loop's models in a plain loop: what the nodes compute, no ROS.
 
-
-def free_body_steps(frames: int, substeps: int) -> float:
-    """RK4 steps per wall second of the free body + gravity gradient (no environment).
-
-    ``sim_node.models.dynamics.steps_per_second``: ``Spacecraft.step`` over 0.1 s frames,
-    paper-000-like inertia, no disturbances; the frame's validation overhead is included.
+    Built from the node parameters the launcher gives the nodes (``build_graph``). Per frame
+    k (as the graph): environment at t_k; magnetometer on its period; estimator (own onboard
+    reference) predict/update on its period; magnetic controller (own onboard reference) and
+    B-dot on the controller period, manager forwards the magnetic command (B-dot if that is
+    not finite); dynamics integrates to t_k+1 with the command held. A timing model, not a
+    trajectory reference (the nodes' message conversions and checks are not here).
     """
-    from sim_node.models.dynamics import steps_per_second
-    return steps_per_second(frames, substeps)
+
+    def __init__(self, sc: dict) -> None:
+        from adcs_nodes.core import attitude as att
+        from adcs_nodes.core.control.bdot import BdotController
+        from adcs_nodes.core.control.magnetic import MagneticController
+        from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
+        from adcs_nodes.core.estimation.onboard import make_onboard_reference
+        from adcs_nodes.core.geomag import make_field
+        from adcs_nodes.core.lockstep import derive_seed
+        from adcs_nodes.core.orbit import make_orbit
+        from adcs_nodes.nodes.lockstep_node import parse_epoch
+        from adcs_nodes.tools.graph import build_graph
+        from sim_node.models.sensors import Magnetometer
+        from sim_node.models.spacecraft_config import DEFAULT_INITIAL, spacecraft_from_config
+
+        self.att = att
+        nodes = {n.name: n.params for n in build_graph(sc, float(sc['timing']['frame_s']))}
+        env, dyn = nodes['environment'], nodes['dynamics']
+        mag, est = nodes['magnetometer'], nodes['estimator']
+        mc, bd = nodes['magnetic_controller'], nodes['bdot_controller']
+        seed = int(sc['seed'])
+        self.epoch = parse_epoch(sc['epoch'])
+        self.frame_s = float(sc['timing']['frame_s'])
+        self.substeps = int(sc['timing']['substeps'])
+        self.orbit = make_orbit(_section(env, 'orbit'), self.epoch)
+        self.field = make_field(_section(env, 'field'), self.epoch)
+        cfg = _section(dyn, 'spacecraft')
+        self.spacecraft = spacecraft_from_config(
+            cfg, seed=derive_seed(seed, 'dynamics/disturbance'))
+        self.initial = {**DEFAULT_INITIAL, **_section(dyn, 'initial')}
+        self.wheel_h0 = cfg.get('wheel_h0_Nms')
+        self.mag = Magnetometer(
+            noise_std_T=mag['noise_std_T'], bias_T=mag['bias_T'],
+            misalignment_rad=mag['misalignment_rad'],
+            scale_factor_error=mag['scale_factor_error'], lsb_T=mag['lsb_T'],
+            saturation_T=mag['saturation_T'], dropout_probability=mag['dropout_probability'],
+            q_body_sensor=mag['q_body_sensor'], seed=derive_seed(seed, 'magnetometer'))
+        self.mag_every = max(1, int(round(float(mag['period_s']) / self.frame_s)))
+        self.est_every = max(1, int(round(float(est['period_s']) / self.frame_s)))
+        self.ctl_every = max(1, int(round(float(mc['period_s']) / self.frame_s)))
+        self.ref_est = make_onboard_reference(_section(est, 'onboard_orbit'),
+                                              _section(est, 'onboard_field'), self.epoch)
+        self.ref_ctl = make_onboard_reference(_section(mc, 'onboard_orbit'),
+                                              _section(mc, 'onboard_field'), self.epoch)
+        inertia = __import__('numpy').asarray(est['inertia_kgm2'], float).reshape(3, 3)
+        self.filter = MagneticFilter(inertia, theta=est['theta_T2'], tau=est['tau'],
+                                     p0_diag=est['p0_diag'],
+                                     measurement_form=est['measurement_form'],
+                                     literal_update=est['literal_update'],
+                                     substeps=est['substeps'])
+        self.q0 = att.normalize(est['initial_q_orbit_body'])
+        self.magnetic = MagneticController(
+            mode=mc['mode'], alpha=mc['alpha_per_s'], k=mc['k_Nms'],
+            max_dipole_Am2=mc['max_dipole_Am2'], beta=mc['beta'] or None,
+            switch_angle_deg=mc['switch_angle_deg'], switch_rate_deg_s=mc['switch_rate_deg_s'])
+        self.bdot = BdotController(gain=bd['gain_Am2s_per_T'], max_dipole_Am2=bd['max_dipole_Am2'],
+                                   filter_time_constant_s=bd['filter_time_constant_s'])
+        self.command = self.spacecraft.zero_command()
+        self.state = None
+        self.b_body = None
+        self.k = 0
+
+    def frame(self) -> None:
+        """One frame (see class docstring)."""
+        import numpy as np
+
+        from adcs_nodes.core.control import ControlInputs, Estimate
+        from adcs_nodes.core.orbit import q_eci_ecef
+        from sim_node.models.dynamics import ActuatorCommand, FrameEnvironment
+        from sim_node.models.spacecraft_config import initial_state
+
+        att, k = self.att, self.k
+        t = k * self.frame_s
+        st = self.orbit.state(t)                                     # environment node
+        b_eci, b_dot_eci = self.field.field_and_rate(self.orbit, t)
+        q_eci_ecef(self.epoch + timedelta(seconds=t))
+        if self.state is None:
+            self.state = initial_state(self.initial, st.q_eci_orbit, st.omega_orbit_eci_eci,
+                                       self.spacecraft, self.wheel_h0)
+        b_fresh = None
+        if k % self.mag_every == 0:                                  # magnetometer node
+            b_fresh = self.mag.measure(att.to_matrix(self.state.q_eci_body).T @ b_eci)
+        if k % self.est_every == 0:                                  # estimator node
+            ref = self.ref_est.at(t)
+            if k == 0:
+                self.filter.reset(self.q0, att.to_matrix(self.q0).T
+                                  @ np.array([0.0, ref.omega0, 0.0]))
+            else:
+                self.filter.predict(self.est_every * self.frame_s, ref.omega0,
+                                    self.command.dipole_body, b_orbit_for_torque=ref.b_orbit)
+            if b_fresh is not None:
+                self.filter.update(b_fresh, ref.b_orbit)
+        if k % self.ctl_every == 0:                                  # controllers, manager
+            ref = self.ref_ctl.at(t)
+            q, w = self.filter.q_orbit_body, self.filter.omega_body_eci_body
+            estimate = Estimate(q, w, ref.omega0, True)
+            model = att.to_matrix(q).T @ ref.b_orbit
+            dt = self.ctl_every * self.frame_s
+            mag_cmd = self.magnetic.update(ControlInputs(estimate, None, b_fresh, model), t, dt)
+            bdot_cmd = self.bdot.update(ControlInputs(estimate, None, b_fresh), t, dt)
+            cmd = mag_cmd if mag_cmd.is_finite() else bdot_cmd
+            self.command = ActuatorCommand(dipole_body=np.asarray(cmd.dipole_body, float),
+                                           wheel_torque=np.zeros(self.spacecraft.n_wheels))
+        env = FrameEnvironment(r_eci=st.r_eci, v_eci=st.v_eci, b_eci=b_eci, b_dot_eci=b_dot_eci)
+        self.state, _ = self.spacecraft.step(self.state, t, self.frame_s, env, self.command,
+                                             self.substeps)         # dynamics node
+        self.k += 1
+
+
+def plain_sample(sc: dict, frames: int) -> Sample:
+    """:class:`PlainLoop` over ``frames`` frames after one untimed frame."""
+    cpu0, w0 = _cpu_now(), time.monotonic()
+    loop = PlainLoop(sc)
+    loop.frame()
+    c1, t1 = time.process_time(), time.perf_counter()
+    for _ in range(frames):
+        loop.frame()
+    dt, dc = time.perf_counter() - t1, time.process_time() - c1
+    return Sample(frames, frames / dt, time.monotonic() - w0, _cpu_now() - cpu0, dc / frames)
+
+
+# ---------------------------------------------------------------------- (5) free body
+def free_body_sample(steps: int, step_s: float = 0.1, per_frame: int = 10) -> Sample:
+    """Free rigid body + gravity gradient, this project's RK4: ``Spacecraft.step`` frames of
+    ``per_frame`` RK4 steps of ``step_s``, circular 690 km orbit from the orbit model."""
+    import numpy as np
+
+    from adcs_nodes.core.orbit import make_orbit
+    from sim_node.models.dynamics import FrameEnvironment, Spacecraft, SpacecraftState
+
+    orbit = make_orbit({'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0},
+                       datetime(2026, 1, 1, tzinfo=timezone.utc))
+    sc = Spacecraft(np.diag(INERTIA_DIAG))
+    state = SpacecraftState(np.array([0.48, -0.48, 0.64, 0.36]), np.radians([-3.0, 3.0, 3.0]))
+    command = sc.zero_command()
+    frames = max(1, steps // per_frame)
+    frame_s = step_s * per_frame
+    cpu0, w0 = _cpu_now(), time.monotonic()
+    c1, t1 = time.process_time(), time.perf_counter()
+    for k in range(frames):
+        st = orbit.state(k * frame_s)
+        env = FrameEnvironment(r_eci=st.r_eci, v_eci=st.v_eci)
+        state, _ = sc.step(state, k * frame_s, frame_s, env, command, per_frame)
+    dt, dc = time.perf_counter() - t1, time.process_time() - c1
+    n = frames * per_frame
+    return Sample(n, n / dt, time.monotonic() - w0, _cpu_now() - cpu0, dc / n)
+
+
+# ---------------------------------------------------------------------- (6) Basilisk
+#: Runs in the Basilisk environment: free body + gravity gradient, RK4 at ``step`` seconds.
+BSK_SCRIPT = r'''
+import json, sys, time
+from Basilisk.simulation import spacecraft, GravityGradientEffector
+from Basilisk.utilities import SimulationBaseClass, macros, orbitalMotion, simIncludeGravBody
+steps, step_s, ixx, iyy, izz = int(sys.argv[1]), float(sys.argv[2]), *map(float, sys.argv[3:6])
+sim = SimulationBaseClass.SimBaseClass()
+proc = sim.CreateNewProcess('p')
+proc.addTask(sim.CreateNewTask('t', macros.sec2nano(step_s)))
+sc = spacecraft.Spacecraft()
+sc.ModelTag = 'sc'
+sc.hub.mHub = 100.0
+sc.hub.IHubPntBc_B = [[ixx, 0.0, 0.0], [0.0, iyy, 0.0], [0.0, 0.0, izz]]
+sim.AddModelToTask('t', sc)
+grav = simIncludeGravBody.gravBodyFactory()
+earth = grav.createEarth()
+earth.isCentralBody = True
+grav.addBodiesTo(sc)
+gg = GravityGradientEffector.GravityGradientEffector()
+gg.ModelTag = 'gg'
+gg.addPlanetName(earth.planetName)
+sc.addDynamicEffector(gg)
+sim.AddModelToTask('t', gg)
+oe = orbitalMotion.ClassicElements()
+oe.a, oe.e, oe.i = (6378.137 + 690.0) * 1e3, 0.0, 98.0 * macros.D2R
+oe.Omega, oe.omega, oe.f = 0.0, 0.0, 0.0
+r, v = orbitalMotion.elem2rv(earth.mu, oe)
+sc.hub.r_CN_NInit, sc.hub.v_CN_NInit = r, v
+sc.hub.sigma_BNInit = [[0.1], [0.2], [-0.3]]
+sc.hub.omega_BN_BInit = [[-3.0 * macros.D2R], [3.0 * macros.D2R], [3.0 * macros.D2R]]
+sim.InitializeSimulation()
+sim.ConfigureStopTime(macros.sec2nano(10 * step_s))
+sim.ExecuteSimulation()
+c0, t0 = time.process_time(), time.perf_counter()
+sim.ConfigureStopTime(macros.sec2nano((10 + steps) * step_s))
+sim.ExecuteSimulation()
+dt, dc = time.perf_counter() - t0, time.process_time() - c0
+w = sc.scStateOutMsg.read().omega_BN_B
+import Basilisk
+print(json.dumps({'steps': steps, 'seconds': dt, 'cpu_s': dc, 'omega': list(w),
+                  'version': getattr(Basilisk, '__version__', '?')}))
+'''
+
+
+def basilisk_python(mode: str, log: Callable[[str], None]) -> tuple[Optional[str], str]:
+    """Interpreter with Basilisk importable, installing ``bsk`` on demand; or (None, why)."""
+    if mode == 'skip':
+        return None, 'skipped (--basilisk skip)'
+    py = os.path.join(BSK_VENV, 'bin', 'python')
+    probe = [py, '-c', 'import Basilisk.simulation.spacecraft']
+    try:
+        if os.path.exists(py) and subprocess.run(probe, capture_output=True,
+                                                 timeout=120).returncode == 0:
+            return py, ''
+        log(f'[bench] installing Basilisk (pip install bsk) into {BSK_VENV} (once, ~20 s) ...')
+        if not os.path.exists(py):
+            subprocess.run([sys.executable, '-m', 'venv', BSK_VENV], check=True,
+                           capture_output=True, timeout=120)
+        pip = subprocess.run([py, '-m', 'pip', 'install', '-q', 'bsk'], capture_output=True,
+                             text=True, timeout=600)
+        if pip.returncode != 0:
+            return None, ('not measured: pip install bsk failed: '
+                          + (pip.stderr.strip().splitlines() or ['?'])[-1][:200])
+        if subprocess.run(probe, capture_output=True, timeout=120).returncode != 0:
+            return None, 'not measured: Basilisk installed but does not import'
+        return py, ''
+    except (OSError, subprocess.SubprocessError) as exc:
+        return None, f'not measured: Basilisk could not be installed ({exc})'
+
+
+class BasiliskMeasure:
+    """Basilisk steps/s of :data:`BSK_SCRIPT` in its own interpreter."""
+
+    def __init__(self, python: str, steps: int) -> None:
+        self.python, self.steps = python, steps
+        self.version = '?'
+
+    def __call__(self) -> Sample:
+        cpu0, w0 = _cpu_now(), time.monotonic()
+        proc = subprocess.run([self.python, '-c', BSK_SCRIPT, str(self.steps), '0.1',
+                               *map(str, INERTIA_DIAG)], capture_output=True, text=True,
+                              timeout=600)
+        lines = [ln for ln in proc.stdout.splitlines() if ln.startswith('{')]
+        if proc.returncode != 0 or not lines:
+            raise BenchError(f'Basilisk run failed: {proc.stderr.strip()[-1500:]}')
+        d = json.loads(lines[-1])
+        if not all(math.isfinite(x) for x in d['omega']):
+            raise BenchError(f'Basilisk run diverged: omega {d["omega"]}')
+        self.version = str(d.get('version', '?'))
+        return Sample(d['steps'], d['steps'] / d['seconds'], time.monotonic() - w0,
+                      _cpu_now() - cpu0, d['cpu_s'] / d['steps'])
 
 
 # ---------------------------------------------------------------------- table
-@dataclass
-class Row:
-    """One line of the table, with the measurement that fills it.
-
-    ``measure()`` returns frames per wall second (``kind='fps'``) or RK4 steps per wall
-    second (``kind='rk4'``); each call is one repeat. A row without it is a reference line.
-    """
-
-    label: str
-    deployment: str
-    frame_s: float = 0.0
-    substeps: int = 0
-    measure: Optional[Callable[[], float]] = None
-    kind: str = 'fps'
-    note: str = ''
-    values: List[float] = field(default_factory=list)
-
-    def stat(self, kind: str) -> Optional[Stat]:
-        """Frames/s (``'fps'``) or RK4 steps/s (``'rk4'``) of this row, if it has them."""
-        if not self.values:
-            return None
-        if kind == self.kind:
-            return Stat(self.values)
-        if kind == 'rk4' and self.substeps:
-            return Stat([v * self.substeps for v in self.values])
-        return None
-
-
-def _num(x: float) -> str:
-    return f'{x:,.0f}' if x >= 100 else f'{x:,.1f}'
-
-
-def _stat(s: Optional[Stat], scale: float = 1.0) -> str:
-    if s is None:
+def _num(x: Optional[float]) -> str:
+    if x is None or not math.isfinite(x):
         return '-'
-    if len(s.values) == 1:
-        return _num(s.median * scale)
-    return f'{_num(s.median * scale)} ({_num(s.lo * scale)}-{_num(s.hi * scale)})'
+    return f'{x:,.0f}' if abs(x) >= 100 else f'{x:,.1f}' if abs(x) >= 1 else f'{x:.3f}'
+
+
+HEADER = ['', 'measurement', 'rate /wall s (min-max)', 'unit', 'sim s/wall s', 'wall s',
+          'CPU s', 'CPU ms/unit', 'load', 'note']
 
 
 def _cells(r: Row) -> List[str]:
-    """Table cells of a row: the range only on the measured quantity, medians elsewhere."""
-    fps, rk4 = r.stat('fps'), r.stat('rk4')
-    frame = f'{r.frame_s:g} s' if r.frame_s else '-'
-    step = f'{r.frame_s / r.substeps:g} s x {r.substeps}' if r.substeps else '-'
-    us = f'{1e6 / fps.median:,.0f}' if fps is not None else '-'
-    sim = _num(fps.median * r.frame_s) if fps is not None and r.frame_s else '-'
-    steps = _stat(rk4) if r.kind == 'rk4' else (_num(rk4.median) if rk4 is not None else '-')
-    return [r.label, r.deployment, frame, step, _stat(fps), us, sim, steps, r.note]
-
-
-HEADER = ['', 'measurement', 'frame', 'RK4 step x n', 'frames/s', 'us/frame', 'sim s/wall s',
-          'RK4 steps/wall s', '']
+    if not r.samples:
+        return [r.key, r.label, '-', r.unit, '-', '-', '-', '-', '-', r.skipped or r.note]
+    rates = [s.rate for s in r.samples]
+    rate = _num(r.rate) + (f' ({_num(min(rates))}-{_num(max(rates))})' if len(rates) > 1
+                           else '')
+    cpu_unit = r.median('cpu_per_unit_s')
+    return [r.key, r.label, rate, r.unit, _num(r.rate * r.step_s), _num(r.median('wall_s')),
+            _num(r.median('cpu_s')), '-' if cpu_unit is None else f'{cpu_unit * 1e3:.3f}',
+            f'{statistics.median(r.loads):.2f}', r.note]
 
 
 def format_table(rows: Sequence[Row]) -> str:
     """Aligned plain-text table of ``rows`` (numbers right-aligned)."""
     cells = [HEADER] + [_cells(r) for r in rows]
     widths = [max(len(c[i]) for c in cells) for i in range(len(HEADER))]
-    right = {4, 5, 6, 7}
+    right = {2, 4, 5, 6, 7, 8}
     lines = []
     for n, c in enumerate(cells):
         parts = [c[i].rjust(widths[i]) if i in right else c[i].ljust(widths[i])
@@ -288,134 +536,133 @@ def format_table(rows: Sequence[Row]) -> str:
     return '\n'.join(lines)
 
 
-def verdict(name: str, ratio: float, target: float, detail: str) -> str:
-    """One MET / NOT MET line."""
+def verdict(name: str, ratio: Optional[float], target: float, detail: str) -> str:
+    """One MET / NOT MET line (``ratio`` None: not measured)."""
+    if ratio is None:
+        return f'  {name:<46} {"-":>7}    (target >= {target:g} x)  NOT MEASURED  {detail}'
     ok = 'MET' if ratio >= target else 'NOT MET'
-    return f'  {name:<44} {ratio:5.2f} x  (target >= {target:3.1f} x)  {ok:<7}  {detail}'
+    return f'  {name:<46} {ratio:7.2f} x  (target >= {target:g} x)  {ok:<7}  {detail}'
 
 
 # ---------------------------------------------------------------------- main
-def plan(sc: dict, frames: int, cases: Sequence[Tuple[float, int]]) -> List[Row]:
+def plan(sc: dict, frames: int, basilisk: Optional[str], bsk_why: str) -> List[Row]:
     """The table's rows, each with the measurement that fills it (not run yet)."""
-    rows = [Row('(1)', 'transport ring, 2 processes', note='2 hops per frame',
-                measure=RingMeasure(3 * frames))]
-    for compose, tag, what in ((False, '(2)', 'world graph, 1 process/node'),
-                               (True, '(3)', 'world graph, composed')):
-        for frame_s, sub in cases:
-            rows.append(Row(tag, what, frame_s, sub, measure=functools.partial(
-                graph_fps, sc, frame_s, sub, frames, compose)))
-    for frame_s, sub in cases:
-        rows.append(Row('(4)', 'plain Python loop, no ROS', frame_s, sub,
-                        measure=functools.partial(plain_fps, sc, frame_s, sub, frames)))
-    rows.append(Row('(4)', 'free body + grav. gradient', 0.1, 10, kind='rk4',
-                    note='Spacecraft.step only',
-                    measure=functools.partial(free_body_steps, max(1, frames // 2), 10)))
-    rows.append(Row('ref', 'Basilisk (C++), same case', kind='rk4',
-                    values=[BASILISK_RK4_STEPS_PER_S], note='reference, not measured here'))
+    hops = hop_pattern(sc, FRAME_S)
+    mean_hops = sum(hops) / len(hops)
+    rows = [Row('(1)', 'ring, 2 processes', note=f'{mean_hops:.2f} hops/frame '
+                f'({"/".join(map(str, hops))})', measure=lambda: ring_sample(hops, 3 * frames)),
+            Row('(2)', 'graph, 1 process/node', note=f'{sc["name"]}, {FRAME_S:g} s frames',
+                measure=GraphMeasure(sc, frames, compose=False)),
+            Row('(3)', 'graph, composed', note='same graph, one process',
+                measure=GraphMeasure(sc, frames, compose=True)),
+            Row('(4)', 'plain loop, same models', note='no ROS',
+                measure=lambda: plain_sample(sc, frames)),
+            Row('(5)', 'free body + GG, this RK4', unit='RK4 steps', step_s=0.1,
+                note='Spacecraft.step, 0.1 s step',
+                measure=lambda: free_body_sample(20 * frames))]
+    bsk = Row('(6)', 'free body + GG, Basilisk', unit='RK4 steps', step_s=0.1,
+              note='bsk, 0.1 s step, + orbit')
+    if basilisk:
+        bsk.measure = BasiliskMeasure(basilisk, 20 * frames)
+    else:
+        bsk.skipped = bsk_why
+    rows.append(bsk)
     return rows
 
 
-def _find(rows: Sequence[Row], label: str, frame_s: float = 0.0, kind: str = 'fps') -> Stat:
-    row = next(r for r in rows if r.label == label and r.frame_s == frame_s and r.kind == kind)
-    return row.stat(kind)
+def _row(rows: Sequence[Row], key: str) -> Row:
+    return next(r for r in rows if r.key == key)
 
 
-def run_bench(scenario: str, frames: int, repeats: int, cases: Sequence[Tuple[float, int]],
+def _ratio(a: Optional[float], b: Optional[float]) -> Optional[float]:
+    return a / b if a is not None and b else None
+
+
+def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
               log: Callable[[str], None]) -> str:
-    """Run every measurement and return the report text (table, breakdown, targets).
-
-    The repeats are interleaved (every row once, then again), so a change of machine load
-    during the bench spreads over all rows instead of biasing one.
-    """
+    """Run every measurement and return the report text (table, targets)."""
+    from adcs_nodes.nodes.runtime import limit_blas_threads
     from adcs_nodes.tools.scenario import load_scenario
 
-    sc = load_scenario(scenario)
+    limit_blas_threads()   # this process runs the plain loops: one BLAS thread as the nodes
+    sc = bench_scenario(load_scenario(scenario))
     info = machine_info()
     t_start = time.monotonic()
-    rows = plan(sc, frames, cases)
+    bsk_py, bsk_why = basilisk_python(basilisk_mode, log)
+    rows = plan(sc, frames, bsk_py, bsk_why)
     for rep in range(repeats):
         for r in rows:
             if r.measure is None:
                 continue
-            frame = f', {r.frame_s:g} s frames' if r.frame_s else ''
-            log(f'[bench] repeat {rep + 1}/{repeats}: {r.label} {r.deployment}{frame} ...')
-            r.values.append(float(r.measure()))
+            log(f'[bench] repeat {rep + 1}/{repeats}: {r.key} {r.label} ...')
+            r.loads.append(load1())
+            try:
+                r.samples.append(r.measure())
+            except BenchError as exc:
+                if r.key != '(6)':
+                    raise
+                r.skipped, r.measure = f'not measured: {exc}'[:200], None
     elapsed = time.monotonic() - t_start
-    load_end = machine_info()['load']
-    ring_meta = rows[0].measure.last
-
+    end_load = machine_info()['load']
+    ring, graph, comp = _row(rows, '(1)'), _row(rows, '(2)'), _row(rows, '(3)')
+    free, bsk = _row(rows, '(5)'), _row(rows, '(6)')
+    cmd = 'make bench  (= ros2_ws/run.sh python -m sim_node.tools.bench ' + \
+        ' '.join(sys.argv[1:]) + ')'
     out = [
-        f'ADCS lockstep throughput bench, {datetime.now().strftime("%Y-%m-%d %H:%M")}, '
-        f'scenario {os.path.basename(scenario)}',
-        f'machine: nproc {info["nproc"]}, {info["cpu"]}, Python {info["python"]}, '
-        f'rclpy executor {ring_meta.executor}, RMW {ring_meta.rmw}',
-        f'load average (1/5/15 min): {info["load"]} at start, {load_end} at end',
-        f'sizes: {frames} frames per graph/loop run, {3 * frames} round trips per ring run; '
-        f'{repeats} interleaved repeats per row: median (min-max); took {elapsed:.0f} s',
+        f'ADCS bench, {datetime.now().strftime("%Y-%m-%d %H:%M")}, scenario '
+        f'{os.path.basename(scenario)} at {FRAME_S:g} s frames x {SUBSTEPS} RK4 substeps',
+        f'command: {cmd.replace(" )", ")")}',
+        f'machine: nproc {info["nproc"]}, {info["cpu"]}, Python {info["python"]}',
+        f'load average (1/5/15 min): {info["load"]} at start, {end_load} at end',
+        f'sizes: {frames} frames per graph/loop run ({SHORT_FRAMES}-frame run subtracted for '
+        f'CPU/frame), {3 * frames} ring frames, {20 * frames} free-body steps; {repeats} '
+        f'interleaved repeats: medians; took {elapsed:.0f} s',
         '',
         format_table(rows),
         '',
-        'Per frame (medians; lockstep is sequential, so the parts add up):',
+        'CPU s: all processes of the row, start-up included. CPU ms/unit: timed frames only.',
     ]
-    ring = _find(rows, '(1)')
-    ring_us = 1e6 / ring.median
-    for frame_s, _ in cases:
-        g_us = 1e6 / _find(rows, '(2)', frame_s).median
-        c_us = 1e6 / _find(rows, '(3)', frame_s).median
-        p_us = 1e6 / _find(rows, '(4)', frame_s).median
-        out.append(f'  {frame_s:g} s frames: graph {g_us:,.0f} us = transport {ring_us:,.0f} '
-                   f'+ models {p_us:,.0f} + node/message overhead {g_us - ring_us - p_us:,.0f}'
-                   f'; composed {c_us:,.0f} us = models {p_us:,.0f} + rest {c_us - p_us:,.0f}')
-    out += ['', 'Design targets, as measured:']
-    for frame_s, _ in cases:
-        g = _find(rows, '(2)', frame_s).median
-        c = _find(rows, '(3)', frame_s).median
-        out.append(verdict(f'(2) graph >= 0.5 x (1) ring, {frame_s:g} s frames', g / ring.median,
-                           TARGET_GRAPH_VS_RING, f'{_num(g)} vs {_num(ring.median)} frames/s'))
-        out.append(verdict(f'(3) composed >= 3 x (2) graph, {frame_s:g} s frames', c / g,
-                           TARGET_COMPOSED_VS_GRAPH, f'{_num(c)} vs {_num(g)} frames/s'))
-    free = _find(rows, '(4)', 0.1, kind='rk4')
-    out.append(verdict('(4) RK4 comparable with Basilisk (>= 0.5 x)',
-                       free.median / BASILISK_RK4_STEPS_PER_S, TARGET_LOOP_VS_BASILISK,
-                       f'{_num(free.median)} vs {_num(BASILISK_RK4_STEPS_PER_S)} RK4 steps/s'))
-    out += ['', f'Noise: {info["nproc"]} cores and other work may be running (load average '
-            'above): compare the ranges, not the last digits.']
+    if bsk.samples:
+        out.append(f'Basilisk {getattr(bsk.measure, "version", "?")} from {BSK_VENV}.')
+    rtf = comp.rate * FRAME_S if comp.rate else None
+    out += ['', 'Targets (ratios of this run):',
+            verdict('(a) graph >= 0.5 x ring (same hops/frame)', _ratio(graph.rate, ring.rate),
+                    TARGET_GRAPH_VS_RING, f'{_num(graph.rate)} vs {_num(ring.rate)} frames/s'),
+            verdict('(b) composed >= 3 x graph', _ratio(comp.rate, graph.rate),
+                    TARGET_COMPOSED_VS_GRAPH, f'{_num(comp.rate)} vs {_num(graph.rate)} '
+                    'frames/s'),
+            verdict(f'(c) composed >= 2000 x real time, {FRAME_S:g} s frames',
+                    _ratio(rtf, 1.0), TARGET_REAL_TIME, f'{_num(rtf)} x real time'),
+            verdict('(d) plain loop (5) >= 0.5 x Basilisk (6)', _ratio(free.rate, bsk.rate),
+                    TARGET_LOOP_VS_BASILISK,
+                    f'{_num(free.rate)} vs {_num(bsk.rate)} RK4 steps/s'
+                    if bsk.samples else bsk.skipped)]
+    out += ['', f'Noise: {info["nproc"]} cores, other work may be running (load average above).']
     return '\n'.join(out) + '\n'
-
-
-def parse_cases(text: str) -> List[Tuple[float, int]]:
-    """``"1.0:10,0.1:1"`` -> ``[(1.0, 10), (0.1, 1)]`` (frame [s] : RK4 substeps)."""
-    cases = []
-    for item in text.split(','):
-        frame, _, sub = item.partition(':')
-        cases.append((float(frame), int(sub or 1)))
-    if not cases or any(f <= 0 or s < 1 for f, s in cases):
-        raise argparse.ArgumentTypeError(f'bad --cases {text!r} (want e.g. 1.0:10,0.1:1)')
-    return cases
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Entry point of ``make bench``."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--frames', type=int, default=3000,
-                    help='lockstep frames per graph and loop run (the ring runs 3x as many)')
-    ap.add_argument('--repeats', type=int, default=3, help='runs per row (median, min-max)')
-    ap.add_argument('--quick', action='store_true', help='500 frames, 2 repeats')
-    ap.add_argument('--cases', type=parse_cases, default=list(DEFAULT_CASES),
-                    help='frame_s:substeps list (default 1.0:10,0.1:1)')
+    ap.add_argument('--frames', type=int, default=2000,
+                    help='frames per graph and loop run (ring 3x, free body 20x as many)')
+    ap.add_argument('--repeats', type=int, default=2, help='runs per row (median, min-max)')
+    ap.add_argument('--quick', action='store_true', help='300 frames, 1 repeat')
+    ap.add_argument('--basilisk', choices=['auto', 'skip'], default='auto',
+                    help='auto: measure Basilisk, installing bsk on demand in its own venv')
     ap.add_argument('--scenario', default=DEFAULT_SCENARIO)
     ap.add_argument('--out', default='out/bench.txt', help='also write the report here')
     args = ap.parse_args(argv)
     if args.quick:
-        args.frames, args.repeats = 500, 2
-    if args.frames < 1 or args.repeats < 1:
-        ap.error('--frames and --repeats must be >= 1')
+        args.frames, args.repeats = 300, 1
+    if args.frames <= SHORT_FRAMES or args.repeats < 1:
+        ap.error(f'--frames must be > {SHORT_FRAMES} and --repeats >= 1')
 
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
     try:
-        text = run_bench(args.scenario, args.frames, args.repeats, args.cases, log)
+        text = run_bench(args.scenario, args.frames, args.repeats, args.basilisk, log)
     except (BenchError, RingError) as exc:
         print(f'[bench] failed: {exc}', file=sys.stderr)
         return 1

@@ -1,33 +1,42 @@
-"""Bare lockstep ring of two rclpy processes: the transport limit of a 2-hop world frame.
+"""Bare lockstep ring of two rclpy processes: the transport limit of a lockstep frame.
 
-Process A (``ping``) publishes a stamp on ``bench/ping``; process B (``pong``) echoes it on
-``bench/pong``; A publishes the next stamp when the echo arrives. One round trip is one
-lockstep frame of the world graph (``/clock`` -> ``sim/environment`` -> next ``/clock``), with
-the same QoS as the graph (``QOS_DATA``: reliable, keep last 100) and the same executor
-(``runtime.make_executor``: ``EventsExecutor``). No model work: this is the ceiling.
+A frame of the real graph is a chain of dependent messages ("hops") between processes; for
+paper 000's closed loop at 1 s frames: ``/clock`` -> environment -> dynamics is 2 hops; on a
+frame with a command due, ``/clock`` -> estimator -> controller -> manager -> dynamics is 4;
+on a magnetometer frame ``... dynamics -> sim/state -> magnetometer -> estimator -> controller
+-> manager -> dynamics`` is 7 (:func:`sim_node.tools.bench.hop_pattern`). This ring relays one
+message ``hops[k % len(hops)]`` times for frame ``k`` between process A and process B (the
+message carries frame ``k`` in ``clock.sec`` and the hop index in ``clock.nanosec``), with the
+same QoS as the graph (``QOS_DATA``) and the same executor (``runtime.make_executor``). No
+model work: this is the ceiling of a graph with that critical path.
 
-Start without fixed sleeps: B publishes a hello (stamp ``sec = -1``) once its publisher and its
-subscription are matched, and repeats it until the first ping arrives; A starts when it has
-the hello and its own publisher has a matched subscription. A runs ``warmup`` untimed frames,
-then ``frames`` timed ones, and prints one JSON line. B stops on SIGINT/SIGTERM or when A's
-publisher has gone. Each ring runs in its own ``ROS_DOMAIN_ID`` (101..200, claimed with a lock
-file next to the launcher's 1..100) with localhost-only discovery.
+Start without fixed sleeps: B publishes a hello (``sec = -1``) once its publisher and its
+subscription are matched, until the first hop arrives; A starts when it has the hello and its
+own publisher has a matched subscription. After ``warmup`` untimed frames, the process that
+receives the first hop of frame ``warmup`` notes the time (``time.monotonic``: one system-wide
+clock, comparable between the two processes), the one that receives the first hop of frame
+``warmup + frames`` notes the end, forwards that message once (so the other one also ends)
+and exits. Each process prints one JSON line: its times and its CPU seconds over the timed
+frames (``time.process_time`` at its first timed message and at the end). Each ring runs in
+its own ``ROS_DOMAIN_ID`` (101..200, claimed with a lock file next to the launcher's 1..100)
+with localhost-only discovery.
 
 Usage (what :func:`run_ring` does)::
 
-    python -m sim_node.tools.bench_ring pong &
-    python -m sim_node.tools.bench_ring ping --frames 3000 --warmup 200
+    python -m sim_node.tools.bench_ring pong --hops 7,2,4,2 &
+    python -m sim_node.tools.bench_ring ping --hops 7,2,4,2 --frames 3000 --warmup 200
 """
 from __future__ import annotations
 
 import argparse
 import json
+import resource
 import signal
 import subprocess
 import sys
 import time
 from dataclasses import dataclass
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from adcs_nodes.tools.launcher import LaunchError, acquire_domain, child_env
 
@@ -47,11 +56,17 @@ class RingResult:
     Attributes
     ----------
     frames : int
-        Timed round trips (after the warm-up).
+        Timed frames (after the warm-up).
+    hops : int
+        Messages relayed in the timed frames.
     seconds : float
-        Wall time of the timed round trips [s].
+        Wall time of the timed frames [s].
     frames_per_s : float
         ``frames / seconds`` [1/s].
+    cpu_s : float
+        CPU seconds of both processes over the timed frames [s].
+    cpu_total_s : float
+        CPU seconds of both processes from start to exit (start-up included) [s].
     executor : str
         Executor class of the ping process.
     rmw : str
@@ -59,8 +74,11 @@ class RingResult:
     """
 
     frames: int
+    hops: int
     seconds: float
     frames_per_s: float
+    cpu_s: float
+    cpu_total_s: float
     executor: str
     rmw: str
 
@@ -80,110 +98,90 @@ def _start_node(name: str):
     return rclpy, node, executor
 
 
-def _stamp(k: int):
+def _stamp(k: int, j: int = 0):
     from builtin_interfaces.msg import Time
     from rosgraph_msgs.msg import Clock
-    return Clock(clock=Time(sec=k, nanosec=0))
+    return Clock(clock=Time(sec=k, nanosec=j))
 
 
-def ping_main(frames: int, warmup: int, timeout_s: float) -> int:
-    """Process A: drive ``warmup + frames`` round trips, print the result as JSON."""
+def relay_main(starter: bool, hops: Sequence[int], frames: int, warmup: int,
+               timeout_s: float) -> int:
+    """One ring process (A if ``starter`` else B): relay hops, print the result as JSON."""
     from rclpy.task import Future
     from rosgraph_msgs.msg import Clock
 
     from adcs_nodes.nodes.lockstep_node import QOS_DATA
 
-    rclpy, node, executor = _start_node('bench_ping')
-    pub = node.create_publisher(Clock, PING, QOS_DATA)
+    rclpy, node, executor = _start_node('bench_ping' if starter else 'bench_pong')
+    pub = node.create_publisher(Clock, PING if starter else PONG, QOS_DATA)
     done = Future()
-    st = {'k': -1, 'hello': False, 't0': 0.0, 't1': 0.0}
+    end = warmup + frames
+    st: Dict[str, Optional[float]] = {'started': False, 'hello': False, 'got': False,
+                                      't0': None, 't1': None, 'cpu0': None, 'cpu1': None}
 
     def try_start() -> None:
-        if st['k'] < 0 and st['hello'] and pub.get_subscription_count() >= 1:
-            st['k'] = 0
-            if warmup == 0:
-                st['t0'] = time.perf_counter()
-            pub.publish(_stamp(0))
+        if starter and not st['started'] and st['hello'] and pub.get_subscription_count() >= 1:
+            st['started'] = True
+            pub.publish(_stamp(0, 0))
 
-    def on_pong(msg: Clock) -> None:
-        k = int(msg.clock.sec)
-        if k < 0:
+    def on_msg(msg: Clock) -> None:
+        k, j = int(msg.clock.sec), int(msg.clock.nanosec)
+        if k < 0:   # B's hello
             st['hello'] = True
             try_start()
             return
-        if k != st['k']:
-            return  # a duplicate; lockstep waits for the echo of the current stamp
-        k += 1
-        st['k'] = k
-        if k == warmup:
-            st['t0'] = time.perf_counter()
-        if k == warmup + frames:
-            st['t1'] = time.perf_counter()
-            done.set_result(True)
+        st['got'] = True
+        if st['cpu0'] is None and k >= warmup:
+            st['cpu0'] = time.process_time()
+        if k == warmup and j == 0:
+            st['t0'] = time.monotonic()
+        if k >= end:
+            if st['t1'] is None and j == 0:
+                st['t1'] = time.monotonic()
+                pub.publish(_stamp(k, 1))   # once, untimed: the other process ends too
+            st['cpu1'] = time.process_time()
+            if not done.done():
+                done.set_result(True)
             return
-        pub.publish(_stamp(k))
+        j += 1
+        if j >= hops[k % len(hops)]:
+            k, j = k + 1, 0
+        pub.publish(_stamp(k, j))
 
-    node.create_subscription(Clock, PONG, on_pong, QOS_DATA)
-    node.create_timer(0.02, try_start)   # the publisher may match after the hello
-    deadline = time.monotonic() + timeout_s
-    while not done.done() and time.monotonic() < deadline:
-        executor.spin_until_future_complete(done, timeout_sec=0.1)
-    code = 0
-    if done.done():
-        dt = st['t1'] - st['t0']
-        print(json.dumps({'frames': frames, 'seconds': dt, 'frames_per_s': frames / dt,
-                          'executor': type(executor).__name__,
-                          'rmw': rclpy.get_rmw_implementation_identifier()}), flush=True)
-    else:
-        print(f'ping: stuck at frame {st["k"]} (hello={st["hello"]}, matched subscriptions='
-              f'{pub.get_subscription_count()}) after {timeout_s:g} s', file=sys.stderr)
-        code = 1
-    executor.remove_node(node)
-    node.destroy_node()
-    executor.shutdown()
-    rclpy.shutdown()
-    return code
-
-
-def pong_main(timeout_s: float) -> int:
-    """Process B: echo every ping; say hello until the first ping; stop when A is gone."""
-    from rclpy.task import Future
-    from rosgraph_msgs.msg import Clock
-
-    from adcs_nodes.nodes.lockstep_node import QOS_DATA
-
-    rclpy, node, executor = _start_node('bench_pong')
-    pub = node.create_publisher(Clock, PONG, QOS_DATA)
-    st = {'pinged': False, 'stop': False}
-
-    def on_ping(msg: Clock) -> None:
-        st['pinged'] = True
-        pub.publish(msg)
-
-    sub = node.create_subscription(Clock, PING, on_ping, QOS_DATA)
+    sub = node.create_subscription(Clock, PONG if starter else PING, on_msg, QOS_DATA)
 
     def on_timer() -> None:
-        if not st['pinged']:
-            if pub.get_subscription_count() >= 1 and sub.get_publisher_count() >= 1:
-                pub.publish(_stamp(-1))
-        elif sub.get_publisher_count() == 0:
-            st['stop'] = True   # the ping process has ended
+        if starter:
+            try_start()
+        elif not st['got'] and pub.get_subscription_count() >= 1 \
+                and sub.get_publisher_count() >= 1:
+            pub.publish(_stamp(-1))
 
     def on_signal(signum, frame) -> None:
-        st['stop'] = True
+        if not done.done():
+            done.set_result(False)
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-    node.create_timer(0.05, on_timer)
-    never = Future()
+    node.create_timer(0.02, on_timer)
     deadline = time.monotonic() + timeout_s
-    while not st['stop'] and time.monotonic() < deadline:
-        executor.spin_until_future_complete(never, timeout_sec=0.1)
+    while not done.done() and time.monotonic() < deadline:
+        executor.spin_until_future_complete(done, timeout_sec=0.1)
+    if done.done() and done.result():
+        executor.spin_until_future_complete(Future(), timeout_sec=0.05)  # let the forward go
+    ok = done.done() and bool(done.result())
+    print(json.dumps({'t0': st['t0'], 't1': st['t1'], 'cpu0': st['cpu0'], 'cpu1': st['cpu1'],
+                      'executor': type(executor).__name__,
+                      'rmw': rclpy.get_rmw_implementation_identifier()}), flush=True)
+    if not ok:
+        print(f'{"ping" if starter else "pong"}: did not finish (started={st["started"]}, '
+              f'hello={st["hello"]}, matched subscriptions={pub.get_subscription_count()}) '
+              f'after {timeout_s:g} s', file=sys.stderr)
     executor.remove_node(node)
     node.destroy_node()
     executor.shutdown()
     rclpy.shutdown()
-    return 0
+    return 0 if ok else 1
 
 
 # ---------------------------------------------------------------------- driver
@@ -206,15 +204,23 @@ def _stop(proc: subprocess.Popen, grace_s: float = 5.0) -> None:
         proc.wait()
 
 
-def run_ring(frames: int, warmup: int = 200, timeout_s: float = 60.0) -> RingResult:
-    """Start the two ring processes in a private domain, time ``frames`` round trips.
+def _children_cpu_s() -> float:
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
+def run_ring(frames: int, hops: Sequence[int] = (2,), warmup: int = 200,
+             timeout_s: float = 60.0) -> RingResult:
+    """Start the two ring processes in a private domain, time ``frames`` frames.
 
     Parameters
     ----------
     frames : int
-        Timed round trips (lockstep frames), ``>= 1``.
+        Timed frames, ``>= 1``.
+    hops : sequence of int
+        Hops (messages) of frame ``k`` are ``hops[k % len(hops)]``, each ``>= 1``.
     warmup : int
-        Untimed round trips first (discovery tail, shared-memory set-up, caches).
+        Untimed frames first (discovery tail, caches), ``>= 1``.
     timeout_s : float
         Wall-clock limit for the whole ring, start-up included [s].
 
@@ -224,20 +230,27 @@ def run_ring(frames: int, warmup: int = 200, timeout_s: float = 60.0) -> RingRes
 
     Raises
     ------
+    ValueError
+        On ``frames < 1``, ``warmup < 1`` or a bad hop list.
     RingError
         If a process fails or the ring does not finish in time (with the processes' output).
     """
-    if frames < 1:
-        raise ValueError(f'frames must be >= 1, got {frames}')
+    hops = [int(h) for h in hops]
+    if frames < 1 or warmup < 1:
+        raise ValueError(f'frames and warmup must be >= 1, got {frames}, {warmup}')
+    if not hops or min(hops) < 1:
+        raise ValueError(f'hops must be a non-empty list of integers >= 1, got {hops}')
     domain, lock = acquire_bench_domain()
     env: Dict[str, str] = child_env(domain)     # the same transport as the graph runs
     cmd: List[str] = [sys.executable, '-m', 'sim_node.tools.bench_ring']
-    pong = subprocess.Popen(cmd + ['pong', '--timeout', str(timeout_s + 10.0)], env=env,
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+    common = ['--hops', ','.join(map(str, hops)), '--frames', str(frames), '--warmup',
+              str(warmup)]
+    cpu_before = _children_cpu_s()
+    pong = subprocess.Popen(cmd + ['pong', *common, '--timeout', str(timeout_s + 10.0)],
+                            env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
-        ping = subprocess.Popen(cmd + ['ping', '--frames', str(frames), '--warmup',
-                                       str(warmup), '--timeout', str(timeout_s)],
+        ping = subprocess.Popen(cmd + ['ping', *common, '--timeout', str(timeout_s)],
                                 env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True)
         try:
@@ -245,32 +258,57 @@ def run_ring(frames: int, warmup: int = 200, timeout_s: float = 60.0) -> RingRes
         except subprocess.TimeoutExpired:
             ping.kill()
             out, err = ping.communicate()
+        try:
+            pong_out, pong_err = pong.communicate(timeout=10.0)
+        except subprocess.TimeoutExpired:
+            _stop(pong)
+            pong_out, pong_err = pong.communicate()
     finally:
         _stop(pong)
         lock.close()
-    lines = [ln for ln in out.splitlines() if ln.startswith('{')]
-    if ping.returncode != 0 or not lines:
-        pong_err = pong.stderr.read() if pong.stderr else ''
-        raise RingError(f'ring failed (ping exit {ping.returncode}, domain {domain}):\n'
+    cpu_total = _children_cpu_s() - cpu_before
+
+    def last_json(text: str) -> dict:
+        lines = [ln for ln in text.splitlines() if ln.startswith('{')]
+        return json.loads(lines[-1]) if lines else {}
+
+    a, b = last_json(out), last_json(pong_out)
+    t0 = a.get('t0') if a.get('t0') is not None else b.get('t0')
+    t1 = a.get('t1') if a.get('t1') is not None else b.get('t1')
+    if ping.returncode != 0 or pong.returncode not in (0, None) or t0 is None or t1 is None:
+        raise RingError(f'ring failed (ping exit {ping.returncode}, pong exit '
+                        f'{pong.returncode}, domain {domain}):\n'
                         f'ping: {err.strip()[-2000:]}\npong: {pong_err.strip()[-2000:]}')
-    if pong.stderr:
-        pong.stderr.close()
-    data = json.loads(lines[-1])
-    return RingResult(int(data['frames']), float(data['seconds']), float(data['frames_per_s']),
-                      str(data['executor']), str(data['rmw']))
+    cpu = sum(d['cpu1'] - d['cpu0'] for d in (a, b)
+              if d.get('cpu0') is not None and d.get('cpu1') is not None)
+    n_hops = sum(hops[k % len(hops)] for k in range(warmup, warmup + frames))
+    dt = float(t1) - float(t0)
+    return RingResult(frames, n_hops, dt, frames / dt, cpu, cpu_total, str(a['executor']),
+                      str(a['rmw']))
+
+
+def parse_hops(text: str) -> List[int]:
+    """``"7,2,4,2"`` -> ``[7, 2, 4, 2]``."""
+    try:
+        hops = [int(h) for h in text.split(',')]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'bad --hops {text!r} (want e.g. 7,2,4,2)') from None
+    if not hops or min(hops) < 1:
+        raise argparse.ArgumentTypeError(f'bad --hops {text!r}: each must be >= 1')
+    return hops
 
 
 def main(argv=None) -> int:
-    """Entry point of one ring process (``ping`` or ``pong``)."""
+    """Entry point of one ring process (``ping`` starts the relay, ``pong`` answers)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('role', choices=['ping', 'pong'])
-    ap.add_argument('--frames', type=int, default=3000, help='timed round trips')
-    ap.add_argument('--warmup', type=int, default=200, help='untimed round trips first')
+    ap.add_argument('--hops', type=parse_hops, default=[2], help='hops per frame, cycled')
+    ap.add_argument('--frames', type=int, default=3000, help='timed frames')
+    ap.add_argument('--warmup', type=int, default=200, help='untimed frames first (>= 1)')
     ap.add_argument('--timeout', type=float, default=60.0, help='wall-clock limit [s]')
     args = ap.parse_args(argv)
-    if args.role == 'ping':
-        return ping_main(args.frames, args.warmup, args.timeout)
-    return pong_main(args.timeout)
+    return relay_main(args.role == 'ping', args.hops, args.frames, max(1, args.warmup),
+                      args.timeout)
 
 
 if __name__ == '__main__':
