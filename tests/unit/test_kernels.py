@@ -1,0 +1,130 @@
+"""Compiled world kernels (sim_node.models.kernels): one implementation, compiled or not.
+
+Truth: the same functions run as plain Python (``NUMBA_DISABLE_JIT=1`` in a subprocess) must
+give the compiled results (identical, or within 1e-12 relative); the kernel's saturation
+against the actuator models' own ``apply`` (numpy ``clip``); the compile cache must serve a
+second process without compiling.
+"""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from adcs_nodes.core import attitude
+from sim_node.models import kernels
+from sim_node.models.actuators import Magnetorquer, WheelCluster
+from sim_node.models.disturbances import ConstantTorque, RandomTorque
+from sim_node.models.dynamics import (ActuatorCommand, FrameEnvironment, Spacecraft,
+                                      SpacecraftState)
+
+PYRAMID = np.array([[1.0, 1.0, 1.0], [-1.0, 1.0, 1.0], [-1.0, -1.0, 1.0], [1.0, -1.0, 1.0]])
+HERE = os.path.abspath(__file__)
+
+
+def scenario():
+    """Every kernel path in a few frames: gravity gradient, magnetorquers clipping, wheels
+    hitting torque and momentum limits, constant + random disturbances, the field cubic.
+    Returns the trajectory as a list of float.hex strings (exact comparison)."""
+    inertia = np.array([[118.0, 3.0, -2.0], [3.0, 100.0, 4.0], [-2.0, 4.0, 19.6]])
+    wheels = WheelCluster(PYRAMID, max_torque=0.02, max_momentum=[0.5, 0.5, 0.5, np.inf],
+                          inertia=0.01)
+    sc = Spacecraft(inertia, magnetorquer=Magnetorquer([1.0, 2.0, 0.5]), wheels=wheels,
+                    disturbances=[ConstantTorque([1e-5, 0.0, -2e-5]),
+                                  RandomTorque(1e-5, 0.7, seed=3)])
+    state = SpacecraftState(attitude.normalize([0.36, 0.48, -0.48, 0.64]),
+                            np.radians([-3.0, 3.0, 3.0]), np.array([0.49, -0.3, 0.0, 2.0]))
+    out = []
+    for k in range(6):
+        t = 1.0 * k
+        u = 0.2 + 1.06e-3 * t
+        env = FrameEnvironment(7068.137e3 * np.array([np.cos(u), 0.0, np.sin(u)]),
+                               7509.6 * np.array([-np.sin(u), 0.0, np.cos(u)]),
+                               3e-5 * np.array([np.cos(2 * u), 0.3, np.sin(2 * u)]),
+                               6.4e-8 * np.array([-np.sin(2 * u), 0.0, np.cos(2 * u)]))
+        cmd = ActuatorCommand(np.array([3.0, -0.5, -2.0]), np.array([0.05, -0.01, 0.0, 0.03]),
+                              np.array([0.0, 1e-4, 0.0]))
+        state, applied = sc.step(state, t, 1.0, env, cmd, 10)
+        values = [state.q_eci_body, state.omega_body_eci_body, state.h_wheels]
+        values += [applied[key] for key in sorted(applied)]
+        out.extend(float(v).hex() for arr in values for v in np.ravel(arr))
+    return out
+
+
+def _run(code, env_extra):
+    env = dict(os.environ, **env_extra)
+    proc = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_compiled_and_python_kernels_agree():
+    assert type(kernels.frame_step).__name__ == 'CPUDispatcher'      # compiled here
+    compiled = scenario()
+    code = ('import json, runpy; from sim_node.models import kernels; '
+            f'm = runpy.run_path({HERE!r}); '
+            'print(json.dumps([type(kernels.frame_step).__name__, m["scenario"]()]))')
+    kind, python = _run(code, {'NUMBA_DISABLE_JIT': '1'})
+    assert kind == 'function'                                       # plain Python there
+    a = np.array([float.fromhex(v) for v in compiled])
+    b = np.array([float.fromhex(v) for v in python])
+    assert a.shape == b.shape and a.size > 100
+    identical = np.count_nonzero(a == b)
+    print(f'compiled vs Python: {identical} of {a.size} values bit-identical, largest '
+          f'relative difference {np.max(np.abs(a - b) / np.maximum(np.abs(a), 1e-300)):.1e}')
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-300)
+
+
+def test_saturation_matches_the_actuator_models():
+    rng = np.random.default_rng(7)
+    mtq = Magnetorquer([1.0, 0.0, 2.5])
+    wheels = WheelCluster(PYRAMID, max_torque=[0.1, 0.2, 0.0, 0.05],
+                          max_momentum=[1.0, np.inf, 2.0, 0.5], inertia=0.01)
+    for dt in (0.1, 1.0, 10.0):
+        for _ in range(200):
+            m_cmd = rng.normal(0.0, 2.0, 3)
+            t_cmd = rng.normal(0.0, 0.2, 4)
+            h = rng.uniform(-1.2, 1.2, 4) * np.array([1.0, 5.0, 2.0, 0.5])
+            dipole, tau = kernels.saturate(dt, m_cmd, mtq.max_dipole_Am2, t_cmd,
+                                           wheels.max_torque, wheels.max_momentum, h)
+            np.testing.assert_array_equal(dipole, mtq.apply(m_cmd))
+            np.testing.assert_array_equal(tau, wheels.apply(t_cmd, h, dt))
+
+
+def test_state_layout_is_named_and_contiguous():
+    """The named slices cover the kernel state once, in order; wheels follow at H0."""
+    n = 4
+    size = kernels.state_size(n)
+    covered = np.zeros(size, dtype=int)
+    for sl in (kernels.Q, kernels.W, kernels.R, kernels.V, slice(kernels.H0, kernels.H0 + n)):
+        covered[sl] += 1
+    np.testing.assert_array_equal(covered, np.ones(size, dtype=int))
+
+
+@pytest.mark.parametrize('bad', [0.0, -1.0])
+def test_zero_position_without_gravity_gradient_is_not_a_division_by_zero(bad):
+    """r = 0 is allowed when gravity gradient is off (a free body): the orbit term is 0."""
+    sc = Spacecraft(np.diag([2.0, 3.0, 4.0]), gravity_gradient=False)
+    s, _ = sc.step(SpacecraftState([0.0, 0.0, 0.0, 1.0], [0.1, bad, 0.0]), 0.0, 1.0,
+                   FrameEnvironment(np.zeros(3)), sc.zero_command(), 10)
+    assert np.all(np.isfinite(s.omega_body_eci_body))
+
+
+def test_compile_cache_serves_a_second_process(tmp_path):
+    """First process compiles into an empty cache; a second one loads it without compiling."""
+    code = ('import json, time; t0 = time.perf_counter(); '
+            'from sim_node.models import kernels; '
+            'from sim_node.models.dynamics import steps_per_second; '
+            'steps_per_second(1, 10); '
+            'st = kernels.frame_step.stats; '
+            'print(json.dumps([sum(st.cache_hits.values()), sum(st.cache_misses.values()), '
+            'time.perf_counter() - t0]))')
+    env = {'NUMBA_CACHE_DIR': str(tmp_path)}
+    hits1, misses1, t1 = _run(code, env)
+    hits2, misses2, t2 = _run(code, env)
+    print(f'start-up to the first frame: compiling {t1:.2f} s, from the cache {t2:.2f} s')
+    assert misses1 >= 1 and hits1 == 0
+    assert hits2 >= 1 and misses2 == 0
