@@ -154,4 +154,15 @@ COMMON = {p.name: p for p in (
           'matched endpoints before ready', read_only=True),
     Param('plugins', 'str[]', [], '-', 'registry plugin modules or .py files to load',
           read_only=True),
+    Param('dead_after_frames', 'int', 3, '-', 'a producer that missed this many frames in a '
+          'row is dead and no longer awaited until it publishes again', min=1, max=1000000),
+    Param('max_sample_age_s', 'float', 5.0, 's', 'live mode: older samples are rejected',
+          positive=True),
+    Param('max_future_s', 'float', 0.5, 's', 'live mode: samples stamped further ahead of '
+          'the clock are rejected', min=0.0),
+    Param('status_period_s', 'float', 1.0, 's', 'lockstep/status period (sim time)',
+          positive=True),
+    Param('timing_mode', 'str', '', '-', "lockstep (with the simulator) or live (real "
+          "drivers); '': live when started alone", choices=('', 'lockstep', 'live'),
+          read_only=True),
 )}
