@@ -33,26 +33,38 @@ import os
 import sys
 from typing import List, Optional
 
+from adcs_nodes import registry
 from adcs_nodes.tools.scenario import ScenarioError, list_scenarios, load_scenario
 
-#: Nodes of the graph: (package, executable, role).
-KNOWN_NODES = [
+#: Nodes that are not registry components: (package, executable, role).
+CORE_NODES = [
     ('sim_node', 'environment', 'orbit + geomagnetic field (sim/environment)'),
     ('sim_node', 'dynamics', 'rigid-body dynamics, actuators, clock master (/clock, sim/state)'),
-    ('sim_node', 'magnetometer', 'magnetometer model (sensors/magnetometer)'),
-    ('sim_node', 'horizon_sensor', 'Earth horizon sensor, roll + pitch (sensors/horizon)'),
-    ('sim_node', 'star_tracker', 'star tracker attitude (sensors/star_tracker)'),
-    ('sim_node', 'gyro', 'rate gyro (sensors/gyro)'),
-    ('adcs_nodes', 'estimator', 'attitude estimator: magnetic_filter | triad | '
-     'horizon_mag_yaw (adcs/attitude_estimate)'),
-    ('adcs_nodes', 'magnetic_controller', 'paper 000 magnetorquer law '
-     '(adcs/controllers/magnetic/command)'),
-    ('adcs_nodes', 'bdot_controller', 'B-dot detumbling, safe mode '
-     '(adcs/controllers/bdot/command)'),
+    ('adcs_nodes', 'estimator', 'attitude estimator, parameter algorithm:=<estimator> '
+     '(adcs/attitude_estimate)'),
+    ('adcs_nodes', 'controller', 'any registered controller, parameter controller:=<name> '
+     '(adcs/controllers/<name>/command)'),
+    ('adcs_nodes', 'guidance', 'attitude target profile (adcs/attitude_target)'),
     ('adcs_nodes', 'controller_manager', 'forwards the active controller, switching and '
      'fallback (adcs/actuator_command)'),
     ('adcs_nodes', 'recorder', 'rosbag2 MCAP recorder of every topic'),
 ]
+
+
+def registry_lines() -> List[str]:
+    """``adcs list``'s registry part: every controller, estimator and sensor, one line each."""
+    out = []
+    for kind in registry.KINDS:
+        out.append(f'{kind.capitalize()}s (registry):')
+        for name, e in registry.entries(kind).items():
+            extra = ''
+            if e.inputs:
+                extra += f' [inputs: {", ".join(e.inputs)}'
+                extra += f'; commands: {", ".join(e.actuators)}]' if e.actuators else ']'
+            if e.node:
+                extra += f' [ros2 run {e.node[0]} {e.node[1].rsplit(".", 1)[1]} -> {e.node[3]}]'
+            out.append(f'  {name:20s} {e.description}{extra}')
+    return out
 
 
 def _default_scenario_dir() -> str:
@@ -98,8 +110,9 @@ def cmd_list(args) -> int:
     for fname, desc in list_scenarios(directory):
         print(f'  {fname:32s} {desc}')
     print('Nodes (ros2 run <package> <executable>):')
-    for pkg, exe, role in KNOWN_NODES:
+    for pkg, exe, role in CORE_NODES:
         print(f'  {pkg + " " + exe:32s} {role}')
+    print('\n'.join(registry_lines()))
     return 0
 
 
