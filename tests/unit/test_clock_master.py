@@ -114,14 +114,31 @@ def test_flow_control_throttles_and_resumes_on_progress():
 
 
 def test_a_dead_lagging_node_does_not_stop_the_world():
-    m = ClockMaster(S, wait_for_nodes=['est'], max_lag_frames=1, timeout_s=1.0)
+    m = ClockMaster(S, duration_ns=100 * S, wait_for_nodes=['est', 'ctl'], max_lag_frames=1,
+                    timeout_s=1.0)
     m.start(0.0)
+    m.on_progress('ctl', 2 * S, False, 0.0)
     m.on_environment(0, 'e', 0.0)
     m.on_environment(S, 'e', 0.0)
     assert m.phase is MasterPhase.THROTTLED and m.throttled_frames == 1
     out = m.tick(1.0)
     assert kinds(out)[:2] == [(Act.LOG, 2), (Act.CLOCK, 2)]
-    assert m.phase is MasterPhase.WAIT_ENV
+    assert m.phase is MasterPhase.WAIT_ENV and m.gone == {'est'}
+    # one timeout, not one per max_lag_frames: 'est' is not waited for any more ...
+    m.on_progress('ctl', 100 * S, False, 1.0)
+    for k in range(2, 100):
+        m.on_environment(k * S, 'e', 1.0)
+    assert m.t_ns == 100 * S and m.throttled_frames == 1
+    m.on_environment(100 * S, 'e', 1.0)
+    out = m.on_progress('ctl', 100 * S, True, 1.0)
+    assert [a.kind for a in out] == [Act.FINISH]       # ... nor at the end
+    m2 = ClockMaster(S, wait_for_nodes=['est'], max_lag_frames=1, timeout_s=1.0)
+    m2.start(0.0)
+    for k in range(2):
+        m2.on_environment(k * S, 'e', 0.0)
+    m2.tick(1.0)
+    out = m2.on_progress('est', S, False, 1.0)         # it reports again: waited for again
+    assert any(a.kind is Act.LOG and 'again' in a.text for a in out) and not m2.gone
 
 
 def test_end_waits_for_final_progress_then_finishes():

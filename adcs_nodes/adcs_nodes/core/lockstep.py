@@ -366,6 +366,8 @@ class ClockMaster:
         self.wait_since = 0.0
         self.progress: Dict[str, int] = {}
         self.final_nodes: set = set()
+        #: nodes that lagged past the timeout: not waited for until they report again
+        self.gone: set = set()
         self.missed_frames = 0
         self.throttled_frames = 0
 
@@ -378,6 +380,8 @@ class ClockMaster:
     def lagging(self) -> Optional[str]:
         """Name of a node too far behind frame k, or None."""
         for node in self.wait_for_nodes:
+            if node in self.gone:
+                continue
             lag = self.lag_frames.get(node, self.max_lag_frames)
             if self.t_ns - self.progress.get(node, 0) > lag * self.frame_ns:
                 return node
@@ -385,7 +389,8 @@ class ClockMaster:
 
     def all_final(self) -> bool:
         """True when every awaited node reported its final frame."""
-        return all(n in self.final_nodes for n in self.wait_for_nodes if n not in self.no_final)
+        return all(n in self.final_nodes for n in self.wait_for_nodes
+                   if n not in self.no_final and n not in self.gone)
 
     # ------------------------------------------------------------------ events
     def start(self, now: float) -> List[Action]:
@@ -412,11 +417,16 @@ class ClockMaster:
         self.progress[node] = max(int(t_ns), self.progress.get(node, -1))
         if final:
             self.final_nodes.add(node)
+        out: List[Action] = []
+        if node in self.gone:
+            self.gone.discard(node)
+            out.append(Action(Act.LOG, self.t_ns, 'info',
+                              f'{node} reports progress again: waited for again'))
         if self.phase is MasterPhase.THROTTLED and not self.lagging():
-            return self._begin_frame(now)
+            return out + self._begin_frame(now)
         if self.phase is MasterPhase.WAIT_FINAL and self.all_final():
-            return self._finish()
-        return []
+            return out + self._finish()
+        return out
 
     def tick(self, now: float) -> List[Action]:
         """Watchdog: act on a wait longer than ``timeout_s`` of wall time."""
@@ -430,13 +440,14 @@ class ClockMaster:
             out = [Action(Act.LOG, t, 'warning',
                           f'frame t={t / NS_PER_S:g} s: {node} is more than '
                           f'{self.lag_frames.get(node, self.max_lag_frames)} frames behind '
-                          f'for {self.timeout_s:g} s; going on without it')]
+                          f'for {self.timeout_s:g} s; going on without waiting for it until it '
+                          'reports progress again')]
             if node is not None:
-                self.progress[node] = t           # a dead node must not stop the world
+                self.gone.add(node)               # a dead node must not stop the world
             return out + self._begin_frame(now)
         if self.phase is MasterPhase.WAIT_FINAL:
-            missing = [n for n in self.wait_for_nodes
-                       if n not in self.no_final and n not in self.final_nodes]
+            missing = [n for n in self.wait_for_nodes if n not in self.no_final
+                       and n not in self.final_nodes and n not in self.gone]
             return [Action(Act.LOG, t, 'warning',
                            f'end of run: no final frame from {", ".join(missing)} within '
                            f'{self.timeout_s:g} s; finishing')] + self._finish()
