@@ -317,13 +317,20 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
                               publishes=[f'adcs/controllers/{name}/command'], subscribes=subs))
     man = sc.get('manager') or {'safe': 'bdot' if 'bdot' in names else names[0],
                                 'initial': '', 'stale_after_s': 0.0, 'schedule': []}
+    users = [n for n, e in entries.items() if 'estimate' in e.inputs]
+    watch_estimate = est_period > 0 and (users or 'auto' in man)
     mparams: Dict[str, Any] = {
         **flight, 'controllers': names, 'safe': man['safe'], 'initial': man['initial'],
         'period_s': ctrl['period_s'], 'controller_period_s': ctrl['period_s'],
-        'estimator_period_s': est_period if 'auto' in man else 0.0,
-        'stale_after_s': man['stale_after_s'], 'max_dipole_Am2': limits}
+        # the manager watches the estimate: stale -> the safe controller (which needs none)
+        'estimator_period_s': est_period if watch_estimate else 0.0,
+        'estimate_users': users or [''],
+        'stale_after_s': man['stale_after_s'], 'max_dipole_Am2': limits,
+        'max_torque_Nm': list(sc['spacecraft']['ideal_torque']['max_torque_Nm'])
+        if 'ideal_torque' in sc['spacecraft'] else [0.0, 0.0, 0.0]}
     if wheels:
         mparams['max_wheel_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
+        mparams['wheel_names'] = [w['name'] for w in wheels]
         mparams['wheel_names'] = [w['name'] for w in wheels]
     if man['schedule']:
         mparams['schedule_t_s'] = [e['t_s'] for e in man['schedule']]
@@ -331,7 +338,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     if 'auto' in man:
         flatten('auto', man['auto'], mparams)
     subs = ['/clock'] + [f'adcs/controllers/{n}/command' for n in names]
-    if 'auto' in man:
+    if watch_estimate:
         subs.append('adcs/attitude_estimate')
     nodes.append(NodeSpec('controller_manager', 'adcs_nodes', 'controller_manager',
                           'adcs_nodes.nodes.controller_manager', 'ControllerManagerNode',

@@ -101,6 +101,10 @@ SCHEMA: Dict[str, Any] = {
         'magnetorquer': {
             'max_dipole_Am2': F('vec3', REQUIRED, 'per-axis dipole limit [A m^2]'),
         },
+        'ideal_torque': {
+            'max_torque_Nm': F('vec3', REQUIRED, 'per-axis limit of an ideal body-torque '
+                               'actuator (thrusters, or a stand-in for wheels) [N m]'),
+        },
         'wheels': F('wheels', [], 'reaction wheels: list of {name, axis, max_torque_Nm, '
                     'max_momentum_Nms, inertia_kgm2, h0_Nms}'),
         'disturbance': {
@@ -524,6 +528,9 @@ def controller_problems(sc: Dict[str, Any], name: str) -> List[str]:
         out.append('commands magnetorquers: needs spacecraft.magnetorquer')
     if 'wheels' in entry.actuators and not craft.get('wheels'):
         out.append('commands reaction wheels: needs spacecraft.wheels')
+    if 'torque' in entry.actuators and 'ideal_torque' not in craft and not craft.get('wheels'):
+        out.append('commands a body torque: needs spacecraft.ideal_torque or '
+                   'spacecraft.wheels (torque allocation)')
     for section in entry.requires:
         head, _, tail = section.partition('.')
         if not (sc.get(head, {}).get(tail) if tail else sc.get(head)):
@@ -677,7 +684,11 @@ def _load_scenario(path: str) -> Dict[str, Any]:
         registry.load_plugins(plugins, os.path.dirname(os.path.abspath(path)))
     except ValueError as exc:
         checker.fail(getattr(data, 'lines', {}).get('plugins'), 'plugins', str(exc))
-    out = checker.mapping(data, schema(), '', None)
+    top = schema()
+    out = checker.mapping(data, top, '', None)
+    for key, spec in top.items():   # a section with required keys is skipped when absent
+        if isinstance(spec, dict) and not isinstance(spec, Opt) and key not in out:
+            checker.fail(None, key, 'missing required section')
     base = os.path.dirname(os.path.abspath(path))   # plugin files: absolute for every node
     out['plugins'] = [os.path.join(base, x) if x.endswith('.py') and not os.path.isabs(x)
                       else x for x in out['plugins']]
