@@ -1,7 +1,9 @@
 """The launcher behind ``adcs run``: start the scenario's graph, watch it, stop it cleanly.
 
-* Isolation: each run takes a free ``ROS_DOMAIN_ID`` (1..100, claimed with a lock file so
-  parallel runs never share one) and localhost-only discovery.
+* Isolation: each run takes a free ``ROS_DOMAIN_ID`` drawn at random from
+  :data:`RUN_DOMAINS` (claimed with a lock file in a per-user directory, opened with
+  ``O_NOFOLLOW``, so parallel runs of one user never share one) and localhost-only discovery.
+  Isolation is not a security boundary: ``docs/security.md``.
 * One process per node (``python -m <module> --ros-args -r __node:=<name> --params-file ...``),
   or all nodes in one process (``--compose``, :mod:`adcs_nodes.tools.compose`).
 * Progress: sim time, real-time factor, frames/s and missed frames, read from ``/clock`` and
@@ -13,16 +15,27 @@
   goes on (its consumers time out and fall back). A configuration error (exit code 2) of any
   node stops the run.
 * Ctrl-C stops every child the same way; the bag is closed and valid.
+* Crash safety: every child gets a parent-death signal (``prctl(PR_SET_PDEATHSIG, SIGTERM)``
+  set before it executes the node, :data:`PDEATHSIG_SHIM`), so a launcher killed with SIGKILL
+  takes its nodes with it (the recorder closes its bag on SIGTERM). A full disk (``ENOSPC``)
+  stops the run with a message saying so; what was written is kept.
+* Privacy: the run directory (logs, parameters) and the manifests are readable by the owner
+  only (0700 / 0600); ``~/.cache/adcs/runs`` keeps the last :data:`KEEP_RUNS` run directories.
 * While a run is active, ``~/.cache/adcs/runs/active-<pid>.json`` names its domain, run
   directory, bag and node PIDs (for ``adcs switch``/``adcs status`` and the tests).
 """
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
+import math
 import os
 import random
+import re
+import shutil
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -34,8 +47,36 @@ import yaml
 
 from adcs_nodes.tools.graph import NodeSpec, build_graph, params_file_text
 
-DOMAIN_LOCK_DIR = os.path.join(tempfile.gettempdir(), 'adcs-domain-locks')
 RUNS_DIR = os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'runs')
+#: ``ROS_DOMAIN_ID`` values a run draws from (at random among the free ones). Fast DDS over
+#: UDP accepts 0..232; 0 is everybody's default domain; 100..199 are used without a lock by
+#: the node tests and claimed by the bench rings; 102..214 put the DDS ports inside Linux's
+#: ephemeral port range (32768-60999), where the OS may hand them to another socket. Left:
+#: 1..99 and 215..232 (117 ids).
+RUN_DOMAINS = tuple(range(1, 100)) + tuple(range(215, 233))
+#: Run directories kept in ``RUNS_DIR`` (older ones are removed when a run starts).
+KEEP_RUNS = 50
+#: Scenario names allowed in run directory names (no path separators, no ``..`` escape).
+NAME_PATTERN = re.compile(r'[A-Za-z0-9_.-]+')
+#: Run directory names made by :class:`Launcher` (only these are pruned).
+RUN_DIR_PATTERN = re.compile(r'\d{8}T\d{6}-[A-Za-z0-9_.-]+-\d+')
+#: Exit code of the recorder after a write error (``recorder.EXIT_WRITE_FAILED``).
+RECORDER_WRITE_FAILED = 3
+#: Exit code of ``adcs run`` for a run that completed but lost its controller or estimator for
+#: part of the time (a flight-software node died, or the controller manager fell back).
+EXIT_DEGRADED = 3
+#: Run via ``python -S -c``: sets the parent-death signal, checks the parent is still the
+#: launcher (it may have died between fork and prctl), then executes the node command. A
+#: separate tiny process image instead of ``preexec_fn``, which is unsafe in a launcher whose
+#: DDS threads run while it forks.
+PDEATHSIG_SHIM = (
+    'import ctypes, os, signal, sys\n'
+    'libc = ctypes.CDLL(None, use_errno=True)\n'
+    'if libc.prctl(1, int(signal.SIGTERM), 0, 0, 0) != 0:\n'   # 1 = PR_SET_PDEATHSIG
+    '    sys.exit("prctl(PR_SET_PDEATHSIG) failed: errno %d" % ctypes.get_errno())\n'
+    'if os.getppid() != int(sys.argv[1]):\n'
+    '    sys.exit(0)\n'  # the launcher died before prctl: do not start an orphan
+    'os.execv(sys.argv[2], sys.argv[2:])\n')
 #: Nodes whose death ends the run: the simulated world, the recorder, the composed process.
 #: Any other node (flight software) may die; the run goes on and its consumers fall back.
 ESSENTIAL = {'dynamics', 'environment', 'recorder', 'composed'}
@@ -61,24 +102,115 @@ class RunResult:
     frames_per_s: float = 0.0
 
 
-def acquire_domain(domains: Iterable[int] = range(1, 101)):
-    """Claim a free ROS_DOMAIN_ID of ``domains`` with an exclusive lock file.
+def _private_dir(path: str) -> str:
+    """Create ``path`` (mode 0700) or check an existing one: a real directory (not a symlink)
+    owned by this user and not writable by others; ``LaunchError`` otherwise."""
+    try:
+        os.makedirs(path, mode=0o700, exist_ok=True)
+        st = os.lstat(path)
+    except OSError as exc:
+        raise LaunchError(f'cannot create {path}: {exc.strerror or exc}') from None
+    if not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid():
+        raise LaunchError(f'{path} is not a directory owned by you (a symlink planted by '
+                          'someone else?); remove it')
+    if st.st_mode & 0o077:
+        os.chmod(path, 0o700)
+    return path
 
+
+def domain_lock_dir() -> str:
+    """Per-user directory of the domain lock files: ``$XDG_RUNTIME_DIR/adcs-domain-locks``,
+    else ``<tmp>/adcs-domain-locks-<uid>`` (created 0700, ownership checked)."""
+    runtime = os.environ.get('XDG_RUNTIME_DIR', '')
+    if runtime and os.path.isabs(runtime) and os.path.isdir(runtime):
+        return os.path.join(runtime, 'adcs-domain-locks')
+    return os.path.join(tempfile.gettempdir(), f'adcs-domain-locks-{os.getuid()}')
+
+
+def acquire_domain(domains: Iterable[int] = RUN_DOMAINS):
+    """Claim a free ROS_DOMAIN_ID of ``domains``, drawn at random, with an exclusive lock file.
+
+    The lock files live in :func:`domain_lock_dir` and are opened with ``O_NOFOLLOW`` and
+    without truncation: a symlink planted in their place is refused, never followed.
     Returns ``(id, handle)``; the domain stays claimed until the handle is closed.
     """
-    os.makedirs(DOMAIN_LOCK_DIR, exist_ok=True)
+    lock_dir = _private_dir(domain_lock_dir())
     ids = list(domains)
     random.shuffle(ids)
     for dom in ids:
-        fh = open(os.path.join(DOMAIN_LOCK_DIR, f'{dom}.lock'), 'w')
+        try:
+            fd = os.open(os.path.join(lock_dir, f'{dom}.lock'),
+                         os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
+        except OSError:
+            continue  # ELOOP: a symlink in place of the lock file; not ours to use
+        fh = os.fdopen(fd, 'r+')
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             fh.close()
             continue
         return dom, fh
-    raise LaunchError(f'no free ROS_DOMAIN_ID in {ids[0] if ids else "?"}.. '
-                      f'({len(ids)} runs at once?)')
+    raise LaunchError(f'no free ROS_DOMAIN_ID among {len(ids)} ({len(ids)} runs at once?)')
+
+
+def prune_runs(runs_dir: str = RUNS_DIR, keep: int = KEEP_RUNS,
+               protect: Iterable[str] = ()) -> List[str]:
+    """Remove the oldest run directories of ``runs_dir`` beyond the newest ``keep``.
+
+    Only directories named like the launcher's (``<time>-<scenario>-<pid>``) are touched, and
+    never one in ``protect`` or one of a run whose launcher is alive (its manifest). Returns
+    the removed paths.
+    """
+    try:
+        names = [n for n in os.listdir(runs_dir) if RUN_DIR_PATTERN.fullmatch(n)]
+    except OSError:
+        return []
+    busy = {os.path.abspath(p) for p in protect}
+    for name in os.listdir(runs_dir):
+        if name.startswith('active-') and name.endswith('.json'):
+            try:
+                with open(os.path.join(runs_dir, name)) as fh:
+                    busy.add(os.path.abspath(json.load(fh)['run_dir']))
+            except (OSError, ValueError, KeyError, TypeError):
+                continue
+    dirs = []
+    for name in names:
+        path = os.path.join(runs_dir, name)
+        try:
+            st = os.lstat(path)
+        except OSError:
+            continue
+        if stat.S_ISDIR(st.st_mode):
+            dirs.append((st.st_mtime, name, path))
+    dirs.sort(reverse=True)
+    removed = []
+    for _, _, path in dirs[keep:]:
+        if os.path.abspath(path) in busy:
+            continue
+        shutil.rmtree(path, ignore_errors=True)
+        removed.append(path)
+    return removed
+
+
+def _write_private(path: str, text: str) -> None:
+    """Write ``text`` to ``path`` readable by the owner only (0600), replacing it atomically."""
+    tmp = f'{path}.tmp{os.getpid()}'
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC,
+                 0o600)
+    try:
+        with os.fdopen(fd, 'w') as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def _disk_full(exc: OSError) -> bool:
+    return exc.errno in (errno.ENOSPC, errno.EDQUOT)
 
 
 def child_env(domain: int) -> Dict[str, str]:
@@ -118,10 +250,21 @@ class _Monitor:
         self.status: Dict[str, LockstepStatus] = {}
         self.recorder_clock_ns = -1
         self.recorder_count = 0
+        self.recorder_error = ''
         be = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.node.create_subscription(Clock, '/clock', self._on_clock, be)
         self.node.create_subscription(LockstepStatus, 'lockstep/status', self._on_status, 50)
         self.node.create_subscription(LockstepStatus, 'recorder/status', self._on_rec, 10)
+        # degraded-run accounting (H-lockstep): the manager's latched status, max missed/node
+        from rclpy.qos import DurabilityPolicy
+
+        from adcs_msgs.msg import ControllerStatus
+        self.controller_status = None
+        self.max_missed: Dict[str, int] = {}
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.node.create_subscription(ControllerStatus, 'adcs/controller_status',
+                                      self._on_controller_status, latched)
         self.executor = make_executor(self.context)
         self.executor.add_node(self.node)
 
@@ -130,10 +273,17 @@ class _Monitor:
 
     def _on_status(self, msg) -> None:
         self.status[msg.node] = msg
+        self.max_missed[msg.node] = max(int(msg.missed_frames),
+                                        self.max_missed.get(msg.node, 0))
+
+    def _on_controller_status(self, msg) -> None:
+        self.controller_status = msg
 
     def _on_rec(self, msg) -> None:
         self.recorder_clock_ns = self._stamp_ns(msg.header.stamp) - self.epoch_ns
         self.recorder_count = int(msg.frames)
+        if msg.last_missed_input.startswith('write failed: '):
+            self.recorder_error = msg.last_missed_input[len('write failed: '):]
 
     def spin(self, seconds: float) -> None:
         from rclpy.task import Future
@@ -141,7 +291,8 @@ class _Monitor:
 
     @property
     def missed_frames(self) -> int:
-        return sum(int(s.missed_frames) for s in self.status.values())
+        """Missed frames of every node (the highest count each one reported)."""
+        return sum(self.max_missed.values())
 
     def close(self) -> None:
         self.executor.remove_node(self.node)
@@ -159,8 +310,17 @@ class Launcher:
                  run_dir: Optional[str] = None, log=print) -> None:
         self.sc = scenario
         self.duration_s = float(duration_s if duration_s is not None else scenario['duration_s'])
-        if not self.duration_s > 0:
-            raise LaunchError(f'duration must be positive, got {self.duration_s}')
+        if not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise LaunchError(f'duration must be a positive finite number of seconds, got '
+                              f'{self.duration_s}')
+        if not NAME_PATTERN.fullmatch(str(scenario.get('name', ''))):
+            raise LaunchError(f'scenario name {str(scenario.get("name"))[:80]!r} must match '
+                              f'{NAME_PATTERN.pattern} (it names the run directory)')
+        from adcs_nodes.tools.scenario import ScenarioError, check_epoch
+        try:
+            check_epoch(scenario.get('epoch', ''), self.duration_s)
+        except ScenarioError as exc:
+            raise LaunchError(str(exc)) from None
         frames = self.duration_s / scenario['timing']['frame_s']
         if abs(frames - round(frames)) > 1e-9:
             raise LaunchError(f'duration {self.duration_s} s is not a whole number of '
@@ -186,6 +346,7 @@ class Launcher:
             self.result_file
         self.procs: Dict[str, subprocess.Popen] = {}
         self.lost: set = set()     # non-essential nodes that died during the run
+        self.lost_at: Dict[str, float] = {}   # ... and the sim time they were seen dead [s]
         self._stop_requested = False
 
     # ------------------------------------------------------------------ processes
@@ -200,13 +361,18 @@ class Launcher:
 
     def _spawn(self, env: Dict[str, str], params_path: str) -> None:
         logs = os.path.join(self.run_dir, 'logs')
-        os.makedirs(logs, exist_ok=True)
+        os.makedirs(logs, mode=0o700, exist_ok=True)
+        shim = [sys.executable, '-S', '-c', PDEATHSIG_SHIM, str(os.getpid())]
         for name, cmd in self._commands(params_path).items():
-            fh = open(os.path.join(logs, f'{name}.log'), 'w')
-            self.procs[name] = subprocess.Popen(cmd, env=env, stdout=fh,
-                                                stderr=subprocess.STDOUT,
-                                                stdin=subprocess.DEVNULL,
-                                                start_new_session=True)
+            fd = os.open(os.path.join(logs, f'{name}.log'),
+                         os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o600)
+            with os.fdopen(fd, 'w') as fh:
+                # own session: a Ctrl-C in the terminal reaches the launcher only, which
+                # stops the graph in order; the parent-death signal covers a killed launcher
+                self.procs[name] = subprocess.Popen(shim + cmd, env=env, stdout=fh,
+                                                    stderr=subprocess.STDOUT,
+                                                    stdin=subprocess.DEVNULL,
+                                                    start_new_session=True)
 
     def _log_tail(self, name: str, lines: int = 15) -> str:
         path = os.path.join(self.run_dir, 'logs', f'{name}.log')
@@ -256,12 +422,23 @@ class Launcher:
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
         """Run the scenario to its end (or Ctrl-C / a failed node); returns the outcome."""
+        t0 = time.monotonic()
+        try:
+            _private_dir(RUNS_DIR)
+            prune_runs(protect=[self.run_dir])
+            _private_dir(self.run_dir)
+            params_path = os.path.join(self.run_dir, 'params.yaml')
+            _write_private(params_path, params_file_text(self.nodes))
+        except (OSError, LaunchError) as exc:
+            why = ('disk full' if isinstance(exc, OSError) and _disk_full(exc)
+                   else str(getattr(exc, 'strerror', None) or exc))
+            return RunResult(1, 0.0, time.monotonic() - t0, 0, 0, None, self.run_dir,
+                             f'cannot prepare the run directory {self.run_dir}: {why}')
+        return self._run(params_path, t0)
+
+    def _run(self, params_path: str, t0: float) -> RunResult:
         from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
 
-        os.makedirs(self.run_dir, exist_ok=True)
-        params_path = os.path.join(self.run_dir, 'params.yaml')
-        with open(params_path, 'w') as fh:
-            fh.write(params_file_text(self.nodes))
         domain, lock = acquire_domain()
         env = child_env(domain)
         os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
@@ -269,10 +446,13 @@ class Launcher:
         manifest = {'pid': os.getpid(), 'domain': domain, 'scenario': self.sc['_path'],
                     'epoch': self.sc['epoch'],
                     'bag': self.record, 'run_dir': self.run_dir, 'compose': self.compose}
-        os.makedirs(RUNS_DIR, exist_ok=True)
         manifest_path = os.path.join(RUNS_DIR, f'active-{os.getpid()}.json')
-        with open(manifest_path, 'w') as fh:
-            json.dump(manifest, fh)
+        try:
+            _write_private(manifest_path, json.dumps(manifest))
+        except OSError as exc:
+            lock.close()
+            return RunResult(1, 0.0, time.monotonic() - t0, 0, 0, None, self.run_dir,
+                             f'cannot write {manifest_path}: {exc.strerror or exc}')
         epoch_ns = epoch_to_ns(parse_epoch(self.sc['epoch']))
         monitor = _Monitor(epoch_ns)
         old_int = signal.signal(signal.SIGINT, self._on_signal)
@@ -280,14 +460,18 @@ class Launcher:
         self.log(f'[adcs] run {self.sc["name"]}: {len(self.nodes)} nodes '
                  f'({"composed in one process" if self.compose else "one process each"}), '
                  f'ROS_DOMAIN_ID={domain}, logs in {self.run_dir}/logs')
-        t0 = time.monotonic()
         code, message = 0, ''
         try:
             self._spawn(env, params_path)
             manifest['pids'] = {name: proc.pid for name, proc in self.procs.items()}
-            with open(manifest_path, 'w') as fh:
-                json.dump(manifest, fh)
+            try:
+                _write_private(manifest_path, json.dumps(manifest))
+            except OSError as exc:  # the first manifest stands; status/switch lack the pids
+                self.log(f'[adcs] WARNING: cannot update {manifest_path}: {exc.strerror}')
             code, message = self._watch(monitor, t0)
+        except OSError as exc:   # a log file or the node processes could not be created
+            code, message = 1, (f'cannot start the nodes: '
+                                f'{"disk full" if _disk_full(exc) else exc.strerror or exc}')
         finally:
             self._stop_all(monitor)
             if self.progress:
@@ -297,14 +481,45 @@ class Launcher:
             frames = int(round(sim_s / self.sc['timing']['frame_s']))
             missed = monitor.missed_frames
             fps = self._master_fps()
+            if monitor.recorder_error and code == 0:
+                code, message = 1, self._write_failed_message(monitor.recorder_error)
+            degraded = self._degraded(monitor)
+            if degraded and code == 0:
+                code, message = EXIT_DEGRADED, f'done, DEGRADED: {degraded}'
+            elif degraded:
+                message += f'\n[adcs] degraded: {degraded}'
             monitor.close()
             signal.signal(signal.SIGINT, old_int)
             signal.signal(signal.SIGTERM, old_term)
-            os.unlink(manifest_path)
+            try:
+                os.unlink(manifest_path)
+            except OSError:
+                pass
             lock.close()
-            self._save_scenario()
+            saved = self._save_scenario()
+            if saved and code == 0:
+                code, message = 1, saved
+            elif saved:
+                message += f'\n{saved}'
         return RunResult(code, sim_s, wall, frames, missed, self.record, self.run_dir, message,
                          fps)
+
+    def _degraded(self, monitor: '_Monitor') -> str:
+        """Why the run lost its controller or estimator for part of the time ('' if not)."""
+        why = []
+        if self.lost:
+            why.append('lost ' + ', '.join(
+                f'{n} (died at sim t = {self.lost_at.get(n, 0.0):g} s)'
+                for n in sorted(self.lost)))
+        st = monitor.controller_status
+        if st is not None and st.missed_frames > 0:
+            why.append(f'the controller manager could not forward the active controller in '
+                       f'{st.missed_frames} frames (last fault: {st.last_fault or "?"})')
+        return '; '.join(why)
+
+    def _write_failed_message(self, error: str) -> str:
+        return (f'the recorder stopped: {error} ({self.record}). The run was stopped; the bag '
+                'keeps what was written before (adcs export / adcs report read it)')
 
     def _master_fps(self) -> float:
         """Lockstep frames/s measured by the clock master (its result file), 0 if none."""
@@ -314,19 +529,31 @@ class Launcher:
         except (OSError, ValueError, KeyError):
             return 0.0
 
-    def _save_scenario(self) -> None:
+    def _save_scenario(self) -> str:
         """Store the effective scenario (defaults filled in) beside the bag's files.
 
         ``<bag>/scenario.yaml`` lets ``adcs report`` pick the paper comparison and lets a
         campaign check what each run really used; rosbag2 readers ignore the extra file.
+        Returns ``''``, or a message when it could not be written (disk full): the bag itself
+        is kept.
         """
         if not self.record or not os.path.isdir(self.record):
-            return
+            return ''
         sc = {k: v for k, v in self.sc.items() if not k.startswith('_')}
         sc['duration_s'] = self.duration_s
-        with open(os.path.join(self.record, 'scenario.yaml'), 'w') as fh:
-            fh.write(f'# effective scenario of this bag (from {self.sc.get("_path", "?")})\n')
-            yaml.safe_dump(sc, fh, sort_keys=False)
+        path = os.path.join(self.record, 'scenario.yaml')
+        try:
+            with open(path, 'w') as fh:
+                fh.write(f'# effective scenario of this bag (from {self.sc.get("_path", "?")})\n')
+                yaml.safe_dump(sc, fh, sort_keys=False)
+        except OSError as exc:
+            try:
+                os.unlink(path)   # a cut scenario.yaml would mislead adcs report
+            except OSError:
+                pass
+            why = 'disk full' if _disk_full(exc) else (exc.strerror or str(exc))
+            return f'could not write {path}: {why} (the bag is kept)'
+        return ''
 
     def _on_signal(self, signum, frame) -> None:
         self._stop_requested = True
@@ -347,6 +574,8 @@ class Launcher:
             if self._stop_requested:
                 return 130, ('interrupted (Ctrl-C): nodes stopped'
                              + (', bag closed' if self.record else ''))
+            if monitor.recorder_error:   # also in composed mode, where the process lives on
+                return 1, self._write_failed_message(monitor.recorder_error)
             for name, proc in self.procs.items():
                 rc = proc.poll()
                 if rc is None or name in self.lost:
@@ -354,10 +583,17 @@ class Launcher:
                 if name == master and rc == 0:
                     return self._finish(monitor, total_ns)
                 tail = self._log_tail(name)
+                if name in ('recorder', 'composed') and monitor.recorder_error:
+                    return 1, self._write_failed_message(monitor.recorder_error)
+                if name == 'recorder' and rc == RECORDER_WRITE_FAILED:
+                    return 1, self._write_failed_message(
+                        ('disk full' if 'disk full' in tail else 'write error') + ', see '
+                        + os.path.join(self.run_dir, 'logs', 'recorder.log'))
                 if name not in ESSENTIAL and rc != 2:
                     # flight software died (a crash, a kill): the graph goes on without it;
                     # its consumers time out and fall back (manager -> safe controller)
                     self.lost.add(name)
+                    self.lost_at[name] = monitor.sim_ns / 1e9
                     self.log(f'[adcs] WARNING: node {name} exited with code {rc}; the graph '
                              f'goes on without it (log: {self.run_dir}/logs/{name}.log)')
                     continue

@@ -1,0 +1,119 @@
+"""Launcher safety without starting a graph: domain locks, run directories, bad run inputs.
+
+The truth is the file system (modes, link targets, contents) and the documented limits.
+"""
+import json
+import os
+import stat
+
+import pytest
+
+from adcs_nodes.tools import launcher
+from adcs_nodes.tools.launcher import LaunchError, Launcher, acquire_domain, prune_runs
+from adcs_nodes.tools.scenario import load_scenario
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+FREE_TUMBLE = os.path.join(ROOT, 'scenarios', 'free_tumble.yaml')
+
+
+@pytest.fixture
+def lock_dir(tmp_path, monkeypatch):
+    path = tmp_path / 'locks'
+    monkeypatch.setattr(launcher, 'domain_lock_dir', lambda: str(path))
+    return path
+
+
+def test_planted_symlink_is_not_followed(lock_dir):
+    lock_dir.mkdir(mode=0o700)
+    victim = lock_dir.parent / 'victim.txt'
+    victim.write_text('precious')
+    os.symlink(victim, lock_dir / '7.lock')
+    with pytest.raises(LaunchError, match='no free ROS_DOMAIN_ID'):
+        acquire_domain([7])
+    dom, fh = acquire_domain([7, 8])
+    try:
+        assert dom == 8
+    finally:
+        fh.close()
+    assert victim.read_text() == 'precious'
+    assert os.readlink(lock_dir / '7.lock') == str(victim)
+
+
+def test_lock_dir_is_private_and_a_planted_dir_symlink_is_refused(lock_dir):
+    dom, fh = acquire_domain([5])
+    fh.close()
+    assert stat.S_IMODE(os.stat(lock_dir).st_mode) == 0o700
+    assert stat.S_IMODE(os.stat(lock_dir / '5.lock').st_mode) == 0o600
+    os.rename(lock_dir, lock_dir.parent / 'elsewhere')
+    os.symlink(lock_dir.parent / 'elsewhere', lock_dir)
+    with pytest.raises(LaunchError, match='not a directory owned by you'):
+        acquire_domain([5])
+
+
+def test_default_lock_dir_is_per_user(monkeypatch):
+    monkeypatch.delenv('XDG_RUNTIME_DIR', raising=False)
+    assert launcher.domain_lock_dir().endswith(f'adcs-domain-locks-{os.getuid()}')
+
+
+def test_domains_are_many_valid_and_drawn_at_random(lock_dir):
+    ids = launcher.RUN_DOMAINS
+    assert len(set(ids)) > 100
+    assert all(1 <= d <= 232 for d in ids)                 # Fast DDS on UDP: 0..232
+    assert not any(100 <= d <= 199 for d in ids)           # the unlocked test domains
+    assert not any(102 <= d <= 214 for d in ids)           # ports in the ephemeral range
+    held = [acquire_domain() for _ in range(8)]
+    try:
+        got = [d for d, _ in held]
+        assert len(set(got)) == 8                          # claimed: never shared
+        assert got != sorted(got)                          # not handed out in order
+    finally:
+        for _, fh in held:
+            fh.close()
+
+
+def test_prune_keeps_the_newest_and_the_active_runs(tmp_path):
+    runs = tmp_path / 'runs'
+    runs.mkdir()
+    made = []
+    for i in range(60):
+        d = runs / f'20260101T{i:06d}-scenario_{i}-{1000 + i}'
+        d.mkdir()
+        (d / 'params.yaml').write_text('x')
+        os.utime(d, (1e9 + i, 1e9 + i))
+        made.append(d)
+    (runs / 'keep-me').mkdir()                             # not a run directory: untouched
+    (runs / 'active-1.json').write_text(json.dumps({'run_dir': str(made[0])}))
+    removed = prune_runs(str(runs), keep=50)
+    assert sorted(removed) == sorted(str(d) for d in made[1:10])
+    left = {p.name for p in runs.iterdir()}
+    assert {d.name for d in made[10:]} | {made[0].name, 'keep-me', 'active-1.json'} == left
+
+
+def test_private_files_and_dirs(tmp_path):
+    d = tmp_path / 'run'
+    d.mkdir(mode=0o755)
+    os.chmod(d, 0o755)
+    launcher._private_dir(str(d))
+    assert stat.S_IMODE(os.stat(d).st_mode) == 0o700
+    f = d / 'active-1.json'
+    launcher._write_private(str(f), '{"domain": 5}')
+    assert stat.S_IMODE(os.stat(f).st_mode) == 0o600
+    assert json.loads(f.read_text()) == {'domain': 5}
+
+
+@pytest.mark.parametrize('change, message', [
+    ({'name': '../../escape'}, 'must match'),
+    ({'name': 'a/b'}, 'must match'),
+    ({'epoch': 'not-a-date'}, 'ISO-8601'),
+    ({'epoch': '2037-12-31T00:00:00Z'}, '2038'),
+])
+def test_launcher_refuses_bad_runs(change, message):
+    sc = dict(load_scenario(FREE_TUMBLE), **change)
+    with pytest.raises(LaunchError, match=message):
+        Launcher(sc, duration_s=86400 * 30, progress=False)
+
+
+@pytest.mark.parametrize('duration', [float('inf'), float('nan'), -1.0, 0.0])
+def test_launcher_refuses_non_finite_durations(duration):
+    with pytest.raises(LaunchError, match='positive finite'):
+        Launcher(load_scenario(FREE_TUMBLE), duration_s=duration, progress=False)
