@@ -1,7 +1,25 @@
-"""ament_python package of the flight software and tools (``ros2 run adcs_nodes <node>``)."""
+"""ament_python package of the flight software and tools (``ros2 run adcs_nodes <node>``).
+
+Installs, besides the Python package: the launch file (``share/adcs_nodes/launch``) and the
+scenarios (``share/adcs_nodes/scenarios``, from the repository's ``scenarios/``). ``colcon test``
+runs the project's tests (``tests/``, config in setup.cfg) because pytest is a test dependency.
+"""
+import glob
+import os
+
 from setuptools import find_packages, setup
 
 PACKAGE = 'adcs_nodes'
+# adcs_nodes/scenarios is a symlink to the repository's scenarios/ (colcon wants data_files
+# inside the package directory)
+HERE = os.path.dirname(os.path.realpath(__file__))
+
+
+def files(pattern):
+    """Paths matching ``pattern``, relative to this package's real directory (colcon wants
+    relative data_files)."""
+    return sorted(os.path.relpath(p, HERE) for p in glob.glob(os.path.join(HERE, pattern)))
+
 
 setup(
     name=PACKAGE,
@@ -10,8 +28,11 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/launch', files('launch/*.launch.py')),
+        ('share/' + PACKAGE + '/scenarios', files('scenarios/*.yaml')),
     ],
     install_requires=['setuptools'],
+    tests_require=['pytest'],
     zip_safe=True,
     maintainer='ADCS maintainers',
     maintainer_email='adcs@example.org',

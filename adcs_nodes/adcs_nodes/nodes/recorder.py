@@ -111,6 +111,7 @@ from std_msgs.msg import String
 from adcs_nodes.nodes import runtime
 from adcs_nodes.tools.bag import (cdr_stamp_ns, ensure_type, flush_writer, make_typestore,
                                   stamp_kind)
+from adcs_nodes.tools.distro import close_writer
 
 DEFAULT_EXCLUDE = ['/rosout', '/parameter_events']
 QUEUE_DEPTH = 1000
@@ -615,7 +616,7 @@ class RecorderNode(Node):
         for rec in self._topics.values():
             self.destroy_subscription(rec.subscription)
         try:
-            writer.close()
+            close_writer(writer)      # metadata carries the real ROS distro, not 'rosbags'
         except OSError as exc:
             self._writer = writer
             self._write_failed(exc)
