@@ -18,6 +18,7 @@ Command``), then add one ``register(Entry(...))`` here (or in a plugin module): 
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Dict
 
 import numpy as np
@@ -161,6 +162,47 @@ register(Entry(
     _build_reference_slew, inputs=('estimate', 'target'), actuators=('torque',)))
 
 
+def _build_mpi(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from adcs_nodes.core.control.mpi import MPIController
+    inertia = p['inertia_kgm2']
+    if inertia and len(inertia) != 9:
+        raise ValueError(f'mpi inertia_kgm2: expected 9 values (row-major 3x3) or none, got '
+                         f'{len(inertia)}')
+    inertia = np.reshape(inertia, (3, 3)) if inertia else ctx['inertia_kgm2']
+    if not _n_wheels(ctx):
+        raise ValueError('controller mpi needs reaction wheels (spacecraft.wheels)')
+    return MPIController(
+        inertia, ctx['wheel_axes_body'], ctx['wheel_max_torque_Nm'],
+        ctx['wheel_max_momentum_Nms'], ctx['period_s'], series_order=p['series_order'],
+        literal_model=p['literal_model'], min_horizon_s=p['min_horizon_s'],
+        saturation=p['saturation'], reference_time=p['reference_time'],
+        exact_transition=p['exact_transition'])
+
+
+register(Entry(
+    'controller', 'mpi',
+    'paper 001 MPI: feedback-linearised model, power-series state transition, generalised '
+    'inverse to reaction-wheel torque; maneuvers with a deadline, stabilisation, tracking',
+    'adcs_nodes.core.control.mpi:MPIController',
+    (Param('series_order', 'int', 5, '-', 'order N of the power series of Phi and Q (19)-(21) '
+           '(paper: 5)', min=1, max=30),
+     Param('literal_model', 'bool', False, '-', "the paper's model without the constant "
+           'gyroscopic terms [w0 hz, 0, -w0 hx] (digest P2)'),
+     Param('min_horizon_s', 'float', 0.0, 's', 'horizon floor in a maneuver (ASSUMPTION); '
+           '0: one control period', min=0.0),
+     Param('saturation', 'str', 'scale', '-', 'wheel torque limit: scale (one factor, keeps '
+           'the direction) or clip per wheel', choices=('scale', 'clip')),
+     Param('reference_time', 'str', 't0', '-', "desired state from the target at t0 (the "
+           "paper's tracking lag) or propagated to t0 + tau", choices=('t0', 't0_plus_tau')),
+     Param('exact_transition', 'bool', False, '-', 'expm instead of the power series '
+           '(digest P6 study)'),
+     Param('inertia_kgm2', 'float[]', [], 'kg m^2', "the controller's own inertia, 9 values "
+           'row-major (paper 001: eq. (31), 5 % off the truth); empty: the onboard inertia of '
+           'the spacecraft')),
+    _build_mpi, inputs=('estimate', 'target', 'wheel_speeds'), actuators=('wheels',),
+    requires=('spacecraft.wheels',)))
+
+
 # ---------------------------------------------------------------------- estimators
 _P0_HELP = ('initial covariance diagonal: attitude (phi or mu) [-], rate [rad^2/s^2], '
             'disturbance [1/s^4]; empty: the default of the measurement form')
@@ -218,6 +260,36 @@ register(Entry(
     'difference',
     'adcs_nodes.core.estimation.algorithms:GeometricEstimator', (),
     _build_geometric('horizon_mag_yaw'), inputs=('magnetometer', 'horizon')))
+
+
+def _build_mekf(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from adcs_nodes.core.estimation.mekf import MEKF
+    return MEKF(star_tracker_std_rad=p['star_tracker_std_rad'],
+                gyro_noise_std_rad_s=p['gyro_noise_std_rad_s'],
+                gyro_bias_walk_rad_s_sqrt_s=p['gyro_bias_walk_rad_s_sqrt_s'],
+                p0_bias_rad_s=p['p0_bias_rad_s'], gate_nis=p['gate_nis'],
+                max_rejections=p['max_rejections'])
+
+
+register(Entry(
+    'estimator', 'mekf',
+    'multiplicative EKF: star-tracker attitude + gyro rate with gyro-bias states (feeds the '
+    'paper 001 MPI controller)',
+    'adcs_nodes.core.estimation.mekf:MEKF',
+    (Param('star_tracker_std_rad', 'float', math.radians(0.02 / 3.0), 'rad',
+           'star-tracker noise per axis (paper 001: 0.02 deg 3-sigma)', positive=True),
+     Param('gyro_noise_std_rad_s', 'float', 1e-6, 'rad/s', 'gyro white noise per sample '
+           '(ASSUMPTION: the paper gives only the drift)', min=0.0),
+     Param('gyro_bias_walk_rad_s_sqrt_s', 'float',
+           math.radians(0.01 / 3.0) / 3600.0 / math.sqrt(3600.0), 'rad/s/sqrt(s)',
+           'gyro bias random walk (paper 001: 0.01 deg/h 3-sigma drift after 1 h)', min=0.0),
+     Param('p0_bias_rad_s', 'float', 1e-4, 'rad/s', 'initial bias std per axis',
+           positive=True),
+     Param('gate_nis', 'float', 100.0, '-', 'largest accepted normalised innovation squared '
+           '(chi-square, 3 dof)', positive=True),
+     Param('max_rejections', 'int', 10, '-', 'refused star-tracker samples in a row that '
+           'restart the filter', min=1, max=100000)),
+    _build_mekf, inputs=('star_tracker', 'gyro')))
 
 
 def wheel_momentum(speed_rad_s: Any, ctx: Dict[str, Any]) -> Any:
