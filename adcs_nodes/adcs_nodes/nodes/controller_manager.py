@@ -51,6 +51,24 @@ LIST_SERVICE = 'adcs/list_controllers'
 class ControllerManagerNode(LockstepNode):
     """Controller manager (see module docstring)."""
 
+    #: Descriptions of this node's own parameters (``ros2 param describe``).
+    PARAM_DOCS = {
+        'controllers': 'controllers whose commands are forwarded',
+        'safe': 'safe-mode controller (fallback)',
+        'initial': 'controller active at start (empty: auto or safe)',
+        'period_s': 'manager period [s]',
+        'controller_period_s': 'period of the controller commands [s]',
+        'estimator_period_s': 'period of the watched estimate [s] (0: not watched)',
+        'schedule_t_s': 'scripted switch times [s]',
+        'schedule_controller': 'scripted switch targets',
+        'max_wheel_torque_Nm': 'wheel torque limits [N m] ([-1]: no wheels)',
+        'estimate_users': 'controllers that need the estimate (* all)',
+        'max_dipole_Am2': 'magnetorquer limits [A m^2]',
+        'max_torque_Nm': 'ideal body-torque limits [N m]',
+        'stale_after_s': 'a command older than this is stale [s]',
+        'wheel_names': 'wheel names (JointState order)',
+    }
+
     def __init__(self, name: str = 'controller_manager', **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
         self.names: List[str] = [n for n in self.param('controllers', ['bdot']) if n]

@@ -169,16 +169,20 @@ class LockstepNode(Node):
         self.create_timer(1.0, self._status_watchdog)
 
     # ------------------------------------------------------------------ parameters
-    def param(self, name: str, default: Any) -> Any:
+    def param(self, name: str, default: Any, doc: str = '') -> Any:
         """Value of parameter ``name`` (declared with ``default`` if not given).
 
-        A name spec'd in :data:`adcs_nodes.nodes.params.COMMON` is declared with its
-        descriptor and validated; every name asked for is "known" to
+        A name spec'd in :data:`adcs_nodes.nodes.params.COMMON`, or documented by ``doc`` or
+        the class's ``PARAM_DOCS`` ("meaning [unit]"), is declared with a descriptor (``ros2
+        param describe``) and its type checked; every name asked for is "known" to
         :func:`adcs_nodes.nodes.params.refuse_unknown`.
         """
         self._asked = getattr(self, '_asked', set())
         self._asked.add(name)
         spec = node_params.COMMON.get(name)
+        doc = doc or getattr(self, 'PARAM_DOCS', {}).get(name, '')
+        if spec is None and doc:
+            spec = node_params.infer(name, default, doc)
         if spec is not None:
             if name in getattr(self, '_adcs_specs', {}):
                 return self.get_parameter(name).value
@@ -189,7 +193,7 @@ class LockstepNode(Node):
         return default if value is None else value
 
     def section(self, prefix: str, defaults: Dict[str, Any],
-                merge: bool = True) -> Dict[str, Any]:
+                merge: bool = True, docs: Optional[Dict[str, str]] = None) -> Dict[str, Any]:
         """Parameters ``prefix.*`` as a dict (for model factories).
 
         With ``merge`` the given keys override ``defaults``; without it ``defaults`` are used
@@ -198,6 +202,9 @@ class LockstepNode(Node):
         """
         node_params.known_prefix(self, prefix)
         given = {k: p.value for k, p in self.get_parameters_by_prefix(prefix).items()}
+        for key in given:   # descriptions of the section's keys (ros2 param describe)
+            node_params.describe_given(self, f'{prefix}.{key}', (docs or {}).get(
+                key, f'{prefix} section key {key} (docs/scenarios.md: {prefix}.{key})'))
         if merge:
             return {**defaults, **given}
         return given if given else dict(defaults)

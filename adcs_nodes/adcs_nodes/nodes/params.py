@@ -86,6 +86,35 @@ def declare(node, spec: Param) -> Any:
     return value
 
 
+def infer(name: str, default: Any, doc: str) -> Param:
+    """A :class:`Param` for a node-local parameter documented by ``doc`` (type from default)."""
+    if isinstance(default, bool):
+        ptype = 'bool'
+    elif isinstance(default, int):
+        ptype = 'int'
+    elif isinstance(default, float):
+        ptype = 'float'
+    elif isinstance(default, str):
+        ptype = 'str'
+    elif isinstance(default, (list, tuple)) and default and all(
+            isinstance(v, str) for v in default):
+        ptype = 'str[]'
+    else:
+        ptype = 'float[]'
+        default = [float(v) for v in default]
+    return Param(name, ptype, default, '-', doc)
+
+
+def describe_given(node, name: str, doc: str) -> None:
+    """Attach a description to a parameter declared from the overrides (section keys)."""
+    if not node.has_parameter(name) or name in _specs(node):
+        return
+    param = node.get_parameter(name)
+    node.undeclare_parameter(name)
+    node.declare_parameter(name, param.value, ParameterDescriptor(
+        name=name, type=param.type_.value, description=doc, read_only=True))
+
+
 def declare_all(node, specs: Iterable[Param]) -> Dict[str, Any]:
     """:func:`declare` each spec; returns ``{name: value}``."""
     return {s.name: declare(node, s) for s in specs}

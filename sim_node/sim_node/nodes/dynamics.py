@@ -52,6 +52,16 @@ RECORDER_LAG_FRAMES = 400
 class DynamicsNode(LockstepNode):
     """Clock master and rigid-body integrator (see module docstring)."""
 
+    #: Descriptions of this node's own parameters (``ros2 param describe``).
+    PARAM_DOCS = {
+        'substeps': 'RK4 substeps per frame',
+        'rate_factor': 'real-time mode: sim seconds per wall second',
+        'command_period_s': 'period of adcs/actuator_command [s] (0: none awaited)',
+        'wait_for_nodes': 'nodes whose lockstep/ready starts frame 0',
+        'result_file': 'JSON file written at the end of the run (frames/s, final state)',
+        'start_timeout_s': 'wall-clock wait for every node ready [s]',
+    }
+
     SIMULATED_WORLD = True      # the simulator: lockstep only
 
     def __init__(self, name: str = 'dynamics', **kwargs) -> None:
