@@ -199,10 +199,13 @@ def hermite_field_derivatives(b_prev, b_dot_prev, b, b_dot, tau: float
     tuple of numpy.ndarray, shape (3,)
         Second [T/s^2] and third [T/s^3] derivative of the cubic at ``t``.
     """
-    d = b - b_prev
-    c2 = (2.0 * b_dot + b_dot_prev) / tau - 3.0 * d / tau ** 2
-    c3 = (b_dot + b_dot_prev) / tau ** 2 - 2.0 * d / tau ** 3
-    return 2.0 * c2, 6.0 * c3
+    tau = float(tau)
+    if not (tau > 0.0 and math.isfinite(tau)):
+        raise ValueError(f'tau must be > 0 and finite, got {tau}')
+    c = np.empty((2, 3))
+    kernels.hermite_terms(_vec(b_prev, 'b_prev'), _vec(b_dot_prev, 'b_dot_prev'),
+                          _vec(b, 'b'), _vec(b_dot, 'b_dot'), tau, c)
+    return 2.0 * c[0], 6.0 * c[1]
 
 
 def propagate_environment(env: FrameEnvironment, ds: float,
@@ -303,7 +306,11 @@ class Spacecraft:
         else:
             self._wheel_max_torque = self._wheel_max_momentum = np.zeros(0)
         self._no_dist: dict[int, np.ndarray] = {}
-        self._field_prev: Optional[tuple] = None     # (t, dt, b, b_dot) of the last frame
+        self._field_prev: Optional[tuple] = None     # (t, dt, [b, b_dot]) of the last frame
+        self._zero_wheels = np.zeros(self.n_wheels)
+        self._x_shape = (kernels.state_size(self.n_wheels),)
+        self._part_lens = (4, 3, 3, 3, self.n_wheels, 3, 3, self.n_wheels, 3, 3)
+        self._u_shape = (6 + self.n_wheels,)
 
     # ----------------------------------------------------------------- validation (edges)
     def check_state(self, state: SpacecraftState) -> None:
@@ -346,26 +353,61 @@ class Spacecraft:
         x[kernels.H0:] = state.h_wheels
         return x
 
-    def _field_coefficients(self, t: float, dt: float, env: FrameEnvironment, b_eci: np.ndarray,
-                            b_dot_eci: np.ndarray) -> np.ndarray:
-        """Polynomial (E7) in ``s`` as rows ``c_j`` [T/s^j] (4, 3), from ``env`` or (E8)."""
+    def _frame_inputs(self, state: SpacecraftState, env: FrameEnvironment,
+                      command: ActuatorCommand) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Validated kernel state (N,), command ``u`` (6 + n,) and field ``[b, b_dot]`` (2, 3).
+
+        One finiteness check over everything; only when it fails (or a shape is wrong) the
+        per-item checks run, to name the culprit in the ``ValueError``.
+        """
+        wheel_cmd = command.wheel_torque
+        if np.size(wheel_cmd) == 0:
+            wheel_cmd = self._zero_wheels
+        parts = (state.q_eci_body, state.omega_body_eci_body, env.r_eci, env.v_eci,
+                 state.h_wheels, command.dipole_body, command.torque_body, wheel_cmd,
+                 env.b_eci, env.b_dot_eci)
+        try:
+            ok = tuple(map(len, parts)) == self._part_lens
+            if ok:
+                flat = np.concatenate(parts, dtype=float)
+                ok = flat.ndim == 1 and bool(np.isfinite(flat).all())
+        except (ValueError, TypeError):
+            ok = False
+        if not ok:                                   # find and name the bad item
+            self.check_state(state)
+            self._check_env(env.r_eci, env.v_eci, env.b_eci, env.b_dot_eci)
+            _vec(command.dipole_body, 'dipole_body')
+            _vec(command.torque_body, 'torque_body')
+            self._wheel_command(command)
+            raise ValueError('inputs of wrong shape or type')      # pragma: no cover
+        n_x, n_u = self._x_shape[0], self._u_shape[0]
+        x, u = flat[:n_x], flat[n_x:n_x + n_u]
+        field = flat[n_x + n_u:].reshape(2, 3)
+        q = x[kernels.Q]
+        if q @ q < 1e-12:
+            raise ValueError('q_eci_body has zero norm')
+        if self.gravity_gradient and not x[kernels.R].any():
+            raise ValueError('r_eci must not be zero with gravity gradient on')
+        return x, u, field
+
+    def _field_terms(self, t: float, dt: float, env: FrameEnvironment,
+                     field: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """Kernel field arguments ``(b_coef (4, 3), b_prev (2, 3), tau_prev)`` of (E7), (E8):
+        explicit higher terms from ``env``, else the previous frame's field when this frame
+        follows it, else the line."""
         coef = np.zeros((4, 3))
-        coef[0] = b_eci
-        coef[1] = b_dot_eci
-        prev, self._field_prev = self._field_prev, (t, dt, b_eci.copy(), b_dot_eci.copy())
+        coef[0:2] = field
+        prev, self._field_prev = self._field_prev, (t, dt, field)
         if env.b_ddot_eci is not None or env.b_dddot_eci is not None:
             if env.b_ddot_eci is not None:
                 coef[2] = 0.5 * _vec(env.b_ddot_eci, 'b_ddot_eci')
             if env.b_dddot_eci is not None:
                 coef[3] = _vec(env.b_dddot_eci, 'b_dddot_eci') / 6.0
         elif self.field_history and prev is not None:
-            t_prev, tau, b_prev, b_dot_prev = prev
+            t_prev, tau, field_prev = prev
             if abs(t_prev + tau - t) <= 1e-9 * tau:          # consecutive frames only
-                b_ddot, b_dddot = hermite_field_derivatives(b_prev, b_dot_prev, b_eci,
-                                                            b_dot_eci, tau)
-                coef[2] = 0.5 * b_ddot
-                coef[3] = b_dddot / 6.0
-        return coef
+                return coef, field_prev, tau
+        return coef, field, 0.0
 
     def _disturbance_table(self, t: float, h: float, substeps: int) -> np.ndarray:
         """Disturbance torque of each substep, sampled at its midpoint (substeps, 3) [N m]."""
@@ -479,34 +521,27 @@ class Spacecraft:
                 or substeps < 1:
             raise ValueError(f'substeps must be an integer >= 1, got {substeps!r}')
         substeps = int(substeps)
-        self.check_state(state)
-        r_eci, v_eci, b_eci, b_dot_eci = self._check_env(env.r_eci, env.v_eci, env.b_eci,
-                                                         env.b_dot_eci)
-        dipole_cmd = _vec(command.dipole_body, 'dipole_body')
-        wheel_cmd = self._wheel_command(command)
-        tau_ideal = _vec(command.torque_body, 'torque_body').copy()
-        coef = self._field_coefficients(t, dt, env, b_eci, b_dot_eci)
-        h = dt / substeps
-        tau_dist = self._disturbance_table(t, h, substeps)
+        x, u, field = self._frame_inputs(state, env, command)
+        coef, b_prev, tau_prev = self._field_terms(t, dt, env, field)
+        tau_dist = self._disturbance_table(t, dt / substeps, substeps)
+        out = np.empty(kernels.OUT_TAU_W + self.n_wheels)
+        kernels.frame_step(x, dt, substeps, self._inertia_c, self._inertia_inv_c, self._A,
+                           self.mu, self.gravity_gradient, self._dipole_max,
+                           self._wheel_max_torque, self._wheel_max_momentum, u, tau_dist, coef,
+                           b_prev, tau_prev, out)
 
-        x, dipole, tau_w, torques0 = kernels.frame_step(
-            self._kernel_state(state, r_eci, v_eci), dt, substeps, self._inertia_c,
-            self._inertia_inv_c, self._A, self.mu, self.gravity_gradient, dipole_cmd,
-            self._dipole_max, wheel_cmd, self._wheel_max_torque, self._wheel_max_momentum,
-            tau_ideal, tau_dist, coef)
-
-        tau_wheels = -(self._A @ tau_w)
+        tau_ideal = u[3:6]
         tau_dist_first = tau_dist[0].copy()
-        tau_gg, tau_mag = torques0[:3], torques0[3:]
-        tau_external = tau_ideal + tau_dist_first + tau_gg + tau_mag
+        tau_wheels = out[kernels.OUT_WHEELS_BODY]
+        tau_external = tau_ideal + tau_dist_first + out[kernels.OUT_GG] + out[kernels.OUT_MAG]
         applied = {
-            'dipole_body': dipole,
-            'wheel_torque': tau_w,
+            'dipole_body': out[kernels.OUT_DIPOLE],
+            'wheel_torque': out[kernels.OUT_TAU_W:],
             'torque_ideal_body': tau_ideal,
             'torque_wheels_body': tau_wheels,
             'torque_disturbance_body': tau_dist_first,
-            'torque_gg_body': tau_gg,
-            'torque_magnetic_body': tau_mag,
+            'torque_gg_body': out[kernels.OUT_GG],
+            'torque_magnetic_body': out[kernels.OUT_MAG],
             'torque_external_body': tau_external,
             'torque_body': tau_external + tau_wheels,
         }

@@ -196,19 +196,42 @@ def saturate(dt, dipole_cmd, dipole_max, wheel_cmd, wheel_max_torque, wheel_max_
 
 
 @njit(cache=True)
-def frame_step(x0, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_cmd,
-               dipole_max, wheel_cmd, wheel_max_torque, wheel_max_momentum, tau_ideal,
-               tau_dist, b_coef):
+def hermite_terms(b_prev, b_dot_prev, b, b_dot, tau, out):
+    """Coefficients ``c2``, ``c3`` of (E7) from the cubic Hermite polynomial (E8) through
+    ``(b_prev, b_dot_prev)`` at ``-tau`` and ``(b, b_dot)`` at 0 (ECI, (3,) each, [T], [T/s]),
+    ``tau > 0`` [s]; written to ``out[0]``, ``out[1]`` (rows of shape (3,))."""
+    tau2 = tau * tau
+    for i in range(3):
+        d = b[i] - b_prev[i]
+        out[0, i] = (2.0 * b_dot[i] + b_dot_prev[i]) / tau - 3.0 * d / tau2
+        out[1, i] = (b_dot[i] + b_dot_prev[i]) / tau2 - 2.0 * d / (tau2 * tau)
+
+
+#: Layout of the ``applied`` output of :func:`frame_step` (body axes): applied dipole
+#: [A m^2], gravity-gradient and magnetic torque at ``t_k`` [N m], wheels' reaction
+#: ``-A tau_w`` [N m], then the applied motor torques (n) [N m].
+OUT_DIPOLE = slice(0, 3)
+OUT_GG = slice(3, 6)
+OUT_MAG = slice(6, 9)
+OUT_WHEELS_BODY = slice(9, 12)
+OUT_TAU_W = 12
+
+
+@njit(cache=True)
+def frame_step(x, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_max,
+               wheel_max_torque, wheel_max_momentum, u, tau_dist, b_coef, b_prev, tau_prev,
+               applied):
     """One frame ``t_k -> t_k + dt``: saturate the command once, hold it, RK4 in ``substeps``.
 
     Parameters
     ----------
-    x0 : numpy.ndarray, shape (N,)
-        Kernel state at ``t_k`` (layout in the module docstring); not modified.
+    x : numpy.ndarray, shape (N,)
+        Kernel state at ``t_k`` (layout in the module docstring); overwritten with the state
+        at ``t_k + dt``.
     dt : float
         Frame length [s], ``> 0``.
     substeps : int
-        RK4 substeps, ``>= 1``; the quaternion is renormalised after each.
+        RK4 substeps, ``>= 1``; the quaternion is renormalised first and after each.
     inertia, inertia_inv : numpy.ndarray, shape (3, 3)
         Inertia [kg m^2] and its inverse, body axes.
     axes : numpy.ndarray, shape (3, n)
@@ -217,38 +240,34 @@ def frame_step(x0, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_
         Gravitational parameter [m^3/s^2].
     use_gg : bool
         Gravity gradient (D1) on.
-    dipole_cmd, dipole_max : numpy.ndarray, shape (3,)
-        Requested dipole and per-axis limit [A m^2], body axes.
-    wheel_cmd, wheel_max_torque, wheel_max_momentum : numpy.ndarray, shape (n,)
-        Requested motor torque [N m], limits [N m], [N m s].
-    tau_ideal : numpy.ndarray, shape (3,)
-        Ideal external torque [N m], body axes.
+    dipole_max : numpy.ndarray, shape (3,)
+        Per-axis dipole limit [A m^2] (zero: no magnetorquer).
+    wheel_max_torque, wheel_max_momentum : numpy.ndarray, shape (n,)
+        Wheel limits [N m], [N m s] (``inf``: none).
+    u : numpy.ndarray, shape (6 + n,)
+        Command: requested dipole (3) [A m^2], ideal torque (3) [N m], motor torques (n)
+        [N m], body axes.
     tau_dist : numpy.ndarray, shape (substeps, 3)
         Disturbance torque of each substep [N m], body axes.
     b_coef : numpy.ndarray, shape (4, 3)
-        Field polynomial (E7) [T/s^j], ECI.
-
-    Returns
-    -------
-    x : numpy.ndarray, shape (N,)
-        Kernel state at ``t_k + dt``.
-    dipole : numpy.ndarray, shape (3,)
-        Applied dipole [A m^2].
-    tau_w : numpy.ndarray, shape (n,)
-        Applied motor torques [N m].
-    torques0 : numpy.ndarray, shape (6,)
-        ``tau_gg_body`` and ``tau_magnetic_body`` at ``t_k`` [N m].
+        Field polynomial (E7) [T/s^j], ECI. Rows 2, 3 are replaced by (E8) if ``tau_prev > 0``.
+    b_prev : numpy.ndarray, shape (2, 3)
+        Field [T] and rate [T/s] at ``t_k - tau_prev``, ECI (read only if ``tau_prev > 0``).
+    tau_prev : float
+        Length of the previous frame [s] for (E8), or ``<= 0``: use ``b_coef`` as given.
+    applied : numpy.ndarray, shape (12 + n,)
+        Written: see ``OUT_*``.
     """
-    n_x = x0.shape[0]
+    n_x = x.shape[0]
     n_wheels = axes.shape[1]
-    x = x0.copy()
+    coef = b_coef.copy()
+    if tau_prev > 0.0:
+        hermite_terms(b_prev[0], b_prev[1], coef[0], coef[1], tau_prev, coef[2:])
     norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
     for i in range(4):
         x[i] /= norm
-    h_w = np.empty(n_wheels)
-    for j in range(n_wheels):
-        h_w[j] = x[H0 + j]
-    dipole, tau_w = saturate(dt, dipole_cmd, dipole_max, wheel_cmd, wheel_max_torque,
+    h_w = x[H0:H0 + n_wheels].copy()
+    dipole, tau_w = saturate(dt, u[0:3], dipole_max, u[6:6 + n_wheels], wheel_max_torque,
                              wheel_max_momentum, h_w)
     use_mtq = dipole[0] != 0.0 or dipole[1] != 0.0 or dipole[2] != 0.0
     tau_fixed = np.empty(3)                 # ideal + wheels' reaction -A tau_w (W3)
@@ -256,9 +275,15 @@ def frame_step(x0, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_
         acc = 0.0
         for j in range(n_wheels):
             acc += axes[i, j] * tau_w[j]
-        tau_fixed[i] = tau_ideal[i] + -acc
-    torques0 = np.empty(6)
-    external_torques(0.0, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, torques0)
+        applied[9 + i] = -acc
+        tau_fixed[i] = u[3 + i] + -acc
+        applied[i] = dipole[i]
+    for j in range(n_wheels):
+        applied[OUT_TAU_W + j] = tau_w[j]
+    work = np.empty(6)
+    external_torques(0.0, x, inertia, mu, use_gg, use_mtq, dipole, coef, work)
+    for i in range(6):
+        applied[3 + i] = work[i]
 
     h = dt / substeps
     half = 0.5 * h
@@ -269,31 +294,29 @@ def frame_step(x0, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_
     k4 = np.empty(n_x)
     xt = np.empty(n_x)
     tau_held = np.empty(3)
-    work = np.empty(6)
     for i in range(substeps):
         s = i * h
         for c in range(3):
             tau_held[c] = tau_fixed[c] + tau_dist[i, c]
-        rhs(s, x, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef, tau_held,
+        rhs(s, x, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, coef, tau_held,
             tau_w, work, k1)
         for j in range(n_x):
             xt[j] = x[j] + half * k1[j]
-        rhs(s + half, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef,
+        rhs(s + half, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, coef,
             tau_held, tau_w, work, k2)
         for j in range(n_x):
             xt[j] = x[j] + half * k2[j]
-        rhs(s + half, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef,
+        rhs(s + half, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, coef,
             tau_held, tau_w, work, k3)
         for j in range(n_x):
             xt[j] = x[j] + h * k3[j]
-        rhs(s + h, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef,
+        rhs(s + h, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, coef,
             tau_held, tau_w, work, k4)
         for j in range(n_x):
             x[j] = x[j] + sixth * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
         norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
         for c in range(4):
             x[c] /= norm
-    return x, dipole, tau_w, torques0
 
 
 @njit(cache=True)
