@@ -76,3 +76,28 @@ def test_run_time_changes_are_validated(ros_context):
         assert ok.successful and node.get_parameter('alpha_per_s').value == 2e-3
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize('module, cls', [
+    ('sim_node.nodes.environment', 'EnvironmentNode'),
+    ('sim_node.nodes.dynamics', 'DynamicsNode'),
+    ('sim_node.nodes.magnetometer', 'MagnetometerNode'),
+    ('sim_node.nodes.horizon_sensor', 'HorizonSensorNode'),
+    ('sim_node.nodes.star_tracker', 'StarTrackerNode'),
+    ('sim_node.nodes.gyro', 'GyroNode'),
+    ('sim_node.nodes.wheel_tachometer', 'WheelTachometerNode'),
+    ('adcs_nodes.nodes.estimator', 'EstimatorNode'),
+    ('adcs_nodes.nodes.guidance', 'GuidanceNode'),
+    ('adcs_nodes.nodes.controller_manager', 'ControllerManagerNode'),
+])
+def test_every_node_describes_every_parameter(ros_context, module, cls):
+    """What ``ros2 param describe`` prints: a description for each parameter of each node."""
+    import importlib
+    node = getattr(importlib.import_module(module), cls)(context=ros_context)
+    try:
+        missing = [n for n, d in _describe(node).items()
+                   if not d.description and n not in ('use_sim_time',
+                                                      'start_type_description_service')]
+        assert missing == [], f'{cls}: parameters without a description: {missing}'
+    finally:
+        node.destroy_node()
