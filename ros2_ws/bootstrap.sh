@@ -112,7 +112,10 @@ done
 build_inputs=$(find -L "${base_paths[@]}" -maxdepth 3 \( -name package.xml -o -name CMakeLists.txt \
     -o -name setup.py -o -name setup.cfg -o -name '*.msg' -o -name '*.srv' -o -name '*.action' \) \
     | sort)
-build_hash="$( (echo "$build_inputs"; hash_of $build_inputs) | sha256sum | cut -d' ' -f1)"
+# installed data files (symlinked one by one): a new or removed one needs a build, an edit does not
+data_names=$(find -L "${base_paths[@]}" -maxdepth 3 \( -name '*.launch.py' -o -path '*/scenarios/*.yaml' \) \
+    | sort)
+build_hash="$( (echo "$build_inputs"; echo "$data_names"; hash_of $build_inputs) | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.build.sha256" 2>/dev/null)" != "$build_hash" ] || [ ! -f install/local_setup.bash ]; then
     say "colcon build (${base_paths[*]})"
     # shellcheck disable=SC1091

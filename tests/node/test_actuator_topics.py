@@ -40,8 +40,8 @@ def test_manager_offers_the_topics_its_spacecraft_has(ros_context):
         Parameter('controllers', value=['bdot']), Parameter('safe', value='bdot'),
         Parameter('max_wheel_torque_Nm', value=[0.01, 0.01]),
         Parameter('wheel_names', value=['a', 'b'])])
-    pubs = dict(node.get_publisher_names_and_types_by_node(node.get_name(),
-                                                          node.get_namespace()))
+    pubs = dict(node.get_publisher_names_and_types_by_node(
+        node.get_name(), node.get_namespace()))
     assert pubs['/actuators/magnetorquer/command'] == ['geometry_msgs/msg/Vector3Stamped']
     assert pubs['/actuators/wheels/command'] == ['sensor_msgs/msg/JointState']
     assert node.actuators.wheel_names == ['a', 'b']
