@@ -149,3 +149,46 @@ def test_disk_full_stops_the_run_says_so_and_keeps_the_data(tmp_path):
         assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)
     finally:
         subprocess.run(['umount', '-l', str(disk)], capture_output=True, timeout=10)
+
+
+def test_sigkill_of_the_recorder_stops_the_run_and_export_and_report_read_the_bag(
+        tmp_path):
+    """The recorder killed with SIGKILL mid-run: the launcher stops the run naming it, and
+    ``adcs export`` / ``adcs report`` read the unfinished bag (every state up to at most a
+    few seconds of sim time before the kill)."""
+    import csv
+
+    from adcs_nodes.tools.bag import read_messages
+
+    bag = tmp_path / 'bag'
+    proc = _start(tmp_path, 'run', FREE_TUMBLE, '--duration', LONG_S, '--record', str(bag),
+                  '--quiet')
+    try:
+        pids = _manifest(proc, tmp_path)['pids']
+        _wait(lambda: _mcap_size(bag) > 50_000, 60.0, 'the recorder writing data')
+        os.kill(pids['recorder'], signal.SIGKILL)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            _kill_group(proc)
+            proc.wait()
+    assert proc.returncode == 1, (out, err)
+    assert 'node recorder exited with code -9' in err, err
+    assert not (bag / 'metadata.yaml').exists()
+    states = [m for _, _, m in read_messages(bag, topics=['/sim/state'])]
+    assert len(states) > 10
+    env = _env(tmp_path)
+    csv_dir = tmp_path / 'csv'
+    res = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.cli', 'export', str(bag),
+                          '--csv', str(csv_dir)], env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert 'unfinished bag' in res.stderr
+    with open(csv_dir / 'sim__state.csv') as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(states)
+    res = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.cli', 'report', str(bag),
+                          '--out', str(tmp_path / 'report')], env=env, capture_output=True,
+                         text=True, timeout=180)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / 'report' / 'summary.md').is_file()

@@ -117,3 +117,11 @@ def test_launcher_refuses_bad_runs(change, message):
 def test_launcher_refuses_non_finite_durations(duration):
     with pytest.raises(LaunchError, match='positive finite'):
         Launcher(load_scenario(FREE_TUMBLE), duration_s=duration, progress=False)
+
+
+def test_a_100_kB_controller_name_is_refused_unsent_and_not_echoed():
+    from adcs_nodes.tools.live import LiveError, switch
+    with pytest.raises(LiveError) as info:
+        switch('x' * 100_000, pid=1)
+    assert len(str(info.value)) < 300
+    assert '100000 characters' in str(info.value)

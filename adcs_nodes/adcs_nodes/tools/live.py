@@ -9,12 +9,15 @@ from __future__ import annotations
 import glob
 import json
 import os
+import re
 import time
 from typing import Dict, List, Optional
 
 from adcs_nodes.tools.launcher import RUNS_DIR
 
 MANAGER = 'controller_manager'
+#: What a controller name can be (the registry's names); anything else is refused unsent.
+CONTROLLER_NAME = re.compile(r'[A-Za-z0-9_.-]{1,100}')
 
 
 class LiveError(RuntimeError):
@@ -110,6 +113,11 @@ def switch(name: str, pid: Optional[int] = None) -> str:
         No run, no manager, or the manager refused (unknown name: the message lists the
         known controllers).
     """
+    from adcs_nodes.tools.scenario import shorten_message
+    if not CONTROLLER_NAME.fullmatch(name):
+        raise LiveError(shorten_message(
+            f'{name!r} is not a controller name ({len(name)} characters; names are 1 to 100 '
+            'letters, digits, "_", "." or "-"; `adcs status` lists them)'))
     from adcs_msgs.srv import SwitchController
     session = _Session(pick_run(pid))
     try:
@@ -118,8 +126,8 @@ def switch(name: str, pid: Optional[int] = None) -> str:
     finally:
         session.close()
     if not res.success:
-        raise LiveError(res.message)
-    return f'{res.message} (active: {res.active})'
+        raise LiveError(shorten_message(res.message))
+    return shorten_message(f'{res.message} (active: {res.active})')
 
 
 def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
