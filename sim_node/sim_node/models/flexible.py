@@ -302,8 +302,9 @@ class FlexibleSpacecraft:
         if self.wheels is not None:
             tau_w = self.wheels.apply(cmd, h_w, dt)
             status = self.wheels.saturation_status(cmd, h_w, dt)
-            if self.wheel_error is not None:
-                tau_w = tau_w + self.wheel_error.torque(t)
+            if self.wheel_error is not None:       # (W5), still inside the torque limit
+                tau_w = np.clip(tau_w + self.wheel_error.torque(t), -self.wheels.max_torque,
+                                self.wheels.max_torque)
         else:
             tau_w = cmd
             status = {'torque_limited': np.zeros(0, bool), 'momentum_limited': np.zeros(0, bool)}
