@@ -349,3 +349,20 @@ def test_registry_entry_builds_with_the_paper_inertia_and_refuses_no_wheels():
     est = registry.get('estimator', 'mekf')
     assert est.inputs == ('star_tracker', 'gyro')
     assert est.build(est.validate({}), ctx).s_st == pytest.approx(math.radians(0.02 / 3))
+
+
+def test_reference_time_t0_plus_tau_leads_a_tracking_target_by_one_period():
+    """Tracking a constant rate w about the LVLH-fixed body axis: the t0 + tau reference is
+    the t0 one turned by w tau; the maneuver target (time to go > 0) is never propagated."""
+    w = np.array([0.0, 0.0, 1e-3])
+    q_ref = mpi.q_orbit_body_of_lvlh_euler312(np.radians([10.0, 5.0, -3.0]))
+    lead = _controller(reference_time='t0_plus_tau')
+    plain = _controller()
+    q_ahead = att.multiply(q_ref, att.from_rotation_vector(w * 0.2))
+    inputs = _inputs(q_ref, [0.0, 0.0, 0.0], Target(q_ref, w))
+    ahead = _inputs(q_ref, [0.0, 0.0, 0.0], Target(q_ahead, w))
+    np.testing.assert_allclose(lead.update(inputs, 0.0, 0.2).wheel_torque,
+                               plain.update(ahead, 0.0, 0.2).wheel_torque, atol=1e-12)
+    man = _inputs(q_ref, [0.0, 0.0, 0.0], Target(q_ref, w, time_to_go_s=50.0))
+    np.testing.assert_allclose(lead.update(man, 0.0, 0.2).wheel_torque,
+                               plain.update(man, 0.0, 0.2).wheel_torque, atol=1e-15)

@@ -486,7 +486,8 @@ class MPIController:
             h_w = np.zeros(n)
             reason = 'no valid wheel momentum: h taken as 0'
         tau = self.horizon(tgt)
-        if self.reference_time == 't0_plus_tau':
+        maneuver = math.isfinite(float(tgt.time_to_go_s)) and float(tgt.time_to_go_s) > 0.0
+        if self.reference_time == 't0_plus_tau' and not maneuver:   # a maneuver's is at t_f
             q_ref = att.normalize(att.multiply(
                 q_ref, att.from_rotation_vector(w_ref * tau + 0.5 * wd_ref * tau * tau)))
             w_ref = w_ref + wd_ref * tau
