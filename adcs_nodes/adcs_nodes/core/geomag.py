@@ -25,8 +25,19 @@ semi-normalised ``P_n^m(cos theta)``, reference radius ``a = 6371.2 km``::
     V = a sum_n (a/r)^(n+1) sum_m P_n^m (g_nm cos m phi + h_nm sin m phi)               (G4)
     B_r = -dV/dr,  B_theta = -(1/r) dV/dtheta,  B_phi = -(1/(r sin theta)) dV/dphi
 
-with ``g, h`` linear in decimal year between the 5-year model epochs (as the reference
-``igrf14syn`` program). The spherical components go to ECEF by
+with ``g, h`` linear in the decimal year ``y`` between the 5-year model epochs ``Y_k`` and
+with the secular variation ``sv`` after the last one (the interpolation of the reference
+``igrf14syn`` program)::
+
+    g(y) = g(Y_k) + (y - Y_k) / 5 [g(Y_k+1) - g(Y_k)],   Y_k <= y < Y_k+1               (G4a)
+    g(y) = g(2025) + (y - 2025) sv,                      y >= 2025
+
+(``ppigrf``'s table gives the 2030 column as ``g(2025) + 5 sv``, so (G4a) is one formula).
+The decimal year of an instant is ``y = Y + (instant - Y-01-01) / length of year Y``, the
+same definition at the scenario epoch and at every ``t`` of a run (one year length: the
+calendar year's own, 365 or 366 days). ``ppigrf`` itself interpolates linearly in time
+between the epoch dates, which differs from (G4a) by up to a day's secular variation
+(~0.03 nT). The spherical components go to ECEF by
 ``b = B_r r_hat + B_theta theta_hat + B_phi phi_hat`` (theta_hat points south).
 
 Rate along the trajectory (motion + Earth rotation + secular variation), central difference::
@@ -59,7 +70,7 @@ from __future__ import annotations
 import abc
 import functools
 import math
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 from typing import Mapping
 
 import numpy as np
@@ -256,10 +267,16 @@ class IgrfField(GeomagneticField):
             raise ValueError(f'IGRF epoch must be in {IGRF_YEARS}, got decimal year {self.year0}')
         self._table = _igrf_table(self.max_degree)
 
+    def decimal_year(self, t: float) -> float:
+        """Decimal year of ``t`` s after the epoch, as of the epoch itself (G4a)."""
+        if t == 0.0:
+            return self.year0
+        return _decimal_year(self.epoch + timedelta(seconds=float(t)))
+
     def field_ecef(self, r_ecef: np.ndarray, t: float) -> np.ndarray:
         """Field (3,) [T], ECEF, at ``r_ecef`` (3,) [m], ``t`` s after the epoch (G4)."""
         tab = self._table
-        g, h = tab.coefficients(self.year0 + t / _SECONDS_PER_YEAR)
+        g, h = tab.coefficients(self.decimal_year(t))                                 # (G4a)
         r = math.sqrt(r_ecef @ r_ecef)
         theta = min(max(math.acos(r_ecef[2] / r), _POLE_EPS), math.pi - _POLE_EPS)
         phi = math.atan2(r_ecef[1], r_ecef[0])
@@ -279,8 +296,6 @@ class IgrfField(GeomagneticField):
 
 
 # ----------------------------------------------------------------------- IGRF internals
-_SECONDS_PER_YEAR = 365.25 * 86400.0
-
 
 def _decimal_year(t_utc: datetime) -> float:
     """Decimal year of an aware datetime: ``year + elapsed / length of that year``."""
@@ -319,7 +334,7 @@ class _IgrfTable:
                                     math.sqrt(max((n - 1) ** 2 - m * m, 0)) / den))
 
     def coefficients(self, year: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(g, h)`` (K,) [nT] at a decimal year, linear in time; extrapolated past the ends."""
+        """``(g, h)`` (K,) [nT] at a decimal year, (G4a); extrapolated past the ends."""
         i = min(max(int(np.searchsorted(self.years, year)) - 1, 0), len(self.years) - 2)
         w = (year - self.years[i]) / (self.years[i + 1] - self.years[i])
         return (self.g[i] + w * (self.g[i + 1] - self.g[i]),
