@@ -82,11 +82,15 @@ def test_prune_keeps_the_newest_and_the_active_runs(tmp_path):
         os.utime(d, (1e9 + i, 1e9 + i))
         made.append(d)
     (runs / 'keep-me').mkdir()                             # not a run directory: untouched
-    (runs / 'active-1.json').write_text(json.dumps({'run_dir': str(made[0])}))
+    (runs / 'active-1.json').write_text(json.dumps({'pid': os.getpid(),
+                                                    'run_dir': str(made[0])}))
+    (runs / 'active-2.json').write_text(json.dumps({'pid': 2**22 + 1,   # above pid_max: dead
+                                                    'run_dir': str(made[1])}))
     removed = prune_runs(str(runs), keep=50)
     assert sorted(removed) == sorted(str(d) for d in made[1:10])
     left = {p.name for p in runs.iterdir()}
-    assert {d.name for d in made[10:]} | {made[0].name, 'keep-me', 'active-1.json'} == left
+    assert {d.name for d in made[10:]} | {made[0].name, 'keep-me', 'active-1.json',
+                                          'active-2.json'} == left
 
 
 def test_private_files_and_dirs(tmp_path):

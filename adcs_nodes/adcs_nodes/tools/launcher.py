@@ -170,7 +170,9 @@ def prune_runs(runs_dir: str = RUNS_DIR, keep: int = KEEP_RUNS,
         if name.startswith('active-') and name.endswith('.json'):
             try:
                 with open(os.path.join(runs_dir, name)) as fh:
-                    busy.add(os.path.abspath(json.load(fh)['run_dir']))
+                    data = json.load(fh)
+                os.kill(int(data['pid']), 0)   # a manifest left by a killed launcher: stale
+                busy.add(os.path.abspath(data['run_dir']))
             except (OSError, ValueError, KeyError, TypeError):
                 continue
     dirs = []
