@@ -11,6 +11,8 @@ The kernel integrates (E1)-(E3), (E6) of :mod:`sim_node.models.dynamics` with th
     tau_gg         = 3 mu / |r|^5  r_body x (I r_body),   r_body = R(q)^T r_eci          (D1)
     dr_eci/dt = v_eci,   dv_eci/dt = -mu r_eci / |r_eci|^3                               (E6)
     b_eci(t_k + s) = c0 + c1 s + c2 s^2 + c3 s^3                                         (E7)
+    c2 = (2 b_dot_k + b_dot_p) / tau - 3 D / tau^2,  c3 = (b_dot_k + b_dot_p) / tau^2 - 2 D / tau^3
+        (E8: cubic Hermite through (b_p, b_dot_p) at -tau and (b_k, b_dot_k) at 0, D = b_k - b_p)
     m = clip(m_cmd, -m_max, m_max)                                                       (A2)
     tau_w = clip(clip(tau_cmd, -tau_max, tau_max), lower, upper)                         (W4)
     upper = max((h_max - h_w) / dt, 0),   lower = min((-h_max - h_w) / dt, 0)
@@ -28,6 +30,13 @@ more slice appended after the wheels, its derivative written in :func:`rhs`::
     x[Q]  q_eci_body (4, scalar last)        x[W]  omega_body_eci_body [rad/s] (3)
     x[R]  r_eci [m] (3)                      x[V]  v_eci [m/s] (3)
     x[H0:H0 + n_wheels]  h_wheels [N m s]
+
+To add a part: give it the next slice (``H0 + n_wheels`` on), grow :func:`state_size`, fill it
+in ``Spacecraft._frame_inputs`` and read it back in ``Spacecraft.step``; :func:`frame_step`
+integrates every entry of ``x`` (its RK4 loops run over the whole array), so only :func:`rhs`
+needs the new equations. Coupled terms (e.g. modal accelerations in (E2)) go into :func:`rhs`
+before ``xdot[W]`` is written. Inputs that are not state (commands, limits) are extra
+arguments, outputs of a frame go to ``applied`` (``OUT_*``).
 
 The orbit (E6) is integrated with the attitude in the same RK4 stages, from the orbit model's
 ``r, v`` at ``t_k``: the position at every stage is the two-body orbit, not a straight line.
