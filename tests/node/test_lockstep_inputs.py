@@ -178,3 +178,19 @@ def test_qos_overrides_let_a_best_effort_driver_match(ros_context, spin):
     assert spin([over, src], lambda: len(over.fired) >= 1)
     src.destroy_node()
     over.destroy_node()
+
+
+def test_timing_diagnostics_of_the_clock_master_and_a_consumer(ros_context):
+    """/diagnostics calls timing_diagnostics() on every node, the clock master included."""
+    from sim_node.nodes.dynamics import DynamicsNode
+    dyn = DynamicsNode(context=ros_context, parameter_overrides=[
+        Parameter('command_period_s', value=1.0)])
+    dyn.master.sync.add('env', 0, 'e0')
+    for _ in range(3):
+        dyn.master.sync.record_misses(0)
+    d = dyn.timing_diagnostics()
+    assert d['timing_mode'] == 'lockstep' and d['dead_inputs'] == 'adcs/actuator_command'
+    dyn.destroy_node()
+    probe = Probe(ros_context)
+    assert probe.timing_diagnostics()['rejected_samples'] == '0'
+    probe.destroy_node()

@@ -455,7 +455,8 @@ class LockstepNode(Node):
         """Key-value timing health for ``/diagnostics``: mode, frames, missed frames, dead
         inputs, rejected samples by reason."""
         sync = getattr(self, 'sync', None)
-        dead = [self._topics_of.get(n, n) for n in sync.dead()] if sync is not None else []
+        topics = getattr(self, '_topics_of', {})
+        dead = [topics.get(n, n) for n in sync.dead()] if sync is not None else []
         out = {'timing_mode': self.timing_mode, 'frames': str(self.frames),
                'missed_frames': str(self.missed_frames),
                'last_missed_input': self.last_missed_input,

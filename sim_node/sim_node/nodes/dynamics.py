@@ -92,6 +92,7 @@ class DynamicsNode(LockstepNode):
             max_lag_frames=MAX_LAG_FRAMES, lag_frames={'recorder': RECORDER_LAG_FRAMES},
             dead_after=self.dead_after, no_final=['recorder'])
         self._exec_t = 0              # frame of the action being executed
+        self._topics_of = {'env': 'sim/environment', 'cmd': 'adcs/actuator_command'}
         self.clock_pub = self.publisher(Clock, '/clock', QOS_CLOCK)
         self.state_pub = self.publisher(AttitudeState, 'sim/state')
         self.wheels_pub = self.publisher(WheelState, 'sim/wheels')

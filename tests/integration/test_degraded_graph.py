@@ -1,0 +1,84 @@
+"""Dead producers and degraded runs in the launched graph (issue 12).
+
+* Killing ``controller_manager`` used to make ``dynamics`` wait 2 x timeout (10 s wall) for
+  every frame; now the command producer is dead after ``dead_after_frames`` (3) missed
+  frames, a zero command is applied without waiting, and the world runs on at full speed.
+* A run that loses its estimator for part of the time ends with exit code 3 and a DEGRADED
+  summary line naming it, with the true number of missed frames.
+"""
+import os
+import re
+import signal
+import time
+
+import yaml
+
+from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
+
+
+def control_scenario(tmp_path):
+    """paper000_control with a 2 s magnetometer and a 1 s input timeout (dynamics: 2 s)."""
+    with open(os.path.join(SCENARIOS, 'paper000_control.yaml')) as fh:
+        sc = yaml.safe_load(fh)
+    sc['sensors']['magnetometer']['period_s'] = 2.0
+    sc['timing']['timeout_s'] = 1.0
+    path = tmp_path / 'control.yaml'
+    path.write_text(yaml.safe_dump(sc))
+    return str(path)
+
+
+def node_status(pid, name):
+    """(frames, missed) of node ``name`` from ``adcs status``, or None."""
+    out = adcs('status', '--run', str(pid), check=False)
+    m = re.search(rf'^\s+{name}\s+frames\s+(\d+)\s+missed (\d+)', out.stdout, re.M)
+    return None if m is None else (int(m.group(1)), int(m.group(2)))
+
+
+def wait_node(pid, name, predicate, timeout):
+    deadline = time.monotonic() + timeout
+    last = None
+    while time.monotonic() < deadline:
+        last = node_status(pid, name)
+        if last is not None and predicate(*last):
+            return last
+    raise AssertionError(f'{name}: condition not reached within {timeout} s; last {last}')
+
+
+def test_killed_manager_costs_three_timeouts_then_the_world_runs_on(tmp_path):
+    proc = start_adcs('run', control_scenario(tmp_path), '--duration', '200000', '--quiet')
+    try:
+        manifest = wait_manifest(proc)
+        frames0, _ = wait_node(proc.pid, 'dynamics', lambda f, m: f >= 10, timeout=60.0)
+        os.kill(manifest['pids']['controller_manager'], signal.SIGKILL)
+        t_kill = time.monotonic()
+        # 300 more frames: about 3 x 2 s of timeouts, then full speed (before: 2 s a frame,
+        # i.e. 600 s wall)
+        frames, missed = wait_node(proc.pid, 'dynamics', lambda f, m: f >= frames0 + 300,
+                                   timeout=90.0)
+        assert time.monotonic() - t_kill < 90.0
+        assert missed == 3, missed                  # dead after 3 misses, then not awaited
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, out + err
+    log = open(os.path.join(manifest['run_dir'], 'logs', 'dynamics.log')).read()
+    assert 'applying a zero command' in log and 'last value' not in log
+    assert 'treated as dead' in log
+
+
+def test_run_that_lost_its_estimator_ends_degraded_with_exit_code_3(tmp_path):
+    proc = start_adcs('run', control_scenario(tmp_path), '--duration', '4000', '--quiet')
+    try:
+        manifest = wait_manifest(proc)
+        wait_node(proc.pid, 'estimator', lambda f, m: f >= 10, timeout=60.0)
+        os.kill(manifest['pids']['estimator'], signal.SIGKILL)
+        out, err = proc.communicate(timeout=600)
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            proc.communicate(timeout=60)
+    text = out + err
+    assert proc.returncode == 3, text
+    assert 'DEGRADED' in text and 'lost estimator' in text, text
+    m = re.search(r'missed frames (\d+)', text)
+    assert m is not None and int(m.group(1)) >= 3, text    # the consumers' timeouts, counted
