@@ -145,7 +145,7 @@ class LockstepNode(Node):
         self.rejected_samples: Dict[str, int] = {r: 0 for r in REJECT_REASONS}
         self.last_rejected_sample = ''
         self._status_mark = -1
-        self._last_status_wall = time.monotonic()
+        self._lockstep_status_wall = time.monotonic()
         self.frames = 0
         self.sim_t_ns = 0            # elapsed sim time of the last frame this node processed
         self.missed_frames = 0
@@ -569,7 +569,7 @@ class LockstepNode(Node):
 
     def _status_watchdog(self) -> None:
         """A stalled node (no frame for 2 s of wall time) still reports once a second."""
-        if time.monotonic() - self._last_status_wall >= 2.0:
+        if time.monotonic() - self._lockstep_status_wall >= 2.0:
             self.publish_status()
 
     def publish_status(self, final: bool = False) -> None:
@@ -582,7 +582,7 @@ class LockstepNode(Node):
         if getattr(self, '_final_sent', False):
             return
         self._final_sent = bool(final)
-        self._last_status_wall = time.monotonic()
+        self._lockstep_status_wall = time.monotonic()
         msg = LockstepStatus()
         msg.header.stamp = self.stamp(self.sim_t_ns)   # sim time of the last frame
         msg.node = self.get_name()
