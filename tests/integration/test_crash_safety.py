@@ -192,3 +192,21 @@ def test_sigkill_of_the_recorder_stops_the_run_and_export_and_report_read_the_ba
                          text=True, timeout=180)
     assert res.returncode == 0, res.stderr
     assert (tmp_path / 'report' / 'summary.md').is_file()
+
+
+def test_a_node_refusing_its_configuration_makes_the_run_exit_2(tmp_path, monkeypatch):
+    """A node exiting with code 2 (configuration error) ends the run with exit code 2."""
+    from adcs_nodes.tools import launcher
+    from adcs_nodes.tools.scenario import load_scenario
+
+    monkeypatch.setattr(launcher, 'RUNS_DIR', str(tmp_path / 'runs'))
+    run = launcher.Launcher(load_scenario(FREE_TUMBLE), duration_s=10.0, progress=False,
+                            log=lambda *a: None)
+    refuse = [sys.executable, '-c', 'import sys; print("bad parameter"); sys.exit(2)']
+    wait = [sys.executable, '-c', 'import time; time.sleep(60)']
+    monkeypatch.setattr(run, '_commands', lambda params: {
+        'environment': wait, 'dynamics': wait, 'magnetometer': refuse})
+    result = run.run()
+    assert result.exit_code == 2, result.message
+    assert 'magnetometer refused its configuration' in result.message
+    assert 'bad parameter' in result.message

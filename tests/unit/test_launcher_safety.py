@@ -129,3 +129,20 @@ def test_a_100_kB_controller_name_is_refused_unsent_and_not_echoed():
         switch('x' * 100_000, pid=1)
     assert len(str(info.value)) < 300
     assert '100000 characters' in str(info.value)
+
+
+def test_save_scenario_on_a_full_disk_reports_and_keeps_the_bag(tmp_path, monkeypatch):
+    import errno
+    bag = tmp_path / 'bag'
+    run = Launcher(load_scenario(FREE_TUMBLE), duration_s=10.0, record=str(bag),
+                   progress=False, run_dir=str(tmp_path / 'run'))
+    bag.mkdir()
+    (bag / 'bag.mcap').write_bytes(b'data')
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(launcher.yaml, 'safe_dump', full)
+    message = run._save_scenario()
+    assert 'disk full' in message and 'the bag is kept' in message
+    assert sorted(p.name for p in bag.iterdir()) == ['bag.mcap']   # no cut scenario.yaml

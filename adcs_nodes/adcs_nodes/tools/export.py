@@ -97,7 +97,7 @@ def export_csv(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
     FileNotFoundError
         If the bag does not exist.
     ValueError
-        If it is not a readable bag.
+        If it is not a readable bag, or a CSV file cannot be written (disk full).
     """
     rows: Dict[str, List[Dict[str, Any]]] = {}
     columns: Dict[str, _ColumnOrder] = {}
@@ -111,17 +111,22 @@ def export_csv(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
             rows.setdefault(topic, [])
             columns.setdefault(topic, _ColumnOrder()).add_row(['t'])
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     written: List[Path] = []
-    for topic in sorted(rows):
-        path = out / topic_file_name(topic)
-        names = columns[topic].names
-        with path.open('w', newline='', encoding='utf-8') as handle:
-            writer = csv.writer(handle)
-            writer.writerow(names)
-            for row in rows[topic]:
-                writer.writerow([_cell(row[n]) if n in row else '' for n in names])
-        written.append(path)
+    path = out
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for topic in sorted(rows):
+            path = out / topic_file_name(topic)
+            names = columns[topic].names
+            with path.open('w', newline='', encoding='utf-8') as handle:
+                writer = csv.writer(handle)
+                writer.writerow(names)
+                for row in rows[topic]:
+                    writer.writerow([_cell(row[n]) if n in row else '' for n in names])
+            written.append(path)
+    except OSError as exc:   # disk full, no permission: a message, not a traceback
+        raise ValueError(f'cannot write {path}: {exc.strerror or exc} '
+                         f'({len(written)} of {len(rows)} CSV files written)') from None
     return written
 
 

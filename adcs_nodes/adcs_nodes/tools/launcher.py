@@ -599,6 +599,9 @@ class Launcher:
                     self.log(f'[adcs] WARNING: node {name} exited with code {rc}; the graph '
                              f'goes on without it (log: {self.run_dir}/logs/{name}.log)')
                     continue
+                if rc == 2:   # a node refused its configuration: bad input, as the CLI's
+                    return 2, (f'node {name} refused its configuration (exit code 2); last '
+                               f'lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
                 return 1, (f'node {name} exited with code {rc} before the end of the run; '
                            f'last lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
 
