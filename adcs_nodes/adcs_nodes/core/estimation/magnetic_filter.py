@@ -51,6 +51,12 @@ right multiplicative), ``d_omega = omega' - omega``, ``d_m = m' - m``; linearise
 ``Phi(r)`` is the cross-product matrix; ``omega_E`` is taken as ``omega'`` and ``e_R`` from
 ``N``. The matrix ``A`` of (34) is frozen at the start of each substep, ``F = expm(A h)``, and
 ``P <- F P F^T`` (no process noise: the paper has none; ``sigma_j`` plays its role).
+``expm`` is evaluated by scaling and squaring of its Taylor series (:func:`expm_taylor`)::
+
+    expm(X) = (T_12(X / 2^s))^(2^s),  T_12(Y) = sum_{k=0}^{12} Y^k / k!,  ||X / 2^s||_1 <= 1/4
+
+whose truncation error ``(1/4)^13 / 13! ~ 2e-18`` is below double rounding (tested against
+``scipy.linalg.expm`` to 1e-13), without a LAPACK call per step.
 The magnetic torque has no term in (34) (as in the paper), which is exact when ``B`` is the
 measured field and neglects ``L x dB`` when ``B`` is the reference rotated by ``N``.
 
@@ -85,6 +91,14 @@ Recovery of the rotation part of ``w``: with (36) the first block is ``phi`` and
 ``N . conj(M) = Lambda . M . conj(M) = Lambda``: the correction recovers the truth when ``w``
 is exact.
 
+Compiled kernels
+----------------
+The arithmetic of :meth:`MagneticFilter.predict` and :meth:`MagneticFilter.update` is in the
+plain functions :func:`predict_kernel` and :func:`update_kernel` (explicit loops, no BLAS),
+compiled with numba (``cache=True``, no fastmath: IEEE arithmetic in the order written). The
+same functions run uncompiled with ``NUMBA_DISABLE_JIT=1`` or without numba; a test checks both
+give the same numbers. Input checks and guards stay in Python around them.
+
 Guards (not in the paper)
 -------------------------
 A reading or reference that is not a finite (3,) vector with magnitude in [1e-6, 1e-3] T is
@@ -106,9 +120,19 @@ from typing import Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg import expm
 
 from adcs_nodes.core import attitude
+
+try:  # compiled kernels; the same functions run as plain Python without numba
+    from numba import njit as _njit
+except ImportError:  # pragma: no cover - numba is pinned in ros2_ws/requirements.txt
+    _njit = None
+
+
+def _jit(fn):
+    """numba ``njit(cache=True)`` (no fastmath) when numba is there, else ``fn`` itself."""
+    return fn if _njit is None else _njit(cache=True)(fn)
+
 
 THETA_DEFAULT = (0.3e-6) ** 2
 """Default ``theta`` [T^2]: (0.3 uT)^2, about the largest magnetometer noise variance."""
@@ -243,15 +267,10 @@ def error_matrix(inertia: ArrayLike, omega0: float, q_orbit_body: ArrayLike,
     numpy.ndarray
         ``A`` with ``dw/dt = A w``, ``w = [mu, d_omega, d_m]``.
     """
-    omega = np.asarray(omega_body_eci_body, dtype=float)
-    e_r = e_r_body(q_orbit_body)
-    a = np.zeros((9, 9))
-    a[0:3, 0:3] = -_skew(omega)  # (34) first row
-    a[0:3, 3:6] = 0.5 * np.eye(3)
-    a[3:6, 0:3] = -6.0 * omega0 ** 2 * g_matrix(inertia, e_r) @ _skew(e_r)  # (34) second row
-    a[3:6, 3:6] = g_matrix(inertia, omega)
-    a[3:6, 6:9] = np.eye(3)
-    return a
+    inertia = np.ascontiguousarray(inertia, dtype=float)
+    return error_matrix_kernel(inertia, np.linalg.inv(inertia), float(omega0),
+                               np.ascontiguousarray(q_orbit_body, dtype=float),
+                               np.ascontiguousarray(omega_body_eci_body, dtype=float))
 
 
 def measurement_matrix(b_meas_body: ArrayLike, n_star_body: ArrayLike) -> np.ndarray:
@@ -320,19 +339,327 @@ def correct_state(q_orbit_body: ArrayLike, omega_body_eci_body: ArrayLike, m: Ar
     tuple of numpy.ndarray
         ``N+`` (4,) (unit, not sign-normalised), ``omega'+`` (3,), ``m'+`` (3,).
     """
-    w = np.asarray(w, dtype=float)
-    v, d_omega, d_m = w[0:3], w[3:6], w[6:9]
-    if measurement_form == 'phi':  # (36): the block is phi
-        mu0 = 1.0 / math.sqrt(1.0 + float(v @ v))
+    w = np.ascontiguousarray(w, dtype=float)
+    if w.shape != (9,):
+        raise ValueError(f'w must have shape (9,), got {w.shape}')
+    return correct_kernel(np.ascontiguousarray(q_orbit_body, dtype=float),
+                          np.ascontiguousarray(omega_body_eci_body, dtype=float),
+                          np.ascontiguousarray(m, dtype=float), w, measurement_form == 'phi')
+
+
+# ------------------------------------------------------------------------ kernels
+# Plain loops on float64 arrays: compiled by numba, or run as Python (NUMBA_DISABLE_JIT=1).
+_TAYLOR_ORDER = 12
+_TAYLOR_NORM = 0.25
+
+
+@_jit
+def _matmul(a, b):
+    n, m, k = a.shape[0], b.shape[1], a.shape[1]
+    out = np.zeros((n, m))
+    for i in range(n):
+        for j in range(m):
+            acc = 0.0
+            for r in range(k):
+                acc += a[i, r] * b[r, j]
+            out[i, j] = acc
+    return out
+
+
+@_jit
+def expm_taylor(x):
+    """``expm(x)`` of a square matrix by Taylor series with scaling and squaring.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Square matrix (n, n), float64, finite.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``expm(x)`` (n, n): ``(T_12(x / 2^s))^(2^s)`` with ``||x / 2^s||_1 <= 1/4``.
+    """
+    n = x.shape[0]
+    norm = 0.0
+    for j in range(n):
+        col = 0.0
+        for i in range(n):
+            col += abs(x[i, j])
+        norm = max(norm, col)
+    s = 0
+    while norm > _TAYLOR_NORM and s < 64:
+        norm *= 0.5
+        s += 1
+    y = x * (0.5 ** s)
+    out = np.eye(n)
+    for k in range(_TAYLOR_ORDER, 0, -1):  # Horner: I + y/1 (I + y/2 (I + ...))
+        out = _matmul(y, out) * (1.0 / k)
+        for i in range(n):
+            out[i, i] += 1.0
+    for _ in range(s):
+        out = _matmul(out, out)
+    return out
+
+
+@_jit
+def _qmul_k(p, q):
+    out = np.empty(4)
+    out[0] = p[3] * q[0] + p[0] * q[3] + p[1] * q[2] - p[2] * q[1]
+    out[1] = p[3] * q[1] - p[0] * q[2] + p[1] * q[3] + p[2] * q[0]
+    out[2] = p[3] * q[2] + p[0] * q[1] - p[1] * q[0] + p[2] * q[3]
+    out[3] = p[3] * q[3] - p[0] * q[0] - p[1] * q[1] - p[2] * q[2]
+    return out
+
+
+@_jit
+def _dcm_k(q):
+    """``R(q)`` (3, 3), body -> orbit, of ``q`` normalised here (as :func:`_dcm_orbit_body`)."""
+    nrm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    x, y, z, w = q[0] / nrm, q[1] / nrm, q[2] / nrm, q[3] / nrm
+    r = np.empty((3, 3))
+    r[0, 0] = 1 - 2 * (y * y + z * z)
+    r[0, 1] = 2 * (x * y - z * w)
+    r[0, 2] = 2 * (x * z + y * w)
+    r[1, 0] = 2 * (x * y + z * w)
+    r[1, 1] = 1 - 2 * (x * x + z * z)
+    r[1, 2] = 2 * (y * z - x * w)
+    r[2, 0] = 2 * (x * z - y * w)
+    r[2, 1] = 2 * (y * z + x * w)
+    r[2, 2] = 1 - 2 * (x * x + y * y)
+    return r
+
+
+@_jit
+def _cross_k(a, b):
+    out = np.empty(3)
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+    return out
+
+
+@_jit
+def _mv_k(m, v):
+    out = np.empty(3)
+    for i in range(3):
+        out[i] = m[i, 0] * v[0] + m[i, 1] * v[1] + m[i, 2] * v[2]
+    return out
+
+
+@_jit
+def _skew_k(v):
+    out = np.zeros((3, 3))
+    out[0, 1], out[0, 2] = -v[2], v[1]
+    out[1, 0], out[1, 2] = v[2], -v[0]
+    out[2, 0], out[2, 1] = -v[1], v[0]
+    return out
+
+
+@_jit
+def _g_k(inertia, inertia_inv, v):
+    """``G(v) = I^-1 [Phi(I v) - Phi(v) I]`` (3, 3) (35)."""
+    inner = _skew_k(_mv_k(inertia, v)) - _matmul(_skew_k(v), inertia)
+    return _matmul(inertia_inv, inner)
+
+
+@_jit
+def error_matrix_kernel(inertia, inertia_inv, omega0, q, omega):
+    """``A`` (9, 9) of (34) at ``(N = q, omega_E = omega)``; see :func:`error_matrix`."""
+    e_r = _dcm_k(q)[2, :].copy()
+    a = np.zeros((9, 9))
+    sk_w = _skew_k(omega)
+    c = _matmul(_g_k(inertia, inertia_inv, e_r), _skew_k(e_r))
+    g = _g_k(inertia, inertia_inv, omega)
+    for i in range(3):
+        a[i, 3 + i] = 0.5                       # (34) first row
+        a[3 + i, 6 + i] = 1.0                   # (34) second row, d_m
+        for j in range(3):
+            a[i, j] = -sk_w[i, j]
+            a[3 + i, j] = -6.0 * omega0 ** 2 * c[i, j]
+            a[3 + i, 3 + j] = g[i, j]
+    return a
+
+
+@_jit
+def _rates_k(q, omega, m, inertia, inertia_inv, omega0, dipole, field, field_mode):
+    """(33): ``dN/dt`` (4,) and ``domega'/dt`` (3,); ``field_mode`` 0 none, 1 body, 2 orbit."""
+    c_bo = _dcm_k(q)                            # R(N); C(N) = R(N)^T (orbit -> body)
+    e_r = c_bo[2, :].copy()
+    m_s = 3.0 * omega0 ** 2 * _cross_k(e_r, _mv_k(inertia, e_r))  # (3) from the estimate
+    if field_mode == 1:
+        m_s = m_s + _cross_k(dipole, field)     # (4) L x B, B measured or given
+    elif field_mode == 2:
+        b_body = np.empty(3)
+        for i in range(3):
+            b_body[i] = c_bo[0, i] * field[0] + c_bo[1, i] * field[1] + c_bo[2, i] * field[2]
+        m_s = m_s + _cross_k(dipole, b_body)    # (4) L x n*
+    w4 = np.zeros(4)
+    w4[0], w4[1], w4[2] = omega[0], omega[1], omega[2]
+    o4 = np.zeros(4)
+    o4[1] = omega0
+    q_dot = 0.5 * (_qmul_k(q, w4) - _qmul_k(o4, q))   # (33)
+    omega_dot = _mv_k(inertia_inv, _cross_k(_mv_k(inertia, omega), omega) + m_s) + m
+    return q_dot, omega_dot
+
+
+@_jit
+def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, field_mode,
+                   h, substeps):
+    """``substeps`` RK4 steps of (33) of ``h`` seconds and ``P <- F P F^T`` (34).
+
+    Parameters
+    ----------
+    q, omega, m : numpy.ndarray
+        ``N`` (4,), ``omega'`` (3,) [rad/s], ``m'`` (3,) [rad/s^2].
+    p : numpy.ndarray
+        ``P`` (9, 9).
+    inertia, inertia_inv : numpy.ndarray
+        ``I`` and ``I^-1`` (3, 3).
+    omega0 : float
+        Orbit rate [rad/s].
+    dipole, field : numpy.ndarray
+        ``L`` (3,) [A m^2]; field (3,) [T] in body (``field_mode`` 1) or orbit (2) axes.
+    field_mode : int
+        0: no magnetic torque; 1: ``L x field``; 2: ``L x C(N) field``.
+    h : float
+        Substep [s].
+    substeps : int
+        Number of substeps.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (9, 9) (symmetrised); may be non-finite.
+    """
+    f = np.eye(9)
+    for _ in range(substeps):
+        a = error_matrix_kernel(inertia, inertia_inv, omega0, q, omega)  # (34), frozen
+        f = _matmul(expm_taylor(a * h), f)
+        k1q, k1w = _rates_k(q, omega, m, inertia, inertia_inv, omega0, dipole, field,
+                            field_mode)                                     # (33), RK4
+        k2q, k2w = _rates_k(q + 0.5 * h * k1q, omega + 0.5 * h * k1w, m, inertia, inertia_inv,
+                            omega0, dipole, field, field_mode)
+        k3q, k3w = _rates_k(q + 0.5 * h * k2q, omega + 0.5 * h * k2w, m, inertia, inertia_inv,
+                            omega0, dipole, field, field_mode)
+        k4q, k4w = _rates_k(q + h * k3q, omega + h * k3w, m, inertia, inertia_inv, omega0,
+                            dipole, field, field_mode)
+        q = q + h / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
+        omega = omega + h / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
+        q = q / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    p = _matmul(_matmul(f, p), f.T.copy())
+    p = 0.5 * (p + p.T)
+    return q, omega, p
+
+
+@_jit
+def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_innovation,
+                  form_phi):
+    """(36)/(37), the sequential update (38) and the correction (39) on arrays.
+
+    Parameters
+    ----------
+    q, omega, m, p : numpy.ndarray
+        ``N`` (4,), ``omega'`` (3,), ``m'`` (3,), ``P`` (9, 9).
+    n : numpy.ndarray
+        Measured field (3,) [T], body axes.
+    b_ref : numpy.ndarray
+        Model field ``B*`` (3,) [T], orbit axes.
+    theta : numpy.ndarray
+        ``theta_j`` of (38) per body axis (3,) [T^2].
+    tau : float
+        ``tau`` of (38).
+    literal, sigma_from_innovation, form_phi : bool
+        As :class:`MagneticFilter`'s options (``form_phi``: (36), else (37)).
+
+    Returns
+    -------
+    tuple
+        ``N+`` (4,) (not normalised when degenerate), ``omega'+`` (3,), ``m'+`` (3,),
+        ``P+`` (9, 9), ``z`` (3,), ``w`` (9,), ``sigma`` (3,); may be non-finite.
+    """
+    r = _dcm_k(q)
+    n_star = np.empty(3)
+    for i in range(3):   # n* = C(N) B* = R(N)^T B*
+        n_star[i] = r[0, i] * b_ref[0] + r[1, i] * b_ref[1] + r[2, i] * b_ref[2]
+    z = n - n_star
+    h_mat = np.zeros((3, 9))
+    sk = _skew_k(n + n_star)
+    for i in range(3):
+        for j in range(3):
+            h_mat[i, j] = -sk[i, j]              # (36)/(37)
+    p = p.copy()
+    w = np.zeros(9)
+    sigma = np.ones(3)
+    for j in range(3):   # (38), sequential
+        hj = h_mat[j]
+        ph = np.zeros(9)
+        for a in range(9):
+            acc = 0.0
+            for b in range(9):
+                acc += p[a, b] * hj[b]
+            ph[a] = acc
+        hph = 0.0
+        hw = 0.0
+        for a in range(9):
+            hph += hj[a] * ph[a]
+            hw += hj[a] * w[a]
+        s = theta[j] + hph
+        k = ph / s
+        nu = z[j] if literal else z[j] - hw
+        r_sig = nu if (sigma_from_innovation and not literal) else z[j]
+        sigma[j] = 1.0 + tau * r_sig * r_sig / s
+        for a in range(9):
+            for b in range(9):
+                p[a, b] = sigma[j] * (p[a, b] - k[a] * ph[b])
+        w = w + k * nu
+    p = 0.5 * (p + p.T)
+    q_new, omega_new, m_new = correct_kernel(q, omega, m, w, form_phi)
+    return q_new, omega_new, m_new, p, z, w, sigma
+
+
+@_jit
+def correct_kernel(q, omega, m, w, form_phi):
+    """Correction (39) on arrays; see :func:`correct_state` (``form_phi``: form (36))."""
+    v = w[0:3].copy()
+    vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    if form_phi:   # (36): the block is phi
+        mu0 = 1.0 / math.sqrt(1.0 + vv)
         mu = mu0 * v
-    else:  # (37): the block is mu, clamped to |mu| < 1
-        nv = math.sqrt(float(v @ v))
+    else:          # (37): the block is mu, clamped to |mu| < 1
+        nv = math.sqrt(vv)
         mu = v if nv < MU_CLAMP else v * (MU_CLAMP / nv)
-        mu0 = math.sqrt(max(0.0, 1.0 - float(mu @ mu)))
-    q = _qmul(np.asarray(q_orbit_body, dtype=float), np.append(-mu, mu0))  # (39): N . (mu0 - mu)
-    q = q / math.sqrt(float(q @ q))
-    return (q, np.asarray(omega_body_eci_body, float) - d_omega,  # (39)
-            np.asarray(m, float) - d_m)
+        mu0 = math.sqrt(max(0.0, 1.0 - (mu[0] * mu[0] + mu[1] * mu[1] + mu[2] * mu[2])))
+    corr = np.empty(4)
+    corr[0], corr[1], corr[2], corr[3] = -mu[0], -mu[1], -mu[2], mu0
+    q_new = _qmul_k(q, corr)   # (39): N . (mu0 - mu)
+    qn = math.sqrt(q_new[0] ** 2 + q_new[1] ** 2 + q_new[2] ** 2 + q_new[3] ** 2)
+    if qn > 0.0 and math.isfinite(qn):
+        q_new = q_new / qn
+    return q_new, omega - w[3:6], m - w[6:9]   # (39)
+
+
+_WARM = {'done': False}
+
+
+def warm_up() -> None:
+    """Compile (or load from the numba cache) every kernel with the filter's argument types.
+
+    Called once per process by :class:`MagneticFilter`'s constructor, so the compilation
+    (about 20 s on a loaded 2-core machine the first time, about 1-2 s from the cache) happens
+    before a node joins the lockstep, never inside a frame.
+    """
+    if _WARM['done']:
+        return
+    eye3, z3 = np.eye(3), np.zeros(3)
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    for mode in (0, 1, 2):
+        predict_kernel(q, z3, z3, np.eye(9), eye3, eye3, 1e-3, z3, z3, mode, 1.0, 1)
+    for literal in (False, True):
+        update_kernel(q, z3, z3, np.eye(9), np.ones(3), np.ones(3), np.ones(3), 0.01,
+                      literal, False, True)
+    correct_kernel(q, z3, z3, np.zeros(9), False)
+    _WARM['done'] = True
 
 
 # ----------------------------------------------------------------------------- filter
@@ -421,6 +748,7 @@ class MagneticFilter:
             raise ValueError('max_disturbance_rad_s2 must be finite and > 0, got '
                              f'{max_disturbance_rad_s2}')
         self.max_disturbance = float(max_disturbance_rad_s2)
+        warm_up()   # compiled kernels ready before the first step (numba cache)
         self.reset(attitude.identity(), np.zeros(3))
 
     # ----------------------------------------------------------------------- state
@@ -484,22 +812,6 @@ class MagneticFilter:
                                    b_ref_orbit)
 
     # ------------------------------------------------------------------ prediction
-    def _rates(self, q: np.ndarray, omega: np.ndarray, omega0: float, dipole: np.ndarray,
-               b_body: Optional[np.ndarray], b_orbit: Optional[np.ndarray]
-               ) -> tuple[np.ndarray, np.ndarray]:
-        c_ob = _dcm_orbit_body(q).T  # C(N): orbit -> body
-        e_r = c_ob[:, 2]
-        ie_r = self.inertia @ e_r
-        m_s = 3.0 * omega0 ** 2 * _cross(e_r, ie_r)  # (3) from the estimate
-        if b_body is not None:
-            m_s = m_s + _cross(dipole, b_body)  # (4) L x B, B measured or given
-        elif b_orbit is not None:
-            m_s = m_s + _cross(dipole, c_ob @ b_orbit)  # (4) L x n*
-        q_dot = 0.5 * (_qmul(q, np.append(omega, 0.0))
-                       - _qmul(np.array([0.0, omega0, 0.0, 0.0]), q))  # (33)
-        omega_dot = self._inertia_inv @ (_cross(self.inertia @ omega, omega) + m_s) + self._m
-        return q_dot, omega_dot
-
     def predict(self, dt: float, omega0: float, dipole_body: ArrayLike = (0.0, 0.0, 0.0),
                 b_body_for_torque: Optional[ArrayLike] = None,
                 b_orbit_for_torque: Optional[ArrayLike] = None) -> bool:
@@ -548,25 +860,16 @@ class MagneticFilter:
             else:
                 raise ValueError('a non-zero dipole needs b_body_for_torque, b_orbit_for_torque'
                                  ' or an earlier accepted measurement')
-        h = dt / self.substeps
-        q, omega = self._q, self._omega
-        f = np.eye(9)
+        field_mode, field = 0, np.zeros(3)
+        if b_body is not None:
+            field_mode, field = 1, b_body
+        elif b_orbit is not None:
+            field_mode, field = 2, b_orbit
         with np.errstate(over='ignore', invalid='ignore'):
-            for _ in range(self.substeps):
-                a = error_matrix(self.inertia, omega0, q, omega)  # (34), frozen over the substep
-                f = expm(a * h) @ f
-                k1q, k1w = self._rates(q, omega, omega0, dipole, b_body, b_orbit)  # (33), RK4
-                k2q, k2w = self._rates(q + 0.5 * h * k1q, omega + 0.5 * h * k1w, omega0, dipole,
-                                       b_body, b_orbit)
-                k3q, k3w = self._rates(q + 0.5 * h * k2q, omega + 0.5 * h * k2w, omega0, dipole,
-                                       b_body, b_orbit)
-                k4q, k4w = self._rates(q + h * k3q, omega + h * k3w, omega0, dipole, b_body,
-                                       b_orbit)
-                q = q + h / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
-                omega = omega + h / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
-                q = q / math.sqrt(float(q @ q))
-            p = f @ self._p @ f.T
-            p = 0.5 * (p + p.T)
+            q, omega, p = predict_kernel(
+                self._q, self._omega, self._m, self._p, self.inertia, self._inertia_inv,
+                omega0, np.ascontiguousarray(dipole), np.ascontiguousarray(field, dtype=float),
+                field_mode, dt / self.substeps, self.substeps)
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(omega))):
             return False
         self._q, self._omega = q, omega
@@ -622,25 +925,13 @@ class MagneticFilter:
         if reason:
             out['reason'] = reason
             return out
-        n_star = predicted_field_body(self._q, b_ref)  # n* = conj(N) . B* . N
-        z = n - n_star
-        h_mat = measurement_matrix(n, n_star)  # (36)/(37)
         with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
-            p = self._p.copy()
-            w = np.zeros(9)
-            sigma = np.ones(3)
-            for j in range(3):  # (38), sequential
-                h = h_mat[j]
-                ph = p @ h
-                s = float(theta[j]) + float(h @ ph)
-                k = ph / s
-                nu = z[j] if self.literal_update else z[j] - float(h @ w)
-                r_sig = nu if (self.sigma_from_innovation and not self.literal_update) else z[j]
-                sigma[j] = 1.0 + self.tau * r_sig * r_sig / s
-                p = sigma[j] * (p - np.outer(k, ph))
-                w = w + k * nu
-            p = 0.5 * (p + p.T)
-            q, omega, m = correct_state(self._q, self._omega, self._m, w, self.measurement_form)
+            # n* = conj(N) . B* . N, (36)/(37), (38) sequential, correction (39)
+            q, omega, m, p, z, w, sigma = update_kernel(
+                self._q, self._omega, self._m, self._p, np.ascontiguousarray(n),
+                np.ascontiguousarray(b_ref), np.ascontiguousarray(theta, dtype=float),
+                self.tau, self.literal_update, self.sigma_from_innovation,
+                self.measurement_form == 'phi')
         q_norm = math.sqrt(float(q @ q)) if np.all(np.isfinite(q)) else 0.0
         out['innovation'] = z
         if q_norm < 1e-12 or not (np.all(np.isfinite(omega)) and np.all(np.isfinite(m))
