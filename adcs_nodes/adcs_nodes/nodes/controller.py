@@ -41,6 +41,7 @@ from adcs_nodes.nodes.lockstep_node import LockstepNode
 from adcs_nodes.nodes.tf import MountTable
 from adcs_nodes.registry import Param
 
+#: Onboard models of a node started alone (paper 000's orbit, a dipole field).
 DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
                  'raan_deg': 0.0, 'arg_latitude0_deg': 0.0}
 DEFAULT_FIELD = {'model': 'dipole'}

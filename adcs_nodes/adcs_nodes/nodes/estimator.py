@@ -36,15 +36,11 @@ from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.controller import inertia_matrix
+from adcs_nodes.nodes.controller import DEFAULT_FIELD, DEFAULT_ORBIT, inertia_matrix
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 from adcs_nodes.nodes.tf import MountTable, TfPublisher, estimate_transforms
 from adcs_nodes.registry import Param
-
-DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
-                 'raan_deg': 0.0, 'arg_latitude0_deg': 0.0}
-DEFAULT_FIELD = {'model': 'dipole'}
 
 #: What every estimator node knows besides its algorithm's own parameters.
 CONTEXT_PARAMS = (
@@ -107,8 +103,10 @@ class EstimatorNode(LockstepNode):
             'actuator_command': ('cmd', ActuatorCommand, 'adcs/actuator_command',
                                  p['command_period_s']),
         }
-        inputs = {key: (mtype, topic, period) for need, (key, mtype, topic, period)
-                  in topics.items() if need in self.entry.inputs}
+        # the command applied over [t_k-1, t_k] is the one stamped t_k-1: awaited (determinism)
+        inputs = {key: (mtype, topic, period, 'previous' if key == 'cmd' else 'frame')
+                  for need, (key, mtype, topic, period) in topics.items()
+                  if need in self.entry.inputs}
         self.est_pub = self.publisher(AttitudeState, 'adcs/attitude_estimate')
         self.diag_pub = self.publisher(FilterDiagnostics, 'adcs/estimator/diagnostics')
         self.update_count = 0
