@@ -3,15 +3,20 @@
 Every ``period_s`` of sim time t it publishes ``adcs/attitude_target``
 (``adcs_msgs/AttitudeTarget``) stamped t, ``header.frame_id`` = the profile's frame
 (``orbit`` or ``eci``): target attitude, rate, acceleration, time to go and the segment type.
-The profile (:mod:`adcs_nodes.core.guidance`) is given as per-segment arrays; the default
-holds the orbital frame (paper 000's target).
+The profile is either quaternion segments (:mod:`adcs_nodes.core.guidance`: hold, slew,
+track; per-segment array parameters; the default holds the orbital frame, paper 000's target)
+or, with ``euler312_profile`` (JSON text), paper 001's maneuvers, holds and sine tracking in
+its LVLH 3-1-2 Euler angles (:mod:`adcs_nodes.core.guidance_profiles`, converted to the orbit
+frame at that module's boundary).
 """
 from __future__ import annotations
 
+import json
 from typing import Any, Dict, List
 
 from adcs_msgs.msg import AttitudeTarget
-from adcs_nodes.core.guidance import FRAMES, SEGMENT_TYPES, guidance_from_params
+from adcs_nodes.core.guidance import FRAMES, SEGMENT_TYPES, TargetSample, guidance_from_params
+from adcs_nodes.core.guidance_profiles import profile_from_dicts
 from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
@@ -37,7 +42,26 @@ PARAMS = (
           'segment', min=0.0, max=180.0, read_only=True),
     Param('profile_period_s', 'float[]', [0.0], 's', 'tracking period of each segment',
           min=0.0, read_only=True),
+    Param('euler312_profile', 'str', '', '-', "paper 001 profile as JSON: a list of "
+          "{type: maneuver|hold|sine, start_s, end_s, ...} in LVLH 3-1-2 Euler degrees "
+          "(replaces the segments; '': none)", read_only=True),
 )
+
+
+class _Euler312:
+    """Adapter: a paper 001 :class:`Profile` with the quaternion guidance's ``at(t)``."""
+
+    def __init__(self, text: str) -> None:
+        try:
+            items = json.loads(text)
+        except ValueError as exc:
+            raise ValueError(f'euler312_profile is not JSON: {exc}') from None
+        self.profile = profile_from_dicts(items)
+
+    def at(self, t: float) -> TargetSample:
+        q, w, a, ttg, frame = self.profile.profile_at(t)
+        kind = 'maneuver' if ttg > 0 else 'hold'
+        return TargetSample(q, w, a, frame, ttg, kind)
 
 
 class GuidanceNode(LockstepNode):
@@ -48,10 +72,13 @@ class GuidanceNode(LockstepNode):
         p = node_params.declare_all(self, PARAMS)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
-        self.guidance = guidance_from_params(
-            p['profile_t_s'], p['profile_type'], p['profile_q_xyzw'], p['profile_duration_s'],
-            p['profile_axis_body'], p['profile_amplitude_deg'], p['profile_period_s'],
-            p['frame'])
+        if p['euler312_profile']:
+            self.guidance = _Euler312(p['euler312_profile'])
+        else:
+            self.guidance = guidance_from_params(
+                p['profile_t_s'], p['profile_type'], p['profile_q_xyzw'],
+                p['profile_duration_s'], p['profile_axis_body'], p['profile_amplitude_deg'],
+                p['profile_period_s'], p['frame'])
         self.pub = self.publisher(AttitudeTarget, 'adcs/attitude_target')
         self.lockstep_inputs({}, p['period_s'], self.on_frame)
         self.start_handshake()

@@ -9,6 +9,7 @@ Pure Python; no rclpy.
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from typing import Any, Dict, List
@@ -274,6 +275,8 @@ def _guidance_node(sc: Dict[str, Any], flight: Dict[str, Any]) -> NodeSpec:
               'profile_axis_body': [float(c) for e in prof for c in e['axis_body']],
               'profile_amplitude_deg': [e['amplitude_deg'] for e in prof],
               'profile_period_s': [e['period_s'] for e in prof]}
+    if g.get('euler312_profile'):
+        params['euler312_profile'] = json.dumps(g['euler312_profile'])
     return NodeSpec('guidance', 'adcs_nodes', 'guidance', 'adcs_nodes.nodes.guidance',
                     'GuidanceNode', params, publishes=['adcs/attitude_target'],
                     subscribes=['/clock'])

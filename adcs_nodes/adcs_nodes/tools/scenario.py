@@ -131,6 +131,10 @@ SCHEMA: Dict[str, Any] = {
         'profile': F('profile', [], 'time-tagged segments: list of {t_s, type: hold|slew|'
                      'track, q_xyzw, duration_s (slew), axis_body, amplitude_deg, period_s '
                      '(track)}; empty: hold the orbital frame'),
+        'euler312_profile': F('euler312', [], "paper 001's profile instead: list of {type: "
+                              'maneuver|hold|sine, start_s, end_s, euler_deg | center_deg, '
+                              'amplitude_deg, period_s, phase_deg} in LVLH 3-1-2 Euler '
+                              'angles [deg] (orbit frame)'),
     }),
     'manager': Opt({
         'safe': F('str', 'bdot', 'safe-mode controller (fallback)'),
@@ -452,6 +456,13 @@ def _convert(value: Any, spec: F) -> Any:
         return sorted(out, key=lambda e: e['t_s'])
     if kind == 'profile':
         return _profile(value)
+    if kind == 'euler312':
+        from adcs_nodes.core.guidance_profiles import profile_from_dicts
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise ValueError(f'expected a list of segments, got {registry.short(value)}')
+        if value:
+            profile_from_dicts(value)     # ValueError with the reason
+        return value
     if kind == 'wheels':
         if not isinstance(value, list):
             raise ValueError(f'expected a list of wheels, got {value!r}')
