@@ -150,7 +150,13 @@ def test_ctrl_c_stops_every_node_and_leaves_a_valid_bag(bag_dir):
     proc = start_adcs('run', FREE_TUMBLE, '--record', bag, '--duration', '100000', '--quiet')
     manifest = wait_manifest(proc)
     import time
-    time.sleep(3.0)                          # let it record a while
+    deadline = time.monotonic() + 60.0       # let it record a while (the recorder flushes
+    while time.monotonic() < deadline:       # its chunks as it goes: the file grows)
+        sizes = [e.stat().st_size for e in os.scandir(bag) if e.name.endswith('.mcap')] \
+            if os.path.isdir(bag) else []
+        if sizes and max(sizes) > 20_000:
+            break
+        time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, out + err
