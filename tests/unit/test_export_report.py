@@ -215,6 +215,20 @@ def test_report_metrics_plots_and_summary(bag, tmp_path):
     assert '| settling time | 25.73 s | 31 | FAIL |' in text
     assert again['all_pass'] is False
 
+    # a row without a paper value is information: printed 'info', never counted as a pass
+    info = make_report(bag, tmp_path / 'report3', sections=[('Extra', 'hello table')],
+                       expectations=[('final pointing error', '< 60 deg', 59.5, True),
+                                     ('final angle', '(not given)', 59.5, None)])
+    text = (tmp_path / 'report3' / 'summary.md').read_text()
+    assert '| final angle | (not given) | 59.5 | info |' in text
+    assert '1 of 1 comparisons with the paper pass; 1 rows are information' in text
+    assert '## Extra' in text and 'hello table' in text
+    assert info['all_pass'] is True
+    assert info['expectations'][1]['pass'] is None
+    only_info = make_report(bag, tmp_path / 'report4',
+                            expectations=[('final angle', '(not given)', 59.5, None)])
+    assert only_info['all_pass'] is None
+
 
 def test_missing_and_corrupt_bags(tmp_path):
     missing = tmp_path / 'nope'

@@ -13,7 +13,11 @@ two runs of the same simulation give the same report):
 * estimate error (``/adcs/attitude_estimate``, if any): ``angle(q_eci_body_est, q_eci_body_true)``
   [deg] and ``|omega_est - omega_true|`` [deg/s], pairs matched on equal header stamps;
 * paper comparison: a table filled from ``expectations`` (empty by default), so scenarios that
-  reproduce a paper add their rows ``(name, paper value, measured value, pass)``.
+  reproduce a paper add their rows ``(name, paper value, measured value, verdict)``; verdict
+  True/False prints PASS/FAIL (a comparison with a paper number), ``None`` prints ``info`` (no
+  paper value) and is not counted in ``all_pass``;
+* extra sections (e.g. paper 000's sensitivity table) from
+  :func:`adcs_nodes.tools.reproductions.sections_for`.
 
 Time axes are in orbits when the run lasts at least half an orbit (orbit rate from
 ``/sim/environment``), else in seconds, counted from the first ``/sim/state`` stamp.
@@ -34,6 +38,7 @@ from matplotlib.figure import Figure
 
 from adcs_nodes.core import attitude
 from adcs_nodes.tools.bag import cdr_stamp_ns, open_bag, stamp_kind
+from adcs_nodes.tools.metrics import angle_to_identity_deg, run_metrics
 
 STATE_TOPIC = '/sim/state'
 ENV_TOPIC = '/sim/environment'
@@ -41,7 +46,7 @@ MAG_TOPIC = '/sensors/magnetometer'
 WHEELS_TOPIC = '/sim/wheels'
 ESTIMATE_TOPIC = '/adcs/attitude_estimate'
 
-Expectation = Tuple[str, str, Any, bool]
+Expectation = Tuple[str, str, Any, Optional[bool]]
 
 _RAD2DEG = 180.0 / math.pi
 _T2UT = 1e6
@@ -151,8 +156,8 @@ class _TimeAxis:
 
 
 def _angle_to_identity(quats: np.ndarray) -> np.ndarray:
-    ident = attitude.identity()
-    return np.array([attitude.angle_between(q, ident) for q in quats])
+    """Rotation angle of each quaternion [rad] (:func:`metrics.angle_to_identity_deg`)."""
+    return np.radians(angle_to_identity_deg(quats))
 
 
 def _save(fig: Figure, out: Path, name: str, plots: List[str]) -> None:
@@ -294,7 +299,13 @@ def _utc(t_ns: int) -> str:
         '%Y-%m-%d %H:%M:%S.%f UTC')
 
 
-def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expectation]) -> str:
+def verdict_text(ok: Optional[bool]) -> str:
+    """``PASS`` / ``FAIL`` for a comparison with the paper, ``info`` for ``None``."""
+    return 'info' if ok is None else ('PASS' if ok else 'FAIL')
+
+
+def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expectation],
+                sections: Sequence[Tuple[str, str]] = ()) -> str:
     lines = [
         '# ADCS run report', '',
         f'* bag: `{bag_path}`',
@@ -324,6 +335,11 @@ def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expect
         ('final attitude estimate error', 'estimate_final_error_deg', 'deg'),
         ('max attitude estimate error', 'estimate_max_error_deg', 'deg'),
         ('rms attitude estimate error', 'estimate_rms_error_deg', 'deg'),
+        ('capture: enters 5 deg, stays within 10 deg', 'capture_orbits', 'orbits'),
+        ('last exit from 5 deg', 'last_exit_orbits', 'orbits'),
+        ('hold RMS (4 orbits to the end)', 'hold_rms_deg', 'deg'),
+        ('hold median', 'hold_median_deg', 'deg'),
+        ('hold 95th percentile', 'hold_p95_deg', 'deg'),
         ('max \\|wheel momentum\\|', 'wheel_max_abs_momentum_Nms', 'N m s'),
         ('mean \\|b_eci\\|', 'field_mean_norm_uT', 'uT'),
         ('mean \\|magnetometer\\|', 'magnetometer_mean_norm_uT', 'uT'),
@@ -335,19 +351,27 @@ def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expect
     else:
         lines.append(f'No `{STATE_TOPIC}` in the bag.')
     lines += ['', '## Paper comparison', '',
-              '| quantity | paper | measured | pass |', '|---|---|---|---|']
+              '| quantity | paper | measured | verdict |', '|---|---|---|---|']
     for name, paper, measured, ok in expectations:
-        cells = [_md(name), _md(paper), _md(_fmt(measured)), 'PASS' if ok else 'FAIL']
+        cells = [_md(name), _md(paper), _md(_fmt(measured)), verdict_text(ok)]
         lines.append('| ' + ' | '.join(cells) + ' |')
     if not expectations:
         lines += ['', '_No paper comparison for this run._']
+    else:
+        counted = [e for e in expectations if e[3] is not None]
+        lines += ['', f'{sum(1 for e in counted if e[3])} of {len(counted)} comparisons with '
+                  f'the paper pass; {len(expectations) - len(counted)} rows are information '
+                  '(no paper value).']
+    for title, text in sections:
+        lines += ['', f'## {title}', '', text.rstrip()]
     lines += ['', '## Plots', '']
     lines += [f'![{Path(p).stem}]({p})' for p in metrics['plots']]
     return '\n'.join(lines) + '\n'
 
 
 def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
-                expectations: Optional[Sequence[Expectation]] = None) -> Dict[str, Any]:
+                expectations: Optional[Sequence[Expectation]] = None,
+                sections: Optional[Sequence[Tuple[str, str]]] = None) -> Dict[str, Any]:
     """Analyse a bag: write PNG plots, ``summary.md`` and ``metrics.json`` into ``out_dir``.
 
     Parameters
@@ -356,9 +380,13 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         rosbag2 bag directory or ``.mcap`` file.
     out_dir : path-like
         Output directory (created if needed; files of the same names are replaced).
-    expectations : sequence of (str, str, object, bool), optional
-        Paper comparison rows ``(name, paper_value_str, measured_value, pass)``; the table in
-        ``summary.md`` is empty without them.
+    expectations : sequence of (str, str, object, bool or None), optional
+        Paper comparison rows ``(name, paper_value_str, measured_value, verdict)``; verdict
+        ``None`` is an information row (not counted). The table in ``summary.md`` is empty
+        without them.
+    sections : sequence of (str, str), optional
+        Extra markdown sections ``(title, text)``; default: those of the bag's scenario
+        (:func:`adcs_nodes.tools.reproductions.sections_for`).
 
     Returns
     -------
@@ -369,9 +397,12 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         ``final_rate_deg_s``, ``max_rate_deg_s``, ``final_rate_orbit_deg_s``; with an estimate:
         ``estimate_final_error_deg``, ``estimate_max_error_deg``, ``estimate_rms_error_deg``,
         ``estimate_matched``; ``wheel_max_abs_momentum_Nms``, ``field_mean_norm_uT``,
-        ``magnetometer_mean_norm_uT`` when those topics exist; ``expectations`` (list of dicts),
-        ``all_pass`` (``None`` without expectations), ``plots`` (file names), ``summary`` and
-        ``metrics_file`` (paths).
+        ``magnetometer_mean_norm_uT`` when those topics exist; with a known orbit period the
+        run metrics of :func:`adcs_nodes.tools.metrics.run_metrics` on the angle to the orbit
+        frame (``capture_orbits``, ``last_exit_orbits``, ``hold_rms_deg``, ...);
+        ``expectations`` (list of dicts, ``pass`` None for information rows), ``all_pass``
+        (over the rows with a verdict; ``None`` without any), ``plots`` (file names),
+        ``summary`` and ``metrics_file`` (paths).
 
     Raises
     ------
@@ -381,6 +412,12 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         If it is not a readable bag.
     """
     expectations = list(expectations or [])
+    if sections is None:
+        from adcs_nodes.tools.reproductions import sections_for
+        try:
+            sections = sections_for(str(bag_path))
+        except (OSError, ValueError, ImportError):
+            sections = []
     data = _collect(bag_path)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -420,6 +457,13 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
             'max_rate_deg_s': float(w.max()),
             'final_rate_orbit_deg_s': float(w_orb[-1]),
         })
+        if period:
+            t_s = (np.asarray(data.state['t'], dtype=np.int64) - t0) * 1e-9
+            run = run_metrics(t_s, angles, period)
+            metrics.update({k: run[k] for k in (
+                'capture_orbits', 'last_exit_orbits', 'hold_rms_deg', 'hold_median_deg',
+                'hold_p95_deg', 'hold_max_deg', 'hold_samples')
+                if run[k] is not None and math.isfinite(run[k])})
         _plot_attitude(data, axis, out, plots)
         _plot_rates(data, axis, out, plots)
     if data.env['t']:
@@ -449,12 +493,15 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         _plot_estimate(errors, axis, out, plots)
 
     metrics['expectations'] = [
-        {'name': name, 'paper': paper, 'measured': _json_value(measured), 'pass': bool(ok)}
+        {'name': name, 'paper': paper, 'measured': _json_value(measured),
+         'pass': None if ok is None else bool(ok)}
         for name, paper, measured, ok in expectations]
-    metrics['all_pass'] = all(bool(e[3]) for e in expectations) if expectations else None
+    counted = [bool(e[3]) for e in expectations if e[3] is not None]
+    metrics['all_pass'] = all(counted) if counted else None
     metrics['plots'] = plots
     summary = out / 'summary.md'
-    summary.write_text(_summary_md(bag_path, metrics, expectations), encoding='utf-8')
+    summary.write_text(_summary_md(bag_path, metrics, expectations, sections),
+                       encoding='utf-8')
     metrics['summary'] = str(summary)
     metrics_file = out / 'metrics.json'
     metrics['metrics_file'] = str(metrics_file)
