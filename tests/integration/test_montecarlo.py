@@ -2,7 +2,8 @@
 
 Campaigns go through the real command (``python -m adcs_nodes.tools.montecarlo``, the same
 code as ``adcs montecarlo``) on ``paper000_control`` shortened to 60 s (30 frames); each run is
-a full recorded graph. The checks read every run's bag independently of the tool.
+a full recorded graph. The checks read every run's bag independently of the tool. The plain
+engine (no ROS) must give the graph's trajectory for the same dispersion.
 """
 import dataclasses
 import json
@@ -25,13 +26,16 @@ from adcs_nodes.tools.bag import read_messages
 
 SCENARIO = os.path.join(SCENARIOS, 'paper000_control.yaml')
 DURATION = 60.0
+#: Disperse the magnetometer errors too (the default keeps the scenario's), so the tests see
+#: them reach the runs.
+SENSOR_DISPERSION = ('--mag-bias-nT', '120', '--misalignment-deg', '1')
 QUAT = ('x', 'y', 'z', 'w')
 VEC = ('x', 'y', 'z')
 
 
 def campaign_cmd(out, *args, duration=DURATION):
     return [sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
-            '--duration', f'{duration:g}', '--out', str(out), *args]
+            '--duration', f'{duration:g}', '--out', str(out), *SENSOR_DISPERSION, *args]
 
 
 def campaign(out, *args, check=True, timeout=240):
@@ -86,15 +90,25 @@ def three_runs(tmp_path_factory):
 
 
 # ---------------------------------------------------------------------- pure functions
-def test_capture_index_is_the_start_of_the_final_stay_below():
-    assert mc.capture_index(np.array([50.0, 4.0, 6.0, 3.0, 2.0]), 5.0) == 3
-    assert mc.capture_index(np.array([1.0, 2.0]), 5.0) == 0
-    assert mc.capture_index(np.array([1.0, 6.0]), 5.0) is None
-    assert mc.capture_index(np.array([]), 5.0) is None
+def test_run_metrics_use_the_paper_definitions():
+    # angle about z: 50, 4, 6, 3, 2 deg at t = 0..4 s; capture = entering 5 deg and staying
+    # below 10 (t = 1 s), the last exit from 5 deg is later (t = 3 s)
+    ang = np.radians([50.0, 4.0, 6.0, 3.0, 2.0])
+    q = np.stack([np.zeros(5), np.zeros(5), np.sin(ang / 2), np.cos(ang / 2)], axis=1)
+    w = np.zeros((5, 3))
+    w[:, 2] = 0.01
+    m = mc.series_metrics(np.arange(5.0), q, w, w, 5.0, None)
+    assert m['status'] == 'captured' and m['capture_time_s'] == 1.0
+    assert m['last_exit_s'] == 3.0 and m['final_angle_deg'] == pytest.approx(2.0)
+    assert m['max_rate_deg_s'] == pytest.approx(math.degrees(0.01))
+    assert m['bag_initial']['q_orbit_body_xyzw'] == list(q[0])
+    q[-1] = [0.0, 0.0, math.sin(0.1), math.cos(0.1)]          # 11.5 deg at the end
+    assert mc.series_metrics(np.arange(5.0), q, w, w, 5.0, None)['status'] == 'not_captured'
 
 
 def test_dispersions_are_deterministic_bounded_and_uniform_on_so3():
-    cfg = mc.CampaignConfig('x.yaml', 'h', runs=4000, seed=7, duration_s=10.0)
+    cfg = mc.CampaignConfig('x.yaml', 'h', runs=4000, seed=7, duration_s=10.0,
+                            mag_bias_nT=120.0, misalignment_deg=1.0)
     assert mc.draw_dispersion(cfg, 3) == mc.draw_dispersion(cfg, 3)
     assert mc.draw_dispersion(cfg, 3) != mc.draw_dispersion(cfg, 4)
     draws = [mc.draw_dispersion(cfg, i) for i in range(cfg.runs)]
@@ -108,36 +122,58 @@ def test_dispersions_are_deterministic_bounded_and_uniform_on_so3():
     assert np.abs(np.array([d.mag_bias_T for d in draws])).max() <= 120e-9
     assert np.abs(np.array([d.mag_misalignment_deg for d in draws])).max() <= 1.0
     assert len({d.seed for d in draws}) == cfg.runs
+    # without sensor dispersion the same attitude, rate and seed are drawn, errors are None
+    keep = mc.CampaignConfig('x.yaml', 'h', runs=1, seed=7, duration_s=10.0)
+    a, b = mc.draw_dispersion(keep, 3), mc.draw_dispersion(cfg, 3)
+    assert a.mag_bias_T is None and a.mag_misalignment_deg is None
+    assert (a.q_orbit_body_xyzw, a.omega_body_eci_body_deg_s, a.seed) == \
+        (b.q_orbit_body_xyzw, b.omega_body_eci_body_deg_s, b.seed)
 
 
 def test_apply_dispersion_replaces_the_initial_state_and_sensor_errors():
     from adcs_nodes.tools.scenario import load_scenario
     base = load_scenario(SCENARIO)
-    cfg = mc.CampaignConfig(SCENARIO, 'h', runs=1, seed=1, duration_s=DURATION)
+    cfg = mc.CampaignConfig(SCENARIO, 'h', runs=1, seed=1, duration_s=DURATION,
+                            mag_bias_nT=120.0, misalignment_deg=1.0)
     disp = mc.draw_dispersion(cfg, 0)
-    sc = mc.apply_dispersion(base, disp, DURATION)
+    sc = mc.apply_dispersion(base, disp, DURATION, cfg)
     assert 'q_orbit_body_wxyz' not in sc['initial'] and '_path' not in sc
     assert sc['initial']['q_orbit_body_xyzw'] == disp.q_orbit_body_xyzw
     assert sc['sensors']['magnetometer']['bias_T'] == disp.mag_bias_T
     assert sc['seed'] == disp.seed and sc['duration_s'] == DURATION
+    assert 'auto' not in sc.get('manager', {})
     assert base['initial']['q_orbit_body_wxyz'] == [0.36, 0.48, -0.48, 0.64]  # base untouched
+    # default: the scenario's sensor errors; --auto-detumble: B-dot first, with its gain
+    keep = mc.CampaignConfig(SCENARIO, 'h', runs=1, seed=1, duration_s=DURATION,
+                             auto_detumble=True, bdot_gain=1e8)
+    sc = mc.apply_dispersion(base, mc.draw_dispersion(keep, 0), DURATION, keep)
+    assert sc['sensors']['magnetometer']['bias_T'] == base['sensors']['magnetometer']['bias_T']
+    assert sc['manager']['auto'] == mc.AUTO_DETUMBLE and sc['manager']['initial'] == ''
+    assert sc['controllers']['bdot']['gain_Am2s_per_T'] == 1e8
 
 
 def test_summary_and_plot_from_synthetic_results(tmp_path):
-    cfg = mc.CampaignConfig(SCENARIO, 'h', runs=4, seed=1, duration_s=1000.0)
+    cfg = mc.CampaignConfig(SCENARIO, 'h', runs=4, seed=1, duration_s=40000.0)
     results = []
-    for i, (status, t_cap) in enumerate([('captured', 300.0), ('captured', 500.0),
-                                         ('not_captured', None), ('error', None)]):
+    for i, (status, t_cap, in_time, hold) in enumerate([
+            ('captured', 300.0, True, 1.0), ('captured', 30000.0, False, 2.0),
+            ('not_captured', None, False, 90.0), ('error', None, None, None)]):
         results.append({'index': i, 'status': status, 'capture_time_s': t_cap,
-                        'final_angle_deg': 1.0 if t_cap else 90.0, 'missed_frames': 0,
+                        'captured_in_time': in_time, 'hold_median_deg': hold,
+                        'hold_rms_deg': hold, 'final_angle_deg': 1.0 if t_cap else 90.0,
+                        'missed_frames': 0,
                         'dispersion': dataclasses.asdict(mc.draw_dispersion(cfg, i))})
-    text = mc.summary_markdown(cfg, results, {'name': 'x', 'orbit': {'type': 'circular',
-                                                                     'altitude_km': 690.0}})
+    base = {'name': 'x', 'orbit': {'type': 'circular', 'altitude_km': 690.0}}
+    text = mc.summary_markdown(cfg, results, base)
     assert '| runs completed | 3 of 4 |' in text
     assert '2/3 = 66.7 %' in text
-    assert '| capture time, median [s] | 400 (0.07 orbits) |' in text
+    assert '| captured within 4 orbits (target >= 95 %) | 1/3 = 33.3 % |' in text
+    assert '| capture time, median [s] | 15150 (2.56 orbits) |' in text
+    assert '| hold median per run: median / 90th percentile / max [deg] (target: median ' \
+        '<= 1.5) | 2.00 / 72.40 / 90.00 |' in text
+    assert '| runs with a hold median <= 1.5 deg | 1/3 = 33.3 % |' in text
     png = tmp_path / 'plot.png'
-    mc.plot_capture_vs_rate(str(png), cfg, results)
+    mc.plot_capture_vs_rate(str(png), cfg, results, base)
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
@@ -186,6 +222,30 @@ def test_three_runs_in_parallel_and_every_dispersion_reached_its_run(three_runs)
     assert len({r['seed'] for r in rows}) == 3
     assert (out / 'summary.md').read_text().count('| runs completed | 3 of 3 |') == 1
     assert (out / 'capture_vs_rate.png').read_bytes()[:4] == b'\x89PNG'
+
+
+def test_plain_engine_gives_the_graph_trajectory(three_runs, tmp_path):
+    """The same dispersions without ROS: same initial state, same final attitude and rate."""
+    out = tmp_path / 'plain'
+    proc = campaign(out, '--runs', '2', '--engine', 'plain')
+    assert 'executed 2 run(s)' in proc.stdout, proc.stdout
+    rows, graph = table(out), table(three_runs[0])
+    for row in rows:
+        i = int(row['index'])
+        assert row['engine'] == 'plain' and row['status'] in ('captured', 'not_captured')
+        assert {c: row[c] for c in row if c.startswith('disp_')} == \
+            {c: graph[i][c] for c in graph[i] if c.startswith('disp_')}
+        series = np.load(os.path.join(mc.run_dir_of(str(out), i), mc.SERIES_FILE))
+        assert series['t_s'][-1] == DURATION
+        # the truth at the end of the run, against the graph's bag read independently
+        msgs = list(read_messages(os.path.join(mc.run_dir_of(str(three_runs[0]), i), 'bag'),
+                                  ['/sim/state']))
+        q = msgs[-1][2].q_orbit_body
+        q_bag = np.array([q.x, q.y, q.z, q.w])
+        q_plain = series['q_orbit_body'][-1]
+        assert quat_close(q_plain, q_bag, 1e-9), (q_plain, q_bag)
+        assert float(row['final_angle_deg']) == pytest.approx(float(graph[i]['final_angle_deg']),
+                                                              abs=1e-7)
 
 
 def test_restart_reruns_only_incomplete_runs(three_runs, tmp_path):

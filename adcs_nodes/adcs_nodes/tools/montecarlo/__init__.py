@@ -1,0 +1,111 @@
+"""``adcs montecarlo``: dispersed closed-loop campaigns, local or on a Dask cluster, resumable.
+
+Usage::
+
+    adcs montecarlo SCENARIO --runs N [--jobs J | --scheduler ADDRESS] [--out DIR]
+                    [--duration S] [--seed S] [--max-rate-deg-s 3.0] [--capture-deg 5.0]
+                    [--mag-bias-nT B] [--misalignment-deg M] [--auto-detumble]
+                    [--bdot-gain K] [--engine graph|plain] [--compose]
+
+Dispersions
+-----------
+Run ``i`` of a campaign with seed ``s`` draws, from ``numpy.random.default_rng([s, i])`` and in
+this order (the order is part of the file format: changing it changes every campaign):
+
+1. ``q_orbit_body`` uniform on SO(3): a 4-D standard normal vector, normalised, sign chosen
+   with ``w >= 0`` (scalar last);
+2. ``omega_body_eci_body``: each body component uniform in ``[-max_rate, +max_rate]`` deg/s
+   (issue 5: "initial rates up to 3 deg/s" per axis; the paper's (-3, 3, 3) deg/s is a corner
+   of that cube, so the magnitude reaches ``sqrt(3) max_rate``);
+3. magnetometer bias: each sensor axis uniform in ``+-mag_bias`` nT (only with
+   ``--mag-bias-nT``; by default the scenario's bias is kept: "the scenario's sensor errors");
+4. magnetometer misalignment: a body -> sensor rotation vector, each component uniform in
+   ``+-misalignment`` deg (only with ``--misalignment-deg``; default: the scenario's);
+5. the run's scenario ``seed`` (sensor noise, random torque): an integer in ``[0, 2**31 - 1)``.
+
+Every draw is made even when it is not applied (no magnetometer, or the scenario's errors
+kept), so a run's values never depend on the scenario's sensor set or these options.
+
+``--auto-detumble`` writes the manager's automatic sequence into each run
+(:data:`~adcs_nodes.tools.montecarlo.config.AUTO_DETUMBLE`: B-dot until the rate is below
+0.5 deg/s, then the magnetic law), with ``--bdot-gain`` as the B-dot gain.
+
+Metrics of a run (:mod:`adcs_nodes.tools.metrics`, the same definitions as ``adcs report``)
+------------------------------------------------------------------------------------------
+Captured: the angle between body and orbit frame enters ``--capture-deg`` and then stays
+below twice that to the end; "captured within 4 orbits" compares that time with 4 orbits of
+the scenario's circular orbit; the hold is the angle from 4 orbits to the end (RMS, median,
+95th percentile); the last exit from the band is reported as ``last_exit_s``.
+
+Execution
+---------
+Engine ``graph`` (default): each run is one ``python -m adcs_nodes.tools.montecarlo _worker
+RUN_DIR`` process that starts
+the graph with :class:`~adcs_nodes.tools.launcher.Launcher` in its own main thread (the
+launcher needs signal handlers and sets ``ROS_DOMAIN_ID`` in its environment; a fresh process
+per run keeps every graph isolated, each with its own domain). ``--jobs J`` supervises J such
+processes at once from a thread pool; ``--scheduler ADDRESS`` submits the same supervisor
+function (:func:`execute_run`) to an existing Dask distributed scheduler, whose workers start
+the run processes on their machines. Workers need this package (and ROS 2) installed and
+``--out`` on a file system they see under the same path. Engine ``plain``: the run process is
+``python -m sim_node.tools.closed_loop _mc_worker RUN_DIR``, the same cores in a plain loop
+without ROS (same trajectory as the graph up to float rounding; no bag, the per-frame series
+go to ``series.npz``).
+
+Files (``OUT`` = ``--out``)
+---------------------------
+``campaign.json``
+    The campaign's identity (:data:`IDENTITY_KEYS`: scenario content hash, seed, duration,
+    dispersion bounds, capture threshold) plus the last ``runs`` and ``compose``; a restart
+    with a different identity is refused. ``--runs``, ``--jobs``, ``--scheduler`` and
+    ``--compose`` may change between restarts (run ``i``'s draws depend only on the seed and
+    ``i``, so a larger ``--runs`` extends the campaign; composed and per-process graphs give
+    the same trajectory).
+``runs/run_<i>/``
+    ``scenario.yaml`` (the dispersed scenario: ``adcs run`` reproduces the run), ``job.json``,
+    ``bag/`` (rosbag2 MCAP), ``logs/``, ``worker.log`` and ``result.json`` (written atomically
+    when the run completed; its presence, with the bag, marks the run as done).
+``campaign.csv``
+    One row per run (:data:`CSV_COLUMNS`): dispersed values, status, metrics and the initial
+    truth read back from the bag's first ``/sim/state``.
+``summary.md``, ``capture_vs_rate.png``
+    Success rate, fraction captured within 4 orbits, capture-time and hold-accuracy
+    statistics, success rate per initial-rate bin; scatter of capture time against the initial
+    rate.
+
+Modules (one concern each): :mod:`.config` (campaign identity, dispersions),
+:mod:`.results` (metrics of one run), :mod:`.files` (atomic files, run directories, lock),
+:mod:`.runner` (worker process and its supervisor), :mod:`.backends` (thread pool, Dask),
+:mod:`.campaign` (the campaign), :mod:`.table` (``campaign.csv``), :mod:`.summary`
+(``summary.md``, plot), :mod:`.cli` (arguments, entry points).
+
+Status of a run: ``captured`` (see the metrics above), ``not_captured`` (completed, never
+captured), ``error`` (the
+graph failed: message in the table, rerun on restart), ``interrupted`` / ``pending``
+(Ctrl-C; rerun on restart). Exit codes: 0 every run completed, 1 some run failed, 2 bad
+arguments, 130 interrupted.
+"""
+from adcs_nodes.tools.montecarlo.backends import DaskBackend, LocalBackend
+from adcs_nodes.tools.montecarlo.campaign import Campaign
+from adcs_nodes.tools.montecarlo.cli import add_arguments, config_from_args, main, run_from_args
+from adcs_nodes.tools.montecarlo.config import (AUTO_DETUMBLE, ENGINES, IDENTITY_KEYS,
+                                                CampaignConfig, CampaignError, Dispersion,
+                                                apply_dispersion, draw_dispersion,
+                                                scenario_hash)
+from adcs_nodes.tools.montecarlo.files import (FAILED_FILE, RESULT_FILE, SERIES_FILE,
+                                               load_result, run_dir_of, write_json_atomic)
+from adcs_nodes.tools.montecarlo.results import (STATE_TOPIC, bag_metrics, read_truth,
+                                                 series_metrics)
+from adcs_nodes.tools.montecarlo.runner import STOP_GRACE_S, execute_run, worker_main
+from adcs_nodes.tools.montecarlo.summary import (orbit_period_s, plot_capture_vs_rate,
+                                                 rate_bins, summary_markdown)
+from adcs_nodes.tools.montecarlo.table import CSV_COLUMNS, read_table, table_row, write_table
+
+__all__ = ['AUTO_DETUMBLE', 'CSV_COLUMNS', 'ENGINES', 'FAILED_FILE', 'IDENTITY_KEYS',
+           'RESULT_FILE', 'SERIES_FILE', 'STATE_TOPIC', 'STOP_GRACE_S', 'Campaign',
+           'CampaignConfig', 'CampaignError', 'DaskBackend', 'Dispersion', 'LocalBackend',
+           'add_arguments', 'apply_dispersion', 'bag_metrics', 'config_from_args',
+           'draw_dispersion', 'execute_run', 'load_result', 'main', 'orbit_period_s',
+           'plot_capture_vs_rate', 'rate_bins', 'read_table', 'read_truth', 'run_dir_of',
+           'run_from_args', 'scenario_hash', 'series_metrics', 'summary_markdown', 'table_row',
+           'worker_main', 'write_json_atomic', 'write_table']

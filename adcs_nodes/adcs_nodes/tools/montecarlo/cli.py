@@ -1,0 +1,131 @@
+"""``adcs montecarlo`` arguments and entry points."""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import List, Optional
+
+from adcs_nodes.tools.montecarlo.campaign import Campaign
+from adcs_nodes.tools.montecarlo.config import (ENGINES, CampaignConfig, CampaignError,
+                                                scenario_hash)
+from adcs_nodes.tools.montecarlo.runner import worker_main
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``adcs montecarlo`` arguments to ``parser``."""
+    parser.add_argument('scenario', help='base scenario YAML (closed loop, e.g. '
+                        'scenarios/paper000_control.yaml)')
+    parser.add_argument('--runs', type=int, required=True, metavar='N', help='number of runs')
+    parser.add_argument('--jobs', type=int, default=1, metavar='J',
+                        help='runs at once on this machine, each in its own processes '
+                        '(default 1; ignored with --scheduler)')
+    parser.add_argument('--scheduler', metavar='ADDRESS',
+                        help='submit the runs to this Dask distributed scheduler '
+                        '(e.g. tcp://host:8786); --out must be on a shared file system')
+    parser.add_argument('--out', metavar='DIR', help='campaign directory (default '
+                        'montecarlo_<scenario name>); an existing campaign there is resumed')
+    parser.add_argument('--duration', type=float, metavar='S',
+                        help='simulated seconds per run (default: the scenario duration_s)')
+    parser.add_argument('--seed', type=int, metavar='S',
+                        help='campaign seed (default: the scenario seed)')
+    parser.add_argument('--max-rate-deg-s', type=float, default=3.0, metavar='W',
+                        help='each initial rate component uniform in +-W deg/s (default 3)')
+    parser.add_argument('--capture-deg', type=float, default=5.0, metavar='A',
+                        help='captured when the angle to the orbit frame enters A deg and '
+                        'then stays below 2 A to the end (default 5)')
+    parser.add_argument('--mag-bias-nT', type=float, default=None, metavar='B',
+                        help='disperse the magnetometer bias per axis uniform in +-B nT '
+                        '(default: the scenario\'s bias)')
+    parser.add_argument('--misalignment-deg', type=float, default=None, metavar='M',
+                        help='disperse the magnetometer misalignment rotation vector per '
+                        'component uniform in +-M deg (default: the scenario\'s)')
+    parser.add_argument('--auto-detumble', action='store_true',
+                        help='B-dot detumble first (below 0.5 deg/s), then the magnetic law '
+                        '(writes manager.auto into each run)')
+    parser.add_argument('--bdot-gain', type=float, default=None, metavar='K',
+                        help='B-dot gain of the detumble [A m^2 s/T] (default: the '
+                        'scenario\'s)')
+    parser.add_argument('--engine', choices=ENGINES, default='graph',
+                        help='graph: the ROS graph, one bag per run (default); plain: the '
+                        'same cores in a plain loop without ROS (sim_node.tools.closed_loop, '
+                        'no bag, much faster)')
+    parser.add_argument('--compose', action='store_true',
+                        help='each run composed in one process (faster, same trajectory)')
+
+
+def config_from_args(args: argparse.Namespace) -> tuple:
+    """Validate the arguments; returns ``(CampaignConfig, base scenario, out dir)``.
+
+    Raises
+    ------
+    CampaignError, adcs_nodes.tools.scenario.ScenarioError
+        On a bad value or scenario.
+    """
+    from adcs_nodes.tools.scenario import load_scenario
+
+    base = load_scenario(args.scenario)
+    if args.runs < 1:
+        raise CampaignError(f'--runs must be >= 1, got {args.runs}')
+    if args.jobs < 1:
+        raise CampaignError(f'--jobs must be >= 1, got {args.jobs}')
+    for name in ('max_rate_deg_s', 'mag_bias_nT', 'misalignment_deg', 'bdot_gain'):
+        value = getattr(args, name, None)
+        if value is None and name != 'max_rate_deg_s':
+            continue
+        if not (math.isfinite(value) and value >= 0.0):
+            raise CampaignError(f'--{name.replace("_", "-")} must be >= 0, got {value}')
+    if not (math.isfinite(args.capture_deg) and 0.0 < args.capture_deg <= 180.0):
+        raise CampaignError(f'--capture-deg must be in (0, 180], got {args.capture_deg}')
+    duration = float(args.duration if args.duration is not None else base['duration_s'])
+    frames = duration / base['timing']['frame_s']
+    if not duration > 0 or abs(frames - round(frames)) > 1e-9:
+        raise CampaignError(f'--duration {duration:g} s is not a positive whole number of '
+                            f'{base["timing"]["frame_s"]:g} s frames')
+    cfg = CampaignConfig(
+        scenario_path=base['_path'], scenario_sha256=scenario_hash(base), runs=args.runs,
+        seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
+        max_rate_deg_s=args.max_rate_deg_s, capture_deg=args.capture_deg,
+        mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
+        auto_detumble=bool(getattr(args, 'auto_detumble', False)),
+        bdot_gain=getattr(args, 'bdot_gain', None),
+        engine=getattr(args, 'engine', 'graph'), compose=bool(args.compose))
+    if cfg.auto_detumble and not {'magnetic', 'bdot'} <= set(base.get('controllers', {})):
+        raise CampaignError('--auto-detumble needs the controllers magnetic and bdot in the '
+                            'scenario')
+    out = args.out or f'montecarlo_{base["name"]}'
+    return cfg, base, out
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """``adcs montecarlo``: run or resume a campaign; returns the exit code."""
+    from adcs_nodes.tools.scenario import ScenarioError
+
+    try:
+        cfg, base, out = config_from_args(args)
+        campaign = Campaign(cfg, base, out, log=lambda text: print(text, flush=True))
+        mode = (f'on the Dask scheduler {args.scheduler}' if args.scheduler
+                else f'{args.jobs} at a time')
+        print(f'[montecarlo] {cfg.runs} runs of {base["name"]} ({cfg.duration_s:g} s each, '
+              f'seed {cfg.seed}) {mode}, output in {campaign.out}', flush=True)
+        return campaign.run(jobs=args.jobs, scheduler=args.scheduler)
+    except (CampaignError, ScenarioError) as exc:
+        print(f'adcs montecarlo: {exc}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print('adcs montecarlo: interrupted (finished runs are kept)', file=sys.stderr)
+        return 130
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """``python -m adcs_nodes.tools.montecarlo``: the campaign command, or one run's process.
+
+    ``_worker RUN_DIR`` is the internal per-run entry point used by :func:`execute_run`.
+    """
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ['_worker'] and len(argv) == 2:
+        return worker_main(argv[1])
+    parser = argparse.ArgumentParser(prog='adcs montecarlo',
+                                     description='Dispersed Monte Carlo campaign.')
+    add_arguments(parser)
+    return run_from_args(parser.parse_args(argv))
