@@ -18,6 +18,9 @@ Commands
 ``adcs montecarlo SCENARIO --runs N [--jobs J] [--scheduler ADDRESS] [--out DIR]``
     Dispersed runs (attitude, rate, magnetometer errors, seeds) in parallel or on a Dask
     cluster; resumable; ``campaign.csv``, ``summary.md``, ``capture_vs_rate.png``.
+``adcs replay BAG [--topics T ...] [--rate F] [--time-offset S | --now]``
+    Publish a bag's recorded sensor topics (best effort, original stamps, ``/clock``) as
+    drivers would, to run the flight software without ``sim_node``.
 ``adcs export BAG --csv DIR``
     One CSV per topic, flattened fields, time column ``t`` in seconds.
 ``adcs report BAG [--out DIR]``
@@ -226,6 +229,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('montecarlo', help='dispersed Monte Carlo campaign (parallel, resumable)')
     montecarlo.add_arguments(p)
     p.set_defaults(func=montecarlo.run_from_args)
+
+    from adcs_nodes.tools import replay
+    p = sub.add_parser('replay', help='publish recorded sensor topics as a driver would')
+    replay.add_arguments(p)
+    p.set_defaults(func=replay.run_from_args)
 
     p = sub.add_parser('schema', help='print every scenario key (Markdown table)')
     p.set_defaults(func=cmd_schema)
