@@ -116,23 +116,23 @@ register(Entry(
            'clip per axis', choices=('scale', 'clip')),
      Param('n_points', 'int', 501, '-', 'output grid points of the centroid', min=3,
            max=100001),
-     Param('phi_peaks_deg', 'float[]', [0.0, 3.0, 12.0, 35.0, 90.0], 'deg',
+     Param('phi_peaks_deg', 'float[]', [0.0, 2.5, 10.0, 30.0, 90.0], 'deg',
            f'term peaks of phi (Н, ОМ, М, С, Б); {_ASSUMED}', length=5, min=0.0, max=180.0),
-     Param('dphi_peaks_deg_s', 'float[]', [-4.0, -3.0, -1.5, -0.5, 0.0, 0.5, 1.5, 3.0, 4.0],
+     Param('dphi_peaks_deg_s', 'float[]', [-6.4, -4.8, -2.4, -0.8, 0.0, 0.8, 2.4, 4.8, 6.4],
            'deg/s', f'term peaks of phi_dot (ОБ .. ПБ); {_ASSUMED}', length=9),
      Param('mk_peaks_Nm', 'float[]', [-1.0, -0.75, -0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0],
            'N m', f'term peaks of M_k (ОБ .. ПБ); {_ASSUMED}', length=9),
      Param('mk_half_width_Nm', 'float', 0.25, 'N m', f'half width of the M_k triangles; '
            f'{_ASSUMED}', positive=True),
-     Param('mk_gain', 'float', 3.0, '-', 'gain on the defuzzified M_k before the limit '
+     Param('mk_gain', 'float', 3.7, '-', 'gain on the defuzzified M_k before the limit '
            '(ASSUMPTION: not in the paper)', positive=True),
      Param('g_peaks_deg_s', 'float[]', [-0.2, -0.1, 0.0, 0.1, 0.2], 'deg/s',
            f'term peaks of |phidot_g| (ОБ, ОС, Н, ПС, ПБ); {_ASSUMED}', length=5),
      Param('dg_peaks_deg_s2', 'float[]', [-0.2, -0.1, 0.0, 0.1, 0.2], 'deg/s^2',
            f'term peaks of d|phidot_g|/dt (15); {_ASSUMED}', length=5),
-     Param('mgk_peaks_Nm', 'float[]', [-0.5, -0.25, 0.0, 0.25, 0.5], 'N m',
+     Param('mgk_peaks_Nm', 'float[]', [-0.4, -0.2, 0.0, 0.2, 0.4], 'N m',
            f'term peaks of M_gk; {_ASSUMED}', length=5),
-     Param('mgk_half_width_Nm', 'float', 0.25, 'N m', f'half width of the M_gk triangles; '
+     Param('mgk_half_width_Nm', 'float', 0.2, 'N m', f'half width of the M_gk triangles; '
            f'{_ASSUMED}', positive=True)),
     _build_fuzzy, inputs=('estimate', 'target'), actuators=('torque',)))
 
@@ -143,7 +143,7 @@ def _build_reference_slew(p: Dict[str, Any], ctx: Dict[str, Any]):
         ctx['inertia_kgm2'], p['max_torque_Nm'], accel_fraction=p['accel_fraction'],
         rate_gain_per_s=p['rate_gain_per_s'], linear_gain_per_s=p['linear_gain_per_s'],
         max_rate_deg_s=p['max_rate_deg_s'] if p['max_rate_deg_s'] > 0 else float('inf'),
-        **_wheel_kwargs(ctx))
+        gyroscopic_compensation=p['gyroscopic_compensation'], **_wheel_kwargs(ctx))
 
 
 register(Entry(
@@ -158,15 +158,17 @@ register(Entry(
      Param('linear_gain_per_s', 'float', 0.15, '1/s', 'slope lambda of the linear (PD) end '
            'of the rate profile', positive=True),
      Param('max_rate_deg_s', 'float', 0.0, 'deg/s', 'cap on the profile rate (0: none)',
-           min=0.0)),
+           min=0.0),
+     Param('gyroscopic_compensation', 'bool', True, '-', 'add omega x J omega (off: the '
+           'classical law on assumption (10) of paper 003)')),
     _build_reference_slew, inputs=('estimate', 'target'), actuators=('torque',)))
 
 
 def _build_mpi(p: Dict[str, Any], ctx: Dict[str, Any]):
     from adcs_nodes.core.control.mpi import MPIController
-    inertia = p['inertia_kgm2']
+    inertia = p['model_inertia_kgm2']
     if inertia and len(inertia) != 9:
-        raise ValueError(f'mpi inertia_kgm2: expected 9 values (row-major 3x3) or none, got '
+        raise ValueError(f'mpi model_inertia_kgm2: expected 9 values (row-major 3x3) or none, got '
                          f'{len(inertia)}')
     inertia = np.reshape(inertia, (3, 3)) if inertia else ctx['inertia_kgm2']
     if not _n_wheels(ctx):
@@ -196,7 +198,7 @@ register(Entry(
            "paper's tracking lag) or propagated to t0 + tau", choices=('t0', 't0_plus_tau')),
      Param('exact_transition', 'bool', False, '-', 'expm instead of the power series '
            '(digest P6 study)'),
-     Param('inertia_kgm2', 'float[]', [], 'kg m^2', "the controller's own inertia, 9 values "
+     Param('model_inertia_kgm2', 'float[]', [], 'kg m^2', "the controller's own inertia, 9 values "
            'row-major (paper 001: eq. (31), 5 % off the truth); empty: the onboard inertia of '
            'the spacecraft')),
     _build_mpi, inputs=('estimate', 'target', 'wheel_speeds'), actuators=('wheels',),

@@ -147,7 +147,8 @@ def make_reference(**kw):
 
 
 def reproduce(t_end: float = 80.0) -> dict:
-    """Run fuzzy (both Table 1 readings) and the reference; return the results table.
+    """Run the fuzzy controller (default set with both Table 1 readings, the smooth set, no
+    compensation) and the reference; return the results table (rows: the default set).
 
     Returns
     -------
@@ -155,10 +156,13 @@ def reproduce(t_end: float = 80.0) -> dict:
         ``runs``: name -> :class:`Run`; ``rows``: list of (quantity, ours, paper, tolerance,
         PASS/FAIL) for the default (reversed) reading.
     """
+    from adcs_nodes.core.control.fuzzy import SMOOTH
     runs = {
         'fuzzy (Table 1 reversed)': simulate(make_fuzzy(table1_rows='reversed'), t_end=t_end),
         'fuzzy (Table 1 as printed)': simulate(make_fuzzy(table1_rows='as_printed'),
                                                t_end=t_end),
+        'fuzzy (smooth set)': simulate(make_fuzzy(**SMOOTH), t_end=t_end),
+        'fuzzy (no compensation)': simulate(make_fuzzy(compensation=False), t_end=t_end),
         'reference slew': simulate(make_reference(), t_end=t_end),
     }
     f, r = runs['fuzzy (Table 1 reversed)'], runs['reference slew']
@@ -177,12 +181,14 @@ def format_table(result: dict) -> str:
     """Plain-text tables of :func:`reproduce`."""
     lines = ['paper 003 fuzzy eigenaxis slew (plain numpy loop; metrics: 5 % band of phi0, '
              'E = int sum|M_i| dt to settling)',
-             f'{"run":28s} {"T_s [s]":>8s} {"E [N m s]":>10s} {"E_80s":>8s} {"max|M_i|":>9s} '
-             f'{"overshoot":>9s} {"us/call":>8s}']
+             '(E_run: to the end of the run; phi_max_in: largest phi after first entering the '
+             'band [deg])',
+             f'{"run":28s} {"T_s [s]":>8s} {"E [N m s]":>10s} {"E_run":>8s} {"max|M_i|":>9s} '
+             f'{"phi_max_in":>10s} {"us/call":>8s}']
     for name, run in result['runs'].items():
         lines.append(f'{name:28s} {run.settling_s:8.2f} {run.energy_Nms:10.2f} '
                      f'{run.energy_total_Nms:8.2f} {run.max_abs_torque_Nm:9.3f} '
-                     f'{run.overshoot_deg:8.2f}d {1e6 * run.seconds_per_call:8.1f}')
+                     f'{run.overshoot_deg:10.2f} {1e6 * run.seconds_per_call:8.1f}')
     lines.append(f'{"quantity":14s} {"ours":>8s} {"paper":>8s} {"tol":>6s} verdict')
     for key, v, paper, tol, verdict in result['rows']:
         lines.append(f'{key:14s} {v:8.2f} {paper:8.2f} {100 * tol:5.0f}% {verdict}')

@@ -53,6 +53,9 @@ class ReferenceSlewController:
         ``lambda`` [1/s] of the linear (PD) end of the profile.
     max_rate_deg_s : float
         ``w_max`` [deg/s]; ``inf`` for none.
+    gyroscopic_compensation : bool
+        Add ``omega x J omega`` (default). Off: the classical law built on assumption (10)
+        (``omega = phi_dot e_phi``), which the paper says is wrong for an asymmetric body.
     wheel_axes_body, wheel_max_torque_Nm : optional
         Reaction wheels, as in :class:`~adcs_nodes.core.control.fuzzy.FuzzyEigenaxisController`.
 
@@ -65,6 +68,7 @@ class ReferenceSlewController:
     def __init__(self, inertia_kgm2: ArrayLike, max_torque_Nm: ArrayLike = 1.0,
                  accel_fraction: float = 0.9, rate_gain_per_s: float = 1.0,
                  linear_gain_per_s: float = 0.15, max_rate_deg_s: float = math.inf,
+                 gyroscopic_compensation: bool = True,
                  wheel_axes_body: Optional[ArrayLike] = None,
                  wheel_max_torque_Nm: Optional[ArrayLike] = None) -> None:
         J = np.asarray(inertia_kgm2, dtype=float)
@@ -88,6 +92,7 @@ class ReferenceSlewController:
         self.k = float(rate_gain_per_s)
         self.lam = float(linear_gain_per_s)
         self.w_max = math.radians(float(max_rate_deg_s))
+        self.gyro = bool(gyroscopic_compensation)
         if wheel_axes_body is not None and np.size(wheel_axes_body) > 0:
             axes = np.asarray(wheel_axes_body, dtype=float).reshape(-1, 3)
             n = axes.shape[0]
@@ -127,7 +132,9 @@ class ReferenceSlewController:
             a_max = self.f_a * float(np.min(np.where(je > 0.0, self.limit / je, np.inf)))
         w_prof = min(math.sqrt(2.0 * a_max * phi), self.lam * phi, self.w_max)
         omega_d = -w_prof * e
-        m = self.J @ (self.k * (omega_d - w)) + cross3(w_abs, self.J @ w_abs)
+        m = self.J @ (self.k * (omega_d - w))
+        if self.gyro:
+            m = m + cross3(w_abs, self.J @ w_abs)
         m_out, sigma = scale_to_limits(m, self.limit)
         return dict(torque_body=m_out, phi=phi, phi_dot=float(e @ w), e_phi=e, a_max=a_max,
                     w_prof=w_prof, sigma=sigma)
