@@ -337,7 +337,7 @@ def test_registry_entry_builds_with_the_paper_inertia_and_refuses_no_wheels():
     assert entry.actuators == ('wheels',) and entry.requires == ('spacecraft.wheels',)
     ctx = dict(inertia_kgm2=IB, wheel_axes_body=np.eye(3), wheel_max_torque_Nm=[1.0] * 3,
                wheel_max_momentum_Nms=[55.0] * 3, wheel_inertia_kgm2=[0.1] * 3, period_s=0.2)
-    c = entry.build(entry.validate({'inertia_kgm2': IC.ravel().tolist()}), ctx)
+    c = entry.build(entry.validate({'model_inertia_kgm2': IC.ravel().tolist()}), ctx)
     np.testing.assert_array_equal(c.inertia, IC)
     np.testing.assert_array_equal(entry.build(entry.validate({}), ctx).inertia, IB)
     no_wheels = dict(ctx, wheel_axes_body=np.zeros((0, 3)), wheel_max_torque_Nm=[],
@@ -345,7 +345,7 @@ def test_registry_entry_builds_with_the_paper_inertia_and_refuses_no_wheels():
     with pytest.raises(ValueError, match='wheels'):
         entry.build(entry.validate({}), no_wheels)
     with pytest.raises(ValueError, match='9 values'):
-        entry.build(entry.validate({'inertia_kgm2': [1.0, 2.0]}), ctx)
+        entry.build(entry.validate({'model_inertia_kgm2': [1.0, 2.0]}), ctx)
     est = registry.get('estimator', 'mekf')
     assert est.inputs == ('star_tracker', 'gyro')
     assert est.build(est.validate({}), ctx).s_st == pytest.approx(math.radians(0.02 / 3))

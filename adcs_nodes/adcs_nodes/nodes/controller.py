@@ -63,7 +63,7 @@ CONTEXT_PARAMS = (
           "the controller's own inertia: 3 diagonal values or 9 (row-major)",
           read_only=True),
     Param('max_dipole_Am2', 'float[]', [40.0, 40.0, 40.0], 'A m^2',
-          'magnetorquer limits per body axis (empty: no magnetorquer)', positive=True,
+          'magnetorquer limits per body axis (all zero: no magnetorquer)', length=3, min=0.0,
           read_only=True),
     Param('wheel_axes_body', 'float[]', [], '-', 'wheel spin axes, body axes, 3 per wheel',
           read_only=True),
@@ -147,7 +147,7 @@ class ControllerNode(LockstepNode):
                              f'got {axes.size}')
         self.ctx: Dict[str, Any] = {
             'inertia_kgm2': inertia_matrix(ctx_p['inertia_kgm2']),
-            'max_dipole_Am2': ctx_p['max_dipole_Am2'] or None,
+            'max_dipole_Am2': ctx_p['max_dipole_Am2'] if any(ctx_p['max_dipole_Am2']) else None,
             'wheel_axes_body': axes.reshape(n_wheels, 3),
             'wheel_max_torque_Nm': ctx_p['wheel_max_torque_Nm'],
             'wheel_max_momentum_Nms': ctx_p['wheel_max_momentum_Nms'],

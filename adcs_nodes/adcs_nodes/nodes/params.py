@@ -63,11 +63,16 @@ def _specs(node) -> Dict[str, Param]:
 def declare(node, spec: Param) -> Any:
     """Declare ``spec`` on ``node`` and return its validated value (given or default)."""
     specs = _specs(node)
+    if spec.name in specs:
+        raise ValueError(f'parameter {spec.name} is declared twice (a registry entry may not '
+                         "reuse a name of the node's own parameters)")
     specs[spec.name] = spec
     value = spec.default
     if node.has_parameter(spec.name):          # declared from the overrides: take the value
         given = node.get_parameter(spec.name).value
         node.undeclare_parameter(spec.name)
+        if given is None and spec.type.endswith('[]'):
+            given = []       # an empty YAML list arrives untyped (NOT_SET)
         if given is not None:
             if spec.type == 'float' and isinstance(given, int) and not isinstance(given, bool):
                 given = float(given)

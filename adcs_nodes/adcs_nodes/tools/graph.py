@@ -17,6 +17,7 @@ from typing import Any, Dict, List
 import yaml
 
 from adcs_nodes import registry
+from adcs_nodes.tools.scenario import default_safe
 
 
 @dataclass
@@ -251,7 +252,7 @@ def _spacecraft_context(sc: Dict[str, Any]) -> Dict[str, Any]:
     p: Dict[str, Any] = {
         'inertia_kgm2': [float(v) for row in craft['inertia_kgm2'] for v in row],
         'max_dipole_Am2': list(craft['magnetorquer']['max_dipole_Am2'])
-        if 'magnetorquer' in craft else []}
+        if 'magnetorquer' in craft else [0.0, 0.0, 0.0]}    # zero: no magnetorquer
     if wheels:
         p['wheel_axes_body'] = [float(c) for w in wheels for c in w['axis']]
         p['wheel_max_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
@@ -289,7 +290,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     sensors = sc['sensors']
     est_period = sc['estimator']['period_s'] if 'estimator' in sc else 0.0
     craft = _spacecraft_context(sc)
-    limits = craft['max_dipole_Am2'] or [0.0, 0.0, 0.0]
+    limits = craft['max_dipole_Am2']
     wheels = sc['spacecraft'].get('wheels') or []
     names = [k for k in ctrl if k != 'period_s']
     entries = {n: registry.get('controller', n) for n in names}
@@ -318,7 +319,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
         nodes.append(NodeSpec(f'{name}_controller', 'adcs_nodes', 'controller',
                               'adcs_nodes.nodes.controller', 'ControllerNode', params,
                               publishes=[f'adcs/controllers/{name}/command'], subscribes=subs))
-    man = sc.get('manager') or {'safe': 'bdot' if 'bdot' in names else names[0],
+    man = sc.get('manager') or {'safe': default_safe(names),
                                 'initial': '', 'stale_after_s': 0.0, 'schedule': []}
     users = [n for n, e in entries.items() if 'estimate' in e.inputs]
     watch_estimate = est_period > 0 and (users or 'auto' in man)

@@ -460,6 +460,8 @@ def _convert(value: Any, spec: F) -> Any:
         from adcs_nodes.core.guidance_profiles import profile_from_dicts
         if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
             raise ValueError(f'expected a list of segments, got {registry.short(value)}')
+        value = [{k: (list(v) if isinstance(v, list) else v) for k, v in item.items()}
+                 for item in value]       # plain dicts and lists (no line-number maps)
         if value:
             profile_from_dicts(value)     # ValueError with the reason
         return value
@@ -523,6 +525,11 @@ SENSOR_OF_INPUT = {'magnetometer': 'magnetometer', 'horizon': 'horizon_sensor',
 def controller_names(sc: Dict[str, Any]) -> List[str]:
     """Names of the controllers a validated scenario configures, in file order."""
     return [k for k in sc.get('controllers', {}) if k != 'period_s']
+
+
+def default_safe(names: List[str]) -> str:
+    """The safe controller without a manager section: B-dot when configured, else the first."""
+    return 'bdot' if 'bdot' in names or not names else names[0]
 
 
 def controller_problems(sc: Dict[str, Any], name: str) -> List[str]:
@@ -589,7 +596,7 @@ def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, i
         for name in names:
             for why in controller_problems(sc, name):
                 checker.fail(lines.get('controllers'), f'controllers.{name}', why)
-        man = sc.get('manager', {'safe': 'bdot', 'initial': '', 'schedule': []})
+        man = sc.get('manager', {'safe': default_safe(names), 'initial': '', 'schedule': []})
         allowed = names + (['auto'] if 'auto' in man else [])
         for key in ('safe', 'initial'):
             if man.get(key) and man[key] not in names:
