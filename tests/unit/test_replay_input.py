@@ -38,8 +38,8 @@ def small_bag(tmp_path):
     return str(out)
 
 
-def _args(bag, **kw):
-    base = dict(bag=bag, topics=None, rate=1.0, time_offset=0.0, now=False, no_clock=False,
+def _args(default_bag, **kw):
+    base = dict(bag=default_bag, topics=None, rate=1.0, time_offset=0.0, now=False, no_clock=False,
                 wait=0.0, start=0.0, duration=None)
     return argparse.Namespace(**{**base, **kw})
 
