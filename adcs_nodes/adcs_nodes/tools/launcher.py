@@ -41,7 +41,7 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass
-from typing import Dict, Iterable, List, Optional
+from typing import Any, Dict, Iterable, List, Optional
 
 import yaml
 
@@ -80,6 +80,19 @@ PDEATHSIG_SHIM = (
 #: Nodes whose death ends the run: the simulated world, the recorder, the composed process.
 #: Any other node (flight software) may die; the run goes on and its consumers fall back.
 ESSENTIAL = {'dynamics', 'environment', 'recorder', 'composed'}
+
+
+def external_devices(sc: Dict[str, Any]) -> List[str]:
+    """One line per sensor the scenario marks ``external``: no simulated node, a driver."""
+    from adcs_nodes import registry
+    out = []
+    for name, cfg in sc.get('sensors', {}).items():
+        if cfg.get('external'):
+            entry = registry.get('sensor', name)
+            out.append(f'external {name}: no simulated node; expecting a driver publishing '
+                       f'{entry.node[3]} ({entry.node[4]}) on ROS_DOMAIN_ID of this run '
+                       '(docs/topics.md)')
+    return out
 
 
 class LaunchError(RuntimeError):
@@ -462,6 +475,8 @@ class Launcher:
         self.log(f'[adcs] run {self.sc["name"]}: {len(self.nodes)} nodes '
                  f'({"composed in one process" if self.compose else "one process each"}), '
                  f'ROS_DOMAIN_ID={domain}, logs in {self.run_dir}/logs')
+        for line in external_devices(self.sc):
+            self.log(f'[adcs] {line}')
         code, message = 0, ''
         try:
             self._spawn(env, params_path)
