@@ -262,6 +262,7 @@ class _Monitor:
         self.node = rclpy.create_node('adcs_launcher', context=self.context,
                                       start_parameter_services=False)
         self.sim_ns = 0
+        self.clock_seen = False     # the lockstep has started (frame 0 published)
         self.status: Dict[str, LockstepStatus] = {}
         self.recorder_clock_ns = -1
         self.recorder_count = 0
@@ -284,6 +285,7 @@ class _Monitor:
         self.executor.add_node(self.node)
 
     def _on_clock(self, msg) -> None:
+        self.clock_seen = True
         self.sim_ns = max(self.sim_ns, self._stamp_ns(msg.clock) - self.epoch_ns)
 
     def _on_status(self, msg) -> None:
@@ -606,6 +608,11 @@ class Launcher:
                     return 1, self._write_failed_message(
                         ('disk full' if 'disk full' in tail else 'write error') + ', see '
                         + os.path.join(self.run_dir, 'logs', 'recorder.log'))
+                if name not in ESSENTIAL and rc != 2 and not monitor.clock_seen:
+                    # died during start-up: the lockstep can never start without it
+                    return 1, (f'node {name} exited with code {rc} during start-up (the '
+                               f'lockstep cannot start without it); last lines of its log '
+                               f'({self.run_dir}/logs/{name}.log):\n{tail}')
                 if name not in ESSENTIAL and rc != 2:
                     # flight software died (a crash, a kill): the graph goes on without it;
                     # its consumers time out and fall back (manager -> safe controller)
