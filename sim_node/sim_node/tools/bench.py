@@ -10,9 +10,8 @@ Every row is measured in the same run, on the same machine, at the same time (is
    estimator, two controllers, controller manager), one process per node, in lockstep, at
    1 s frames with 10 RK4 substeps (0.1 s truth step);
 3. ``composed``: the same graph in one process (``Launcher(compose=True)``);
-4. ``plain loop``: the same models in a plain Python loop without ROS (:class:`PlainLoop`:
-   environment, dynamics, magnetometer model, onboard references, filter predict/update,
-   both controller laws, the manager's choice);
+4. ``plain loop``: the same models in a plain Python loop without ROS
+   (:class:`sim_node.tools.closed_loop.ClosedLoop`, built from the same node parameters);
 5. ``free body``: free rigid body + gravity gradient with this project's RK4
    (``Spacecraft.step``, paper 000 inertia diag(118, 118, 19.6) kg m^2, 0.1 s step);
 6. ``Basilisk``: the same model set in Basilisk (``bsk`` from PyPI: ``Spacecraft`` hub with
@@ -52,7 +51,7 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
-from datetime import datetime, timedelta, timezone
+from datetime import datetime, timezone
 from typing import Callable, Dict, List, Optional, Sequence
 
 from sim_node.tools.bench_ring import RingError, run_ring
@@ -240,139 +239,20 @@ class GraphMeasure:
 
 
 # ---------------------------------------------------------------------- (4) plain loop
-def _section(params: dict, prefix: str) -> dict:
-    """Node parameters ``prefix.*`` without the prefix (as ``LockstepNode.section``)."""
-    n = len(prefix) + 1
-    return {k[n:]: v for k, v in params.items() if k.startswith(prefix + '.')}
-
-
-class PlainLoop:
-    """The paper-000 closed loop's models in a plain loop: what the nodes compute, no ROS.
-
-    Built from the node parameters the launcher gives the nodes (``build_graph``). Per frame
-    k (as the graph): environment at t_k; magnetometer on its period; estimator (own onboard
-    reference) predict/update on its period; magnetic controller (own onboard reference) and
-    B-dot on the controller period, manager forwards the magnetic command (B-dot if that is
-    not finite); dynamics integrates to t_k+1 with the command held. A timing model, not a
-    trajectory reference (the nodes' message conversions and checks are not here).
-    """
-
-    def __init__(self, sc: dict) -> None:
-        from adcs_nodes.core import attitude as att
-        from adcs_nodes.core.control.bdot import BdotController
-        from adcs_nodes.core.control.magnetic import MagneticController
-        from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
-        from adcs_nodes.core.estimation.onboard import make_onboard_reference
-        from adcs_nodes.core.geomag import make_field
-        from adcs_nodes.core.lockstep import derive_seed
-        from adcs_nodes.core.orbit import make_orbit
-        from adcs_nodes.nodes.lockstep_node import parse_epoch
-        from adcs_nodes.tools.graph import build_graph
-        from sim_node.models.sensors import Magnetometer
-        from sim_node.models.spacecraft_config import DEFAULT_INITIAL, spacecraft_from_config
-
-        self.att = att
-        nodes = {n.name: n.params for n in build_graph(sc, float(sc['timing']['frame_s']))}
-        env, dyn = nodes['environment'], nodes['dynamics']
-        mag, est = nodes['magnetometer'], nodes['estimator']
-        mc, bd = nodes['magnetic_controller'], nodes['bdot_controller']
-        seed = int(sc['seed'])
-        self.epoch = parse_epoch(sc['epoch'])
-        self.frame_s = float(sc['timing']['frame_s'])
-        self.substeps = int(sc['timing']['substeps'])
-        self.orbit = make_orbit(_section(env, 'orbit'), self.epoch)
-        self.field = make_field(_section(env, 'field'), self.epoch)
-        cfg = _section(dyn, 'spacecraft')
-        self.spacecraft = spacecraft_from_config(
-            cfg, seed=derive_seed(seed, 'dynamics/disturbance'))
-        self.initial = {**DEFAULT_INITIAL, **_section(dyn, 'initial')}
-        self.wheel_h0 = cfg.get('wheel_h0_Nms')
-        self.mag = Magnetometer(
-            noise_std_T=mag['noise_std_T'], bias_T=mag['bias_T'],
-            misalignment_rad=mag['misalignment_rad'],
-            scale_factor_error=mag['scale_factor_error'], lsb_T=mag['lsb_T'],
-            saturation_T=mag['saturation_T'], dropout_probability=mag['dropout_probability'],
-            q_body_sensor=mag['q_body_sensor'], seed=derive_seed(seed, 'magnetometer'))
-        self.mag_every = max(1, int(round(float(mag['period_s']) / self.frame_s)))
-        self.est_every = max(1, int(round(float(est['period_s']) / self.frame_s)))
-        self.ctl_every = max(1, int(round(float(mc['period_s']) / self.frame_s)))
-        self.ref_est = make_onboard_reference(_section(est, 'onboard_orbit'),
-                                              _section(est, 'onboard_field'), self.epoch)
-        self.ref_ctl = make_onboard_reference(_section(mc, 'onboard_orbit'),
-                                              _section(mc, 'onboard_field'), self.epoch)
-        inertia = __import__('numpy').asarray(est['inertia_kgm2'], float).reshape(3, 3)
-        self.filter = MagneticFilter(inertia, theta=est['theta_T2'], tau=est['tau'],
-                                     p0_diag=est['p0_diag'],
-                                     measurement_form=est['measurement_form'],
-                                     literal_update=est['literal_update'],
-                                     substeps=est['substeps'])
-        self.q0 = att.normalize(est['initial_q_orbit_body'])
-        self.magnetic = MagneticController(
-            mode=mc['mode'], alpha=mc['alpha_per_s'], k=mc['k_Nms'],
-            max_dipole_Am2=mc['max_dipole_Am2'], beta=mc['beta'] or None,
-            switch_angle_deg=mc['switch_angle_deg'], switch_rate_deg_s=mc['switch_rate_deg_s'])
-        self.bdot = BdotController(gain=bd['gain_Am2s_per_T'], max_dipole_Am2=bd['max_dipole_Am2'],
-                                   filter_time_constant_s=bd['filter_time_constant_s'])
-        self.command = self.spacecraft.zero_command()
-        self.state = None
-        self.b_body = None
-        self.k = 0
-
-    def frame(self) -> None:
-        """One frame (see class docstring)."""
-        import numpy as np
-
-        from adcs_nodes.core.control import ControlInputs, Estimate
-        from adcs_nodes.core.orbit import q_eci_ecef
-        from sim_node.models.dynamics import ActuatorCommand, FrameEnvironment
-        from sim_node.models.spacecraft_config import initial_state
-
-        att, k = self.att, self.k
-        t = k * self.frame_s
-        st = self.orbit.state(t)                                     # environment node
-        b_eci, b_dot_eci = self.field.field_and_rate(self.orbit, t)
-        q_eci_ecef(self.epoch + timedelta(seconds=t))
-        if self.state is None:
-            self.state = initial_state(self.initial, st.q_eci_orbit, st.omega_orbit_eci_eci,
-                                       self.spacecraft, self.wheel_h0)
-        b_fresh = None
-        if k % self.mag_every == 0:                                  # magnetometer node
-            b_fresh = self.mag.measure(att.to_matrix(self.state.q_eci_body).T @ b_eci)
-        if k % self.est_every == 0:                                  # estimator node
-            ref = self.ref_est.at(t)
-            if k == 0:
-                self.filter.reset(self.q0, att.to_matrix(self.q0).T
-                                  @ np.array([0.0, ref.omega0, 0.0]))
-            else:
-                self.filter.predict(self.est_every * self.frame_s, ref.omega0,
-                                    self.command.dipole_body, b_orbit_for_torque=ref.b_orbit)
-            if b_fresh is not None:
-                self.filter.update(b_fresh, ref.b_orbit)
-        if k % self.ctl_every == 0:                                  # controllers, manager
-            ref = self.ref_ctl.at(t)
-            q, w = self.filter.q_orbit_body, self.filter.omega_body_eci_body
-            estimate = Estimate(q, w, ref.omega0, True)
-            model = att.to_matrix(q).T @ ref.b_orbit
-            dt = self.ctl_every * self.frame_s
-            mag_cmd = self.magnetic.update(ControlInputs(estimate, None, b_fresh, model), t, dt)
-            bdot_cmd = self.bdot.update(ControlInputs(estimate, None, b_fresh), t, dt)
-            cmd = mag_cmd if mag_cmd.is_finite() else bdot_cmd
-            self.command = ActuatorCommand(dipole_body=np.asarray(cmd.dipole_body, float),
-                                           wheel_torque=np.zeros(self.spacecraft.n_wheels))
-        env = FrameEnvironment(r_eci=st.r_eci, v_eci=st.v_eci, b_eci=b_eci, b_dot_eci=b_dot_eci)
-        self.state, _ = self.spacecraft.step(self.state, t, self.frame_s, env, self.command,
-                                             self.substeps)         # dynamics node
-        self.k += 1
-
-
 def plain_sample(sc: dict, frames: int) -> Sample:
-    """:class:`PlainLoop` over ``frames`` frames after one untimed frame."""
+    """The closed loop's models in a plain loop without ROS, ``frames`` frames.
+
+    :class:`sim_node.tools.closed_loop.ClosedLoop`: the same core models and laws as the
+    nodes, built from the same node parameters (``build_graph``), in the graph's order.
+    Construction (and kernel compilation/cache load) is in the wall and CPU columns, not in
+    the rate.
+    """
+    from sim_node.tools.closed_loop import ClosedLoop
+
     cpu0, w0 = _cpu_now(), time.monotonic()
-    loop = PlainLoop(sc)
-    loop.frame()
+    loop = ClosedLoop(sc, duration_s=frames * float(sc['timing']['frame_s']))
     c1, t1 = time.process_time(), time.perf_counter()
-    for _ in range(frames):
-        loop.frame()
+    loop.run()
     dt, dc = time.perf_counter() - t1, time.process_time() - c1
     return Sample(frames, frames / dt, time.monotonic() - w0, _cpu_now() - cpu0, dc / frames)
 
