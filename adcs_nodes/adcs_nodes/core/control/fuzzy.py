@@ -148,13 +148,20 @@ def triangular_memberships(x: ArrayLike, peaks: np.ndarray) -> np.ndarray:
     ndarray, shape (k, n)
         ``mu[j, i]`` of input ``j`` in term ``i``; every row sums to 1 (at most two non-zero).
     """
-    xs = np.atleast_1d(np.asarray(x, dtype=float)).reshape(-1)
-    xs = np.minimum(np.maximum(xs, peaks[0]), peaks[-1])
-    gaps = np.diff(peaks)
-    left = np.concatenate(([np.inf], gaps))           # foot on the previous peak
-    right = np.concatenate((gaps, [np.inf]))          # foot on the next peak
+    return _memberships(x, peaks, *_inverse_widths(peaks))
+
+
+def _inverse_widths(peaks: np.ndarray) -> tuple:
+    """``1 / (left foot distance)``, ``1 / (right foot distance)`` per term (0: shoulder)."""
+    inv = 1.0 / np.diff(peaks)
+    return np.concatenate(([0.0], inv)), np.concatenate((inv, [0.0]))
+
+
+def _memberships(x: ArrayLike, peaks: np.ndarray, inv_left: np.ndarray,
+                 inv_right: np.ndarray) -> np.ndarray:
+    xs = np.minimum(np.maximum(np.asarray(x, dtype=float).reshape(-1), peaks[0]), peaks[-1])
     d = xs[:, None] - peaks[None, :]
-    mu = 1.0 - np.abs(d) / np.where(d >= 0.0, right, left)
+    mu = 1.0 - np.abs(d) * np.where(d >= 0.0, inv_right, inv_left)
     return np.maximum(mu, 0.0)
 
 
@@ -175,13 +182,17 @@ def centroid(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
         formula of ``skfuzzy.defuzz(..., 'centroid')``); 0 for an empty set.
     """
     dx = np.diff(x)
+    return _centroid(mu, x[:-1], dx, dx * dx / 6.0)
+
+
+def _centroid(mu: np.ndarray, x0: np.ndarray, dx: np.ndarray, dx2_6: np.ndarray) -> np.ndarray:
     y1, y2 = mu[:, :-1], mu[:, 1:]
     area = 0.5 * dx * (y1 + y2)
-    moment = x[:-1] * area + dx * dx * (y1 + 2.0 * y2) / 6.0
     total = area.sum(axis=1)
+    moment = (x0 * area + dx2_6 * (y1 + 2.0 * y2)).sum(axis=1)
     out = np.zeros(mu.shape[0])
     ok = total > 0.0
-    out[ok] = moment.sum(axis=1)[ok] / total[ok]
+    out[ok] = moment[ok] / total[ok]
     return out
 
 
@@ -233,6 +244,10 @@ class Mamdani:
         # Output membership functions on the grid, shape (m, N).
         self.out_mf = np.clip(1.0 - np.abs(self.x[None, :] - self.out_peaks[:, None]) / w,
                               0.0, None)
+        self._w1 = _inverse_widths(self.peaks1)
+        self._w2 = _inverse_widths(self.peaks2)
+        dx = np.diff(self.x)
+        self._grid = (self.x[:-1], dx, dx * dx / 6.0)
         # Rules sorted by output term, for a max-reduction per term.
         flat = self.table.reshape(-1)
         self._order = np.argsort(flat, kind='stable')
@@ -252,8 +267,8 @@ class Mamdani:
         -------
         ndarray, shape (k, m)
         """
-        mu1 = triangular_memberships(x1, self.peaks1)                      # (k, n1)
-        mu2 = triangular_memberships(x2, self.peaks2)                      # (k, n2)
+        mu1 = _memberships(x1, self.peaks1, *self._w1)                     # (k, n1)
+        mu2 = _memberships(x2, self.peaks2, *self._w2)                     # (k, n2)
         w = np.minimum(mu1[:, :, None], mu2[:, None, :]).reshape(mu1.shape[0], -1)
         # A zero sentinel column keeps every start a valid index (unused trailing terms).
         ws = np.concatenate((w[:, self._order], np.zeros((w.shape[0], 1))), axis=1)
@@ -264,7 +279,7 @@ class Mamdani:
         """Crisp outputs for crisp inputs (scalars or equal-length arrays), shape (k,)."""
         s = self.strengths(x1, x2)                                          # (k, m)
         agg = np.max(np.minimum(s[:, :, None], self.out_mf[None]), axis=1)  # (k, N)
-        return centroid(self.x, agg)
+        return _centroid(agg, *self._grid)
 
 
 # ---------------------------------------------------------------------- the controller
