@@ -19,6 +19,7 @@ from typing import Any, Dict, Iterable, List
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
+from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 
 from adcs_nodes.registry import Param, short
@@ -61,7 +62,18 @@ def _specs(node) -> Dict[str, Param]:
 
 
 def declare(node, spec: Param) -> Any:
-    """Declare ``spec`` on ``node`` and return its validated value (given or default)."""
+    """Declare ``spec`` on ``node`` and return its validated value (given or default).
+
+    Raises ``ValueError`` (a configuration error: exit code 2, no traceback) for a bad value
+    or type, including the errors rclpy raises itself.
+    """
+    try:
+        return _declare(node, spec)
+    except ParameterException as exc:   # (InvalidParameterType..., Immutable... are these)
+        raise ValueError(f'parameter {spec.name}: {exc}') from None
+
+
+def _declare(node, spec: Param) -> Any:
     specs = _specs(node)
     if spec.name in specs:
         raise ValueError(f'parameter {spec.name} is declared twice (a registry entry may not '
