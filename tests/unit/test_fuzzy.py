@@ -281,7 +281,7 @@ def test_registry_entries_build_and_share_the_core_defaults():
 def test_output_terms_without_rules_never_fire():
     # Only term 0 (peak -1) and term 1 (peak 0) are used; the trailing term 2 has no rule.
     m = fz.Mamdani([0.0, 1.0], [0.0, 1.0], [-1.0, 0.0, 1.0], 0.5, [[0, 0], [0, 1]],
-                   n_points=401)
+                   n_points=601)                 # grid step 0.005: peaks and feet on the grid
     s = m.strengths([0.0, 1.0, 0.5], [0.0, 1.0, 0.5])
     np.testing.assert_allclose(s, [[1, 0, 0], [0, 1, 0], [0.5, 0.5, 0]])
     np.testing.assert_allclose(m([0.0, 1.0], [0.0, 1.0]), [-1.0, 0.0], atol=1e-12)
