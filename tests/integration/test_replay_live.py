@@ -139,3 +139,59 @@ def test_best_effort_off_grid_replay_drives_the_live_estimator(bag, tmp_path):
     assert est_diag, 'no /diagnostics from the estimator'
     values = {kv.key: kv.value for kv in est_diag[-1].values}
     assert values['timing_mode'] == 'live' and int(values['update_count']) > 100
+
+
+def test_wall_clock_driver_is_accepted_without_sim_time(bag, tmp_path):
+    """A driver stamping with the wall clock (``adcs replay --now``, best-effort, real time)
+    and an estimator started alone with no parameters at all (live, wall clock): every sample
+    is accepted and used, estimates carry wall-clock stamps at the samples' times."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(100 + (os.getpid() + 7) % 50),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
+    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
+                                           'FASTDDS_BUILTIN_TRANSPORTS')})
+    est_log = open(tmp_path / 'estimator.log', 'w')
+    est = subprocess.Popen([sys.executable, '-m', 'adcs_nodes.nodes.estimator'], cwd=ROOT,
+                           env=env, stdout=est_log, stderr=subprocess.STDOUT)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    probe = rclpy.create_node('probe', context=ctx)
+    estimates, diags = [], []
+    probe.create_subscription(AttitudeState, 'adcs/attitude_estimate', estimates.append, 100)
+    probe.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 100)
+    executor = rclpy.executors.SingleThreadedExecutor(context=ctx)
+    executor.add_node(probe)
+    try:
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and not probe.count_publishers(
+                'adcs/attitude_estimate'):
+            executor.spin_once(timeout_sec=0.05)
+        start_ns = time.time_ns()
+        replay = subprocess.Popen(
+            [sys.executable, '-m', 'adcs_nodes.tools.cli', 'replay', bag, '--now',
+             '--duration', '25', '--wait', '20'],
+            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        deadline = time.monotonic() + 90.0
+        while replay.poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        out = replay.communicate(timeout=10)[0]
+        assert replay.returncode == 0, out
+        settle = time.monotonic() + 4.0          # two more live periods of 2 s
+        while time.monotonic() < settle:
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        est.terminate()
+        try:
+            est.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            est.kill()
+        est_log.close()
+        executor.shutdown()
+        probe.destroy_node()
+        rclpy.shutdown(context=ctx)
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in estimates]
+    assert len(stamps) >= 8, open(est_log.name).read()[-2000:]
+    assert all(start_ns - 5e9 < s < time.time_ns() for s in stamps)      # wall-clock stamps
+    values = {kv.key: kv.value for d in diags for st in d.status if st.name == 'estimator'
+              for kv in st.values}
+    assert values['timing_mode'] == 'live'
+    assert int(values['update_count']) == 3 and values['rejected_samples'] == '0'

@@ -181,7 +181,7 @@ def replay(bag: str, topics: Optional[Sequence[str]] = None, rate: float = 1.0,
         first + int(round(duration_s * NS_PER_S))
     timed = [s for s in timed if first <= s.stamp_ns <= last]
     clock = (not now) if clock is None else clock
-    offset_ns = (time.time_ns() - first) if now else int(round(time_offset_s * NS_PER_S))
+    offset_ns = 0 if now else int(round(time_offset_s * NS_PER_S))   # --now: set at the start
 
     import rclpy
     from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
@@ -221,6 +221,9 @@ def replay(bag: str, topics: Optional[Sequence[str]] = None, rate: float = 1.0,
         for s in static:
             pubs[s.topic].publish(s.data)
         t0_wall = time.monotonic()
+        if now:      # the first sample is stamped now, after the wait for subscribers
+            offset_ns = time.time_ns() - first
+            log(f'[replay] wall-clock stamps: offset {offset_ns / NS_PER_S:+.9f} s')
         i, sent = 0, 0
         while i < len(timed):
             sim_ns = first + int((time.monotonic() - t0_wall) * rate * NS_PER_S)
