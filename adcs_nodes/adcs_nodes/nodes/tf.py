@@ -208,7 +208,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         pub = TfPublisher(node, static=True)
         pub.send([transform(args[0], args[1], q, node.get_clock().now().to_msg(),
                             values[4:] or None)])
-        node.get_logger().info(f'/tf_static: {args[0]} -> {args[1]} q={list(q)}')
+        node.get_logger().info(f'/tf_static: {args[0]} -> {args[1]} q_xyzw={q.tolist()}')
         runtime.spin_nodes([node])
     finally:
         if rclpy.ok():
