@@ -154,8 +154,8 @@ register(Entry(
     (Param('max_torque_Nm', 'float', 1.0, 'N m', 'per-axis torque limit |M_i|', positive=True),
      Param('accel_fraction', 'float', 0.9, '-', 'fraction of the admissible eigenaxis '
            'acceleration planned', positive=True, max=1.0),
-     Param('rate_gain_per_s', 'float', 1.0, '1/s', 'rate-loop gain k', positive=True),
-     Param('linear_gain_per_s', 'float', 0.15, '1/s', 'slope lambda of the linear (PD) end '
+     Param('rate_gain_per_s', 'float', 2.0, '1/s', 'rate-loop gain k', positive=True),
+     Param('linear_gain_per_s', 'float', 0.5, '1/s', 'slope lambda of the linear (PD) end '
            'of the rate profile', positive=True),
      Param('max_rate_deg_s', 'float', 0.0, 'deg/s', 'cap on the profile rate (0: none)',
            min=0.0),

@@ -4,14 +4,17 @@ Tolerances (relative to the paper's values), fixed before any tuning and not cha
 settling time 15 %, energy 20 %, speed ratio 20 %, energy ratio 20 %
 (:data:`adcs_nodes.tools.paper003.TOLERANCE`). Each paper number is its own test, so the
 table shows which rows reproduce; the structural claims (which Table 1 reading settles, the
-torque limit) are a separate test.
+torque limit) are a separate test. The PNG equivalents of the paper's Figs. 6-9 go to
+``out/paper003/``.
 """
 import math
+import os
 
 import pytest
 
 from adcs_nodes.tools import paper003
 
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 _RESULT = {}
 
 
@@ -19,6 +22,8 @@ def _result():
     if not _RESULT:
         _RESULT.update(paper003.reproduce())
         print('\n' + paper003.format_table(_RESULT))
+        for path in paper003.write_figures(_RESULT, os.path.join(ROOT, 'out', 'paper003')):
+            print(f'  figure: {os.path.relpath(path, ROOT)}')
     return _RESULT
 
 

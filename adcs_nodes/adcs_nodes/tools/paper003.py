@@ -12,7 +12,8 @@ Metrics (the paper defines neither; ASSUMPTIONS of the digest, section 10):
 * energy: ``E = int_0^T_s sum_i |M_i| dt`` [N m s], up to the settling time (also reported up
   to the end of the run).
 
-``python -m adcs_nodes.tools.paper003`` prints the table.
+``python -m adcs_nodes.tools.paper003 [OUT_DIR]`` prints the table (and writes the PNG
+equivalents of the paper's Figs. 6-9 to ``OUT_DIR``).
 """
 from __future__ import annotations
 
@@ -49,6 +50,7 @@ class Run:
     overshoot_deg: float   # largest phi after the first minimum below the band [deg]
     seconds_per_call: float
     e_phi: np.ndarray      # (N, 3) eigenaxis the controller used (nan if it reports none)
+    q: np.ndarray          # (N, 4) q_eci_body, scalar last
 
 
 def initial_quaternion(euler_deg=EULER0_DEG) -> np.ndarray:
@@ -85,7 +87,7 @@ def simulate(controller, inertia=INERTIA, euler0_deg=EULER0_DEG, t_end: float = 
     n_sub = max(1, int(round(dt_ctrl / dt_int)))
     h = dt_ctrl / n_sub
     n = int(round(t_end / dt_ctrl))
-    ts, phis, ws, ms, axes = [], [], [], [], []
+    ts, phis, ws, ms, axes, qs = [], [], [], [], [], []
     controller.reset()
     t_ctrl = 0.0
     for k in range(n + 1):
@@ -98,6 +100,7 @@ def simulate(controller, inertia=INERTIA, euler0_deg=EULER0_DEG, t_end: float = 
         ts.append(t)
         phis.append(attitude.angle_between(q, q_t))
         ws.append(w.copy())
+        qs.append(q.copy())
         ms.append(m.copy())
         axes.append(np.asarray(cmd.info.get('e_phi', np.full(3, np.nan)), dtype=float))
         if k == n:
@@ -120,7 +123,8 @@ def simulate(controller, inertia=INERTIA, euler0_deg=EULER0_DEG, t_end: float = 
     inside = np.nonzero(phi <= band * phi[0])[0]
     overshoot = float(np.degrees(phi[inside[0]:].max())) if inside.size else float('nan')
     return Run(t_arr, phi, np.array(ws), torque, settle, energy, energy_total,
-               float(np.abs(torque).max()), overshoot, t_ctrl / (n + 1), np.array(axes))
+               float(np.abs(torque).max()), overshoot, t_ctrl / (n + 1), np.array(axes),
+               np.array(qs))
 
 
 def settling_time(t: np.ndarray, phi: np.ndarray, threshold: float) -> float:
@@ -195,5 +199,54 @@ def format_table(result: dict) -> str:
     return '\n'.join(lines)
 
 
+def write_figures(result: dict, out_dir: str) -> list:
+    """PNG equivalents of the paper's Figs. 6-9 for every run of :func:`reproduce`.
+
+    Fig. 6: eigenangle phi(t); Fig. 7: Euler-Krylov angles psi, theta, gamma (t); Fig. 8: body
+    rates omega_i(t); Fig. 9: torques M_i(t). Returns the written paths.
+    """
+    import os
+    from matplotlib.figure import Figure
+    os.makedirs(out_dir, exist_ok=True)
+    runs = result['runs']
+    panels = [
+        ('fig6_phi.png', 'eigenangle phi [deg] (Fig. 6)',
+         lambda r: [('phi', np.degrees(r.phi))]),
+        ('fig7_euler.png', 'Euler-Krylov angles [deg] (Fig. 7)',
+         lambda r: list(zip(('gamma (x)', 'theta (y)', 'psi (z)'), np.degrees(
+             np.array([attitude.to_euler_321(q) for q in r.q])).T))),
+        ('fig8_rates.png', 'body rates omega_i [deg/s] (Fig. 8)',
+         lambda r: list(zip(('omega_1', 'omega_2', 'omega_3'), np.degrees(r.omega).T))),
+        ('fig9_torque.png', 'torques M_i [N m] (Fig. 9)',
+         lambda r: list(zip(('M_1', 'M_2', 'M_3'), r.torque.T))),
+    ]
+    paths = []
+    for name, title, series in panels:
+        fig = Figure(figsize=(9, 2.6 * len(runs)))
+        for k, (label, run) in enumerate(runs.items()):
+            ax = fig.add_subplot(len(runs), 1, k + 1)
+            for lab, y in series(run):
+                ax.plot(run.t, y, label=lab)
+            if name.startswith('fig6'):
+                ax.axhline(np.degrees(0.05 * run.phi[0]), color='k', lw=0.5, ls='--',
+                           label='5 % band')
+            if math.isfinite(run.settling_s):
+                ax.axvline(run.settling_s, color='r', lw=0.5, ls=':', label='settling')
+            ax.set_title(f'{label}: {title}', fontsize=9)
+            ax.grid(True, lw=0.3)
+            ax.legend(fontsize=7, loc='upper right')
+        fig.axes[-1].set_xlabel('t [s]')
+        fig.tight_layout()
+        path = os.path.join(out_dir, name)
+        fig.savefig(path, dpi=90)
+        paths.append(path)
+    return paths
+
+
 if __name__ == '__main__':
-    print(format_table(reproduce()))
+    import sys
+    res = reproduce()
+    print(format_table(res))
+    if len(sys.argv) > 1:
+        for path in write_figures(res, sys.argv[1]):
+            print(path)
