@@ -18,6 +18,8 @@ import yaml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 WORKSPACE_PACKAGES = {'adcs_msgs', 'adcs_nodes', 'sim_node', 'tf2_msgs'}
+#: ROS packages that are not in the PyPI wheels (so not in the ament index here)
+NOT_IN_WHEELS = {'launch', 'launch_ros'}
 
 #: import name -> rosdep key
 PIP_KEYS = {
@@ -35,7 +37,7 @@ ROSDISTRO_KEYS = {'python3-numpy', 'python3-scipy', 'python3-yaml', 'python3-mat
 
 
 def _ros_packages():
-    found = set(WORKSPACE_PACKAGES)
+    found = set(WORKSPACE_PACKAGES) | NOT_IN_WHEELS
     for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
         index = os.path.join(prefix, 'share', 'ament_index', 'resource_index', 'packages')
         if os.path.isdir(index):
@@ -99,7 +101,7 @@ def test_every_third_party_import_is_declared(package):
 @pytest.mark.parametrize('package', ['adcs_nodes', 'sim_node'])
 def test_every_declared_key_resolves(package):
     project = _project_keys()
-    ros = _ros_packages() | {'launch', 'launch_ros'}   # launch is not in the PyPI wheels
+    ros = _ros_packages()
     bad = [k for k in _declared(package)
            if k not in ROSDISTRO_KEYS and k not in project and k not in ros]
     assert not bad, f'{package}: keys neither in rosdistro nor ros2_ws/rosdep.yaml: {bad}'
