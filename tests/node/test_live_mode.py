@@ -44,7 +44,10 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
                                100)
     mag = driver.create_publisher(MagneticField, 'sensors/magnetometer',
                                   qos_profile_sensor_data)          # best effort
-    assert spin([node, driver], lambda: mag.get_subscription_count() > 0)
+    # matched both ways (a best-effort sample sent before the reader knows the writer is lost)
+    sub = node._subs['/sensors/magnetometer']
+    assert spin([node, driver], lambda: mag.get_subscription_count() > 0
+                and sub.get_publisher_count() > 0)
     ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
     sent = []
     for k in range(8):
@@ -52,7 +55,8 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
         sent.append(s)
         mag.publish(_sample(ref, node.epoch_ns, s))
         assert spin([node, driver], lambda: any(stamp_ns(m.header.stamp) == s for m in est),
-                    timeout=5.0), f'no estimate stamped with sample {k}'
+                    timeout=5.0), (f'no estimate stamped with sample {k}',
+                                   node.rejected_samples, node.last_rejected_sample)
     stamps = [stamp_ns(m.header.stamp) for m in est]
     assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)  # never replayed
     assert set(sent) <= set(stamps)                   # each sample used at its own stamp

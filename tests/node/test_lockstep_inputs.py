@@ -176,6 +176,10 @@ def test_qos_overrides_let_a_best_effort_driver_match(ros_context, spin):
     assert spin([over, src], lambda: pub.get_subscription_count() > 0)
     pub.publish(msg(0, 'a0'))
     assert spin([over, src], lambda: len(over.fired) >= 1)
+    # the override applies to that subscription only, not to the shared profile (rclpy
+    # applies overrides in place: in a composed process it would leak into every node)
+    from adcs_nodes.nodes.lockstep_node import QOS_DATA
+    assert QOS_DATA.reliability == ReliabilityPolicy.RELIABLE
     src.destroy_node()
     over.destroy_node()
 

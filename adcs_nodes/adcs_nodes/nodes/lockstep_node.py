@@ -36,6 +36,7 @@ Timing modes (parameter ``timing_mode``, DESIGN section 6)
 """
 from __future__ import annotations
 
+import copy
 import time
 from datetime import datetime, timezone
 from typing import Any, Callable, Dict, List, Optional, Tuple
@@ -213,7 +214,7 @@ class LockstepNode(Node):
     def publisher(self, msg_type, topic: str, qos: QoSProfile = QOS_DATA):
         """Create a publisher (QoS overridable by parameters) registered for the handshake."""
         pub = self.create_publisher(
-            msg_type, topic, qos,
+            msg_type, topic, copy.copy(qos),   # rclpy applies overrides to the profile in place
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self._pubs[pub.topic_name] = pub
         return pub
@@ -221,7 +222,7 @@ class LockstepNode(Node):
     def subscription(self, msg_type, topic: str, callback, qos: QoSProfile = QOS_DATA):
         """Create a subscription (QoS overridable by parameters) registered for the handshake."""
         sub = self.create_subscription(
-            msg_type, topic, callback, qos,
+            msg_type, topic, callback, copy.copy(qos),   # (overrides mutate the profile)
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self._subs[sub.topic_name] = sub
         return sub
