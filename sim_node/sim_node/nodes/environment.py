@@ -69,6 +69,7 @@ class EnvironmentNode(LockstepNode):
         self.tf_pub.send(earth_transforms(msg.header.stamp, quat(msg.q_eci_ecef)))
         self.frames += 1
         self.sim_t_ns = t_ns
+        self.diagnostics.frame(t_ns)      # /diagnostics once per sim second
         self.report_progress(t_ns, final=self.is_last_frame(t_ns, self.frame_ns))
 
 
