@@ -243,6 +243,28 @@ def _body_from_eci(qx: float, qy: float, qz: float, qw: float) -> tuple:
             k * (qx * qz + qy * qw), k * (qy * qz - qx * qw), 1.0 - k * (qx * qx + qy * qy))
 
 
+_kernel_loaded = False
+
+
+def _load_kernel() -> None:
+    """Compile ``kernels.frame_step`` (or load it from numba's cache) now, once per process.
+
+    Called when the first :class:`Spacecraft` is built, so a node pays the ~0.15 s CPU of
+    loading the compiled frame while it starts (in parallel with the other nodes' start-up
+    and discovery) rather than in its first frame, on the lockstep's critical path.
+    """
+    global _kernel_loaded
+    if _kernel_loaded:
+        return
+    x = np.zeros(kernels.state_size(0))
+    x[3], x[7] = 1.0, 7.0e6
+    eye = np.eye(3)
+    kernels.frame_step(x, 1.0, 1, eye, eye, np.zeros((3, 0)), MU_EARTH, True, np.zeros(3),
+                       np.zeros(0), np.zeros(0), np.zeros(6), np.zeros((1, 3)),
+                       np.zeros((4, 3)), np.zeros((2, 3)), 0.0, np.empty(kernels.OUT_TAU_W))
+    _kernel_loaded = True
+
+
 class Spacecraft:
     """Rigid spacecraft with optional magnetorquers, reaction wheels and disturbances.
 
@@ -311,6 +333,7 @@ class Spacecraft:
         self._x_shape = (kernels.state_size(self.n_wheels),)
         self._part_lens = (4, 3, 3, 3, self.n_wheels, 3, 3, self.n_wheels, 3, 3)
         self._u_shape = (6 + self.n_wheels,)
+        _load_kernel()
 
     # ----------------------------------------------------------------- validation (edges)
     def check_state(self, state: SpacecraftState) -> None:
