@@ -25,8 +25,9 @@ Timing modes (parameter ``timing_mode``, DESIGN section 6)
   ``expected_matches``, ``duration_s`` or ``frame_period_s`` given; the launcher sets
   ``timing_mode: lockstep``). Every ``period_s`` of the ROS clock (``use_sim_time`` or wall)
   the node fires once with the newest sample of each input, at the newest new stamp of its
-  ``frame`` inputs (or the clock's time when none is new): the true time difference, no epoch
-  counting, no replay of missed frames. A sample stamped zero, more than ``max_future_s``
+  ``frame`` inputs (or the clock's time minus ``live_latency_s`` when none is new): the true
+  time difference, no epoch counting, no replay of missed frames. A sample stamped zero,
+  more than ``max_future_s``
   ahead of the clock, more than ``max_sample_age_s`` old, or not newer than the one before is
   rejected and counted by reason (:attr:`LockstepNode.rejected_samples`).
 * QoS: every publisher and subscription accepts ``qos_overrides.<topic>.*`` parameters
@@ -106,7 +107,7 @@ class LockstepNode(Node):
     ``expected_matches`` (start handshake), ``real_time`` (latest-value mode),
     ``timing_mode`` (``lockstep`` | ``live``), ``dead_after_frames`` (missed frames in a row
     before a producer is dead), ``status_period_s`` (sim seconds between ``lockstep/status``),
-    and in live mode ``max_sample_age_s`` and ``max_future_s``.
+    and in live mode ``max_sample_age_s``, ``max_future_s`` and ``live_latency_s``.
     """
 
     #: True for the simulator's own nodes: they run in lockstep only.
@@ -137,6 +138,10 @@ class LockstepNode(Node):
         self.timing_mode = self._timing_mode()
         self.max_sample_age_s = float(self.param('max_sample_age_s', 5.0))
         self.max_future_s = float(self.param('max_future_s', 0.5))
+        # ASSUMPTION: 50 ms covers a driver's publish-to-receive latency on one machine
+        self.live_latency_ns = seconds_to_ns(self.param('live_latency_s', 0.05))
+        if self.live_latency_ns < 0:
+            raise ValueError('live_latency_s must be >= 0')
         if not (self.max_sample_age_s > 0 and self.max_future_s >= 0):
             raise ValueError('max_sample_age_s must be > 0 and max_future_s >= 0')
         self.status_period_ns = seconds_to_ns(self.param('status_period_s', 1.0))
@@ -438,7 +443,9 @@ class LockstepNode(Node):
                 self._reject_sample(n, 'late', 'arrived after a later frame was processed')
                 continue
             new.append(ent[0])
-        t = self.elapsed_ns(max(new) if new else now)
+        # nothing new: fire at the clock's time minus the expected transport latency, so a
+        # sample taken just before now and still on its way is not made "late"
+        t = self.elapsed_ns(max(new) if new else now - self.live_latency_ns)
         if last is not None and t <= last:
             return                              # clock did not advance
         max_age = self.max_sample_age_s * NS_PER_S
