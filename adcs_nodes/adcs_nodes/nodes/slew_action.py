@@ -228,9 +228,16 @@ class SlewActionServer:
         self._frame = 'orbit'
         self._last_estimate: Optional[AttitudeState] = None
         self._waiters: list = []
-        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        node.create_subscription(AttitudeState, estimate_topic, self._on_estimate, qos)
-        node.create_subscription(ActuatorCommand, command_topic, self._on_command, qos)
+        # A LockstepNode host registers the subscriptions for its start-up handshake
+        # (``subscription``); a plain Node creates them directly.
+        subscribe = getattr(node, 'subscription', None)
+        if subscribe is None:
+            qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+            def subscribe(msg_type, topic, callback):
+                return node.create_subscription(msg_type, topic, callback, qos)
+        subscribe(AttitudeState, estimate_topic, self._on_estimate)
+        subscribe(ActuatorCommand, command_topic, self._on_command)
         self.server = ActionServer(node, Slew, action_name, execute_callback=self._execute,
                                    goal_callback=self._on_goal,
                                    handle_accepted_callback=self._on_accepted,
