@@ -40,7 +40,7 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.control import Command, ControlInputs, Estimate
+from adcs_nodes.core.control import ControlInputs, Estimate
 from adcs_nodes.core.lockstep import derive_seed
 from adcs_nodes.tools import metrics
 
@@ -49,6 +49,11 @@ def _section(params: dict, prefix: str, default: Optional[dict] = None) -> dict:
     n = len(prefix) + 1
     out = {k[n:]: v for k, v in params.items() if k.startswith(prefix + '.')}
     return out if out or default is None else dict(default)
+
+
+def _values(specs, params: dict) -> Dict[str, Any]:
+    """``{name: value}`` of registry parameter specs: the node parameter, else the default."""
+    return {spec.name: params.get(spec.name, spec.default) for spec in specs}
 
 
 class ClosedLoop:
@@ -67,91 +72,87 @@ class ClosedLoop:
 
     def __init__(self, sc: Dict[str, Any], duration_s: Optional[float] = None,
                  estimator: str = 'paper') -> None:
-        from adcs_nodes.core.control.bdot import BdotController
-        from adcs_nodes.core.control.magnetic import MagneticController
-        from adcs_nodes.core.estimation.magnetic_filter import MAX_DISTURBANCE_DEFAULT
-        from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
+        from adcs_nodes import registry
         from adcs_nodes.core.estimation.onboard import make_onboard_reference
         from adcs_nodes.core.manager import AutoSequence, ControllerManagerCore
+        from adcs_nodes.nodes import controller as controller_node
+        from adcs_nodes.nodes import estimator as estimator_node
         from adcs_nodes.tools.graph import build_graph
-        from sim_node.models.sensors import Magnetometer
 
         self.sc = sc
         self.duration_s = float(sc['duration_s'] if duration_s is None else duration_s)
         self.frame_s = float(sc['timing']['frame_s'])
         self.substeps = int(sc['timing']['substeps'])
         nodes = {n.name: n.params for n in build_graph(sc, self.duration_s)}
-        self.world = _World(sc, nodes)
         self.nodes = nodes
+        for params in nodes.values():
+            registry.load_plugins(params.get('plugins', []))
+        self.world = _World(sc, nodes)
+        epoch = self.world.epoch
         if estimator not in ('paper', 'truth'):
             raise ValueError(f"estimator must be 'paper' or 'truth', got {estimator!r}")
         self.ideal = estimator == 'truth'
-        # magnetometer
+        # magnetometer: the sensor's registry entry, as the magnetometer node builds it
         mp = nodes.get('magnetometer')
         if mp is None:
             raise ValueError('closed loop: the scenario has no magnetometer')
-        self.mag_period = float(mp['period_s'])
-        self.mag = Magnetometer(
-            noise_std_T=mp['noise_std_T'], bias_T=mp['bias_T'],
-            misalignment_rad=mp['misalignment_rad'],
-            scale_factor_error=mp['scale_factor_error'], lsb_T=mp['lsb_T'],
-            saturation_T=mp['saturation_T'], dropout_probability=mp['dropout_probability'],
-            q_body_sensor=mp['q_body_sensor'], seed=derive_seed(int(sc['seed']), 'magnetometer'))
-        # estimator
+        entry = registry.get('sensor', 'magnetometer')
+        self.mag_period = float(mp.get('period_s', 1.0))
+        self.mag = entry.build(_values(entry.params, mp),
+                               {'seed': derive_seed(int(sc['seed']), 'magnetometer')})
+        self.q_body_mag = att.normalize(mp.get('q_body_sensor_xyzw', [0.0, 0.0, 0.0, 1.0]))
+        # estimator: its registry entry with the estimator node's context
         ep = nodes.get('estimator')
-        if ep is None or ep.get('algorithm') != 'magnetic_filter':
-            raise ValueError('closed loop: only the magnetic_filter estimator is wired')
-        self.est_period = float(ep['period_s'])
-        self.q_body_mag = att.normalize(mp.get('q_body_sensor', [0.0, 0.0, 0.0, 1.0]))  # mount
-        self.reference = make_onboard_reference(_section(ep, 'onboard_orbit'),
-                                                _section(ep, 'onboard_field'), self.world.epoch)
-        inertia = np.asarray(ep['inertia_kgm2'], float)
-        inertia = np.diag(inertia) if inertia.size == 3 else inertia.reshape(3, 3)
-        self.max_rate = float(ep.get('max_rate_rad_s', 1.0))
-        self.filter_kwargs = dict(
-            theta=float(ep['theta_T2']), tau=float(ep['tau']), p0_diag=list(ep['p0_diag']),
-            measurement_form=str(ep['measurement_form']),
-            literal_update=bool(ep.get('literal_update', False)),
-            substeps=int(ep.get('substeps', 1)),
-            max_rate_rad_s=self.max_rate,
-            max_disturbance_rad_s2=float(ep.get('max_disturbance_rad_s2',
-                                                MAX_DISTURBANCE_DEFAULT)))
-        self.filter = MagneticFilter(inertia, **self.filter_kwargs)
-        self.q0 = att.normalize(ep['initial_q_orbit_body'])
-        self.omega_rel0 = np.asarray(ep['initial_omega_body_orbit_body'], dtype=float)
-        # controllers
+        if ep is None:
+            raise ValueError('closed loop: the scenario has no estimator')
+        ectx = _values(estimator_node.CONTEXT_PARAMS, ep)
+        entry = registry.get('estimator', ectx['algorithm'])
+        if 'magnetometer' not in entry.inputs:
+            raise ValueError(f'closed loop: estimator {entry.name} does not use the magnetometer')
+        self.est_period = float(ectx['period_s'])
+        self.field_range = (float(ectx['min_field_T']), float(ectx['max_field_T']))
+        self.reference = make_onboard_reference(
+            _section(ep, 'onboard_orbit', estimator_node.DEFAULT_ORBIT),
+            _section(ep, 'onboard_field', estimator_node.DEFAULT_FIELD), epoch)
+        self.estimator = entry.build(_values(entry.params, ep), {
+            'inertia_kgm2': controller_node.inertia_matrix(ectx['inertia_kgm2']),
+            'period_s': ectx['period_s'], 'epoch': epoch, 'seed': int(sc['seed']),
+            'reference': self.reference})
+        self.estimator.initialise(att.normalize(ectx['initial_q_orbit_body']),
+                                  np.asarray(ectx['initial_omega_body_orbit_body'], float))
+        # controllers: registry entries with the controller node's context
         self.controllers: Dict[str, Any] = {}
         self.ctrl_period: Dict[str, float] = {}
-        self.ctrl_ref = None
+        self.ctrl_ref: Dict[str, Any] = {}
         for name, p in nodes.items():
             if not name.endswith('_controller'):
                 continue
-            kind = p.get('kind', name[:-len('_controller')])
-            short = p.get('controller_name', kind)
-            limits = list(p['max_dipole_Am2'])
-            if kind == 'magnetic':
-                beta = float(p.get('beta', 0.0))
-                core = MagneticController(
-                    mode=str(p['mode']), alpha=float(p['alpha_per_s']), k=float(p['k_Nms']),
-                    max_dipole_Am2=limits, beta=beta if beta > 0 else None,
-                    switch_angle_deg=float(p.get('switch_angle_deg', 15.0)),
-                    switch_rate_deg_s=float(p.get('switch_rate_deg_s', 0.2)),
-                    n_wheels=int(p.get('n_wheels', 0)))
-                self.ctrl_ref = make_onboard_reference(
-                    _section(p, 'onboard_orbit'), _section(p, 'onboard_field'),
-                    self.world.epoch)
-            elif kind == 'bdot':
-                core = BdotController(
-                    gain=float(p['gain_Am2s_per_T']), max_dipole_Am2=limits,
-                    filter_time_constant_s=float(p.get('filter_time_constant_s', 0.0)),
-                    n_wheels=int(p.get('n_wheels', 0)))
-            else:
-                raise ValueError(f'closed loop: controller kind {kind!r} is not wired')
-            self.controllers[short] = core
-            self.ctrl_period[short] = float(p['period_s'])
+            cctx = _values(controller_node.CONTEXT_PARAMS, p)
+            entry = registry.get('controller', cctx['controller'])
+            if set(entry.inputs) - {'estimate', 'target', 'magnetometer'}:
+                raise ValueError(f'closed loop: controller {entry.name} needs inputs this loop '
+                                 f'does not have: {entry.inputs}')
+            n_wheels = len(cctx['wheel_max_torque_Nm'])
+            axes = np.asarray(cctx['wheel_axes_body'], dtype=float).reshape(n_wheels, 3)
+            ref = None
+            if {'estimate', 'magnetometer'} <= set(entry.inputs):
+                ref = make_onboard_reference(
+                    _section(p, 'onboard_orbit', controller_node.DEFAULT_ORBIT),
+                    _section(p, 'onboard_field', controller_node.DEFAULT_FIELD), epoch)
+            ctx = {'inertia_kgm2': controller_node.inertia_matrix(cctx['inertia_kgm2']),
+                   'max_dipole_Am2': cctx['max_dipole_Am2'] if any(cctx['max_dipole_Am2'])
+                   else None,
+                   'wheel_axes_body': axes, 'wheel_max_torque_Nm': cctx['wheel_max_torque_Nm'],
+                   'wheel_max_momentum_Nms': cctx['wheel_max_momentum_Nms'],
+                   'wheel_inertia_kgm2': cctx['wheel_inertia_kgm2'],
+                   'period_s': cctx['period_s'], 'epoch': epoch, 'seed': int(sc['seed']),
+                   'reference': ref}
+            self.controllers[entry.name] = entry.build(_values(entry.params, p), ctx)
+            self.ctrl_period[entry.name] = float(cctx['period_s'])
+            self.ctrl_ref[entry.name] = ref
         mg = nodes['controller_manager']
-        sched = [(float(t), str(n)) for t, n in zip(mg['schedule_t_s'], mg['schedule_controller'])
-                 if n] if 'schedule_t_s' in mg else []
+        sched = [(float(t), str(n)) for t, n in zip(mg.get('schedule_t_s', []),
+                                                    mg.get('schedule_controller', [])) if n]
         auto_cfg = _section(mg, 'auto')
         self.auto = bool(auto_cfg)
         self.manager = ControllerManagerCore(
@@ -191,7 +192,6 @@ class ClosedLoop:
         last_est_t: Optional[float] = None
         est: Optional[Estimate] = None
         ctrl_cmds: Dict[str, tuple] = {}
-        bdot_last: Dict[str, Command] = {}
         cmd_model = sc.zero_command()
         start = time.perf_counter()
         period_s = None
@@ -213,7 +213,7 @@ class ClosedLoop:
                 b_sensor = self.mag.measure(att.to_matrix(state.q_eci_body).T @ b_eci)
                 if b_sensor is not None and np.all(np.isfinite(b_sensor)):
                     norm = float(np.linalg.norm(b_sensor))
-                    if 1e-6 <= norm <= 1e-3:
+                    if self.field_range[0] <= norm <= self.field_range[1]:
                         b_body_meas = att.rotate(self.q_body_mag, b_sensor)
             # 3. estimator
             ref = self.reference.at(t)
@@ -221,25 +221,18 @@ class ClosedLoop:
                 est = self._estimate(t, last_est_t, ref, applied, b_body_meas)
                 last_est_t = t
             if self.ideal:
-                est = Estimate(q_orbit_body, omega, float(st.orbit_rate), True)
-            # 4. controllers and manager
+                est = Estimate(q_orbit_body, omega, float(st.orbit_rate), True,
+                               np.asarray(state.q_eci_body, float))
+            # 4. controllers (shadow mode) and manager
             for name, core in self.controllers.items():
                 if not _due(t_ns, self.ctrl_period[name]):
                     continue
-                dt = self.ctrl_period[name]
-                if name == 'bdot' or type(core).__name__ == 'BdotController':
-                    if b_body_meas is None:
-                        cmd = bdot_last.get(name) or Command.zero(0, 'no command yet')
-                    else:
-                        cmd = core.update(ControlInputs(b_body=b_body_meas), t, dt)
-                    bdot_last[name] = cmd
-                else:
-                    model = None
-                    if b_body_meas is None and est is not None and est.valid:
-                        b_orbit = self.ctrl_ref.at(t).b_orbit
-                        model = att.to_matrix(est.q_orbit_body).T @ b_orbit
-                    cmd = core.update(ControlInputs(estimate=est, b_body=b_body_meas,
-                                                    b_body_model=model), t, dt)
+                dt = 0.0 if k == 0 else self.ctrl_period[name]
+                model, cref = None, self.ctrl_ref[name]
+                if cref is not None and est is not None and est.is_usable():
+                    model = att.to_matrix(est.q_orbit_body).T @ cref.at(t).b_orbit
+                cmd = core.update(ControlInputs(estimate=est, b_body=b_body_meas,
+                                                b_body_model=model), t, dt)
                 ctrl_cmds[name] = (t, cmd)
             if _due(t_ns, self.man_period):
                 out, status = self.manager.step(t, ctrl_cmds, est if self.auto else None)
@@ -284,24 +277,19 @@ class ClosedLoop:
 
     def _estimate(self, t: float, last_t: Optional[float], ref, dipole: np.ndarray,
                   b_body: Optional[np.ndarray]) -> Optional[Estimate]:
-        """The estimator node's ``_filter_step`` (magnetic_filter) and its published estimate."""
-        f = self.filter
-        omega_abs0 = self.omega_rel0 + att.to_matrix(self.q0).T @ np.array([0.0, ref.omega0, 0.0])
-        if last_t is None:
-            f.reset(self.q0, omega_abs0)
-        else:
-            ok = f.predict(t - last_t, ref.omega0, dipole, b_orbit_for_torque=ref.b_orbit)
-            w = f.omega_body_eci_body
-            if not ok or not np.all(np.isfinite(w)) or float(np.linalg.norm(w)) > self.max_rate:
-                f.reset(self.q0, omega_abs0)
-        if b_body is not None:
-            f.update(b_body, ref.b_orbit)
-        q, w_abs = f.q_orbit_body, f.omega_body_eci_body
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(w_abs))):
+        """The estimator node's step and the estimate its message gives the controllers."""
+        from adcs_nodes.core.estimation.algorithms import EstimatorInputs
+
+        dt = 0.0 if last_t is None else t - last_t
+        step = self.estimator.step(EstimatorInputs(ref, b_body=b_body,
+                                                   dipole_body=np.asarray(dipole, float)), t, dt)
+        if step.estimate is None:
             return None
+        q = np.asarray(step.estimate.q_orbit_body, float)
+        w_abs = np.asarray(step.estimate.omega_body_eci_body, float)
         w_rel = w_abs - att.to_matrix(q).T @ np.array([0.0, ref.omega0, 0.0])
-        return Estimate(np.asarray(q, float), np.asarray(w_abs, float),
-                        float(np.linalg.norm(w_abs - w_rel)), True)
+        return Estimate(q, w_abs, float(np.linalg.norm(w_abs - w_rel)), True,
+                        att.multiply(ref.q_eci_orbit, q))
 
 
 class _World:

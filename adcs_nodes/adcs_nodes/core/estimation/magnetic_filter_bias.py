@@ -234,17 +234,23 @@ class MagneticFilterBias(MagneticFilter):
         except (TypeError, ValueError):
             usable = False
         if not usable:
-            out = super().update(b_meas_body, b_ref_orbit, theta_axes)
+            out = self._paper_update(b_meas_body, b_ref_orbit, theta_axes)
             out.update({'bias': self.bias_body_T, 'bias_updated': False})
             return out
         saved = (self._b.copy(), self._pb.copy(), self.bias_updates, self.bias_rejections)
         updated = self.update_bias(n, b_ref)
-        out = super().update(n - self._b, b_ref, theta_axes)
+        out = self._paper_update(n - self._b, b_ref, theta_axes)
         if not out.get('accepted', False) and updated:
             self._b, self._pb, self.bias_updates, self.bias_rejections = saved
             updated = False
         out.update({'bias': self.bias_body_T, 'bias_updated': updated})
         return out
+
+    def _paper_update(self, b_meas_body, b_ref_orbit, theta_axes) -> dict:
+        """The paper's update (36)-(39) (``theta_axes`` passed only when given)."""
+        if theta_axes is None:
+            return super().update(b_meas_body, b_ref_orbit)
+        return super().update(b_meas_body, b_ref_orbit, theta_axes)
 
 
 class MagneticFilterBiasEstimator(MagneticFilterEstimator):
