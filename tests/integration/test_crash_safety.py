@@ -52,11 +52,12 @@ def _wait(predicate, timeout, what):
         time.sleep(0.05)
 
 
-def _mcap_size(bag):
+def _states_in(bag) -> int:
+    """Number of ``/sim/state`` messages the (unfinished) bag holds now, 0 if none yet."""
+    from adcs_nodes.tools.bag import read_messages
     try:
-        return max((e.stat().st_size for e in os.scandir(bag) if e.name.endswith('.mcap')),
-                   default=0)
-    except OSError:
+        return sum(1 for _ in read_messages(bag, topics=['/sim/state']))
+    except (OSError, ValueError):
         return 0
 
 
@@ -77,18 +78,19 @@ def _kill_group(proc):
         pass
 
 
-def test_sigkill_of_the_launcher_leaves_no_node_and_a_readable_bag(tmp_path):
+@pytest.mark.parametrize('mode', [[], ['--compose']], ids=['process_per_node', 'composed'])
+def test_sigkill_of_the_launcher_leaves_no_node_and_a_readable_bag(tmp_path, mode):
     from adcs_nodes.tools.bag import read_messages
 
     bag = tmp_path / 'bag'
     proc = _start(tmp_path, 'run', FREE_TUMBLE, '--duration', LONG_S, '--record', str(bag),
-                  '--quiet')
+                  '--quiet', *mode)
     pids = {}
     try:
         manifest = _manifest(proc, tmp_path)
         pids = manifest['pids']
-        assert len(pids) >= 3
-        _wait(lambda: _mcap_size(bag) > 20_000, 60.0, 'the recorder writing data')
+        assert len(pids) == (1 if mode else 3)
+        _wait(lambda: _states_in(bag) >= 20, 60.0, 'the recorder writing 20 states')
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
         _wait(lambda: not any(_alive(p) for p in pids.values()), 15.0,
@@ -118,7 +120,8 @@ def _mount_tmpfs(path, size='256k'):
         pytest.skip(f'cannot mount a tmpfs here (needs root): {res.stderr.strip()}')
 
 
-def test_disk_full_stops_the_run_says_so_and_keeps_the_data(tmp_path):
+@pytest.mark.parametrize('mode', [[], ['--compose']], ids=['process_per_node', 'composed'])
+def test_disk_full_stops_the_run_says_so_and_keeps_the_data(tmp_path, mode):
     """The bag on a 256 KiB tmpfs: the run stops by itself with exit 1 and 'disk full', no
     traceback anywhere, and the bag reads back with the frames written before."""
     from adcs_nodes.tools.bag import read_messages
@@ -128,7 +131,7 @@ def test_disk_full_stops_the_run_says_so_and_keeps_the_data(tmp_path):
     try:
         bag = disk / 'bag'
         proc = _start(tmp_path, 'run', FREE_TUMBLE, '--duration', LONG_S, '--record',
-                      str(bag), '--quiet')
+                      str(bag), '--quiet', *mode)
         try:
             out, err = proc.communicate(timeout=120)
         finally:
@@ -140,7 +143,7 @@ def test_disk_full_stops_the_run_says_so_and_keeps_the_data(tmp_path):
         assert 'Traceback' not in out + err, err
         run_dir = max((tmp_path / '.cache' / 'adcs' / 'runs').glob('2*'),
                       key=os.path.getmtime)
-        rec_log = (run_dir / 'logs' / 'recorder.log').read_text()
+        rec_log = (run_dir / 'logs' / ('composed.log' if mode else 'recorder.log')).read_text()
         assert 'Traceback' not in rec_log, rec_log[-2000:]
         assert 'disk full' in rec_log
         states = [msg for _, _, msg in read_messages(bag, topics=['/sim/state'])]
@@ -165,7 +168,7 @@ def test_sigkill_of_the_recorder_stops_the_run_and_export_and_report_read_the_ba
                   '--quiet')
     try:
         pids = _manifest(proc, tmp_path)['pids']
-        _wait(lambda: _mcap_size(bag) > 50_000, 60.0, 'the recorder writing data')
+        _wait(lambda: _states_in(bag) >= 20, 60.0, 'the recorder writing 20 states')
         os.kill(pids['recorder'], signal.SIGKILL)
         out, err = proc.communicate(timeout=60)
     finally:

@@ -19,6 +19,7 @@ import sys
 from typing import Callable, Iterable, List, Optional
 
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -80,28 +81,53 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
 
     old_int = signal.signal(signal.SIGINT, _handler)
     old_term = signal.signal(signal.SIGTERM, _handler)
-    never = Future()
+    # An executor that always has work (a composed graph running as fast as it can, a
+    # recorder under a steady stream) never lets spin_until_future_complete time out, so the
+    # loop below would never see SIGTERM, until() or done: a steady-clock timer inside the
+    # executor checks them and ends the spin by completing its future.
+    wake = {'future': Future()}
+    steady = Clock(clock_type=ClockType.STEADY_TIME)
+
+    def _check() -> None:
+        if not wake['future'].done() and (
+                stop['flag'] or (until is not None and until())
+                or (nodes and all(getattr(n, 'done', False) for n in nodes))):
+            wake['future'].set_result(True)
+
+    timers = [nodes[0].create_timer(poll_s, _check, clock=steady)] if nodes else []
     try:
         while rclpy.ok() and not stop['flag']:
-            executor.spin_until_future_complete(never, timeout_sec=poll_s)
+            if wake['future'].done():   # a condition that did not last: wait for the next
+                wake['future'] = Future()
+            executor.spin_until_future_complete(wake['future'], timeout_sec=poll_s)
             if until is not None and until():
                 break
             if nodes and all(getattr(n, 'done', False) for n in nodes):
-                executor.spin_until_future_complete(never, timeout_sec=linger_s)
+                lingered = Future()
+                timers.append(nodes[0].create_timer(
+                    linger_s, lambda: lingered.done() or lingered.set_result(True),
+                    clock=steady))
+                executor.spin_until_future_complete(lingered, timeout_sec=linger_s)
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        signal.signal(signal.SIGINT, old_int)
-        signal.signal(signal.SIGTERM, old_term)
-        for node in nodes:
-            close = getattr(node, 'close', None)
-            if close is not None:
-                close()
-        for node in nodes:
-            executor.remove_node(node)
-            node.destroy_node()
-        executor.shutdown()
+        # the handlers stay while the nodes close: a parent-death signal arrives once per
+        # thread of the dying launcher, and a second SIGTERM must not kill a closing recorder
+        try:
+            for timer in timers:
+                timer.cancel()
+            for node in nodes:
+                close = getattr(node, 'close', None)
+                if close is not None:
+                    close()
+            for node in nodes:
+                executor.remove_node(node)
+                node.destroy_node()
+            executor.shutdown()
+        finally:
+            signal.signal(signal.SIGINT, old_int)
+            signal.signal(signal.SIGTERM, old_term)
 
 
 def _node_name(args, factory) -> str:
