@@ -177,6 +177,7 @@ def _build_mpi(p: Dict[str, Any], ctx: Dict[str, Any]):
         inertia, ctx['wheel_axes_body'], ctx['wheel_max_torque_Nm'],
         ctx['wheel_max_momentum_Nms'], ctx['period_s'], series_order=p['series_order'],
         literal_model=p['literal_model'], min_horizon_s=p['min_horizon_s'],
+        hold_horizon_s=p['hold_horizon_s'],
         saturation=p['saturation'], reference_time=p['reference_time'],
         exact_transition=p['exact_transition'])
 
@@ -192,6 +193,9 @@ register(Entry(
            'gyroscopic terms [w0 hz, 0, -w0 hx] (digest P2)'),
      Param('min_horizon_s', 'float', 0.0, 's', 'horizon floor in a maneuver (ASSUMPTION); '
            '0: one control period', min=0.0),
+     Param('hold_horizon_s', 'float', 0.0, 's', 'horizon when stabilising or tracking; 0: '
+           "one control period (the paper's); longer softens the rate loop (digest P14)",
+           min=0.0),
      Param('saturation', 'str', 'scale', '-', 'wheel torque limit: scale (one factor, keeps '
            'the direction) or clip per wheel', choices=('scale', 'clip')),
      Param('reference_time', 'str', 't0', '-', "desired state from the target at t0 (the "

@@ -262,6 +262,7 @@ def test_horizon_is_time_to_go_in_a_maneuver_else_one_period():
     assert c.horizon(Target(time_to_go_s=0.05)) == 0.2      # floor: one control period
     assert c.horizon(Target()) == 0.2
     assert c.horizon(Target(time_to_go_s=float('nan'))) == 0.2
+    assert _controller(hold_horizon_s=1.0).horizon(Target()) == 1.0
 
 
 def test_singular_q_falls_back_with_a_reason_never_nan(monkeypatch):

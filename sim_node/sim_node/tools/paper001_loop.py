@@ -36,7 +36,8 @@ INERTIA_31 = np.array([[1260.0, -840.0, -9.5], [-840.0, 2375.0, -26.2], [-9.5, -
 
 def run(duration: float = 5000.0, wings: str = 'two', literal: bool = False,
         substeps: int = 5, seed: int = 1, estimator: str = 'mekf', unloading: bool = True,
-        reference_time: str = 't0', gyro_noise: float = 1e-6, damping: float = 0.005) -> dict:
+        reference_time: str = 't0', gyro_noise: float = 1e-6, damping: float = 0.005,
+        hold_horizon_s: float = 0.0) -> dict:
     """Run the loop; returns time series (numpy arrays) keyed by name."""
     orbit = CircularOrbit(600e3, math.radians(97.79), math.radians(90.0),
                           epoch=datetime(2026, 3, 21, tzinfo=timezone.utc))
@@ -51,7 +52,8 @@ def run(duration: float = 5000.0, wings: str = 'two', literal: bool = False,
     x = sc.pack(att.multiply(s0.q_eci_orbit, q_ob0),
                 w_bo0 + att.to_matrix(q_ob0).T @ [0.0, w0, 0.0])
     ctrl = mpi.MPIController(INERTIA_31, np.eye(3), [1.0] * 3, [55.0] * 3, 0.2,
-                             literal_model=literal, reference_time=reference_time)
+                             literal_model=literal, reference_time=reference_time,
+                             hold_horizon_s=hold_horizon_s)
     st = StarTracker(seed=seed + 10)
     gyro = Gyro(gyro_noise, 0.0, GYRO_DRIFT_WALK_RAD_S_SQRT_S, seed=seed + 20)
     filt = MEKF(gyro_noise_std_rad_s=max(gyro_noise, 1e-9))
@@ -163,11 +165,13 @@ def main(argv=None) -> int:
     ap.add_argument('--no-unloading', action='store_true')
     ap.add_argument('--reference-time', choices=('t0', 't0_plus_tau'), default='t0')
     ap.add_argument('--damping', type=float, default=0.005)
+    ap.add_argument('--hold-horizon', type=float, default=0.0)
     ap.add_argument('--save', default='')
     a = ap.parse_args(argv)
     t0, c0 = time.time(), time.process_time()
     r = run(a.duration, a.wings, a.literal, a.substeps, a.seed, a.estimator,
-            not a.no_unloading, a.reference_time, damping=a.damping)
+            not a.no_unloading, a.reference_time, damping=a.damping,
+            hold_horizon_s=a.hold_horizon)
     m = metrics(r)
     m['wall_s'] = time.time() - t0
     m['cpu_s'] = time.process_time() - c0

@@ -365,6 +365,10 @@ class MPIController:
         Drop the derived constant ``c = [w0 hz, 0, -w0 hx]`` as the paper does.
     min_horizon_s : float
         Horizon floor in a maneuver [s] (ASSUMPTION); 0 means one control period.
+    hold_horizon_s : float
+        Horizon when stabilising or tracking [s]; 0 means one control period (the paper).
+        A longer one softens the near dead-beat rate loop (digest P14: two mirrored wings
+        give a 2.5 Hz limit cycle at one period); a departure from the paper.
     saturation : {'scale', 'clip'}
         One factor keeping the direction, or per-wheel clipping.
     reference_time : {'t0', 't0_plus_tau'}
@@ -384,7 +388,8 @@ class MPIController:
     def __init__(self, inertia_kgm2: ArrayLike, wheel_axes_body: ArrayLike,
                  wheel_max_torque_Nm: ArrayLike, wheel_max_momentum_Nms: ArrayLike,
                  period_s: float, series_order: int = 5, literal_model: bool = False,
-                 min_horizon_s: float = 0.0, saturation: str = 'scale',
+                 min_horizon_s: float = 0.0, hold_horizon_s: float = 0.0,
+                 saturation: str = 'scale',
                  reference_time: str = 't0', exact_transition: bool = False) -> None:
         inertia = finite_vector(inertia_kgm2, 'inertia_kgm2', (3, 3))
         if np.max(np.abs(inertia - inertia.T)) > 1e-9 * np.max(np.abs(inertia)) or \
@@ -418,6 +423,11 @@ class MPIController:
         if not (math.isfinite(mh) and mh >= 0.0):
             raise ValueError(f'min_horizon_s must be finite and >= 0 [s], got {min_horizon_s!r}')
         self.min_horizon = mh if mh > 0.0 else self.period
+        hh = float(hold_horizon_s)
+        if not (math.isfinite(hh) and hh >= 0.0):
+            raise ValueError(f'hold_horizon_s must be finite and >= 0 [s], got '
+                             f'{hold_horizon_s!r}')
+        self.hold_horizon = hh if hh > 0.0 else self.period
         if saturation not in self.SATURATION:
             raise ValueError(f'saturation must be one of {self.SATURATION}, got {saturation!r}')
         if reference_time not in self.REFERENCE_TIME:
@@ -441,7 +451,7 @@ class MPIController:
         ttg = float(target.time_to_go_s)
         if math.isfinite(ttg) and ttg > 0.0:
             return max(ttg, self.min_horizon)
-        return self.period
+        return self.hold_horizon
 
     def _limit(self, tau_w: np.ndarray, h_w: np.ndarray) -> tuple[np.ndarray, float]:
         """Torque limit (one factor keeping the direction, or per-wheel clip), then the
