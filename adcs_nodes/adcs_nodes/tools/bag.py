@@ -317,6 +317,8 @@ def _complete_records_end(fh, size: int) -> int:
         end = pos + 9 + length
         if opcode == 0 or end > size:
             break  # zero bytes of a file extended but never written, or a cut record
+        if pos == len(MCAP_MAGIC) and opcode != 0x01:
+            break  # an MCAP file starts with its header record
         pos = good = end
         if opcode == 0x02:  # footer: the closing magic follows
             break
@@ -353,9 +355,10 @@ def recover_mcap(src: os.PathLike | str, dst: os.PathLike | str) -> Tuple[int, i
     count = 0
     with open(src, 'rb') as fh, open(dst, 'wb') as out:
         good = _complete_records_end(fh, size)
-        if good == 0:
-            raise ValueError(f'{src}: not an MCAP file (empty or wrong magic)' if size else
-                             f'{src}: empty file (the recorder wrote nothing)')
+        if good <= len(MCAP_MAGIC):
+            raise ValueError(f'{src}: empty file (the recorder wrote nothing)' if not size else
+                             f'{src}: not an MCAP file (wrong magic, or no complete header '
+                             'record)')
         fh.seek(0)
         writer = McapStreamWriter(out, compression=CompressionType.NONE)
         writer.start(profile='ros2', library='adcs recover_mcap')
