@@ -146,3 +146,10 @@ def test_save_scenario_on_a_full_disk_reports_and_keeps_the_bag(tmp_path, monkey
     message = run._save_scenario()
     assert 'disk full' in message and 'the bag is kept' in message
     assert sorted(p.name for p in bag.iterdir()) == ['bag.mcap']   # no cut scenario.yaml
+
+
+@pytest.mark.parametrize('rate', [float('inf'), float('nan'), 0.0, -2.0, 1e9])
+def test_launcher_refuses_absurd_real_time_rates(rate):
+    with pytest.raises(LaunchError, match='--rate'):
+        Launcher(load_scenario(FREE_TUMBLE), duration_s=10.0, real_time=True,
+                 rate_factor=rate, progress=False)

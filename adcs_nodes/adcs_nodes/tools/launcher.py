@@ -330,6 +330,9 @@ class Launcher:
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise LaunchError(f'duration must be a positive finite number of seconds, got '
                               f'{self.duration_s}')
+        if not (math.isfinite(rate_factor) and 0 < rate_factor <= 1e6):
+            raise LaunchError(f'--rate must be in (0, 1e6] sim seconds per wall second, got '
+                              f'{rate_factor}')
         if not NAME_PATTERN.fullmatch(str(scenario.get('name', ''))):
             raise LaunchError(f'scenario name {str(scenario.get("name"))[:80]!r} must match '
                               f'{NAME_PATTERN.pattern} (it names the run directory)')
