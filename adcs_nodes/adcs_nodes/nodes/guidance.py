@@ -8,13 +8,22 @@ track; per-segment array parameters; the default holds the orbital frame, paper 
 or, with ``euler312_profile`` (JSON text), paper 001's maneuvers, holds and sine tracking in
 its LVLH 3-1-2 Euler angles (:mod:`adcs_nodes.core.guidance_profiles`, converted to the orbit
 frame at that module's boundary).
+
+It also hosts the ``adcs/slew`` action (:class:`~adcs_nodes.nodes.slew_action.SlewActionServer`):
+an accepted goal replaces the profile by a hold of the goal attitude from the next frame on
+(and asks the manager to switch to the goal's controller, if one is named); a cancel holds
+the current attitude. Goals arrive in wall time, so a run with slew goals is not
+deterministic (a scripted profile is).
 """
 from __future__ import annotations
 
 import json
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Optional, Tuple
+
+import numpy as np
 
 from adcs_msgs.msg import AttitudeTarget
+from adcs_msgs.srv import SwitchController
 from adcs_nodes.core.guidance import FRAMES, SEGMENT_TYPES, TargetSample, guidance_from_params
 from adcs_nodes.core.guidance_profiles import profile_from_dicts
 from adcs_nodes.core.lockstep import NS_PER_S
@@ -22,6 +31,7 @@ from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import to_quat, to_vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.slew_action import SlewActionServer
 from adcs_nodes.registry import Param
 
 PARAMS = (
@@ -42,6 +52,8 @@ PARAMS = (
           'segment', min=0.0, max=180.0, read_only=True),
     Param('profile_period_s', 'float[]', [0.0], 's', 'tracking period of each segment',
           min=0.0, read_only=True),
+    Param('controllers', 'str[]', [''], '-', 'controllers a slew goal may name (the run\'s)',
+          read_only=True),
     Param('euler312_profile', 'str', '', '-', "paper 001 profile as JSON: a list of "
           "{type: maneuver|hold|sine, start_s, end_s, ...} in LVLH 3-1-2 Euler degrees "
           "(replaces the segments; '': none)", read_only=True),
@@ -80,12 +92,32 @@ class GuidanceNode(LockstepNode):
                 p['profile_duration_s'], p['profile_axis_body'], p['profile_amplitude_deg'],
                 p['profile_period_s'], p['frame'])
         self.pub = self.publisher(AttitudeTarget, 'adcs/attitude_target')
+        self.override: Optional[TargetSample] = None     # a slew goal's hold target
+        names = [n for n in p['controllers'] if n]
+        self.switch_client = self.create_client(SwitchController, 'adcs/switch_controller')
+        self.slew = SlewActionServer(self, self.set_goal_target, self.request_switch,
+                                     known_controllers=names or None)
         self.lockstep_inputs({}, p['period_s'], self.on_frame)
         self.start_handshake()
 
+    def set_goal_target(self, q_xyzw: np.ndarray, frame: str) -> None:
+        """Slew action: hold ``q_xyzw`` in ``frame`` from the next frame on."""
+        zero = np.zeros(3)
+        self.override = TargetSample(np.asarray(q_xyzw, dtype=float), zero, zero, frame, 0.0,
+                                     'slew_goal')
+
+    def request_switch(self, name: str) -> Tuple[bool, str]:
+        """Slew action: ask the manager to switch to ``name`` (answered asynchronously)."""
+        if not self.switch_client.service_is_ready():
+            return False, 'no controller manager (adcs/switch_controller) in this graph'
+        request = SwitchController.Request()
+        request.name = name
+        self.switch_client.call_async(request)
+        return True, f'switch to {name} requested'
+
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Publish the target of frame ``t_ns``."""
-        s = self.guidance.at(t_ns / NS_PER_S)
+        s = self.override or self.guidance.at(t_ns / NS_PER_S)
         msg = AttitudeTarget()
         msg.header.stamp = self.stamp(t_ns)
         msg.header.frame_id = s.frame

@@ -32,6 +32,7 @@ Exit codes: 0 success, 1 run failure (a node died, recorder lagged), 2 bad input
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from typing import List, Optional
@@ -140,6 +141,22 @@ def cmd_switch(args) -> int:
     return 0
 
 
+def cmd_slew(args) -> int:
+    from adcs_nodes.tools.live import LiveError
+    from adcs_nodes.tools.slew import slew
+    if not all(math.isfinite(v) for v in args.to):
+        print(f'adcs slew: --to needs three finite angles [deg], got {args.to}',
+              file=sys.stderr)
+        return 2
+    try:
+        print(slew(*args.to, frame=args.frame, controller=args.controller,
+                   tolerance_deg=args.tolerance_deg, timeout_s=args.timeout_s, pid=args.run))
+    except LiveError as exc:
+        print(f'adcs slew: {exc}', file=sys.stderr)
+        return 2
+    return 0
+
+
 def cmd_status(args) -> int:
     from adcs_nodes.tools.live import LiveError, status
     try:
@@ -220,6 +237,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('controller', help='controller name (see `adcs status`)')
     p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_switch)
+
+    p = sub.add_parser('slew', help='slew a running graph to an attitude (adcs/slew action) '
+                       'and wait for the result')
+    p.add_argument('--to', nargs=3, type=float, required=True, metavar=('ROLL', 'PITCH', 'YAW'),
+                   help='target attitude, 3-2-1 Euler angles [deg]')
+    p.add_argument('--frame', choices=('inertial', 'orbit'), default='inertial',
+                   help='frame of the target attitude (default: inertial)')
+    p.add_argument('--controller', default='', help='switch to this controller for the slew')
+    p.add_argument('--tolerance-deg', type=float, default=0.0,
+                   help='done below this angle (default: the server\'s, 0.1 deg)')
+    p.add_argument('--timeout-s', type=float, default=0.0,
+                   help='abort after this much sim time (default: the server\'s, 600 s)')
+    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
+    p.set_defaults(func=cmd_slew)
 
     p = sub.add_parser('status', help='controllers and lockstep health of a running graph')
     p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')

@@ -269,6 +269,7 @@ def _guidance_node(sc: Dict[str, Any], flight: Dict[str, Any]) -> NodeSpec:
                                  'amplitude_deg': 0.0, 'period_s': 0.0}]
     params = {**flight, 'period_s': g.get('period_s') or sc['controllers']['period_s'],
               'frame': g.get('frame', 'orbit'),
+              'controllers': [k for k in sc['controllers'] if k != 'period_s'],
               'profile_t_s': [e['t_s'] for e in prof],
               'profile_type': [e['type'] for e in prof],
               'profile_q_xyzw': [c for e in prof for c in e['q_xyzw']],
@@ -280,7 +281,8 @@ def _guidance_node(sc: Dict[str, Any], flight: Dict[str, Any]) -> NodeSpec:
         params['euler312_profile'] = json.dumps(g['euler312_profile'])
     return NodeSpec('guidance', 'adcs_nodes', 'guidance', 'adcs_nodes.nodes.guidance',
                     'GuidanceNode', params, publishes=['adcs/attitude_target'],
-                    subscribes=['/clock'])
+                    # the slew action follows the estimate and the applied command
+                    subscribes=['/clock', 'adcs/attitude_estimate', 'adcs/actuator_command'])
 
 
 def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
@@ -303,8 +305,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
                'wheel_speeds': ('tachometer_period_s',
                                 sensors.get('wheel_tachometer', {}).get('period_s'))}
     nodes = []
-    if any('target' in e.inputs for e in entries.values()):
-        nodes.append(_guidance_node(sc, flight))
+    nodes.append(_guidance_node(sc, flight))     # targets, and the adcs/slew action
     for name, entry in entries.items():
         params = {**shared, **plugins, 'controller': name, **ctrl[name]}
         for need in entry.inputs:
@@ -329,7 +330,10 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
         # the manager watches the estimate: stale -> the safe controller (which needs none)
         'estimator_period_s': est_period if watch_estimate else 0.0,
         'estimate_users': users or [''],
-        'stale_after_s': man['stale_after_s'], 'max_dipole_Am2': limits,
+        # real time: nodes take the latest values, so a command may be a frame old
+        'stale_after_s': man['stale_after_s'] or (1.5 * ctrl['period_s'] if flight['real_time']
+                                                  else 0.0),
+        'max_dipole_Am2': limits,
         'max_torque_Nm': list(sc['spacecraft']['ideal_torque']['max_torque_Nm'])
         if 'ideal_torque' in sc['spacecraft'] else [0.0, 0.0, 0.0]}
     if wheels:

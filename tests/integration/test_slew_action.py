@@ -1,0 +1,61 @@
+"""The adcs/slew action on a running graph (issue 10): a goal preempted by a second goal ends
+at the second target; bad goals are refused with a reason before anything is sent."""
+import os
+import signal
+import time
+
+import numpy as np
+import yaml
+
+from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
+from adcs_nodes.core import attitude as att
+from adcs_nodes.tools.bag import read_messages
+
+
+def _scenario(tmp_path):
+    with open(os.path.join(SCENARIOS, 'paper003_slew.yaml')) as fh:
+        sc = yaml.safe_load(fh)
+    sc['initial'] = {'q_orbit_body_xyzw': [0.0, 0.0, 0.0, 1.0],
+                     'omega_body_orbit_body_deg_s': [0.0, 0.0, 0.0]}
+    path = tmp_path / 'slew.yaml'
+    path.write_text(yaml.safe_dump(sc))
+    return str(path)
+
+
+def _wait_running(pid, timeout=120.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        out = adcs('status', '--run', str(pid), check=False)
+        if out.returncode == 0 and 'controller: fuzzy' in out.stdout:
+            return
+        time.sleep(0.5)
+    raise AssertionError('the graph did not come up')
+
+
+def test_a_preempted_slew_ends_at_the_second_target(tmp_path):
+    bag = str(tmp_path / 'slew')
+    proc = start_adcs('run', _scenario(tmp_path), '--record', bag, '--duration', '100000',
+                      '--quiet')
+    try:
+        wait_manifest(proc)
+        _wait_running(proc.pid)
+        first = start_adcs('slew', '--to', '60', '0', '0', '--frame', 'orbit',
+                           '--run', str(proc.pid))
+        assert first.stdout.readline().lstrip().startswith('t ')   # accepted: feedback
+        second = adcs('slew', '--to', '0', '10', '0', '--frame', 'orbit', '--run',
+                      str(proc.pid), timeout=300)
+        out1, err1 = first.communicate(timeout=60)
+        assert first.returncode == 2 and 'preempted' in (out1 + err1)
+        assert second.stdout.strip().splitlines()[-1].startswith('succeeded'), second.stdout
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=60)
+    states = list(read_messages(bag, ['/sim/state']))
+    q = states[-1][2].q_orbit_body
+    target = att.from_euler_321(0.0, np.radians(10.0), 0.0)
+    assert np.degrees(att.angle_between([q.x, q.y, q.z, q.w], target)) < 0.5
+
+
+def test_bad_goals_are_refused_before_sending():
+    bad = adcs('slew', '--to', '0', '0', '0', '--controller', 'nope', check=False)
+    assert bad.returncode == 2 and 'nope' in bad.stderr
