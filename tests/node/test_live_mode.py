@@ -103,3 +103,50 @@ def test_same_node_in_lockstep_mode_gives_exact_frames(ros_context, spin):
     assert [stamp_ns(m.header.stamp) - node.epoch_ns for m in est] == [0, 2 * S, 4 * S, 6 * S]
     driver.destroy_node()
     node.destroy_node()
+
+
+def test_live_frame_takes_the_newest_stamp_and_fresh_tells_new_samples(ros_context, spin):
+    """Two inputs with their own off-grid stamps: the frame is at the newest new stamp,
+    ``fresh`` says which input brought a new sample (stamp equality cannot, off the grid)."""
+    from std_msgs.msg import Header
+
+    from adcs_msgs.msg import LockstepStatus
+    from adcs_nodes.nodes.lockstep_node import LockstepNode
+
+    class LiveProbe(LockstepNode):
+        def __init__(self):
+            super().__init__('live_probe', context=ros_context)
+            self.fired = []
+            self.lockstep_inputs({'a': (LockstepStatus, 'sensors/a', 1.0),
+                                  'b': (LockstepStatus, 'in/b', 1.0)}, 0.1, self.on_frame)
+
+        def on_frame(self, t, msgs, missing):
+            self.fired.append((t, self.fresh('a', msgs['a'], t), self.fresh('b', msgs['b'], t)))
+
+    node = LiveProbe()
+    assert node.live
+    src = rclpy.create_node('src', context=ros_context)
+    pa = src.create_publisher(LockstepStatus, 'sensors/a', qos_profile_sensor_data)
+    pb = src.create_publisher(LockstepStatus, 'in/b', 10)
+    subs = [node._subs['/sensors/a'], node._subs['/in/b']]
+    assert spin([node, src], lambda: pa.get_subscription_count() and pb.get_subscription_count()
+                and all(s.get_publisher_count() for s in subs))
+
+    def send(pub, stamp):
+        pub.publish(LockstepStatus(header=Header(stamp=to_stamp(stamp))))
+
+    now = time.time_ns()
+    send(pa, now - 10_000_000)
+    send(pb, now - 5_000_000)
+    b_stamp = now - 5_000_000 - node.epoch_ns
+    assert spin([node, src], lambda: any(f[0] == b_stamp for f in node.fired))
+    assert [f for f in node.fired if f[0] == b_stamp] == [(b_stamp, True, True)]
+    n = len(node.fired)
+    assert spin([node, src], lambda: len(node.fired) > n)       # nothing new: clock time
+    assert node.fired[n][1:] == (False, False) and node.fired[n][0] > b_stamp
+    a2 = time.time_ns() - 2_000_000
+    send(pa, a2)
+    assert spin([node, src], lambda: any(f[0] == a2 - node.epoch_ns for f in node.fired))
+    assert [f[1:] for f in node.fired if f[0] == a2 - node.epoch_ns] == [(True, False)]
+    src.destroy_node()
+    node.destroy_node()

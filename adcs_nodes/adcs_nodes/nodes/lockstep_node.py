@@ -457,7 +457,22 @@ class LockstepNode(Node):
         self.frames += 1
         self.sim_t_ns = t
         self._on_frame(t, msgs, [])
+        self._live_prev = {n: stamp_ns(m.header.stamp) for n, m in msgs.items() if m is not None}
         self.frame_done(t)
+
+    def fresh(self, name: str, msg: Any, t_ns: int) -> bool:
+        """True when ``msg``, the value of input ``name`` in frame ``t_ns``, is a new sample.
+
+        Lockstep: stamped exactly ``t_ns``. Live: newer than the sample of that input in the
+        frame before (stamps are not on a frame grid there).
+        """
+        if msg is None:
+            return False
+        s = stamp_ns(msg.header.stamp)
+        if not self.live:
+            return self.elapsed_ns(s) == int(t_ns)
+        prev = getattr(self, '_live_prev', {}).get(name)
+        return prev is None or s > prev
 
     def timing_diagnostics(self) -> Dict[str, str]:
         """Key-value timing health for ``/diagnostics``: mode, frames, missed frames, dead
