@@ -21,12 +21,19 @@ with ``u`` the argument of latitude, ``i`` the inclination, ``r`` the orbit radi
 :class:`~adcs_nodes.core.geomag.DipoleField` with ``pole_colatitude_rad = 0`` (a unit test
 pins it). The dipole moment points to the geographic south (``b`` points north on the
 equator, down at the north pole).
+
+One reference per stamp (issue 13): :meth:`OnboardReference.at` keeps its last result, and
+:func:`make_onboard_reference` returns one shared instance per configuration within a
+process, so the estimator and the controllers of a composed process compute (R1) once per
+stamp. ``at(t)`` is a pure function of ``t``, so sharing changes no number; every caller gets
+its own copies of the arrays.
 """
 from __future__ import annotations
 
+import json
 import math
 from datetime import datetime
-from typing import Mapping, NamedTuple
+from typing import Dict, Mapping, NamedTuple, Optional
 
 import numpy as np
 
@@ -84,21 +91,34 @@ class OnboardReference:
                              f'epoch {getattr(field, "epoch", None)}')
         self.orbit = orbit
         self.field = field
+        self._last_t: Optional[float] = None
+        self._last: Optional[OnboardState] = None
 
     def at(self, t: float) -> OnboardState:
-        """Reference at ``t`` seconds after the epoch.
+        """Reference at ``t`` seconds after the epoch (the last stamp's result is reused).
 
         Returns
         -------
         OnboardState
             ``(q_eci_orbit (4,), b_orbit (3,) [T] orbit axes, omega0 [rad/s], u [rad],
-            r_eci (3,) [m])``.
+            r_eci (3,) [m])``; the arrays are the caller's own copies.
         """
-        st = self.orbit.state(float(t))
-        b_eci = self.field.field_eci(st.r_eci, float(t))
-        b_orbit = attitude.to_matrix(st.q_eci_orbit).T @ b_eci  # (R1)
-        return OnboardState(st.q_eci_orbit, b_orbit, float(st.orbit_rate),
-                            float(st.argument_of_latitude), st.r_eci)
+        t = float(t)
+        if self._last is None or self._last_t != t:
+            st = self.orbit.state(t)
+            b_eci = self.field.field_eci(st.r_eci, t)
+            b_orbit = attitude.to_matrix(st.q_eci_orbit).T @ b_eci  # (R1)
+            self._last = OnboardState(np.array(st.q_eci_orbit, dtype=float), b_orbit,
+                                      float(st.orbit_rate), float(st.argument_of_latitude),
+                                      np.array(st.r_eci, dtype=float))
+            self._last_t = t
+        last = self._last
+        return OnboardState(last.q_eci_orbit.copy(), last.b_orbit.copy(), last.omega0, last.u,
+                            last.r_eci.copy())
+
+
+#: One :class:`OnboardReference` per (orbit, field, epoch) configuration in this process.
+_SHARED: Dict[str, OnboardReference] = {}
 
 
 def make_onboard_reference(orbit_cfg: Mapping, field_cfg: Mapping,
@@ -114,12 +134,29 @@ def make_onboard_reference(orbit_cfg: Mapping, field_cfg: Mapping,
     epoch : datetime
         Timezone-aware scenario epoch (``t = 0``).
 
+    Returns
+    -------
+    OnboardReference
+        The process's shared instance for this configuration (created on first use).
+
     Raises
     ------
     ValueError
         On a bad configuration (message from the model factories).
     """
-    return OnboardReference(make_orbit(orbit_cfg, epoch), make_field(field_cfg, epoch))
+    try:
+        key = json.dumps([dict(orbit_cfg), dict(field_cfg), epoch.isoformat()],
+                         sort_keys=True, default=repr)
+    except (TypeError, ValueError):
+        key = None   # not serialisable: a private instance
+    ref = _SHARED.get(key) if key is not None else None
+    if ref is None:
+        ref = OnboardReference(make_orbit(orbit_cfg, epoch), make_field(field_cfg, epoch))
+        if key is not None:
+            if len(_SHARED) >= 16:   # a long campaign in one process: keep it bounded
+                _SHARED.clear()
+            _SHARED[key] = ref
+    return ref
 
 
 def b_orbit_direct_dipole(u: float, i: float, r: float, mu_e: float = MU_E_DEFAULT) -> np.ndarray:
