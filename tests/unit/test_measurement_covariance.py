@@ -75,3 +75,34 @@ def test_covariance_to_body_rotates_and_follows_the_ros_conventions():
     assert tf.covariance_to_body([np.nan] * 9, q) is None
     assert tf.covariance_to_body([1.0, 2.0, 0, 0, 1.0, 0, 0, 0, 1.0], q) is None   # asymmetric
     assert tf.covariance_to_body([1.0] * 4, q) is None                  # wrong size
+
+
+def test_estimator_core_uses_the_sample_variances_floored_at_theta():
+    """The registry's magnetic-filter estimator passes max(theta, variance) per axis: a huge
+    variance leaves the state as the prediction made it; zero variances (below the floor) give
+    exactly the theta-only update; no variance given is the theta-only update."""
+    from adcs_nodes.core.estimation.algorithms import EstimatorInputs, MagneticFilterEstimator
+    from adcs_nodes.core.estimation.onboard import OnboardState
+
+    ref = OnboardState(q_eci_orbit=np.array([0.0, 0.0, 0.0, 1.0]), b_orbit=B_ORBIT,
+                       omega0=1.06e-3, u=0.0,
+                       r_eci=np.array([7.07e6, 0.0, 0.0]))
+    b_body = _measurement()
+
+    def run(var):
+        est = MagneticFilterEstimator(I_PAPER)
+        est.step(EstimatorInputs(ref), 0.0, 0.0)                       # start
+        step = est.step(EstimatorInputs(ref, b_body=b_body, b_body_var=var), 2.0, 2.0)
+        return step, est.filter.q_orbit_body.copy()
+
+    predicted = MagneticFilterEstimator(I_PAPER)
+    predicted.step(EstimatorInputs(ref), 0.0, 0.0)
+    predicted.step(EstimatorInputs(ref), 2.0, 2.0)
+    q_pred = predicted.filter.q_orbit_body
+    s_none, q_none = run(None)
+    s_zero, q_zero = run(np.zeros(3))
+    s_huge, q_huge = run(np.full(3, 1e300))
+    assert s_none.updates == s_zero.updates == s_huge.updates == 1
+    assert np.array_equal(q_none, q_zero)
+    assert attitude.angle_between(q_huge, q_pred) < 1e-12
+    assert attitude.angle_between(q_none, q_pred) > 1e-6

@@ -39,7 +39,8 @@ from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.controller import DEFAULT_FIELD, DEFAULT_ORBIT, inertia_matrix
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
-from adcs_nodes.nodes.tf import MountTable, TfPublisher, estimate_transforms
+from adcs_nodes.nodes.tf import (MountTable, TfPublisher, covariance_to_body,
+                                 estimate_transforms)
 from adcs_nodes.registry import Param
 
 #: What every estimator node knows besides its algorithm's own parameters.
@@ -146,6 +147,14 @@ class EstimatorNode(LockstepNode):
         q_body_sensor = self._mount(msg.header.frame_id)
         return None if q_body_sensor is None else att.rotate(q_body_sensor, b_sensor)
 
+    def _field_var(self, msg: MagneticField) -> Optional[np.ndarray]:
+        """Per-body-axis variances [T^2] of a sample's ``magnetic_field_covariance``, or None
+        when the message gives none (all zeros, ``[0] = -1``) or its mount is unknown."""
+        q_body_sensor = self.mounts.lookup(msg.header.frame_id)
+        cov = None if q_body_sensor is None else covariance_to_body(
+            msg.magnetic_field_covariance, q_body_sensor)
+        return None if cov is None else np.diag(cov).copy()
+
     def _horizon(self, msg: HorizonSensor) -> Optional[tuple]:
         if not msg.valid or not math.isfinite(msg.roll) or not math.isfinite(msg.pitch):
             self._reject('horizon sensor sample invalid (out of view or not finite)')
@@ -178,7 +187,8 @@ class EstimatorNode(LockstepNode):
             self.reference.at(t_ns / NS_PER_S), b_body=fresh('mag', self._field_body),
             horizon_roll_pitch=fresh('horizon', self._horizon),
             dipole_body=dipole if all_finite(dipole) else np.zeros(3),
-            gyro_rate_body=fresh('gyro', self._gyro), q_eci_body_meas=fresh('star', self._star))
+            gyro_rate_body=fresh('gyro', self._gyro), q_eci_body_meas=fresh('star', self._star),
+            b_body_var=fresh('mag', self._field_var))
 
     # ------------------------------------------------------------------ frame
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:

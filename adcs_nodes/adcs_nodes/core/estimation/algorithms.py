@@ -57,6 +57,9 @@ class EstimatorInputs:
         Fresh gyro rate ``omega_body_eci_body`` [rad/s].
     q_eci_body_meas : ndarray (4,) or None
         Fresh star-tracker attitude, scalar last.
+    b_body_var : ndarray (3,) or None
+        Variances of ``b_body`` per body axis [T^2] from the sample's own covariance (rotated
+        into body axes), or None when the sample gives none.
     """
 
     ref: OnboardState
@@ -65,6 +68,7 @@ class EstimatorInputs:
     dipole_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
     gyro_rate_body: Optional[np.ndarray] = None
     q_eci_body_meas: Optional[np.ndarray] = None
+    b_body_var: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -144,7 +148,10 @@ class MagneticFilterEstimator:
                     f'reset to the initial estimate ({self.resets})')
                 f.reset(self.q0, omega_abs0)
         if inputs.b_body is not None:
-            res = f.update(inputs.b_body, ref.b_orbit)
+            # the sample's own variances when given, floored at theta (ASSUMPTION: theta also
+            # covers what a covariance does not: bias, misalignment, model errors)
+            theta = None if inputs.b_body_var is None else np.maximum(f.theta, inputs.b_body_var)
+            res = f.update(inputs.b_body, ref.b_orbit, theta_axes=theta)
             if res.get('accepted', False):
                 out.updates = 1
                 out.innovation = [float(v) for v in res['innovation']]
