@@ -206,6 +206,9 @@ COMMON = {p.name: p for p in (
           positive=True),
     Param('max_future_s', 'float', 0.5, 's', 'live mode: samples stamped further ahead of '
           'the clock are rejected', min=0.0),
+    Param('live_latency_s', 'float', 0.05, 's', 'live mode: a frame with no new sample is '
+          'stamped the clock time minus this (samples in transit are not late)', min=0.0,
+          max=60.0),
     Param('status_period_s', 'float', 1.0, 's', 'lockstep/status period (sim time)',
           positive=True),
     Param('timing_mode', 'str', '', '-', "lockstep (with the simulator) or live (real "
