@@ -11,8 +11,11 @@ State and error state
 ``q_true = q (x) exp(dtheta)`` (body axes). Gyro model ``omega_m = omega + b + v``,
 ``db/dt = w_u``.
 
-Propagation over ``dt`` with the gyro sample held (zero-order hold)::
+Propagation over ``dt`` with the mean of the previous and the fresh gyro samples (the held
+previous sample when no fresh one came; a sample is the rate at its instant, so the mean is
+exact for a linearly changing rate, where holding one sample leaves ``alpha dt^2 / 2``)::
 
+    omega_m   = (omega_m,k-1 + omega_m,k) / 2
     omega_hat = omega_m - b
     q <- q (x) exp(omega_hat dt)                                                      (P1)
     Phi = [[R(omega_hat dt)^T, -dt E], [0, E]]                                         (P2)
@@ -128,11 +131,12 @@ class MEKF:
         self.reset()
 
     # ------------------------------------------------------------------ filter steps
-    def propagate(self, dt: float) -> None:
-        """(P1)-(P3) over ``dt`` [s] with the held gyro sample."""
-        if self.q is None or self.omega_m is None or not dt > 0.0:
+    def propagate(self, dt: float, omega_m: Optional[np.ndarray] = None) -> None:
+        """(P1)-(P3) over ``dt`` [s] with the gyro rate ``omega_m`` (default: the held one)."""
+        omega_m = self.omega_m if omega_m is None else omega_m
+        if self.q is None or omega_m is None or not dt > 0.0:
             return
-        w = self.omega_m - self.b
+        w = omega_m - self.b
         self.q = att.normalize(att.multiply(self.q, att.from_rotation_vector(w * dt)))    # (P1)
         phi = np.eye(6)
         phi[:3, :3] = att.to_matrix(att.from_rotation_vector(w * dt)).T
@@ -175,16 +179,22 @@ class MEKF:
         return True, z, ''
 
     def step(self, inputs: EstimatorInputs, t: float, dt: float) -> Step:
-        """Propagate over ``dt`` with the previous gyro sample, then take the fresh samples."""
+        """Propagate over ``dt`` (mean of the previous and the fresh gyro sample), then
+        update with a fresh star-tracker sample."""
         out = Step(None)
-        self.propagate(float(dt) if math.isfinite(dt) else 0.0)
+        fresh = None
         gyro = inputs.gyro_rate_body
         if gyro is not None:
             g = np.asarray(gyro, dtype=float)
             if g.shape == (3,) and _finite(g):
-                self.omega_m = g.copy()
+                fresh = g.copy()
             else:
                 out.rejections.append('gyro sample not a finite (3,) vector: refused')
+        w_prop = self.omega_m if fresh is None else (
+            fresh if self.omega_m is None else 0.5 * (self.omega_m + fresh))
+        self.propagate(float(dt) if math.isfinite(dt) else 0.0, w_prop)
+        if fresh is not None:
+            self.omega_m = fresh
         qm = inputs.q_eci_body_meas
         if qm is not None:
             qm = np.asarray(qm, dtype=float)
