@@ -10,19 +10,35 @@ process boundaries. Used by ``adcs run --compose``::
 
 The process ends when the clock master (the node named ``dynamics``) is done, after a short
 drain so the last messages reach the recorder; or on SIGINT/SIGTERM.
+
+In-process path (``--inproc``, or ``ADCS_COMPOSE_INPROC=1`` in the environment; off by
+default): for a volatile topic with a publisher and subscriptions in this process
+(:class:`InProcessBus`), a message goes straight to the local subscriptions' callbacks when no
+subscription outside the process is matched (its ``get_subscription_count()`` is not above
+the local count); when one is (recorder, live view, ``ros2 topic echo``, the launcher's
+monitor on ``/clock``), it is published over DDS as before and every subscriber, local ones
+included, gets it from DDS. Each message goes one way only, so nothing is lost or doubled. The
+local deliveries run from a zero-period rclpy timer after the publishing callback has
+returned, first in first out, one callback at a time, never inside another callback. The
+lockstep fires on stamps, not arrival order, so the trajectory is the same (tested).
 """
 from __future__ import annotations
 
 import argparse
+import collections
 import importlib
+import json
+import os
 import sys
 import time
-from typing import Any, Dict, List, Tuple
+from typing import Any, Callable, Deque, Dict, List, Tuple
 
 import rclpy
 import yaml
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 
 from adcs_nodes.nodes.runtime import limit_blas_threads, spin_nodes
 from adcs_nodes.tools.graph import flatten
@@ -56,12 +72,110 @@ def build_nodes(specs: List[str], params_doc: Dict[str, Any]):
     return nodes
 
 
+class InProcessBus:
+    """Direct delivery between the nodes of this process (see module docstring).
+
+    Parameters
+    ----------
+    nodes : list of rclpy.node.Node
+        The composed nodes (their publishers and subscriptions existing now are linked).
+    max_batch : int
+        Deliveries per timer call before the executor gets control back (signals, timers).
+    """
+
+    def __init__(self, nodes, max_batch: int = 500) -> None:
+        self.queue: Deque[Tuple[List[Callable], Any]] = collections.deque()
+        self.busy = False
+        self.max_batch = int(max_batch)
+        self.local = 0        # messages delivered in process
+        self.dds = 0          # messages of linked publishers sent over DDS
+        self.topics: List[str] = []
+        subs: Dict[Tuple[str, Any], List[Subscription]] = collections.defaultdict(list)
+        skip = set()
+        for node in nodes:
+            for sub in node.subscriptions:
+                key = (sub.topic_name, sub.msg_type)
+                if sub._callback_type != Subscription.CallbackType.MessageOnly \
+                        or sub.qos_profile.durability != DurabilityPolicy.VOLATILE:
+                    skip.add(key)
+                subs[key].append(sub)
+        self._timer = nodes[0].create_timer(0.0, self._drain)
+        self._timer.cancel()
+        for node in nodes:
+            for pub in list(node.publishers):
+                key = (pub.topic_name, pub.msg_type)
+                if key in skip or not subs.get(key) \
+                        or pub.qos_profile.durability != DurabilityPolicy.VOLATILE:
+                    continue
+                self._link(pub, subs[key])
+                if pub.topic_name not in self.topics:
+                    self.topics.append(pub.topic_name)
+
+    def _link(self, pub, local_subs: List[Subscription]) -> None:
+        dds_publish = pub.publish
+        n_local = len(local_subs)
+        callbacks = [sub.callback for sub in local_subs]
+
+        def publish(msg) -> None:
+            if pub.get_subscription_count() > n_local:   # someone outside listens: DDS
+                self.dds += 1
+                dds_publish(msg)
+                return
+            self.local += 1
+            self.queue.append((callbacks, msg))
+            if not self.busy:
+                self._timer.reset()   # deliver after the publishing callback returns
+
+        pub.publish = publish
+
+    def _drain(self) -> None:
+        self._timer.cancel()
+        self.busy = True
+        try:
+            for _ in range(self.max_batch):
+                if not self.queue:
+                    return
+                callbacks, msg = self.queue.popleft()
+                for cb in callbacks:
+                    cb(msg)
+        finally:
+            self.busy = False
+            if self.queue:
+                self._timer.reset()   # more to deliver: the executor runs it next
+
+
+def write_state(state: Any, path: str) -> None:
+    """The fields of a state object as exact hex floats in JSON (for bit-exact comparisons)."""
+    import numpy as np
+
+    out: Dict[str, Any] = {}
+    for name, value in (vars(state).items() if state is not None else ()):
+        try:
+            arr = np.asarray(value, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            continue
+        out[name] = [float(x).hex() for x in arr]
+    with open(path, 'w') as fh:
+        json.dump(out, fh)
+
+
+def inproc_enabled(flag: bool) -> bool:
+    """``--inproc`` given, or ``ADCS_COMPOSE_INPROC`` set to 1/true/yes."""
+    env = os.environ.get('ADCS_COMPOSE_INPROC', '').strip().lower()
+    return flag or env in ('1', 'true', 'yes', 'on')
+
+
 def main(argv=None) -> int:
     """Entry point of the composed runner."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--params-file', required=True)
     ap.add_argument('--nodes', nargs='+', required=True)
     ap.add_argument('--drain-s', type=float, default=0.5)
+    ap.add_argument('--inproc', action='store_true',
+                    help='in-process path between the composed nodes (DDS only for outside '
+                         'subscribers); also ADCS_COMPOSE_INPROC=1')
+    ap.add_argument('--state-out', default='',
+                    help='write the clock master\'s final state here (JSON, exact hex floats)')
     args = ap.parse_args(argv)
     with open(args.params_file) as fh:
         doc = yaml.safe_load(fh) or {}
@@ -73,6 +187,10 @@ def main(argv=None) -> int:
             print(f'[compose] configuration error: {exc}', file=sys.stderr)
             return 2
         limit_blas_threads()   # again after the node modules' imports (idempotent)
+        bus = InProcessBus(nodes) if inproc_enabled(args.inproc) and nodes else None
+        if bus is not None:
+            print(f'[compose] in-process path on {len(bus.topics)} topics: '
+                  f'{", ".join(sorted(bus.topics))}', file=sys.stderr)
         master = next((n for n in nodes if n.get_name() == 'dynamics'), None)
         drain = {'until': None}
 
@@ -84,6 +202,11 @@ def main(argv=None) -> int:
             return time.monotonic() >= drain['until']
 
         spin_nodes(nodes, until=finished, poll_s=0.05)
+        if bus is not None:
+            print(f'[compose] in-process deliveries {bus.local}, DDS publishes of linked '
+                  f'publishers {bus.dds}', file=sys.stderr)
+        if args.state_out and master is not None:
+            write_state(getattr(master, 'state', None), args.state_out)
         return 0
     finally:
         if rclpy.ok():
