@@ -23,7 +23,12 @@ columns of ``A = [a_1 ... a_n]`` (3, n))::
 ``J_k (Omega_k + a_k . omega_body_eci_body)``; with it (W2) holds exactly and the rotor's axial
 inertia is not part of the spacecraft inertia. (W4) is followed by the momentum limit: a
 torque that would drive ``|h_w,k|`` past ``h_max,k`` is cut to zero at the limit, or, when the
-hold time ``dt`` is known, reduced so that ``h_w,k + tau_w,k dt`` lands on the limit.
+hold time ``dt`` is known, reduced so that ``h_w,k + tau_w,k dt`` lands on the limit;
+:meth:`WheelCluster.saturation_status` says which wheels are torque- or momentum-limited.
+
+Momentum control error (paper 001: 0.01 N m s, 3-sigma), :class:`WheelMomentumError`::
+
+    delta_tau_j = (e_j - e_{j-1}) / T,   e_j ~ N(0, sigma^2) per wheel and period j       (W5)
 """
 from __future__ import annotations
 
