@@ -229,6 +229,27 @@ def test_bad_parameters_raise(ros_context, bad):
             frame_period_s=1.0, **bad))
 
 
+def _wait_for_nodes(domain_id, names, procs, timeout=120.0):
+    """Until every node name is in the ROS graph of ``domain_id`` (a started node's
+    executor spins, so SIGINT then reaches the node, not the import of numpy)."""
+    import rclpy
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain_id)
+    probe = rclpy.create_node('probe_alone', context=ctx)
+    try:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if set(names) <= set(probe.get_node_names()):
+                return
+            if any(p.poll() is not None for p in procs):
+                return          # one died: the caller's assertion shows its output
+            time.sleep(0.1)
+        raise AssertionError(f'nodes not up after {timeout} s: {probe.get_node_names()}')
+    finally:
+        probe.destroy_node()
+        rclpy.shutdown(context=ctx)
+
+
 def test_each_node_runs_alone_with_defaults():
     """``python -m sim_node.nodes.<name>`` starts, spins and stops cleanly on SIGINT."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(100 + os.getpid() % 50),
@@ -238,7 +259,7 @@ def test_each_node_runs_alone_with_defaults():
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for n in names]
     try:
-        time.sleep(3.0)
+        _wait_for_nodes(int(env['ROS_DOMAIN_ID']), names, procs)   # readiness, no fixed sleep
         assert [p.poll() for p in procs] == [None] * 4, [p.communicate() for p in procs]
         for p in procs:
             p.send_signal(signal.SIGINT)
