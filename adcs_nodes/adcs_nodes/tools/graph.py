@@ -17,6 +17,7 @@ from typing import Any, Dict, List
 import yaml
 
 from adcs_nodes import registry
+from adcs_nodes.core.orbit import MU_EARTH, R_EARTH
 from adcs_nodes.tools.scenario import default_safe
 
 
@@ -62,6 +63,7 @@ TOPIC_TYPES = {
     'sim/environment': 'adcs_msgs/msg/Environment',
     'sim/state': 'adcs_msgs/msg/AttitudeState',
     'sim/wheels': 'adcs_msgs/msg/WheelState',
+    'sim/appendages': 'adcs_msgs/msg/AppendageState',
     'adcs/actuator_command': 'adcs_msgs/msg/ActuatorCommand',
     'lockstep/status': 'adcs_msgs/msg/LockstepStatus',
     'sensors/magnetometer': 'sensor_msgs/msg/MagneticField',
@@ -145,6 +147,26 @@ def _spacecraft_params(sc: Dict[str, Any]) -> Dict[str, Any]:
         'random_std_Nm': s['disturbance']['random_std_Nm'],
         'random_period_s': s['disturbance']['random_period_s'],
     }
+    dist = s['disturbance']
+    for key in ('aerodynamic_Nm', 'solar_pressure_Nm', 'synthetic_gravity_gradient_Nm',
+                'residual_magnetic_Nm', 'unloading_Nm'):
+        if any(dist.get(key, [])):
+            p[key] = [float(v) for v in dist[key]]
+    if any(k in p for k in ('aerodynamic_Nm', 'solar_pressure_Nm',
+                            'synthetic_gravity_gradient_Nm')):
+        p['harmonic_period_s'] = float(dist.get('harmonic_period_s')
+                                       or orbital_period_s(sc['orbit']))
+    if 'unloading_Nm' in p:
+        for key in ('unloading_period_s', 'unloading_duration_s', 'unloading_start_s'):
+            p[key] = float(dist[key])
+    if s.get('wheel_error_std_Nms', 0.0) > 0.0:
+        p['wheel_error_std_Nms'] = float(s['wheel_error_std_Nms'])
+        p['wheel_error_period_s'] = float(
+            s.get('wheel_error_period_s') or sc.get('controllers', {}).get('period_s')
+            or sc['timing']['frame_s'])
+    if 'flexible' in s:
+        for key in ('model', 'wings', 'damping'):
+            p[f'flexible.{key}'] = s['flexible'][key]
     if 'magnetorquer' in s:
         p['max_dipole_Am2'] = s['magnetorquer']['max_dipole_Am2']
     wheels = s.get('wheels') or []
@@ -156,6 +178,15 @@ def _spacecraft_params(sc: Dict[str, Any]) -> Dict[str, Any]:
         p['wheel_inertia_kgm2'] = [w['inertia_kgm2'] for w in wheels]
         p['wheel_h0_Nms'] = [w['h0_Nms'] for w in wheels]
     return {f'spacecraft.{k}': v for k, v in p.items()}
+
+
+def orbital_period_s(orbit: Dict[str, Any]) -> float:
+    """Period [s] of a validated ``orbit`` section (two-body: circular altitude, or the TLE's
+    mean motion)."""
+    if orbit.get('type', 'circular') == 'circular':
+        a = R_EARTH + 1e3 * float(orbit['altitude_km'])
+        return 2.0 * math.pi * math.sqrt(a ** 3 / MU_EARTH)
+    return 86400.0 / float(orbit['line2'][52:63])        # mean motion [rev/day]
 
 
 def _initial_params(sc: Dict[str, Any]) -> Dict[str, Any]:
@@ -195,7 +226,8 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                   'substeps': int(sc['timing']['substeps']),
                   'rate_factor': float(rate_factor), **_spacecraft_params(sc),
                   **_initial_params(sc)},
-                 publishes=['/clock', 'sim/state', 'sim/wheels', '/tf'],
+                 publishes=['/clock', 'sim/state', 'sim/wheels', '/tf']
+                 + (['sim/appendages'] if 'flexible' in sc['spacecraft'] else []),
                  subscribes=['sim/environment', 'adcs/actuator_command']),
     ]
     flight = {**common, 'timing_mode': 'lockstep'}

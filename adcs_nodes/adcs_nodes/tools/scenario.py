@@ -107,10 +107,41 @@ SCHEMA: Dict[str, Any] = {
         },
         'wheels': F('wheels', [], 'reaction wheels: list of {name, axis, max_torque_Nm, '
                     'max_momentum_Nms, inertia_kgm2, h0_Nms}'),
+        'wheel_error_std_Nms': F('float', 0.0, 'momentum control error of every wheel, 1-sigma '
+                                 '[N m s], redrawn each wheel_error_period_s (paper 001: '
+                                 '0.01/3); 0: none'),
+        'wheel_error_period_s': F('float', OPTIONAL, 'period of the momentum error draws [s] '
+                                  '(default: controllers.period_s, else timing.frame_s)'),
+        'flexible': Opt({
+            'model': F('str', 'paper001', 'flexible appendage modes: paper 001\'s two solar '
+                       'wings (5 modes each, coupling (32))', ('paper001',)),
+            'wings': F('str', 'two', 'two: both wings (the -X wing mirrored, 10 modes); one: '
+                       'the +X wing only (5 modes)', ('one', 'two')),
+            'damping': F('float', 0.005, 'modal damping ratio of every mode (the paper gives '
+                         'none)'),
+        }),
         'disturbance': {
             'constant_torque_Nm': F('vec3', [0.0, 0.0, 0.0], 'constant body torque [N m]'),
             'random_std_Nm': F('float', 0.0, 'std of the random body torque per axis [N m]'),
             'random_period_s': F('float', 2.0, 'hold time of each random draw [s]'),
+            'aerodynamic_Nm': F('vec3', [0.0, 0.0, 0.0], 'aerodynamic torque amplitude per '
+                                'body axis, a sin(2 pi t / harmonic_period_s + seeded phase) '
+                                '[N m]'),
+            'solar_pressure_Nm': F('vec3', [0.0, 0.0, 0.0], 'solar pressure torque amplitude, '
+                                   'same waveform [N m]'),
+            'synthetic_gravity_gradient_Nm': F('vec3', [0.0, 0.0, 0.0], 'a harmonic stand-in '
+                                               'for the gravity gradient at twice that '
+                                               'frequency (paper 001 magnitudes) [N m]'),
+            'harmonic_period_s': F('float', OPTIONAL, 'period of the harmonic torques [s] '
+                                   '(default: the orbital period)'),
+            'residual_magnetic_Nm': F('vec3', [0.0, 0.0, 0.0], 'constant residual magnetic '
+                                      'torque [N m]'),
+            'unloading_Nm': F('vec3', [0.0, 0.0, 0.0], 'momentum unloading torque per axis, '
+                              'seeded signs, on unloading_duration_s every unloading_period_s '
+                              '[N m]'),
+            'unloading_period_s': F('float', 600.0, 'unloading period [s]'),
+            'unloading_duration_s': F('float', 60.0, 'unloading pulse length [s]'),
+            'unloading_start_s': F('float', 0.0, 'first unloading pulse [s]'),
         },
     },
     'initial': {
@@ -938,6 +969,27 @@ def _check_physical(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, int]
     dist = craft.get('disturbance', {})
     if 'random_period_s' in dist and not dist['random_period_s'] > 0:
         checker.fail(line, 'spacecraft.disturbance.random_period_s', 'must be positive')
+    for key in ('aerodynamic_Nm', 'solar_pressure_Nm', 'synthetic_gravity_gradient_Nm',
+                'unloading_Nm'):
+        if any(a < 0 for a in dist.get(key, [])):
+            checker.fail(line, f'spacecraft.disturbance.{key}', 'amplitudes must be >= 0')
+    for key in ('harmonic_period_s', 'unloading_period_s'):
+        if key in dist and not dist[key] > 0:
+            checker.fail(line, f'spacecraft.disturbance.{key}', 'must be positive')
+    if not 0 <= dist.get('unloading_duration_s', 0.0) <= dist.get('unloading_period_s', 1.0):
+        checker.fail(line, 'spacecraft.disturbance.unloading_duration_s',
+                     'must be in [0, unloading_period_s]')
+    if craft.get('wheel_error_std_Nms', 0.0) < 0:
+        checker.fail(line, 'spacecraft.wheel_error_std_Nms', 'must be >= 0')
+    if craft.get('wheel_error_std_Nms', 0.0) > 0 and not craft.get('wheels'):
+        checker.fail(line, 'spacecraft.wheel_error_std_Nms', 'needs spacecraft.wheels')
+    if 'wheel_error_period_s' in craft and not craft['wheel_error_period_s'] > 0:
+        checker.fail(line, 'spacecraft.wheel_error_period_s', 'must be positive')
+    flex = craft.get('flexible')
+    if flex is not None:
+        if not 0 <= flex['damping'] < 1:
+            checker.fail(line, 'spacecraft.flexible.damping', f'{flex["damping"]:g} is not in '
+                         '[0, 1)')
 
     init = sc['initial']
     for key in ('omega_body_eci_body_deg_s', 'omega_body_orbit_body_deg_s'):

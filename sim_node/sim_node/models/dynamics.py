@@ -1,4 +1,4 @@
-"""Rigid-body attitude dynamics of the simulated spacecraft, with reaction wheels.
+"""Attitude dynamics of the simulated spacecraft: rigid body, reaction wheels, flexible modes.
 
 Equations
 ---------
@@ -15,6 +15,22 @@ wheel spin axes in body axes, ``h_w`` the wheels' axial momentum (see ``actuator
 ``disturbances.gravity_gradient_torque`` (D1) and ``actuators`` (A1).
 Without external torque the inertial angular momentum ``R(q) (I omega + A h_w)`` is constant,
 and without wheels also the kinetic energy ``1/2 omega . I omega``.
+
+Flexible appendages (optional, :class:`FlexibleModes`; paper 001 Sec. 6, the hybrid form of
+``sim_node.models.flexible`` (H1)-(H2), ASSUMPTION: the paper writes no equations). ``I`` is
+then the whole spacecraft's inertia ``I_b``, ``F`` (3, m) the rotational coupling of the
+modes, ``eta`` (m,) the modal coordinates [kg^1/2 m], ``Lambda = 2 pi diag(f)``::
+
+    I domega/dt + F eta_ddot = -omega x (I omega + F eta_dot + A h_w) + tau_ext - A tau_w  (E2f)
+    eta_ddot + 2 zeta Lambda eta_dot + Lambda^2 eta + F^T domega/dt = 0                    (E9)
+
+solved together with the constant mass matrix ``[[I, F], [F^T, E_m]]``. Without damping and
+torques the energy ``1/2 [omega; eta_dot]^T M [omega; eta_dot] + 1/2 eta^T Lambda^2 eta`` and
+``R(q) (I omega + F eta_dot + A h_w)`` are conserved.
+
+Wheel momentum control error (optional, ``actuators.WheelMomentumError`` (W5), paper 001:
+0.01 N m s 3-sigma): an extra motor torque held over the frame, added after the limits (W4)
+and clipped to the torque and momentum limits again.
 
 Frame step (DESIGN section 6): from ``t_k`` to ``t_k + dt`` the command is held (zero-order
 hold). The environment at ``t_k`` (the orbit model's ``r, v`` and the field model's ``b`` and
@@ -64,7 +80,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from sim_node.models import kernels
-from sim_node.models.actuators import Magnetorquer, WheelCluster
+from sim_node.models.actuators import Magnetorquer, WheelCluster, WheelMomentumError
 from sim_node.models.disturbances import (MU_EARTH, ConstantTorque, Disturbance, RandomTorque,
                                           check_inertia)
 
@@ -85,16 +101,71 @@ class SpacecraftState:
         Rate of the body w.r.t. ECI, body axes [rad/s].
     h_wheels : numpy.ndarray, shape (n_wheels,)
         Wheel momentum about each spin axis [N m s]; length 0 without wheels.
+    eta, eta_dot : numpy.ndarray, shape (n_modes,)
+        Modal coordinates [kg^1/2 m] and their rates [kg^1/2 m/s] of the flexible
+        appendages (:class:`FlexibleModes`); length 0 for a rigid spacecraft.
     """
 
     q_eci_body: np.ndarray
     omega_body_eci_body: np.ndarray
     h_wheels: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    eta: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    eta_dot: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         self.q_eci_body = np.asarray(self.q_eci_body, dtype=float)
         self.omega_body_eci_body = np.asarray(self.omega_body_eci_body, dtype=float)
         self.h_wheels = np.asarray(self.h_wheels, dtype=float).reshape(-1)
+        self.eta = np.asarray(self.eta, dtype=float).reshape(-1)
+        self.eta_dot = np.asarray(self.eta_dot, dtype=float).reshape(-1)
+
+
+@dataclass
+class FlexibleModes:
+    """Flexible appendages as modes in hybrid coordinates, (E2f), (E9).
+
+    Attributes
+    ----------
+    coupling : numpy.ndarray, shape (3, m)
+        Rotational coupling ``F`` of all modes, body axes [kg^1/2 m].
+    frequencies_hz : numpy.ndarray, shape (m,)
+        Constrained-hub modal frequencies [Hz], > 0.
+    damping : numpy.ndarray, shape (m,)
+        Modal damping ratios ``zeta`` in [0, 1) (a scalar is broadcast).
+
+    Raises
+    ------
+    ValueError
+        On bad shapes, non-finite values, frequencies <= 0 or damping outside [0, 1).
+    """
+
+    coupling: np.ndarray
+    frequencies_hz: np.ndarray
+    damping: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def __post_init__(self) -> None:
+        f = np.array(self.coupling, dtype=float)
+        if f.ndim != 2 or f.shape[0] != 3 or not np.all(np.isfinite(f)):
+            raise ValueError(f'coupling must be a finite (3, m) array, got shape {f.shape}')
+        m = f.shape[1]
+        freq = np.array(self.frequencies_hz, dtype=float).reshape(-1)
+        if freq.shape != (m,) or not np.all(np.isfinite(freq)) or np.any(freq <= 0.0):
+            raise ValueError(f'frequencies_hz must be {m} finite values > 0, got {freq}')
+        zeta = np.array(self.damping, dtype=float)
+        if zeta.size == 0:
+            zeta = np.zeros(m)
+        try:
+            zeta = np.broadcast_to(zeta, (m,)).astype(float)
+        except ValueError:
+            raise ValueError(f'damping must be a scalar or {m} values, got {zeta}') from None
+        if not np.all(np.isfinite(zeta)) or np.any(zeta < 0.0) or np.any(zeta >= 1.0):
+            raise ValueError(f'damping must be in [0, 1), got {zeta}')
+        self.coupling, self.frequencies_hz, self.damping = f, freq, zeta
+
+    @property
+    def n(self) -> int:
+        """Number of modes ``m``."""
+        return self.coupling.shape[1]
 
 
 @dataclass
@@ -172,13 +243,18 @@ def rk4_step(f: Callable[[float, np.ndarray], np.ndarray], t: float, x: np.ndarr
 
 
 def pack_state(state: SpacecraftState) -> np.ndarray:
-    """Flat state ``[q (4), omega (3), h_wheels (n)]``, shape (7 + n,)."""
-    return np.concatenate((state.q_eci_body, state.omega_body_eci_body, state.h_wheels))
+    """Flat state ``[q (4), omega (3), h_wheels (n), eta (m), eta_dot (m)]``,
+    shape (7 + n + 2 m,)."""
+    return np.concatenate((state.q_eci_body, state.omega_body_eci_body, state.h_wheels,
+                           state.eta, state.eta_dot))
 
 
-def unpack_state(x: np.ndarray) -> SpacecraftState:
-    """Inverse of :func:`pack_state` (copies)."""
-    return SpacecraftState(x[0:4].copy(), x[4:7].copy(), x[7:].copy())
+def unpack_state(x: np.ndarray, n_modes: int = 0) -> SpacecraftState:
+    """Inverse of :func:`pack_state` (copies) for ``n_modes`` flexible modes."""
+    m = int(n_modes)
+    end = len(x) - 2 * m
+    return SpacecraftState(x[0:4].copy(), x[4:7].copy(), x[7:end].copy(),
+                           x[end:end + m].copy(), x[end + m:].copy())
 
 
 def hermite_field_derivatives(b_prev, b_dot_prev, b, b_dot, tau: float
@@ -259,20 +335,22 @@ def _load_kernel() -> None:
     x = np.zeros(kernels.state_size(0))
     x[3], x[7] = 1.0, 7.0e6
     eye = np.eye(3)
-    kernels.frame_step(x, 1.0, 1, eye, eye, np.zeros((3, 0)), MU_EARTH, True, np.zeros(3),
-                       np.zeros(0), np.zeros(0), np.zeros(6), np.zeros((1, 3)),
-                       np.zeros((4, 3)), np.zeros((2, 3)), 0.0, np.empty(kernels.OUT_TAU_W))
+    kernels.frame_step(x, 1.0, 1, eye, eye, np.zeros((3, 0)), np.zeros((3, 0)), np.zeros(0),
+                       np.zeros(0), MU_EARTH, True, np.zeros(3), np.zeros(0), np.zeros(0),
+                       np.zeros(6), np.zeros(0), np.zeros((1, 3)), np.zeros((4, 3)),
+                       np.zeros((2, 3)), 0.0, np.empty(kernels.OUT_TAU_W))
     _kernel_loaded = True
 
 
 class Spacecraft:
-    """Rigid spacecraft with optional magnetorquers, reaction wheels and disturbances.
+    """Spacecraft with optional magnetorquers, reaction wheels, flexible modes, disturbances.
 
     Parameters
     ----------
     inertia : array_like, shape (3, 3)
         Inertia about the centre of mass, body axes [kg m^2], without the rotors' axial
-        inertia; symmetric positive definite.
+        inertia; symmetric positive definite. With ``flexible``: the whole spacecraft's
+        ``I_b`` (appendages included, undeformed); ``I_b - F F^T`` must be positive definite.
     magnetorquer : Magnetorquer, optional
         Without it, dipole commands are ignored (the applied dipole is zero).
     wheels : WheelCluster, optional
@@ -287,19 +365,53 @@ class Spacecraft:
     field_history : bool
         Use the previous frame's field for the cubic (E8) when frames are consecutive;
         ``False``: the line ``b + b_dot s`` in every frame.
+    flexible : FlexibleModes, optional
+        Modes of flexible appendages (E2f), (E9); without it the body is rigid.
+    wheel_error : WheelMomentumError, optional
+        Momentum control error of the wheels (W5) (needs ``wheels``, one entry per wheel).
 
     Raises
     ------
     ValueError
-        On an invalid inertia, actuator or disturbance object, or ``mu``.
+        On an invalid inertia, actuator, disturbance or modes object, or ``mu``, or a
+        coupling too large for the inertia.
     """
 
     def __init__(self, inertia, magnetorquer: Magnetorquer | None = None,
                  wheels: WheelCluster | None = None, disturbances: Sequence = (),
                  gravity_gradient: bool = True, mu: float = MU_EARTH,
-                 field_history: bool = True) -> None:
+                 field_history: bool = True, flexible: FlexibleModes | None = None,
+                 wheel_error: WheelMomentumError | None = None) -> None:
         self.inertia = check_inertia(inertia)
         self.inertia_inv = np.linalg.inv(self.inertia)
+        if flexible is not None and not isinstance(flexible, FlexibleModes):
+            raise ValueError(f'flexible must be FlexibleModes or None, got {flexible!r}')
+        self.flexible = flexible
+        self.n_modes = flexible.n if flexible is not None else 0
+        m = self.n_modes
+        coupling = flexible.coupling if flexible is not None else np.zeros((3, 0))
+        hub = self.inertia - coupling @ coupling.T
+        if m and np.linalg.eigvalsh(0.5 * (hub + hub.T))[0] <= 0.0:
+            raise ValueError('hub inertia I_b - F F^T is not positive definite: the modal '
+                             'coupling is too large for this inertia')
+        mass = np.eye(3 + m)
+        mass[:3, :3] = self.inertia
+        mass[:3, 3:] = coupling
+        mass[3:, :3] = coupling.T
+        self.mass = mass
+        self._mass_inv_c = np.ascontiguousarray(
+            np.linalg.inv(mass) if m else self.inertia_inv)
+        self._coupling_c = np.ascontiguousarray(coupling)
+        lam = (2.0 * math.pi * flexible.frequencies_hz if flexible is not None else np.zeros(0))
+        self._modal_k = np.ascontiguousarray(lam ** 2)
+        self._modal_c = np.ascontiguousarray(
+            2.0 * flexible.damping * lam if flexible is not None else np.zeros(0))
+        if wheel_error is not None:
+            if not isinstance(wheel_error, WheelMomentumError):
+                raise ValueError(f'wheel_error must be a WheelMomentumError, got {wheel_error!r}')
+            if wheels is None or wheel_error.n != wheels.n:
+                raise ValueError('wheel_error needs wheels and one entry per wheel')
+        self.wheel_error = wheel_error
         if magnetorquer is not None and not isinstance(magnetorquer, Magnetorquer):
             raise ValueError(f'magnetorquer must be a Magnetorquer or None, got {magnetorquer!r}')
         if wheels is not None and not isinstance(wheels, WheelCluster):
@@ -330,8 +442,9 @@ class Spacecraft:
         self._no_dist: dict[int, np.ndarray] = {}
         self._field_prev: Optional[tuple] = None     # (t, dt, [b, b_dot]) of the last frame
         self._zero_wheels = np.zeros(self.n_wheels)
-        self._x_shape = (kernels.state_size(self.n_wheels),)
-        self._part_lens = (4, 3, 3, 3, self.n_wheels, 3, 3, self.n_wheels, 3, 3)
+        self._x_shape = (kernels.state_size(self.n_wheels, self.n_modes),)
+        self._part_lens = (4, 3, 3, 3, self.n_wheels, m, m, 3, 3, self.n_wheels, 3, 3)
+        self._eta_sl, self._eta_dot_sl = kernels.modal_slices(self.n_wheels, m)
         self._u_shape = (6 + self.n_wheels,)
         _load_kernel()
 
@@ -344,6 +457,15 @@ class Spacecraft:
             raise ValueError('q_eci_body has zero norm')
         _vec(state.omega_body_eci_body, 'omega_body_eci_body')
         _vec(state.h_wheels, 'h_wheels', self.n_wheels)
+        _vec(state.eta, 'eta', self.n_modes)
+        _vec(state.eta_dot, 'eta_dot', self.n_modes)
+
+    def zero_state(self, q_eci_body, omega_body_eci_body, h_wheels=None) -> SpacecraftState:
+        """A state with the given attitude, rate and wheel momenta (zero if omitted) and the
+        modes at rest (``eta = eta_dot = 0``), sized for this spacecraft."""
+        h = np.zeros(self.n_wheels) if h_wheels is None else h_wheels
+        return SpacecraftState(q_eci_body, omega_body_eci_body, h, np.zeros(self.n_modes),
+                               np.zeros(self.n_modes))
 
     def zero_command(self) -> ActuatorCommand:
         """An all-zero :class:`ActuatorCommand` sized for this spacecraft."""
@@ -368,13 +490,21 @@ class Spacecraft:
 
     def _kernel_state(self, state: SpacecraftState, r_eci, v_eci) -> np.ndarray:
         """Kernel state (``kernels`` layout) of ``state`` at the position ``r_eci``, ``v_eci``."""
-        x = np.empty(kernels.state_size(self.n_wheels))
+        x = np.empty(self._x_shape[0])
         x[kernels.Q] = state.q_eci_body
         x[kernels.W] = state.omega_body_eci_body
         x[kernels.R] = r_eci
         x[kernels.V] = v_eci
-        x[kernels.H0:] = state.h_wheels
+        x[kernels.H0:kernels.H0 + self.n_wheels] = state.h_wheels
+        x[self._eta_sl] = state.eta
+        x[self._eta_dot_sl] = state.eta_dot
         return x
+
+    def _state_of(self, x: np.ndarray) -> SpacecraftState:
+        """:class:`SpacecraftState` of a kernel state (copies)."""
+        return SpacecraftState(x[kernels.Q].copy(), x[kernels.W].copy(),
+                               x[kernels.H0:kernels.H0 + self.n_wheels].copy(),
+                               x[self._eta_sl].copy(), x[self._eta_dot_sl].copy())
 
     def _frame_inputs(self, state: SpacecraftState, env: FrameEnvironment,
                       command: ActuatorCommand) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -387,8 +517,8 @@ class Spacecraft:
         if np.size(wheel_cmd) == 0:
             wheel_cmd = self._zero_wheels
         parts = (state.q_eci_body, state.omega_body_eci_body, env.r_eci, env.v_eci,
-                 state.h_wheels, command.dipole_body, command.torque_body, wheel_cmd,
-                 env.b_eci, env.b_dot_eci)
+                 state.h_wheels, state.eta, state.eta_dot, command.dipole_body,
+                 command.torque_body, wheel_cmd, env.b_eci, env.b_dot_eci)
         try:
             ok = tuple(map(len, parts)) == self._part_lens
             if ok:
@@ -483,7 +613,8 @@ class Spacecraft:
         -------
         SpacecraftState
             The derivative: ``q_eci_body`` holds ``dq/dt`` [1/s], ``omega_body_eci_body``
-            holds ``domega/dt`` [rad/s^2], ``h_wheels`` holds ``dh_w/dt`` [N m].
+            holds ``domega/dt`` [rad/s^2], ``h_wheels`` holds ``dh_w/dt`` [N m], ``eta`` and
+            ``eta_dot`` hold ``d eta/dt`` and ``d^2 eta/dt^2``.
         """
         self.check_state(state)
         r_eci, b_eci = env_at_t
@@ -496,10 +627,11 @@ class Spacecraft:
         coef[0] = b_eci
         x = self._kernel_state(state, r_eci, np.zeros(3))
         x_dot = np.empty_like(x)
-        kernels.rhs(0.0, x, self._inertia_c, self._inertia_inv_c, self._A, self.mu,
-                    self.gravity_gradient, bool(dipole.any()), dipole, coef, tau_held, tau_w,
-                    np.empty(6), x_dot)
-        return SpacecraftState(x_dot[kernels.Q], x_dot[kernels.W], x_dot[kernels.H0:])
+        kernels.rhs(0.0, x, self._inertia_c, self._mass_inv_c, self._A, self._coupling_c,
+                    self._modal_c, self._modal_k, self.mu, self.gravity_gradient,
+                    bool(dipole.any()), dipole, coef, tau_held, tau_w,
+                    np.empty(9 + self.n_modes), x_dot)
+        return self._state_of(x_dot)
 
     def step(self, state: SpacecraftState, t: float, dt: float, env: FrameEnvironment,
              command: ActuatorCommand, substeps: int = 1) -> tuple[SpacecraftState, dict]:
@@ -536,6 +668,10 @@ class Spacecraft:
             ``torque_wheels_body`` (``-A tau_w``) held, ``torque_disturbance_body`` (held over
             the first substep), and at ``t``: ``torque_gg_body``, ``torque_magnetic_body``,
             ``torque_external_body`` (all but the wheels) and ``torque_body`` (total) [N m].
+            With wheels also the driver status (n,) bool: ``torque_limited`` (the command
+            exceeds the torque limit (W4)) and ``momentum_limited`` (the torque is cut at the
+            momentum limit: the wheel is at, or would pass within ``dt``, ``max_momentum``);
+            ``wheel_torque`` includes the momentum control error (W5) if modelled.
         """
         t, dt = float(t), float(dt)
         if not (math.isfinite(t) and math.isfinite(dt) and dt > 0.0):
@@ -547,11 +683,15 @@ class Spacecraft:
         x, u, field = self._frame_inputs(state, env, command)
         coef, b_prev, tau_prev = self._field_terms(t, dt, env, field)
         tau_dist = self._disturbance_table(t, dt / substeps, substeps)
-        out = np.empty(kernels.OUT_TAU_W + self.n_wheels)
-        kernels.frame_step(x, dt, substeps, self._inertia_c, self._inertia_inv_c, self._A,
-                           self.mu, self.gravity_gradient, self._dipole_max,
-                           self._wheel_max_torque, self._wheel_max_momentum, u, tau_dist, coef,
-                           b_prev, tau_prev, out)
+        n = self.n_wheels
+        out = np.empty(kernels.OUT_TAU_W + 2 * n)
+        wheel_extra = (self.wheel_error.torque(t) if self.wheel_error is not None
+                       else self._zero_wheels)
+        kernels.frame_step(x, dt, substeps, self._inertia_c, self._mass_inv_c, self._A,
+                           self._coupling_c, self._modal_c, self._modal_k, self.mu,
+                           self.gravity_gradient, self._dipole_max, self._wheel_max_torque,
+                           self._wheel_max_momentum, u, wheel_extra, tau_dist, coef, b_prev,
+                           tau_prev, out)
 
         tau_ideal = u[3:6]
         tau_dist_first = tau_dist[0].copy()
@@ -559,7 +699,7 @@ class Spacecraft:
         tau_external = tau_ideal + tau_dist_first + out[kernels.OUT_GG] + out[kernels.OUT_MAG]
         applied = {
             'dipole_body': out[kernels.OUT_DIPOLE],
-            'wheel_torque': out[kernels.OUT_TAU_W:],
+            'wheel_torque': out[kernels.OUT_TAU_W:kernels.OUT_TAU_W + n],
             'torque_ideal_body': tau_ideal,
             'torque_wheels_body': tau_wheels,
             'torque_disturbance_body': tau_dist_first,
@@ -568,13 +708,22 @@ class Spacecraft:
             'torque_external_body': tau_external,
             'torque_body': tau_external + tau_wheels,
         }
-        return SpacecraftState(x[kernels.Q], x[kernels.W], x[kernels.H0:]), applied
+        if n:
+            cmd_w = u[6:6 + n]
+            limited = out[kernels.OUT_TAU_W + n:]              # after (W4) and the h limit
+            clipped = np.minimum(np.maximum(cmd_w, -self._wheel_max_torque),
+                                 self._wheel_max_torque)
+            applied['torque_limited'] = np.abs(cmd_w) > self._wheel_max_torque
+            applied['momentum_limited'] = limited != clipped
+        return self._state_of(x), applied
 
     # ------------------------------------------------------------------ diagnostics
     def angular_momentum_eci(self, state: SpacecraftState) -> np.ndarray:
-        """Total angular momentum ``R(q) (I omega + A h_w)`` [N m s], ECI, shape (3,)."""
+        """Total angular momentum ``R(q) (I omega + F eta_dot + A h_w)`` [N m s], ECI,
+        shape (3,)."""
         self.check_state(state)
-        h_body = self.inertia @ state.omega_body_eci_body + self._A @ state.h_wheels
+        h_body = (self.inertia @ state.omega_body_eci_body + self._A @ state.h_wheels
+                  + self._coupling_c @ state.eta_dot)
         c = np.array(_body_from_eci(*state.q_eci_body.tolist())).reshape(3, 3)
         return c.T @ h_body
 
@@ -583,6 +732,15 @@ class Spacecraft:
         self.check_state(state)
         w = state.omega_body_eci_body
         return 0.5 * float(w @ self.inertia @ w)
+
+    def mechanical_energy(self, state: SpacecraftState) -> float:
+        """Kinetic + modal strain energy [J] (rotor spin excluded), conserved by (E2f), (E9)
+        without damping and torques: ``1/2 v^T M v + 1/2 eta^T Lambda^2 eta``,
+        ``v = [omega; eta_dot]``."""
+        self.check_state(state)
+        v = np.concatenate((state.omega_body_eci_body, state.eta_dot))
+        strain = state.eta @ (self._modal_k * state.eta)
+        return 0.5 * float(v @ self.mass @ v) + 0.5 * float(strain)
 
 
 def steps_per_second(n: int = 2000, substeps: int = 1) -> float:

@@ -8,6 +8,9 @@ The kernel integrates (E1)-(E3), (E6) of :mod:`sim_node.models.dynamics` with th
     dq_eci_body/dt = 1/2 q_eci_body (x) [omega, 0]                                       (E1)
     I domega/dt    = -omega x (I omega + A h_w) + tau_gg + m x b_body + tau_held         (E2)
     dh_w/dt        = tau_w                                                               (E3)
+    (E2) with flexible appendages (paper 001 Sec. 6; ``sim_node.models.flexible`` (H1)-(H2)):
+    I domega/dt + F eta_ddot = -omega x (I omega + F eta_dot + A h_w) + tau_gg + ...     (E2f)
+    eta_ddot + 2 zeta Lambda eta_dot + Lambda^2 eta + F^T domega/dt = 0                  (E9)
     tau_gg         = 3 mu / |r|^5  r_body x (I r_body),   r_body = R(q)^T r_eci          (D1)
     dr_eci/dt = v_eci,   dv_eci/dt = -mu r_eci / |r_eci|^3                               (E6)
     b_eci(t_k + s) = c0 + c1 s + c2 s^2 + c3 s^3                                         (E7)
@@ -17,9 +20,17 @@ The kernel integrates (E1)-(E3), (E6) of :mod:`sim_node.models.dynamics` with th
     tau_w = clip(clip(tau_cmd, -tau_max, tau_max), lower, upper)                         (W4)
     upper = max((h_max - h_w) / dt, 0),   lower = min((-h_max - h_w) / dt, 0)
 
+    tau_w <- clip(tau_w + delta_tau_w, max(lower, -tau_max), min(upper, tau_max))      (W5)
+        (the momentum control error, inside the torque and momentum limits: the torque stops
+        at the momentum limit as hardware does)
+
 (D1), (A2), (W4) are ``disturbances`` and ``actuators``' equations (papers 000 eqs. (3)-(6),
 001 eq. (6)); ``tau_held = tau_ideal - A tau_w + tau_dist`` is constant over a substep (the
 disturbance is sampled by the caller at the substep midpoint, one row per substep).
+(E2f) and (E9) are solved together at every evaluation with the inverse of the constant mass
+matrix ``M = [[I, F], [F^T, E_m]]`` (``mass_inv``, (3 + m, 3 + m)); ``F`` (3, m) is the
+rotational coupling, ``Lambda = 2 pi diag(f)``. Without modes (m = 0) ``mass_inv`` is
+``I^-1`` and the arithmetic is the rigid one, operation for operation.
 
 State layout
 ------------
@@ -30,12 +41,15 @@ more slice appended after the wheels, its derivative written in :func:`rhs`::
     x[Q]  q_eci_body (4, scalar last)        x[W]  omega_body_eci_body [rad/s] (3)
     x[R]  r_eci [m] (3)                      x[V]  v_eci [m/s] (3)
     x[H0:H0 + n_wheels]  h_wheels [N m s]
+    x[H0 + n : H0 + n + m]          eta, modal coordinates [kg^1/2 m] (paper 001 (32) units)
+    x[H0 + n + m : H0 + n + 2 m]    eta_dot [kg^1/2 m / s]
 
-To add a part: give it the next slice (``H0 + n_wheels`` on), grow :func:`state_size`, fill it
-in ``Spacecraft._frame_inputs`` and read it back in ``Spacecraft.step``; :func:`frame_step`
-integrates every entry of ``x`` (its RK4 loops run over the whole array), so only :func:`rhs`
-needs the new equations. Coupled terms (e.g. modal accelerations in (E2)) go into :func:`rhs`
-before ``xdot[W]`` is written. Inputs that are not state (commands, limits) are extra
+To add a part: give it the next slice (after the modal coordinates), grow
+:func:`state_size`, fill it in ``Spacecraft._frame_inputs`` and read it back in
+``Spacecraft.step``; :func:`frame_step` integrates every entry of ``x`` (its RK4 loops run
+over the whole array), so only :func:`rhs` needs the new equations. Coupled terms go into
+:func:`rhs` before ``xdot[W]`` is written (as the modal accelerations, solved with
+``domega/dt`` through ``mass_inv``). Inputs that are not state (commands, limits) are extra
 arguments, outputs of a frame go to ``applied`` (``OUT_*``).
 
 The orbit (E6) is integrated with the attitude in the same RK4 stages, from the orbit model's
@@ -70,9 +84,16 @@ V = slice(10, 13)
 H0 = 13
 
 
-def state_size(n_wheels: int) -> int:
-    """Length of the kernel state for ``n_wheels`` wheels."""
-    return H0 + int(n_wheels)
+def state_size(n_wheels: int, n_modes: int = 0) -> int:
+    """Length of the kernel state for ``n_wheels`` wheels and ``n_modes`` flexible modes."""
+    return H0 + int(n_wheels) + 2 * int(n_modes)
+
+
+def modal_slices(n_wheels: int, n_modes: int) -> tuple[slice, slice]:
+    """Slices of ``eta`` and ``eta_dot`` in the kernel state (after the wheels)."""
+    e0 = H0 + int(n_wheels)
+    m = int(n_modes)
+    return slice(e0, e0 + m), slice(e0 + m, e0 + 2 * m)
 
 
 @njit(cache=True)
@@ -138,13 +159,16 @@ def external_torques(s, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, out):
 
 
 @njit(cache=True)
-def rhs(s, x, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef, tau_held,
-        tau_w, work, xdot):
-    """Right-hand side (E1)-(E3), (E6) at ``t_k + s``; writes ``xdot`` (N,).
+def rhs(s, x, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu, use_gg, use_mtq, dipole,
+        b_coef, tau_held, tau_w, work, xdot):
+    """Right-hand side (E1)-(E3), (E2f), (E6), (E9) at ``t_k + s``; writes ``xdot`` (N,).
 
-    ``axes`` (3, n) are the wheel spin axes (columns), ``tau_held`` (3,) [N m] the torques
-    held over the substep, ``tau_w`` (n,) [N m] the motor torques, ``work`` (6,) scratch;
-    the other arguments as in :func:`external_torques`.
+    ``mass_inv`` (3 + m, 3 + m) is the inverse mass matrix ``[[I, F], [F^T, E]]^-1`` (``I^-1``
+    without modes), ``axes`` (3, n) the wheel spin axes (columns), ``coupling`` (3, m) the
+    modal coupling ``F`` [kg^1/2 m], ``modal_c`` = ``2 zeta Lambda`` [1/s] and ``modal_k`` =
+    ``Lambda^2`` [1/s^2] (m,), ``tau_held`` (3,) [N m] the torques held over the substep,
+    ``tau_w`` (n,) [N m] the motor torques, ``work`` (9 + m,) scratch; the other arguments as
+    in :func:`external_torques`.
     """
     external_torques(s, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, work)
     tx = tau_held[0] + work[0] + work[3]
@@ -162,16 +186,32 @@ def rhs(s, x, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, b_coef, t
         hy += axes[1, j] * hw
         hz += axes[2, j] * hw
         xdot[H0 + j] = tau_w[j]                                              # (E3)
-    ux = tx - (wy * hz - wz * hy)
-    uy = ty - (wz * hx - wx * hz)
-    uz = tz - (wx * hy - wy * hx)
+    n_modes = coupling.shape[1]
+    e0 = H0 + n_wheels
+    d0 = e0 + n_modes
+    for i in range(n_modes):
+        eta_d = x[d0 + i]
+        hx += coupling[0, i] * eta_d                                         # F eta_dot in h
+        hy += coupling[1, i] * eta_d
+        hz += coupling[2, i] * eta_d
+        xdot[e0 + i] = eta_d
+        work[9 + i] = -modal_c[i] * eta_d - modal_k[i] * x[e0 + i]          # (E9) rhs
+    work[6] = tx - (wy * hz - wz * hy)                                      # (E2f) rhs
+    work[7] = ty - (wz * hx - wx * hz)
+    work[8] = tz - (wx * hy - wy * hx)
     xdot[0] = 0.5 * (qw * wx + qy * wz - qz * wy)                           # (E1)
     xdot[1] = 0.5 * (qw * wy + qz * wx - qx * wz)
     xdot[2] = 0.5 * (qw * wz + qx * wy - qy * wx)
     xdot[3] = -0.5 * (qx * wx + qy * wy + qz * wz)
-    xdot[4] = inertia_inv[0, 0] * ux + inertia_inv[0, 1] * uy + inertia_inv[0, 2] * uz  # (E2)
-    xdot[5] = inertia_inv[1, 0] * ux + inertia_inv[1, 1] * uy + inertia_inv[1, 2] * uz
-    xdot[6] = inertia_inv[2, 0] * ux + inertia_inv[2, 1] * uy + inertia_inv[2, 2] * uz
+    n_acc = 3 + n_modes
+    for r in range(n_acc):            # [domega/dt; eta_ddot] = M^-1 rhs  (E2), (E2f), (E9)
+        acc = 0.0
+        for c in range(n_acc):
+            acc += mass_inv[r, c] * work[6 + c]
+        if r < 3:
+            xdot[4 + r] = acc
+        else:
+            xdot[d0 + r - 3] = acc
     rx, ry, rz = x[7], x[8], x[9]
     r2 = rx * rx + ry * ry + rz * rz
     ko = -mu / (r2 * math.sqrt(r2)) if r2 > 0.0 else 0.0                     # (E6)
@@ -218,7 +258,8 @@ def hermite_terms(b_prev, b_dot_prev, b, b_dot, tau, out):
 
 #: Layout of the ``applied`` output of :func:`frame_step` (body axes): applied dipole
 #: [A m^2], gravity-gradient and magnetic torque at ``t_k`` [N m], wheels' reaction
-#: ``-A tau_w`` [N m], then the applied motor torques (n) [N m].
+#: ``-A tau_w`` [N m], then the applied motor torques (n) [N m], then the motor torques after
+#: the limits (W4) but before the momentum control error (W5) (n) [N m].
 OUT_DIPOLE = slice(0, 3)
 OUT_GG = slice(3, 6)
 OUT_MAG = slice(6, 9)
@@ -227,9 +268,9 @@ OUT_TAU_W = 12
 
 
 @njit(cache=True)
-def frame_step(x, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_max,
-               wheel_max_torque, wheel_max_momentum, u, tau_dist, b_coef, b_prev, tau_prev,
-               applied):
+def frame_step(x, dt, substeps, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu,
+               use_gg, dipole_max, wheel_max_torque, wheel_max_momentum, u, wheel_extra,
+               tau_dist, b_coef, b_prev, tau_prev, applied):
     """One frame ``t_k -> t_k + dt``: saturate the command once, hold it, RK4 in ``substeps``.
 
     Parameters
@@ -241,10 +282,16 @@ def frame_step(x, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_m
         Frame length [s], ``> 0``.
     substeps : int
         RK4 substeps, ``>= 1``; the quaternion is renormalised first and after each.
-    inertia, inertia_inv : numpy.ndarray, shape (3, 3)
-        Inertia [kg m^2] and its inverse, body axes.
+    inertia : numpy.ndarray, shape (3, 3)
+        Inertia [kg m^2], body axes (with modes: the whole spacecraft's, ``I_b``).
+    mass_inv : numpy.ndarray, shape (3 + m, 3 + m)
+        ``[[I, F], [F^T, E_m]]^-1`` (``I^-1`` without modes).
     axes : numpy.ndarray, shape (3, n)
         Wheel spin axes (columns), body axes.
+    coupling : numpy.ndarray, shape (3, m)
+        Modal coupling ``F`` [kg^1/2 m], body axes (m = 0: rigid).
+    modal_c, modal_k : numpy.ndarray, shape (m,)
+        ``2 zeta Lambda`` [1/s] and ``Lambda^2`` [1/s^2] of (E9).
     mu : float
         Gravitational parameter [m^3/s^2].
     use_gg : bool
@@ -256,6 +303,9 @@ def frame_step(x, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_m
     u : numpy.ndarray, shape (6 + n,)
         Command: requested dipole (3) [A m^2], ideal torque (3) [N m], motor torques (n)
         [N m], body axes.
+    wheel_extra : numpy.ndarray, shape (n,)
+        Momentum control error torque (W5) [N m], added after (W4), the sum clipped to the
+        torque and momentum limits again (zeros: none).
     tau_dist : numpy.ndarray, shape (substeps, 3)
         Disturbance torque of each substep [N m], body axes.
     b_coef : numpy.ndarray, shape (4, 3)
@@ -264,11 +314,12 @@ def frame_step(x, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_m
         Field [T] and rate [T/s] at ``t_k - tau_prev``, ECI (read only if ``tau_prev > 0``).
     tau_prev : float
         Length of the previous frame [s] for (E8), or ``<= 0``: use ``b_coef`` as given.
-    applied : numpy.ndarray, shape (12 + n,)
+    applied : numpy.ndarray, shape (12 + 2 n,)
         Written: see ``OUT_*``.
     """
     n_x = x.shape[0]
     n_wheels = axes.shape[1]
+    n_modes = coupling.shape[1]
     coef = b_coef.copy()
     if tau_prev > 0.0:
         hermite_terms(b_prev[0], b_prev[1], coef[0], coef[1], tau_prev, coef[2:])
@@ -278,6 +329,13 @@ def frame_step(x, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_m
     h_w = x[H0:H0 + n_wheels].copy()
     dipole, tau_w = saturate(dt, u[0:3], dipole_max, u[6:6 + n_wheels], wheel_max_torque,
                              wheel_max_momentum, h_w)
+    for j in range(n_wheels):
+        applied[OUT_TAU_W + n_wheels + j] = tau_w[j]          # after (W4), before (W5)
+        if wheel_extra[j] != 0.0:            # (W5), then (W4) and the momentum limit again
+            lim = wheel_max_torque[j]
+            upper = min(max((wheel_max_momentum[j] - h_w[j]) / dt, 0.0), lim)
+            lower = max(min((-wheel_max_momentum[j] - h_w[j]) / dt, 0.0), -lim)
+            tau_w[j] = min(max(tau_w[j] + wheel_extra[j], lower), upper)
     use_mtq = dipole[0] != 0.0 or dipole[1] != 0.0 or dipole[2] != 0.0
     tau_fixed = np.empty(3)                 # ideal + wheels' reaction -A tau_w (W3)
     for i in range(3):
@@ -289,7 +347,7 @@ def frame_step(x, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_m
         applied[i] = dipole[i]
     for j in range(n_wheels):
         applied[OUT_TAU_W + j] = tau_w[j]
-    work = np.empty(6)
+    work = np.empty(9 + n_modes)
     external_torques(0.0, x, inertia, mu, use_gg, use_mtq, dipole, coef, work)
     for i in range(6):
         applied[3 + i] = work[i]
@@ -307,20 +365,20 @@ def frame_step(x, dt, substeps, inertia, inertia_inv, axes, mu, use_gg, dipole_m
         s = i * h
         for c in range(3):
             tau_held[c] = tau_fixed[c] + tau_dist[i, c]
-        rhs(s, x, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, coef, tau_held,
-            tau_w, work, k1)
+        rhs(s, x, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu, use_gg, use_mtq,
+            dipole, coef, tau_held, tau_w, work, k1)
         for j in range(n_x):
             xt[j] = x[j] + half * k1[j]
-        rhs(s + half, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, coef,
-            tau_held, tau_w, work, k2)
+        rhs(s + half, xt, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu, use_gg,
+            use_mtq, dipole, coef, tau_held, tau_w, work, k2)
         for j in range(n_x):
             xt[j] = x[j] + half * k2[j]
-        rhs(s + half, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, coef,
-            tau_held, tau_w, work, k3)
+        rhs(s + half, xt, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu, use_gg,
+            use_mtq, dipole, coef, tau_held, tau_w, work, k3)
         for j in range(n_x):
             xt[j] = x[j] + h * k3[j]
-        rhs(s + h, xt, inertia, inertia_inv, axes, mu, use_gg, use_mtq, dipole, coef,
-            tau_held, tau_w, work, k4)
+        rhs(s + h, xt, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu, use_gg,
+            use_mtq, dipole, coef, tau_held, tau_w, work, k4)
         for j in range(n_x):
             x[j] = x[j] + sixth * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
         norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])

@@ -9,6 +9,12 @@ Frame k (DESIGN section 6), lockstep mode::
        hold it (zero-order hold) and integrate t_k -> t_k+1 (fixed RK4 substeps)
     D. k += 1, back to A (after the last frame: done, the process exits 0)
 
+With ``spacecraft.flexible`` the same integrator carries the modal coordinates of the
+appendages (``sim_node.models.dynamics`` (E2f), (E9)); phase B then also publishes them on
+``sim/appendages``. Wheel driver status (torque limit, momentum limit) is in ``/diagnostics``
+(``wheels_torque_limited``, ``wheels_momentum_limited``: wheel names of the last frame, and
+frame counters) and logged when a wheel reaches or leaves its momentum limit.
+
 Missing input past ``timeout_s`` of wall time: log, count a missed frame, and go on with the last
 environment (extrapolated by its rates inside the frame) or a zero command. A command producer
 that missed ``dead_after_frames`` command frames in a row is dead: a zero command is applied
@@ -29,8 +35,8 @@ import numpy as np
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
-from adcs_msgs.msg import (ActuatorCommand, AttitudeState, Environment, LockstepStatus,
-                           WheelState)
+from adcs_msgs.msg import (ActuatorCommand, AppendageState, AttitudeState, Environment,
+                           LockstepStatus, WheelState)
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import (ZERO, Act, Action, ClockMaster, derive_seed,
                                       ns_to_seconds, seconds_to_ns)
@@ -96,6 +102,8 @@ class DynamicsNode(LockstepNode):
         self.clock_pub = self.publisher(Clock, '/clock', QOS_CLOCK)
         self.state_pub = self.publisher(AttitudeState, 'sim/state')
         self.wheels_pub = self.publisher(WheelState, 'sim/wheels')
+        self.appendages_pub = (self.publisher(AppendageState, 'sim/appendages')
+                               if self.spacecraft.n_modes else None)
         self.tf_pub = TfPublisher(self)             # /tf: eci -> orbit -> body (truth)
         self.subscription(Environment, 'sim/environment', self.on_environment)
         self.subscription(ActuatorCommand, 'adcs/actuator_command', self.on_command)
@@ -111,6 +119,10 @@ class DynamicsNode(LockstepNode):
         self.last_cmd = self.spacecraft.zero_command()
         self.rejected_commands = 0
         self.applied_wheel_torque = np.zeros(self.spacecraft.n_wheels)
+        self.wheel_torque_limited = np.zeros(self.spacecraft.n_wheels, dtype=bool)
+        self.wheel_momentum_limited = np.zeros(self.spacecraft.n_wheels, dtype=bool)
+        self.torque_limited_frames = 0
+        self.momentum_limited_frames = 0
         self.started = False
         self.create_timer(min(0.05, self.timeout_s / 4.0), self.on_watchdog)
         self.start_timeout_s = float(self.param('start_timeout_s', 120.0))
@@ -242,7 +254,31 @@ class DynamicsNode(LockstepNode):
         if dt_env:
             self.spacecraft.reset_field_history()
         self.applied_wheel_torque = self.applied.get('wheel_torque', self.applied_wheel_torque)
+        if 'momentum_limited' in self.applied:
+            self._wheel_status(self.applied['torque_limited'], self.applied['momentum_limited'])
         self.frames += 1
+
+    def _wheel_status(self, torque_limited: np.ndarray, momentum_limited: np.ndarray) -> None:
+        """Keep the wheel driver status of the last frame; log momentum-limit transitions."""
+        for i in np.flatnonzero(momentum_limited != self.wheel_momentum_limited):
+            self.get_logger().info(
+                f'{self.wheel_names[i]}: torque cut at the momentum limit' if momentum_limited[i]
+                else f'{self.wheel_names[i]}: off the momentum limit')
+        self.wheel_torque_limited = np.asarray(torque_limited, dtype=bool)
+        self.wheel_momentum_limited = np.asarray(momentum_limited, dtype=bool)
+        self.torque_limited_frames += int(self.wheel_torque_limited.any())
+        self.momentum_limited_frames += int(self.wheel_momentum_limited.any())
+
+    def diagnostic_values(self) -> dict:
+        """Wheel driver status for ``/diagnostics`` (wheels only)."""
+        if not self.spacecraft.n_wheels:
+            return {}
+        names = np.asarray(self.wheel_names, dtype=object)
+        return {'wheels_torque_limited': ', '.join(names[self.wheel_torque_limited]) or 'none',
+                'wheels_momentum_limited':
+                    ', '.join(names[self.wheel_momentum_limited]) or 'none',
+                'torque_limited_frames': self.torque_limited_frames,
+                'momentum_limited_frames': self.momentum_limited_frames}
 
     def on_watchdog(self) -> None:
         """Wall-clock timeout of the current wait: count a missed frame and go on."""
@@ -304,6 +340,13 @@ class DynamicsNode(LockstepNode):
             w.torque = np.asarray(self.applied_wheel_torque, dtype=float).tolist()
             w.h_wheels_body = to_vec3(wheels.h_body(h))
         self.wheels_pub.publish(w)
+        if self.appendages_pub is not None:
+            a = AppendageState()
+            a.header = msg.header
+            a.eta = np.asarray(st.eta, dtype=float).tolist()
+            a.eta_dot = np.asarray(st.eta_dot, dtype=float).tolist()
+            a.frequency_hz = self.spacecraft.flexible.frequencies_hz.tolist()
+            self.appendages_pub.publish(a)
 
     def finish(self) -> None:
         """End of the scenario: report and let the runtime stop the process."""
