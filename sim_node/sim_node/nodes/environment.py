@@ -29,6 +29,8 @@ DEFAULT_FIELD = {'model': 'dipole'}
 class EnvironmentNode(LockstepNode):
     """Publishes the orbit and field at each ``/clock`` tick (see module docstring)."""
 
+    SIMULATED_WORLD = True      # the simulator: lockstep only
+
     def __init__(self, name: str = 'environment', **kwargs) -> None:
         super().__init__(name, **kwargs)
         self.orbit = make_orbit(self.section('orbit', DEFAULT_ORBIT, merge=False), self.epoch)
