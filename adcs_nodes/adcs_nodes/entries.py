@@ -220,7 +220,8 @@ def _build_magnetic_filter(p: Dict[str, Any], ctx: Dict[str, Any]):
         ctx['inertia_kgm2'], theta=p['theta_T2'], tau=p['tau'],
         p0_diag=p['p0_diag'] or None, measurement_form=p['measurement_form'],
         literal_update=p['literal_update'], substeps=p['substeps'],
-        max_rate_rad_s=p['max_rate_rad_s'], max_disturbance_rad_s2=p['max_disturbance_rad_s2'])
+        max_rate_rad_s=p['max_rate_rad_s'], max_disturbance_rad_s2=p['max_disturbance_rad_s2'],
+        use_sensor_covariance=p['use_sensor_covariance'])
 
 
 MAGNETIC_FILTER_PARAMS = (
@@ -237,6 +238,9 @@ MAGNETIC_FILTER_PARAMS = (
           'rate restarts the filter (not in the paper)', positive=True),
     Param('max_disturbance_rad_s2', 'float', 1e-2, 'rad/s^2', 'divergence guard on the '
           'disturbance state (not in the paper)', positive=True),
+    Param('use_sensor_covariance', 'bool', True, '-', "theta per axis from the sample's "
+          'magnetic_field_covariance when the driver gives one (never below theta_T2); '
+          "false: the paper's single theta"),
 )
 
 register(Entry(

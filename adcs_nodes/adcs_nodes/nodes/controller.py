@@ -36,7 +36,7 @@ from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.entries import wheel_momentum
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_vec3, vec3
+from adcs_nodes.nodes.convert import all_finite, quat, to_vec3, vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 from adcs_nodes.nodes.tf import MountTable
 from adcs_nodes.registry import Param
@@ -187,12 +187,9 @@ class ControllerNode(LockstepNode):
         self.lockstep_inputs(inputs, ctx_p['period_s'], self.on_frame)
         self.start_handshake()
 
-    def _fresh(self, msg, t_ns: int) -> bool:
-        return msg is not None and self.elapsed_ns(stamp_ns(msg.header.stamp)) == t_ns
-
     def _field_body(self, msg: Optional[MagneticField], t_ns: int) -> Optional[np.ndarray]:
         """Fresh magnetometer sample in body axes, or None."""
-        if not self._fresh(msg, t_ns):
+        if not self.fresh('mag', msg, t_ns):   # lockstep: stamped t; live: a newer sample
             return None
         b = vec3(msg.magnetic_field)
         q_body_sensor = self.mounts.lookup(msg.header.frame_id)   # None: no mount known yet

@@ -37,7 +37,7 @@ from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.controller import DEFAULT_FIELD, DEFAULT_ORBIT, inertia_matrix
-from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
+from adcs_nodes.nodes.convert import all_finite, quat, to_quat, to_vec3, vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 from adcs_nodes.nodes.tf import (MountTable, TfPublisher, covariance_to_body,
                                  estimate_transforms)
@@ -123,10 +123,6 @@ class EstimatorNode(LockstepNode):
         self.last_rejection = why
         self.get_logger().warning(f'measurement rejected: {why}')
 
-    def _fresh(self, msg, t_ns: int) -> bool:
-        """True when ``msg`` is stamped exactly t (a new sample this frame)."""
-        return msg is not None and self.elapsed_ns(stamp_ns(msg.header.stamp)) == t_ns
-
     def _mount(self, frame_id: str) -> Optional[np.ndarray]:
         q_body_sensor = self.mounts.lookup(frame_id)
         if q_body_sensor is None:
@@ -180,7 +176,7 @@ class EstimatorNode(LockstepNode):
         """Fresh, checked samples of frame ``t_ns`` -> the core's :class:`EstimatorInputs`."""
         def fresh(key, convert):
             msg = msgs.get(key)
-            return convert(msg) if self._fresh(msg, t_ns) else None
+            return convert(msg) if self.fresh(key, msg, t_ns) else None
         cmd = msgs.get('cmd')
         dipole = vec3(cmd.dipole_body) if cmd is not None else np.zeros(3)
         return EstimatorInputs(

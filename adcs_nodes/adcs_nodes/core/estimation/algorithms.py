@@ -113,11 +113,15 @@ class MagneticFilterEstimator:
     """Paper 000's filter with a divergence reset and the 6x6 covariance (module docstring).
 
     Parameters are those of :class:`~adcs_nodes.core.estimation.magnetic_filter.MagneticFilter`
-    plus ``max_rate_rad_s`` (an estimated rate beyond it is a divergence).
+    plus ``max_rate_rad_s`` (an estimated rate beyond it is a divergence) and
+    ``use_sensor_covariance`` (theta of (38) per axis from the sample's covariance when given,
+    never below ``theta``; False: the paper's single theta).
     """
 
-    def __init__(self, inertia: ArrayLike, max_rate_rad_s: float = 1.0, **filter_args) -> None:
+    def __init__(self, inertia: ArrayLike, max_rate_rad_s: float = 1.0,
+                 use_sensor_covariance: bool = True, **filter_args) -> None:
         self.filter = MagneticFilter(inertia, max_rate_rad_s=max_rate_rad_s, **filter_args)
+        self.use_sensor_covariance = bool(use_sensor_covariance)
         self.max_rate = float(max_rate_rad_s)
         self.q0 = att.identity()
         self.omega_rel0 = np.zeros(3)
@@ -150,7 +154,8 @@ class MagneticFilterEstimator:
         if inputs.b_body is not None:
             # the sample's own variances when given, floored at theta (ASSUMPTION: theta also
             # covers what a covariance does not: bias, misalignment, model errors)
-            theta = None if inputs.b_body_var is None else np.maximum(f.theta, inputs.b_body_var)
+            var = inputs.b_body_var if self.use_sensor_covariance else None
+            theta = None if var is None else np.maximum(f.theta, var)
             res = f.update(inputs.b_body, ref.b_orbit, theta_axes=theta)
             if res.get('accepted', False):
                 out.updates = 1
