@@ -75,7 +75,7 @@ def summary_markdown(cfg: CampaignConfig, results: Sequence[Dict[str, Any]],
     missed = sum(int(r.get('missed_frames') or 0) for r in done)
     lines += [f'| missed lockstep frames (all runs) | {missed} |', '',
               '## Success rate against initial rate', '',
-              '| initial rate |omega0| [deg/s] | runs | captured | success rate | within 4 '
+              '| initial rate \\|omega0\\| [deg/s] | runs | captured | success rate | within 4 '
               'orbits |', '|---|---|---|---|---|']
     for lo, hi, n, ok, in_time in _bin_table(cfg, done):
         lines.append(f'| {lo:.2f} - {hi:.2f} | {n} | {ok} | {_rate_text(ok, n)} | '
