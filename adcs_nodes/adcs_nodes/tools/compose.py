@@ -18,9 +18,9 @@ subscription outside the process is matched (its ``get_subscription_count()`` is
 the local count); when one is (recorder, live view, ``ros2 topic echo``, the launcher's
 monitor on ``/clock``), it is published over DDS as before and every subscriber, local ones
 included, gets it from DDS. Each message goes one way only, so nothing is lost or doubled. The
-local deliveries run from a zero-period rclpy timer after the publishing callback has
-returned, first in first out, one callback at a time, never inside another callback. The
-lockstep fires on stamps, not arrival order, so the trajectory is the same (tested).
+local deliveries run after the publishing callback has returned, first in first out, one
+callback at a time, never inside another callback. The lockstep fires on stamps, not arrival
+order, so the trajectory is the same (tested).
 """
 from __future__ import annotations
 
@@ -75,12 +75,18 @@ def build_nodes(specs: List[str], params_doc: Dict[str, Any]):
 class InProcessBus:
     """Direct delivery between the nodes of this process (see module docstring).
 
+    Local deliveries are queued and run, first in first out, when the executor callback that
+    published them (a subscription callback of a composed node, wrapped here) has returned,
+    so no callback ever runs inside another. A publish from anywhere else (a timer, a
+    service) is delivered by a 1 ms one-shot timer; so is the rest of a long chain after
+    ``max_batch`` deliveries, so signals and timers keep running.
+
     Parameters
     ----------
     nodes : list of rclpy.node.Node
         The composed nodes (their publishers and subscriptions existing now are linked).
     max_batch : int
-        Deliveries per timer call before the executor gets control back (signals, timers).
+        Deliveries in one go before the executor gets control back.
     """
 
     def __init__(self, nodes, max_batch: int = 500) -> None:
@@ -89,17 +95,23 @@ class InProcessBus:
         self.max_batch = int(max_batch)
         self.local = 0        # messages delivered in process
         self.dds = 0          # messages of linked publishers sent over DDS
+        self.timer_drains = 0  # deliveries started by the fallback timer
         self.topics: List[str] = []
         subs: Dict[Tuple[str, Any], List[Subscription]] = collections.defaultdict(list)
+        originals: Dict[int, Callable] = {}
         skip = set()
         for node in nodes:
             for sub in node.subscriptions:
                 key = (sub.topic_name, sub.msg_type)
-                if sub._callback_type != Subscription.CallbackType.MessageOnly \
-                        or sub.qos_profile.durability != DurabilityPolicy.VOLATILE:
+                if sub._callback_type != Subscription.CallbackType.MessageOnly:
+                    skip.add(key)
+                    continue
+                if sub.qos_profile.durability != DurabilityPolicy.VOLATILE:
                     skip.add(key)
                 subs[key].append(sub)
-        self._timer = nodes[0].create_timer(0.0, self._drain)
+                originals[id(sub)] = sub.callback
+                sub.callback = self._wrap(sub.callback)
+        self._timer = nodes[0].create_timer(0.001, self._on_timer)
         self._timer.cancel()
         for node in nodes:
             for pub in list(node.publishers):
@@ -107,14 +119,27 @@ class InProcessBus:
                 if key in skip or not subs.get(key) \
                         or pub.qos_profile.durability != DurabilityPolicy.VOLATILE:
                     continue
-                self._link(pub, subs[key])
+                self._link(pub, [originals[id(sub)] for sub in subs[key]])
                 if pub.topic_name not in self.topics:
                     self.topics.append(pub.topic_name)
 
-    def _link(self, pub, local_subs: List[Subscription]) -> None:
+    def _wrap(self, callback: Callable) -> Callable:
+        def wrapped(msg) -> None:
+            if self.busy:     # cannot happen from the executor; keep the order anyway
+                callback(msg)
+                return
+            self.busy = True
+            try:
+                callback(msg)
+            finally:
+                self.busy = False
+            if self.queue:
+                self._drain()
+        return wrapped
+
+    def _link(self, pub, callbacks: List[Callable]) -> None:
         dds_publish = pub.publish
-        n_local = len(local_subs)
-        callbacks = [sub.callback for sub in local_subs]
+        n_local = len(callbacks)
 
         def publish(msg) -> None:
             if pub.get_subscription_count() > n_local:   # someone outside listens: DDS
@@ -124,12 +149,17 @@ class InProcessBus:
             self.local += 1
             self.queue.append((callbacks, msg))
             if not self.busy:
-                self._timer.reset()   # deliver after the publishing callback returns
+                self._timer.reset()   # published outside a wrapped callback: deliver soon
 
         pub.publish = publish
 
-    def _drain(self) -> None:
+    def _on_timer(self) -> None:
         self._timer.cancel()
+        if not self.busy:
+            self.timer_drains += 1
+            self._drain()
+
+    def _drain(self) -> None:
         self.busy = True
         try:
             for _ in range(self.max_batch):
@@ -141,7 +171,7 @@ class InProcessBus:
         finally:
             self.busy = False
             if self.queue:
-                self._timer.reset()   # more to deliver: the executor runs it next
+                self._timer.reset()   # more to deliver: after the executor's other work
 
 
 def write_state(state: Any, path: str) -> None:
@@ -204,7 +234,8 @@ def main(argv=None) -> int:
         spin_nodes(nodes, until=finished, poll_s=0.05)
         if bus is not None:
             print(f'[compose] in-process deliveries {bus.local}, DDS publishes of linked '
-                  f'publishers {bus.dds}', file=sys.stderr)
+                  f'publishers {bus.dds}, timer-started deliveries {bus.timer_drains}',
+                  file=sys.stderr)
         if args.state_out and master is not None:
             write_state(getattr(master, 'state', None), args.state_out)
         return 0
