@@ -122,6 +122,13 @@ def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
     return p
 
 
+#: Wall-clock wait for a missing input, in units of ``timing.timeout_s``, by depth in the
+#: frame's chain (estimator -> controllers -> manager -> dynamics): a node waits longer than
+#: its producers, so a missing input upstream times out there first and the consumers get
+#: the fallback instead of timing out themselves at the same moment.
+CHAIN_TIMEOUT = {'estimator': 1.0, 'controller': 2.0, 'manager': 3.0, 'dynamics': 4.0}
+
+
 def flatten(prefix: str, data: Dict[str, Any], out: Dict[str, Any]) -> None:
     """Nested dict -> ``out`` with dotted keys (``orbit.altitude_km``)."""
     for key, value in data.items():
@@ -222,7 +229,7 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                  {**common, 'duration_s': float(duration_s),
                   # the clock master waits longest, so a fallback upstream (manager -> safe
                   # controller after timeout_s) delivers its command before the master gives up
-                  'timeout_s': 2.0 * common['timeout_s'],
+                  'timeout_s': CHAIN_TIMEOUT['dynamics'] * common['timeout_s'],
                   'substeps': int(sc['timing']['substeps']),
                   'rate_factor': float(rate_factor), **_spacecraft_params(sc),
                   **_initial_params(sc)},
@@ -339,7 +346,8 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     nodes = []
     nodes.append(_guidance_node(sc, flight))     # targets, and the adcs/slew action
     for name, entry in entries.items():
-        params = {**shared, **plugins, 'controller': name, **ctrl[name]}
+        params = {**shared, **plugins, 'controller': name, **ctrl[name],
+                  'timeout_s': CHAIN_TIMEOUT['controller'] * flight['timeout_s']}
         for need in entry.inputs:
             key, period = periods[need]
             params[key] = period
@@ -358,6 +366,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     watch_estimate = est_period > 0 and (users or 'auto' in man)
     mparams: Dict[str, Any] = {
         **flight, 'controllers': names, 'safe': man['safe'], 'initial': man['initial'],
+        'timeout_s': CHAIN_TIMEOUT['manager'] * flight['timeout_s'],
         'period_s': ctrl['period_s'], 'controller_period_s': ctrl['period_s'],
         # the manager watches the estimate: stale -> the safe controller (which needs none)
         'estimator_period_s': est_period if watch_estimate else 0.0,
