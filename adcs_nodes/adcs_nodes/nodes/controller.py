@@ -48,6 +48,8 @@ DEFAULT_FIELD = {'model': 'dipole'}
 
 #: The spacecraft context every controller node knows (defaults: paper 000's satellite).
 CONTEXT_PARAMS = (
+    Param('expected_mounts', 'str[]', [], '-', 'sensor frames whose /tf_static mount must '
+          'have arrived before the node is ready (the launcher sets them)', read_only=True),
     Param('controller', 'str', 'magnetic', '-', 'registered controller this node runs',
           read_only=True),
     Param('period_s', 'float', 2.0, 's', 'control period', positive=True, read_only=True),
@@ -140,6 +142,7 @@ class ControllerNode(LockstepNode):
         self.controller_name = self.entry.name
         own = node_params.declare_all(self, self.entry.params)
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
+        self.add_ready_check(lambda: self.mounts.missing(ctx_p['expected_mounts']))
         axes = np.asarray(ctx_p['wheel_axes_body'], dtype=float)
         n_wheels = len(ctx_p['wheel_max_torque_Nm'])
         if axes.size != 3 * n_wheels:

@@ -45,6 +45,8 @@ from adcs_nodes.registry import Param
 
 #: What every estimator node knows besides its algorithm's own parameters.
 CONTEXT_PARAMS = (
+    Param('expected_mounts', 'str[]', [], '-', 'sensor frames whose /tf_static mount must '
+          'have arrived before the node is ready (the launcher sets them)', read_only=True),
     Param('algorithm', 'str', 'magnetic_filter', '-', 'registered estimator algorithm',
           read_only=True),
     Param('period_s', 'float', 2.0, 's', 'estimator period', positive=True, read_only=True),
@@ -83,6 +85,7 @@ class EstimatorNode(LockstepNode):
         self.algorithm = self.entry.name
         own = node_params.declare_all(self, self.entry.params)
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
+        self.add_ready_check(lambda: self.mounts.missing(p['expected_mounts']))
         self.tf_pub = TfPublisher(self)   # /tf: eci -> body_estimate
         self.reference = make_onboard_reference(
             self.section('onboard_orbit', DEFAULT_ORBIT, merge=False),

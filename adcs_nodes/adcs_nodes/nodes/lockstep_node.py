@@ -504,9 +504,13 @@ class LockstepNode(Node):
                                  '(want "pub:<topic>=<n>" or "sub:<topic>=<n>")') from exc
         return out
 
+    def add_ready_check(self, check: Callable[[], List[str]]) -> None:
+        """Also wait, before ready, until ``check()`` (what is still missing) is empty."""
+        self._ready_checks = getattr(self, '_ready_checks', []) + [check]
+
     def unmatched(self) -> List[str]:
         """Handshake expectations not met yet, as readable strings."""
-        missing = []
+        missing = [m for check in getattr(self, '_ready_checks', []) for m in check()]
         for kind, topic, n in self._expectations():
             table = self._pubs if kind == 'pub' else self._subs
             ent = table.get(topic)

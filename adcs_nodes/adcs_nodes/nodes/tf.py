@@ -181,6 +181,12 @@ class MountTable:
         """Sensor frames with a known mount."""
         return sorted(self._mounts)
 
+    def missing(self, expected: List[str]) -> List[str]:
+        """The ``expected`` frames whose mount has not arrived yet (for the start handshake:
+        matched ``/tf_static`` endpoints do not mean the latched message was delivered)."""
+        return [f'/tf_static mount body -> {f}' for f in expected
+                if f and self.lookup(f) is None]
+
 
 def main(argv: Optional[List[str]] = None) -> int:
     """``python -m adcs_nodes.nodes.tf PARENT CHILD QX QY QZ QW [X Y Z]``: one static transform."""

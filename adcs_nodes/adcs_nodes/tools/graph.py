@@ -255,7 +255,8 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         subs = ['/clock', '/tf_static'] + [_INPUT_TOPICS[i] for i in entry.inputs]
         nodes.append(NodeSpec('estimator', 'adcs_nodes', 'estimator',
                               'adcs_nodes.nodes.estimator', 'EstimatorNode',
-                              {**flight, **plugins, **_estimator_params(sc)},
+                              {**flight, **plugins, **_estimator_params(sc),
+                               **_mounts(sc, entry.inputs)},
                               publishes=['adcs/attitude_estimate',
                                          'adcs/estimator/diagnostics', '/tf'],
                               subscribes=subs))
@@ -282,6 +283,19 @@ _INPUT_TOPICS = {'estimate': 'adcs/attitude_estimate', 'target': 'adcs/attitude_
                  'magnetometer': 'sensors/magnetometer', 'wheel_speeds': 'sensors/wheels',
                  'horizon': 'sensors/horizon', 'star_tracker': 'sensors/star_tracker',
                  'gyro': 'sensors/gyro', 'actuator_command': 'adcs/actuator_command'}
+
+
+def _mounts(sc: Dict[str, Any], inputs) -> Dict[str, Any]:
+    """``expected_mounts`` of a consumer: the frames of the simulated sensors it reads
+    (a node waits for their ``/tf_static`` mounts before it is ready)."""
+    from adcs_nodes.tools.scenario import SENSOR_OF_INPUT
+    frames = []
+    for need in inputs:
+        key = SENSOR_OF_INPUT.get(need)
+        cfg = sc['sensors'].get(key) if key else None
+        if cfg is not None and not cfg.get('external') and key != 'wheel_tachometer':
+            frames.append(key)        # a sensor node's frame_id is its name
+    return {'expected_mounts': frames} if frames else {}
 
 
 def _spacecraft_context(sc: Dict[str, Any]) -> Dict[str, Any]:
@@ -347,6 +361,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     nodes.append(_guidance_node(sc, flight))     # targets, and the adcs/slew action
     for name, entry in entries.items():
         params = {**shared, **plugins, 'controller': name, **ctrl[name],
+                  **_mounts(sc, entry.inputs),
                   'timeout_s': CHAIN_TIMEOUT['controller'] * flight['timeout_s']}
         for need in entry.inputs:
             key, period = periods[need]
