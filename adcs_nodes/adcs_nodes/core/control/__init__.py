@@ -40,15 +40,16 @@ from typing import Optional, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
+from adcs_nodes.core import kernels
+from adcs_nodes.core.kernels import finite_vector
+
 __all__ = ['Estimate', 'Target', 'Command', 'ControlInputs', 'Controller', 'scale_to_limits',
            'limits_vector', 'finite_vector', 'cross3']
 
 
 def cross3(a: ArrayLike, b: ArrayLike) -> np.ndarray:
-    """Cross product ``a x b`` of two (3,) vectors (``np.cross`` costs ~10x more per call)."""
-    a1, a2, a3 = (float(x) for x in a)
-    b1, b2, b3 = (float(x) for x in b)
-    return np.array([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1])
+    """Cross product ``a x b`` of two (3,) vectors (:func:`adcs_nodes.core.kernels.cross`)."""
+    return kernels.cross(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
 
 
 def positive(value, name: str, unit: str) -> float:
@@ -60,19 +61,6 @@ def positive(value, name: str, unit: str) -> float:
     if not (math.isfinite(x) and x > 0.0):
         raise ValueError(f'{name} must be finite and > 0 [{unit}], got {value!r}')
     return x
-
-
-def finite_vector(value: ArrayLike, name: str, shape: tuple) -> np.ndarray:
-    """Return ``value`` as a finite float array of ``shape``, else raise ``ValueError``."""
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f'{name} must be numeric with shape {shape}, got {value!r}') from None
-    if arr.shape != shape:
-        raise ValueError(f'{name} must have shape {shape}, got {arr.shape}')
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f'{name} must be finite, got {arr}')
-    return arr
 
 
 def limits_vector(value: ArrayLike, name: str, n: int, allow_zero: bool = True,

@@ -122,17 +122,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
-
-try:  # compiled kernels; the same functions run as plain Python without numba
-    from numba import njit as _njit
-except ImportError:  # pragma: no cover - numba is pinned in ros2_ws/requirements.txt
-    _njit = None
-
-
-def _jit(fn):
-    """numba ``njit(cache=True)`` (no fastmath) when numba is there, else ``fn`` itself."""
-    return fn if _njit is None else _njit(cache=True)(fn)
-
+from adcs_nodes.core.kernels import cross, dcm, finite_vector, jit, matmul, mv, qmul, skew
 
 THETA_DEFAULT = (0.3e-6) ** 2
 """Default ``theta`` [T^2]: (0.3 uT)^2, about the largest magnetometer noise variance."""
@@ -180,54 +170,20 @@ def lambda_from_q_orbit_body(q_orbit_body: ArrayLike) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- helpers
-def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product of scalar-last quaternions (unchecked; hot path of the integrator)."""
-    px, py, pz, pw = p
-    qx, qy, qz, qw = q
-    return np.array([pw * qx + px * qw + py * qz - pz * qy,
-                     pw * qy - px * qz + py * qw + pz * qx,
-                     pw * qz + px * qy - py * qx + pz * qw,
-                     pw * qw - px * qx - py * qy - pz * qz])
-
-
-def _dcm_orbit_body(q: np.ndarray) -> np.ndarray:
-    """``R(q_orbit_body)`` (3, 3), body -> orbit, of a quaternion normalised here."""
-    x, y, z, w = q / math.sqrt(float(q @ q))
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    # np.cross costs ~10x more for single 3-vectors; this is the integrator's hot path.
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _vec3(v: ArrayLike, name: str) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f'{name} must be a finite array of shape (3,), got {v!r}')
-    return v
-
 
 def e_r_body(q_orbit_body: ArrayLike) -> np.ndarray:
     """Zenith ``e_R`` (3,), unit, body axes, of ``q_orbit_body`` (4,) (10): ``C(N) j3``."""
-    return _dcm_orbit_body(np.asarray(q_orbit_body, dtype=float))[2, :].copy()
+    return dcm(np.asarray(q_orbit_body, dtype=float))[2, :].copy()
 
 
 def e_n_body(q_orbit_body: ArrayLike) -> np.ndarray:
     """Orbit normal ``e_N`` (3,), unit, body axes, of ``q_orbit_body`` (4,) (10): ``C(N) j2``."""
-    return _dcm_orbit_body(np.asarray(q_orbit_body, dtype=float))[1, :].copy()
+    return dcm(np.asarray(q_orbit_body, dtype=float))[1, :].copy()
 
 
 def predicted_field_body(q_orbit_body: ArrayLike, b_orbit: ArrayLike) -> np.ndarray:
     """``n* = conj(N) . B* . N = C(N) B*`` (3,) [T], body axes, of ``b_orbit`` (3,) [T], orbit."""
-    return _dcm_orbit_body(np.asarray(q_orbit_body, dtype=float)).T @ np.asarray(b_orbit, float)
+    return dcm(np.asarray(q_orbit_body, dtype=float)).T @ np.asarray(b_orbit, float)
 
 
 def g_matrix(inertia: ArrayLike, omega: ArrayLike) -> np.ndarray:
@@ -244,7 +200,7 @@ def g_matrix(inertia: ArrayLike, omega: ArrayLike) -> np.ndarray:
     """
     inertia = np.asarray(inertia, dtype=float)
     omega = np.asarray(omega, dtype=float)
-    return np.linalg.solve(inertia, _skew(inertia @ omega) - _skew(omega) @ inertia)  # (35)
+    return np.linalg.solve(inertia, skew(inertia @ omega) - skew(omega) @ inertia)  # (35)
 
 
 def error_matrix(inertia: ArrayLike, omega0: float, q_orbit_body: ArrayLike,
@@ -276,7 +232,7 @@ def error_matrix(inertia: ArrayLike, omega0: float, q_orbit_body: ArrayLike,
 def measurement_matrix(b_meas_body: ArrayLike, n_star_body: ArrayLike) -> np.ndarray:
     """``H = [-Phi(n + n*), 0_3, 0_3]`` (3, 9) [T] of (36)/(37)."""
     h = np.zeros((3, 9))
-    h[:, 0:3] = -_skew(np.asarray(b_meas_body, float) + np.asarray(n_star_body, float))
+    h[:, 0:3] = -skew(np.asarray(b_meas_body, float) + np.asarray(n_star_body, float))
     return h
 
 
@@ -353,20 +309,7 @@ _TAYLOR_ORDER = 12
 _TAYLOR_NORM = 0.25
 
 
-@_jit
-def _matmul(a, b):
-    n, m, k = a.shape[0], b.shape[1], a.shape[1]
-    out = np.zeros((n, m))
-    for i in range(n):
-        for j in range(m):
-            acc = 0.0
-            for r in range(k):
-                acc += a[i, r] * b[r, j]
-            out[i, j] = acc
-    return out
-
-
-@_jit
+@jit
 def expm_taylor(x):
     """``expm(x)`` of a square matrix by Taylor series with scaling and squaring.
 
@@ -394,82 +337,28 @@ def expm_taylor(x):
     y = x * (0.5 ** s)
     out = np.eye(n)
     for k in range(_TAYLOR_ORDER, 0, -1):  # Horner: I + y/1 (I + y/2 (I + ...))
-        out = _matmul(y, out) * (1.0 / k)
+        out = matmul(y, out) * (1.0 / k)
         for i in range(n):
             out[i, i] += 1.0
     for _ in range(s):
-        out = _matmul(out, out)
+        out = matmul(out, out)
     return out
 
 
-@_jit
-def _qmul_k(p, q):
-    out = np.empty(4)
-    out[0] = p[3] * q[0] + p[0] * q[3] + p[1] * q[2] - p[2] * q[1]
-    out[1] = p[3] * q[1] - p[0] * q[2] + p[1] * q[3] + p[2] * q[0]
-    out[2] = p[3] * q[2] + p[0] * q[1] - p[1] * q[0] + p[2] * q[3]
-    out[3] = p[3] * q[3] - p[0] * q[0] - p[1] * q[1] - p[2] * q[2]
-    return out
-
-
-@_jit
-def _dcm_k(q):
-    """``R(q)`` (3, 3), body -> orbit, of ``q`` normalised here (as :func:`_dcm_orbit_body`)."""
-    nrm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    x, y, z, w = q[0] / nrm, q[1] / nrm, q[2] / nrm, q[3] / nrm
-    r = np.empty((3, 3))
-    r[0, 0] = 1 - 2 * (y * y + z * z)
-    r[0, 1] = 2 * (x * y - z * w)
-    r[0, 2] = 2 * (x * z + y * w)
-    r[1, 0] = 2 * (x * y + z * w)
-    r[1, 1] = 1 - 2 * (x * x + z * z)
-    r[1, 2] = 2 * (y * z - x * w)
-    r[2, 0] = 2 * (x * z - y * w)
-    r[2, 1] = 2 * (y * z + x * w)
-    r[2, 2] = 1 - 2 * (x * x + y * y)
-    return r
-
-
-@_jit
-def _cross_k(a, b):
-    out = np.empty(3)
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
-    return out
-
-
-@_jit
-def _mv_k(m, v):
-    out = np.empty(3)
-    for i in range(3):
-        out[i] = m[i, 0] * v[0] + m[i, 1] * v[1] + m[i, 2] * v[2]
-    return out
-
-
-@_jit
-def _skew_k(v):
-    out = np.zeros((3, 3))
-    out[0, 1], out[0, 2] = -v[2], v[1]
-    out[1, 0], out[1, 2] = v[2], -v[0]
-    out[2, 0], out[2, 1] = -v[1], v[0]
-    return out
-
-
-@_jit
+@jit
 def _g_k(inertia, inertia_inv, v):
     """``G(v) = I^-1 [Phi(I v) - Phi(v) I]`` (3, 3) (35)."""
-    inner = _skew_k(_mv_k(inertia, v)) - _matmul(_skew_k(v), inertia)
-    return _matmul(inertia_inv, inner)
+    inner = skew(mv(inertia, v)) - matmul(skew(v), inertia)
+    return matmul(inertia_inv, inner)
 
 
-@_jit
+@jit
 def error_matrix_kernel(inertia, inertia_inv, omega0, q, omega):
     """``A`` (9, 9) of (34) at ``(N = q, omega_E = omega)``; see :func:`error_matrix`."""
-    e_r = _dcm_k(q)[2, :].copy()
+    e_r = dcm(q)[2, :].copy()
     a = np.zeros((9, 9))
-    sk_w = _skew_k(omega)
-    c = _matmul(_g_k(inertia, inertia_inv, e_r), _skew_k(e_r))
+    sk_w = skew(omega)
+    c = matmul(_g_k(inertia, inertia_inv, e_r), skew(e_r))
     g = _g_k(inertia, inertia_inv, omega)
     for i in range(3):
         a[i, 3 + i] = 0.5                       # (34) first row
@@ -481,29 +370,29 @@ def error_matrix_kernel(inertia, inertia_inv, omega0, q, omega):
     return a
 
 
-@_jit
+@jit
 def _rates_k(q, omega, m, inertia, inertia_inv, omega0, dipole, field, field_mode):
     """(33): ``dN/dt`` (4,) and ``domega'/dt`` (3,); ``field_mode`` 0 none, 1 body, 2 orbit."""
-    c_bo = _dcm_k(q)                            # R(N); C(N) = R(N)^T (orbit -> body)
+    c_bo = dcm(q)                            # R(N); C(N) = R(N)^T (orbit -> body)
     e_r = c_bo[2, :].copy()
-    m_s = 3.0 * omega0 ** 2 * _cross_k(e_r, _mv_k(inertia, e_r))  # (3) from the estimate
+    m_s = 3.0 * omega0 ** 2 * cross(e_r, mv(inertia, e_r))  # (3) from the estimate
     if field_mode == 1:
-        m_s = m_s + _cross_k(dipole, field)     # (4) L x B, B measured or given
+        m_s = m_s + cross(dipole, field)     # (4) L x B, B measured or given
     elif field_mode == 2:
         b_body = np.empty(3)
         for i in range(3):
             b_body[i] = c_bo[0, i] * field[0] + c_bo[1, i] * field[1] + c_bo[2, i] * field[2]
-        m_s = m_s + _cross_k(dipole, b_body)    # (4) L x n*
+        m_s = m_s + cross(dipole, b_body)    # (4) L x n*
     w4 = np.zeros(4)
     w4[0], w4[1], w4[2] = omega[0], omega[1], omega[2]
     o4 = np.zeros(4)
     o4[1] = omega0
-    q_dot = 0.5 * (_qmul_k(q, w4) - _qmul_k(o4, q))   # (33)
-    omega_dot = _mv_k(inertia_inv, _cross_k(_mv_k(inertia, omega), omega) + m_s) + m
+    q_dot = 0.5 * (qmul(q, w4) - qmul(o4, q))   # (33)
+    omega_dot = mv(inertia_inv, cross(mv(inertia, omega), omega) + m_s) + m
     return q_dot, omega_dot
 
 
-@_jit
+@jit
 def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, field_mode,
                    h, substeps):
     """``substeps`` RK4 steps of (33) of ``h`` seconds and ``P <- F P F^T`` (34).
@@ -535,7 +424,7 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
     f = np.eye(9)
     for _ in range(substeps):
         a = error_matrix_kernel(inertia, inertia_inv, omega0, q, omega)  # (34), frozen
-        f = _matmul(expm_taylor(a * h), f)
+        f = matmul(expm_taylor(a * h), f)
         k1q, k1w = _rates_k(q, omega, m, inertia, inertia_inv, omega0, dipole, field,
                             field_mode)                                     # (33), RK4
         k2q, k2w = _rates_k(q + 0.5 * h * k1q, omega + 0.5 * h * k1w, m, inertia, inertia_inv,
@@ -547,12 +436,12 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
         q = q + h / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
         omega = omega + h / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
         q = q / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    p = _matmul(_matmul(f, p), f.T.copy())
+    p = matmul(matmul(f, p), f.T.copy())
     p = 0.5 * (p + p.T)
     return q, omega, p
 
 
-@_jit
+@jit
 def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_innovation,
                   form_phi):
     """(36)/(37), the sequential update (38) and the correction (39) on arrays.
@@ -578,13 +467,13 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
         ``N+`` (4,) (not normalised when degenerate), ``omega'+`` (3,), ``m'+`` (3,),
         ``P+`` (9, 9), ``z`` (3,), ``w`` (9,), ``sigma`` (3,); may be non-finite.
     """
-    r = _dcm_k(q)
+    r = dcm(q)
     n_star = np.empty(3)
     for i in range(3):   # n* = C(N) B* = R(N)^T B*
         n_star[i] = r[0, i] * b_ref[0] + r[1, i] * b_ref[1] + r[2, i] * b_ref[2]
     z = n - n_star
     h_mat = np.zeros((3, 9))
-    sk = _skew_k(n + n_star)
+    sk = skew(n + n_star)
     for i in range(3):
         for j in range(3):
             h_mat[i, j] = -sk[i, j]              # (36)/(37)
@@ -618,7 +507,7 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
     return q_new, omega_new, m_new, p, z, w, sigma
 
 
-@_jit
+@jit
 def correct_kernel(q, omega, m, w, form_phi):
     """Correction (39) on arrays; see :func:`correct_state` (``form_phi``: form (36))."""
     v = w[0:3].copy()
@@ -632,7 +521,7 @@ def correct_kernel(q, omega, m, w, form_phi):
         mu0 = math.sqrt(max(0.0, 1.0 - (mu[0] * mu[0] + mu[1] * mu[1] + mu[2] * mu[2])))
     corr = np.empty(4)
     corr[0], corr[1], corr[2], corr[3] = -mu[0], -mu[1], -mu[2], mu0
-    q_new = _qmul_k(q, corr)   # (39): N . (mu0 - mu)
+    q_new = qmul(q, corr)   # (39): N . (mu0 - mu)
     qn = math.sqrt(q_new[0] ** 2 + q_new[1] ** 2 + q_new[2] ** 2 + q_new[3] ** 2)
     if qn > 0.0 and math.isfinite(qn):
         q_new = q_new / qn
@@ -771,8 +660,8 @@ class MagneticFilter:
             On non-finite input or a zero quaternion.
         """
         self._q = attitude.normalize(q_orbit_body0)
-        self._omega = _vec3(omega_body_eci_body0, 'omega_body_eci_body0').copy()
-        self._m = _vec3(m0, 'm0').copy()
+        self._omega = finite_vector(omega_body_eci_body0, 'omega_body_eci_body0', (3,)).copy()
+        self._m = finite_vector(m0, 'm0', (3,)).copy()
         self._p = np.diag(self.p0_diag)
         self._last_b_meas: Optional[np.ndarray] = None
 
@@ -848,13 +737,13 @@ class MagneticFilter:
             raise ValueError(f'dt must be finite and > 0 [s], got {dt}')
         if not math.isfinite(omega0):
             raise ValueError(f'omega0 must be finite [rad/s], got {omega0}')
-        dipole = _vec3(dipole_body, 'dipole_body')
+        dipole = finite_vector(dipole_body, 'dipole_body', (3,))
         b_body = b_orbit = None
         if dipole.any():
             if b_body_for_torque is not None:
-                b_body = _vec3(b_body_for_torque, 'b_body_for_torque')
+                b_body = finite_vector(b_body_for_torque, 'b_body_for_torque', (3,))
             elif b_orbit_for_torque is not None:
-                b_orbit = _vec3(b_orbit_for_torque, 'b_orbit_for_torque')
+                b_orbit = finite_vector(b_orbit_for_torque, 'b_orbit_for_torque', (3,))
             elif self._last_b_meas is not None:
                 b_body = self._last_b_meas
             else:
