@@ -251,6 +251,40 @@ register(Entry(
     inputs=('magnetometer', 'actuator_command')))
 
 
+def _build_magnetic_filter_bias(p: Dict[str, Any], ctx: Dict[str, Any]):
+    from adcs_nodes.core.estimation.magnetic_filter_bias import MagneticFilterBiasEstimator
+    return MagneticFilterBiasEstimator(
+        ctx['inertia_kgm2'], theta=p['theta_T2'], tau=p['tau'],
+        p0_diag=p['p0_diag'] or None, measurement_form=p['measurement_form'],
+        literal_update=p['literal_update'], substeps=p['substeps'],
+        max_rate_rad_s=p['max_rate_rad_s'], max_disturbance_rad_s2=p['max_disturbance_rad_s2'],
+        use_sensor_covariance=p['use_sensor_covariance'], bias0_T=p['bias0_T'],
+        bias_std0_T=p['bias_std0_T'], magnitude_std_T=p['magnitude_std_T'],
+        bias_walk_T_sqrt_s=p['bias_walk_T_sqrt_s'], max_bias_T=p['max_bias_T'],
+        bias_gate_sigma=p['bias_gate_sigma'])
+
+
+register(Entry(
+    'estimator', 'magnetic_filter_bias',
+    "beyond paper 000: the paper's filter plus a constant magnetometer bias estimated from "
+    'field-magnitude residuals',
+    'adcs_nodes.core.estimation.magnetic_filter_bias:MagneticFilterBiasEstimator',
+    MAGNETIC_FILTER_PARAMS + (
+        Param('bias0_T', 'float[]', [0.0, 0.0, 0.0], 'T', 'initial bias estimate, body axes',
+              length=3, min=-1e-4, max=1e-4),
+        Param('bias_std0_T', 'float', 2e-7, 'T', 'initial bias std per axis', positive=True,
+              max=1e-4),
+        Param('magnitude_std_T', 'float', 3e-7, 'T', 'std of a field-magnitude residual',
+              positive=True, max=1e-4),
+        Param('bias_walk_T_sqrt_s', 'float', 0.0, 'T/sqrt(s)', 'bias random walk (0: '
+              'constant bias)', min=0.0),
+        Param('max_bias_T', 'float', 5e-6, 'T', 'largest accepted bias estimate per axis',
+              positive=True),
+        Param('bias_gate_sigma', 'float', 5.0, '-', 'magnitude residuals beyond this many '
+              'sigma are not used for the bias', positive=True)),
+    _build_magnetic_filter_bias, inputs=('magnetometer', 'actuator_command')))
+
+
 def _build_geometric(method: str):
     def build(p: Dict[str, Any], ctx: Dict[str, Any]):
         from adcs_nodes.core.estimation.algorithms import GeometricEstimator
