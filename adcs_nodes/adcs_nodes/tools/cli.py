@@ -26,8 +26,13 @@ Commands
 ``adcs report BAG [--out DIR]``
     Metrics, PNG plots and ``summary.md``.
 
-Exit codes: 0 success, 1 run failure (a node died, recorder lagged), 2 bad input
-(scenario, arguments, bag), 130 interrupted.
+``adcs slew --to ROLL PITCH YAW [--frame inertial|orbit] [--controller NAME] [--run PID]``
+    Slew a running graph (``adcs/slew`` action): feedback, then settling time, energy, error.
+
+Exit codes: 0 success, 1 run failure (a world node or the recorder died, recorder lagged),
+2 bad input (scenario, arguments, bag, a node refusing its parameters), 3 degraded run (it
+ended, but lost a flight-software node or fell back to the safe controller for part of the
+time: the summary line says which), 130 interrupted.
 """
 from __future__ import annotations
 
