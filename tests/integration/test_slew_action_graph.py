@@ -59,3 +59,31 @@ def test_a_preempted_slew_ends_at_the_second_target(tmp_path):
 def test_bad_goals_are_refused_before_sending():
     bad = adcs('slew', '--to', '0', '0', '0', '--controller', 'nope', check=False)
     assert bad.returncode == 2 and 'nope' in bad.stderr
+
+
+def test_switching_to_fuzzy_mid_run_starts_a_slew_within_the_torque_limit(tmp_path):
+    """reference_slew holds the start attitude (target = itself), then a scripted switch to
+    fuzzy with a 20 deg target: one zero frame, then a slew; no command above 1 N m/axis."""
+    with open(os.path.join(SCENARIOS, 'paper003_slew.yaml')) as fh:
+        sc = yaml.safe_load(fh)
+    start = [float(c) for c in att.from_euler_321(0.0, 0.0, np.radians(20.0))]
+    sc['initial'] = {'q_orbit_body_xyzw': start, 'omega_body_orbit_body_deg_s': [0.0] * 3}
+    sc['guidance']['profile'] = [
+        {'t_s': 0.0, 'type': 'hold', 'q_xyzw': start},
+        {'t_s': 5.0, 'type': 'hold', 'q_xyzw': [0.0, 0.0, 0.0, 1.0]}]
+    sc['manager'] = {'safe': 'reference_slew', 'initial': 'reference_slew',
+                     'schedule': [{'t_s': 5.0, 'controller': 'fuzzy'}]}
+    path = tmp_path / 'switch.yaml'
+    path.write_text(yaml.safe_dump(sc))
+    bag = str(tmp_path / 'switch')
+    adcs('run', str(path), '--record', bag, '--duration', '40', '--quiet', timeout=600)
+    cmds = list(read_messages(bag, ['/adcs/actuator_command']))
+    src = [m.source for _, _, m in cmds]
+    assert src[:50] == ['reference_slew'] * 50 and src[50] == 'zero'
+    assert set(src[51:]) == {'fuzzy'}
+    torque = np.array([[m.torque_body.x, m.torque_body.y, m.torque_body.z]
+                       for _, _, m in cmds])
+    assert np.max(np.abs(torque)) <= 1.0 + 1e-12          # no jump above the limit
+    assert np.max(np.abs(torque[51:])) > 0.2                # the slew did start
+    q = list(read_messages(bag, ['/sim/state']))[-1][2].q_orbit_body
+    assert np.degrees(att.angle_between([q.x, q.y, q.z, q.w], att.identity())) < 2.0
