@@ -111,3 +111,24 @@ def test_an_external_sensor_gets_no_simulated_node_and_is_announced(tmp_path):
     lines = external_devices(loaded)
     assert len(lines) == 1 and 'sensors/magnetometer' in lines[0]
     assert 'sensor_msgs/msg/MagneticField' in lines[0]
+
+
+def test_the_managers_point_mode_is_reachable_from_a_scenario(tmp_path):
+    with open(os.path.join(SCEN, 'paper000_control.yaml')) as fh:
+        sc = yaml.safe_load(fh)
+    sc['manager'] = {'safe': 'bdot', 'auto': {'detumble': 'bdot', 'acquire': 'magnetic',
+                                              'point': 'magnetic', 'angle_enter_deg': 10.0,
+                                              'angle_exit_deg': 20.0}}
+    loaded = load_scenario(_write(tmp_path, sc))
+    man = next(n for n in build_graph(loaded, 10.0) if n.name == 'controller_manager')
+    assert man.params['auto.point'] == 'magnetic' and man.params['auto.angle_enter_deg'] == 10.0
+    from adcs_nodes.core.manager import AutoSequence
+    auto = AutoSequence.from_dict({k[5:]: v for k, v in man.params.items()
+                                   if k.startswith('auto.')})
+    assert auto.controller_of('point') == 'magnetic'
+    sc['manager']['auto'] = {'angle_enter_deg': 10.0}          # thresholds without a point
+    with pytest.raises(ScenarioError, match='point'):
+        load_scenario(_write(tmp_path, sc))
+    sc['manager']['auto'] = {'point': 'mpi', 'angle_enter_deg': 10.0}
+    with pytest.raises(ScenarioError, match="'mpi' is not a configured controller"):
+        load_scenario(_write(tmp_path, sc))

@@ -182,6 +182,12 @@ SCHEMA: Dict[str, Any] = {
             'exit_confirm_frames': F('int', 1, 'frames the back condition must hold'),
             'rate_frame': F('str', 'eci', 'rate compared: w.r.t. ECI or the orbit frame',
                             ('eci', 'orbit')),
+            'point': F('str', OPTIONAL, 'controller of the optional point mode (after '
+                       'acquire, once the attitude error is below angle_enter_deg)'),
+            'angle_enter_deg': F('float', OPTIONAL, 'acquire -> point below this attitude '
+                                 'error to the orbital frame [deg]'),
+            'angle_exit_deg': F('float', OPTIONAL, 'point -> acquire above this error [deg] '
+                                '(> angle_enter_deg)'),
         }),
     }),
     'record': {
@@ -633,6 +639,17 @@ def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, i
             if man.get(key) and man[key] not in names:
                 checker.fail(lines.get('manager'), f'manager.{key}',
                              f'{man[key]!r} is not a configured controller ({names})')
+        for mode in ('detumble', 'acquire', 'point'):
+            name = man.get('auto', {}).get(mode)
+            if name and name not in names:
+                checker.fail(lines.get('manager'), f'manager.auto.{mode}',
+                             f'{name!r} is not a configured controller ({names})')
+        if 'auto' in man:
+            try:
+                from adcs_nodes.core.manager import AutoSequence
+                AutoSequence.from_dict(man['auto'])
+            except ValueError as exc:
+                checker.fail(lines.get('manager'), 'manager.auto', str(exc))
         for entry in man.get('schedule', []):
             if entry['controller'] not in allowed:
                 checker.fail(lines.get('manager'), 'manager.schedule',
