@@ -30,7 +30,7 @@ ROWS = [
 @pytest.mark.slow
 @pytest.mark.timeout(3600)
 def test_paper001_mpi_reproduction(tmp_path):
-    from sim_node.tools.paper001_bag import series
+    from sim_node.tools.paper001_bag import plots, series
     from sim_node.tools.paper001_loop import metrics
     bag = str(tmp_path / 'paper001')
     proc = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.cli', 'run',
@@ -38,7 +38,10 @@ def test_paper001_mpi_reproduction(tmp_path):
                            bag, '--quiet'], cwd=ROOT, capture_output=True, text=True,
                           timeout=3600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    m = metrics(series(bag))
+    r = series(bag)
+    m = metrics(r)
+    figures = plots(r, os.path.join(ROOT, 'out', 'paper001'))    # like the paper's figures
+    assert all(os.path.getsize(f) > 0 for f in figures)
     print('\npaper001_mpi: paper vs measured (per axis x/y/z where three values)')
     failed = []
     for key, paper, check in ROWS:

@@ -6,7 +6,9 @@ The bag's truth (``/sim/state``), target (``/adcs/attitude_target``), command
 estimate (``/adcs/attitude_estimate``) are joined on the header stamp (sim time) into the
 series :func:`paper001_loop.metrics` reads.
 
-Usage: ``python -m sim_node.tools.paper001_bag BAG [--epoch 2026-01-01T00:00:00Z]``
+Usage: ``python -m sim_node.tools.paper001_bag BAG [--epoch 2026-01-01T00:00:00Z] [--plots DIR]``
+(``--plots``: attitude and rate errors, wheel torque and momentum, modal amplitudes against
+time, like the paper's figures).
 """
 from __future__ import annotations
 
@@ -73,13 +75,55 @@ def series(bag: str, epoch: str = '2026-01-01T00:00:00Z') -> dict:
     return {k: np.array(v) for k, v in rec.items()}
 
 
+def plots(r: dict, out_dir: str) -> list:
+    """PNG figures like the paper's (Figs. 4-9): attitude error, rate error, wheel torque and
+    momentum, modal amplitudes, against time. Returns the file paths."""
+    import os
+
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    os.makedirs(out_dir, exist_ok=True)
+    t = r['t']
+    err = (np.degrees(r['e'] - r['e_d']) + 180.0) % 360.0 - 180.0
+    panels = [
+        ('attitude_error.png', err, 'attitude error, 3-1-2 Euler [deg]', ('phi', 'theta', 'psi')),
+        ('rate_error.png', np.degrees(r['de'] - r['de_d']), 'Euler-rate error [deg/s]',
+         ('phi', 'theta', 'psi')),
+        ('wheel_torque.png', r['tau'], 'applied wheel torque [N m]', ('x', 'y', 'z')),
+        ('wheel_momentum.png', r['h'], 'wheel momentum [N m s]', ('x', 'y', 'z')),
+    ]
+    if r['eta'].size:
+        panels.append(('modal_amplitudes.png', r['eta'], 'modal coordinates eta', None))
+    paths = []
+    for name, y, label, legend in panels:
+        fig, ax = plt.subplots(figsize=(9, 3.5))
+        ax.plot(t, y, lw=0.6)
+        ax.set_xlabel('t [s]')
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+        if legend:
+            ax.legend(legend, loc='upper right', fontsize=8)
+        if name == 'attitude_error.png':    # the paper's figures zoom on the small errors
+            ax.set_ylim(-0.3, 0.3)
+        fig.tight_layout()
+        path = os.path.join(out_dir, name)
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('bag')
     ap.add_argument('--epoch', default='2026-01-01T00:00:00Z')
     ap.add_argument('--save', default='', help='also save the series (.npz)')
+    ap.add_argument('--plots', default='', metavar='DIR', help='write the paper-like figures')
     a = ap.parse_args(argv)
     r = series(a.bag, a.epoch)
+    if a.plots:
+        plots(r, a.plots)
     m = metrics(r)
     eta = r['eta']
     if eta.size:
