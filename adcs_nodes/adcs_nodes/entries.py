@@ -214,14 +214,18 @@ _P0_HELP = ('initial covariance diagonal: attitude (phi or mu) [-], rate [rad^2/
             'disturbance [1/s^4]; empty: the default of the measurement form')
 
 
+def _filter_args(p: Dict[str, Any]) -> Dict[str, Any]:
+    """Keyword arguments of the paper-000 filter wrappers from their registry parameters."""
+    return dict(theta=p['theta_T2'], tau=p['tau'], p0_diag=p['p0_diag'] or None,
+                measurement_form=p['measurement_form'], literal_update=p['literal_update'],
+                substeps=p['substeps'], max_rate_rad_s=p['max_rate_rad_s'],
+                max_disturbance_rad_s2=p['max_disturbance_rad_s2'],
+                use_sensor_covariance=p['use_sensor_covariance'])
+
+
 def _build_magnetic_filter(p: Dict[str, Any], ctx: Dict[str, Any]):
     from adcs_nodes.core.estimation.algorithms import MagneticFilterEstimator
-    return MagneticFilterEstimator(
-        ctx['inertia_kgm2'], theta=p['theta_T2'], tau=p['tau'],
-        p0_diag=p['p0_diag'] or None, measurement_form=p['measurement_form'],
-        literal_update=p['literal_update'], substeps=p['substeps'],
-        max_rate_rad_s=p['max_rate_rad_s'], max_disturbance_rad_s2=p['max_disturbance_rad_s2'],
-        use_sensor_covariance=p['use_sensor_covariance'])
+    return MagneticFilterEstimator(ctx['inertia_kgm2'], **_filter_args(p))
 
 
 MAGNETIC_FILTER_PARAMS = (
@@ -254,11 +258,7 @@ register(Entry(
 def _build_magnetic_filter_bias(p: Dict[str, Any], ctx: Dict[str, Any]):
     from adcs_nodes.core.estimation.magnetic_filter_bias import MagneticFilterBiasEstimator
     return MagneticFilterBiasEstimator(
-        ctx['inertia_kgm2'], theta=p['theta_T2'], tau=p['tau'],
-        p0_diag=p['p0_diag'] or None, measurement_form=p['measurement_form'],
-        literal_update=p['literal_update'], substeps=p['substeps'],
-        max_rate_rad_s=p['max_rate_rad_s'], max_disturbance_rad_s2=p['max_disturbance_rad_s2'],
-        use_sensor_covariance=p['use_sensor_covariance'], bias0_T=p['bias0_T'],
+        ctx['inertia_kgm2'], **_filter_args(p), bias0_T=p['bias0_T'],
         bias_std0_T=p['bias_std0_T'], magnitude_std_T=p['magnitude_std_T'],
         bias_walk_T_sqrt_s=p['bias_walk_T_sqrt_s'], max_bias_T=p['max_bias_T'],
         bias_gate_sigma=p['bias_gate_sigma'])
