@@ -1,0 +1,62 @@
+"""Lockstep determinism of the closed loop (issue 12): paper000_control runs beside two CPU
+burners, one process per node and composed, give the same contents on every data topic as a
+run on its own (estimate, commands of every controller, the manager's output, truth,
+magnetometer, target, tf). Status-like topics with wall-clock content are excluded
+(``tools.bag.NONDETERMINISTIC_TYPES``)."""
+import multiprocessing
+import os
+
+import pytest
+import yaml
+
+from adcs_launch import SCENARIOS, adcs
+from adcs_nodes.tools.bag import content_digest
+
+DURATION = '300'
+DATA_TOPICS = ('/adcs/attitude_estimate', '/adcs/actuator_command',
+               '/adcs/controllers/magnetic/command', '/adcs/controllers/bdot/command',
+               '/sim/state', '/sensors/magnetometer', '/adcs/attitude_target', '/tf')
+
+
+def _burn(seconds):
+    import time
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        pass
+
+
+@pytest.fixture(scope='module')
+def scenario(tmp_path_factory):
+    with open(os.path.join(SCENARIOS, 'paper000_control.yaml')) as fh:
+        sc = yaml.safe_load(fh)
+    sc['sensors']['magnetometer']['period_s'] = 2.0      # the magnetometer in every frame
+    path = tmp_path_factory.mktemp('det') / 'control.yaml'
+    path.write_text(yaml.safe_dump(sc))
+    return str(path)
+
+
+@pytest.fixture(scope='module')
+def reference(scenario, tmp_path_factory):
+    bag = str(tmp_path_factory.mktemp('det') / 'reference')
+    adcs('run', scenario, '--record', bag, '--duration', DURATION, '--quiet', timeout=600)
+    return content_digest(bag)
+
+
+@pytest.mark.parametrize('compose', [False, True], ids=['process_per_node', 'composed'])
+def test_closed_loop_bag_is_identical_beside_cpu_burners(scenario, reference, tmp_path,
+                                                         compose):
+    bag = str(tmp_path / 'loaded')
+    burners = [multiprocessing.Process(target=_burn, args=(300.0,)) for _ in range(2)]
+    for b in burners:
+        b.start()
+    try:
+        adcs('run', scenario, '--record', bag, '--duration', DURATION, '--quiet',
+             *(['--compose'] if compose else []), timeout=600)
+    finally:
+        for b in burners:
+            b.terminate()
+            b.join()
+    got = content_digest(bag)
+    for topic in DATA_TOPICS:
+        assert topic in reference, f'{topic} not recorded'
+        assert got[topic] == reference[topic], f'{topic} differs under load'
