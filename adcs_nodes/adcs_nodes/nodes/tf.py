@@ -43,6 +43,12 @@ QOS_TF = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
 QOS_TF_STATIC = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                            history=HistoryPolicy.KEEP_LAST,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: A /tf_static reader keeps many messages (tf2's static listener: depth 100): TFMessage has
+#: no key, so with depth 1 the latched mounts of two sensors arriving together overwrote each
+#: other and one mount was never seen (the estimator then waited for it forever).
+QOS_TF_STATIC_READER = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                  history=HistoryPolicy.KEEP_LAST,
+                                  durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 BODY = 'body'
 BODY_ESTIMATE = 'body_estimate'
@@ -159,9 +165,10 @@ class MountTable:
         self._mounts: Dict[str, np.ndarray] = {}
         make = getattr(node, 'subscription', None)
         if make is not None:
-            make(TFMessage, '/tf_static', self.on_message, QOS_TF_STATIC)
+            make(TFMessage, '/tf_static', self.on_message, QOS_TF_STATIC_READER)
         else:
-            node.create_subscription(TFMessage, '/tf_static', self.on_message, QOS_TF_STATIC)
+            node.create_subscription(TFMessage, '/tf_static', self.on_message,
+                                     QOS_TF_STATIC_READER)
 
     def on_message(self, msg: TFMessage) -> None:
         """Store every ``body -> X`` rotation of a ``/tf_static`` message (finite ones only)."""
