@@ -126,7 +126,8 @@ def test_trajectory_matches_an_independent_integration(bag_dir, tmp_path):
 # the trajectory topics were not compared that time. One rerun, reported, not hidden.
 @pytest.mark.flaky(reruns=1)
 def test_same_seed_same_bag_under_cpu_load(reference_bag, bag_dir):
-    bag = str(bag_dir / 'loaded')
+    import time
+    bag = str(bag_dir / f'loaded-{time.monotonic_ns()}')     # a fresh bag on a rerun
     burners = [multiprocessing.Process(target=_burn, args=(120.0,)) for _ in range(2)]
     for b in burners:
         b.start()
