@@ -335,6 +335,9 @@ def _graph_nodes(bag: str, nodes: Sequence[str]):
     except ValueError as exc:
         raise ReplayError(f'{path}: {exc}') from None
     unknown = [n for n in nodes if n not in specs]
+    if 'dynamics' in nodes:
+        raise ReplayError('dynamics is the clock master: it paces a run, a replay cannot '
+                          'pace it')
     if unknown:
         raise ReplayError(f'no node {", ".join(unknown)} in the graph of {path} (it has: '
                           f'{", ".join(sorted(specs))})')
@@ -343,8 +346,14 @@ def _graph_nodes(bag: str, nodes: Sequence[str]):
 
 def _lockstep_params(spec) -> Dict:
     """The launcher's parameters of ``spec`` for a lockstep run alone: ``timing_mode:
-    lockstep`` and a handshake that waits only for its inputs (which the replay publishes)."""
+    lockstep`` and a handshake that waits only for its inputs (which the replay publishes).
+
+    Left out: ``expected_publishers`` (the replay, not the graph's producer, publishes the
+    inputs) and ``autostart`` (a managed node started alone configures and activates itself).
+    """
     params = dict(spec.params, timing_mode='lockstep')
+    for key in ('expected_publishers', 'autostart'):
+        params.pop(key, None)
     subs = [e for e in params.pop('expected_matches', []) if e.startswith('sub:')]
     if subs:        # (an empty list has no type in a ROS parameter file)
         params['expected_matches'] = subs
@@ -385,13 +394,13 @@ def lockstep_plan(bag: str, nodes: Sequence[str] = ('estimator',),
             available = {c.topic: c.msgtype for c in reader.connections}
             if topics and '/tf_static' in available:
                 needed.setdefault('/tf_static', list(nodes))
+            needed.setdefault('/clock', [])           # the frames, even for a node without it
             missing = [t for t in needed if t not in available]
-            if '/clock' not in needed:
-                missing.append('/clock')
             if missing:
                 raise ReplayError(
                     f'{bag}: no topic ' + ', '.join(
-                        f'{t} (needed by {", ".join(needed.get(t, nodes))})' for t in missing)
+                        f'{t} (needed by {", ".join(needed[t] or ["the frames"])})'
+                        for t in missing)
                     + f' (it has: {", ".join(sorted(available))})')
             store = reader.typestore if hasattr(reader, 'typestore') else None
             from adcs_nodes.tools.bag import stamp_kind
