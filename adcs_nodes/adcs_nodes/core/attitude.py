@@ -20,6 +20,8 @@ zero-norm quaternion instead of returning NaN.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 _EPS_NORM = 1e-12
@@ -29,7 +31,7 @@ def _as_quat(q) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     if q.shape != (4,):
         raise ValueError(f'quaternion must have shape (4,), got {q.shape}')
-    if not np.all(np.isfinite(q)):
+    if not np.isfinite(q).all():        # the method: no np.all dispatch (hot path)
         raise ValueError(f'quaternion is not finite: {q}')
     return q
 
@@ -39,7 +41,7 @@ def as_vec3(v, name: str = 'vector') -> np.ndarray:
     v = np.asarray(v, dtype=float)
     if v.shape != (3,):
         raise ValueError(f'{name} must have shape (3,), got {v.shape}')
-    if not np.all(np.isfinite(v)):
+    if not np.isfinite(v).all():
         raise ValueError(f'{name} is not finite: {v}')
     return v
 
@@ -53,7 +55,7 @@ def normalize(q) -> np.ndarray:
         If ``q`` is not finite or has (near) zero norm.
     """
     q = _as_quat(q)
-    n = np.linalg.norm(q)
+    n = math.sqrt(q.dot(q))             # what np.linalg.norm computes for a real vector
     if n < _EPS_NORM:
         raise ValueError('quaternion has zero norm')
     return q / n

@@ -24,16 +24,27 @@ or in which order the torque is queried, so a trajectory does not depend on the 
 integrator substeps. The spacecraft model samples every disturbance once per RK4 substep, at
 the substep midpoint, and holds it over the substep; with ``T`` a multiple of the substep this
 is exact for (D3).
+
+Drawing ``n_j`` with ``default_rng([seed, key])`` costs about 8 us (most of it building the
+``SeedSequence`` and ``PCG64``), 20 times per frame at the paper's 0.1 s period. The same bits
+come from one reused ``PCG64``: :func:`pcg64_seed_words` is numpy's ``SeedSequence`` hash
+(``mix_entropy`` with pool size 4, then ``generate_state(4, uint64)`` as eight 32-bit words;
+numpy ``bit_generator.pyx``) compiled with numba, and :meth:`RandomTorque.draw` applies PCG64's
+seeding (``pcg_setseq_128_srandom_r``: ``inc = 2 initseq + 1``, ``s = (inc + initstate) a +
+inc`` mod 2^128) and sets that state. About 2-4 us; ``tests/unit/test_random_draw.py`` checks
+every bit against ``default_rng``.
 """
 from __future__ import annotations
 
 import math
+import threading
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from adcs_nodes.core import attitude
 from adcs_nodes.core.orbit import MU_EARTH  # one value for the whole project
+from sim_node.models.kernels import njit
 
 _INDEX_TOL = 1e-9   # [periods]: t = j T minus a rounding error still belongs to period j
 
@@ -163,10 +174,14 @@ class RandomTorque:
         return math.floor(t / self.period_s + _INDEX_TOL)
 
     def draw(self, j: int) -> np.ndarray:
-        """Torque of period ``j`` [N m], body axes, shape (3,); a pure function of (seed, j)."""
+        """Torque of period ``j`` [N m], body axes, shape (3,); a pure function of (seed, j).
+
+        ``std_Nm * default_rng([seed, key]).standard_normal(3)`` with ``key = 2 j`` (``j >=
+        0``) or ``-2 j - 1``, computed on one reused ``PCG64`` (module docstring).
+        """
         # SeedSequence entropy must be non-negative: map ..., -2, -1, 0, 1, ... one-to-one.
         key = 2 * j if j >= 0 else -2 * j - 1
-        return self.std_Nm * np.random.default_rng([self.seed, key]).standard_normal(3)
+        return self.std_Nm * standard_normal3(self.seed, key)
 
     def torque(self, t: float) -> np.ndarray:
         """Torque [N m], body axes, shape (3,), held over the period containing ``t`` [s]."""
@@ -175,6 +190,85 @@ class RandomTorque:
             self._last_value = self.draw(j)
             self._last_index = j
         return self._last_value.copy()
+
+
+_M128 = (1 << 128) - 1
+_PCG64_MULT = (2549297995355413924 << 64) + 4865540595714422341   # PCG_DEFAULT_MULTIPLIER_128
+_LOCAL = threading.local()            # one reseeded PCG64 per thread (module docstring)
+
+
+@njit(cache=True)
+def pcg64_seed_words(ent, n):
+    """``SeedSequence(entropy).generate_state(4, np.uint64)`` as eight 32-bit words.
+
+    Parameters
+    ----------
+    ent : numpy.ndarray, shape (4,), int64
+        The entropy as 32-bit words (``_coerce_to_uint32_array``: each integer of the entropy
+        list split into words, low first; ``0`` is one word), zero padded.
+    n : int
+        Number of entropy words, 1 to 4.
+
+    Returns
+    -------
+    numpy.ndarray, shape (8,), int64
+        Words ``w``: 64-bit word ``k`` is ``w[2k] + 2**32 w[2k + 1]``.
+    """
+    m32 = 0xFFFFFFFF
+    pool = np.zeros(4, np.int64)
+    h = 0x43b0d7e5                       # INIT_A
+    for i in range(4 + 12 + 4 * max(n - 4, 0)):
+        if i < 4:                        # hashmix of the entropy (or 0) into the pool
+            src, dst = (int(ent[i]) if i < n else 0), -1
+        elif i < 16:                     # every pool word into every other one
+            i_src, k = divmod(i - 4, 3)
+            dst = k if k < i_src else k + 1
+            src = int(pool[i_src])
+        else:                            # entropy beyond the pool size
+            i_src, dst = divmod(i - 16, 4)
+            src = int(ent[4 + i_src])
+        value = src ^ h
+        h = (h * 0x931e8875) & m32       # MULT_A
+        value = (value * h) & m32
+        value ^= value >> 16
+        if dst < 0:
+            pool[i] = value
+        else:                            # mix(x, y)
+            r = (0xca01f9dd * int(pool[dst]) - 0x4973f715 * value) & m32
+            pool[dst] = r ^ (r >> 16)
+    out = np.zeros(8, np.int64)
+    h = 0x8b51f9dd                       # INIT_B
+    for i in range(8):
+        value = int(pool[i % 4]) ^ h
+        h = (h * 0x58f38ded) & m32       # MULT_B
+        value = (value * h) & m32
+        out[i] = value ^ (value >> 16)
+    return out
+
+
+def standard_normal3(seed: int, key: int) -> np.ndarray:
+    """``numpy.random.default_rng([seed, key]).standard_normal(3)``, bit for bit, shape (3,)."""
+    if not 0 <= seed < 2**64 or not 0 <= key < 2**64:
+        return np.random.default_rng([seed, key]).standard_normal(3)
+    ent = np.zeros(4, np.int64)
+    n = 0
+    for v in (seed, key):
+        ent[n] = v & 0xFFFFFFFF
+        n += 1
+        if v >> 32:
+            ent[n] = v >> 32
+            n += 1
+    w0, w1, w2, w3, w4, w5, w6, w7 = pcg64_seed_words(ent, n).tolist()
+    initstate = (((w1 << 32) | w0) << 64) | ((w3 << 32) | w2)
+    initseq = (((w5 << 32) | w4) << 64) | ((w7 << 32) | w6)
+    inc = ((initseq << 1) | 1) & _M128
+    state = ((inc + initstate) * _PCG64_MULT + inc) & _M128
+    gen = getattr(_LOCAL, 'gen', None)
+    if gen is None:
+        gen = _LOCAL.gen = np.random.Generator(np.random.PCG64(0))
+    gen.bit_generator.state = {'bit_generator': 'PCG64', 'state': {'state': state, 'inc': inc},
+                               'has_uint32': 0, 'uinteger': 0}
+    return gen.standard_normal(3)
 
 
 def _seed(seed) -> int:

@@ -510,6 +510,19 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     return 0
 
 
+def one_blas_thread() -> None:
+    """One BLAS/OpenMP thread in this process and its children (numpy is already loaded here,
+    so the environment alone would come too late: ``threadpoolctl`` limits the loaded
+    libraries). The models make only tiny LAPACK calls; extra threads cost CPU, same bits."""
+    for key in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
+        os.environ[key] = '1'
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - pinned in ros2_ws/requirements.txt
+        return
+    threadpool_limits(limits=1)
+
+
 if __name__ == '__main__':
-    os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+    one_blas_thread()
     raise SystemExit(main())

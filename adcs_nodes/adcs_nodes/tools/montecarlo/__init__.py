@@ -2,7 +2,7 @@
 
 Usage::
 
-    adcs montecarlo SCENARIO --runs N [--jobs J | --scheduler ADDRESS] [--out DIR]
+    adcs montecarlo SCENARIO --runs N [--jobs J] [--scheduler ADDRESS | --dask-local] [--out DIR]
                     [--duration S] [--seed S] [--max-rate-deg-s 3.0] [--capture-deg 5.0]
                     [--mag-bias-nT B] [--misalignment-deg M] [--auto-detumble]
                     [--bdot-gain K] [--engine graph|plain] [--compose]
@@ -47,20 +47,24 @@ per run keeps every graph isolated, each with its own domain). ``--jobs J`` supe
 processes at once from a thread pool; ``--scheduler ADDRESS`` submits the same supervisor
 function (:func:`execute_run`) to an existing Dask distributed scheduler, whose workers start
 the run processes on their machines. Workers need this package (and ROS 2) installed and
-``--out`` on a file system they see under the same path. Engine ``plain``: the run process is
-``python -m sim_node.tools.closed_loop _mc_worker RUN_DIR``, the same cores in a plain loop
-without ROS (same trajectory as the graph up to float rounding; no bag, the per-frame series
-go to ``series.npz``).
+``--out`` on a file system they see under the same path. ``--dask-local`` starts a Dask
+``LocalCluster`` of J worker processes with one thread each (a worker supervises one run at
+a time, like one slot of the thread pool) for the campaign and stops it at the end. Engine
+``plain``: the run process is ``python -m sim_node.tools.closed_loop _mc_worker RUN_DIR``, the
+same cores in a plain loop without ROS (same trajectory as the graph up to float rounding; no
+bag, the per-frame series go to ``series.npz``): about 7x less CPU per run (README, Monte
+Carlo). Every run process gets one BLAS/OpenMP thread (:data:`.runner.ONE_THREAD_ENV`) and
+loads the numba kernels from their on-disk cache.
 
 Files (``OUT`` = ``--out``)
 ---------------------------
 ``campaign.json``
     The campaign's identity (:data:`IDENTITY_KEYS`: scenario content hash, seed, duration,
-    dispersion bounds, capture threshold) plus the last ``runs`` and ``compose``; a restart
-    with a different identity is refused. ``--runs``, ``--jobs``, ``--scheduler`` and
-    ``--compose`` may change between restarts (run ``i``'s draws depend only on the seed and
-    ``i``, so a larger ``--runs`` extends the campaign; composed and per-process graphs give
-    the same trajectory).
+    dispersion bounds, capture threshold, engine) plus the last ``runs`` and ``compose``; a
+    restart with a different identity is refused. ``--runs``, ``--jobs``, ``--scheduler``,
+    ``--dask-local`` and ``--compose`` may change between restarts (run ``i``'s draws depend
+    only on the seed and ``i``, so a larger ``--runs`` extends the campaign; composed and
+    per-process graphs give the same trajectory).
 ``runs/run_<i>/``
     ``scenario.yaml`` (the dispersed scenario: ``adcs run`` reproduces the run), ``job.json``,
     ``bag/`` (rosbag2 MCAP), ``logs/``, ``worker.log`` and ``result.json`` (written atomically
@@ -96,16 +100,17 @@ from adcs_nodes.tools.montecarlo.files import (FAILED_FILE, RESULT_FILE, SERIES_
                                                load_result, run_dir_of, write_json_atomic)
 from adcs_nodes.tools.montecarlo.results import (STATE_TOPIC, bag_metrics, read_truth,
                                                  series_metrics)
-from adcs_nodes.tools.montecarlo.runner import STOP_GRACE_S, execute_run, worker_main
+from adcs_nodes.tools.montecarlo.runner import (ONE_THREAD_ENV, STOP_GRACE_S, execute_run,
+                                                worker_env, worker_main)
 from adcs_nodes.tools.montecarlo.summary import (orbit_period_s, plot_capture_vs_rate,
                                                  rate_bins, summary_markdown)
 from adcs_nodes.tools.montecarlo.table import CSV_COLUMNS, read_table, table_row, write_table
 
 __all__ = ['AUTO_DETUMBLE', 'CSV_COLUMNS', 'ENGINES', 'FAILED_FILE', 'IDENTITY_KEYS',
-           'RESULT_FILE', 'SERIES_FILE', 'STATE_TOPIC', 'STOP_GRACE_S', 'Campaign',
-           'CampaignConfig', 'CampaignError', 'DaskBackend', 'Dispersion', 'LocalBackend',
-           'add_arguments', 'apply_dispersion', 'bag_metrics', 'config_from_args',
+           'ONE_THREAD_ENV', 'RESULT_FILE', 'SERIES_FILE', 'STATE_TOPIC', 'STOP_GRACE_S',
+           'Campaign', 'CampaignConfig', 'CampaignError', 'DaskBackend', 'Dispersion',
+           'LocalBackend', 'add_arguments', 'apply_dispersion', 'bag_metrics', 'config_from_args',
            'draw_dispersion', 'execute_run', 'load_result', 'main', 'orbit_period_s',
            'plot_capture_vs_rate', 'rate_bins', 'read_table', 'read_truth', 'run_dir_of',
            'run_from_args', 'scenario_hash', 'series_metrics', 'summary_markdown', 'table_row',
-           'worker_main', 'write_json_atomic', 'write_table']
+           'worker_env', 'worker_main', 'write_json_atomic', 'write_table']

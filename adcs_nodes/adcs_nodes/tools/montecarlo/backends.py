@@ -1,8 +1,10 @@
-"""Where the runs execute: a local thread pool of run processes, or a Dask cluster."""
+"""Where the runs execute: a local thread pool of run processes, or a Dask cluster (an
+existing scheduler, or a ``LocalCluster`` started for the campaign)."""
 from __future__ import annotations
 
+import logging
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-from typing import Any, Dict, Iterator, List
+from typing import Any, Dict, Iterator, List, Optional
 
 from adcs_nodes.tools.montecarlo.config import CampaignError
 from adcs_nodes.tools.montecarlo.runner import execute_run
@@ -35,19 +37,44 @@ class LocalBackend:
 
 
 class DaskBackend:
-    """Runs submitted to an existing Dask distributed scheduler."""
+    """Runs submitted to a Dask distributed scheduler: an existing one (``address``), or a
+    ``LocalCluster`` this backend starts and stops (``local_workers``).
 
-    def __init__(self, address: str, session: str) -> None:
+    Parameters
+    ----------
+    address : str or None
+        Scheduler address (``--scheduler``); None with ``local_workers``.
+    session : str
+        Campaign session id (part of the task keys).
+    local_workers : int, optional
+        Start a ``LocalCluster`` of this many worker processes with one thread each
+        (``--dask-local``): a worker supervises one run process at a time, like one slot of
+        the local thread pool.
+    """
+
+    def __init__(self, address: Optional[str], session: str,
+                 local_workers: Optional[int] = None) -> None:
         try:
-            from distributed import Client
+            from distributed import Client, LocalCluster
         except ImportError as exc:
-            raise CampaignError('--scheduler needs the dask and distributed packages '
+            flag = '--dask-local' if local_workers else '--scheduler'
+            raise CampaignError(f'{flag} needs the dask and distributed packages '
                                 f'({exc})') from exc
+        self.cluster = None
+        if local_workers is not None:
+            if local_workers < 1:
+                raise CampaignError(f'a Dask LocalCluster needs >= 1 worker, got {local_workers}')
+            self.cluster = LocalCluster(n_workers=local_workers, threads_per_worker=1,
+                                        processes=True, dashboard_address=None,
+                                        silence_logs=logging.ERROR)
+            address = self.cluster.scheduler_address
         try:
             self.client = Client(address, timeout=30)
         except (OSError, TimeoutError) as exc:
+            self._close_cluster()
             raise CampaignError(f'cannot connect to the Dask scheduler {address}: {exc}') \
                 from exc
+        self.address = address
         self.session = session
         self.futures: list = []
 
@@ -79,7 +106,15 @@ class DaskBackend:
         return done
 
     def close(self) -> None:
-        self.client.close()
+        try:
+            self.client.close()
+        finally:
+            self._close_cluster()
+
+    def _close_cluster(self) -> None:
+        if self.cluster is not None:
+            self.cluster.close()
+            self.cluster = None
 
 
 def _future_index(fut: Any) -> int:

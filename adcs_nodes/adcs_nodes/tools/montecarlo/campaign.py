@@ -92,8 +92,14 @@ class Campaign:
         return job
 
     # -------------------------------------------------------------- execution
-    def run(self, jobs: int = 1, scheduler: Optional[str] = None) -> int:
-        """Execute every run not done yet; write the table, summary and plot. Exit code."""
+    def run(self, jobs: int = 1, scheduler: Optional[str] = None,
+            dask_local: bool = False) -> int:
+        """Execute every run not done yet; write the table, summary and plot. Exit code.
+
+        ``jobs`` runs at once from a local thread pool; or the runs go to the Dask scheduler
+        ``scheduler``; or, with ``dask_local``, to a Dask ``LocalCluster`` of ``jobs`` worker
+        processes (one thread each) started here and stopped at the end.
+        """
         os.makedirs(self.out, exist_ok=True)
         with campaign_lock(self.out):
             self.check_or_create()
@@ -101,8 +107,12 @@ class Campaign:
             todo = self._collect_done()
             interrupted = False
             if todo:
-                backend = (DaskBackend(scheduler, self.session) if scheduler
-                           else LocalBackend(jobs))
+                if dask_local:
+                    backend = DaskBackend(None, self.session, local_workers=jobs)
+                elif scheduler:
+                    backend = DaskBackend(scheduler, self.session)
+                else:
+                    backend = LocalBackend(jobs)
                 interrupted = self._execute(backend, todo)
             for i in range(self.cfg.runs):
                 self.rows.setdefault(i, {'index': i, 'status': 'pending', 'dispersion':

@@ -19,10 +19,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--runs', type=int, required=True, metavar='N', help='number of runs')
     parser.add_argument('--jobs', type=int, default=1, metavar='J',
                         help='runs at once on this machine, each in its own processes '
-                        '(default 1; ignored with --scheduler)')
-    parser.add_argument('--scheduler', metavar='ADDRESS',
-                        help='submit the runs to this Dask distributed scheduler '
-                        '(e.g. tcp://host:8786); --out must be on a shared file system')
+                        '(default 1; with --dask-local: the number of Dask workers; ignored '
+                        'with --scheduler)')
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument('--scheduler', metavar='ADDRESS',
+                       help='submit the runs to this Dask distributed scheduler '
+                       '(e.g. tcp://host:8786); --out must be on a shared file system')
+    where.add_argument('--dask-local', action='store_true',
+                       help='start a Dask LocalCluster on this machine for the campaign '
+                       '(--jobs worker processes, one thread each) and stop it at the end')
     parser.add_argument('--out', metavar='DIR', help='campaign directory (default '
                         'montecarlo_<scenario name>); an existing campaign there is resumed')
     parser.add_argument('--duration', type=float, metavar='S',
@@ -104,11 +109,17 @@ def run_from_args(args: argparse.Namespace) -> int:
     try:
         cfg, base, out = config_from_args(args)
         campaign = Campaign(cfg, base, out, log=lambda text: print(text, flush=True))
-        mode = (f'on the Dask scheduler {args.scheduler}' if args.scheduler
-                else f'{args.jobs} at a time')
+        dask_local = bool(getattr(args, 'dask_local', False))
+        if args.scheduler:
+            mode = f'on the Dask scheduler {args.scheduler}'
+        elif dask_local:
+            mode = f'on a Dask LocalCluster of {args.jobs} worker process(es), 1 thread each'
+        else:
+            mode = f'{args.jobs} at a time'
         print(f'[montecarlo] {cfg.runs} runs of {base["name"]} ({cfg.duration_s:g} s each, '
-              f'seed {cfg.seed}) {mode}, output in {campaign.out}', flush=True)
-        return campaign.run(jobs=args.jobs, scheduler=args.scheduler)
+              f'seed {cfg.seed}, engine {cfg.engine}) {mode}, output in {campaign.out}',
+              flush=True)
+        return campaign.run(jobs=args.jobs, scheduler=args.scheduler, dask_local=dask_local)
     except (CampaignError, ScenarioError) as exc:
         print(f'adcs montecarlo: {exc}', file=sys.stderr)
         return 2

@@ -22,6 +22,18 @@ WORKER_COMMANDS = {
     'graph': ['-m', 'adcs_nodes.tools.montecarlo', '_worker'],
     'plain': ['-m', 'sim_node.tools.closed_loop', '_mc_worker'],
 }
+#: Set in every run process's environment: one BLAS/OpenMP/numba thread per run (J runs share
+#: J cores; the models make only tiny LAPACK calls, where extra threads cost CPU and give the
+#: same bits: :mod:`adcs_nodes.nodes.runtime`). The numba kernels use their on-disk cache
+#: (``cache=True``), so a run process loads them instead of compiling.
+ONE_THREAD_ENV = {key: '1' for key in (
+    'OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'BLIS_NUM_THREADS',
+    'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS', 'NUMBA_NUM_THREADS')}
+
+
+def worker_env() -> Dict[str, str]:
+    """Environment of a run process: this process's, with :data:`ONE_THREAD_ENV`."""
+    return {**os.environ, **ONE_THREAD_ENV}
 
 
 def worker_main(run_dir: str) -> int:
@@ -82,10 +94,10 @@ def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
 
     This is the unit of work submitted to the local thread pool or to Dask workers. It
     starts ``python -m adcs_nodes.tools.montecarlo _worker RUN_DIR`` (graph engine) or
-    ``python -m sim_node.tools.closed_loop _mc_worker RUN_DIR`` (plain engine; output to
-    ``worker.log``), and while waiting watches ``job['stop_file']``: when that file appears
-    (Ctrl-C on the campaign) the run gets SIGINT, closes its bag and is reported
-    ``interrupted``.
+    ``python -m sim_node.tools.closed_loop _mc_worker RUN_DIR`` (plain engine), output to
+    ``worker.log``, one BLAS thread (:func:`worker_env`). While waiting it watches
+    ``job['stop_file']``: when that file appears (Ctrl-C on the campaign) the run gets
+    SIGINT, closes its bag and is reported ``interrupted``.
 
     Parameters
     ----------
@@ -107,7 +119,8 @@ def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
     cmd = [sys.executable] + cmd
     with open(os.path.join(run_dir, 'worker.log'), 'w') as log:
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, start_new_session=True)
+                                stdin=subprocess.DEVNULL, start_new_session=True,
+                                env=worker_env())
         code = _supervise(proc, job['stop_file'])
     wall = time.monotonic() - t0
     result = load_result(run_dir) if code == 0 else None

@@ -1,0 +1,111 @@
+"""``adcs montecarlo`` execution: one BLAS thread per run process, ``--dask-local``.
+
+Short: the run processes here are stand-ins or 20 s plain-engine runs. The full campaigns
+(graph engine, ``--scheduler``) are in tests/integration/test_montecarlo.py.
+"""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from adcs_nodes.tools import montecarlo as mc
+from adcs_nodes.tools.montecarlo import runner
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCENARIO = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
+
+#: Stand-in run process: reports the thread counts its BLAS libraries really use.
+PROBE = r'''
+import json, os, sys
+import numpy, scipy.linalg
+from threadpoolctl import threadpool_info
+run_dir = sys.argv[1]
+info = [{'api': i['internal_api'], 'threads': i['num_threads']} for i in threadpool_info()]
+open(os.path.join(run_dir, 'series.npz'), 'wb').close()
+with open(os.path.join(run_dir, 'result.json'), 'w') as fh:
+    env = {k: os.environ.get(k) for k in ('OPENBLAS_NUM_THREADS', 'NUMBA_NUM_THREADS')}
+    json.dump({'index': 0, 'status': 'captured', 'pools': info, 'env': env}, fh)
+'''
+
+
+def test_run_process_gets_one_blas_thread(tmp_path, monkeypatch):
+    pytest.importorskip('threadpoolctl')
+    monkeypatch.setenv('OPENBLAS_NUM_THREADS', '4')    # the campaign's own setting loses
+    monkeypatch.setenv('OMP_NUM_THREADS', '4')
+    monkeypatch.setitem(runner.WORKER_COMMANDS, 'plain', ['-c', PROBE])
+    job = {'index': 0, 'run_dir': str(tmp_path), 'stop_file': str(tmp_path / 'stop'),
+           'engine': 'plain'}
+    result = mc.execute_run(job)
+    assert result['status'] == 'captured', result
+    assert result['env'] == {'OPENBLAS_NUM_THREADS': '1', 'NUMBA_NUM_THREADS': '1'}
+    assert result['pools'], 'numpy loaded no BLAS library?'
+    assert all(p['threads'] == 1 for p in result['pools']), result['pools']
+
+
+def test_local_cluster_has_one_single_thread_process_per_job():
+    distributed = pytest.importorskip('distributed')
+    backend = mc.DaskBackend(None, 'test', local_workers=2)
+    try:
+        workers = backend.client.scheduler_info()['workers'].values()
+        assert sorted(w['nthreads'] for w in workers) == [1, 1]
+        pids = set(backend.client.run(os.getpid).values())
+        assert len(pids) == 2 and os.getpid() not in pids     # processes, not threads
+    finally:
+        backend.close()
+    assert backend.cluster is None
+    assert backend.client.status == 'closed'
+    assert isinstance(backend.client, distributed.Client)
+
+
+def test_bad_local_cluster_size_is_refused():
+    pytest.importorskip('distributed')
+    with pytest.raises(ValueError, match='>= 1 worker'):
+        mc.DaskBackend(None, 'test', local_workers=0)
+
+
+def campaign(out, *args, timeout=180):
+    """Run the command to its end; returns ``(exit code, stdout, stderr, pid)``."""
+    with subprocess.Popen([sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
+                           '--duration', '20', '--engine', 'plain', '--out', str(out), *args],
+                          cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                          text=True) as proc:
+        try:
+            out, err = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+    return proc.returncode, out, err, proc.pid
+
+
+def test_dask_local_campaign_gives_the_local_campaigns_results(tmp_path):
+    pytest.importorskip('distributed')
+    psutil = pytest.importorskip('psutil')
+    code, out, err, _ = campaign(tmp_path / 'local', '--runs', '3', '--jobs', '2')
+    assert code == 0, out + err
+    code, out, err, pid = campaign(tmp_path / 'dask', '--runs', '3', '--jobs', '2',
+                                   '--dask-local')
+    assert code == 0, out + err
+    assert 'on a Dask LocalCluster of 2 worker process(es), 1 thread each' in out
+    assert 'executed 3 run(s)' in out, out
+    rows = mc.read_table(os.path.join(str(tmp_path / 'dask'), 'campaign.csv'))
+    ref = mc.read_table(os.path.join(str(tmp_path / 'local'), 'campaign.csv'))
+    assert [int(r['index']) for r in rows] == [0, 1, 2]
+    supervisors = set()
+    for row, want in zip(rows, ref):
+        assert row['status'] in ('captured', 'not_captured'), row
+        assert row['final_angle_deg'] == want['final_angle_deg']    # same draws, same run
+        with open(os.path.join(mc.run_dir_of(str(tmp_path / 'dask'), int(row['index'])),
+                               'result.json')) as fh:
+            supervisors.add(json.load(fh)['supervisor_pid'])
+    # supervised in the cluster's worker processes, which the command stopped at its end
+    assert pid not in supervisors
+    assert not any(psutil.pid_exists(pid) and psutil.Process(pid).status() != 'zombie'
+                   for pid in supervisors), supervisors
+
+
+def test_dask_local_and_scheduler_exclude_each_other(tmp_path):
+    code, _, err, _ = campaign(tmp_path / 'x', '--runs', '1', '--dask-local', '--scheduler',
+                               'tcp://127.0.0.1:1', timeout=60)
+    assert code == 2 and 'not allowed with argument' in err, err
