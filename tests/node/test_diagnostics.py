@@ -72,3 +72,24 @@ def test_bad_period_is_refused(ros_context):
         raise AssertionError('period 0 accepted')
     finally:
         node.destroy_node()
+
+
+def test_nothing_is_built_while_nobody_reads_diagnostics(ros_context, spin):
+    node = _Node(ros_context)
+    diag = Diagnostics(node)
+    built = []
+    real_status = diag.status
+    diag.status = lambda: built.append(1) or real_status()
+    assert diag.pub.get_subscription_count() == 0
+    assert [diag.frame(k * 500_000_000) for k in range(4)] == [False] * 4     # 0 .. 1.5 s
+    assert built == []
+    probe = rclpy.create_node('probe', context=ros_context)
+    got = []
+    probe.create_subscription(DiagnosticArray, '/diagnostics', got.append, 100)
+    assert spin([node, probe], lambda: diag.pub.get_subscription_count() == 1)
+    # a reader now: the next period boundary (2 s) publishes, stamped with it
+    assert [diag.frame(k * 500_000_000) for k in (4, 5)] == [True, False]
+    assert spin([node, probe], lambda: len(got) == 1)
+    assert stamp_ns(got[0].header.stamp) - EPOCH_NS == 2_000_000_000 and built == [1]
+    probe.destroy_node()
+    node.destroy_node()

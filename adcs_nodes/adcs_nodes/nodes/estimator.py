@@ -220,7 +220,10 @@ class EstimatorNode(LockstepNode):
             omega_orbit_from_eci(q_orbit_body, est.omega_body_eci_body, ref.omega0))
         msg.covariance = [float(c) for c in np.asarray(est.covariance).reshape(-1)]
         self.est_pub.publish(msg)
-        self.tf_pub.send(estimate_transforms(msg.header.stamp, ref.r_eci, q_eci_body))
+        if self.tf_pub.wanted():          # /tf and the filter diagnostics: only when read
+            self.tf_pub.send(estimate_transforms(msg.header.stamp, ref.r_eci, q_eci_body))
+        if self.diag_pub.get_subscription_count() == 0:
+            return
         d = FilterDiagnostics()
         d.header = msg.header
         d.algorithm = self.algorithm

@@ -6,7 +6,7 @@
   Isolation is not a security boundary: ``docs/security.md``.
 * One process per node (``python -m <module> --ros-args -r __node:=<name> --params-file ...``),
   or all nodes in one process (``--compose``, :mod:`adcs_nodes.tools.compose`).
-* Progress: sim time, real-time factor, frames/s and missed frames, read from ``/clock`` and
+* Progress: sim time, real-time factor, frames/s and missed frames, read from
   ``lockstep/status`` by a small monitor node in the launcher process.
 * End: the clock master (dynamics) exits 0 after the last frame; the launcher waits until the
   recorder has seen the final clock, then stops every child with SIGINT (SIGKILL after a grace
@@ -243,12 +243,19 @@ def child_env(domain: int) -> Dict[str, str]:
 
 
 class _Monitor:
-    """Launcher-side rclpy node: progress from /clock, lockstep/status and recorder/status."""
+    """Launcher-side rclpy node: progress from lockstep/status and recorder/status.
+
+    It reads no topic that a node of the graph reads (issue 13): a subscriber of ``/clock``
+    (or of ``lockstep/progress``) in another process sends that topic over DDS also in composed
+    mode, off the composed runner's in-process path, and the mix of the two paths ran at a
+    fifth of the speed (the clock master waited for progress messages stuck behind the
+    in-process deliveries). ``lockstep/status`` (every node once per sim second, stamped with
+    the sim time of its last frame) gives the sim time reached and that the lockstep started.
+    """
 
     def __init__(self, epoch_ns: int) -> None:
         import rclpy
         from rclpy.qos import QoSProfile, ReliabilityPolicy
-        from rosgraph_msgs.msg import Clock
 
         from adcs_msgs.msg import LockstepStatus
         from adcs_nodes.nodes.convert import stamp_ns
@@ -262,14 +269,13 @@ class _Monitor:
         self.node = rclpy.create_node('adcs_launcher', context=self.context,
                                       start_parameter_services=False)
         self.sim_ns = 0
-        self.clock_seen = False     # the lockstep has started (frame 0 published)
+        self.clock_seen = False     # the lockstep has started (a node reported a frame)
         self.status: Dict[str, LockstepStatus] = {}
         self.recorder_clock_ns = -1
         self.recorder_count = 0
         self.recorder_error = ''
-        be = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.node.create_subscription(Clock, '/clock', self._on_clock, be)
-        self.node.create_subscription(LockstepStatus, 'lockstep/status', self._on_status, 50)
+        self.node.create_subscription(LockstepStatus, 'lockstep/status', self._on_status_msg,
+                                      50)
         self.node.create_subscription(LockstepStatus, 'recorder/status', self._on_rec, 10)
         # degraded-run accounting (H-lockstep): the manager's latched status, max missed/node
         from rclpy.qos import DurabilityPolicy
@@ -284,9 +290,13 @@ class _Monitor:
         self.executor = make_executor(self.context)
         self.executor.add_node(self.node)
 
-    def _on_clock(self, msg) -> None:
-        self.clock_seen = True
-        self.sim_ns = max(self.sim_ns, self._stamp_ns(msg.clock) - self.epoch_ns)
+    def _on_status_msg(self, msg) -> None:
+        """``lockstep/status``: missed frames, and the sim time of the node's last frame
+        (a status with no frame processed yet is the start-up watchdog's)."""
+        self._on_status(msg)
+        if msg.frames > 0:
+            self.clock_seen = True
+            self.sim_ns = max(self.sim_ns, self._stamp_ns(msg.header.stamp) - self.epoch_ns)
 
     def _on_status(self, msg) -> None:
         self.status[msg.node] = msg

@@ -327,10 +327,23 @@ class DynamicsNode(LockstepNode):
         msg.omega_body_orbit_body = to_vec3(st.omega_body_eci_body
                                             - r_body_eci @ omega_orbit_eci_eci)
         self.state_pub.publish(msg)
-        self.tf_pub.send(truth_transforms(msg.header.stamp, vec3(env_msg.r_eci), q_eci_orbit,
-                                          q_orbit_body))
+        if self.tf_pub.wanted():     # /tf, sim/wheels, sim/appendages: built only when read
+            self.tf_pub.send(truth_transforms(msg.header.stamp, vec3(env_msg.r_eci),
+                                              q_eci_orbit, q_orbit_body))
+        if self.wheels_pub.get_subscription_count() > 0:
+            self._publish_wheels(msg.header, st)
+        if self.appendages_pub is not None and self.appendages_pub.get_subscription_count() > 0:
+            a = AppendageState()
+            a.header = msg.header
+            a.eta = np.asarray(st.eta, dtype=float).tolist()
+            a.eta_dot = np.asarray(st.eta_dot, dtype=float).tolist()
+            a.frequency_hz = self.spacecraft.flexible.frequencies_hz.tolist()
+            self.appendages_pub.publish(a)
+
+    def _publish_wheels(self, header, st: SpacecraftState) -> None:
+        """``sim/wheels`` of frame k (momentum, speed, applied torque)."""
         w = WheelState()
-        w.header = msg.header
+        w.header = header
         w.names = self.wheel_names
         h = np.asarray(st.h_wheels, dtype=float)
         w.momentum = h.tolist()
@@ -340,13 +353,6 @@ class DynamicsNode(LockstepNode):
             w.torque = np.asarray(self.applied_wheel_torque, dtype=float).tolist()
             w.h_wheels_body = to_vec3(wheels.h_body(h))
         self.wheels_pub.publish(w)
-        if self.appendages_pub is not None:
-            a = AppendageState()
-            a.header = msg.header
-            a.eta = np.asarray(st.eta, dtype=float).tolist()
-            a.eta_dot = np.asarray(st.eta_dot, dtype=float).tolist()
-            a.frequency_hz = self.spacecraft.flexible.frequencies_hz.tolist()
-            self.appendages_pub.publish(a)
 
     def finish(self) -> None:
         """End of the scenario: report and let the runtime stop the process."""

@@ -68,7 +68,8 @@ class EnvironmentNode(LockstepNode):
         self._last_ns = t_ns
         msg = self.compute(t_ns)
         self.pub.publish(msg)
-        self.tf_pub.send(earth_transforms(msg.header.stamp, quat(msg.q_eci_ecef)))
+        if self.tf_pub.wanted():           # only built when someone reads /tf
+            self.tf_pub.send(earth_transforms(msg.header.stamp, quat(msg.q_eci_ecef)))
         self.frames += 1
         self.sim_t_ns = t_ns
         self.diagnostics.frame(t_ns)      # /diagnostics once per sim second

@@ -12,8 +12,8 @@ Every row is measured in the same run, on the same machine, at the same time (is
 3. ``composed``: the same graph in one process (``Launcher(compose=True)``), all messages
    over DDS as in the graph; ``3i``: the same with the composed runner's in-process path
    (``ADCS_COMPOSE_INPROC=1``: DDS only where an outside subscriber is matched; the
-   launcher's progress monitor subscribes to ``/clock`` and ``lockstep/status``, so those
-   still go over DDS);
+   launcher's progress monitor subscribes to ``lockstep/progress`` and ``lockstep/status``,
+   so those still go over DDS);
 4. ``plain loop``: the same models in a plain Python loop without ROS
    (:class:`sim_node.tools.closed_loop.ClosedLoop`, built from the same node parameters);
 5. ``free body``: free rigid body + gravity gradient with this project's RK4
@@ -39,6 +39,7 @@ Usage::
 
     python -m sim_node.tools.bench [--frames 2000] [--repeats 2] [--quick]
                                    [--basilisk auto|skip] [--out out/bench.txt]
+                                   [--rows 2,3,3i]
 """
 from __future__ import annotations
 
@@ -475,8 +476,9 @@ def _ratio(a: Optional[float], b: Optional[float]) -> Optional[float]:
 
 
 def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
-              log: Callable[[str], None]) -> str:
-    """Run every measurement and return the report text (table, targets)."""
+              log: Callable[[str], None], only: Sequence[str] = ()) -> str:
+    """Run every measurement (or the rows whose keys are in ``only``, e.g. ``2, 3, 3i``) and
+    return the report text (table, targets)."""
     from adcs_nodes.nodes.runtime import limit_blas_threads
     from adcs_nodes.tools.scenario import load_scenario
 
@@ -486,6 +488,9 @@ def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
     t_start = time.monotonic()
     bsk_py, bsk_why = basilisk_python(basilisk_mode, log)
     rows = plan(sc, frames, bsk_py, bsk_why)
+    for r in rows:
+        if only and r.key.strip('()') not in only:
+            r.measure, r.skipped = None, 'not selected (--rows)'
     for rep in range(repeats):
         for r in rows:
             if r.measure is None:
@@ -550,7 +555,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help='auto: measure Basilisk, installing bsk on demand in its own venv')
     ap.add_argument('--scenario', default=DEFAULT_SCENARIO)
     ap.add_argument('--out', default='out/bench.txt', help='also write the report here')
+    ap.add_argument('--rows', default='',
+                    help='comma-separated row keys to measure (e.g. 2,3,3i); default: all')
     args = ap.parse_args(argv)
+    only = [k.strip() for k in args.rows.split(',') if k.strip()]
+    known = ('1', '2', '3', '3i', '4', '5', '6')
+    if any(k not in known for k in only):
+        ap.error(f'--rows: known keys are {", ".join(known)}')
     if args.quick:
         args.frames, args.repeats = 300, 1
     if args.frames <= SHORT_FRAMES or args.repeats < 1:
@@ -560,7 +571,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(msg, file=sys.stderr, flush=True)
 
     try:
-        text = run_bench(args.scenario, args.frames, args.repeats, args.basilisk, log)
+        text = run_bench(args.scenario, args.frames, args.repeats, args.basilisk, log, only)
     except (BenchError, RingError) as exc:
         print(f'[bench] failed: {exc}', file=sys.stderr)
         return 1
