@@ -585,7 +585,8 @@ def replay_lockstep(bag: str, nodes: Sequence[str] = ('estimator',),
         def show(what: str = '') -> None:
             log(f'[replay] lockstep: t={(sent_t - first) / NS_PER_S:g} of '
                 f'{(last - first) / NS_PER_S:g} s published; ' + ', '.join(
-                    f'{n} at {(done[n] - first) / NS_PER_S:g} s' for n in nodes))
+                    f'{n} at {(done[n] - first) / NS_PER_S:g} s' for n in nodes)
+                + (f' ({what})' if what else ''))
 
         lag_ns = MAX_LAG_FRAMES * plan.frame_ns
         i, sent, sent_t = 0, 0, first
