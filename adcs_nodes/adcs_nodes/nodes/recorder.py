@@ -41,12 +41,16 @@ Topics
 ``recorder/status`` (``adcs_msgs/LockstepStatus``): ``node`` = node name, ``frames`` = messages
 written, ``header.stamp`` = latest ``/clock`` seen, ``missed_frames`` = messages the middleware
 reported lost, ``last_missed_input`` = topic of the last loss, ``wall_time`` = wall seconds
-since the first message written. A launcher waits on it (clock stamp reached the end of the
-run, frame count stable) before stopping the recorder. A launcher that needs every message of
-a topic gives ``expected_matches`` and waits for ``lockstep/ready``, or waits until
-:func:`recorder_subscribed` is true, before starting the simulation. ``/clock`` is subscribed
-once only (the recording subscription when ``/clock`` is recorded), so the recorder adds
-exactly one DDS match per recorded topic to the publishers' handshakes.
+since the first message written; published every ``status_period_s`` and every
+:data:`STATUS_EVERY_CLOCKS` ``/clock`` messages received. The clock master lets the recorder
+fall behind by fewer frames than the publishers keep (``sim_node.nodes.dynamics``), so a
+message the recorder has not received yet can always still be resent. A launcher waits on it
+(clock stamp reached the end of the run, frame count stable) before stopping the recorder. A
+launcher that needs every message of a topic gives ``expected_matches`` and waits for
+``lockstep/ready``, or waits until :func:`recorder_subscribed` is true, before starting the
+simulation. ``/clock`` is subscribed once only (the recording subscription when ``/clock`` is
+recorded), so the recorder adds exactly one DDS match per recorded topic to the publishers'
+handshakes.
 
 QoS
 ---
@@ -123,6 +127,10 @@ QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                        history=HistoryPolicy.KEEP_LAST,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 HANDSHAKE_PERIOD_S = 0.02
+#: ``recorder/status`` is also published every this many ``/clock`` messages written (as the
+#: lockstep nodes report progress every 10 frames), so the clock master's flow control sees
+#: the recorder's progress in frames, not only every ``status_period_s`` of wall time.
+STATUS_EVERY_CLOCKS = 10
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 #: Exit code of a recorder stopped by a write error (disk full); the launcher names it.
 EXIT_WRITE_FAILED = 3
@@ -327,6 +335,7 @@ class RecorderNode(Node):
         self._last_lost_topic = ''
         self._last_log_ns = 0
         self._latest_clock_ns = 0
+        self._clocks_written = 0
         self._clock_in_graph = False
         self._first_write_wall: Optional[float] = None
 
@@ -519,10 +528,12 @@ class RecorderNode(Node):
     def _on_message(self, rec: _Topic, raw: bytes) -> None:
         if self._writer is None:
             return
+        clock_tick = False
         if rec.msgtype == CLOCK_TYPE:
             stamp = cdr_stamp_ns(raw)
             if stamp is not None:
                 self._latest_clock_ns = max(self._latest_clock_ns, stamp)
+                clock_tick = True
         t_ns = self._log_time_ns(rec, raw)
         try:
             self._writer.write(rec.connection, t_ns, raw)
@@ -538,6 +549,10 @@ class RecorderNode(Node):
         # abs: the log time may jump back once, from wall time to the first /clock
         if abs(t_ns - self._chunk_t0_ns) >= self._flush_sim_ns:
             self.flush()
+        if clock_tick:
+            self._clocks_written += 1
+            if self._clocks_written % STATUS_EVERY_CLOCKS == 0:
+                self.publish_status()    # progress for the clock master's flow control
 
     def flush(self, fsync: Optional[bool] = None) -> None:
         """Write the pending chunk and flush it to the kernel (module docstring, 'Crash safety').
@@ -589,6 +604,9 @@ class RecorderNode(Node):
     def _on_clock(self, msg: ClockMsg) -> None:
         stamp = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
         self._latest_clock_ns = max(self._latest_clock_ns, stamp)
+        self._clocks_written += 1
+        if self._clocks_written % STATUS_EVERY_CLOCKS == 0:
+            self.publish_status()
 
     def publish_status(self) -> None:
         """Publish ``recorder/status`` now (also called by the wall-clock timer)."""

@@ -51,8 +51,11 @@ from sim_node.models.spacecraft_config import (DEFAULT_INITIAL, DEFAULT_SPACECRA
                                                initial_state, spacecraft_from_config)
 
 QOS_CLOCK = QOS_DATA
-#: The recorder's queues are 1000 deep: it may lag further than the lockstep nodes.
-RECORDER_LAG_FRAMES = 400
+#: The recorder may lag no further than the lockstep nodes: what it has not received must
+#: still be in the publishers' history (QOS_DATA keeps 100 per topic) to be resent. Its deeper
+#: reader queues do not help against a recorder stalled at the DDS level (with 400, a stopped
+#: recorder lost tens to hundreds of frames of every world topic: test_free_tumble).
+RECORDER_LAG_FRAMES = MAX_LAG_FRAMES
 
 
 class DynamicsNode(LockstepNode):
