@@ -46,6 +46,11 @@ def running(status_text, sim_s=20.0):
     return m is not None and float(m.group(1)) >= sim_s
 
 
+def sim_time(status_text):
+    """Sim time [s] an ``adcs status`` text reports."""
+    return float(re.search(r'sim time: ([0-9.]+) s', status_text).group(1))
+
+
 def wait_status(pid, predicate, timeout=30.0):
     deadline = time.monotonic() + timeout
     out = None
@@ -68,12 +73,13 @@ def test_switch_mid_run_gives_one_zero_frame_each_and_unknown_is_refused(tmp_pat
         assert bad.returncode == 2
         assert "unknown controller 'no_such_law'" in bad.stderr and 'magnetic' in bad.stderr
         assert 'switch magnetic -> bdot' in adcs('switch', 'bdot', '--run', str(proc.pid)).stdout
-        wait_status(proc.pid, lambda s: 'controller: bdot' in s and 'switches: 1' in s)
-        time.sleep(1.0)
+        status = wait_status(proc.pid, lambda s: 'controller: bdot' in s and 'switches: 1' in s)
+        wait_status(proc.pid, lambda s: running(s, sim_time(status) + 10.0))   # 5 bdot frames
         back = adcs('switch', 'magnetic', '--run', str(proc.pid)).stdout
         assert 'switch bdot -> magnetic' in back
-        wait_status(proc.pid, lambda s: 'controller: magnetic' in s and 'switches: 2' in s)
-        time.sleep(1.0)
+        status = wait_status(proc.pid,
+                             lambda s: 'controller: magnetic' in s and 'switches: 2' in s)
+        wait_status(proc.pid, lambda s: running(s, sim_time(status) + 10.0))
     finally:
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=60)
@@ -105,7 +111,7 @@ def test_killed_controller_falls_back_to_bdot_and_the_graph_goes_on(tmp_path):
         os.kill(manifest['pids']['magnetic_controller'], signal.SIGKILL)
         status = wait_status(proc.pid, lambda s: 'fallback to bdot' in s, timeout=20.0)
         assert time.monotonic() - t_kill < 15.0
-        t_fallback = float(re.search(r'sim time: ([0-9.]+) s', status).group(1))
+        t_fallback = sim_time(status)
         # the graph keeps running on the fallback: 20 more sim seconds
         wait_status(proc.pid, lambda s: running(s, t_fallback + 20.0), timeout=120.0)
         assert proc.poll() is None, 'the run stopped when a controller died'

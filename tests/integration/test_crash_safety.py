@@ -206,7 +206,7 @@ def test_a_node_refusing_its_configuration_makes_the_run_exit_2(tmp_path, monkey
     run = launcher.Launcher(load_scenario(FREE_TUMBLE), duration_s=10.0, progress=False,
                             log=lambda *a: None)
     refuse = [sys.executable, '-c', 'import sys; print("bad parameter"); sys.exit(2)']
-    wait = [sys.executable, '-c', 'import time; time.sleep(60)']
+    wait = [sys.executable, '-c', 'import signal; signal.pause()']   # until the launcher stops it
     monkeypatch.setattr(run, '_commands', lambda params: {
         'environment': wait, 'dynamics': wait, 'magnetometer': refuse})
     result = run.run()

@@ -56,6 +56,14 @@ def vec(row, pattern, names):
     return np.array([float(row[pattern.format(n)]) for n in names])
 
 
+def states_in(bag) -> int:
+    """``/sim/state`` messages in a (possibly unfinished) bag now, 0 if none yet."""
+    try:
+        return sum(1 for _ in read_messages(bag, topics=['/sim/state']))
+    except (OSError, ValueError):
+        return 0
+
+
 def config_of(out):
     with open(os.path.join(str(out), 'campaign.json')) as fh:
         data = json.load(fh)
@@ -332,7 +340,12 @@ def test_ctrl_c_keeps_finished_runs(tmp_path):
         assert proc.poll() is None, proc.communicate()
         time.sleep(0.2)
     assert os.path.exists(first), 'run 0 did not finish'
-    time.sleep(2.0)                     # run 1 is under way
+    second_bag = os.path.join(mc.run_dir_of(str(out), 1), 'bag')
+    deadline = time.monotonic() + 120.0
+    while states_in(second_bag) < 3 and time.monotonic() < deadline:    # run 1 is under way
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    assert states_in(second_bag) >= 3, 'run 1 did not start recording'
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=90)
     assert proc.returncode == 130, stdout + stderr
