@@ -336,7 +336,9 @@ class LockstepNode(Node):
         if t > self._seen_t:
             self._seen_t = t
             self._try_fire()
-            self.report_progress(self._seen_t)
+        # on every tick: an input stamped ahead of the clock (the environment runs one frame
+        # ahead) may have moved _seen_t past a progress mark already
+        self.report_progress(self._seen_t)
 
     def input_arrived(self, name: str) -> None:
         """Hook called on every message of a lockstep input before it is stored."""

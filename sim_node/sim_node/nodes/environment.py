@@ -2,6 +2,13 @@
 
 Subscribes ``/clock``; for every clock tick t_k publishes ``sim/environment`` stamped t_k:
 r, v (ECI), q_eci_orbit, orbit rate, argument of latitude, B (ECI) and dB/dt, q_eci_ecef.
+
+Runs one frame ahead in a launched lockstep run (``duration_s`` given, not real-time; issue
+13): the environment depends on time only, so on ``/clock`` t_k it also publishes t_k+1
+(never past the duration), and the clock master finds it waiting when it starts frame k+1
+instead of a ``/clock -> environment -> dynamics`` round trip. The messages are the same,
+each published once; consumers take them by stamp (``FrameSync``), so the trajectory and the
+bags do not change. Started alone (no duration) it answers each clock tick only.
 Models: ``adcs_nodes.core.orbit`` and ``adcs_nodes.core.geomag``, configured by the
 parameters ``orbit.*`` and ``field.*`` (same keys as the scenario YAML sections).
 """
@@ -39,6 +46,7 @@ class EnvironmentNode(LockstepNode):
         self.tf_pub = TfPublisher(self)            # /tf: eci -> ecef
         self.subscription(Clock, '/clock', self.on_clock)
         self._last_ns = None
+        self._ahead_ns = None        # frame already published ahead (lockstep)
         self.start_handshake()
 
     def compute(self, t_ns: int) -> Environment:
@@ -61,11 +69,22 @@ class EnvironmentNode(LockstepNode):
         return msg
 
     def on_clock(self, msg: Clock) -> None:
-        """One frame: compute and publish for the clock's time (duplicates ignored)."""
+        """One frame: publish for the clock's time unless that was done ahead, then (lockstep)
+        the next frame ahead (duplicate clocks ignored)."""
         t_ns = self.elapsed_ns(stamp_ns(msg.clock))
         if t_ns == self._last_ns:
             return
         self._last_ns = t_ns
+        if t_ns != self._ahead_ns:
+            self.publish_frame(t_ns)
+        t_next = t_ns + self.frame_ns
+        if not self.real_time and 0 < t_next <= self.duration_ns:
+            self.publish_frame(t_next)
+            self._ahead_ns = t_next
+        self.report_progress(t_ns, final=self.is_last_frame(t_ns, self.frame_ns))
+
+    def publish_frame(self, t_ns: int) -> None:
+        """Compute and publish ``sim/environment`` (and ``/tf``, ``/diagnostics``) of ``t_ns``."""
         msg = self.compute(t_ns)
         self.pub.publish(msg)
         if self.tf_pub.wanted():           # only built when someone reads /tf
@@ -73,7 +92,6 @@ class EnvironmentNode(LockstepNode):
         self.frames += 1
         self.sim_t_ns = t_ns
         self.diagnostics.frame(t_ns)      # /diagnostics once per sim second
-        self.report_progress(t_ns, final=self.is_last_frame(t_ns, self.frame_ns))
 
 
 def main(args=None) -> int:
