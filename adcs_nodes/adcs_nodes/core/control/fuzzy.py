@@ -74,7 +74,8 @@ from adcs_nodes.core.control import eigenaxis as ea
 
 __all__ = ['PHI_TERMS', 'DPHI_TERMS', 'MK_TERMS', 'TABLE1_ROWS_PRINTED', 'TABLE1', 'G_TERMS',
            'TABLE2', 'table1_indices', 'table2_indices', 'triangular_memberships',
-           'centroid', 'Mamdani', 'FuzzyEigenaxisController', 'DEFAULTS', 'SMOOTH']
+           'centroid', 'Mamdani', 'EigenaxisTorqueLaw', 'FuzzyEigenaxisController', 'DEFAULTS',
+           'SMOOTH']
 
 # ---------------------------------------------------------------------- rule tables
 #: φ terms in increasing order: zero, very small, small, medium, big.
@@ -318,7 +319,63 @@ SMOOTH = dict(
 )
 
 
-class FuzzyEigenaxisController:
+class EigenaxisTorqueLaw:
+    """Frame shared by the eigenaxis torque laws (:class:`FuzzyEigenaxisController` and
+    :class:`~adcs_nodes.core.control.reference_slew.ReferenceSlewController`).
+
+    ``update`` takes the error state (:func:`error_state`), asks the subclass's
+    ``_torque_law(q_target_body, omega_rel_body, omega_body_eci_body, dt)`` for a dict with
+    ``torque_body`` (3,) [N m, body axes] and diagnostics, and realises the torque as ideal
+    body torque or on the reaction wheels (:func:`realise`). A subclass calls
+    :meth:`_set_wheels` in its constructor.
+    """
+
+    A_w: Optional[np.ndarray] = None
+
+    def _set_wheels(self, wheel_axes_body: Optional[ArrayLike],
+                    wheel_max_torque_Nm: Optional[ArrayLike]) -> None:
+        """Reaction wheels: ``A_w`` (3, n) spin axes, body axes, ``A_w_pinv`` (n, 3) and
+        ``wheel_limit`` (n,) [N m]; ``A_w = None`` without wheels (ideal body torque).
+
+        Raises
+        ------
+        ValueError
+            If the axes are not finite or do not span 3-D, or the limits are bad.
+        """
+        if wheel_axes_body is not None and np.size(wheel_axes_body) > 0:
+            axes = np.asarray(wheel_axes_body, dtype=float).reshape(-1, 3)
+            n = axes.shape[0]
+            self.A_w = finite_vector(axes, 'wheel_axes_body', (n, 3)).T       # (3, n)
+            if np.linalg.matrix_rank(self.A_w) < 3:
+                raise ValueError('wheel axes must span 3-D for three-axis slews')
+            self.A_w_pinv = np.linalg.pinv(self.A_w)                          # (n, 3)
+            self.wheel_limit = limits_vector(wheel_max_torque_Nm, 'wheel_max_torque_Nm', n,
+                                             allow_zero=False)
+        else:
+            self.A_w = None
+
+    @property
+    def n_wheels(self) -> int:
+        return 0 if self.A_w is None else self.A_w.shape[1]
+
+    def _torque_law(self, q_err: np.ndarray, w_rel: np.ndarray, w_abs: np.ndarray,
+                    dt: float) -> dict:
+        raise NotImplementedError
+
+    def update(self, inputs: ControlInputs, t: float, dt: float) -> Command:
+        """Command for frame time ``t`` (see :mod:`adcs_nodes.core.control`)."""
+        err = error_state(inputs)
+        if isinstance(err, str):
+            return Command.zero(self.n_wheels, err)
+        q_err, w_rel, w_abs = err
+        out = self._torque_law(q_err, w_rel, w_abs, dt)
+        torque = out.pop('torque_body')
+        if not np.all(np.isfinite(torque)):
+            return Command.zero(self.n_wheels, 'non-finite torque')
+        return realise(torque, w_abs, inputs, self, out)
+
+
+class FuzzyEigenaxisController(EigenaxisTorqueLaw):
     """Paper 003's fuzzy eigenaxis slew controller (interface of :mod:`..control`).
 
     Parameters
@@ -383,23 +440,9 @@ class FuzzyEigenaxisController:
                             bp['mk_half_width_Nm'], table1_indices(table1_rows), n_points)
         self.flc2 = Mamdani(bp['g_peaks_deg_s'], bp['dg_peaks_deg_s2'], bp['mgk_peaks_Nm'],
                             bp['mgk_half_width_Nm'], table2_indices(), n_points)
-        if wheel_axes_body is not None and np.size(wheel_axes_body) > 0:
-            axes = np.asarray(wheel_axes_body, dtype=float).reshape(-1, 3)
-            n = axes.shape[0]
-            self.A_w = finite_vector(axes, 'wheel_axes_body', (n, 3)).T       # (3, n)
-            if np.linalg.matrix_rank(self.A_w) < 3:
-                raise ValueError('wheel axes must span 3-D for three-axis slews')
-            self.A_w_pinv = np.linalg.pinv(self.A_w)                          # (n, 3)
-            self.wheel_limit = limits_vector(wheel_max_torque_Nm, 'wheel_max_torque_Nm', n,
-                                             allow_zero=False)
-        else:
-            self.A_w = None
+        self._set_wheels(wheel_axes_body, wheel_max_torque_Nm)
         self._d_g = ea.RateModulusDerivative()
         self._axis: Optional[np.ndarray] = None
-
-    @property
-    def n_wheels(self) -> int:
-        return 0 if self.A_w is None else self.A_w.shape[1]
 
     def reset(self) -> None:
         """Forget the previous axis and the previous parasitic rate."""
@@ -450,17 +493,9 @@ class FuzzyEigenaxisController:
         return dict(torque_body=m_out, torque_unlimited=m, phi=phi, phi_dot=phi_dot, g=g,
                     g_dot=g_dot, M_k=m_k, M_gk=m_gk, e_phi=e_phi, sigma=sigma)
 
-    def update(self, inputs: ControlInputs, t: float, dt: float) -> Command:
-        """Command for frame time ``t`` (see :mod:`adcs_nodes.core.control`)."""
-        err = error_state(inputs)
-        if isinstance(err, str):
-            return Command.zero(self.n_wheels, err)
-        q_err, w_rel, w_abs = err
-        out = self.law(q_err, w_rel, dt)
-        torque = out.pop('torque_body')
-        if not np.all(np.isfinite(torque)):
-            return Command.zero(self.n_wheels, 'non-finite torque')
-        return realise(torque, w_abs, inputs, self, out)
+    def _torque_law(self, q_err: np.ndarray, w_rel: np.ndarray, w_abs: np.ndarray,
+                    dt: float) -> dict:
+        return self.law(q_err, w_rel, dt)
 
 
 # ---------------------------------------------------------------------- shared helpers

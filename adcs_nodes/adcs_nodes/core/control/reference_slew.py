@@ -31,15 +31,14 @@ from typing import Optional
 import numpy as np
 from numpy.typing import ArrayLike
 
-from adcs_nodes.core.control import (Command, ControlInputs, cross3, finite_vector,
-                                     limits_vector, scale_to_limits)
+from adcs_nodes.core.control import cross3, finite_vector, limits_vector, scale_to_limits
 from adcs_nodes.core.control import eigenaxis as ea
-from adcs_nodes.core.control.fuzzy import error_state, realise
+from adcs_nodes.core.control.fuzzy import EigenaxisTorqueLaw
 
 __all__ = ['ReferenceSlewController']
 
 
-class ReferenceSlewController:
+class ReferenceSlewController(EigenaxisTorqueLaw):
     """Near time-optimal eigenaxis slew (interface of :mod:`adcs_nodes.core.control`).
 
     Parameters
@@ -96,22 +95,8 @@ class ReferenceSlewController:
         self.lam = float(linear_gain_per_s)
         self.w_max = math.radians(float(max_rate_deg_s))
         self.gyro = bool(gyroscopic_compensation)
-        if wheel_axes_body is not None and np.size(wheel_axes_body) > 0:
-            axes = np.asarray(wheel_axes_body, dtype=float).reshape(-1, 3)
-            n = axes.shape[0]
-            self.A_w = finite_vector(axes, 'wheel_axes_body', (n, 3)).T
-            if np.linalg.matrix_rank(self.A_w) < 3:
-                raise ValueError('wheel axes must span 3-D for three-axis slews')
-            self.A_w_pinv = np.linalg.pinv(self.A_w)
-            self.wheel_limit = limits_vector(wheel_max_torque_Nm, 'wheel_max_torque_Nm', n,
-                                             allow_zero=False)
-        else:
-            self.A_w = None
+        self._set_wheels(wheel_axes_body, wheel_max_torque_Nm)
         self._axis: Optional[np.ndarray] = None
-
-    @property
-    def n_wheels(self) -> int:
-        return 0 if self.A_w is None else self.A_w.shape[1]
 
     def reset(self) -> None:
         """Forget the previous eigenaxis."""
@@ -142,14 +127,6 @@ class ReferenceSlewController:
         return dict(torque_body=m_out, phi=phi, phi_dot=float(e @ w), e_phi=e, a_max=a_max,
                     w_prof=w_prof, sigma=sigma)
 
-    def update(self, inputs: ControlInputs, t: float, dt: float) -> Command:
-        """Command for frame time ``t`` (see :mod:`adcs_nodes.core.control`)."""
-        err = error_state(inputs)
-        if isinstance(err, str):
-            return Command.zero(self.n_wheels, err)
-        q_err, w_rel, w_abs = err
-        out = self.law(q_err, w_rel, w_abs)
-        torque = out.pop('torque_body')
-        if not np.all(np.isfinite(torque)):
-            return Command.zero(self.n_wheels, 'non-finite torque')
-        return realise(torque, w_abs, inputs, self, out)
+    def _torque_law(self, q_err: np.ndarray, w_rel: np.ndarray, w_abs: np.ndarray,
+                    dt: float) -> dict:
+        return self.law(q_err, w_rel, w_abs)
