@@ -74,6 +74,15 @@ def spin_until(executor, predicate, timeout=10.0, what='condition'):
         executor.spin_once(timeout_sec=0.02)
 
 
+def _remove(executor, *nodes) -> None:
+    """End of a test: close the bag of a recorder, then remove and destroy each node."""
+    for node in nodes:
+        if isinstance(node, RecorderNode):
+            node.close()
+        executor.remove_node(node)
+        node.destroy_node()
+
+
 def make_environment(i: int) -> Environment:
     msg = Environment()
     t_ns = T0_NS + i * 100_000_000
@@ -163,11 +172,7 @@ def test_records_every_message_latched_and_schemas(context, executor, tmp_path):
         assert '/recorder/status' not in recorder.topics
         assert '/rosout' not in recorder.topics
     finally:
-        recorder.close()
-        executor.remove_node(recorder)
-        recorder.destroy_node()
-        executor.remove_node(talker)
-        talker.destroy_node()
+        _remove(executor, recorder, talker)
 
     # contents, order and counts
     got = {}
@@ -241,11 +246,7 @@ def test_sim_time_stamps_and_topic_list(context, executor, tmp_path):
         spin_until(executor, lambda: recorder.counts.get('/env_only') == 4, what='4th message')
         assert recorder.topics == ['/env_only']
     finally:
-        recorder.close()
-        executor.remove_node(recorder)
-        recorder.destroy_node()
-        executor.remove_node(talker)
-        talker.destroy_node()
+        _remove(executor, recorder, talker)
     log_times = [t for _, t, _ in read_messages(bag)]
     assert log_times == [T0_NS, T0_NS + 100_000_000, T0_NS + 200_000_000, 1_800_000_000 * 10**9]
 
@@ -296,11 +297,7 @@ def test_handshake_typed_topics_and_clock_log_time(context, executor, tmp_path):
         hs_pub.publish(String(data='after clock'))
         spin_until(executor, lambda: recorder.counts.get('/hs') == 1, what='hs recorded')
     finally:
-        recorder.close()
-        executor.remove_node(recorder)
-        recorder.destroy_node()
-        executor.remove_node(talker)
-        talker.destroy_node()
+        _remove(executor, recorder, talker)
     got = [(topic, t) for topic, t, _ in read_messages(bag)]
     assert got == [('/clock', 1_900_000_000 * 10**9), ('/hs', 1_900_000_000 * 10**9)]
 
@@ -310,6 +307,18 @@ def _clock(t_ns: int) -> Clock:
     msg = Clock()
     msg.clock.sec, msg.clock.nanosec = divmod(t_ns, 10**9)
     return msg
+
+
+def _talker(context, executor, name: str):
+    """A node ``<name>_talker`` publishing ``/clock`` and ``<name>_chatter``, collecting
+    ``recorder/status``: ``(node, clock_pub, chatter_pub, statuses)``."""
+    talker = Node(f'{name}_talker', context=context)
+    clock_pub = talker.create_publisher(Clock, '/clock', 100)
+    chat_pub = talker.create_publisher(String, f'{name}_chatter', 100)
+    statuses = []
+    talker.create_subscription(LockstepStatus, 'recorder/status', statuses.append, 10)
+    executor.add_node(talker)
+    return talker, clock_pub, chat_pub, statuses
 
 
 def _wait_proc(proc, timeout: float) -> None:
@@ -330,12 +339,7 @@ def test_sigkill_keeps_everything_but_the_last_seconds(context, executor, tmp_pa
     is fully received before phase 2 (clocks 18.5..20 s) is published, so every phase-1
     message is logged at <= 18 s = last log time - 2 s: all of it must survive the kill.
     """
-    talker = Node('crash_talker', context=context)
-    clock_pub = talker.create_publisher(Clock, '/clock', 100)
-    chat_pub = talker.create_publisher(String, 'crash_chatter', 100)
-    statuses = []
-    talker.create_subscription(LockstepStatus, 'recorder/status', statuses.append, 10)
-    executor.add_node(talker)
+    talker, clock_pub, chat_pub, statuses = _talker(context, executor, 'crash')
     bag = tmp_path / 'killed'
     proc = subprocess.Popen(
         [sys.executable, '-m', 'adcs_nodes.nodes.recorder', '--ros-args',
@@ -370,8 +374,7 @@ def test_sigkill_keeps_everything_but_the_last_seconds(context, executor, tmp_pa
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-        executor.remove_node(talker)
-        talker.destroy_node()
+        _remove(executor, talker)
     assert not (bag / 'metadata.yaml').exists()   # really unfinished
     got = {}
     for topic, t_ns, msg in read_messages(bag):
@@ -415,12 +418,7 @@ def test_disk_full_stops_recording_keeps_the_data(context, executor, tmp_path):
     (status and exit code) and stops; the bag keeps every chunk written before."""
     from adcs_nodes.nodes.recorder import EXIT_WRITE_FAILED, WRITE_FAILED_PREFIX
 
-    talker = Node('full_talker', context=context)
-    clock_pub = talker.create_publisher(Clock, '/clock', 100)
-    chat_pub = talker.create_publisher(String, 'full_chatter', 100)
-    statuses = []
-    talker.create_subscription(LockstepStatus, 'recorder/status', statuses.append, 10)
-    executor.add_node(talker)
+    talker, clock_pub, chat_pub, statuses = _talker(context, executor, 'full')
     bag = tmp_path / 'full'
     recorder = RecorderNode(context=context, parameter_overrides=[
         Parameter('output', value=str(bag)), Parameter('discovery_period_s', value=0.1),
@@ -450,10 +448,6 @@ def test_disk_full_stops_recording_keeps_the_data(context, executor, tmp_path):
         assert 'disk full' in recorder.write_error
         recorder.close()   # idempotent, no exception
     finally:
-        recorder.close()
-        executor.remove_node(recorder)
-        recorder.destroy_node()
-        executor.remove_node(talker)
-        talker.destroy_node()
+        _remove(executor, recorder, talker)
     chatter = [m.data for topic, _, m in read_messages(bag) if topic == '/full_chatter']
     assert chatter == [f'before {i}' for i in range(10)]
