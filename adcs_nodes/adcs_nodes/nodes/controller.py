@@ -37,7 +37,7 @@ from adcs_nodes.entries import wheel_momentum
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, quat, to_vec3, vec3
-from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.managed import ManagedLockstepNode
 from adcs_nodes.nodes.tf import MountTable
 from adcs_nodes.registry import Param
 
@@ -127,12 +127,18 @@ def command_msg(cmd: Command, stamp, source: str) -> ActuatorCommand:
     return msg
 
 
-class ControllerNode(LockstepNode):
-    """A registered controller core wrapped as a lockstep node (see module docstring)."""
+class ControllerNode(ManagedLockstepNode):
+    """A registered controller core wrapped as a lockstep node (see module docstring); a
+    managed node (:mod:`adcs_nodes.nodes.managed`)."""
 
     def __init__(self, name: Optional[str] = None, controller: Optional[str] = None,
                  **kwargs: Any) -> None:
+        self._fixed_controller = controller   # (configure runs inside super().__init__)
         super().__init__(name or f'{controller or "magnetic"}_controller', **kwargs)
+
+    def configure(self) -> None:
+        """Parameters, controller core and endpoints (lifecycle configure)."""
+        controller = self._fixed_controller
         registry.load_plugins(self.param('plugins', []))
         specs = {s.name: s for s in CONTEXT_PARAMS}
         if controller is not None:   # the class fixes the controller: that is its default

@@ -40,7 +40,8 @@ from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.actuator_topics import ActuatorTopics, wheel_names_for
 from adcs_nodes.nodes.controller import command_msg, estimate_from_msg
 from adcs_nodes.nodes.convert import stamp_ns, vec3
-from adcs_nodes.nodes.lockstep_node import QOS_LATCHED, LockstepNode
+from adcs_nodes.nodes.lockstep_node import QOS_LATCHED
+from adcs_nodes.nodes.managed import ManagedLockstepNode
 
 
 #: Service names (relative: under the node's namespace; ``/adcs/...`` when started at the root).
@@ -48,8 +49,8 @@ SWITCH_SERVICE = 'adcs/switch_controller'
 LIST_SERVICE = 'adcs/list_controllers'
 
 
-class ControllerManagerNode(LockstepNode):
-    """Controller manager (see module docstring)."""
+class ControllerManagerNode(ManagedLockstepNode):
+    """Controller manager (see module docstring); a managed node (:mod:`.managed`)."""
 
     #: Descriptions of this node's own parameters (``ros2 param describe``).
     PARAM_DOCS = {
@@ -71,6 +72,9 @@ class ControllerManagerNode(LockstepNode):
 
     def __init__(self, name: str = 'controller_manager', **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
+
+    def configure(self) -> None:
+        """Parameters, manager core, endpoints and services (lifecycle configure)."""
         self.names: List[str] = [n for n in self.param('controllers', ['bdot']) if n]
         safe = str(self.param('safe', 'bdot'))
         initial = str(self.param('initial', '')) or None
@@ -115,8 +119,11 @@ class ControllerManagerNode(LockstepNode):
         self._t_last: Optional[float] = None
         self._fault_kind: List[str] = []
         self.lockstep_inputs(inputs, period_s, self.on_frame)
-        self._publish_status(force=True)
         self.start_handshake()
+
+    def activated(self) -> None:
+        """Publish the latched status at once (its publisher drops what comes before)."""
+        self._publish_status(force=True)
 
     # ------------------------------------------------------------------ services
     def on_switch(self, request, response):

@@ -38,7 +38,7 @@ from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.controller import DEFAULT_FIELD, DEFAULT_ORBIT, inertia_matrix
 from adcs_nodes.nodes.convert import all_finite, quat, to_quat, to_vec3, vec3
-from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.managed import ManagedLockstepNode
 from adcs_nodes.nodes.tf import (MountTable, TfPublisher, covariance_to_body,
                                  estimate_transforms)
 from adcs_nodes.registry import Param
@@ -74,11 +74,14 @@ CONTEXT_PARAMS = (
 )
 
 
-class EstimatorNode(LockstepNode):
-    """Attitude estimator (see module docstring)."""
+class EstimatorNode(ManagedLockstepNode):
+    """Attitude estimator (see module docstring); a managed node (:mod:`.managed`)."""
 
     def __init__(self, name: str = 'estimator', **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
+
+    def configure(self) -> None:
+        """Parameters, onboard models, filter core and endpoints (lifecycle configure)."""
         registry.load_plugins(self.param('plugins', []))
         p = node_params.declare_all(self, CONTEXT_PARAMS)
         self.entry = registry.get('estimator', p['algorithm'])

@@ -30,7 +30,7 @@ from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import to_quat, to_vec3
-from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.managed import ManagedLockstepNode
 from adcs_nodes.nodes.slew_action import SlewActionServer
 from adcs_nodes.registry import Param
 
@@ -76,11 +76,14 @@ class _Euler312:
         return TargetSample(q, w, a, frame, ttg, kind)
 
 
-class GuidanceNode(LockstepNode):
-    """Publishes the target of the profile (see module docstring)."""
+class GuidanceNode(ManagedLockstepNode):
+    """Publishes the target of the profile (see module docstring); a managed node."""
 
     def __init__(self, name: str = 'guidance', **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
+
+    def configure(self) -> None:
+        """Parameters, profile, publisher and the slew action (lifecycle configure)."""
         p = node_params.declare_all(self, PARAMS)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)

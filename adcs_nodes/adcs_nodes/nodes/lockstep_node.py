@@ -114,8 +114,14 @@ class LockstepNode(Node):
     SIMULATED_WORLD = False
 
     def __init__(self, name: str, **kwargs: Any) -> None:
-        super().__init__(name, allow_undeclared_parameters=True,
-                         automatically_declare_parameters_from_overrides=True, **kwargs)
+        Node.__init__(self, name, allow_undeclared_parameters=True,
+                      automatically_declare_parameters_from_overrides=True, **kwargs)
+        self.setup_lockstep()
+
+    def setup_lockstep(self) -> None:
+        """Read the common parameters and create the lockstep endpoints (status, progress,
+        ready, ``/diagnostics``); ValueError for a bad value. A plain node calls it from its
+        constructor, a managed one (:class:`ManagedLockstepNode`) when it is configured."""
         self.done = False
         self.exit_code = 0
         self.epoch = parse_epoch(self.param('epoch', DEFAULT_EPOCH))

@@ -11,6 +11,12 @@ process boundaries. Used by ``adcs run --compose``::
 The process ends when the clock master (the node named ``dynamics``) is done, after a short
 drain so the last messages reach the recorder; or on SIGINT/SIGTERM.
 
+Lifecycle: the managed nodes (:mod:`adcs_nodes.nodes.managed`) of the parameter file that are
+still unconfigured (``autostart: false``, as ``adcs run --compose`` writes it) are configured,
+all of them, then activated, in process (``trigger_configure``/``trigger_activate``), before
+the executor spins; a node refusing its configuration ends the process with exit code 2 and
+its reason, as a configuration error while building a node does.
+
 In-process path (``--inproc``, or ``ADCS_COMPOSE_INPROC=1`` in the environment; off by
 default): for a volatile topic with a publisher and subscriptions in this process
 (:class:`InProcessBus`), a message goes straight to the local subscriptions' callbacks when no
@@ -142,6 +148,8 @@ class InProcessBus:
         n_local = len(callbacks)
 
         def publish(msg) -> None:
+            if not getattr(pub, 'is_activated', True):   # an inactive lifecycle publisher
+                return
             if pub.get_subscription_count() > n_local:   # someone outside listens: DDS
                 self.dds += 1
                 dds_publish(msg)
@@ -172,6 +180,22 @@ class InProcessBus:
             self.busy = False
             if self.queue:
                 self._timer.reset()   # more to deliver: after the executor's other work
+
+
+def drive_lifecycle(nodes) -> str:
+    """Configure, then activate, every managed node that is unconfigured (in process).
+
+    Returns ``''``, or why a node refused (``<node>: <reason>``)."""
+    from rclpy.lifecycle import TransitionCallbackReturn
+
+    managed = [n for n in nodes if getattr(n, 'lifecycle_state', '') == 'unconfigured']
+    for node in managed:
+        if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+            return f'{node.get_name()}: {node.configure_error or "configure failed"}'
+    for node in managed:
+        if node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+            return f'{node.get_name()}: activate failed'
+    return ''
 
 
 def write_state(state: Any, path: str) -> None:
@@ -215,6 +239,10 @@ def main(argv=None) -> int:
             nodes = build_nodes(args.nodes, doc)
         except ValueError as exc:
             print(f'[compose] configuration error: {exc}', file=sys.stderr)
+            return 2
+        refused = drive_lifecycle(nodes)
+        if refused:
+            print(f'[compose] configuration error: {refused}', file=sys.stderr)
             return 2
         limit_blas_threads()   # again after the node modules' imports (idempotent)
         bus = InProcessBus(nodes) if inproc_enabled(args.inproc) and nodes else None

@@ -7,8 +7,12 @@ module holds the part that needs no ``launch`` package (not on PyPI), so it is t
 
 What ``ros2 launch`` does not do that ``adcs run`` does: a private ``ROS_DOMAIN_ID`` with
 localhost discovery, the progress bar, the run manifest for ``adcs switch``/``adcs status``,
-stopping the run when a world node dies, the dynamics result file. The launch ends when the
-clock master (``dynamics``) exits at the end of the scenario.
+stopping the run when a world node dies, the dynamics result file, and driving the lifecycle
+of the managed nodes (:data:`MANAGED_CLASSES`): ``adcs run`` starts them with ``autostart:
+false`` and calls configure and activate; the launch file gives no ``autostart``, so they
+configure and activate themselves (the default ``autostart: true``), as there is no
+lifecycle manager here. The launch ends when the clock master (``dynamics``) exits at the
+end of the scenario.
 
 Pure Python; no rclpy.
 """
@@ -22,6 +26,15 @@ from adcs_nodes.tools.scenario import load_scenario
 
 PACKAGE = 'adcs_nodes'
 CLOCK_MASTER = 'dynamics'
+#: Node classes of the graph that are managed (lifecycle) nodes
+#: (:class:`adcs_nodes.nodes.managed.ManagedLockstepNode`); the world nodes and the recorder
+#: are plain nodes.
+MANAGED_CLASSES = ('EstimatorNode', 'ControllerNode', 'ControllerManagerNode', 'GuidanceNode')
+
+
+def is_managed(node: NodeSpec) -> bool:
+    """True for a managed (lifecycle) node of the graph."""
+    return node.cls in MANAGED_CLASSES
 
 
 def installed_scenario_dir() -> Optional[str]:

@@ -6,6 +6,14 @@
   Isolation is not a security boundary: ``docs/security.md``.
 * One process per node (``python -m <module> --ros-args -r __node:=<name> --params-file ...``),
   or all nodes in one process (``--compose``, :mod:`adcs_nodes.tools.compose`).
+* Lifecycle: the managed nodes (estimator, controllers, manager, guidance;
+  :data:`adcs_nodes.tools.launch_graph.MANAGED_CLASSES`) start with ``autostart: false``;
+  the launcher calls ``configure`` then ``activate`` on each through its standard
+  ``/<node>/change_state`` service, all nodes in parallel, each as soon as its service is
+  there (no fixed sleep), within :data:`LIFECYCLE_DEADLINE_S`. A failed configure stops the
+  run with exit code 2 and the node's reason (its ``configuration error:`` log line). The
+  start handshake counts a managed node ready only once it is active. ``--compose`` drives
+  the same transitions in process (:mod:`adcs_nodes.tools.compose`).
 * Progress: sim time, real-time factor, frames/s and missed frames, read from
   ``lockstep/status`` by a small monitor node in the launcher process.
 * End: the clock master (dynamics) exits 0 after the last frame; the launcher waits until the
@@ -40,12 +48,13 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
-from typing import Any, Dict, Iterable, List, Optional
+from dataclasses import dataclass, replace
+from typing import Any, Dict, Iterable, List, Optional, Tuple
 
 import yaml
 
 from adcs_nodes.tools.graph import NodeSpec, build_graph, params_file_text
+from adcs_nodes.tools.launch_graph import is_managed
 
 RUNS_DIR = os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'runs')
 #: ``ROS_DOMAIN_ID`` values a run draws from (at random among the free ones). Fast DDS over
@@ -80,6 +89,10 @@ PDEATHSIG_SHIM = (
 #: Nodes whose death ends the run: the simulated world, the recorder, the composed process.
 #: Any other node (flight software) may die; the run goes on and its consumers fall back.
 ESSENTIAL = {'dynamics', 'environment', 'recorder', 'composed'}
+#: Wall-clock limit for a managed node to become active after it was started [s]: process
+#: start (imports), service discovery, configure (parameters, core, endpoints), activate.
+#: The clock master's own start limit (``start_timeout_s``) is the same.
+LIFECYCLE_DEADLINE_S = 120.0
 
 
 def external_devices(sc: Dict[str, Any]) -> List[str]:
@@ -328,6 +341,65 @@ class _Monitor:
         self._rclpy.shutdown(context=self.context)
 
 
+class _Transitions:
+    """Drives ``configure`` then ``activate`` of the managed nodes through their standard
+    ``/<node>/change_state`` services (``lifecycle_msgs/srv/ChangeState``).
+
+    Non-blocking: :meth:`poll` (called by the launcher's watch loop) sends ``configure`` to
+    each node whose service has appeared; the answer's callback sends ``activate`` at once.
+    """
+
+    def __init__(self, node, names: List[str], deadline_s: float = LIFECYCLE_DEADLINE_S):
+        from lifecycle_msgs.msg import Transition
+        from lifecycle_msgs.srv import ChangeState
+
+        self._srv = ChangeState
+        self._ids = {'configure': Transition.TRANSITION_CONFIGURE,
+                     'activate': Transition.TRANSITION_ACTIVATE}
+        self.clients = {n: node.create_client(ChangeState, f'/{n}/change_state')
+                        for n in names}
+        #: node -> 'starting' (no service yet), 'configure', 'activate' (awaiting the
+        #: answer) or 'active'
+        self.step = {n: 'starting' for n in names}
+        self.failed: Dict[str, str] = {}     # node -> the transition it refused
+        self.deadline = time.monotonic() + deadline_s
+        self.deadline_s = deadline_s
+
+    @property
+    def pending(self) -> bool:
+        """True while a node is not active yet (and none failed)."""
+        return not self.failed and any(s != 'active' for s in self.step.values())
+
+    def poll(self) -> Optional[Tuple[str, str]]:
+        """Send what is due. Returns ``(node, transition)`` of the first refused transition,
+        ``(node, 'deadline')`` for a node not active in time, else None."""
+        if self.failed:
+            return next(iter(self.failed.items()))
+        for name, step in self.step.items():
+            if step == 'starting' and self.clients[name].service_is_ready():
+                self._call(name, 'configure')
+        late = [n for n, s in self.step.items() if s != 'active']
+        if late and time.monotonic() > self.deadline:
+            return late[0], 'deadline'
+        return None
+
+    def _call(self, name: str, transition: str) -> None:
+        self.step[name] = transition
+        request = self._srv.Request()
+        request.transition.id = self._ids[transition]
+        future = self.clients[name].call_async(request)
+        future.add_done_callback(lambda f: self._answered(name, transition, f))
+
+    def _answered(self, name: str, transition: str, future) -> None:
+        result = future.result() if not future.cancelled() else None
+        if result is None or not result.success:
+            self.failed.setdefault(name, transition)
+        elif transition == 'configure':
+            self._call(name, 'activate')
+        else:
+            self.step[name] = 'active'
+
+
 class Launcher:
     """Start, watch and stop one scenario run (see module docstring)."""
 
@@ -380,6 +452,12 @@ class Launcher:
         self._stop_requested = False
 
     # ------------------------------------------------------------------ processes
+    def _started_nodes(self) -> List[NodeSpec]:
+        """The graph as started: the managed nodes with ``autostart: false`` (the launcher,
+        or the composed process, drives their transitions)."""
+        return [replace(n, params={**n.params, 'autostart': False}) if is_managed(n) else n
+                for n in self.nodes]
+
     def _commands(self, params_path: str) -> Dict[str, List[str]]:
         if self.compose:
             spec = [f'{n.name}={n.module}:{n.cls}' for n in self.nodes]
@@ -458,7 +536,7 @@ class Launcher:
             prune_runs(protect=[self.run_dir])
             _private_dir(self.run_dir)
             params_path = os.path.join(self.run_dir, 'params.yaml')
-            _write_private(params_path, params_file_text(self.nodes))
+            _write_private(params_path, params_file_text(self._started_nodes()))
         except (OSError, LaunchError) as exc:
             why = ('disk full' if isinstance(exc, OSError) and _disk_full(exc)
                    else str(getattr(exc, 'strerror', None) or exc))
@@ -495,6 +573,9 @@ class Launcher:
         code, message = 0, ''
         try:
             self._spawn(env, params_path)
+            self._transitions = _Transitions(
+                monitor.node, [] if self.compose else
+                [n.name for n in self.nodes if is_managed(n)])
             manifest['pids'] = {name: proc.pid for name, proc in self.procs.items()}
             try:
                 _write_private(manifest_path, json.dumps(manifest))
@@ -597,8 +678,12 @@ class Launcher:
         total_ns = int(round(self.duration_s * 1e9))
         last_print = 0.0
         master = self._master_name()
+        transitions = getattr(self, '_transitions', None)
         while True:
-            monitor.spin(0.1)
+            monitor.spin(0.02 if transitions is not None and transitions.pending else 0.1)
+            failed = transitions.poll() if transitions is not None else None
+            if failed is not None:
+                return self._transition_failed(*failed)
             now = time.monotonic()
             if self.progress and now - last_print > 0.5:
                 last_print = now
@@ -639,6 +724,23 @@ class Launcher:
                                f'lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
                 return 1, (f'node {name} exited with code {rc} before the end of the run; '
                            f'last lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
+
+    def _transition_failed(self, name: str, transition: str):
+        """Exit code and message for a managed node that was not made active."""
+        log = os.path.join(self.run_dir, 'logs', f'{name}.log')
+        tail = self._log_tail(name)
+        if transition == 'configure':
+            reasons = [ln.split('configuration error:', 1)[1].strip()
+                       for ln in tail.splitlines() if 'configuration error:' in ln]
+            why = reasons[-1] if reasons else 'no reason in its log'
+            return 2, (f'node {name} refused its configuration (lifecycle configure failed): '
+                       f'{why}; last lines of its log ({log}):\n{tail}')
+        if transition == 'deadline':
+            step = self._transitions.step.get(name)
+            return 1, (f'node {name} was not active {self._transitions.deadline_s:g} s after '
+                       f'its start (lifecycle: {step}); last lines of its log ({log}):\n{tail}')
+        return 1, (f'node {name} refused the lifecycle transition {transition}; last lines '
+                   f'of its log ({log}):\n{tail}')
 
     def _finish(self, monitor: _Monitor, total_ns: int):
         monitor.sim_ns = max(monitor.sim_ns, total_ns)

@@ -1,0 +1,226 @@
+"""Managed (lifecycle) flight-software nodes: :class:`ManagedLockstepNode`.
+
+The estimator, the controllers, the controller manager and guidance are ROS 2 managed nodes
+(``rclpy.lifecycle``, the standard state machine and services); the simulated world and the
+recorder stay plain nodes.
+
+States and what the node has in each
+------------------------------------
+* ``unconfigured``: only the node, its parameters as given and the lifecycle interface
+  (``~/change_state``, ``~/get_state``, ``~/get_available_states``,
+  ``~/get_available_transitions``, ``~/get_transition_graph``, ``~/transition_event``).
+  No topic, no timer.
+* ``configure`` reads and validates every parameter and builds the core (a bad value: the
+  transition fails with the reason logged as ``configuration error: ...``, no traceback, and
+  the node stays ``unconfigured``), then creates every publisher, subscription, timer,
+  service and action. -> ``inactive``.
+* ``inactive``: frames are processed (the filter and the controllers keep their state, so an
+  activation is bumpless), but no output is published: the node's topics (estimate,
+  commands, targets, ``/tf``, controller status, ...) are lifecycle publishers and drop what
+  is published. The lockstep bookkeeping (``lockstep/status``, ``lockstep/progress``,
+  ``/diagnostics``) goes on, so a lockstep run never stalls on an inactive node.
+* ``activate`` enables the outputs; only now does the start handshake say ``lockstep/ready``
+  (the clock master starts frame 0 when every node is ready, so in a run no frame is
+  computed before the nodes are active). -> ``active``. ``deactivate`` -> ``inactive``.
+* ``cleanup`` destroys everything ``configure`` created (endpoints, timers, services, the
+  parameter declarations it made) -> ``unconfigured``; a new ``configure`` reads the
+  parameters again (their current values). ``shutdown`` (from any state) ends the process
+  (``done``, exit code 0).
+
+Autostart
+---------
+Parameter ``autostart`` (bool, default ``true``): the node configures and activates itself
+in its constructor, as every node did before it was managed (nav2's lifecycle manager
+style), so ``ros2 run adcs_nodes estimator`` and ``python -m adcs_nodes.nodes.estimator`` work
+as before, and a bad parameter still ends the process with exit code 2. With
+``autostart:=false`` the node starts ``unconfigured`` and waits for the standard services::
+
+    ros2 lifecycle set /estimator configure     # or: ros2 service call
+    ros2 lifecycle set /estimator activate      #   /estimator/change_state ...
+
+``adcs run`` starts these nodes with ``autostart: false`` and drives the transitions
+(:mod:`adcs_nodes.tools.launcher`; ``--compose`` does it in process).
+"""
+from __future__ import annotations
+
+import traceback
+from typing import Any, Dict, Optional
+
+from rclpy.lifecycle import LifecycleNodeMixin, LifecyclePublisher, TransitionCallbackReturn
+from rclpy.node import Node
+
+from adcs_nodes.nodes.lockstep_node import LockstepNode
+
+#: Node attributes of the parameter layer (``adcs_nodes.nodes.params``) that exist before
+#: ``configure`` (the ``autostart`` parameter) and grow in it: restored by ``cleanup``.
+_SAVED_ATTRS = ('_adcs_specs', '_adcs_prefixes', '_asked')
+
+
+class ManagedLockstepNode(LifecycleNodeMixin, LockstepNode):
+    """A :class:`LockstepNode` with the ROS 2 lifecycle (see the module docstring).
+
+    A subclass puts what its constructor did (read parameters, build the core, create
+    endpoints) in :meth:`configure`, and may override :meth:`activated`. Attributes it needs
+    before ``configure`` (a constructor argument) are set before ``super().__init__``.
+    """
+
+    def __init__(self, name: str, **kwargs: Any) -> None:
+        Node.__init__(self, name, allow_undeclared_parameters=True,
+                      automatically_declare_parameters_from_overrides=True, **kwargs)
+        LifecycleNodeMixin.__init__(self)
+        self.done = False
+        self.exit_code = 0
+        #: why the last ``configure`` failed ('' if it did not)
+        self.configure_error = ''
+        self._outputs_managed = False     # publishers created now are lifecycle publishers
+        self._active = False
+        self._saved: Optional[Dict[str, Any]] = None
+        autostart = self.param('autostart', True, 'configure and activate at start (false: '
+                               'wait for the lifecycle services)')
+        if autostart:   # (a failed configure raises: the caller reports it, exit code 2)
+            self._autostarting = True
+            if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                raise ValueError(self.configure_error or 'configure failed')
+            if self.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+                raise ValueError('activate failed')
+            self._autostarting = False
+
+    # ------------------------------------------------------------------ subclass hooks
+    def configure(self) -> None:
+        """Read and validate the parameters, build the core, create the endpoints."""
+        raise NotImplementedError
+
+    def activated(self) -> None:
+        """Called once the outputs are enabled (e.g. to publish a latched status)."""
+
+    @property
+    def lifecycle_state(self) -> str:
+        """Label of the current lifecycle state (``unconfigured``, ``inactive``, ...)."""
+        return self._state_machine.current_state[1]
+
+    @property
+    def active(self) -> bool:
+        """True in the ``active`` state (outputs enabled)."""
+        return self._active
+
+    # ------------------------------------------------------------------ endpoints
+    def create_publisher(self, *args: Any, **kwargs: Any):
+        """Publishers created by :meth:`configure` are lifecycle publishers (silent unless
+        active); the lockstep bookkeeping ones, created before, are plain."""
+        if not getattr(self, '_outputs_managed', False) or 'publisher_class' in kwargs:
+            return super().create_publisher(*args, **kwargs)
+        pub = super().create_publisher(*args, publisher_class=LifecyclePublisher, **kwargs)
+        self.add_managed_entity(pub)
+        return pub
+
+    def _entities(self) -> Dict[str, set]:
+        return {'publishers': set(self.publishers), 'subscriptions': set(self.subscriptions),
+                'timers': set(self.timers), 'services': set(self.services),
+                'clients': set(self.clients), 'waitables': set(self.waitables)}
+
+    # ------------------------------------------------------------------ transitions
+    def on_configure(self, state) -> TransitionCallbackReturn:
+        """``configure``: parameters, core, endpoints (the module docstring)."""
+        self.configure_error = ''
+        self._saved = {
+            'entities': self._entities(), 'names': set(vars(self)),
+            'parameters': dict(self._parameters), 'descriptors': dict(self._descriptors),
+            'on_set': list(self._on_set_parameters_callbacks),
+            'attrs': {a: _copy(getattr(self, a)) for a in _SAVED_ATTRS if hasattr(self, a)}}
+        try:
+            self.setup_lockstep()
+            self._outputs_managed = True
+            self.add_ready_check(lambda: [] if self._active else
+                                 [f'{self.get_name()} is not active (lifecycle)'])
+            self.configure()
+        except ValueError as exc:
+            self.configure_error = str(exc)
+        except Exception as exc:   # a bug, not a bad value: keep the traceback in the log
+            self.configure_error = f'{type(exc).__name__}: {exc}'
+            self.get_logger().error(traceback.format_exc())
+        finally:
+            self._outputs_managed = False
+        if self.configure_error:
+            if not getattr(self, '_autostarting', False):
+                self.get_logger().error(f'configuration error: {self.configure_error}')
+            self._undo_configure()
+            return TransitionCallbackReturn.FAILURE
+        return super().on_configure(state)
+
+    def on_activate(self, state) -> TransitionCallbackReturn:
+        """``activate``: enable the outputs; the handshake may now say ready."""
+        ret = super().on_activate(state)
+        if ret == TransitionCallbackReturn.SUCCESS:
+            self._active = True
+            self.activated()
+        return ret
+
+    def on_deactivate(self, state) -> TransitionCallbackReturn:
+        """``deactivate``: frames go on, outputs are dropped."""
+        self._active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state) -> TransitionCallbackReturn:
+        """``cleanup``: back to ``unconfigured``."""
+        self._active = False
+        self._undo_configure()
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state) -> TransitionCallbackReturn:
+        """``shutdown``: outputs off, the process ends (``done``)."""
+        self._active = False
+        ret = super().on_shutdown(state)
+        self.done = True
+        return ret
+
+    def on_error(self, state) -> TransitionCallbackReturn:
+        """An error in a transition: back to ``unconfigured`` (rclpy's default)."""
+        self._active = False
+        self._undo_configure()
+        return super().on_error(state)
+
+    def _undo_configure(self) -> None:
+        """Destroy what ``configure`` created and restore the parameters as they were."""
+        saved, self._saved = self._saved, None
+        if saved is None:
+            return
+        before = saved['entities']
+        now = self._entities()
+        for pub in now['publishers'] - before['publishers']:
+            self._managed_entities.discard(pub)
+            self.destroy_publisher(pub)      # (and its QoS event handlers)
+        for kind, destroy in (('subscriptions', self.destroy_subscription),
+                              ('timers', self.destroy_timer),
+                              ('services', self.destroy_service),
+                              ('clients', self.destroy_client)):
+            for entity in now[kind] - before[kind]:
+                destroy(entity)
+        for waitable in set(self.waitables) - before['waitables']:   # action servers
+            destroy = getattr(waitable, 'destroy', None)
+            if destroy is not None:
+                destroy()
+            if waitable in set(self.waitables):
+                self.remove_waitable(waitable)
+        # parameters: rclpy refuses to undeclare read-only ones, so the tables are restored;
+        # a value changed at run time is kept for the next configure
+        params, descs = saved['parameters'], saved['descriptors']
+        current = dict(self._parameters)
+        self._parameters.clear()
+        self._descriptors.clear()
+        for name, param in params.items():
+            self._parameters[name] = current.get(name, param)
+            self._descriptors[name] = descs[name]
+        self._on_set_parameters_callbacks[:] = saved['on_set']
+        for attr in _SAVED_ATTRS:
+            if attr in saved['attrs']:
+                setattr(self, attr, saved['attrs'][attr])
+        # what configure set on the node (core, endpoints, counters, handshake state) goes;
+        # rclpy's own name-mangled attributes stay
+        for attr in set(vars(self)) - saved['names']:
+            if '__' not in attr:
+                delattr(self, attr)
+
+
+def _copy(value: Any) -> Any:
+    """Shallow copy of a dict, set or list (the saved parameter-layer attributes)."""
+    return type(value)(value) if isinstance(value, (dict, set, list)) else value
