@@ -109,3 +109,19 @@ def test_dask_local_and_scheduler_exclude_each_other(tmp_path):
     code, _, err, _ = campaign(tmp_path / 'x', '--runs', '1', '--dask-local', '--scheduler',
                                'tcp://127.0.0.1:1', timeout=60)
     assert code == 2 and 'not allowed with argument' in err, err
+
+
+def test_plain_run_process_loads_the_compiled_kernels_from_the_cache(tmp_path):
+    """A second run process compiles nothing: numba reports every kernel loaded from its
+    on-disk cache (``NUMBA_DEBUG_CACHE``), none saved (a save follows a compilation)."""
+    env = {**os.environ, 'NUMBA_DEBUG_CACHE': '1'}
+    for name in ('first', 'second'):      # the first one may fill a stale cache
+        proc = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
+                               '--duration', '2', '--engine', 'plain', '--runs', '1',
+                               '--out', str(tmp_path / name)], cwd=ROOT, env=env,
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+    with open(os.path.join(mc.run_dir_of(str(tmp_path / 'second'), 0), 'worker.log')) as fh:
+        log = fh.read()
+    assert log.count('[cache] data loaded') >= 3, log
+    assert '[cache] data saved' not in log, log
