@@ -46,7 +46,7 @@ ATTRIBUTES = ('frames', 'missed_frames', 'last_missed_input', 'update_count', 'r
               'last_rejection', 'resets', 'rejected_commands', 'dropouts')
 #: Values that count problems: their growth over a period makes the level WARN.
 COUNTERS = ('missed_frames', 'rejected_samples', 'rejected_count', 'resets',
-            'rejected_commands', 'dropouts')
+            'rejected_commands', 'dropouts', 'security_events')
 NS_PER_S = 1_000_000_000
 
 

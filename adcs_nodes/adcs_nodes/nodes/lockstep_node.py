@@ -52,6 +52,7 @@ from std_msgs.msg import String
 from adcs_msgs.msg import LockstepStatus
 from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, InputKind, input_kind, seconds_to_ns
 from adcs_nodes.nodes import params as node_params
+from adcs_nodes.nodes import publisher_guard
 from adcs_nodes.nodes.convert import stamp_ns, to_stamp
 from adcs_nodes.nodes.diagnostics import Diagnostics
 
@@ -359,7 +360,9 @@ class LockstepNode(Node):
             if t > self._seen_t:
                 self._seen_t = t
             self._try_fire()
-        return cb
+        # expected_publishers given: only the launched producer's messages reach cb
+        guard = publisher_guard.for_node(self)
+        return cb if guard is None else guard.wrap(lambda: self._topics_of[name], cb)
 
     def _try_fire(self) -> None:
         while self._seen_t >= self._next_t:
@@ -495,6 +498,9 @@ class LockstepNode(Node):
                'rejected_samples': str(sum(self.rejected_samples.values())),
                'last_rejected_sample': self.last_rejected_sample}
         out.update({f'rejected_{r}': str(v) for r, v in self.rejected_samples.items()})
+        guard = getattr(self, '_publisher_guard', None)
+        if guard is not None:                 # publisher identity (publisher_guard)
+            out.update(guard.core.diagnostic_values())
         return out
 
     # ------------------------------------------------------------------ handshake
@@ -548,6 +554,8 @@ class LockstepNode(Node):
             return
         self._hs_timer.cancel()
         self.destroy_timer(self._hs_timer)
+        if getattr(self, '_publisher_guard', None) is not None:
+            self._publisher_guard.lock()      # guarded inputs: the launched producers only
         self._ready_sent = True
         self._ready_pub.publish(String(data=self.get_name()))
         if self._on_ready is not None:

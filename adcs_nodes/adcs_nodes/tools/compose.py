@@ -109,14 +109,14 @@ class InProcessBus:
         for node in nodes:
             for sub in node.subscriptions:
                 key = (sub.topic_name, sub.msg_type)
-                if sub._callback_type != Subscription.CallbackType.MessageOnly:
-                    skip.add(key)
-                    continue
+                # a callback taking the message info (publisher_guard) gets None in process
+                info = sub._callback_type != Subscription.CallbackType.MessageOnly
                 if sub.qos_profile.durability != DurabilityPolicy.VOLATILE:
                     skip.add(key)
                 subs[key].append(sub)
-                originals[id(sub)] = sub.callback
-                sub.callback = self._wrap(sub.callback)
+                cb = sub.callback
+                originals[id(sub)] = (lambda m, cb=cb: cb(m, None)) if info else cb
+                sub.callback = self._wrap(cb, info)
         self._timer = nodes[0].create_timer(0.001, self._on_timer)
         self._timer.cancel()
         for node in nodes:
@@ -129,18 +129,21 @@ class InProcessBus:
                 if pub.topic_name not in self.topics:
                     self.topics.append(pub.topic_name)
 
-    def _wrap(self, callback: Callable) -> Callable:
-        def wrapped(msg) -> None:
+    def _wrap(self, callback: Callable, info: bool = False) -> Callable:
+        def wrapped(msg, *rest) -> None:
             if self.busy:     # cannot happen from the executor; keep the order anyway
-                callback(msg)
+                callback(msg, *rest)
                 return
             self.busy = True
             try:
-                callback(msg)
+                callback(msg, *rest)
             finally:
                 self.busy = False
             if self.queue:
                 self._drain()
+        if info:     # still given the message info by rclpy, from any executor
+            from adcs_nodes.nodes.publisher_guard import WithInfo
+            return WithInfo(wrapped)
         return wrapped
 
     def _link(self, pub, callbacks: List[Callable]) -> None:

@@ -75,6 +75,7 @@ TOPIC_TYPES = {
     'adcs/controller_status': 'adcs_msgs/msg/ControllerStatus',
     'adcs/attitude_target': 'adcs_msgs/msg/AttitudeTarget',
     'sensors/wheels': 'sensor_msgs/msg/JointState',
+    'adcs/security_events': 'diagnostic_msgs/msg/DiagnosticArray',
 }
 COMMAND_TYPE = 'adcs_msgs/msg/ActuatorCommand'
 
@@ -266,6 +267,7 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         dyn.params['command_period_s'] = sc['controllers']['period_s']
     for node in nodes:      # every LockstepNode publishes /diagnostics once per sim second
         node.publishes.append('/diagnostics')
+    _add_publisher_guard(nodes)
     if record:
         topics = list(sc['record']['topics']) or sorted(
             {t for n in nodes for t in n.publishes} | {'lockstep/status'})
@@ -411,6 +413,29 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
                           + (['actuators/wheels/command'] if wheels else []),
                           subscribes=subs))
     return nodes
+
+
+#: Consumers that accept each lockstep input only from the graph's producer of it
+#: (``expected_publishers``: ``adcs_nodes.nodes.publisher_guard``, ``docs/security.md``).
+GUARDED_NODES = ('dynamics', 'controller_manager')
+#: Where a guarded node reports refused messages (recorded with the graph's topics).
+SECURITY_EVENTS = 'adcs/security_events'
+
+
+def _add_publisher_guard(nodes: List[NodeSpec]) -> None:
+    """``expected_publishers`` of the guarded nodes: ``<topic>=<node>`` for each subscribed
+    topic with exactly one producer in the graph (``/clock`` and tf are not guarded)."""
+    for node in nodes:
+        if node.name not in GUARDED_NODES:
+            continue
+        exp = []
+        for topic in node.subscribes:
+            producers = [o.name for o in nodes if o is not node and topic in o.publishes]
+            if topic not in ('/clock', '/tf', '/tf_static') and len(producers) == 1:
+                exp.append(f'{topic}={producers[0]}')
+        if exp:
+            node.params['expected_publishers'] = exp
+            node.publishes.append(SECURITY_EVENTS)
 
 
 def _add_handshake(nodes: List[NodeSpec]) -> None:

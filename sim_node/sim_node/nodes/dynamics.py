@@ -40,7 +40,7 @@ from adcs_msgs.msg import (ActuatorCommand, AppendageState, AttitudeState, Envir
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import (ZERO, Act, Action, ClockMaster, derive_seed,
                                       ns_to_seconds, seconds_to_ns)
-from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes import publisher_guard, runtime
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
 from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
 from adcs_nodes.nodes.lockstep_node import (MAX_LAG_FRAMES, QOS_DATA, QOS_READY,
@@ -108,8 +108,13 @@ class DynamicsNode(LockstepNode):
         self.appendages_pub = (self.publisher(AppendageState, 'sim/appendages')
                                if self.spacecraft.n_modes else None)
         self.tf_pub = TfPublisher(self)             # /tf: eci -> orbit -> body (truth)
-        self.subscription(Environment, 'sim/environment', self.on_environment)
-        self.subscription(ActuatorCommand, 'adcs/actuator_command', self.on_command)
+        # expected_publishers (the launcher: environment, controller_manager): messages of
+        # any other publisher, and duplicate stamps, are dropped and reported (publisher_guard)
+        guard = publisher_guard.for_node(self)
+        for msg_type, topic, cb in ((Environment, 'sim/environment', self.on_environment),
+                                    (ActuatorCommand, 'adcs/actuator_command', self.on_command)):
+            self.subscription(msg_type, topic, cb if guard is None else
+                              guard.wrap(self.resolve_topic_name(topic), cb))
         self.ready_nodes = set()
         self.create_subscription(String, 'lockstep/ready', self.on_ready_msg, QOS_READY)
         # flow control and end of run: how far every other node got (lockstep/progress)
@@ -374,7 +379,9 @@ class DynamicsNode(LockstepNode):
                            'frames_per_s': self.frames / max(wall, 1e-9),
                            'missed_frames': self.missed_frames,
                            'throttled_frames': self.throttled_frames,
-                           'rejected_commands': self.rejected_commands}, fh)
+                           'rejected_commands': self.rejected_commands,
+                           'security_events': (0 if self._publisher_guard is None
+                                               else self._publisher_guard.core.total)}, fh)
             os.replace(self.result_file + '.tmp', self.result_file)
         self.done = True  # the runtime lingers briefly (DDS resends) and exits
 

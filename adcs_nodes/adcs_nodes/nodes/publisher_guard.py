@@ -1,0 +1,353 @@
+"""Publisher identity of lockstep inputs: only the launched node's publisher is used.
+
+DDS without its security plugins lets any process on the run's domain publish on any topic
+(``docs/security.md``). A consumer given ``expected_publishers`` (the launcher sets it for
+``dynamics`` and ``controller_manager``: ``"<topic>=<node name>"`` per guarded input, from the
+graph) checks who sent each message of those topics:
+
+* Start handshake: the node is not ready until a publisher of the named node is discovered
+  on every guarded topic; when the handshake completes, each guarded topic is **locked** to
+  the endpoint GID(s) of that node's publisher(s) there (``get_publishers_info_by_topic``).
+  Other publishers present then are reported (``second_publisher``), not trusted.
+* After the lock, a message is dropped (never stored, never used) when
+
+  - its publisher GID (``MessageInfo['publisher_gid']``) is not a locked one
+    (``foreign_publisher``);
+  - its stamp was already received on that topic (``duplicate_stamp``), or is older than
+    every stamp remembered (``old_stamp``; the last :data:`HISTORY` are remembered): the
+    launched producers stamp strictly increasing frames;
+  - it arrives before the lock (``before_handshake``; no launched producer publishes a
+    lockstep topic before every consumer is ready, so only a stranger can).
+
+  A publisher appearing on a guarded topic after the lock is reported once
+  (``second_publisher``, from the graph, even before it publishes).
+* Every event is logged (throttled), counted (``/diagnostics``: ``security_events``, one
+  counter per reason, ``last_security_event``) and published on ``adcs/security_events``
+  (``diagnostic_msgs/DiagnosticArray``, one WARN status per event; reliable, recorded by the
+  recorder). Publishing is limited to :data:`MAX_EVENTS_PER_S` per wall second; the number
+  left out is carried in the next one (``suppressed``).
+
+Messages delivered in process by the composed runner's in-process path carry no message info
+(``info is None``): they come from a publisher of this process (a node the launcher built), so
+only their stamps are checked. A node started alone (no ``expected_publishers``) is unguarded:
+it accepts everything, as before.
+
+Not prevented (``docs/security.md``): a stranger that is on the domain *before* the handshake
+under the expected node name is locked in with the real node (its messages then pass the GID
+check, and only a duplicate stamp is caught, whichever of the two came second); forged
+``/clock``, services and any topic not guarded. DDS Security (SROS2) is the real answer.
+
+:class:`PublisherGuard` is the bookkeeping (pure Python); :class:`NodeGuard` the rclpy glue.
+"""
+from __future__ import annotations
+
+import collections
+import inspect
+import time
+from typing import Any, Deque, Dict, Iterable, List, Optional, Set, Tuple
+
+#: Why a message (or a publisher) was refused; keys of :attr:`PublisherGuard.counts`.
+REASONS = ('foreign_publisher', 'duplicate_stamp', 'old_stamp', 'before_handshake',
+           'second_publisher')
+#: Stamps remembered per guarded topic for the duplicate check.
+HISTORY = 4096
+#: Events published on the events topic per wall second at most (the rest are counted).
+MAX_EVENTS_PER_S = 100
+EVENTS_TOPIC = 'adcs/security_events'
+PARAM = 'expected_publishers'
+PARAM_DOC = ('lockstep inputs accepted only from the named node\'s publisher: '
+             '"<topic>=<node>" entries (empty: accept every publisher)')
+
+
+def parse_expected(entries: Iterable[str]) -> Dict[str, str]:
+    """``["<topic>=<node>", ...]`` -> ``{topic: node}`` (empty entries skipped).
+
+    Raises
+    ------
+    ValueError
+        For an entry without ``=``, an empty topic or node, or a topic given twice.
+    """
+    out: Dict[str, str] = {}
+    for entry in entries:
+        entry = str(entry).strip()
+        if not entry:
+            continue
+        topic, sep, node = entry.rpartition('=')
+        topic, node = topic.strip(), node.strip()
+        if not sep or not topic or not node:
+            raise ValueError(f'bad {PARAM} entry {entry[:100]!r} (want "<topic>=<node name>")')
+        if topic in out:
+            raise ValueError(f'{PARAM}: topic {topic!r} given twice')
+        out[topic] = node
+    return out
+
+
+def gid_hex(gid: Optional[bytes]) -> str:
+    """Readable GID (hex), ``'-'`` for none."""
+    return '-' if gid is None else bytes(gid).hex()
+
+
+class PublisherGuard:
+    """Which publisher may feed each guarded topic, and which stamps it has sent.
+
+    Parameters
+    ----------
+    expected : dict
+        ``{topic: node name}`` of the guarded topics (resolved topic names).
+    history : int
+        Stamps remembered per topic for the duplicate check (>= 1).
+    """
+
+    def __init__(self, expected: Dict[str, str], history: int = HISTORY) -> None:
+        if int(history) < 1:
+            raise ValueError('history must be >= 1')
+        self.expected = dict(expected)
+        self.history = int(history)
+        self.allowed: Dict[str, Set[bytes]] = {}
+        self.known: Dict[str, Set[bytes]] = {t: set() for t in self.expected}
+        self._stamps: Dict[str, Set[int]] = {t: set() for t in self.expected}
+        self._order: Dict[str, Deque[int]] = {t: collections.deque() for t in self.expected}
+        self.counts: Dict[str, int] = {r: 0 for r in REASONS}
+        self.by_topic: Dict[Tuple[str, str], int] = collections.Counter()
+        self.last_event = ''
+
+    @property
+    def topics(self) -> List[str]:
+        """The guarded topics."""
+        return list(self.expected)
+
+    @property
+    def locked(self) -> bool:
+        """True once every guarded topic is locked."""
+        return all(t in self.allowed for t in self.expected)
+
+    @property
+    def total(self) -> int:
+        """Events of every reason so far."""
+        return sum(self.counts.values())
+
+    def lock(self, topic: str, gids: Iterable[bytes]) -> None:
+        """Accept ``topic`` only from the publishers ``gids`` from now on.
+
+        Raises
+        ------
+        KeyError
+            If ``topic`` is not guarded.
+        ValueError
+            If ``gids`` is empty (the expected node has no publisher there).
+        """
+        if topic not in self.expected:
+            raise KeyError(topic)
+        allowed = {bytes(g) for g in gids}
+        if not allowed:
+            raise ValueError(f'{topic}: no publisher of {self.expected[topic]} to lock to')
+        self.allowed[topic] = allowed
+        self.known[topic] |= allowed
+
+    def new_publishers(self, topic: str, gids: Iterable[bytes]) -> List[bytes]:
+        """Publishers of a locked ``topic`` seen for the first time (each reported once)."""
+        if topic not in self.allowed:
+            return []
+        new = [bytes(g) for g in gids if bytes(g) not in self.known[topic]]
+        self.known[topic].update(new)
+        return new
+
+    def check(self, topic: str, gid: Optional[bytes], stamp_ns: int) -> Optional[str]:
+        """Decide on one message: ``None`` to accept it, else the reason it is refused.
+
+        ``gid`` None: delivered in process (no message info), only the stamp is checked.
+        A refused message does not count as received (its stamp is not remembered).
+        """
+        if topic not in self.expected:
+            return None
+        if topic not in self.allowed:
+            return 'before_handshake'
+        if gid is not None and bytes(gid) not in self.allowed[topic]:
+            return 'foreign_publisher'
+        stamps, order = self._stamps[topic], self._order[topic]
+        stamp_ns = int(stamp_ns)
+        if stamp_ns in stamps:
+            return 'duplicate_stamp'
+        if len(order) >= self.history and stamp_ns < order[0]:
+            return 'old_stamp'
+        stamps.add(stamp_ns)
+        order.append(stamp_ns)
+        if len(order) > self.history:
+            stamps.discard(order.popleft())
+        return None
+
+    def count(self, topic: str, reason: str, text: str) -> int:
+        """Count one event; returns the number of events of this topic and reason so far."""
+        if reason not in self.counts:
+            raise KeyError(reason)
+        self.counts[reason] += 1
+        self.by_topic[(topic, reason)] += 1
+        self.last_event = text
+        return self.by_topic[(topic, reason)]
+
+    def diagnostic_values(self) -> Dict[str, str]:
+        """Counters for ``/diagnostics``."""
+        out = {'security_events': str(self.total)}
+        out.update({f'security_{r}': str(n) for r, n in self.counts.items()})
+        out['last_security_event'] = self.last_event
+        return out
+
+
+class NodeGuard:
+    """rclpy glue of :class:`PublisherGuard` for one :class:`LockstepNode` (see module doc).
+
+    Built by :func:`for_node`; hooks: a start-handshake ready check, :meth:`lock` when the
+    handshake completes, :meth:`wrap` for input callbacks, a 1 s graph check.
+    """
+
+    def __init__(self, node: Any, expected: Dict[str, str]) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
+                               ReliabilityPolicy)
+        self.node = node
+        self.core = PublisherGuard({node.resolve_topic_name(t): n
+                                    for t, n in expected.items()})
+        self._array = DiagnosticArray
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                         history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+        self.pub = node.publisher(DiagnosticArray, EVENTS_TOPIC, qos)
+        self._window = (0.0, 0)        # (wall second, events published in it)
+        self.suppressed = 0
+        node.add_ready_check(self.missing)
+        self._graph_timer = None
+
+    # ------------------------------------------------------------------ handshake
+    def _publishers(self, topic: str) -> Tuple[List[bytes], List[Tuple[str, bytes]]]:
+        """(GIDs of the expected node's publishers, [(node, gid)] of the others) now."""
+        want = self.core.expected[topic]
+        mine, others = [], []
+        for info in self.node.get_publishers_info_by_topic(topic):
+            full = info.node_namespace.rstrip('/') + '/' + info.node_name
+            gid = bytes(info.endpoint_gid)
+            if info.node_name == want or full == want:
+                mine.append(gid)
+            else:
+                others.append((full, gid))
+        return mine, others
+
+    def missing(self) -> List[str]:
+        """Ready check: guarded topics with no publisher of the expected node yet."""
+        if self.core.locked:
+            return []
+        return [f'{t} (no publisher of {n} yet: {PARAM})'
+                for t, n in self.core.expected.items() if not self._publishers(t)[0]]
+
+    def lock(self) -> None:
+        """Lock every guarded topic to its expected node's publisher(s) (handshake done)."""
+        for topic, name in self.core.expected.items():
+            mine, others = self._publishers(topic)
+            self.core.lock(topic, mine)
+            self.node.get_logger().info(
+                f'{topic}: accepted only from {name} (publisher {", ".join(map(gid_hex, mine))})')
+            for full, gid in others:
+                self.core.known[topic].add(gid)
+                self.event(topic, 'second_publisher', gid, None,
+                           f'{topic}: another publisher at the handshake, {full} '
+                           f'({gid_hex(gid)}): not trusted')
+        self._graph_timer = self.node.create_timer(1.0, self.check_graph)
+
+    def check_graph(self) -> None:
+        """Report a publisher that joined a guarded topic after the lock (once each)."""
+        for topic in self.core.topics:
+            if self.node.count_publishers(topic) <= len(self.core.known[topic]):
+                continue
+            infos = {bytes(i.endpoint_gid): i for i in
+                     self.node.get_publishers_info_by_topic(topic)}
+            for gid in self.core.new_publishers(topic, infos):
+                i = infos[gid]
+                self.event(topic, 'second_publisher', gid, None,
+                           f'{topic}: a second publisher joined, {i.node_namespace.rstrip("/")}'
+                           f'/{i.node_name} ({gid_hex(gid)}): its messages are dropped')
+
+    # ------------------------------------------------------------------ messages
+    def wrap(self, topic_of, callback):
+        """A two-argument subscription callback (rclpy passes the message info) that calls
+        ``callback(msg)`` only for an accepted message. ``topic_of``: the resolved topic, or
+        a callable giving it (evaluated per message)."""
+        core = self.core
+
+        def guarded(msg: Any, info: Any) -> None:
+            if isinstance(msg, tuple):      # EventsExecutor: the (msg, info) pair, see below
+                msg, info = msg
+            topic = topic_of() if callable(topic_of) else topic_of
+            gid = None
+            if info is not None:
+                gid = (info.get('publisher_gid') or {}).get('data')
+            stamp = self.node.elapsed_ns(
+                msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+            reason = core.check(topic, gid, stamp)
+            if reason is None:
+                callback(msg)
+                return
+            self.event(topic, reason, gid, stamp,
+                       f'{topic}: message stamped t={stamp / 1e9:.9g} s dropped ({reason}, '
+                       f'publisher {gid_hex(gid)}, expected {core.expected[topic]})')
+        return WithInfo(guarded)
+
+    def event(self, topic: str, reason: str, gid: Optional[bytes], stamp_ns: Optional[int],
+              text: str) -> None:
+        """Log (throttled), count and publish one event."""
+        from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+        n = self.core.count(topic, reason, text)
+        self.node.get_logger().warning(
+            f'security: {text} [{reason} on this topic: {n}, all events: {self.core.total}]',
+            throttle_duration_sec=5.0)
+        now = time.monotonic()
+        second, sent = self._window
+        if now - second >= 1.0:
+            second, sent = now, 0
+        if sent >= MAX_EVENTS_PER_S:
+            self.suppressed += 1
+            self._window = (second, sent)
+            return
+        self._window = (second, sent + 1)
+        st = DiagnosticStatus(level=DiagnosticStatus.WARN, name=self.node.get_name(),
+                              hardware_id='adcs', message=text)
+        allowed = sorted(self.core.allowed.get(topic, ()))
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in (
+            ('topic', topic), ('reason', reason), ('publisher_gid', gid_hex(gid)),
+            ('expected_node', self.core.expected.get(topic, '')),
+            ('expected_gids', ', '.join(map(gid_hex, allowed))),
+            ('message_stamp_s', '-' if stamp_ns is None else f'{stamp_ns / 1e9:.9f}'),
+            ('count', n), ('suppressed', self.suppressed))]
+        self.suppressed = 0
+        msg = self._array()
+        msg.header.stamp = self.node.stamp(self.node.sim_t_ns)
+        msg.status = [st]
+        self.pub.publish(msg)
+
+
+class WithInfo:
+    """A subscription callback that rclpy calls with the message info, from any executor.
+
+    rclpy gives a callback the ``MessageInfo`` when its signature takes two arguments. Its
+    ``SingleThreadedExecutor`` then calls ``cb(msg, info)``, but the ``EventsExecutor`` of
+    rclpy 9.1.2 (the wheels here, ``runtime.make_executor``) calls ``cb((msg, info))``: one
+    tuple (a plain two-argument function fails there with ``SystemError: null argument to
+    internal routine``). This wrapper declares two arguments and accepts both calls.
+    """
+
+    __signature__ = inspect.Signature([
+        inspect.Parameter('msg', inspect.Parameter.POSITIONAL_ONLY),
+        inspect.Parameter('info', inspect.Parameter.POSITIONAL_ONLY)])
+
+    def __init__(self, fn) -> None:
+        self.fn = fn
+
+    def __call__(self, msg: Any, info: Any = None) -> None:
+        self.fn(msg, info)
+
+
+def for_node(node: Any) -> Optional[NodeGuard]:
+    """The node's :class:`NodeGuard` (built on the first call from its ``expected_publishers``
+    parameter), or None when the parameter is empty (unguarded)."""
+    if hasattr(node, '_publisher_guard'):
+        return node._publisher_guard
+    expected = parse_expected(node.param(PARAM, [''], PARAM_DOC) or [])
+    node._publisher_guard = NodeGuard(node, expected) if expected else None
+    return node._publisher_guard
