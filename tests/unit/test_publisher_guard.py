@@ -107,3 +107,30 @@ def test_counts_and_diagnostic_values():
     assert d['security_second_publisher'] == '0'
     assert d['last_security_event'] == 'd'
     assert gid_hex(b'\x01\xff') == '01ff' and gid_hex(None) == '-'
+
+
+def test_graph_names_the_producer_of_each_guarded_input():
+    """The launcher's graph: dynamics and the manager are guarded, each subscribed lockstep
+    topic names the one node of the graph that publishes it; their events are recorded."""
+    import os
+
+    from adcs_nodes.tools.graph import build_graph
+    from adcs_nodes.tools.scenario import load_scenario
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    sc = load_scenario(os.path.join(root, 'scenarios', 'paper000_control.yaml'))
+    nodes = {n.name: n for n in build_graph(sc, 100.0, record=True)}
+    assert nodes['dynamics'].params['expected_publishers'] == [
+        'sim/environment=environment', 'adcs/actuator_command=controller_manager']
+    assert sorted(nodes['controller_manager'].params['expected_publishers']) == [
+        'adcs/attitude_estimate=estimator',
+        'adcs/controllers/bdot/command=bdot_controller',
+        'adcs/controllers/magnetic/command=magnetic_controller']
+    guarded = [n for n in nodes.values() if 'expected_publishers' in n.params]
+    assert sorted(n.name for n in guarded) == ['controller_manager', 'dynamics']
+    recorded = [p.split('=')[0] for p in nodes['recorder'].params['topics']]
+    assert 'adcs/security_events' in recorded
+    assert 'sub:adcs/security_events=2' in nodes['recorder'].params['expected_matches']
+    # free tumble: no command producer, only the environment is named
+    sc = load_scenario(os.path.join(root, 'scenarios', 'free_tumble.yaml'))
+    nodes = {n.name: n for n in build_graph(sc, 100.0)}
+    assert nodes['dynamics'].params['expected_publishers'] == ['sim/environment=environment']
