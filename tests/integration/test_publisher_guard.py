@@ -11,6 +11,8 @@ a frame arrives before the true one) and nothing reported it. Now:
 * the true trajectory (``/sim/state``) and the manager's output are bit for bit those of a
   run without the forger (one process per node, and composed: one process, DDS between the
   nodes; the in-process path ``--inproc`` cannot record yet, see docs/security.md);
+* a forger that takes the name of the node it impersonates (``controller_manager``) after
+  the handshake is refused all the same (its GID was not there at the lock);
 * ``dynamics`` and ``controller_manager`` count the dropped messages in ``/diagnostics``
   (``security_foreign_publisher``), and the bag holds their ``adcs/security_events``
   (reason, topic, the forger's GID) and the forged messages themselves.
@@ -107,8 +109,10 @@ def _last_diagnostics(bag, node):
     return last
 
 
-@pytest.mark.parametrize('compose', [False, True], ids=['process_per_node', 'composed'])
-def test_forged_commands_are_dropped_counted_and_recorded(scenario, clean, tmp_path, compose):
+@pytest.mark.parametrize('compose,name', [(False, 'forger'), (True, 'controller_manager')],
+                         ids=['process_per_node', 'composed_same_name'])
+def test_forged_commands_are_dropped_counted_and_recorded(scenario, clean, tmp_path, compose,
+                                                          name):
     from adcs_nodes.tools.launcher import child_env
     bag = str(tmp_path / 'forged')
     proc = start_adcs('run', scenario, '--record', bag, '--duration', DURATION, '--quiet',
@@ -120,7 +124,8 @@ def test_forged_commands_are_dropped_counted_and_recorded(scenario, clean, tmp_p
                            ('composed' if compose else 'dynamics') + '.log')
         _wait_for(lambda: _log_has(log, 'lockstep start'), 120.0, 'the lockstep start', proc)
         forger = subprocess.Popen(
-            [sys.executable, os.path.join(HERE, 'forger.py'), '--topics', *FORGED],
+            [sys.executable, os.path.join(HERE, 'forger.py'), '--topics', *FORGED,
+             '--name', name],
             cwd=ROOT, env=child_env(manifest['domain']), stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, text=True)
         f_out, f_err = forger.communicate(timeout=180)
