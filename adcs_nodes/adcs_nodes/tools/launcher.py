@@ -263,7 +263,8 @@ class _Monitor:
     mode, off the composed runner's in-process path, and the mix of the two paths ran at a
     fifth of the speed (the clock master waited for progress messages stuck behind the
     in-process deliveries). ``lockstep/status`` (every node once per sim second, stamped with
-    the sim time of its last frame) gives the sim time reached and that the lockstep started.
+    the sim time of its last frame) gives the sim time reached and that the lockstep started;
+    a content filter keeps it to the clock master's and to those reporting missed frames.
     """
 
     def __init__(self, epoch_ns: int) -> None:
@@ -287,8 +288,24 @@ class _Monitor:
         self.recorder_clock_ns = -1
         self.recorder_count = 0
         self.recorder_error = ''
-        self.node.create_subscription(LockstepStatus, 'lockstep/status', self._on_status_msg,
-                                      50)
+        # a DDS content filter (evaluated by the writers where the middleware can): only the
+        # clock master's statuses (sim time) and those with missed frames reach this process,
+        # not every node's status of every sim second; unfiltered if rclpy cannot
+        status_filter = None
+        try:
+            from rclpy.subscription_content_filter_options import ContentFilterOptions
+            status_filter = ContentFilterOptions(
+                filter_expression='node = %0 OR missed_frames > 0',
+                expression_parameters=["'dynamics'"])
+        except ImportError:
+            pass
+        try:
+            self.node.create_subscription(LockstepStatus, 'lockstep/status',
+                                          self._on_status_msg, 50,
+                                          content_filter_options=status_filter)
+        except Exception:      # a middleware that refuses the filter: take every status
+            self.node.create_subscription(LockstepStatus, 'lockstep/status',
+                                          self._on_status_msg, 50)
         self.node.create_subscription(LockstepStatus, 'recorder/status', self._on_rec, 10)
         # degraded-run accounting (H-lockstep): the manager's latched status, max missed/node
         from rclpy.qos import DurabilityPolicy
