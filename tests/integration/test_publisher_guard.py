@@ -162,3 +162,8 @@ def test_forged_commands_are_dropped_counted_and_recorded(scenario, clean, tmp_p
         assert all(v['topic'] == topic and v['publisher_gid'] != '-' for v in mine), mine
         assert len({v['publisher_gid'] for v in mine}) == 1, mine     # the one forger
         assert len(mine) <= dropped
+        # nothing else refused: no false alarm on the true producers' messages
+        assert diag['security_duplicate_stamp'] == diag['security_old_stamp'] == \
+            diag['security_before_handshake'] == '0', diag
+        clean_diag = _last_diagnostics(clean, node)
+        assert clean_diag['security_events'] == '0', clean_diag
