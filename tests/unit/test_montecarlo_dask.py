@@ -5,8 +5,10 @@ Short: the run processes here are stand-ins or 20 s plain-engine runs. The full 
 """
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -125,3 +127,41 @@ def test_plain_run_process_loads_the_compiled_kernels_from_the_cache(tmp_path):
         log = fh.read()
     assert log.count('[cache] data loaded') >= 3, log
     assert '[cache] data saved' not in log, log
+
+
+def _run_processes(out):
+    psutil = pytest.importorskip('psutil')
+    found = []
+    for p in psutil.process_iter(['cmdline']):
+        cmd = p.info['cmdline'] or []
+        if '_mc_worker' in cmd and any(str(out) in c for c in cmd):
+            found.append(p)
+    return found
+
+
+def test_ctrl_c_on_a_dask_local_campaign_stops_runs_and_cluster(tmp_path):
+    """Ctrl-C reaches the whole foreground process group: the campaign stops its runs
+    through the stop file, the cluster's workers do not die under the runs."""
+    pytest.importorskip('distributed')
+    out = tmp_path / 'ctrlc'
+    proc = subprocess.Popen([sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
+                             '--engine', 'plain', '--runs', '4', '--jobs', '2', '--dask-local',
+                             '--out', str(out)], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 90.0
+        while len(_run_processes(out)) < 2 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert len(_run_processes(out)) == 2, 'the two runs never started'
+        os.killpg(proc.pid, signal.SIGINT)              # what a terminal's Ctrl-C does
+        text, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, text
+    assert text.count('interrupted (Ctrl-C)') == 2, text
+    assert 'Traceback' not in text and 'KeyboardInterrupt' not in text, text
+    assert _run_processes(out) == []
+    assert not (out / 'runs' / 'run_0000' / 'result.json').exists()

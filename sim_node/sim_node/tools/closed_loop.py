@@ -33,6 +33,7 @@ import copy
 import json
 import math
 import os
+import signal
 import sys
 import time
 from typing import Any, Dict, List, Optional, Sequence
@@ -524,5 +525,8 @@ def one_blas_thread() -> None:
 
 
 if __name__ == '__main__':
+    # a Monte Carlo run started under ``--dask-local`` inherits an ignored SIGINT (see
+    # adcs_nodes.tools.montecarlo.backends.sigint_ignored): the supervisor's SIGINT must stop it
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     one_blas_thread()
     raise SystemExit(main())

@@ -2,7 +2,10 @@
 existing scheduler, or a ``LocalCluster`` started for the campaign)."""
 from __future__ import annotations
 
+import contextlib
 import logging
+import signal
+import threading
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from typing import Any, Dict, Iterator, List, Optional
 
@@ -64,9 +67,10 @@ class DaskBackend:
         if local_workers is not None:
             if local_workers < 1:
                 raise CampaignError(f'a Dask LocalCluster needs >= 1 worker, got {local_workers}')
-            self.cluster = LocalCluster(n_workers=local_workers, threads_per_worker=1,
-                                        processes=True, dashboard_address=None,
-                                        silence_logs=logging.ERROR)
+            with sigint_ignored():   # Ctrl-C stops the runs through the campaign, not here
+                self.cluster = LocalCluster(n_workers=local_workers, threads_per_worker=1,
+                                            processes=True, dashboard_address=None,
+                                            silence_logs=logging.ERROR)
             address = self.cluster.scheduler_address
         try:
             self.client = Client(address, timeout=30)
@@ -115,6 +119,23 @@ class DaskBackend:
         if self.cluster is not None:
             self.cluster.close()
             self.cluster = None
+
+
+@contextlib.contextmanager
+def sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored in this process meanwhile (main thread only), so that processes started
+    here inherit the ignored SIGINT: a Ctrl-C in the terminal reaches the whole foreground
+    process group, and the ``LocalCluster`` workers must keep supervising their runs while
+    the campaign stops them through its stop file (as with the local thread pool). The run
+    processes restore the default handler (:mod:`sim_node.tools.closed_loop`, the launcher)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
 
 
 def _future_index(fut: Any) -> int:

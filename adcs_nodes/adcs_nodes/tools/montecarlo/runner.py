@@ -16,6 +16,8 @@ from adcs_nodes.tools.montecarlo.results import bag_metrics
 
 #: Seconds a supervisor waits for an interrupted run to close its bag before killing it.
 STOP_GRACE_S = 60.0
+#: Seconds between repeated SIGINTs to a run being stopped (see :func:`_supervise`).
+SIGINT_REPEAT_S = 2.0
 #: Per-engine worker command (``python`` + these + ``RUN_DIR``). The plain engine's worker is
 #: a simulator tool: the flight-software package names it but never imports it.
 WORKER_COMMANDS = {
@@ -133,19 +135,30 @@ def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def _supervise(proc: subprocess.Popen, stop_file: str) -> int:
-    """Wait for ``proc``; on ``stop_file`` send SIGINT, then SIGKILL after the grace time."""
+    """Wait for ``proc``; on ``stop_file`` send SIGINT, then SIGKILL after the grace time.
+
+    SIGINT is repeated every :data:`SIGINT_REPEAT_S` (the run's handlers are idempotent): a
+    run process started by a ``--dask-local`` worker inherits an ignored SIGINT until its
+    Python code installs a handler (``backends.sigint_ignored``), and a signal that arrives
+    in that window is lost.
+    """
     stopped_at: Optional[float] = None
+    last_int = 0.0
     while True:
         try:
             return proc.wait(timeout=0.5)
         except subprocess.TimeoutExpired:
             pass
+        now = time.monotonic()
         if stopped_at is None and os.path.exists(stop_file):
-            stopped_at = time.monotonic()
+            stopped_at = last_int = now
             _signal_group(proc, signal.SIGINT)
-        elif stopped_at is not None and time.monotonic() - stopped_at > STOP_GRACE_S:
+        elif stopped_at is not None and now - stopped_at > STOP_GRACE_S:
             _signal_group(proc, signal.SIGKILL)
             return proc.wait()
+        elif stopped_at is not None and now - last_int >= SIGINT_REPEAT_S:
+            last_int = now
+            _signal_group(proc, signal.SIGINT)
 
 
 def _signal_group(proc: subprocess.Popen, sig: int) -> None:
