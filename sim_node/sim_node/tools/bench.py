@@ -12,8 +12,8 @@ Every row is measured in the same run, on the same machine, at the same time (is
 3. ``composed``: the same graph in one process (``Launcher(compose=True)``), all messages
    over DDS as in the graph; ``3i``: the same with the composed runner's in-process path
    (``ADCS_COMPOSE_INPROC=1``: DDS only where an outside subscriber is matched; the
-   launcher's progress monitor subscribes to ``lockstep/progress`` and ``lockstep/status``,
-   so those still go over DDS);
+   launcher's progress monitor reads only ``lockstep/status``, which no node of the graph
+   reads, so every topic between the nodes goes in process);
 4. ``plain loop``: the same models in a plain Python loop without ROS
    (:class:`sim_node.tools.closed_loop.ClosedLoop`, built from the same node parameters);
 5. ``free body``: free rigid body + gravity gradient with this project's RK4
