@@ -42,9 +42,12 @@ def reference(scenario, tmp_path_factory):
     return content_digest(bag)
 
 
-@pytest.mark.parametrize('compose', [False, True], ids=['process_per_node', 'composed'])
+@pytest.mark.parametrize('compose', [False, True, 'inproc'],
+                         ids=['process_per_node', 'composed', 'composed_inproc'])
 def test_closed_loop_bag_is_identical_beside_cpu_burners(scenario, reference, tmp_path,
-                                                         compose):
+                                                         compose, monkeypatch):
+    if compose == 'inproc':   # the in-process path, with a composed recorder (raw CDR)
+        monkeypatch.setenv('ADCS_COMPOSE_INPROC', '1')
     bag = str(tmp_path / 'loaded')
     burners = [multiprocessing.Process(target=_burn, args=(300.0,)) for _ in range(2)]
     for b in burners:

@@ -115,6 +115,11 @@ class InProcessBus:
                     skip.add(key)
                 subs[key].append(sub)
                 cb = sub.callback
+                if sub.raw:
+                    # a raw subscription (a composed recorder) records the bytes DDS gives;
+                    # serialize_message pads empty float64 sequences differently (rosbags
+                    # then refuses the message), so such a topic stays on DDS
+                    skip.add(key)
                 originals[id(sub)] = (lambda m, cb=cb: cb(m, None)) if info else cb
                 sub.callback = self._wrap(cb, info)
         self._timer = nodes[0].create_timer(0.001, self._on_timer)
