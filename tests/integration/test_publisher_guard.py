@@ -136,6 +136,7 @@ def test_forged_commands_are_dropped_counted_and_recorded(scenario, clean, tmp_p
                 p.kill()
                 p.communicate()
     assert proc.returncode == 0, out + err
+    assert 'security: dynamics refused' in out + err, out + err     # the summary says so
     report = json.loads(f_out.strip().splitlines()[-1])
     assert report['ticks'] >= 1, (report, f_err)       # it forged while the run was going on
     assert all(n >= 2 for n in report['sent'].values()), report

@@ -613,6 +613,11 @@ class Launcher:
             fps = self._master_fps()
             if monitor.recorder_error and code == 0:
                 code, message = 1, self._write_failed_message(monitor.recorder_error)
+            refused = int(self._master_result('security_events'))
+            if refused:
+                message += (f'\n[adcs] security: dynamics refused {refused} lockstep messages '
+                            'from an unexpected publisher or with a repeated stamp '
+                            '(adcs/security_events in the bag; docs/security.md)')
             degraded = self._degraded(monitor)
             if degraded and code == 0:
                 code, message = EXIT_DEGRADED, f'done, DEGRADED: {degraded}'
@@ -651,13 +656,18 @@ class Launcher:
         return (f'the recorder stopped: {error} ({self.record}). The run was stopped; the bag '
                 'keeps what was written before (adcs export / adcs report read it)')
 
-    def _master_fps(self) -> float:
-        """Lockstep frames/s measured by the clock master (its result file), 0 if none."""
+    def _master_result(self, key: str) -> float:
+        """A value of the clock master's result file (``frames_per_s``,
+        ``security_events``, ...), 0 if none."""
         try:
             with open(self.result_file) as fh:
-                return float(json.load(fh)['frames_per_s'])
-        except (OSError, ValueError, KeyError):
+                return float(json.load(fh)[key])
+        except (OSError, ValueError, KeyError, TypeError):
             return 0.0
+
+    def _master_fps(self) -> float:
+        """Lockstep frames/s measured by the clock master (its result file), 0 if none."""
+        return self._master_result('frames_per_s')
 
     def _save_scenario(self) -> str:
         """Store the effective scenario (defaults filled in) beside the bag's files.
