@@ -186,15 +186,12 @@ def _wait_until(predicate, timeout, what):
             raise AssertionError(f'timed out after {timeout} s waiting for {what}')
 
 
-def test_a_stalled_recorder_loses_nothing(bag_dir):
-    """The recorder stopped (SIGSTOP: no DDS reception, no acknowledgements) while the clock
-    master runs on: the master must wait for it before the publishers' history (100 samples
-    per topic) drops a sample the recorder has not received. Truth: the frame grid, every
-    world topic once per 1 s frame from 0 on, no gap through the stall and well past it (was:
-    tens to hundreds of frames of every topic lost). The run is open-ended (a probe that
-    discovers the graph late must not miss it) and stopped with Ctrl-C."""
+def _run_with_stalled_recorder(bag, frames_after=None):
+    """An open-ended free_tumble run whose recorder is stopped (SIGSTOP) at frame 20 until the
+    clock master runs 300 frames ahead or waits for it, then resumed (SIGCONT); Ctrl-C
+    ``frames_after`` frames past the stall, or (None) while the recorder is still stopped,
+    resumed 0.5 s later. Returns the stall's end and the last /clock seen [elapsed ns]."""
     import time
-    bag = str(bag_dir / 'stalled_recorder')
     proc = start_adcs('run', FREE_TUMBLE, '--record', bag, '--duration', '100000', '--quiet')
     latest = close = None
     try:
@@ -217,13 +214,18 @@ def test_a_stalled_recorder_loses_nothing(bag_dir):
                 return (now - stopped_at >= 300 * 10**9
                         or time.monotonic() - since > 2.0)
             _wait_until(ahead_or_waiting, 60.0, 'the clock master to run ahead or wait')
+            if frames_after is None:
+                proc.send_signal(signal.SIGINT)
+                _wait_until(lambda: time.monotonic() - since > 2.5, 5.0, '0.5 s')
         finally:
             os.kill(recorder, signal.SIGCONT)
         stall_end = last
-        # the recorder catches up; the master runs 100 frames past the stall
-        _wait_until(lambda: latest() >= stall_end + 100 * 10**9, 60.0, 'the run going on')
-        proc.send_signal(signal.SIGINT)
+        if frames_after is not None:
+            _wait_until(lambda: latest() >= stall_end + frames_after * 10**9, 60.0,
+                        'the run going on')
+            proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=60)
+        seen = latest()
     finally:
         if close is not None:
             close()
@@ -231,17 +233,46 @@ def test_a_stalled_recorder_loses_nothing(bag_dir):
             proc.kill()
             proc.communicate()
     assert proc.returncode == 130, out + err
-    # every frame from 0 to 50 past the stall (published >= 50 frames before the Ctrl-C; the
-    # frames in flight at the Ctrl-C are another matter: test_ctrl_c_...)
+    return stall_end, seen
+
+
+def _world_stamps(bag, topic):
+    return [(m.clock.sec * 10**9 + m.clock.nanosec if topic == '/clock'
+             else header_stamp_ns(m)) - EPOCH_NS for _, _, m in read_messages(bag, [topic])]
+
+
+def test_a_stalled_recorder_loses_nothing(bag_dir):
+    """The recorder stopped (SIGSTOP: no DDS reception, no acknowledgements) while the clock
+    master runs on: the master must wait for it before the publishers' history (100 samples
+    per topic) drops a sample the recorder has not received. Truth: the frame grid, every
+    world topic once per 1 s frame from 0 on, no gap through the stall and well past it (was:
+    tens to hundreds of frames of every topic lost). The run is open-ended (a probe that
+    discovers the graph late must not miss it) and stopped with Ctrl-C."""
+    bag = str(bag_dir / 'stalled_recorder')
+    stall_end, _ = _run_with_stalled_recorder(bag, 100)
+    # every frame from 0 to 50 past the stall (published >= 50 frames before the Ctrl-C)
     n = stall_end // 10**9 + 51
-    for topic in ['/clock', '/sim/environment', '/sim/state', '/sim/wheels']:
-        stamps = [(m.clock.sec * 10**9 + m.clock.nanosec if topic == '/clock'
-                   else header_stamp_ns(m)) - EPOCH_NS
-                  for _, _, m in read_messages(bag, [topic])]
-        head = [t for t in stamps if t < n * 10**9]
+    for topic in WORLD_TOPICS:
+        head = [t for t in _world_stamps(bag, topic) if t < n * 10**9]
         missing = sorted(set(range(n)) - {t // 10**9 for t in head})
         assert not missing, f'{topic}: {len(missing)} of {n} frames lost, from {missing[:5]}'
         assert head == [k * 10**9 for k in range(n)], topic          # in order, each once
+
+
+def test_ctrl_c_during_a_recorder_stall_loses_nothing(bag_dir):
+    """Ctrl-C while the recorder is stopped and up to 40 frames behind: every node waits
+    (bounded, ``runtime.FLUSH_BUDGET_S``) for its samples to be acknowledged before its
+    process ends, so the bag still gets every frame published (truth: every /clock a probe on
+    the domain received), none missing before the last."""
+    bag = str(bag_dir / 'stalled_recorder_ctrl_c')
+    stall_end, seen = _run_with_stalled_recorder(bag)
+    assert seen >= stall_end > 20 * 10**9
+    for topic in WORLD_TOPICS:
+        stamps = _world_stamps(bag, topic)
+        assert stamps == [k * 10**9 for k in range(len(stamps))], \
+            (topic, sorted(set(range(len(stamps))) - {t // 10**9 for t in stamps})[:5])
+        if topic in ('/clock', '/sim/state'):
+            assert stamps[-1] >= seen, (topic, stamps[-1], seen)
 
 
 def test_composed_run_gives_the_identical_trajectory(reference_bag, bag_dir):

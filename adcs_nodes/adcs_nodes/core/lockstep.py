@@ -360,18 +360,23 @@ class ClockMaster:
     max_lag_frames : int
         A node may lag this many frames behind the clock.
     lag_frames : mapping str -> int, optional
-        Per-node override of ``max_lag_frames`` (the recorder's deeper queues).
+        Per-node override of ``max_lag_frames``.
     dead_after : int
         Command frames missed in a row after which the command producer is dead: a zero
         command is applied without waiting until it publishes again (>= 1).
     no_final : iterable of str
         Nodes not waited for at the end (they report no final frame, e.g. the recorder).
+    always_wait : iterable of str
+        Nodes waited for however long they lag (the recorder: going on without it would lose
+        messages the publishers no longer keep; a dead recorder ends the run in the
+        launcher). A warning is logged every ``timeout_s`` while the clock waits.
     """
 
     def __init__(self, frame_ns: int, duration_ns: int = 0, command_period_ns: int = 0,
                  wait_for_nodes: Iterable[str] = (), timeout_s: float = 5.0,
                  max_lag_frames: int = 40, lag_frames: Optional[Mapping[str, int]] = None,
-                 dead_after: int = 3, no_final: Iterable[str] = ()) -> None:
+                 dead_after: int = 3, no_final: Iterable[str] = (),
+                 always_wait: Iterable[str] = ()) -> None:
         self.frame_ns = int(frame_ns)
         if self.frame_ns <= 0:
             raise ValueError(f'frame must be positive, got {frame_ns} ns')
@@ -391,6 +396,7 @@ class ClockMaster:
         self.max_lag_frames = int(max_lag_frames)
         self.lag_frames = dict(lag_frames or {})
         self.no_final = set(no_final)
+        self.always_wait = set(always_wait)
         self.sync = FrameSync({'env': self.frame_ns, 'cmd': cmd}, dead_after=int(dead_after))
         self.phase = MasterPhase.IDLE
         self.k = 0
@@ -468,6 +474,13 @@ class ClockMaster:
         t = self.t_ns
         if self.phase is MasterPhase.THROTTLED:
             node = self.lagging()
+            if node in self.always_wait:
+                self.wait_since = now
+                return [Action(Act.LOG, t, 'warning',
+                               f'frame t={t / NS_PER_S:g} s: waiting for {node}, more than '
+                               f'{self.lag_frames.get(node, self.max_lag_frames)} frames '
+                               f'behind for {self.timeout_s:g} s (going on would lose '
+                               'messages it has not read yet)')]
             out = [Action(Act.LOG, t, 'warning',
                           f'frame t={t / NS_PER_S:g} s: {node} is more than '
                           f'{self.lag_frames.get(node, self.max_lag_frames)} frames behind '

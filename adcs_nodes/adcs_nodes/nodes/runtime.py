@@ -16,16 +16,20 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import time
 from typing import Callable, Iterable, List, Optional
 
 import rclpy
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 #: Environment variables that set the thread count of BLAS/OpenMP libraries at load time.
+#: Wall seconds a closing process waits, in all, for its samples to be acknowledged.
+FLUSH_BUDGET_S = 1.5
 BLAS_THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS',
                    'BLIS_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS')
 
@@ -60,6 +64,25 @@ def make_executor(context=None):
     except ImportError:  # older rclpy
         from rclpy.executors import SingleThreadedExecutor
         return SingleThreadedExecutor(context=context)
+
+
+def flush_publishers(nodes: Iterable[Node], budget_s: float = FLUSH_BUDGET_S) -> List[str]:
+    """Wait (at most ``budget_s`` in all) until every reliable publisher's samples are
+    acknowledged by its matched subscribers, so a process that ends (Ctrl-C, end of run) does
+    not take samples a slower reader (the recorder) has not received yet with it. Returns the
+    topics still unacknowledged at the deadline."""
+    deadline = time.monotonic() + budget_s
+    left = []
+    for node in nodes:
+        for pub in list(getattr(node, 'publishers', [])):
+            remaining = max(0.0, deadline - time.monotonic())
+            try:
+                if pub.get_subscription_count() and not pub.wait_for_all_acked(
+                        Duration(seconds=remaining)):
+                    left.append(pub.topic_name)
+            except Exception:  # noqa: BLE001 - a destroyed publisher: nothing to flush
+                continue
+    return left
 
 
 def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None,
@@ -121,6 +144,7 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
                 close = getattr(node, 'close', None)
                 if close is not None:
                     close()
+            flush_publishers(nodes)
             for node in nodes:
                 executor.remove_node(node)
                 node.destroy_node()

@@ -86,6 +86,8 @@ PDEATHSIG_SHIM = (
     'if os.getppid() != int(sys.argv[1]):\n'
     '    sys.exit(0)\n'  # the launcher died before prctl: do not start an orphan
     'os.execv(sys.argv[2], sys.argv[2:])\n')
+#: Wall seconds without sim progress before the launcher says the run is stalled.
+STALL_NOTICE_S = 30.0
 #: Nodes whose death ends the run: the simulated world, the recorder, the composed process.
 #: Any other node (flight software) may die; the run goes on and its consumers fall back.
 ESSENTIAL = {'dynamics', 'environment', 'recorder', 'composed'}
@@ -706,6 +708,7 @@ class Launcher:
         last_print = 0.0
         master = self._master_name()
         transitions = getattr(self, '_transitions', None)
+        seen_ns, seen_at = -1, time.monotonic()
         while True:
             monitor.spin(0.02 if transitions is not None and transitions.pending else 0.1)
             failed = transitions.poll() if transitions is not None else None
@@ -715,6 +718,16 @@ class Launcher:
             if self.progress and now - last_print > 0.5:
                 last_print = now
                 self._print_progress(monitor, now - t0, total_ns)
+            if monitor.sim_ns != seen_ns:
+                seen_ns, seen_at = monitor.sim_ns, now
+            elif monitor.clock_seen and now - seen_at > STALL_NOTICE_S:
+                seen_at = now      # a stall is said, not hidden (the run is not stopped)
+                waits = [ln for ln in self._log_tail(master, 40).splitlines()
+                         if 'waiting' in ln or 'behind' in ln or 'no ' in ln]
+                self.log(f'[adcs] WARNING: sim time has not advanced for {STALL_NOTICE_S:g} s '
+                         f'(t = {seen_ns / 1e9:g} s)'
+                         + (f'; {master}: {waits[-1].strip()}' if waits else
+                            f'; see {self.run_dir}/logs/') + ' (Ctrl-C stops the run)')
             if self._stop_requested:
                 return 130, ('interrupted (Ctrl-C): nodes stopped'
                              + (', bag closed' if self.record else ''))

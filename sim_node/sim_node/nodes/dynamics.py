@@ -99,7 +99,7 @@ class DynamicsNode(LockstepNode):
         self.master = ClockMaster(
             self.frame_ns, self.duration_ns, cmd_ns, self.wait_for_nodes, self.timeout_s,
             max_lag_frames=MAX_LAG_FRAMES, lag_frames={'recorder': RECORDER_LAG_FRAMES},
-            dead_after=self.dead_after, no_final=['recorder'])
+            dead_after=self.dead_after, no_final=['recorder'], always_wait=['recorder'])
         self._exec_t = 0              # frame of the action being executed
         self._topics_of = {'env': 'sim/environment', 'cmd': 'adcs/actuator_command'}
         self.clock_pub = self.publisher(Clock, '/clock', QOS_CLOCK)
