@@ -1,4 +1,5 @@
 """In-process rclpy fixtures: a private context on a private ROS domain per test."""
+import itertools
 import os
 import time
 
@@ -6,11 +7,15 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 
+#: One domain per test (150-199, outside the launcher's run domains): a participant of an
+#: earlier test that DDS still lists (its lease not expired) is not discovered by the next.
+_TEST_NUMBER = itertools.count()
+
 
 @pytest.fixture
 def ros_context():
     """A fresh rclpy context on this test's own domain (localhost discovery)."""
-    os.environ['ROS_DOMAIN_ID'] = str(150 + os.getpid() % 50)
+    os.environ['ROS_DOMAIN_ID'] = str(150 + (os.getpid() + next(_TEST_NUMBER)) % 50)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')   # as the launcher does
     ctx = rclpy.Context()
