@@ -296,7 +296,7 @@ class LockstepNode(Node):
         """
         self._own_period_ns = seconds_to_ns(period_s)
         if self._own_period_ns <= 0 or (not self.live and self._own_period_ns % self.frame_ns):
-            raise ValueError(f'period {period_s} s is not a positive multiple of the frame '
+            raise ValueError(f'period_s: {period_s} s is not a positive multiple of the frame '
                              f'{self.frame_ns / NS_PER_S:g} s')
         specs: Dict[str, Tuple[int, InputKind]] = {}
         self._topics_of: Dict[str, str] = {}

@@ -397,7 +397,6 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     if wheels:
         mparams['max_wheel_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
         mparams['wheel_names'] = [w['name'] for w in wheels]
-        mparams['wheel_names'] = [w['name'] for w in wheels]
     if man['schedule']:
         mparams['schedule_t_s'] = [e['t_s'] for e in man['schedule']]
         mparams['schedule_controller'] = [e['controller'] for e in man['schedule']]
