@@ -113,20 +113,28 @@ def test_flow_control_throttles_and_resumes_on_progress():
     assert m.phase is MasterPhase.THROTTLED and m.lagging() == 'recorder' and m.t_ns == 6 * S
 
 
-def test_a_lagging_recorder_is_waited_for_however_long_it_takes():
-    # going on without the recorder would lose what the publishers no longer keep
+def test_a_lagging_recorder_is_waited_for_patience_timeouts_then_not():
+    # going on without the recorder loses what the publishers no longer keep: it is waited
+    # for `patience` timeouts (a warning each), then the clock goes on with an error
     m = ClockMaster(S, wait_for_nodes=['recorder'], max_lag_frames=2, timeout_s=1.0,
-                    no_final=['recorder'], always_wait=['recorder'])
+                    no_final=['recorder'], always_wait=['recorder'], patience=3)
     m.start(0.0)
     for k in range(3):
         m.on_environment(k * S, 'e', 0.0)
     assert m.phase is MasterPhase.THROTTLED and m.lagging() == 'recorder'
-    for now in (1.5, 3.0, 100.0):             # timeouts: a warning each, no frame, not gone
+    for now in (1.5, 3.0):                    # timeouts: a warning each, no frame, not gone
         out = m.tick(now)
         assert [a.kind for a in out] == [Act.LOG] and 'waiting for recorder' in out[0].text
         assert m.phase is MasterPhase.THROTTLED and not m.gone and m.t_ns == 3 * S
-    out = m.on_progress('recorder', 2 * S, False, 100.5)
-    assert kinds(out) == [(Act.CLOCK, 3)]
+    out = m.on_progress('recorder', S // 2, False, 3.5)  # some progress: patience restarts
+    assert out == [] and m.phase is MasterPhase.THROTTLED
+    for now in (4.6, 5.7):
+        assert 'waiting for recorder' in m.tick(now)[0].text
+    out = m.tick(6.8)                                   # the third timeout in a row
+    assert out[0].value == 'error' and 'misses' in out[0].text and m.gone == {'recorder'}
+    assert kinds(out)[-1] == (Act.CLOCK, 3)
+    out = m.on_progress('recorder', 2 * S, False, 7.0)   # reports again: waited for again
+    assert not m.gone
 
 
 def test_a_dead_lagging_node_does_not_stop_the_world():

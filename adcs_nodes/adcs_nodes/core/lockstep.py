@@ -367,16 +367,20 @@ class ClockMaster:
     no_final : iterable of str
         Nodes not waited for at the end (they report no final frame, e.g. the recorder).
     always_wait : iterable of str
-        Nodes waited for however long they lag (the recorder: going on without it would lose
-        messages the publishers no longer keep; a dead recorder ends the run in the
-        launcher). A warning is logged every ``timeout_s`` while the clock waits.
+        Nodes waited for ``patience`` timeouts in a row, not one (the recorder: going on
+        without it loses messages the publishers no longer keep; a dead recorder ends the run
+        in the launcher). A warning is logged every ``timeout_s`` while the clock waits; after
+        ``patience`` timeouts the clock goes on with an error saying that the bag misses
+        messages (a recorder stuck for good must not hang the run).
+    patience : int
+        See ``always_wait`` (>= 1).
     """
 
     def __init__(self, frame_ns: int, duration_ns: int = 0, command_period_ns: int = 0,
                  wait_for_nodes: Iterable[str] = (), timeout_s: float = 5.0,
                  max_lag_frames: int = 40, lag_frames: Optional[Mapping[str, int]] = None,
                  dead_after: int = 3, no_final: Iterable[str] = (),
-                 always_wait: Iterable[str] = ()) -> None:
+                 always_wait: Iterable[str] = (), patience: int = 6) -> None:
         self.frame_ns = int(frame_ns)
         if self.frame_ns <= 0:
             raise ValueError(f'frame must be positive, got {frame_ns} ns')
@@ -397,6 +401,8 @@ class ClockMaster:
         self.lag_frames = dict(lag_frames or {})
         self.no_final = set(no_final)
         self.always_wait = set(always_wait)
+        self.patience = max(1, int(patience))
+        self._waited = 0                  # timeouts in a row spent waiting for always_wait
         self.sync = FrameSync({'env': self.frame_ns, 'cmd': cmd}, dead_after=int(dead_after))
         self.phase = MasterPhase.IDLE
         self.k = 0
@@ -452,6 +458,8 @@ class ClockMaster:
     def on_progress(self, node: str, t_ns: int, final: bool, now: float) -> List[Action]:
         """Node ``node`` has read everything up to ``t_ns`` (``final``: its last frame)."""
         self.progress[node] = max(int(t_ns), self.progress.get(node, -1))
+        if node in self.always_wait:
+            self._waited = 0
         if final:
             self.final_nodes.add(node)
         out: List[Action] = []
@@ -474,13 +482,23 @@ class ClockMaster:
         t = self.t_ns
         if self.phase is MasterPhase.THROTTLED:
             node = self.lagging()
-            if node in self.always_wait:
+            if node in self.always_wait and self._waited + 1 < self.patience:
+                self._waited += 1
                 self.wait_since = now
                 return [Action(Act.LOG, t, 'warning',
                                f'frame t={t / NS_PER_S:g} s: waiting for {node}, more than '
                                f'{self.lag_frames.get(node, self.max_lag_frames)} frames '
-                               f'behind for {self.timeout_s:g} s (going on would lose '
-                               'messages it has not read yet)')]
+                               f'behind for {self._waited * self.timeout_s:g} s (going on '
+                               'would lose messages it has not read yet)')]
+            if node in self.always_wait:
+                self._waited = 0
+                self.gone.add(node)
+                return [Action(Act.LOG, t, 'error',
+                               f'frame t={t / NS_PER_S:g} s: {node} read nothing for '
+                               f'{self.patience * self.timeout_s:g} s; going on without '
+                               'waiting for it: the bag misses the messages it did not read '
+                               '(it is waited for again when it reports progress)')
+                        ] + self._begin_frame(now)
             out = [Action(Act.LOG, t, 'warning',
                           f'frame t={t / NS_PER_S:g} s: {node} is more than '
                           f'{self.lag_frames.get(node, self.max_lag_frames)} frames behind '

@@ -36,8 +36,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 TOPIC = '/diagnostics'
 HARDWARE_ID = 'adcs'
-#: ``diagnostic_updater``'s publisher QoS (reliable, volatile, keep last 10).
-QOS_DIAGNOSTICS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+#: ``diagnostic_updater``'s publisher QoS (reliable, volatile), but keep last 100 as every
+#: lockstep topic: the clock master lets a recorder lag 40 frames, and with 10 a lagging
+#: recorder lost ``/diagnostics`` messages (seen in a clean-clone run under load).
+QOS_DIAGNOSTICS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                              history=HistoryPolicy.KEEP_LAST,
                              durability=DurabilityPolicy.VOLATILE)
 
