@@ -14,7 +14,7 @@ demo:  ## run the free-tumble scenario end to end: record a bag, write the repor
 	$(RUN) adcs run scenarios/free_tumble.yaml --record out/demo-$(STAMP) --report
 
 test: lint  ## flake8 + unit, node and integration tests (not the long reproductions)
-	$(RUN) python -m pytest -m "not slow" tests
+	$(RUN) python -m pytest -m "not slow" --durations=15 tests
 
 lint:  ## flake8 at 99 columns on the packages and tests
 	$(RUN) python -m flake8 adcs_nodes sim_node tests
