@@ -137,13 +137,13 @@ def cmd_validate(args) -> int:
 
 
 def cmd_switch(args) -> int:
-    from adcs_nodes.tools.live import LiveError, switch
+    from adcs_nodes.tools.live import LiveError, finish, switch
     try:
         print(switch(args.controller, args.run))
     except LiveError as exc:
         print(f'adcs switch: {exc}', file=sys.stderr)
-        return 2
-    return 0
+        return finish(2)
+    return finish(0)
 
 
 def cmd_slew(args) -> int:
@@ -163,13 +163,13 @@ def cmd_slew(args) -> int:
 
 
 def cmd_status(args) -> int:
-    from adcs_nodes.tools.live import LiveError, status
+    from adcs_nodes.tools.live import LiveError, finish, status
     try:
         print(status(args.run))
     except LiveError as exc:
         print(f'adcs status: {exc}', file=sys.stderr)
-        return 2
-    return 0
+        return finish(2)
+    return finish(0)
 
 
 def cmd_schema(args) -> int:

@@ -10,6 +10,8 @@ import glob
 import json
 import os
 import re
+import sys
+import threading
 import time
 from typing import Dict, List, Optional
 
@@ -58,10 +60,28 @@ def pick_run(pid: Optional[int]) -> Dict:
     return runs[0]
 
 
-class _Session:
-    """A short-lived rclpy context on the run's domain."""
+#: Wall seconds a command on a running graph (status, switch, ...) may take in all: a process
+#: that joined a busy domain was once seen never to return (``adcs status`` beside a graph
+#: running flat out after a controller was killed); it then exits 1 with a message.
+SESSION_DEADLINE_S = 60.0
 
-    def __init__(self, run: Dict) -> None:
+
+def _give_up() -> None:
+    sys.stderr.write(f'adcs: no answer from ROS within {SESSION_DEADLINE_S:g} s (the run\'s '
+                     'domain may be overloaded); giving up\n')
+    sys.stderr.flush()
+    os._exit(1)
+
+
+class _Session:
+    """A short-lived rclpy context on the run's domain (the process exits 1 if the whole
+    command takes longer than :data:`SESSION_DEADLINE_S`)."""
+
+    def __init__(self, run: Dict, deadline: bool = True) -> None:
+        if deadline:       # (not for a long action: adcs slew has its own timeout)
+            watchdog = threading.Timer(SESSION_DEADLINE_S, _give_up)
+            watchdog.daemon = True
+            watchdog.start()
         from adcs_nodes.tools.launcher import child_env
         env = child_env(int(run['domain']))
         for key in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
@@ -98,10 +118,32 @@ class _Session:
         while time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.05)
 
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.rclpy.shutdown(context=self.context)
+    def close(self, wait_s: float = 5.0) -> None:
+        """Shut the session down, waiting at most ``wait_s``; a shutdown still blocked then
+        (a flooded domain) is left to the process's end: :func:`finish` exits at once."""
+        def _close() -> None:
+            self.executor.shutdown()
+            self.node.destroy_node()
+            self.rclpy.shutdown(context=self.context)
+        closer = threading.Thread(target=_close, daemon=True)
+        closer.start()
+        closer.join(wait_s)
+        global _STUCK
+        _STUCK = _STUCK or closer.is_alive()
+
+
+#: True when a session's shutdown did not finish (see :meth:`_Session.close`).
+_STUCK = False
+
+
+def finish(code: int) -> int:
+    """Exit code of a command that used a session; exits the process at once (output
+    flushed) when a session's shutdown is stuck, instead of hanging at interpreter exit."""
+    if _STUCK:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
 
 
 def switch(name: str, pid: Optional[int] = None) -> str:

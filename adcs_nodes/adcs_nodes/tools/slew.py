@@ -121,7 +121,7 @@ def slew(roll_deg: float, pitch_deg: float, yaw_deg: float, frame: str = 'inerti
                         tolerance_deg, timeout_s)
     if reason:
         raise LiveError(reason)
-    session = _Session(pick_run(pid))
+    session = _Session(pick_run(pid), deadline=False)
     last = [0.0]
 
     def show(fb) -> None:
