@@ -177,6 +177,9 @@ def run(factory: Callable[[], Node], args=None) -> int:
         except ValueError as exc:
             print(f'[{_node_name(args, factory)}] configuration error: {exc}', file=sys.stderr)
             return 2
+        except KeyboardInterrupt:    # Ctrl-C (SIGINT) while the node was being built
+            print(f'[{_node_name(args, factory)}] interrupted during start-up', file=sys.stderr)
+            return 0
         spin_nodes([node])
         return int(getattr(node, 'exit_code', 0))
     finally:
