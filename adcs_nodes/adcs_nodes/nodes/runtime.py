@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 import time
 from typing import Callable, Iterable, List, Optional
 
@@ -144,7 +145,14 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
                 close = getattr(node, 'close', None)
                 if close is not None:
                     close()
-            flush_publishers(nodes)
+            # a launched node (start handshake expectations) waits for its samples to be
+            # acknowledged, in a thread joined with a deadline: shutting down never hangs
+            launched = [n for n in nodes if any(getattr(n, '_expected_raw', None) or [])]
+            if launched:
+                flusher = threading.Thread(target=flush_publishers, args=(launched,),
+                                           daemon=True)
+                flusher.start()
+                flusher.join(FLUSH_BUDGET_S + 0.5)
             for node in nodes:
                 executor.remove_node(node)
                 node.destroy_node()
@@ -170,18 +178,18 @@ def run(factory: Callable[[], Node], args=None) -> int:
     ``ValueError`` while building the node: one clear line naming the node, no traceback).
     An exception while running propagates (traceback, exit code 1) so the launcher reports it.
     """
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         try:
             node = factory()
         except ValueError as exc:
             print(f'[{_node_name(args, factory)}] configuration error: {exc}', file=sys.stderr)
             return 2
-        except KeyboardInterrupt:    # Ctrl-C (SIGINT) while the node was being built
-            print(f'[{_node_name(args, factory)}] interrupted during start-up', file=sys.stderr)
-            return 0
         spin_nodes([node])
         return int(getattr(node, 'exit_code', 0))
+    except KeyboardInterrupt:   # Ctrl-C (SIGINT) before spin_nodes took the signal over
+        print(f'[{_node_name(args, factory)}] interrupted during start-up', file=sys.stderr)
+        return 0
     finally:
         if rclpy.ok():
             rclpy.shutdown()
