@@ -6,11 +6,11 @@ import sys
 import time
 
 CHILD = r'''
-import time
+import threading
 from adcs_nodes.tools import live
 live.SESSION_DEADLINE_S = 1.0
 session = live._Session({'domain': 229})
-time.sleep(60)             # stands for a call that never returns
+threading.Event().wait()   # stands for a call that never returns
 '''
 
 
