@@ -179,6 +179,35 @@ def test_end_waits_for_final_progress_then_finishes():
     assert m2.tick(100.0) == []                      # idle: nothing to time out
 
 
+def test_end_waits_until_the_recorder_has_read_the_final_frame():
+    # a clean-clone CI run lost the last 24 /clock messages of a bag: the master's process
+    # ended while the recorder (allowed to lag) had not read them yet
+    m = ClockMaster(S, duration_ns=2 * S, wait_for_nodes=['est', 'recorder'],
+                    lag_frames={'recorder': 5}, no_final=['recorder'],
+                    always_wait=['recorder'], patience=3, timeout_s=1.0)
+    m.start(0.0)
+    for k in range(3):
+        m.on_progress('est', k * S, k == 2, 0.0)
+        m.on_environment(k * S, 'e', 0.0)
+    assert m.phase is MasterPhase.WAIT_FINAL          # est is final; the recorder read nothing
+    out = m.tick(1.5)
+    assert [a.kind for a in out] == [Act.LOG] and 'waiting for recorder' in out[0].text
+    assert m.on_progress('recorder', S, False, 2.0) == []        # not the last frame yet
+    out = m.on_progress('recorder', 2 * S, False, 2.1)
+    assert [a.kind for a in out] == [Act.FINISH]
+    # a recorder that never reads the end: `patience` timeouts, then the run finishes
+    m2 = ClockMaster(S, duration_ns=S, wait_for_nodes=['recorder'], no_final=['recorder'],
+                     always_wait=['recorder'], patience=2, timeout_s=1.0)
+    m2.start(0.0)
+    m2.on_progress('recorder', 0, False, 0.0)
+    for k in range(2):
+        m2.on_environment(k * S, 'e', 0.0)
+    assert m2.phase is MasterPhase.WAIT_FINAL
+    assert 'waiting for recorder' in m2.tick(1.1)[0].text
+    out = m2.tick(2.2)
+    assert kinds(out)[-1] == (Act.FINISH, 1) and 'recorder' in out[0].text
+
+
 def test_bad_configuration_raises():
     with pytest.raises(ValueError, match='frame'):
         ClockMaster(0)

@@ -431,9 +431,18 @@ class ClockMaster:
         return None
 
     def all_final(self) -> bool:
-        """True when every awaited node reported its final frame."""
+        """True when every awaited node reported its final frame, and every ``always_wait``
+        node (the recorder) has read up to it: the master's process must not end while a
+        recorder that lags by up to its ``lag_frames`` has not received the last frames yet
+        (they would be lost with the publishers' history)."""
         return all(n in self.final_nodes for n in self.wait_for_nodes
-                   if n not in self.no_final and n not in self.gone)
+                   if n not in self.no_final and n not in self.gone) and \
+            not self._unread_end()
+
+    def _unread_end(self) -> List[str]:
+        """``always_wait`` nodes (awaited, not gone) that have not read the current frame."""
+        return [n for n in self.wait_for_nodes if n in self.always_wait
+                and n not in self.gone and self.progress.get(n, -1) < self.t_ns]
 
     # ------------------------------------------------------------------ events
     def start(self, now: float) -> List[Action]:
@@ -510,6 +519,14 @@ class ClockMaster:
         if self.phase is MasterPhase.WAIT_FINAL:
             missing = [n for n in self.wait_for_nodes if n not in self.no_final
                        and n not in self.final_nodes and n not in self.gone]
+            unread = self._unread_end()
+            if not missing and unread and self._waited + 1 < self.patience:
+                self._waited += 1
+                self.wait_since = now
+                return [Action(Act.LOG, t, 'warning',
+                               f'end of run: waiting for {", ".join(unread)} to read the '
+                               f'last frames ({self._waited * self.timeout_s:g} s)')]
+            missing += [n for n in unread if n not in missing]
             return [Action(Act.LOG, t, 'warning',
                            f'end of run: no final frame from {", ".join(missing)} within '
                            f'{self.timeout_s:g} s; finishing')] + self._finish()
