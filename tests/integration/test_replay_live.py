@@ -2,7 +2,7 @@
 
 A paper000_estimation run is recorded; ``adcs replay`` then publishes its magnetometer samples
 best-effort (SensorDataQoS), with stamps shifted 0.37 s off the simulator's 2 s frame grid, and
-``/clock`` at 50x; the estimator runs alone (``timing_mode: live``, ``use_sim_time``), its
+``/clock`` at 100x; the estimator runs alone (``timing_mode: live``, ``use_sim_time``), its
 onboard epoch shifted by the same 0.37 s (what the replay prints). Truth: the recorded
 ``sim/state``, interpolated at the estimate's stamp with scipy's Slerp. The live node
 (irregular prediction steps, a few samples lost as 'late' when a /clock tick fires the frame
@@ -31,7 +31,7 @@ from adcs_nodes.tools.scenario import load_scenario  # noqa: E402
 SCENARIO = os.path.join(SCENARIOS, 'paper000_estimation.yaml')
 DURATION_S = 2400.0
 OFFSET_S = 0.37
-RATE = 60.0
+RATE = 100.0
 EPOCH_NS = 1767225600 * 10**9           # 2026-01-01T00:00:00Z, the scenario epoch
 
 
