@@ -33,15 +33,19 @@ QUAT = ('x', 'y', 'z', 'w')
 VEC = ('x', 'y', 'z')
 
 
-def campaign_cmd(out, *args, duration=DURATION):
+def campaign_cmd(out, *args, duration=DURATION, engine='graph'):
+    """The campaign command; the graph engine unless ``args`` name one or ``engine`` is None
+    (the default ``auto``: plain for this scenario, or a resumed campaign's engine)."""
+    if engine is not None and '--engine' not in args:
+        args = (*args, '--engine', engine)
     return [sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
             '--duration', f'{duration:g}', '--out', str(out), *SENSOR_DISPERSION, *args]
 
 
-def campaign(out, *args, check=True, timeout=240):
+def campaign(out, *args, check=True, timeout=240, engine='graph'):
     """Run a campaign to its end; returns the CompletedProcess (text output)."""
-    proc = subprocess.run(campaign_cmd(out, *args), cwd=ROOT, capture_output=True, text=True,
-                          timeout=timeout)
+    proc = subprocess.run(campaign_cmd(out, *args, engine=engine), cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout)
     if check and proc.returncode != 0:
         raise AssertionError(f'campaign failed ({proc.returncode}):\n{proc.stdout}\n'
                              f'{proc.stderr}')
@@ -89,7 +93,7 @@ def result_mtime(out, index):
 
 @pytest.fixture(scope='module')
 def three_runs(tmp_path_factory):
-    """A 3-run campaign, 2 runs at a time, one process per node (the default)."""
+    """A 3-run campaign on the graph engine, 2 runs at a time, one process per node."""
     out = tmp_path_factory.mktemp('montecarlo') / 'campaign'
     t0 = time.monotonic()
     proc = campaign(out, '--runs', '3', '--jobs', '2')
@@ -277,8 +281,11 @@ def test_restart_reruns_only_incomplete_runs(three_runs, tmp_path):
     disp_cols = [c for c in mc.CSV_COLUMNS if c.startswith('disp_')] + ['seed']
     for old, new in zip(before, after):
         assert {c: old[c] for c in disp_cols} == {c: new[c] for c in disp_cols}
-    # nothing done: the same command only rewrites the table
-    proc = campaign(out, '--runs', '3')
+    # nothing done: the same command only rewrites the table; without --engine (auto) the
+    # campaign keeps the graph engine recorded in its campaign.json
+    proc = campaign(out, '--runs', '3', engine=None)
+    first = proc.stdout.splitlines()[0]
+    assert 'engine graph [auto: the engine of the campaign being resumed]' in first, first
     assert 'executed 0 run(s)' in proc.stdout and result_mtime(out, 0) == kept
 
 

@@ -80,6 +80,11 @@ class ClosedLoop:
         from adcs_nodes.nodes import estimator as estimator_node
         from adcs_nodes.tools.graph import build_graph
 
+        from adcs_nodes.tools.montecarlo.engine import plain_engine_problem
+
+        problem = plain_engine_problem(sc)
+        if problem is not None:
+            raise ValueError(f'closed loop: {problem}')
         self.sc = sc
         self.duration_s = float(sc['duration_s'] if duration_s is None else duration_s)
         self.frame_s = float(sc['timing']['frame_s'])

@@ -5,7 +5,7 @@ Usage::
     adcs montecarlo SCENARIO --runs N [--jobs J] [--scheduler ADDRESS | --dask-local] [--out DIR]
                     [--duration S] [--seed S] [--max-rate-deg-s 3.0] [--capture-deg 5.0]
                     [--mag-bias-nT B] [--misalignment-deg M] [--auto-detumble]
-                    [--bdot-gain K] [--engine graph|plain] [--compose]
+                    [--bdot-gain K] [--engine auto|graph|plain] [--compose]
 
 Dispersions
 -----------
@@ -39,9 +39,12 @@ the scenario's circular orbit; the hold is the angle from 4 orbits to the end (R
 
 Execution
 ---------
-Engine ``graph`` (default): each run is one ``python -m adcs_nodes.tools.montecarlo _worker
-RUN_DIR`` process that starts
-the graph with :class:`~adcs_nodes.tools.launcher.Launcher` in its own main thread (the
+Engine (:mod:`.engine`): ``--engine auto`` (the default) is ``plain`` when the plain loop
+wires every node of the scenario (paper 000: ``paper000_control`` and its variants), else
+``graph``; a campaign being resumed keeps the engine recorded in its ``campaign.json``. The
+command's first line names the engine and why. Engine ``graph``: each run is one
+``python -m adcs_nodes.tools.montecarlo _worker RUN_DIR`` process that starts the graph
+with :class:`~adcs_nodes.tools.launcher.Launcher` in its own main thread (the
 launcher needs signal handlers and sets ``ROS_DOMAIN_ID`` in its environment; a fresh process
 per run keeps every graph isolated, each with its own domain). ``--jobs J`` supervises J such
 processes at once from a thread pool; ``--scheduler ADDRESS`` submits the same supervisor

@@ -9,14 +9,15 @@ from typing import List, Optional
 from adcs_nodes.tools.montecarlo.campaign import Campaign
 from adcs_nodes.tools.montecarlo.config import (ENGINES, CampaignConfig, CampaignError,
                                                 scenario_hash)
+from adcs_nodes.tools.montecarlo.engine import plain_engine_problem, resolve_engine
 from adcs_nodes.tools.montecarlo.runner import worker_main
 
 
-#: Printed by a multi-run campaign on the graph engine (the default).
+#: Printed by a multi-run campaign on the graph engine when the plain loop could run it.
 GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, recorded to a bag '
               '(paper000_control, 6 orbits: 60-185 s CPU per run, by machine load). '
-              '--engine plain runs the same cores without ROS, gives the same trajectory '
-              '(to 1e-9) and about 10 s CPU per run, without bags.')
+              '--engine plain (the auto choice for this scenario) runs the same cores without '
+              'ROS, gives the same trajectory (to 1e-9) and a few s CPU per run, without bags.')
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,17 +59,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--bdot-gain', type=float, default=None, metavar='K',
                         help='B-dot gain of the detumble [A m^2 s/T] (default: the '
                         'scenario\'s)')
-    parser.add_argument('--engine', choices=ENGINES, default='graph',
-                        help='graph: the ROS graph, one bag per run (default); plain: the '
-                        'same cores in a plain loop without ROS (sim_node.tools.closed_loop: '
-                        'the graph\'s trajectory to 1e-9, no bag, 6-17x less CPU; the '
-                        'engine for 100-run campaigns)')
+    parser.add_argument('--engine', choices=ENGINES + ('auto',), default='auto',
+                        help='auto (default): plain when the plain loop runs the scenario '
+                        '(paper000_control and its variants), else graph; a campaign being '
+                        'resumed keeps the engine in its campaign.json. graph: the ROS graph, '
+                        'one bag per run; plain: the same cores in a plain loop without ROS '
+                        '(sim_node.tools.closed_loop: the graph\'s trajectory to 1e-9, no bag, '
+                        'far less CPU)')
     parser.add_argument('--compose', action='store_true',
                         help='each run composed in one process (faster, same trajectory)')
 
 
 def config_from_args(args: argparse.Namespace) -> tuple:
     """Validate the arguments; returns ``(CampaignConfig, base scenario, out dir)``.
+
+    The engine is resolved here (:func:`~adcs_nodes.tools.montecarlo.engine.resolve_engine`);
+    the reason is in ``args.engine_reason`` afterwards.
 
     Raises
     ------
@@ -95,6 +101,8 @@ def config_from_args(args: argparse.Namespace) -> tuple:
     if not duration > 0 or abs(frames - round(frames)) > 1e-9:
         raise CampaignError(f'--duration {duration:g} s is not a positive whole number of '
                             f'{base["timing"]["frame_s"]:g} s frames')
+    out = args.out or f'montecarlo_{base["name"]}'
+    engine, args.engine_reason = resolve_engine(getattr(args, 'engine', None), base, out)
     cfg = CampaignConfig(
         scenario_path=base['_path'], scenario_sha256=scenario_hash(base), runs=args.runs,
         seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
@@ -102,11 +110,10 @@ def config_from_args(args: argparse.Namespace) -> tuple:
         mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
         auto_detumble=bool(getattr(args, 'auto_detumble', False)),
         bdot_gain=getattr(args, 'bdot_gain', None),
-        engine=getattr(args, 'engine', 'graph'), compose=bool(args.compose))
+        engine=engine, compose=bool(args.compose))
     if cfg.auto_detumble and not {'magnetic', 'bdot'} <= set(base.get('controllers', {})):
         raise CampaignError('--auto-detumble needs the controllers magnetic and bdot in the '
                             'scenario')
-    out = args.out or f'montecarlo_{base["name"]}'
     return cfg, base, out
 
 
@@ -125,9 +132,9 @@ def run_from_args(args: argparse.Namespace) -> int:
         else:
             mode = f'{args.jobs} at a time'
         print(f'[montecarlo] {cfg.runs} runs of {base["name"]} ({cfg.duration_s:g} s each, '
-              f'seed {cfg.seed}, engine {cfg.engine}) {mode}, output in {campaign.out}',
-              flush=True)
-        if cfg.engine == 'graph' and cfg.runs > 1:
+              f'seed {cfg.seed}, engine {cfg.engine} [{args.engine_reason}]) {mode}, output in '
+              f'{campaign.out}', flush=True)
+        if cfg.engine == 'graph' and cfg.runs > 1 and plain_engine_problem(base) is None:
             print(GRAPH_HINT, flush=True)
         return campaign.run(jobs=args.jobs, scheduler=args.scheduler, dask_local=dask_local)
     except (CampaignError, ScenarioError) as exc:

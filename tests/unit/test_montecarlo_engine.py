@@ -1,0 +1,63 @@
+"""``adcs montecarlo --engine auto`` (the default): plain for the scenarios the plain loop wires,
+graph for the others, an explicit engine wins, a resumed campaign keeps its recorded engine."""
+import json
+import os
+
+import pytest
+
+from adcs_nodes.tools.montecarlo.cli import main
+from adcs_nodes.tools.montecarlo.engine import plain_engine_problem, resolve_engine
+from adcs_nodes.tools.scenario import load_scenario
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def scenario(name):
+    return load_scenario(os.path.join(ROOT, 'scenarios', f'{name}.yaml'))
+
+
+@pytest.mark.parametrize('name', ['paper000_control', 'paper000_control_misaligned'])
+def test_auto_is_plain_for_the_paper000_closed_loop(name, tmp_path):
+    assert plain_engine_problem(scenario(name)) is None
+    assert resolve_engine('auto', scenario(name), str(tmp_path))[0] == 'plain'
+    assert resolve_engine(None, scenario(name), str(tmp_path))[0] == 'plain'
+
+
+@pytest.mark.parametrize('name, why', [
+    ('paper003_slew', 'horizon_sensor'),         # a sensor the plain loop does not model
+    ('paper001_mpi', 'magnetometer'),            # no magnetometer at all
+    ('paper000_estimation', 'controller_manager'),  # open loop: nothing to command
+    ('free_tumble', 'magnetometer')])
+def test_auto_is_graph_when_the_plain_loop_lacks_a_node(name, why, tmp_path):
+    engine, reason = resolve_engine('auto', scenario(name), str(tmp_path))
+    assert engine == 'graph' and why in reason, reason
+
+
+def test_explicit_engine_wins(tmp_path):
+    sc = scenario('paper000_control')
+    assert resolve_engine('graph', sc, str(tmp_path)) == ('graph', '--engine')
+    assert resolve_engine('plain', scenario('paper003_slew'), str(tmp_path))[0] == 'plain'
+    with pytest.raises(ValueError, match='--engine'):
+        resolve_engine('fast', sc, str(tmp_path))
+
+
+@pytest.mark.parametrize('recorded, expected', [
+    ({'engine': 'graph'}, 'graph'), ({'engine': 'plain'}, 'plain'),
+    ({}, 'graph')])   # a campaign.json from before the engines
+def test_a_resumed_campaign_keeps_its_recorded_engine(recorded, expected, tmp_path):
+    with open(tmp_path / 'campaign.json', 'w', encoding='utf-8') as fh:
+        json.dump({'seed': 1, **recorded}, fh)
+    engine, reason = resolve_engine('auto', scenario('paper000_control'), str(tmp_path))
+    assert engine == expected and 'resumed' in reason
+
+
+def test_first_line_names_the_chosen_engine(tmp_path, capsys):
+    """A 2 s plain run (one run process): the first output line names the engine and why."""
+    out = tmp_path / 'mc'
+    code = main([os.path.join(ROOT, 'scenarios', 'paper000_control.yaml'), '--runs', '1',
+                 '--duration', '2', '--out', str(out)])
+    lines = capsys.readouterr().out.splitlines()
+    assert code == 0, lines
+    assert 'engine plain [auto: the plain loop runs this scenario]' in lines[0], lines[0]
+    with open(out / 'campaign.json', encoding='utf-8') as fh:
+        assert json.load(fh)['engine'] == 'plain'
