@@ -52,6 +52,14 @@ Rules
 
 A controller that does not use wheels may send an empty ``wheel_torque``: it is read as zero
 torque on every wheel.
+
+Compiled checks (issue 13)
+--------------------------
+The per-component tests of a command (finite, ``|v_i| <= l_i (1 + 1e-9) + 1e-12``) and the last
+line of defence (non-finite -> 0, then ``clip(v, -l, l)``) are the numba kernels
+:func:`limit_violation` and :func:`clip_finite` (``cache=True``, no fastmath); uncompiled
+(``NUMBA_DISABLE_JIT=1``) they are the same Python. They compare and copy values, so the
+forwarded command has the bits of the controller's.
 """
 from __future__ import annotations
 
@@ -64,12 +72,52 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
 from adcs_nodes.core.control import Command, Estimate, Target, limits_vector, positive
+from adcs_nodes.core.kernels import jit
 
 AUTO = 'auto'
 """Pseudo-controller name that (re)starts the automatic mode sequence."""
 TIME_TOL_S = 1e-9
 """Tolerance on time comparisons [s] (sim time comes from integer nanoseconds)."""
 _LIMIT_RTOL = 1e-9
+
+
+@jit
+def limit_violation(v, limit, rtol):
+    """First bad component of ``v`` against the limits ``limit`` (both float64, shape (n,)).
+
+    Returns
+    -------
+    int
+        ``-1`` when every ``v_i`` is finite and ``|v_i| <= limit_i (1 + rtol) + 1e-12``;
+        ``-2 - i`` when ``v_i`` is the first non-finite component (checked first); else the
+        first ``i`` over its limit.
+    """
+    for i in range(v.shape[0]):
+        if not math.isfinite(v[i]):
+            return -2 - i
+    for i in range(v.shape[0]):
+        if abs(v[i]) > limit[i] * (1.0 + rtol) + 1e-12:
+            return i
+    return -1
+
+
+@jit
+def clip_finite(v, limit):
+    """``clip(v, -limit, limit)`` after zeroing the non-finite entries, shape (n,)."""
+    out = np.zeros(v.shape[0])
+    for i in range(v.shape[0]):
+        if math.isfinite(v[i]):
+            out[i] = min(max(v[i], -limit[i]), limit[i])
+    return out
+
+
+def warm_up() -> None:
+    """Compile (or load from the numba cache) the check kernels, once per process (from the
+    constructor: never inside a frame)."""
+    for n in (0, 3):
+        v = np.zeros(n)
+        limit_violation(v, v, _LIMIT_RTOL)
+        clip_finite(v, v)
 
 
 def _opt_positive(value, name: str, unit: str) -> Optional[float]:
@@ -258,6 +306,7 @@ class ControllerManagerCore:
         self.max_wheel = limits_vector(wheel, 'max_wheel_torque', wheel.size)
         self.n_wheels = int(wheel.size)
         self.max_torque = limits_vector(max_torque, 'max_torque', 3)
+        warm_up()
         try:
             self.stale_after = float(stale_after_s)
         except (TypeError, ValueError):
@@ -577,11 +626,10 @@ class ControllerManagerCore:
                 arr = np.zeros(self.n_wheels)
             if arr.shape != limit.shape:
                 return None, f'malformed {name}: shape {arr.shape}, expected {limit.shape}'
-            if not np.all(np.isfinite(arr)):
+            i = limit_violation(arr, limit, _LIMIT_RTOL)
+            if i <= -2:
                 return None, f'non-finite (NaN or inf) {name}: {arr}'
-            over = np.abs(arr) > limit * (1.0 + _LIMIT_RTOL) + 1e-12
-            if np.any(over):
-                i = int(np.argmax(over))
+            if i >= 0:
                 return None, (f'out of range: {name}[{i}] = {arr[i]:.6g} {unit} exceeds the '
                               f'limit {limit[i]:.6g} {unit}')
             values[name] = arr
@@ -591,8 +639,7 @@ class ControllerManagerCore:
 
     def _sanitize(self, cmd: Command, reason: str) -> Command:
         def clip(v, lim):
-            v = np.nan_to_num(np.asarray(v, dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
-            return np.clip(v, -lim, lim)
+            return clip_finite(np.asarray(v, dtype=float), lim)
         return Command(clip(cmd.dipole_body, self.max_dipole),
                        clip(cmd.wheel_torque, self.max_wheel),
                        clip(cmd.torque_body, self.max_torque), reason or cmd.reason, cmd.info)

@@ -207,7 +207,7 @@ class ClosedLoop:
             t = t_ns / 1e9
             st = w.orbit.state(t)
             period_s = 2.0 * math.pi / float(st.orbit_rate)
-            b_eci, b_dot_eci = w.field.field_and_rate(w.orbit, t)
+            b_eci, b_dot_eci = w.field.field_and_rate(w.orbit, t, st.r_eci)
             if state is None:
                 state = initial_state(w.initial, st.q_eci_orbit, st.omega_orbit_eci_eci, sc,
                                       w.wheel_h0)

@@ -73,6 +73,17 @@ Assumptions (not in the paper)
   law only damps ``y`` until any motion leaves that unstable point.
 * ``|B| < b_min_T`` (default 1e-9 T): zero dipole with a reason (guarded pseudo-inverse,
   pitfall 8). ``B`` is the measured field (digest 3.6).
+
+Compiled law (issue 13)
+-----------------------
+:meth:`MagneticController.law` checks its inputs in Python and computes (7), (10), (16) /
+(21), (29) / (32), (30), (31) in one call of :func:`law_kernel`, compiled by numba
+(``cache=True``, no fastmath: IEEE arithmetic in the order written). The kernel repeats the
+operations of the helper functions above (:func:`relative_rate`, :func:`target_rate_three_axis`,
+...) in the same order, so it gives their bits; a unit test compares them, and the kernel run
+uncompiled (``NUMBA_DISABLE_JIT=1``). The one-axis direction ``s = R(q_err)^T xi`` is summed in
+index order (it was a BLAS matrix-vector product, whose summation order depends on the CPU's
+BLAS kernel): the same bits for ``xi`` on a body axis (the default ``z``).
 """
 from __future__ import annotations
 
@@ -84,7 +95,8 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
 from adcs_nodes.core.control import (Command, ControlInputs, Estimate, Target, cross3,
-                                     finite_vector, limits_vector, positive, scale_to_limits)
+                                     finite_vector, limits_vector, positive)
+from adcs_nodes.core.kernels import cross, jit
 
 MODES = ('three_axis', 'one_axis', 'two_stage')
 """Accepted values of ``mode``."""
@@ -233,6 +245,151 @@ def check_gains(alpha: float, k: float, beta: Optional[float] = None,
             f'{2.0 * alpha * k * sigma_star:g})')
 
 
+#: Layout of the :func:`law_kernel` output (one float64 array): offsets of the (3,) vectors
+#: ``y``, ``y*``, ``M*``, ``L*``, ``L``, ``L x B``, then the scalars.
+K_Y, K_Y_STAR, K_M_STAR, K_L_STAR, K_DIPOLE, K_TORQUE = 0, 3, 6, 9, 12, 15
+K_SIGMA, K_ANGLE, K_AXIS_ANGLE, K_THREE_AXIS = 18, 19, 20, 21
+K_SIZE = 22
+
+
+@jit
+def _normalized(q):
+    """``q / |q|``, ``|q| = sqrt(q . q)`` summed in index order (as :func:`attitude.normalize`)."""
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return np.array([q[0] / n, q[1] / n, q[2] / n, q[3] / n])
+
+
+@jit
+def law_kernel(q_orbit_body, omega_body_eci_body, omega0, q_ref, y_ref, b_body, xi, alpha, k,
+               max_dipole, three_axis, may_switch, switch_angle, switch_rate):
+    """Paper 000's magnetic law for one frame, compiled (see the module docstring).
+
+    Parameters
+    ----------
+    q_orbit_body : numpy.ndarray, shape (4,)
+        Estimated attitude, scalar last (normalised here).
+    omega_body_eci_body : numpy.ndarray, shape (3,)
+        Estimated absolute rate, body axes [rad/s].
+    omega0 : float
+        Orbit rate [rad/s].
+    q_ref, y_ref : numpy.ndarray, shapes (4,), (3,)
+        Target ``q_orbit_body_ref`` and rate ``omega_body_ref_body`` [rad/s].
+    b_body : numpy.ndarray, shape (3,)
+        Field, body axes [T], ``|B| > 0``.
+    xi : numpy.ndarray, shape (3,)
+        Unit body axis of the one-axis law.
+    alpha, k : float
+        Gains [1/s], [N m s].
+    max_dipole : numpy.ndarray, shape (3,)
+        Coil limits ``l_i`` [A m^2], > 0.
+    three_axis : bool
+        True: the three-axis law (16); False: the one-axis law (21).
+    may_switch : bool
+        Two-stage mode in the one-axis stage: switch to the three-axis law when the axis
+        angle is below ``switch_angle`` [rad] and ``|y - y_ref|`` below ``switch_rate``
+        [rad/s].
+
+    Returns
+    -------
+    numpy.ndarray, shape (K_SIZE,)
+        ``y``, ``y*``, ``M*``, ``L*``, ``L = sigma L*``, ``L x B`` (slices ``K_*``), then
+        ``sigma``, the attitude error of the active law (three-axis: its half-angle cosine
+        ``min(1, |q_err_w|)``, the caller takes ``2 arccos`` with numpy's ``arccos``, whose
+        bits :func:`attitude.angle_between` has; one-axis: the angle [rad]), the one-axis
+        angle [rad] and 1.0 when the three-axis law was used.
+    """
+    out = np.zeros(K_SIZE)
+    q = _normalized(q_orbit_body)
+    qr = _normalized(q_ref)
+    q_err = np.array([0.0, 0.0, 0.0, 0.0])
+    px, py, pz, pw = -qr[0], -qr[1], -qr[2], qr[3]                 # conj(q_ref) (x) q
+    q_err[0] = pw * q[0] + px * q[3] + py * q[2] - pz * q[1]
+    q_err[1] = pw * q[1] - px * q[2] + py * q[3] + pz * q[0]
+    q_err[2] = pw * q[2] + px * q[1] - py * q[0] + pz * q[3]
+    q_err[3] = pw * q[3] - px * q[0] - py * q[1] - pz * q[2]
+    # (7), (10): y = omega - omega0 e_N, Lambda = (l0, l1, l2, l3) scalar first
+    qn = _normalized(q)
+    l0, l1, l2, l3 = qn[3], qn[0], qn[1], qn[2]
+    e_n0 = 2.0 * (l1 * l2 + l0 * l3)                                                  # (10)
+    e_n1 = l0 * l0 - l1 * l1 + l2 * l2 - l3 * l3
+    e_n2 = 2.0 * (l2 * l3 - l0 * l1)
+    y = np.array([omega_body_eci_body[0] - omega0 * e_n0,                             # (7)
+                  omega_body_eci_body[1] - omega0 * e_n1,
+                  omega_body_eci_body[2] - omega0 * e_n2])
+    # one-axis direction s = R(conj(q_err)) xi, the target's xi in body axes
+    c = _normalized(np.array([-q_err[0], -q_err[1], -q_err[2], q_err[3]]))
+    x_, y_, z_, w_ = c[0], c[1], c[2], c[3]
+    r = np.array([[1 - 2 * (y_ * y_ + z_ * z_), 2 * (x_ * y_ - z_ * w_), 2 * (x_ * z_ + y_ * w_)],
+                  [2 * (x_ * y_ + z_ * w_), 1 - 2 * (x_ * x_ + z_ * z_), 2 * (y_ * z_ - x_ * w_)],
+                  [2 * (x_ * z_ - y_ * w_), 2 * (y_ * z_ + x_ * w_), 1 - 2 * (x_ * x_ + y_ * y_)]])
+    s = np.zeros(3)
+    for i in range(3):
+        s[i] = r[i, 0] * xi[0] + r[i, 1] * xi[1] + r[i, 2] * xi[2]
+    xs = xi[0] * s[0] + xi[1] * s[1] + xi[2] * s[2]
+    axis_angle = math.acos(min(1.0, max(-1.0, xs)))
+    if may_switch and axis_angle < switch_angle:
+        d0, d1, d2 = y[0] - y_ref[0], y[1] - y_ref[1], y[2] - y_ref[2]
+        if math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) < switch_rate:
+            three_axis = True                                                       # assumption
+    y_star = np.zeros(3)
+    if three_axis:
+        qe = _normalized(q_err)                                                       # (16)
+        sg = 1.0 if qe[3] >= 0.0 else -1.0
+        den = 1.0 + abs(qe[3])
+        for i in range(3):
+            y_star[i] = y_ref[i] + -2.0 * alpha * qe[i] * sg / den
+        angle = min(1.0, abs(qe[3]))         # cos(angle / 2), angle_between(q_err, identity)
+    else:
+        den = max(1.0 + xs, ONE_AXIS_DENOMINATOR_FLOOR)                               # (21)
+        sx = cross(s, xi)
+        for i in range(3):
+            y_star[i] = y_ref[i] + -alpha * sx[i] / den
+        angle = axis_angle
+    m_star = np.zeros(3)
+    for i in range(3):
+        m_star[i] = -k * (y[i] - y_star[i])                                      # (29) / (32)
+    bb = b_body[0] * b_body[0] + b_body[1] * b_body[1] + b_body[2] * b_body[2]
+    l_star = cross(b_body, m_star)                                                    # (30)
+    phi = 0.0
+    for i in range(3):
+        l_star[i] = l_star[i] / bb
+        ratio = abs(l_star[i]) / max_dipole[i] if abs(l_star[i]) > 0.0 else 0.0
+        phi = max(phi, ratio)
+    sigma = 1.0
+    dipole = l_star.copy()
+    if phi > 1.0:                                                                     # (31)
+        sigma = 1.0 / phi
+        for i in range(3):
+            dipole[i] = min(max(sigma * l_star[i], -max_dipole[i]), max_dipole[i])
+    torque = cross(dipole, b_body)                                                    # (4)
+    for i in range(3):
+        out[K_Y + i] = y[i]
+        out[K_Y_STAR + i] = y_star[i]
+        out[K_M_STAR + i] = m_star[i]
+        out[K_L_STAR + i] = l_star[i]
+        out[K_DIPOLE + i] = dipole[i]
+        out[K_TORQUE + i] = torque[i]
+    out[K_SIGMA] = sigma
+    out[K_ANGLE] = angle
+    out[K_AXIS_ANGLE] = axis_angle
+    out[K_THREE_AXIS] = 1.0 if three_axis else 0.0
+    return out
+
+
+_WARM = {'done': False}
+
+
+def warm_up() -> None:
+    """Compile (or load from the numba cache) :func:`law_kernel` once per process, from the
+    constructor: the first compilation (1-2 s) never falls inside a frame."""
+    if _WARM['done']:
+        return
+    q, v = np.array([0.0, 0.0, 0.0, 1.0]), np.array([1e-5, 0.0, 2e-5])
+    for three_axis in (True, False):
+        law_kernel(q, v, 1e-3, q, v, v, v, 1e-3, 0.2, v, three_axis, not three_axis, 0.1, 0.1)
+    _WARM['done'] = True
+
+
 class MagneticController:
     """Paper 000's magnetorquer laws: three-axis (29), one-axis (32), or two-stage.
 
@@ -297,6 +454,7 @@ class MagneticController:
             raise ValueError(f'n_wheels must be an integer >= 0, got {n_wheels!r}')
         self.n_wheels = int(n_wheels)
         self.b_min = positive(b_min_T, 'b_min_T', 'T')
+        warm_up()
         self.stage = ''
         self.reset()
 
@@ -365,30 +523,22 @@ class MagneticController:
                 or not np.all(np.isfinite(y_ref)) or np.linalg.norm(q_ref) < 1e-9):
             return self._zero('target not finite or malformed')
 
-        q = attitude.normalize(estimate.q_orbit_body)
-        q_err = attitude.multiply(attitude.conjugate(attitude.normalize(q_ref)), q)
-        y = relative_rate(q, estimate.omega_body_eci_body, estimate.omega0)           # (7)
-        # Orbit-fixed direction of the one-axis law, body components: where xi points at the
-        # target attitude (= e_R for the identity target and xi = z).
-        s = attitude.rotate(attitude.conjugate(q_err), self.xi)
-        one_axis_angle = math.acos(min(1.0, max(-1.0, float(self.xi @ s))))
-        if (self.stage == 'one_axis' and self.mode == 'two_stage'
-                and one_axis_angle < self.switch_angle
-                and float(np.linalg.norm(y - y_ref)) < self.switch_rate):
-            self.stage = 'three_axis'                                                 # assumption
-
-        if self.stage == 'three_axis':
-            y_star = y_ref + target_rate_three_axis(q_err, self.alpha)                # (16)
-            angle = attitude.angle_between(q_err, attitude.identity())
-        else:
-            y_star = y_ref + target_rate_one_axis(s, self.xi, self.alpha)             # (21)
-            angle = one_axis_angle
-        m_star = torque_demand(y, y_star, self.k)                                     # (29) / (32)
-        l_star = dipole_from_torque(m_star, b)                                        # (30)
-        dipole, sigma = scale_to_limits(l_star, self.max_dipole)                      # (31)
-        cmd = Command(dipole, np.zeros(self.n_wheels), np.zeros(3))
-        cmd.info = {'stage': self.stage, 'y': y, 'y_star': y_star, 'torque_demand': m_star,
-                    'dipole_demand': l_star, 'sigma': sigma,
-                    'torque_applied': cross3(dipole, b), 'angle_rad': angle,          # (4)
-                    'axis_angle_rad': one_axis_angle}
+        q_est = np.asarray(estimate.q_orbit_body, dtype=float)
+        w_est = np.asarray(estimate.omega_body_eci_body, dtype=float)
+        out = law_kernel(q_est, w_est, float(estimate.omega0), q_ref, y_ref, b, self.xi,
+                         self.alpha, self.k, self.max_dipole, self.stage == 'three_axis',
+                         self.stage == 'one_axis' and self.mode == 'two_stage',
+                         self.switch_angle, self.switch_rate)   # (7), (16)/(21), (29)-(31)
+        angle = float(out[K_ANGLE])
+        if out[K_THREE_AXIS] == 1.0:
+            self.stage = 'three_axis'
+            angle = float(2.0 * np.arccos(angle))      # attitude.angle_between(q_err, identity)
+        cmd = Command(out[K_DIPOLE:K_DIPOLE + 3].copy(), np.zeros(self.n_wheels), np.zeros(3))
+        cmd.info = {'stage': self.stage, 'y': out[K_Y:K_Y + 3],
+                    'y_star': out[K_Y_STAR:K_Y_STAR + 3],
+                    'torque_demand': out[K_M_STAR:K_M_STAR + 3],
+                    'dipole_demand': out[K_L_STAR:K_L_STAR + 3], 'sigma': float(out[K_SIGMA]),
+                    'torque_applied': out[K_TORQUE:K_TORQUE + 3],
+                    'angle_rad': angle,
+                    'axis_angle_rad': float(out[K_AXIS_ANGLE])}
         return cmd

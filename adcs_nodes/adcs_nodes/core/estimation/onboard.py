@@ -26,7 +26,8 @@ One reference per stamp (issue 13): :meth:`OnboardReference.at` keeps its last r
 :func:`make_onboard_reference` returns one shared instance per configuration within a
 process, so the estimator and the controllers of a composed process compute (R1) once per
 stamp. ``at(t)`` is a pure function of ``t``, so sharing changes no number; every caller gets
-its own copies of the arrays.
+its own copies of the arrays. (R1) is the numba kernel :func:`to_orbit_axes` (``cache=True``,
+no fastmath; the bits of ``to_matrix(q).T @ b``, summed in index order).
 """
 from __future__ import annotations
 
@@ -37,12 +38,22 @@ from typing import Dict, Mapping, NamedTuple, Optional
 
 import numpy as np
 
-from adcs_nodes.core import attitude
 from adcs_nodes.core.geomag import B0_DEFAULT_T, R_REF_M, GeomagneticField, make_field
+from adcs_nodes.core.kernels import dcm, jit
 from adcs_nodes.core.orbit import OrbitModel, make_orbit
 
 MU_E_DEFAULT = B0_DEFAULT_T * R_REF_M ** 3
 """Default Earth dipole moment ``B0 R^3`` [T m^3] (about 7.76e15; digest 5.2 assumption)."""
+
+
+@jit
+def to_orbit_axes(q_eci_orbit, v_eci):
+    """``R(q_eci_orbit)^T v_eci`` (R1), shape (3,): ECI components to orbit axes."""
+    r = dcm(q_eci_orbit)
+    out = np.empty(3)
+    for i in range(3):
+        out[i] = r[0, i] * v_eci[0] + r[1, i] * v_eci[1] + r[2, i] * v_eci[2]
+    return out
 
 
 class OnboardState(NamedTuple):
@@ -91,6 +102,7 @@ class OnboardReference:
                              f'epoch {getattr(field, "epoch", None)}')
         self.orbit = orbit
         self.field = field
+        to_orbit_axes(np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3))   # compiled before a frame
         self._last_t: Optional[float] = None
         self._last: Optional[OnboardState] = None
 
@@ -107,7 +119,7 @@ class OnboardReference:
         if self._last is None or self._last_t != t:
             st = self.orbit.state(t)
             b_eci = self.field.field_eci(st.r_eci, t)
-            b_orbit = attitude.to_matrix(st.q_eci_orbit).T @ b_eci  # (R1)
+            b_orbit = to_orbit_axes(np.asarray(st.q_eci_orbit, dtype=float), b_eci)  # (R1)
             self._last = OnboardState(np.array(st.q_eci_orbit, dtype=float), b_orbit,
                                       float(st.orbit_rate), float(st.argument_of_latitude),
                                       np.array(st.r_eci, dtype=float))
