@@ -297,3 +297,15 @@ def test_make_field_errors_name_the_key(cfg, word):
 def test_bad_inputs_raise_value_error(build):
     with pytest.raises(ValueError):
         build()
+
+
+def test_igrf14_coefficients_read_without_pandas_equal_ppigrf_read_shc():
+    """The plain reader of IGRF14.shc (no pandas import per process) against ppigrf's."""
+    from adcs_nodes.core import geomag
+    keys = [(n, m) for n in range(1, 14) for m in range(n + 1)]
+    years, g, h = geomag._read_igrf14(keys)
+    years_p, g_p, h_p = geomag._read_igrf14_ppigrf(keys)
+    assert years.tolist() == years_p.tolist() and years[0] == 1900.0 and years[-1] == 2030.0
+    assert g.shape == g_p.shape == h.shape == (years.size, 104)
+    assert g.tobytes() == g_p.tobytes() and h.tobytes() == h_p.tobytes()
+    assert g[list(years).index(2025.0), 0] == pytest.approx(-29350.0, abs=1.0)   # g10 2025

@@ -74,7 +74,9 @@ from __future__ import annotations
 
 import abc
 import functools
+import importlib.util
 import math
+import os
 from datetime import datetime, timedelta, timezone
 from typing import Mapping
 
@@ -370,16 +372,10 @@ class _IgrfTable:
     """IGRF-14 Gauss coefficients (nT) up to ``max_degree`` and Legendre recursion constants."""
 
     def __init__(self, max_degree: int) -> None:
-        from ppigrf import ppigrf
-
-        g_df, h_df = ppigrf.read_shc(ppigrf.shc_fn_igrf14)
         keys = [(n, m) for n in range(1, max_degree + 1) for m in range(n + 1)]
         self.n = np.array([k[0] for k in keys], dtype=float)
         self.m = np.array([k[1] for k in keys], dtype=float)
-        self.years = np.array([_decimal_year(d.to_pydatetime().replace(tzinfo=timezone.utc))
-                               for d in g_df.index])
-        self.g = g_df[keys].to_numpy(dtype=float)
-        self.h = h_df[keys].to_numpy(dtype=float)
+        self.years, self.g, self.h = _read_igrf14(keys)
         # Recursion (Langel 1987): slot 0 is P_0^0 = 1, slot K + 1 stays 0 (absent P_{n-2}^m).
         slot = {k: i + 1 for i, k in enumerate(keys)}
         slot[0, 0] = 0
@@ -418,6 +414,48 @@ class _IgrfTable:
                 p[i] = a * ct * p[j] - b * p[k]
                 dp[i] = a * (ct * dp[j] - st * p[j]) - b * dp[k]
         return np.array(p[1:-1]), np.array(dp[1:-1])
+
+
+def _shc_path() -> str:
+    """``IGRF14.shc`` of the installed ``ppigrf`` package (found without importing it)."""
+    spec = importlib.util.find_spec('ppigrf')
+    if spec is None or not spec.submodule_search_locations:
+        raise ValueError('the IGRF coefficients need the ppigrf package (pip install ppigrf)')
+    return os.path.join(list(spec.submodule_search_locations)[0], 'IGRF14.shc')
+
+
+def _read_igrf14(keys: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(years (T,), g (T, K), h (T, K))`` [nT] of the ``keys`` ``(n, m)`` from IGRF14.shc.
+
+    The ``.shc`` text format: ``#`` comments, a line of sizes, a line of model years, then one
+    line ``n m c_1 .. c_T`` per coefficient, ``m < 0`` for ``h_n^|m|``. Read here with plain
+    Python (``ppigrf.read_shc`` imports pandas: 0.17 s per process); a test checks the values
+    against ``ppigrf.read_shc``. The model years are whole years, whose decimal year is the
+    number itself; any other file goes through ``ppigrf``.
+    """
+    rows: dict = {}
+    lines = []
+    with open(_shc_path(), encoding='utf-8') as fh:
+        lines = [line.split() for line in fh if line.strip() and not line.startswith('#')]
+    years = [float(x) for x in lines[1]] if len(lines) > 2 else []   # lines[0]: sizes
+    for parts in lines[2:]:
+        rows[int(parts[0]), int(parts[1])] = [float(x) for x in parts[2:]]
+    if not years or any(y != math.floor(y) for y in years):
+        return _read_igrf14_ppigrf(keys)
+    g = np.array([rows[n, m] for n, m in keys], dtype=float).T
+    h = np.array([rows[n, -m] if m > 0 else [0.0] * len(years) for n, m in keys],
+                 dtype=float).T
+    return np.array(years), g, h
+
+
+def _read_igrf14_ppigrf(keys: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """As :func:`_read_igrf14`, through ``ppigrf.read_shc`` (pandas)."""
+    from ppigrf import ppigrf
+
+    g_df, h_df = ppigrf.read_shc(ppigrf.shc_fn_igrf14)
+    years = np.array([_decimal_year(d.to_pydatetime().replace(tzinfo=timezone.utc))
+                      for d in g_df.index])
+    return years, g_df[keys].to_numpy(dtype=float), h_df[keys].to_numpy(dtype=float)
 
 
 @functools.lru_cache(maxsize=None)
