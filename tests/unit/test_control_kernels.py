@@ -112,7 +112,9 @@ def test_magnetic_law_gives_the_bits_of_the_numpy_law(mode, xi):
     saturated = switched = 0
     for _ in range(3000):
         q, w, omega0, q_ref, y_ref, b = random_case(rng)
-        cmd = compiled.law(Estimate(q, w, omega0), Target(q_ref, y_ref), b, 0.0, 2.0)
+        orbit_frame = q_ref[3] == 1.0 and not y_ref.any()      # half the cases: no target
+        cmd = compiled.law(Estimate(q, w, omega0),
+                           None if orbit_frame else Target(q_ref, y_ref), b, 0.0, 2.0)
         dipole, info = law_numpy(ref, q, w, omega0, q_ref, y_ref, b)
         assert same(cmd.dipole_body, dipole)
         for key, value in info.items():

@@ -245,6 +245,10 @@ def check_gains(alpha: float, k: float, beta: Optional[float] = None,
             f'{2.0 * alpha * k * sigma_star:g})')
 
 
+# No target: the orbital frame itself (11); read by the kernel, never written.
+_ORBIT_Q_REF = Target().q_orbit_body_ref
+_ZERO_RATE = Target().omega_body_ref_body
+
 #: Layout of the :func:`law_kernel` output (one float64 array): offsets of the (3,) vectors
 #: ``y``, ``y*``, ``M*``, ``L*``, ``L``, ``L x B``, then the scalars.
 K_Y, K_Y_STAR, K_M_STAR, K_L_STAR, K_DIPOLE, K_TORQUE = 0, 3, 6, 9, 12, 15
@@ -510,18 +514,20 @@ class MagneticController:
         if b_body is None:
             return self._zero('no magnetic field measurement')
         b = np.asarray(b_body, dtype=float)
-        if b.shape != (3,) or not np.all(np.isfinite(b)):
+        if b.shape != (3,) or not np.isfinite(b).all():
             return self._zero(f'magnetic field measurement not finite or not (3,): {b}')
-        b_norm = float(np.linalg.norm(b))
+        b_norm = math.sqrt(b @ b)
         if b_norm < self.b_min:
             return self._zero(f'|B| = {b_norm:.3g} T below {self.b_min:.3g} T: dipole set to '
                               f'zero (pseudo-inverse of eq. (30) guarded)')
-        target = Target() if target is None else target
-        q_ref = np.asarray(target.q_orbit_body_ref, dtype=float)
-        y_ref = np.asarray(target.omega_body_ref_body, dtype=float)
-        if (q_ref.shape != (4,) or y_ref.shape != (3,) or not np.all(np.isfinite(q_ref))
-                or not np.all(np.isfinite(y_ref)) or np.linalg.norm(q_ref) < 1e-9):
-            return self._zero('target not finite or malformed')
+        if target is None:
+            q_ref, y_ref = _ORBIT_Q_REF, _ZERO_RATE                    # the orbital frame (11)
+        else:
+            q_ref = np.asarray(target.q_orbit_body_ref, dtype=float)
+            y_ref = np.asarray(target.omega_body_ref_body, dtype=float)
+            if (q_ref.shape != (4,) or y_ref.shape != (3,) or not np.isfinite(q_ref).all()
+                    or not np.isfinite(y_ref).all() or math.sqrt(q_ref @ q_ref) < 1e-9):
+                return self._zero('target not finite or malformed')
 
         q_est = np.asarray(estimate.q_orbit_body, dtype=float)
         w_est = np.asarray(estimate.omega_body_eci_body, dtype=float)
