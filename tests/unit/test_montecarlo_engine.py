@@ -61,3 +61,31 @@ def test_first_line_names_the_chosen_engine(tmp_path, capsys):
     assert 'engine plain [auto: the plain loop runs this scenario]' in lines[0], lines[0]
     with open(out / 'campaign.json', encoding='utf-8') as fh:
         assert json.load(fh)['engine'] == 'plain'
+
+
+def test_resume_keeps_the_engine_and_refuses_another(tmp_path, capsys):
+    """A plain campaign resumed without --engine stays plain (nothing to run); naming the graph
+    engine for it is refused like any other changed argument; a campaign.json from before the
+    engines (no engine key) resumes as a graph campaign."""
+    out = tmp_path / 'mc'
+    args = [os.path.join(ROOT, 'scenarios', 'paper000_control.yaml'), '--runs', '1',
+            '--duration', '2', '--out', str(out)]
+    assert main(args + ['--engine', 'plain']) == 0
+    capsys.readouterr()
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert 'engine plain [auto: the engine of the campaign being resumed]' in text
+    assert 'executed 0 run(s)' in text
+    assert main(args + ['--engine', 'graph']) == 2
+    err = capsys.readouterr().err
+    assert "engine: 'plain' in campaign.json, 'graph' now" in err, err
+    # before the engines: no engine key; auto resumes it as graph, with nothing left to run
+    with open(out / 'campaign.json', encoding='utf-8') as fh:
+        data = json.load(fh)
+    del data['engine']
+    with open(out / 'campaign.json', 'w', encoding='utf-8') as fh:
+        json.dump(data, fh)
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert 'engine graph [auto: the engine of the campaign being resumed]' in text, text
+    assert 'executed 0 run(s)' in text

@@ -55,9 +55,10 @@ the run processes on their machines. Workers need this package (and ROS 2) insta
 a time, like one slot of the thread pool) for the campaign and stops it at the end. Engine
 ``plain``: the run process is ``python -m sim_node.tools.closed_loop _mc_worker RUN_DIR``, the
 same cores in a plain loop without ROS (same trajectory as the graph up to float rounding; no
-bag, the per-frame series go to ``series.npz``): about 7x less CPU per run (README, Monte
-Carlo). Every run process gets one BLAS/OpenMP thread (:data:`.runner.ONE_THREAD_ENV`) and
-loads the numba kernels from their on-disk cache.
+bag, the per-frame series go to ``series.npz``): a 6-orbit paper000_control run costs about
+6.5 s CPU (325 us per 2 s frame plus 1 s of process start), against 60-185 s for the graph
+(docs/montecarlo.md). Every run process gets one BLAS/OpenMP thread
+(:data:`.runner.ONE_THREAD_ENV`) and loads the numba kernels from their on-disk cache.
 
 Files (``OUT`` = ``--out``)
 ---------------------------

@@ -62,6 +62,7 @@ class Campaign:
             with open(path, encoding='utf-8') as fh:
                 old = json.load(fh)
             new = self.cfg.identity()
+            old.setdefault('engine', 'graph')   # written before the engines: the graph
             diff = [f'{k}: {old.get(k)!r} in campaign.json, {new[k]!r} now'
                     for k in IDENTITY_KEYS if old.get(k) != new[k]]
             if diff:
