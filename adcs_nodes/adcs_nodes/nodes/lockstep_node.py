@@ -626,6 +626,10 @@ class LockstepNode(Node):
             return
         self._final_sent = bool(final)
         self._lockstep_status_wall = time.monotonic()
+        if not self._status_pub.get_subscription_count():
+            # nobody listens (no launcher monitor, recorder, live view): a volatile topic,
+            # so a later subscriber would not get this one either; skip building it
+            return
         msg = LockstepStatus()
         msg.header.stamp = self.stamp(self.sim_t_ns)   # sim time of the last frame
         msg.node = self.get_name()

@@ -267,7 +267,14 @@ def main(argv=None) -> int:
                 drain['until'] = time.monotonic() + args.drain_s
             return time.monotonic() >= drain['until']
 
-        spin_nodes(nodes, until=finished, poll_s=0.05)
+        prof_path = os.environ.get('ADCS_COMPOSE_PROFILE', '')
+        if prof_path:     # developer aid (docs/bench.md): cProfile of the spin, pstats file
+            import cProfile
+            prof = cProfile.Profile()
+            prof.runcall(spin_nodes, nodes, until=finished, poll_s=0.05)
+            prof.dump_stats(prof_path)
+        else:
+            spin_nodes(nodes, until=finished, poll_s=0.05)
         if bus is not None:
             print(f'[compose] in-process deliveries {bus.local}, DDS publishes of linked '
                   f'publishers {bus.dds}, timer-started deliveries {bus.timer_drains}',
