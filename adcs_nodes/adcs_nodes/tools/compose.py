@@ -84,7 +84,9 @@ class InProcessBus:
     Local deliveries are queued and run, first in first out, when the executor callback that
     published them (a subscription callback of a composed node, wrapped here) has returned,
     so no callback ever runs inside another. A publish from anywhere else (a timer, a
-    service) is delivered by a 1 ms one-shot timer; so is the rest of a long chain after
+    service) is delivered by a zero-period one-shot timer (next turn of the executor, after
+    the events already queued; a 1 ms timer here made the running graph wait 1 ms every
+    ``max_batch`` deliveries, issue 13); so is the rest of a long chain after
     ``max_batch`` deliveries, so signals and timers keep running.
 
     Parameters
@@ -122,7 +124,7 @@ class InProcessBus:
                     skip.add(key)
                 originals[id(sub)] = (lambda m, cb=cb: cb(m, None)) if info else cb
                 sub.callback = self._wrap(cb, info)
-        self._timer = nodes[0].create_timer(0.001, self._on_timer)
+        self._timer = nodes[0].create_timer(0.0, self._on_timer)
         self._timer.cancel()
         for node in nodes:
             for pub in list(node.publishers):
