@@ -48,6 +48,8 @@ def test_closed_loop_bag_is_identical_beside_cpu_burners(scenario, reference, tm
                                                          compose, monkeypatch):
     if compose == 'inproc':   # the in-process path, with a composed recorder (raw CDR)
         monkeypatch.setenv('ADCS_COMPOSE_INPROC', '1')
+    elif compose:             # composed, all over DDS (the in-process path is the default)
+        monkeypatch.setenv('ADCS_COMPOSE_INPROC', '0')
     bag = str(tmp_path / 'loaded')
     burners = [multiprocessing.Process(target=_burn, args=(300.0,)) for _ in range(2)]
     for b in burners:

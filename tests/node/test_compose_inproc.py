@@ -1,7 +1,8 @@
 """Composed runner's in-process path (issue 13): the same final state to the last bit.
 
 ``paper000_control`` (estimator, controllers, manager in the loop) at 1 s frames for 60
-frames, composed, once over DDS and once with ``--inproc``; the clock master's final state
+frames, composed, once over DDS (``--dds``) and once with the in-process path (the default,
+``--inproc``); the clock master's final state
 (written with ``--state-out`` as exact hex floats) must be identical, and the in-process run
 must really have delivered messages in process.
 """
@@ -41,7 +42,7 @@ def test_inproc_path_gives_the_same_final_state(tmp_path):
         env = {k: v for k, v in os.environ.items() if k != 'ADCS_COMPOSE_INPROC'}
         env.update(ROS_DOMAIN_ID=str(130 + (os.getpid() + n) % 10),
                    ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
-        extra = ['--inproc'] if mode == 'inproc' else []
+        extra = ['--inproc'] if mode == 'inproc' else ['--dds']
         proc = subprocess.run(cmd + ['--state-out', str(out)] + extra, cwd=ROOT, env=env,
                               capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, f'{mode}: {proc.stderr[-3000:]}'
@@ -52,3 +53,17 @@ def test_inproc_path_gives_the_same_final_state(tmp_path):
     m = re.search(r'in-process deliveries (\d+)', logs['inproc'])
     assert m and int(m.group(1)) >= 60 * 5, logs['inproc'][-2000:]
     assert 'in-process deliveries' not in logs['dds']
+
+
+def test_inproc_is_the_default_and_dds_turns_it_off(monkeypatch):
+    from adcs_nodes.tools.compose import inproc_enabled
+
+    monkeypatch.delenv('ADCS_COMPOSE_INPROC', raising=False)
+    assert inproc_enabled(False) and inproc_enabled(True)
+    assert not inproc_enabled(False, dds=True)
+    for off in ('0', 'false', 'No', 'off'):
+        monkeypatch.setenv('ADCS_COMPOSE_INPROC', off)
+        assert not inproc_enabled(False)
+        assert inproc_enabled(True)       # --inproc wins over the environment
+    monkeypatch.setenv('ADCS_COMPOSE_INPROC', '1')
+    assert inproc_enabled(False)

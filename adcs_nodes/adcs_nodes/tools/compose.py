@@ -17,16 +17,18 @@ all of them, then activated, in process (``trigger_configure``/``trigger_activat
 the executor spins; a node refusing its configuration ends the process with exit code 2 and
 its reason, as a configuration error while building a node does.
 
-In-process path (``--inproc``, or ``ADCS_COMPOSE_INPROC=1`` in the environment; off by
-default): for a volatile topic with a publisher and subscriptions in this process
-(:class:`InProcessBus`), a message goes straight to the local subscriptions' callbacks when no
-subscription outside the process is matched (its ``get_subscription_count()`` is not above
-the local count); when one is (recorder, live view, ``ros2 topic echo``, the launcher's
-monitor on ``/clock``), it is published over DDS as before and every subscriber, local ones
-included, gets it from DDS. Each message goes one way only, so nothing is lost or doubled. The
-local deliveries run after the publishing callback has returned, first in first out, one
-callback at a time, never inside another callback. The lockstep fires on stamps, not arrival
-order, so the trajectory is the same (tested).
+In-process path (on by default since issue 13; ``--dds`` or ``ADCS_COMPOSE_INPROC=0`` in the
+environment sends every message over DDS as in the graph; ``--inproc`` and
+``ADCS_COMPOSE_INPROC=1`` are kept and mean the default): for a volatile topic with a
+publisher and subscriptions in this process (:class:`InProcessBus`), a message goes straight
+to the local subscriptions' callbacks when no subscription outside the process is matched
+(its ``get_subscription_count()`` is not above the local count); when one is (recorder, live
+view, ``ros2 topic echo``, the launcher's monitor on ``/clock``), it is published over DDS
+as before and every subscriber, local ones included, gets it from DDS. Each message goes one
+way only, so nothing is lost or doubled. The local deliveries run after the publishing
+callback has returned, first in first out, one callback at a time, never inside another
+callback. The lockstep fires on stamps, not arrival order, so the trajectory is the same
+(tested).
 """
 from __future__ import annotations
 
@@ -223,10 +225,13 @@ def write_state(state: Any, path: str) -> None:
         json.dump(out, fh)
 
 
-def inproc_enabled(flag: bool) -> bool:
-    """``--inproc`` given, or ``ADCS_COMPOSE_INPROC`` set to 1/true/yes."""
+def inproc_enabled(flag: bool, dds: bool = False) -> bool:
+    """The in-process path: on unless ``--dds`` is given or ``ADCS_COMPOSE_INPROC`` is
+    0/false/no/off (``--inproc`` wins over the environment)."""
+    if dds:
+        return False
     env = os.environ.get('ADCS_COMPOSE_INPROC', '').strip().lower()
-    return flag or env in ('1', 'true', 'yes', 'on')
+    return flag or env not in ('0', 'false', 'no', 'off')
 
 
 def main(argv=None) -> int:
@@ -237,7 +242,9 @@ def main(argv=None) -> int:
     ap.add_argument('--drain-s', type=float, default=0.5)
     ap.add_argument('--inproc', action='store_true',
                     help='in-process path between the composed nodes (DDS only for outside '
-                         'subscribers); also ADCS_COMPOSE_INPROC=1')
+                         'subscribers): the default; also ADCS_COMPOSE_INPROC=1')
+    ap.add_argument('--dds', action='store_true',
+                    help='every message over DDS, as in the graph; also ADCS_COMPOSE_INPROC=0')
     ap.add_argument('--state-out', default='',
                     help='write the clock master\'s final state here (JSON, exact hex floats)')
     args = ap.parse_args(argv)
@@ -255,7 +262,7 @@ def main(argv=None) -> int:
             print(f'[compose] configuration error: {refused}', file=sys.stderr)
             return 2
         limit_blas_threads()   # again after the node modules' imports (idempotent)
-        bus = InProcessBus(nodes) if inproc_enabled(args.inproc) and nodes else None
+        bus = InProcessBus(nodes) if inproc_enabled(args.inproc, args.dds) and nodes else None
         if bus is not None:
             print(f'[compose] in-process path on {len(bus.topics)} topics: '
                   f'{", ".join(sorted(bus.topics))}', file=sys.stderr)

@@ -10,8 +10,9 @@ Every row is measured in the same run, on the same machine, at the same time (is
    estimator, two controllers, controller manager), one process per node, in lockstep, at
    1 s frames with 10 RK4 substeps (0.1 s truth step);
 3. ``composed``: the same graph in one process (``Launcher(compose=True)``), all messages
-   over DDS as in the graph; ``3i``: the same with the composed runner's in-process path
-   (``ADCS_COMPOSE_INPROC=1``: DDS only where an outside subscriber is matched; the
+   over DDS as in the graph (``ADCS_COMPOSE_INPROC=0``, the runner's ``--dds``); ``3i``: the
+   same with the composed runner's in-process path (its default since issue 13;
+   ``ADCS_COMPOSE_INPROC=1``: DDS only where an outside subscriber is matched; the
    launcher's progress monitor reads only ``lockstep/status``, which no node of the graph
    reads, so every topic between the nodes goes in process);
 4. ``plain loop``: the same models in a plain Python loop without ROS
@@ -448,10 +449,12 @@ def plan(sc: dict, frames: int, basilisk: Optional[str], bsk_why: str) -> List[R
                 f'({"/".join(map(str, hops))})', measure=lambda: ring_sample(hops, 3 * frames)),
             Row('(2)', 'graph, 1 process/node', note=f'{sc["name"]}, {FRAME_S:g} s frames',
                 measure=GraphMeasure(sc, frames, compose=False)),
-            Row('(3)', 'graph, composed', note='same graph, one process, all over DDS',
+            Row('(3)', 'graph, composed, DDS', note='same graph, one process, all over DDS '
+                '(--dds)',
                 measure=GraphMeasure(sc, frames, compose=True)),
-            Row('(3i)', 'composed, in-process path', note='--inproc: DDS only for outside '
-                'subscribers', measure=GraphMeasure(sc, frames, compose=True, inproc=True)),
+            Row('(3i)', 'composed, in-process path', note='the default: DDS only for '
+                'outside subscribers',
+                measure=GraphMeasure(sc, frames, compose=True, inproc=True)),
             Row('(4)', 'plain loop, same models', note='no ROS',
                 measure=lambda: plain_sample(sc, frames)),
             Row('(5)', 'free body + GG, this RK4', unit='RK4 steps', step_s=0.1,
