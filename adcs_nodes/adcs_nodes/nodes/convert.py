@@ -1,11 +1,24 @@
 """Message <-> numpy conversion at the node edge (the core never sees a message)."""
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Quaternion, Vector3
 
 from adcs_nodes.core.lockstep import NS_PER_S
+
+
+# Fast construction (issue 13): the generated ``__init__`` of a message takes keyword
+# arguments through ``dict.get`` and sets every field through a property; the node glue
+# builds about 30 of these small messages a frame. With field checks off (the rosidl default,
+# ``ROS_PYTHON_CHECK_FIELDS`` not 1) the same object is made by filling its slots; with checks
+# on the generated constructor (which checks) is used. Tested byte for byte against
+# ``serialize_message`` of the generated constructor's message.
+_FAST = all(getattr(sys.modules[cls.__module__], 'ros_python_check_fields', '1') != '1'
+            for cls in (Vector3, Quaternion, Time))
+_new = object.__new__
 
 
 def vec3(msg: Vector3) -> np.ndarray:
@@ -15,6 +28,11 @@ def vec3(msg: Vector3) -> np.ndarray:
 
 def to_vec3(v) -> Vector3:
     """(3,) array -> ``geometry_msgs/Vector3``."""
+    if _FAST:
+        m = _new(Vector3)
+        m._check_fields = False
+        m._x, m._y, m._z = float(v[0]), float(v[1]), float(v[2])
+        return m
     return Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
 
@@ -25,6 +43,11 @@ def quat(msg: Quaternion) -> np.ndarray:
 
 def to_quat(q) -> Quaternion:
     """(4,) array, scalar last -> ``geometry_msgs/Quaternion``."""
+    if _FAST:
+        m = _new(Quaternion)
+        m._check_fields = False
+        m._x, m._y, m._z, m._w = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+        return m
     return Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
 
 
@@ -36,6 +59,11 @@ def stamp_ns(stamp: Time) -> int:
 def to_stamp(t_ns: int) -> Time:
     """Integer nanoseconds -> ``builtin_interfaces/Time``."""
     t_ns = int(t_ns)
+    if _FAST and 0 <= t_ns < 2 ** 31 * NS_PER_S:    # in int32 seconds (else: the checks)
+        m = _new(Time)
+        m._check_fields = False
+        m._sec, m._nanosec = t_ns // NS_PER_S, t_ns % NS_PER_S
+        return m
     return Time(sec=t_ns // NS_PER_S, nanosec=t_ns % NS_PER_S)
 
 
