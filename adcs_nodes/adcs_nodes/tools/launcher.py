@@ -275,6 +275,7 @@ class _Monitor:
 
         from adcs_msgs.msg import LockstepStatus
         from adcs_nodes.nodes.convert import stamp_ns
+        from adcs_nodes.nodes.lockstep_node import MONITOR_NODE, MONITOR_STATUS_OF
         from adcs_nodes.nodes.runtime import make_executor
 
         self._rclpy = rclpy
@@ -282,7 +283,8 @@ class _Monitor:
         self.epoch_ns = epoch_ns
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node('adcs_launcher', context=self.context,
+        # the nodes skip the statuses this filter would drop (LockstepNode._status_wanted)
+        self.node = rclpy.create_node(MONITOR_NODE, context=self.context,
                                       start_parameter_services=False)
         self.sim_ns = 0
         self.clock_seen = False     # the lockstep has started (a node reported a frame)
@@ -298,7 +300,7 @@ class _Monitor:
             from rclpy.subscription_content_filter_options import ContentFilterOptions
             status_filter = ContentFilterOptions(
                 filter_expression='node = %0 OR missed_frames > 0',
-                expression_parameters=["'dynamics'"])
+                expression_parameters=[f"'{MONITOR_STATUS_OF}'"])
         except ImportError:
             pass
         try:

@@ -1,0 +1,63 @@
+"""``lockstep/status`` is built only for a reader that keeps it (issue 13).
+
+The launcher's monitor (node ``adcs_launcher``) takes only the clock master's statuses and
+those with missed frames (its content filter); when it is the only reader, the other nodes
+skip theirs. Any other reader (recorder, live view, ``ros2 topic echo``) gets every status.
+"""
+import rclpy
+from rclpy.parameter import Parameter
+
+from adcs_msgs.msg import LockstepStatus
+from adcs_nodes.nodes.lockstep_node import MONITOR_NODE, MONITOR_STATUS_OF, LockstepNode
+
+
+def _node(ctx, name):
+    return LockstepNode(name, context=ctx, parameter_overrides=[
+        Parameter('timing_mode', value='lockstep'), Parameter('duration_s', value=5.0)])
+
+
+def _reader(ctx, name, got):
+    node = rclpy.create_node(name, context=ctx, start_parameter_services=False)
+    node.create_subscription(LockstepStatus, 'lockstep/status', got.append, 100)
+    return node
+
+
+def test_status_skipped_only_when_the_monitor_alone_would_drop_it(ros_context, spin):
+    other = _node(ros_context, 'estimator')
+    master = _node(ros_context, MONITOR_STATUS_OF)
+    got = []
+    monitor = _reader(ros_context, MONITOR_NODE, got)
+    nodes = [other, master, monitor]
+    # the names of the readers come with discovery: wait until both nodes know them
+    assert spin(nodes, lambda: all(
+        [i.node_name for i in n.get_subscriptions_info_by_topic('/lockstep/status')]
+        == [MONITOR_NODE] for n in (other, master)), timeout=10.0)
+    assert not other._status_wanted()           # the monitor's filter would drop it
+    assert master._status_wanted()              # the clock master's: kept
+    other.missed_frames = 1
+    assert other._status_wanted()               # missed frames: the monitor keeps it
+    other.missed_frames = 0
+    for k in range(3):
+        other.frames = master.frames = k + 1
+        other.publish_status()
+        master.publish_status()
+    assert spin(nodes, lambda: len(got) >= 3, timeout=10.0)
+    assert {m.node for m in got} == {MONITOR_STATUS_OF}
+
+    # a second reader of any other name (a recorder, ros2 topic echo): every status again
+    got2 = []
+    echo = _reader(ros_context, 'echo', got2)
+    nodes.append(echo)
+    assert spin(nodes, lambda: other._status_pub.get_subscription_count() == 2
+                and other._status_wanted(), timeout=10.0)
+    other.publish_status()
+    assert spin(nodes, lambda: any(m.node == 'estimator' for m in got2), timeout=10.0)
+    for n in nodes:
+        n.destroy_node()
+
+
+def test_no_reader_no_status(ros_context):
+    node = _node(ros_context, 'lonely')
+    assert node._status_pub.get_subscription_count() == 0
+    assert not node._status_wanted()
+    node.destroy_node()
