@@ -625,21 +625,27 @@ class LockstepNode(Node):
         No: nobody subscribes (the topic is volatile, so a later subscriber would not get it
         either); or the only subscribers are the launcher's monitor, this node is not the one
         it follows and has no missed frames, so its content filter drops the status anyway.
-        The subscribers' node names are asked again whenever their count changes; a count
-        whose names discovery has not given yet counts as someone else (publish)."""
+        The subscribers' node names are asked again whenever their count changes, and every
+        0.2 s of wall time while discovery has not given all of them yet (rmw then says
+        ``_NODE_NAME_UNKNOWN_``); until it has, a reader counts as someone else (publish)."""
         n = self._status_pub.get_subscription_count()
         if not n:
             return False
         if self.missed_frames or self.get_name() == MONITOR_STATUS_OF:
             return True
-        if n != getattr(self, '_status_readers_n', -1):
+        now = time.monotonic()
+        if n != getattr(self, '_status_readers_n', -1) or (
+                not self._status_readers_known and now >= self._status_recheck_at):
             try:
-                infos = self.get_subscriptions_info_by_topic(self._status_pub.topic_name)
+                names = [i.node_name for i in
+                         self.get_subscriptions_info_by_topic(self._status_pub.topic_name)]
             except Exception:   # noqa: BLE001 - no graph information: publish
-                infos = []
-            self._status_monitor_only = len(infos) == n and all(
-                i.node_name == MONITOR_NODE for i in infos)
-            self._status_readers_n = n if len(infos) == n else -1
+                names = []
+            known = len(names) == n and all(
+                name and not name.startswith('_NODE_NAME_UNKNOWN') for name in names)
+            self._status_monitor_only = known and all(name == MONITOR_NODE for name in names)
+            self._status_readers_n, self._status_readers_known = n, known
+            self._status_recheck_at = now + 0.2
         return not self._status_monitor_only
 
     def publish_status(self, final: bool = False) -> None:
