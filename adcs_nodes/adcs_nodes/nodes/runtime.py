@@ -29,8 +29,10 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 #: Environment variables that set the thread count of BLAS/OpenMP libraries at load time.
-#: Wall seconds a closing process waits, in all, for its samples to be acknowledged.
-FLUSH_BUDGET_S = 1.5
+#: Wall seconds a closing process waits, in all, for its samples to be acknowledged (a
+#: recorder resumed from a stall 40 frames behind took more than 1.5 s at load 5; the
+#: launcher's grace before SIGKILL is 10 s).
+FLUSH_BUDGET_S = 4.0
 BLAS_THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS',
                    'BLIS_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS')
 
