@@ -130,18 +130,13 @@ def dipole_eci(r_eci, theta, m_ecef, k):
     return to_eci(c, s, dipole_ecef(to_ecef(c, s, r_eci), m_ecef, k))
 
 
-_WARM = {'done': False}
-
-
+@functools.cache
 def warm_up() -> None:
     """Compile (or load from the numba cache) the kernels once per process, from the model
     constructors: the first compilation never falls inside a frame."""
-    if _WARM['done']:
-        return
     v = np.array([7e6, 0.0, 0.0])
     dipole_eci(v, 0.1, v, 1.0)
     to_eci(1.0, 0.0, dipole_ecef(to_ecef(1.0, 0.0, v), v, 1.0))
-    _WARM['done'] = True
 
 
 def _position(r_eci: ArrayLike) -> np.ndarray:
@@ -434,7 +429,6 @@ def _read_igrf14(keys: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     number itself; any other file goes through ``ppigrf``.
     """
     rows: dict = {}
-    lines = []
     with open(_shc_path(), encoding='utf-8') as fh:
         lines = [line.split() for line in fh if line.strip() and not line.startswith('#')]
     years = [float(x) for x in lines[1]] if len(lines) > 2 else []   # lines[0]: sizes

@@ -63,6 +63,7 @@ forwarded command has the bits of the controller's.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Iterable, Mapping, Optional, Sequence
@@ -111,6 +112,7 @@ def clip_finite(v, limit):
     return out
 
 
+@functools.cache
 def warm_up() -> None:
     """Compile (or load from the numba cache) the check kernels, once per process (from the
     constructor: never inside a frame)."""

@@ -87,6 +87,7 @@ BLAS kernel): the same bits for ``xi`` on a body axis (the default ``z``).
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import Optional
 
@@ -380,18 +381,13 @@ def law_kernel(q_orbit_body, omega_body_eci_body, omega0, q_ref, y_ref, b_body, 
     return out
 
 
-_WARM = {'done': False}
-
-
+@functools.cache
 def warm_up() -> None:
     """Compile (or load from the numba cache) :func:`law_kernel` once per process, from the
     constructor: the first compilation (1-2 s) never falls inside a frame."""
-    if _WARM['done']:
-        return
     q, v = np.array([0.0, 0.0, 0.0, 1.0]), np.array([1e-5, 0.0, 2e-5])
     for three_axis in (True, False):
         law_kernel(q, v, 1e-3, q, v, v, v, 1e-3, 0.2, v, three_axis, not three_axis, 0.1, 0.1)
-    _WARM['done'] = True
 
 
 class MagneticController:
