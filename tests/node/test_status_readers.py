@@ -61,3 +61,49 @@ def test_no_reader_no_status(ros_context):
     assert node._status_pub.get_subscription_count() == 0
     assert not node._status_wanted()
     node.destroy_node()
+
+
+def test_master_status_to_the_monitor_alone_is_held_to_its_wall_period(ros_context, spin):
+    """The clock master's periodic statuses go to the monitor alone at most once per
+    MONITOR_STATUS_WALL_S of wall time (not once per sim second: 2000 a second at 2000 x real
+    time); the final one, and every one while frames are missed, are never held back."""
+    import time
+
+    from adcs_nodes.nodes.lockstep_node import MONITOR_STATUS_WALL_S
+    master = _node(ros_context, MONITOR_STATUS_OF)
+    monitor = _reader(ros_context, MONITOR_NODE, [])
+    nodes = [master, monitor]
+    assert spin(nodes, lambda: [i.node_name for i in master.get_subscriptions_info_by_topic(
+        '/lockstep/status')] == [MONITOR_NODE], timeout=10.0)
+    assert master._status_wanted()       # (reads the readers' names)
+    sent = []
+    publish = master._status_pub.publish
+    master._status_pub.publish = lambda m: (sent.append(m), publish(m))
+
+    def frames(first, n, final_last=False):
+        for k in range(first, first + n):
+            master.frames = k + 1
+            master.frame_done(k * master.frame_ns, final=final_last and k == first + n - 1)
+
+    t0 = time.monotonic()
+    frames(0, 200)
+    elapsed = time.monotonic() - t0
+    assert len(sent) <= 1 + elapsed / MONITOR_STATUS_WALL_S     # not 200
+    n = len(sent)
+    frames(200, 1, final_last=True)      # the final status: sent at once
+    assert len(sent) == n + 1 and sent[-1].final
+    master._final_sent = False
+    master.missed_frames = 1             # missed frames: every sim second again
+    frames(201, 20)
+    assert len(sent) == n + 1 + 20
+
+    # a second reader (ros2 topic echo, a recorder): every sim second
+    master.missed_frames = 0
+    echo = _reader(ros_context, 'echo', [])
+    nodes.append(echo)
+    assert spin(nodes, lambda: master._status_pub.get_subscription_count() == 2, timeout=10.0)
+    n = len(sent)
+    frames(221, 20)
+    assert len(sent) == n + 20
+    for node in nodes:
+        node.destroy_node()

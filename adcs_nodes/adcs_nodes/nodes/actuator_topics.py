@@ -10,7 +10,9 @@ The controller manager publishes, next to its ``adcs/actuator_command``
   reaction wheels.
 
 Both are held by the driver until the next command (zero-order hold, as the simulated dynamics
-does). The values are the manager's: always finite and inside the actuator limits.
+does). The values are the manager's: always finite and inside the actuator limits. A topic
+with no subscriber (no driver, no recorder: the simulated graph) is not built or published
+(issue 13).
 """
 from __future__ import annotations
 
@@ -18,6 +20,9 @@ from typing import Any, Optional, Sequence
 
 from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+
+from adcs_nodes.nodes.messages import make
 
 MAGNETORQUER_TOPIC = 'actuators/magnetorquer/command'
 WHEELS_TOPIC = 'actuators/wheels/command'
@@ -46,13 +51,11 @@ class ActuatorTopics:
 
     def publish(self, cmd: Any) -> None:
         """Publish the parts of ``cmd`` (an ``adcs_msgs/ActuatorCommand``) this craft has."""
-        if self.mtq_pub is not None:
-            m = Vector3Stamped()
-            m.header.stamp = cmd.header.stamp
-            m.header.frame_id = 'body'
-            m.vector = cmd.dipole_body
-            self.mtq_pub.publish(m)
-        if self.wheel_pub is not None:
+        if self.mtq_pub is not None and self.mtq_pub.get_subscription_count() > 0:
+            self.mtq_pub.publish(make(
+                Vector3Stamped, header=make(Header, stamp=cmd.header.stamp, frame_id='body'),
+                vector=cmd.dipole_body))
+        if self.wheel_pub is not None and self.wheel_pub.get_subscription_count() > 0:
             j = JointState()
             j.header.stamp = cmd.header.stamp
             j.name = list(self.wheel_names)

@@ -26,6 +26,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 from sensor_msgs.msg import JointState, MagneticField
+from std_msgs.msg import Header
 
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, AttitudeTarget
 from adcs_nodes import registry
@@ -38,6 +39,7 @@ from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import all_finite, quat, to_vec3, vec3
 from adcs_nodes.nodes.managed import ManagedLockstepNode
+from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.tf import MountTable
 from adcs_nodes.registry import Param
 
@@ -117,14 +119,10 @@ def target_from_msg(msg: Optional[AttitudeTarget]) -> Optional[Target]:
 
 def command_msg(cmd: Command, stamp, source: str) -> ActuatorCommand:
     """Core command -> ``adcs_msgs/ActuatorCommand``."""
-    msg = ActuatorCommand()
-    msg.header.stamp = stamp
-    msg.header.frame_id = 'body'
-    msg.dipole_body = to_vec3(cmd.dipole_body)
-    msg.wheel_torque = [float(v) for v in np.asarray(cmd.wheel_torque, dtype=float)]
-    msg.torque_body = to_vec3(cmd.torque_body)
-    msg.source = source
-    return msg
+    return make(ActuatorCommand, header=make(Header, stamp=stamp, frame_id='body'),
+                dipole_body=to_vec3(cmd.dipole_body),
+                wheel_torque=np.asarray(cmd.wheel_torque, dtype=float),
+                torque_body=to_vec3(cmd.torque_body), source=source)
 
 
 class ControllerNode(ManagedLockstepNode):

@@ -27,6 +27,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 from sensor_msgs.msg import Imu, MagneticField
+from std_msgs.msg import Header
 
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, FilterDiagnostics, HorizonSensor
 from adcs_nodes import registry
@@ -39,6 +40,7 @@ from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.controller import DEFAULT_FIELD, DEFAULT_ORBIT, inertia_matrix
 from adcs_nodes.nodes.convert import all_finite, quat, to_quat, to_vec3, vec3
 from adcs_nodes.nodes.managed import ManagedLockstepNode
+from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.tf import (MountTable, TfPublisher, covariance_to_body,
                                  estimate_transforms)
 from adcs_nodes.registry import Param
@@ -213,15 +215,12 @@ class EstimatorNode(ManagedLockstepNode):
         est = step.estimate
         q_orbit_body = est.q_orbit_body
         q_eci_body = att.multiply(ref.q_eci_orbit, q_orbit_body)
-        msg = AttitudeState()
-        msg.header.stamp = self.stamp(t_ns)
-        msg.header.frame_id = 'body'
-        msg.q_eci_body = to_quat(q_eci_body)
-        msg.q_orbit_body = to_quat(q_orbit_body)
-        msg.omega_body_eci_body = to_vec3(est.omega_body_eci_body)
-        msg.omega_body_orbit_body = to_vec3(
-            omega_orbit_from_eci(q_orbit_body, est.omega_body_eci_body, ref.omega0))
-        msg.covariance = [float(c) for c in np.asarray(est.covariance).reshape(-1)]
+        msg = make(AttitudeState, header=make(Header, stamp=self.stamp(t_ns), frame_id='body'),
+                   q_eci_body=to_quat(q_eci_body), q_orbit_body=to_quat(q_orbit_body),
+                   omega_body_eci_body=to_vec3(est.omega_body_eci_body),
+                   omega_body_orbit_body=to_vec3(omega_orbit_from_eci(
+                       q_orbit_body, est.omega_body_eci_body, ref.omega0)),
+                   covariance=np.asarray(est.covariance, dtype=float).reshape(-1))
         self.est_pub.publish(msg)
         if self.tf_pub.wanted():          # /tf and the filter diagnostics: only when read
             self.tf_pub.send(estimate_transforms(msg.header.stamp, ref.r_eci, q_eci_body))

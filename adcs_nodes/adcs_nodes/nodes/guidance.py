@@ -21,6 +21,7 @@ import json
 from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
+from std_msgs.msg import Header
 
 from adcs_msgs.msg import AttitudeTarget
 from adcs_msgs.srv import SwitchController
@@ -31,6 +32,7 @@ from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import to_quat, to_vec3
 from adcs_nodes.nodes.managed import ManagedLockstepNode
+from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.slew_action import SlewActionServer
 from adcs_nodes.registry import Param
 
@@ -121,15 +123,11 @@ class GuidanceNode(ManagedLockstepNode):
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Publish the target of frame ``t_ns``."""
         s = self.override or self.guidance.at(t_ns / NS_PER_S)
-        msg = AttitudeTarget()
-        msg.header.stamp = self.stamp(t_ns)
-        msg.header.frame_id = s.frame
-        msg.q_ref_body = to_quat(s.q_ref_body)
-        msg.omega_body_ref_body = to_vec3(s.omega_body_ref_body)
-        msg.omega_dot_body_ref_body = to_vec3(s.omega_dot_body_ref_body)
-        msg.time_to_go_s = float(s.time_to_go_s)
-        msg.profile = s.profile
-        self.pub.publish(msg)
+        self.pub.publish(make(
+            AttitudeTarget, header=make(Header, stamp=self.stamp(t_ns), frame_id=s.frame),
+            q_ref_body=to_quat(s.q_ref_body), omega_body_ref_body=to_vec3(s.omega_body_ref_body),
+            omega_dot_body_ref_body=to_vec3(s.omega_dot_body_ref_body),
+            time_to_go_s=float(s.time_to_go_s), profile=s.profile))
 
 
 def main(args=None) -> int:

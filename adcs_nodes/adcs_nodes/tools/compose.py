@@ -279,7 +279,9 @@ def main(argv=None) -> int:
         prof_path = os.environ.get('ADCS_COMPOSE_PROFILE', '')
         if prof_path:     # developer aid (docs/bench.md): cProfile of the spin, pstats file
             import cProfile
-            prof = cProfile.Profile()
+            # ADCS_COMPOSE_PROFILE_CLOCK=cpu: CPU time (shares of the work, waits left out)
+            cpu = os.environ.get('ADCS_COMPOSE_PROFILE_CLOCK', '') == 'cpu'
+            prof = cProfile.Profile(time.process_time) if cpu else cProfile.Profile()
             prof.runcall(spin_nodes, nodes, until=finished, poll_s=0.05)
             prof.dump_stats(prof_path)
         else:

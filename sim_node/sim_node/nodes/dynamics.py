@@ -33,7 +33,7 @@ from typing import Any, List, Optional
 
 import numpy as np
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import String
+from std_msgs.msg import Header, String
 
 from adcs_msgs.msg import (ActuatorCommand, AppendageState, AttitudeState, Environment,
                            LockstepStatus, WheelState)
@@ -42,6 +42,7 @@ from adcs_nodes.core.lockstep import (ZERO, Act, Action, ClockMaster, derive_see
                                       ns_to_seconds, seconds_to_ns)
 from adcs_nodes.nodes import publisher_guard, runtime
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
+from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
 from adcs_nodes.nodes.lockstep_node import (MAX_LAG_FRAMES, QOS_DATA, QOS_READY,
                                             LockstepNode)
@@ -181,7 +182,7 @@ class DynamicsNode(LockstepNode):
         for a in actions:
             self._exec_t = a.t_ns
             if a.kind is Act.CLOCK:
-                self.clock_pub.publish(Clock(clock=self.stamp(a.t_ns)))
+                self.clock_pub.publish(make(Clock, clock=self.stamp(a.t_ns)))
             elif a.kind is Act.STATE:
                 self.publish_state(a.value)
                 self.frame_done(a.t_ns)
@@ -322,18 +323,17 @@ class DynamicsNode(LockstepNode):
         st = self.state
         self.sim_t_ns = self.t_ns
         r_body_eci = att.to_matrix(st.q_eci_body).T
-        msg = AttitudeState()
-        msg.header.stamp = self.stamp(self.t_ns)
-        msg.header.frame_id = 'body'
-        msg.q_eci_body = to_quat(st.q_eci_body)
         q_orbit_body = att.multiply(att.conjugate(q_eci_orbit), st.q_eci_body)
         if self._last_q_orbit_body is not None and q_orbit_body @ self._last_q_orbit_body < 0:
             q_orbit_body = -q_orbit_body     # keep the published sign continuous in time
         self._last_q_orbit_body = q_orbit_body
-        msg.q_orbit_body = to_quat(q_orbit_body)
-        msg.omega_body_eci_body = to_vec3(st.omega_body_eci_body)
-        msg.omega_body_orbit_body = to_vec3(st.omega_body_eci_body
-                                            - r_body_eci @ omega_orbit_eci_eci)
+        msg = make(AttitudeState, header=make(Header, stamp=self.stamp(self.t_ns),
+                                              frame_id='body'),
+                   q_eci_body=to_quat(st.q_eci_body), q_orbit_body=to_quat(q_orbit_body),
+                   omega_body_eci_body=to_vec3(st.omega_body_eci_body),
+                   omega_body_orbit_body=to_vec3(st.omega_body_eci_body
+                                                 - r_body_eci @ omega_orbit_eci_eci),
+                   covariance=np.zeros(36))     # truth: no covariance
         self.state_pub.publish(msg)
         if self.tf_pub.wanted():     # /tf, sim/wheels, sim/appendages: built only when read
             self.tf_pub.send(truth_transforms(msg.header.stamp, vec3(env_msg.r_eci),

@@ -17,12 +17,14 @@ from __future__ import annotations
 from datetime import timedelta
 
 from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Header
 
 from adcs_msgs.msg import Environment
 from adcs_nodes.core.lockstep import ns_to_seconds
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import quat, stamp_ns, to_quat, to_vec3
 from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.tf import TfPublisher, earth_transforms
 from adcs_nodes.core.geomag import make_field
 from adcs_nodes.core.orbit import make_orbit, q_eci_ecef
@@ -54,19 +56,14 @@ class EnvironmentNode(LockstepNode):
         t = ns_to_seconds(t_ns)
         st = self.orbit.state(t)
         b_eci, b_dot_eci = self.field.field_and_rate(self.orbit, t)
-        msg = Environment()
-        msg.header.stamp = self.stamp(t_ns)
-        msg.header.frame_id = 'eci'
-        msg.r_eci = to_vec3(st.r_eci)
-        msg.v_eci = to_vec3(st.v_eci)
-        msg.q_eci_orbit = to_quat(st.q_eci_orbit)
-        msg.omega_orbit_eci_eci = to_vec3(st.omega_orbit_eci_eci)
-        msg.orbit_rate = float(st.orbit_rate)
-        msg.argument_of_latitude = float(st.argument_of_latitude)
-        msg.b_eci = to_vec3(b_eci)
-        msg.b_dot_eci = to_vec3(b_dot_eci)
-        msg.q_eci_ecef = to_quat(q_eci_ecef(self.epoch + timedelta(seconds=t)))
-        return msg
+        return make(Environment, header=make(Header, stamp=self.stamp(t_ns), frame_id='eci'),
+                    r_eci=to_vec3(st.r_eci), v_eci=to_vec3(st.v_eci),
+                    q_eci_orbit=to_quat(st.q_eci_orbit),
+                    omega_orbit_eci_eci=to_vec3(st.omega_orbit_eci_eci),
+                    orbit_rate=float(st.orbit_rate),
+                    argument_of_latitude=float(st.argument_of_latitude),
+                    b_eci=to_vec3(b_eci), b_dot_eci=to_vec3(b_dot_eci),
+                    q_eci_ecef=to_quat(q_eci_ecef(self.epoch + timedelta(seconds=t))))
 
     def on_clock(self, msg: Clock) -> None:
         """One frame: publish for the clock's time unless that was done ahead, then (lockstep)
