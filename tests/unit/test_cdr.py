@@ -63,7 +63,8 @@ STRINGS = ['', 'a', 'body', 'Ünïcödé ✓ 漢字 🚀', 'x' * 257, 'tab\tnew\
 
 def rand_basic(rng, name):
     if name in ('double', 'float'):
-        x = rng.choice(SPECIAL) if rng.random() < 0.4 else rng.gauss(0.0, 10.0 ** rng.randint(-9, 9))
+        x = (rng.choice(SPECIAL) if rng.random() < 0.4
+             else rng.gauss(0.0, 10.0 ** rng.randint(-9, 9)))
         if name == 'float':
             x = float(np.float32(x)) if math.isfinite(x) and abs(x) < 3e38 else \
                 (x if not math.isfinite(x) else 1.5)

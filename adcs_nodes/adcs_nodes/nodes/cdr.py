@@ -35,6 +35,8 @@ raises ``struct.error``/``ValueError``, as the typed path would refuse it.
 from __future__ import annotations
 
 import array
+import inspect
+import os
 import struct
 import sys
 from typing import Any, Callable, Dict, List, Optional, Tuple
@@ -369,3 +371,77 @@ def _generate(msg_type: type) -> Codec:
     source = '\n'.join(g.lines)
     exec(compile(source, f'<cdr {msg_type.__module__}.{msg_type.__name__}>', 'exec'), g.env)
     return Codec(msg_type, g.env['encode'], g.env['decode'], source)
+
+
+# ---------------------------------------------------------------------- raw endpoints
+#: Environment switch of the raw path: ``0``/``false``/``no``/``off`` turns it off (typed
+#: publishes and takes, as before issue 13); anything else (or unset) leaves it on.
+ENV = 'ADCS_RAW_CDR'
+
+
+def enabled() -> bool:
+    """Whether raw endpoints are used (:data:`ENV`; read at endpoint creation)."""
+    return os.environ.get(ENV, '').strip().lower() not in ('0', 'false', 'no', 'off')
+
+
+def raw_codec(msg_type: type) -> Optional[Codec]:
+    """The generated codec of ``msg_type`` when the raw path is on, else None (off, or a
+    type the generator does not cover: that endpoint stays typed)."""
+    if not enabled():
+        return None
+    c = codec(msg_type)
+    return c if c.generated else None
+
+
+def raw_publisher(pub: Any) -> Any:
+    """Make ``pub.publish(msg)`` send ``codec.encode(msg)`` (rclpy's ``publish`` takes bytes
+    and skips its conversion and serialization). A message of another class (or bytes) goes
+    to the original ``publish`` unchanged. A lifecycle publisher keeps its check (the
+    original bound ``publish`` is called: inactive, nothing is sent). No-op when the raw path
+    is off or the type is not covered. Returns ``pub``; ``pub.raw_codec`` is the codec or
+    None."""
+    c = raw_codec(pub.msg_type)
+    pub.raw_codec = c
+    if c is None:
+        return pub
+    typed = pub.publish
+    encode, cls = c.encode, c.msg_type
+
+    def publish(msg: Any) -> None:
+        typed(encode(msg) if type(msg) is cls else msg)
+
+    pub.publish = publish
+    return pub
+
+
+def takes_info(callback: Callable) -> bool:
+    """True when rclpy would call ``callback`` with the message info (two arguments), by
+    the rule of rclpy's ``Subscription.callback`` setter."""
+    try:
+        inspect.signature(callback).bind(object())
+        return False
+    except TypeError:
+        return True
+
+
+def decoding(callback: Callable, c: Codec) -> Callable:
+    """A subscription callback for a ``raw=True`` subscription: bytes are decoded with ``c``
+    and passed on as a message; a message object (the composed runner's in-process path
+    calls the callback with the publisher's object) is passed on as it is. A callback that
+    takes the message info (``publisher_guard.WithInfo``) gets it, from either executor's
+    calling convention (``cb(msg, info)`` or ``cb((msg, info))``)."""
+    decode = c.decode
+    if not takes_info(callback):
+        def cb(data: Any) -> None:
+            callback(decode(data) if type(data) is bytes else data)
+        cb.raw_codec = c
+        return cb
+    from adcs_nodes.nodes.publisher_guard import WithInfo
+
+    def fn(data: Any, info: Any) -> None:
+        if type(data) is tuple:
+            data, info = data
+        callback(decode(data) if type(data) is bytes else data, info)
+    out = WithInfo(fn)
+    out.raw_codec = c
+    return out

@@ -51,6 +51,7 @@ from std_msgs.msg import String
 
 from adcs_msgs.msg import LockstepStatus
 from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, InputKind, input_kind, seconds_to_ns
+from adcs_nodes.nodes import cdr
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import publisher_guard
 from adcs_nodes.nodes.convert import stamp_ns, to_stamp
@@ -173,11 +174,12 @@ class LockstepNode(Node):
         self._wall0 = time.monotonic()
         self._ready_sent = False
         self._ready_pub = self.create_publisher(String, 'lockstep/ready', QOS_READY)
-        self._status_pub = self.create_publisher(LockstepStatus, 'lockstep/status', QOS_DATA)
+        self._status_pub = cdr.raw_publisher(
+            self.create_publisher(LockstepStatus, 'lockstep/status', QOS_DATA))
         # flow control: every PROGRESS_EVERY frames (and at the last frame of the run) a node
         # reports how far it got; the clock master never runs more than MAX_LAG_FRAMES ahead
-        self._progress_pub = self.create_publisher(LockstepStatus, 'lockstep/progress',
-                                                   QOS_DATA)
+        self._progress_pub = cdr.raw_publisher(
+            self.create_publisher(LockstepStatus, 'lockstep/progress', QOS_DATA))
         self.duration_ns = seconds_to_ns(self.param('duration_s', 0.0))
         self._progress_mark = -1
         self._pubs: Dict[str, Any] = {}
@@ -236,13 +238,20 @@ class LockstepNode(Node):
             msg_type, topic, copy.copy(qos),   # rclpy applies overrides to the profile in place
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self._pubs[pub.topic_name] = pub
-        return pub
+        return cdr.raw_publisher(pub)      # raw CDR (issue 13; ADCS_RAW_CDR=0: typed)
 
     def subscription(self, msg_type, topic: str, callback, qos: QoSProfile = QOS_DATA):
-        """Create a subscription (QoS overridable by parameters) registered for the handshake."""
+        """Create a subscription (QoS overridable by parameters) registered for the handshake.
+
+        Raw CDR (issue 13, ``nodes/cdr.py``): for a type the codec generator covers, the
+        subscription takes the bytes and ``callback`` gets the decoded message (same class
+        and fields as a typed take); ``ADCS_RAW_CDR=0`` in the environment: typed."""
+        codec = cdr.raw_codec(msg_type)
         sub = self.create_subscription(
-            msg_type, topic, callback, copy.copy(qos),   # (overrides mutate the profile)
-            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+            msg_type, topic, callback if codec is None else cdr.decoding(callback, codec),
+            copy.copy(qos),   # (overrides mutate the profile)
+            qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+            raw=codec is not None)
         self._subs[sub.topic_name] = sub
         return sub
 

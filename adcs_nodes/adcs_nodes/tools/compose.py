@@ -119,7 +119,8 @@ class InProcessBus:
                     skip.add(key)
                 subs[key].append(sub)
                 cb = sub.callback
-                if sub.raw:
+                if sub.raw and getattr(cb, 'raw_codec', None) is None:
+                    # (a node's raw CDR input, nodes/cdr.py, also takes message objects)
                     # a raw subscription (a composed recorder) records the bytes DDS gives;
                     # serialize_message pads empty float64 sequences differently (rosbags
                     # then refuses the message), so such a topic stays on DDS
