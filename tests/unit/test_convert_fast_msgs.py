@@ -56,3 +56,23 @@ def test_nested_in_a_message_same_bytes():
     got.header.stamp = convert.to_stamp(12 * 10 ** 9 + 34)
     got.vector = convert.to_vec3([1.0, 2.0, 3.0])
     assert serialize_message(got) == serialize_message(ref)
+
+
+def test_reading_equals_the_fields_of_generated_and_deserialized_messages():
+    """``vec3``/``quat``/``stamp_ns`` read the slots: the same values as the properties, for
+    a message of the generated constructor and one from ``deserialize_message``."""
+    from rclpy.serialization import deserialize_message
+    v = Vector3(x=1.5, y=-np.inf, z=5e-324)
+    q = Quaternion(x=0.1, y=0.2, z=np.nan, w=-0.9)
+    t = Time(sec=2 ** 31 - 1, nanosec=999_999_999)
+    for m in (v, deserialize_message(serialize_message(v), Vector3)):
+        got = convert.vec3(m)
+        assert got.dtype == np.float64 and got.shape == (3,)
+        assert got.tolist() == [m.x, m.y, m.z]
+    for m in (q, deserialize_message(serialize_message(q), Quaternion)):
+        got = convert.quat(m)
+        assert got.shape == (4,) and got[[0, 1, 3]].tolist() == [m.x, m.y, m.w]
+        assert np.isnan(got[2]) and np.isnan(m.z)
+    for m in (t, deserialize_message(serialize_message(t), Time)):
+        assert convert.stamp_ns(m) == m.sec * 10 ** 9 + m.nanosec
+        assert type(convert.stamp_ns(m)) is int

@@ -81,6 +81,9 @@ class Diagnostics:
                     else node.create_publisher(DiagnosticArray, TOPIC, QOS_DIAGNOSTICS))
         self._next_ns = 0
         self._last: Dict[str, int] = {}
+        # the rcl call, without rclpy's `with handle` guard (0.09 us against 0.47 us; called
+        # by every node every sim second; a destroyed publisher raises RCLError either way)
+        self._subscription_count = self.pub.handle.get_subscription_count
 
     def frame(self, t_ns: int) -> bool:
         """Called once per processed frame (elapsed sim time ``t_ns``); publishes when a
@@ -96,7 +99,7 @@ class Diagnostics:
 
     def wanted(self) -> bool:
         """True when a subscription is matched to ``/diagnostics`` (else nothing is built)."""
-        return self.pub.get_subscription_count() > 0
+        return self._subscription_count() > 0
 
     def values(self) -> List[Tuple[str, Any]]:
         """``(key, value)`` pairs (see module docstring for the order)."""

@@ -141,6 +141,9 @@ class TfPublisher:
                     else node.create_publisher(TFMessage, topic, qos))
         self.static = static
         self._static_sent: Dict[str, TransformStamped] = {}
+        # the rcl call, without rclpy's `with handle` guard (0.09 us against 0.47 us; asked
+        # every frame; a destroyed publisher raises RCLError either way)
+        self._subscription_count = self.pub.handle.get_subscription_count
 
     def send(self, transforms: Iterable[TransformStamped]) -> None:
         """Publish ``transforms`` in one message. On ``/tf_static`` every call re-publishes
@@ -156,7 +159,7 @@ class TfPublisher:
         """True when building transforms is worth it: ``/tf`` with a matched subscription (a
         recorder recording it, a tf2 listener, RViz), or ``/tf_static`` (latched, always).
         Nobody reads ``/tf`` in a bench run; building it was about 7 % of a composed frame."""
-        return self.static or self.pub.get_subscription_count() > 0
+        return self.static or self._subscription_count() > 0
 
 
 class MountTable:

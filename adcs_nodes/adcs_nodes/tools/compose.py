@@ -159,11 +159,15 @@ class InProcessBus:
     def _link(self, pub, callbacks: List[Callable]) -> None:
         dds_publish = pub.publish
         n_local = len(callbacks)
+        # the rcl call itself: rclpy's get_subscription_count() wraps it in a `with handle`
+        # guard against destruction from another thread (0.47 us against 0.09 us; this
+        # executor is the only thread; a destroyed publisher raises RCLError either way)
+        subscription_count = pub.handle.get_subscription_count
 
         def publish(msg) -> None:
             if not getattr(pub, 'is_activated', True):   # an inactive lifecycle publisher
                 return
-            if pub.get_subscription_count() > n_local:   # someone outside listens: DDS
+            if subscription_count() > n_local:   # someone outside listens: DDS
                 self.dds += 1
                 dds_publish(msg)
                 return
