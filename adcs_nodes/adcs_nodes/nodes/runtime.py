@@ -187,7 +187,15 @@ def run(factory: Callable[[], Node], args=None) -> int:
         except ValueError as exc:
             print(f'[{_node_name(args, factory)}] configuration error: {exc}', file=sys.stderr)
             return 2
-        spin_nodes([node])
+        prof_dir = os.environ.get('ADCS_NODE_PROFILE', '')
+        if prof_dir:   # developer aid (docs/bench.md): cProfile (CPU clock) of the spin
+            import cProfile
+            name = node.get_name()
+            prof = cProfile.Profile(time.process_time)
+            prof.runcall(spin_nodes, [node])
+            prof.dump_stats(os.path.join(prof_dir, f'{name}.prof'))
+        else:
+            spin_nodes([node])
         return int(getattr(node, 'exit_code', 0))
     except KeyboardInterrupt:   # Ctrl-C (SIGINT) before spin_nodes took the signal over
         print(f'[{_node_name(args, factory)}] interrupted during start-up', file=sys.stderr)
