@@ -114,9 +114,18 @@ def _basic(t) -> Tuple[str, int, Optional[str], Optional[str]]:
 
 
 def _msg_class(t: 'rdef.NamespacedType') -> type:
+    """The Python class of a nested type (``pkg.msg.Name``; an action's or a service's parts,
+    ``Slew_Goal``, live in ``pkg.action._slew``)."""
     import importlib
+    import re
     mod = importlib.import_module('.'.join(t.namespaces))
-    return getattr(mod, t.name)
+    if hasattr(mod, t.name):
+        return getattr(mod, t.name)
+    base = re.sub(r'(?<=[a-z0-9])(?=[A-Z])', '_', t.name.split('_')[0]).lower()
+    try:
+        return getattr(importlib.import_module(f'{mod.__name__}._{base}'), t.name)
+    except (ImportError, AttributeError):
+        raise Unsupported(f'class of {".".join(t.namespaces)}.{t.name} not found') from None
 
 
 def _flatten(cls: type, path: Tuple[str, ...], out: List[tuple], nested: List[tuple]) -> None:
