@@ -121,7 +121,7 @@ def command_msg(cmd: Command, stamp, source: str) -> ActuatorCommand:
     """Core command -> ``adcs_msgs/ActuatorCommand``."""
     return make(ActuatorCommand, header=make(Header, stamp=stamp, frame_id='body'),
                 dipole_body=to_vec3(cmd.dipole_body),
-                wheel_torque=np.asarray(cmd.wheel_torque, dtype=float),
+                wheel_torque=np.asarray(cmd.wheel_torque, dtype=float).tolist(),
                 torque_body=to_vec3(cmd.torque_body), source=source)
 
 
