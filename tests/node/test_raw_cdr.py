@@ -172,3 +172,32 @@ def test_inactive_lifecycle_publisher_sends_nothing(ros_context, spin, monkeypat
     pub.publish(LockstepStatus(node='on'))
     assert spin([node], lambda: got)
     assert [m.node for m in got] == ['on']     # 'off' would have come first (reliable, FIFO)
+
+
+@pytest.mark.parametrize('with_info', [False, True])
+def test_malformed_payload_is_dropped_not_raised(ros_context, spin, monkeypatch, with_info):
+    """A stranger's bytes that do not decode (truncated, invalid UTF-8, not CDR) are dropped
+    with a warning; the node keeps running and takes the next good message."""
+    monkeypatch.delenv(cdr.ENV, raising=False)
+    listener = Listener(with_info, context=ros_context, parameter_overrides=PARAMS)
+    stranger = Node('stranger', context=ros_context)
+    spub = stranger.create_publisher(Environment, 'sim/environment', QOS_DATA)
+    assert spin([listener, stranger], _matched(spub, listener.sub))
+    good = cdr.codec(Environment).encode(_env(0))
+    bad_utf8 = bytearray(good)
+    bad_utf8[16:19] = b'\xff\xfe\xfd'      # frame_id 'eci' -> invalid UTF-8
+    for data in (good[:30], bytes(bad_utf8), b'\x00\x00\x00\x00\x01', b'\x00\x01'):
+        spub.publish(data)
+    spub.publish(good)
+    assert spin([listener, stranger], lambda: listener.got)
+    assert len(listener.got) == 1
+    same(listener.got[0], _env(0))
+
+
+def test_decoding_reports_errors():
+    errors, got = [], []
+    cb = cdr.decoding(got.append, cdr.codec(Clock), errors.append)
+    cb(b'\x00\x01\x00\x00\x01')
+    assert not got and len(errors) == 1
+    cb(Clock())                      # an object (in-process delivery) passes unchanged
+    assert got and type(got[0]) is Clock

@@ -433,16 +433,39 @@ def takes_info(callback: Callable) -> bool:
         return True
 
 
-def decoding(callback: Callable, c: Codec) -> Callable:
+#: What a malformed payload raises in a generated decoder.
+DECODE_ERRORS = (struct.error, ValueError, IndexError, UnicodeDecodeError, TypeError,
+                 RuntimeError)   # RuntimeError: rclpy's deserializer (not CDR_LE)
+
+
+def decoding(callback: Callable, c: Codec,
+             on_error: Optional[Callable[[Exception], None]] = None) -> Callable:
     """A subscription callback for a ``raw=True`` subscription: bytes are decoded with ``c``
     and passed on as a message; a message object (the composed runner's in-process path
     calls the callback with the publisher's object) is passed on as it is. A callback that
     takes the message info (``publisher_guard.WithInfo``) gets it, from either executor's
-    calling convention (``cb(msg, info)`` or ``cb((msg, info))``)."""
+    calling convention (``cb(msg, info)`` or ``cb((msg, info))``).
+
+    A payload that does not decode (truncated, invalid UTF-8: only a stranger on the domain
+    sends one) is dropped: ``on_error(exc)`` is called, ``callback`` is not, nothing raises
+    into the executor."""
     decode = c.decode
+
+    def safe(data: Any) -> Any:
+        if type(data) is not bytes:
+            return data
+        try:
+            return decode(data)
+        except DECODE_ERRORS as exc:
+            if on_error is not None:
+                on_error(exc)
+            return None
+
     if not takes_info(callback):
         def cb(data: Any) -> None:
-            callback(decode(data) if type(data) is bytes else data)
+            msg = safe(data)
+            if msg is not None:
+                callback(msg)
         cb.raw_codec = c
         return cb
     from adcs_nodes.nodes.publisher_guard import WithInfo
@@ -450,7 +473,9 @@ def decoding(callback: Callable, c: Codec) -> Callable:
     def fn(data: Any, info: Any) -> None:
         if type(data) is tuple:
             data, info = data
-        callback(decode(data) if type(data) is bytes else data, info)
+        msg = safe(data)
+        if msg is not None:
+            callback(msg, info)
     out = WithInfo(fn)
     out.raw_codec = c
     return out

@@ -247,8 +247,12 @@ class LockstepNode(Node):
         subscription takes the bytes and ``callback`` gets the decoded message (same class
         and fields as a typed take); ``ADCS_RAW_CDR=0`` in the environment: typed."""
         codec = cdr.raw_codec(msg_type)
+        if codec is not None:
+            callback = cdr.decoding(callback, codec, lambda exc: self.get_logger().warning(
+                f'{topic}: a message that does not decode was dropped ({exc})',
+                throttle_duration_sec=5.0))
         sub = self.create_subscription(
-            msg_type, topic, callback if codec is None else cdr.decoding(callback, codec),
+            msg_type, topic, callback,
             copy.copy(qos),   # (overrides mutate the profile)
             qos_overriding_options=QoSOverridingOptions.with_default_policies(),
             raw=codec is not None)
