@@ -11,13 +11,18 @@ from ``SLOT_TYPES`` and ``__slots__``:
   ``00 01 00 00`` (``CDR_LE``); a primitive is aligned to its size (at most 8) counted from
   the end of the encapsulation header; a string is ``uint32 length`` (with the NUL) + UTF-8
   bytes + NUL; a sequence is ``uint32 count`` + elements; a fixed array is its elements; a
-  nested message is its fields in order (no padding of its own). These are the bytes
-  ``rclpy.serialization.serialize_message`` gives with ``rmw_fastrtps_cpp`` and the bytes a
-  typed publish sends (tested byte for byte, ``tests/unit/test_cdr.py``).
-* covered: every basic numeric type and ``bool``, strings (bounded or not), nested messages,
-  fixed arrays and sequences (bounded or not) of those, sequences and arrays of strings and
-  of messages. Not covered: ``char``, ``byte``/``octet``, ``wchar`` and ``wstring`` fields,
-  and ``bool`` arrays: a type using one gets :class:`RclpyCodec` (rclpy's
+  nested message is its fields in order (no padding of its own); the elements of an empty
+  sequence are not aligned (what Fast CDR writes: the count of the next field follows). These
+  are the bytes a typed publish sends (``rmw_fastrtps_cpp``), with the alignment padding
+  zeroed (Fast CDR leaves it uncleared). ``rclpy.serialization.serialize_message`` writes the
+  same content but reports a length that counts the alignment of empty sequences' elements and
+  rounds up (4-16 bytes more after an empty ``float64[]``; rosbags refuses those bytes). Tested:
+  ``tests/unit/test_cdr.py`` (against ``serialize_message`` and rosbags),
+  ``tests/node/test_raw_cdr.py`` (against what DDS delivers).
+* covered: every basic numeric type, ``bool`` and ``byte``, strings (bounded or not), nested
+  messages, fixed arrays and sequences (bounded or not) of numbers, strings and messages. Not
+  covered: ``wchar``/``wstring`` fields, ``bool`` and ``byte`` arrays, a nested class that
+  cannot be imported: such a type gets :class:`RclpyCodec` (rclpy's
   ``serialize_message``/``deserialize_message``), so :func:`codec` always returns a codec.
 * encoding: fixed-size runs of primitives are one ``struct.pack`` each; the ``struct`` of a
   run is chosen by the alignment (offset mod 8) where it starts, so the padding is exact
