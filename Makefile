@@ -13,8 +13,10 @@ build:  ## venv + pinned ROS 2 wheels + colcon build (idempotent, seconds when u
 demo:  ## run the free-tumble scenario end to end: record a bag, write the report
 	$(RUN) adcs run scenarios/free_tumble.yaml --record out/demo-$(STAMP) --report
 
-test: lint  ## flake8 + unit, node and integration tests (not the long reproductions)
-	$(RUN) python -m pytest -m "not slow" --durations=15 tests
+TEST_WORKERS ?= 2
+
+test: lint  ## flake8 + unit, node and integration tests (not the long reproductions); TEST_WORKERS=0: one process
+	$(RUN) python -m pytest -m "not slow" --durations=15 -n $(TEST_WORKERS) --dist loadgroup tests
 
 lint:  ## flake8 at 99 columns on the packages and tests
 	$(RUN) python -m flake8 adcs_nodes sim_node tests

@@ -27,6 +27,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from adcs_nodes.tools.bag import header_stamp_ns, read_messages  # noqa: E402
 from adcs_nodes.tools.graph import build_graph, params_file_text  # noqa: E402
 from adcs_nodes.tools.scenario import load_scenario  # noqa: E402
+from domains import worker_domain  # noqa: E402
 
 SCENARIO = os.path.join(SCENARIOS, 'paper000_estimation.yaml')
 DURATION_S = 2400.0
@@ -72,7 +73,7 @@ def _live_estimator_params(path):
 
 
 def test_best_effort_off_grid_replay_drives_the_live_estimator(bag, tmp_path):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(100 + os.getpid() % 50),
+    env = dict(os.environ, ROS_DOMAIN_ID=str(worker_domain(100, 50)),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
     os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
                                            'FASTDDS_BUILTIN_TRANSPORTS')})
@@ -161,7 +162,7 @@ def test_wall_clock_driver_is_accepted_without_sim_time(bag, tmp_path):
     """A driver stamping with the wall clock (``adcs replay --now``, best-effort, real time)
     and an estimator started alone with no parameters at all (live, wall clock): every sample
     is accepted and used, estimates carry wall-clock stamps at the samples' times."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(100 + (os.getpid() + 7) % 50),
+    env = dict(os.environ, ROS_DOMAIN_ID=str(worker_domain(100, 50, 7)),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
     os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
                                            'FASTDDS_BUILTIN_TRANSPORTS')})

@@ -7,6 +7,8 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 
+from domains import worker_domain  # noqa: E402
+
 #: One domain per test (150-199, outside the launcher's run domains): a participant of an
 #: earlier test that DDS still lists (its lease not expired) is not discovered by the next.
 _TEST_NUMBER = itertools.count()
@@ -15,7 +17,7 @@ _TEST_NUMBER = itertools.count()
 @pytest.fixture
 def ros_context():
     """A fresh rclpy context on this test's own domain (localhost discovery)."""
-    os.environ['ROS_DOMAIN_ID'] = str(150 + (os.getpid() + next(_TEST_NUMBER)) % 50)
+    os.environ['ROS_DOMAIN_ID'] = str(worker_domain(150, 50, next(_TEST_NUMBER)))
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')   # as the launcher does
     ctx = rclpy.Context()

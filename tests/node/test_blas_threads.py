@@ -17,6 +17,8 @@ import pytest
 pytest.importorskip('threadpoolctl')
 pytest.importorskip('rclpy')
 
+from domains import worker_domain  # noqa: E402
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'BLIS_NUM_THREADS',
               'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS')
@@ -73,7 +75,7 @@ def test_every_node_process_has_one_blas_thread(tmp_path):
     for n, (name, cmd) in enumerate(sorted(cmds.items())):
         assert cmd[1] == '-m'
         proc = subprocess.run([sys.executable, '-c', WRAPPER] + cmd[2:], cwd=ROOT,
-                              env=_env(140 + (os.getpid() + n) % 10), capture_output=True,
+                              env=_env(worker_domain(140, 10, n)), capture_output=True,
                               text=True, timeout=120)
         lines = [ln for ln in proc.stdout.splitlines() if ln.startswith('BLAS ')]
         assert proc.returncode == 0 and lines, f'{name}: {proc.stderr[-2000:]}'

@@ -15,6 +15,8 @@ import pytest
 
 pytest.importorskip('rclpy')
 
+from domains import worker_domain  # noqa: E402
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
@@ -40,7 +42,7 @@ def test_inproc_path_gives_the_same_final_state(tmp_path):
     for n, mode in enumerate(('dds', 'inproc')):
         out = tmp_path / f'state-{mode}.json'
         env = {k: v for k, v in os.environ.items() if k != 'ADCS_COMPOSE_INPROC'}
-        env.update(ROS_DOMAIN_ID=str(130 + (os.getpid() + n) % 10),
+        env.update(ROS_DOMAIN_ID=str(worker_domain(130, 10, n)),
                    ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
         extra = ['--inproc'] if mode == 'inproc' else ['--dds']
         proc = subprocess.run(cmd + ['--state-out', str(out)] + extra, cwd=ROOT, env=env,

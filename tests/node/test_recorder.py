@@ -31,6 +31,7 @@ from std_msgs.msg import String  # noqa: E402
 
 from adcs_nodes.nodes.recorder import OutputExistsError, RecorderNode  # noqa: E402
 from adcs_nodes.tools.bag import read_messages, topic_summary  # noqa: E402
+from domains import worker_domain  # noqa: E402
 
 N = 40
 T0_NS = 1_700_000_000 * 10**9
@@ -41,7 +42,7 @@ LATCHED = ControllerStatus
 def context():
     """Isolated rclpy context on a per-process domain, localhost discovery only."""
     saved = {k: os.environ.get(k) for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
-    os.environ['ROS_DOMAIN_ID'] = str(200 + os.getpid() % 15)   # its own range: no other test
+    os.environ['ROS_DOMAIN_ID'] = str(worker_domain(200, 15))   # its own range: no other test
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     ctx = rclpy.Context()
     rclpy.init(context=ctx)

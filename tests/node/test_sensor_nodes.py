@@ -20,6 +20,7 @@ from sensor_msgs.msg import Imu, MagneticField
 from adcs_msgs.msg import AttitudeState, Environment, HorizonSensor
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import derive_seed
+from domains import worker_domain
 from adcs_nodes.nodes.convert import quat, stamp_ns, to_quat, to_stamp, to_vec3, vec3
 from sim_node.models.sensors import StarTracker
 from sim_node.nodes.gyro import GyroNode
@@ -252,7 +253,7 @@ def _wait_for_nodes(domain_id, names, procs, timeout=120.0):
 
 def test_each_node_runs_alone_with_defaults():
     """``python -m sim_node.nodes.<name>`` starts, spins and stops cleanly on SIGINT."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(100 + os.getpid() % 50),
+    env = dict(os.environ, ROS_DOMAIN_ID=str(worker_domain(100, 50)),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     names = ('magnetometer', 'horizon_sensor', 'star_tracker', 'gyro')
     procs = [subprocess.Popen([sys.executable, '-m', f'sim_node.nodes.{n}'], env=env,

@@ -691,7 +691,10 @@ def load_scenario(path: str) -> Dict[str, Any]:
     try:
         return _load_scenario(path)
     except ScenarioError as exc:
-        raise ScenarioError(shorten_message(str(exc))) from None
+        text, name = str(exc), str(path)
+        if text.startswith(name):      # the file's path is never cut, only what follows it
+            raise ScenarioError(name + shorten_message(text[len(name):])) from None
+        raise ScenarioError(shorten_message(text)) from None
 
 
 def shorten_message(text: str, max_run: int = MAX_SHOWN, max_len: int = MAX_MESSAGE) -> str:
