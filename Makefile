@@ -16,7 +16,8 @@ demo:  ## run the free-tumble scenario end to end: record a bag, write the repor
 TEST_WORKERS ?= 2
 
 test: lint  ## flake8 + unit, node and integration tests (not the long reproductions); TEST_WORKERS=0: one process
-	$(RUN) python -m pytest -m "not slow" --durations=15 -n $(TEST_WORKERS) --dist loadgroup tests
+	$(RUN) python -m pytest -m "not slow and not alone" --durations=15 -n $(TEST_WORKERS) --dist loadgroup tests
+	$(RUN) python -m pytest -m "alone and not slow" --durations=5 tests
 
 lint:  ## flake8 at 99 columns on the packages and tests
 	$(RUN) python -m flake8 adcs_nodes sim_node tests

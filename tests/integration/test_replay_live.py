@@ -72,6 +72,7 @@ def _live_estimator_params(path):
         fh.write(params_file_text([spec]))
 
 
+@pytest.mark.alone     # 100x replay against a live node: needs the CPU it asks for (see Makefile)
 def test_best_effort_off_grid_replay_drives_the_live_estimator(bag, tmp_path):
     env = dict(os.environ, ROS_DOMAIN_ID=str(worker_domain(100, 50)),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
@@ -150,7 +151,8 @@ def test_best_effort_off_grid_replay_drives_the_live_estimator(bag, tmp_path):
     assert late.size > 50
     print(f'live estimator: median error {np.median(late):.2f} deg over 2000-2400 s, '
           f'{len(times)} estimates')
-    assert np.median(late) < 3.0, np.median(late)
+    assert np.median(late) < 3.0, (np.median(late), 'updates', _estimator_count(
+        diags, 'update_count'), 'rejected', _estimator_count(diags, 'rejected_samples'))
     assert np.median(errors[times < 100.0]) > 10.0      # it did start far off (from identity)
     est_diag = [d.status[0] for d in diags if d.status and d.status[0].name == 'estimator']
     assert est_diag, 'no /diagnostics from the estimator'

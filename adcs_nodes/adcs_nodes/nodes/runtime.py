@@ -13,6 +13,7 @@ cores a 9x9 ``expm`` cost 400-930 us CPU instead of 31 us (issue 13), with ident
 """
 from __future__ import annotations
 
+import faulthandler
 import os
 import signal
 import sys
@@ -179,7 +180,10 @@ def run(factory: Callable[[], Node], args=None) -> int:
     Returns the process exit code: 0 on a normal end, 2 on a configuration error (a
     ``ValueError`` while building the node: one clear line naming the node, no traceback).
     An exception while running propagates (traceback, exit code 1) so the launcher reports it.
+    A crash in C (rclpy, Fast DDS, a compiled kernel) writes the Python stack to stderr, i.e.
+    to the node's log (``faulthandler``).
     """
+    faulthandler.enable()
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         try:

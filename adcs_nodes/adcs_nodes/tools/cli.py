@@ -37,6 +37,7 @@ time: the summary line says which), 130 interrupted.
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import math
 import os
 import sys
@@ -288,6 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``adcs`` console script."""
+    # a crash inside a C library (rclpy, Fast DDS) prints where Python was on stderr instead
+    # of ending the command without a word (seen once: `adcs switch` killed by SIGSEGV)
+    faulthandler.enable()
     args = build_parser().parse_args(argv)
     return args.func(args)
 
