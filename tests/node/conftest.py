@@ -29,7 +29,8 @@ def ros_context():
 
 @pytest.fixture
 def spin(ros_context):
-    """``spin(nodes, until, timeout)``: spin nodes on one executor until ``until()`` or timeout.
+    """``spin(nodes, until, timeout, executor=None)``: spin nodes on one executor (a
+    ``SingleThreadedExecutor`` unless one is given) until ``until()`` or timeout.
 
     Returns True when ``until()`` became true, False on timeout.
     """
@@ -37,8 +38,8 @@ def spin(ros_context):
 
     executors = []
 
-    def _spin(nodes, until, timeout=10.0):
-        ex = SingleThreadedExecutor(context=ros_context)
+    def _spin(nodes, until, timeout=10.0, executor=None):
+        ex = executor if executor is not None else SingleThreadedExecutor(context=ros_context)
         executors.append(ex)
         for n in nodes:
             ex.add_node(n)
@@ -52,6 +53,8 @@ def spin(ros_context):
         finally:
             for n in nodes:
                 ex.remove_node(n)
+            if executor is not None:   # (an EventsExecutor keeps its entities' callbacks
+                ex.shutdown()          # until shut down)
 
     yield _spin
     for ex in executors:

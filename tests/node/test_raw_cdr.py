@@ -91,23 +91,8 @@ def _env(k):
 
 
 def _spin_with(executor_kind, ros_context, spin, nodes, until, timeout=10.0):
-    if executor_kind == 'single':
-        return spin(nodes, until, timeout)
-    import time
-    ex = make_executor(ros_context)
-    for n in nodes:
-        ex.add_node(n)
-    deadline = time.monotonic() + timeout
-    try:
-        while time.monotonic() < deadline:
-            ex.spin_once(timeout_sec=0.01)
-            if until():
-                return True
-        return False
-    finally:
-        for n in nodes:
-            ex.remove_node(n)
-        ex.shutdown()
+    executor = make_executor(ros_context) if executor_kind == 'events' else None
+    return spin(nodes, until, timeout, executor=executor)
 
 
 @pytest.mark.parametrize('executor_kind', ['single', 'events'])

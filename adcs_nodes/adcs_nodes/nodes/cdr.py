@@ -187,6 +187,21 @@ def _block_structs(prims: List[tuple]) -> List[struct.Struct]:
 
 
 # ---------------------------------------------------------------------- generation
+def _count_encoder(n: Optional[int], field: str, what: str) -> List[str]:
+    """Source lines writing a sequence's uint32 length (``n`` None) or checking a fixed
+    array's length ``n``, for the list ``L`` of ``field``."""
+    if n is None:
+        return ['    q = -o & 3', '    parts.append(PAD[q] + U32.pack(len(L)))', '    o += q + 4']
+    return [f'    if len(L) != {n}: raise ValueError("{field}: want {n} {what}")']
+
+
+def _count_decoder(n: Optional[int]) -> List[str]:
+    """Source lines reading a sequence's uint32 length into ``c`` (a fixed array: ``n``)."""
+    if n is None:
+        return ['    o += -o & 3', '    (c,) = U32.unpack_from(d, o)', '    o += 4']
+    return [f'    c = {n}']
+
+
 class _Gen:
     def __init__(self) -> None:
         self.env: Dict[str, Any] = {
@@ -283,21 +298,13 @@ class _Gen:
                           f'    o += {n * size}']
             elif kind == 'strs':
                 n = op[2]
-                e += [f'    L = {ref(p)}']
-                if n is None:
-                    e += ['    q = -o & 3', '    parts.append(PAD[q] + U32.pack(len(L)))',
-                          '    o += q + 4']
-                else:
-                    e += [f'    if len(L) != {n}: raise ValueError("{p[-1]}: want {n} strings")']
+                e += [f'    L = {ref(p)}'] + _count_encoder(n, p[-1], 'strings')
                 e += ['    for s in L:', '        s = s.encode()',
                       "        if b'\\0' in s: s = strip(s)",
                       '        k = len(s) + 1', '        q = -o & 3',
                       "        parts.append(PAD[q] + U32.pack(k) + s + b'\\0')",
                       '        o += q + 4 + k']
-                if n is None:
-                    d += ['    o += -o & 3', '    (c,) = U32.unpack_from(d, o)', '    o += 4']
-                else:
-                    d += [f'    c = {n}']
+                d += _count_decoder(n)
                 d += ['    L = []', '    for _ in range(c):', '        o += -o & 3',
                       '        (k,) = U32.unpack_from(d, o)',
                       "        L.append(str(d[o + 4:o + 3 + k], 'utf-8'))", '        o += 4 + k',
@@ -305,17 +312,9 @@ class _Gen:
             elif kind == 'msgs':
                 sub, n = op[2], op[3]
                 se, sd = self.body(sub)
-                e += [f'    L = {ref(p)}']
-                if n is None:
-                    e += ['    q = -o & 3', '    parts.append(PAD[q] + U32.pack(len(L)))',
-                          '    o += q + 4']
-                else:
-                    e += [f'    if len(L) != {n}: raise ValueError("{p[-1]}: want {n} items")']
+                e += [f'    L = {ref(p)}'] + _count_encoder(n, p[-1], 'items')
                 e += ['    for x in L:', f'        o = {se}(x, parts, o)']
-                if n is None:
-                    d += ['    o += -o & 3', '    (c,) = U32.unpack_from(d, o)', '    o += 4']
-                else:
-                    d += [f'    c = {n}']
+                d += _count_decoder(n)
                 d += ['    L = []', '    for _ in range(c):', f'        x, o = {sd}(d, o)',
                       '        L.append(x)', f'    {dref(p)} = L']
             i += 1
