@@ -183,7 +183,10 @@ def run(factory: Callable[[], Node], args=None) -> int:
     A crash in C (rclpy, Fast DDS, a compiled kernel) writes the Python stack to stderr, i.e.
     to the node's log (``faulthandler``).
     """
-    faulthandler.enable()
+    try:
+        faulthandler.enable()
+    except (OSError, ValueError):   # stderr without a file descriptor (captured in tests)
+        pass
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         try:

@@ -291,7 +291,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``adcs`` console script."""
     # a crash inside a C library (rclpy, Fast DDS) prints where Python was on stderr instead
     # of ending the command without a word (seen once: `adcs switch` killed by SIGSEGV)
-    faulthandler.enable()
+    try:
+        faulthandler.enable()
+    except (OSError, ValueError):   # stderr without a file descriptor (captured in tests)
+        pass
     args = build_parser().parse_args(argv)
     return args.func(args)
 
