@@ -264,9 +264,12 @@ class _Monitor:
     (or of ``lockstep/progress``) in another process sends that topic over DDS also in composed
     mode, off the composed runner's in-process path, and the mix of the two paths ran at a
     fifth of the speed (the clock master waited for progress messages stuck behind the
-    in-process deliveries). ``lockstep/status`` (every node once per sim second, stamped with
-    the sim time of its last frame) gives the sim time reached and that the lockstep started;
-    a content filter keeps it to the clock master's and to those reporting missed frames.
+    in-process deliveries). ``lockstep/status`` (stamped with the sim time of a node's last
+    frame) gives the sim time reached and that the lockstep started; a content filter keeps it
+    to the clock master's and to those reporting missed frames. Nodes skip the statuses this
+    filter would drop when the monitor is their only reader, and the clock master sends its
+    own to the monitor alone at most every ``MONITOR_STATUS_WALL_S`` (0.1 s) of wall time
+    (``nodes/lockstep_node.py``); final statuses and missed frames are never held back.
     """
 
     def __init__(self, epoch_ns: int) -> None:
