@@ -88,7 +88,9 @@ LAUNCH_PARAMS = ('expected_matches', 'duration_s', 'frame_period_s')
 #: Topic prefixes subscribed best-effort (SensorDataQoS) in live mode.
 SENSOR_PREFIXES = ('sensors/', '/sensors/')
 #: Reasons a live sample is rejected (keys of ``LockstepNode.rejected_samples``).
-REJECT_REASONS = ('zero_stamp', 'future', 'too_old', 'out_of_order', 'late')
+#: ``undecodable``: raw CDR bytes that do not decode (only a stranger on the domain sends them;
+#: ``nodes/cdr.py``), in either timing mode.
+REJECT_REASONS = ('zero_stamp', 'future', 'too_old', 'out_of_order', 'late', 'undecodable')
 
 
 def parse_epoch(text: str) -> datetime:
@@ -247,10 +249,9 @@ class LockstepNode(Node):
         subscription takes the bytes and ``callback`` gets the decoded message (same class
         and fields as a typed take); ``ADCS_RAW_CDR=0`` in the environment: typed."""
         codec = cdr.raw_codec(msg_type)
-        if codec is not None:
-            callback = cdr.decoding(callback, codec, lambda exc: self.get_logger().warning(
-                f'{topic}: a message that does not decode was dropped ({exc})',
-                throttle_duration_sec=5.0))
+        if codec is not None:     # bytes that do not decode: dropped, counted, warned
+            callback = cdr.decoding(callback, codec, lambda exc: self._reject_sample(
+                topic, 'undecodable', f'a message that does not decode was dropped ({exc})'))
         sub = self.create_subscription(
             msg_type, topic, callback,
             copy.copy(qos),   # (overrides mutate the profile)
@@ -428,7 +429,8 @@ class LockstepNode(Node):
     # ------------------------------------------------------------------ live mode
     def _reject_sample(self, name: str, reason: str, text: str) -> None:
         self.rejected_samples[reason] += 1
-        self.last_rejected_sample = f'{self._topics_of.get(name, name)}: {text}'
+        topic = getattr(self, '_topics_of', {}).get(name, name)   # (inputs set up or not)
+        self.last_rejected_sample = f'{topic}: {text}'
         self.get_logger().warning(
             f'sample rejected ({reason}): {self.last_rejected_sample} '
             f'(rejected so far: {sum(self.rejected_samples.values())})',
