@@ -2,13 +2,13 @@
 from __future__ import annotations
 
 import math
-import sys
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Quaternion, Vector3
 
 from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.nodes.messages import checks_off
 
 
 # Fast construction (issue 13): the generated ``__init__`` of a message takes keyword
@@ -17,8 +17,7 @@ from adcs_nodes.core.lockstep import NS_PER_S
 # ``ROS_PYTHON_CHECK_FIELDS`` not 1) the same object is made by filling its slots; with checks
 # on the generated constructor (which checks) is used. Tested byte for byte against
 # ``serialize_message`` of the generated constructor's message.
-_FAST = all(getattr(sys.modules[cls.__module__], 'ros_python_check_fields', '1') != '1'
-            for cls in (Vector3, Quaternion, Time))
+_FAST = all(checks_off(cls) for cls in (Vector3, Quaternion, Time))
 _new = object.__new__
 
 # Reading: the fields are read from their slots (``msg._x`` is what the property ``msg.x``
