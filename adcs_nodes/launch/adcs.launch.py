@@ -17,6 +17,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from adcs_nodes.tools.launch_graph import CLOCK_MASTER, launch_graph
+from adcs_nodes.tools.launcher import profile_env
 
 
 def _graph(context, *args, **kwargs):
@@ -30,9 +31,13 @@ def _graph(context, *args, **kwargs):
         fh.write(params)
     actions = [LogInfo(msg=f'adcs: {scenario}: {len(nodes)} nodes, parameters in '
                            f'{params_path}')]
+    # the project's Fast DDS profile, as `adcs run` (unless the user set a profiles file)
+    env = profile_env(os.environ)
     for n in nodes:
         extra = {'on_exit': Shutdown(reason='end of the scenario')} \
             if n.name == CLOCK_MASTER else {}
+        if env:
+            extra['additional_env'] = env
         actions.append(Node(package=n.package, executable=n.executable, name=n.name,
                             parameters=[params_path], output='screen', **extra))
     return actions

@@ -26,6 +26,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 
 from adcs_nodes.tools.bag import header_stamp_ns, read_messages  # noqa: E402
 from adcs_nodes.tools.graph import build_graph, params_file_text  # noqa: E402
+from adcs_nodes.tools.launcher import child_env, use_dds_env  # noqa: E402
 from adcs_nodes.tools.scenario import load_scenario  # noqa: E402
 from domains import worker_domain  # noqa: E402
 
@@ -74,10 +75,8 @@ def _live_estimator_params(path):
 
 @pytest.mark.alone     # 100x replay against a live node: needs the CPU it asks for (see Makefile)
 def test_best_effort_off_grid_replay_drives_the_live_estimator(bag, tmp_path):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(worker_domain(100, 50)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
-    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
-                                           'FASTDDS_BUILTIN_TRANSPORTS')})
+    env = child_env(worker_domain(100, 50))
+    use_dds_env(env)
     params = str(tmp_path / 'estimator.yaml')
     _live_estimator_params(params)
     est_log = open(tmp_path / 'estimator.log', 'w')
@@ -164,10 +163,8 @@ def test_wall_clock_driver_is_accepted_without_sim_time(bag, tmp_path):
     """A driver stamping with the wall clock (``adcs replay --now``, best-effort, real time)
     and an estimator started alone with no parameters at all (live, wall clock): every sample
     is accepted and used, estimates carry wall-clock stamps at the samples' times."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(worker_domain(100, 50, 7)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
-    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
-                                           'FASTDDS_BUILTIN_TRANSPORTS')})
+    env = child_env(worker_domain(100, 50, 7))
+    use_dds_env(env)
     est_log = open(tmp_path / 'estimator.log', 'w')
     est = subprocess.Popen([sys.executable, '-m', 'adcs_nodes.nodes.estimator'], cwd=ROOT,
                            env=env, stdout=est_log, stderr=subprocess.STDOUT)

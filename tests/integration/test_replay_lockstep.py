@@ -26,6 +26,7 @@ from adcs_msgs.msg import AttitudeState  # noqa: E402
 
 from adcs_nodes.tools import replay  # noqa: E402
 from adcs_nodes.tools.bag import open_bag, read_messages  # noqa: E402
+from adcs_nodes.tools.launcher import child_env, use_dds_env  # noqa: E402
 from domains import worker_domain  # noqa: E402
 
 SCENARIO = os.path.join(SCENARIOS, 'paper000_control.yaml')
@@ -35,10 +36,8 @@ TOPIC = '/adcs/attitude_estimate'
 
 def _env(k):
     """An isolated DDS domain for this test (and for rclpy in this process)."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(worker_domain(150, 50, k)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
-    os.environ.update({n: env[n] for n in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
-                                           'FASTDDS_BUILTIN_TRANSPORTS')})
+    env = child_env(worker_domain(150, 50, k))
+    use_dds_env(env)
     return env
 
 

@@ -8,6 +8,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 
 from domains import worker_domain  # noqa: E402
+from adcs_nodes.tools.launcher import profile_env  # noqa: E402
 
 #: One domain per test (150-199, outside the launcher's run domains): a participant of an
 #: earlier test that DDS still lists (its lease not expired) is not discovered by the next.
@@ -20,6 +21,7 @@ def ros_context():
     os.environ['ROS_DOMAIN_ID'] = str(worker_domain(150, 50, next(_TEST_NUMBER)))
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')   # as the launcher does
+    os.environ.update(profile_env(os.environ))                     # its Fast DDS profile too
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     yield ctx

@@ -18,6 +18,7 @@ pytest.importorskip('threadpoolctl')
 pytest.importorskip('rclpy')
 
 from domains import worker_domain  # noqa: E402
+from adcs_nodes.tools.launcher import child_env  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'BLIS_NUM_THREADS',
@@ -47,10 +48,7 @@ runpy.run_module(module, run_name='__main__', alter_sys=True)
 
 
 def _env(domain: int) -> dict:
-    env = {k: v for k, v in os.environ.items() if k not in THREAD_ENV}
-    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-               FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
-    return env
+    return {k: v for k, v in child_env(domain).items() if k not in THREAD_ENV}
 
 
 def _commands(tmp_path):

@@ -16,6 +16,7 @@ import pytest
 pytest.importorskip('rclpy')
 
 from domains import worker_domain  # noqa: E402
+from adcs_nodes.tools.launcher import child_env  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -41,9 +42,8 @@ def test_inproc_path_gives_the_same_final_state(tmp_path):
     states, logs = {}, {}
     for n, mode in enumerate(('dds', 'inproc')):
         out = tmp_path / f'state-{mode}.json'
-        env = {k: v for k, v in os.environ.items() if k != 'ADCS_COMPOSE_INPROC'}
-        env.update(ROS_DOMAIN_ID=str(worker_domain(130, 10, n)),
-                   ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
+        env = {k: v for k, v in child_env(worker_domain(130, 10, n)).items()
+               if k != 'ADCS_COMPOSE_INPROC'}
         extra = ['--inproc'] if mode == 'inproc' else ['--dds']
         proc = subprocess.run(cmd + ['--state-out', str(out)] + extra, cwd=ROOT, env=env,
                               capture_output=True, text=True, timeout=300)

@@ -15,7 +15,7 @@ import yaml
 
 from adcs_nodes.tools.graph import params_file_text
 from adcs_nodes.tools.launch_graph import scenario_path
-from adcs_nodes.tools.launcher import Launcher
+from adcs_nodes.tools.launcher import Launcher, child_env
 from adcs_nodes.tools.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -91,9 +91,12 @@ def _entry_points(package):
 
 
 @pytest.mark.parametrize('scenario', ['paper000_control.yaml', 'paper000_estimation.yaml'])
-def test_launch_file_starts_what_adcs_run_starts(launch_stubs, tmp_path, scenario):
+def test_launch_file_starts_what_adcs_run_starts(launch_stubs, tmp_path, scenario,
+                                                 monkeypatch):
     path = os.path.join(ROOT, 'scenarios', scenario)
     bag = str(tmp_path / 'bag')
+    for key in ('FASTDDS_DEFAULT_PROFILES_FILE', 'FASTRTPS_DEFAULT_PROFILES_FILE'):
+        monkeypatch.delenv(key, raising=False)
     nodes = _expand(_load(LAUNCH_FILE), launch_stubs, scenario=path, duration='120',
                     record=bag)
     run = Launcher(load_scenario(path), duration_s=120.0, record=bag, progress=False)
@@ -116,6 +119,15 @@ def test_launch_file_starts_what_adcs_run_starts(launch_stubs, tmp_path, scenari
     assert isinstance(dyn.kwargs['on_exit'], launch_stubs['Shutdown'])   # end of scenario
     for n in nodes:                        # every executable exists for `ros2 run`
         assert n.kwargs['executable'] in _entry_points(n.kwargs['package']), n.kwargs
+        # the Fast DDS profile, as `adcs run` gives it (child_env)
+        assert n.kwargs['additional_env'] == {
+            'FASTDDS_DEFAULT_PROFILES_FILE': child_env(0)['FASTDDS_DEFAULT_PROFILES_FILE']}
+    # a profiles file of the user's own wins
+    monkeypatch.setenv('FASTDDS_DEFAULT_PROFILES_FILE', str(tmp_path / 'mine.xml'))
+    nodes = _expand(_load(LAUNCH_FILE), launch_stubs, scenario=path, duration='120', record='')
+    for params_path in {n.kwargs['parameters'][0] for n in nodes}:
+        os.unlink(params_path)
+    assert all('additional_env' not in n.kwargs for n in nodes)
 
 
 def test_default_arguments_use_an_installed_scenario(launch_stubs):

@@ -243,8 +243,19 @@ def _disk_full(exc: OSError) -> bool:
     return exc.errno in (errno.ENOSPC, errno.EDQUOT)
 
 
+#: Fast DDS defaults of every process of a run (UDP only with 4 MiB socket buffers, a 50 ms
+#: writer heartbeat): docs/reliability.md, "Reliable samples under load".
+FASTDDS_PROFILES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                'config', 'fastdds_profiles.xml')
+#: The middleware settings of a run: :func:`child_env` sets them, :func:`use_dds_env` copies
+#: them into the calling process (its own rclpy node: the launcher's monitor, ``adcs switch``).
+DDS_ENV_KEYS = ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE', 'FASTDDS_BUILTIN_TRANSPORTS',
+                'FASTDDS_DEFAULT_PROFILES_FILE')
+
+
 def child_env(domain: int) -> Dict[str, str]:
-    """Environment of every child: the run's domain, localhost discovery, unbuffered output."""
+    """Environment of every child: the run's domain, localhost discovery, unbuffered output,
+    the project's Fast DDS profile (unless the user set a profiles file of their own)."""
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(domain)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -254,7 +265,22 @@ def child_env(domain: int) -> Dict[str, str]:
     # processes once kept two nodes of a new run from ever matching (seen in CI); UDP
     # loopback measured as fast for this graph (125-163 vs 131-132 frames/s)
     env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+    env.update(profile_env(env))
     return env
+
+
+def profile_env(environ) -> Dict[str, str]:
+    """``{'FASTDDS_DEFAULT_PROFILES_FILE': FASTDDS_PROFILES}``, or ``{}`` when ``environ``
+    names a profiles file of the user's own (an empty value too: Fast DDS then loads none)."""
+    if 'FASTDDS_DEFAULT_PROFILES_FILE' in environ or 'FASTRTPS_DEFAULT_PROFILES_FILE' in environ:
+        return {}
+    return {'FASTDDS_DEFAULT_PROFILES_FILE': FASTDDS_PROFILES}
+
+
+def use_dds_env(env: Dict[str, str]) -> None:
+    """Give this process the run's middleware settings (:data:`DDS_ENV_KEYS` of ``env``);
+    before its first rclpy node, since Fast DDS reads its profiles file once per process."""
+    os.environ.update({k: env[k] for k in DDS_ENV_KEYS if k in env})
 
 
 class _Monitor:
@@ -295,6 +321,8 @@ class _Monitor:
         self.recorder_clock_ns = -1
         self.recorder_count = 0
         self.recorder_error = ''
+        self.recorder_lost = 0            # messages the middleware reported lost to the bag
+        self.recorder_lost_topic = ''
         # a DDS content filter (evaluated by the writers where the middleware can): only the
         # clock master's statuses (sim time) and those with missed frames reach this process,
         # not every node's status of every sim second; unfiltered if rclpy cannot
@@ -348,6 +376,9 @@ class _Monitor:
         self.recorder_count = int(msg.frames)
         if msg.last_missed_input.startswith('write failed: '):
             self.recorder_error = msg.last_missed_input[len('write failed: '):]
+        elif msg.missed_frames > self.recorder_lost:
+            self.recorder_lost = int(msg.missed_frames)
+            self.recorder_lost_topic = msg.last_missed_input
 
     def spin(self, seconds: float) -> None:
         from rclpy.task import Future
@@ -622,8 +653,7 @@ class Launcher:
 
         domain, lock = acquire_domain()
         env = child_env(domain)
-        os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
-                                               'FASTDDS_BUILTIN_TRANSPORTS')})
+        use_dds_env(env)
         manifest = {'pid': os.getpid(), 'domain': domain, 'scenario': self.sc['_path'],
                     'epoch': self.sc['epoch'],
                     'bag': self.record, 'run_dir': self.run_dir, 'compose': self.compose}
@@ -674,6 +704,10 @@ class Launcher:
                 message += (f'\n[adcs] security: dynamics refused {refused} lockstep messages '
                             'from an unexpected publisher or with a repeated stamp '
                             '(adcs/security_events in the bag; docs/security.md)')
+            if monitor.recorder_lost:
+                message += (f'\n[adcs] WARNING: the bag misses {monitor.recorder_lost} '
+                            'message(s) that the middleware reported lost (last on '
+                            f'{monitor.recorder_lost_topic}; docs/reliability.md)')
             degraded = self._degraded(monitor)
             if degraded and code == 0:
                 code, message = EXIT_DEGRADED, f'done, DEGRADED: {degraded}'

@@ -82,11 +82,8 @@ class _Session:
             watchdog = threading.Timer(SESSION_DEADLINE_S, _give_up)
             watchdog.daemon = True
             watchdog.start()
-        from adcs_nodes.tools.launcher import child_env
-        env = child_env(int(run['domain']))
-        for key in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
-                    'FASTDDS_BUILTIN_TRANSPORTS'):
-            os.environ[key] = env[key]
+        from adcs_nodes.tools.launcher import child_env, use_dds_env
+        use_dds_env(child_env(int(run['domain'])))
         import rclpy
         self.rclpy = rclpy
         self.context = rclpy.Context()
