@@ -9,7 +9,10 @@
 #   3. `colcon build --symlink-install` of adcs_msgs, adcs_nodes and sim_node into
 #      ros2_ws/install, with -DPython3_EXECUTABLE set; plus the fallback interface package
 #      ros2_ws/extra/tf2_msgs (the upstream TFMessage definition, same type hash) only when
-#      the environment has no tf2_msgs (the PyPI wheels do not ship it; a ROS 2 install does).
+#      the environment has no tf2_msgs (the PyPI wheels do not ship it; a ROS 2 install does),
+#   4. the `adcs` command in the venv,
+#   5. numba's kernel cache filled once, serially (sim_node.tools.warm_kernels; not with
+#      NUMBA_DISABLE_JIT=1).
 #
 # Each step is skipped when its inputs did not change (stamp files in .venv/), so a second run
 # takes about a second. On a machine with ROS 2 installed, you do not need this script:
@@ -139,4 +142,34 @@ if [ ! -x "$VENV/bin/adcs" ]; then
 exec python -m adcs_nodes.tools.cli "$@"
 SH
     chmod +x "$VENV/bin/adcs"
+fi
+
+# 5. numba's on-disk kernel cache (__pycache__/*.nbi, *.nbc next to the core sources), filled
+#    here once, serially, under the lock: node processes started together then only read it.
+#    Processes that compile and save signatures of one kernel at the same time can leave an
+#    index pointing at another process's object code (numba #4807, #10128; a node SIGSEGV at
+#    start-up in a fresh-clone CI run). numba 0.68 keys a cache entry on the source file's
+#    contents, so the stamp hashes the kernel sources (and the scenarios, whose parameters
+#    reach the kernels), the numba version, NUMBA_CACHE_DIR and the index files that exist.
+warm_stamp() {
+    local dirs=("$WS/src/adcs_nodes/adcs_nodes/core" "$WS/src/sim_node/sim_node/models")
+    {
+        ls -d "$VENV"/lib/python3*/site-packages/numba-*.dist-info
+        echo "NUMBA_CACHE_DIR=${NUMBA_CACHE_DIR:-}"
+        find -L "${dirs[@]}" "$WS/src/adcs_nodes/scenarios" -type f \
+            \( -name '*.py' -o -name '*.yaml' \) | sort | xargs sha256sum
+        find -L "${dirs[@]}" -name '*.nbi' | sort
+    } 2>&1 | sha256sum | cut -d' ' -f1
+}
+if [ "${NUMBA_DISABLE_JIT:-0}" = 0 ] && [ "$(cat "$VENV/.numba-warm.sha256" 2>/dev/null)" != "$(warm_stamp)" ]; then
+    say "warming numba kernel cache"
+    # shellcheck disable=SC1091
+    if ! ( set +u; source "$VENV/bin/activate"; source "$WS/install/local_setup.bash"
+           exec python -m sim_node.tools.warm_kernels ) > "$WS/log/warm-kernels.out" 2>&1 < /dev/null; then
+        cat "$WS/log/warm-kernels.out" >&2
+        echo "bootstrap: numba kernel warm-up failed (log: ros2_ws/log/warm-kernels.out)" >&2
+        exit 1
+    fi
+    say "$(tail -n 1 "$WS/log/warm-kernels.out")"
+    warm_stamp > "$VENV/.numba-warm.sha256"
 fi

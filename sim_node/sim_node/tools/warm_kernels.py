@@ -1,0 +1,159 @@
+"""Fill numba's on-disk kernel cache once, in one process (numba #4807).
+
+Command line: ``python -m sim_node.tools.warm_kernels [--scenarios DIR] [--frames N]``.
+
+Why: the kernels of ``adcs_nodes.core`` and ``sim_node.models`` are ``njit(cache=True)``; their
+compiled code lives in ``__pycache__/*.nbi`` (index) and ``*.nbc`` (object code) next to the
+sources. Two processes that compile and save different signatures of one kernel at the same
+time can both write the same ``*-N.nbc`` name, and one index then points at the other's code
+(numba issues #4807 and #10128): a later process loads the wrong machine code and may crash
+(the SIGSEGV of a ``bdot_controller`` seen at start-up in a fresh-clone CI run). A process
+writes the cache only when it compiles (a signature is missing, or the source changed), so
+once every signature the nodes use is there, node processes only read it.
+``ros2_ws/bootstrap.sh`` runs this module once, under its lock, when the core sources change.
+
+What it runs, in this order:
+
+1. every module's ``warm_up()`` and the other kernel entry points with the argument types of
+   their callers (node constructors, dynamics, environment, disturbances);
+2. for every ``scenarios/*.yaml``: the world of the ``environment`` and ``dynamics`` nodes
+   (orbit, field, spacecraft with its wheels and modes) for a few frames, and, when the plain
+   engine accepts the scenario, the plain closed loop (:class:`sim_node.tools.closed_loop
+   .ClosedLoop`: the nodes' core classes built from the nodes' parameters) for a few frames.
+
+It prints one line (kernels, signatures compiled / loaded from the cache, wall time) and exits
+0, or prints one ``warm_kernels: FAILED ...`` line to stderr and exits 1.
+"""
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import sys
+import time
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+
+#: Frames per scenario: the first steps of every core class (a kernel that only a later step
+#: calls, such as the filter's predict, is in its module's ``warm_up()``).
+FRAMES = 3
+#: Packages whose numba kernels are warmed (and counted).
+PACKAGES = ('adcs_nodes.core', 'sim_node.models')
+
+
+def warm_entry_points() -> None:
+    """Step 1: the modules' ``warm_up()`` and the kernels called from plain Python."""
+    from adcs_nodes.core import geomag, manager
+    from adcs_nodes.core.control import cross3, magnetic
+    from adcs_nodes.core.estimation import magnetic_filter, onboard
+    from sim_node.models import disturbances, dynamics
+
+    for module in (geomag, manager, magnetic, magnetic_filter):
+        module.warm_up()
+    z3, q = np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])
+    onboard.to_orbit_axes(q, z3)                                   # OnboardReference()
+    cross3(z3, z3)                                                 # control laws
+    dynamics._load_kernel()                                        # Spacecraft()
+    dynamics.hermite_field_derivatives(z3, z3, z3, z3, 1.0)
+    env = dynamics.FrameEnvironment(r_eci=np.array([7e6, 0.0, 0.0]),
+                                    v_eci=np.array([0.0, 7.5e3, 0.0]))
+    dynamics.propagate_environment(env, 0.5)                       # dynamics node, late env
+    disturbances.standard_normal3(1, 2)                            # RandomTorque
+
+
+def warm_scenario(path: str, frames: int = FRAMES) -> bool:
+    """Step 2 for one scenario; True when the plain closed loop ran too."""
+    from adcs_nodes.tools.graph import build_graph
+    from adcs_nodes.tools.montecarlo.engine import plain_engine_problem
+    from adcs_nodes.tools.scenario import load_scenario
+    from sim_node.models.dynamics import FrameEnvironment
+    from sim_node.models.spacecraft_config import initial_state
+    from sim_node.tools.closed_loop import ClosedLoop, _World
+
+    sc = load_scenario(path)
+    frame_s = float(sc['timing']['frame_s'])
+    nodes = {n.name: n.params for n in build_graph(sc, frames * frame_s)}
+    if 'environment' in nodes and 'dynamics' in nodes:
+        world = _World(sc, nodes)
+        craft, state = world.spacecraft, None
+        command = craft.zero_command()
+        for k in range(frames):
+            t = k * frame_s
+            st = world.orbit.state(t)
+            world.field.field_and_rate(world.orbit, t)             # environment node
+            b_eci, b_dot_eci = world.field.field_and_rate(world.orbit, t, st.r_eci)
+            if state is None:
+                state = initial_state(world.initial, st.q_eci_orbit, st.omega_orbit_eci_eci,
+                                      craft, world.wheel_h0)
+            env = FrameEnvironment(r_eci=st.r_eci, v_eci=st.v_eci, b_eci=b_eci,
+                                   b_dot_eci=b_dot_eci)
+            state, _ = craft.step(state, t, frame_s, env, command, int(sc['timing']['substeps']))
+    if plain_engine_problem(sc) is not None:
+        return False
+    ClosedLoop(sc, duration_s=frames * frame_s).run()
+    return True
+
+
+def kernel_counts() -> Tuple[int, int, int, int]:
+    """``(kernels, signatures, compiled, loaded from the cache)`` of the loaded packages."""
+    from numba.core.registry import CPUDispatcher
+
+    seen = {}
+    for name, module in list(sys.modules.items()):
+        if module is not None and name.startswith(PACKAGES):
+            for obj in vars(module).values():
+                if isinstance(obj, CPUDispatcher):
+                    seen[id(obj)] = obj
+    sigs = sum(len(d.signatures) for d in seen.values())
+    misses = sum(sum(d.stats.cache_misses.values()) for d in seen.values())
+    hits = sum(sum(d.stats.cache_hits.values()) for d in seen.values())
+    return len(seen), sigs, misses, hits
+
+
+def scenario_dir() -> str:
+    """The installed scenarios (``share/adcs_nodes/scenarios``), else the repository's."""
+    from adcs_nodes.tools.launch_graph import installed_scenario_dir
+
+    return installed_scenario_dir() or os.path.abspath(
+        os.path.join(os.path.dirname(__file__), '..', '..', '..', 'scenarios'))
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Command line; returns the exit status."""
+    ap = argparse.ArgumentParser(prog='python -m sim_node.tools.warm_kernels',
+                                 description=__doc__.splitlines()[0])
+    ap.add_argument('--scenarios', default=None,
+                    help='scenario directory (default: the installed scenarios)')
+    ap.add_argument('--frames', type=int, default=FRAMES, help='frames per scenario')
+    args = ap.parse_args(argv)
+    if os.environ.get('NUMBA_DISABLE_JIT', '0') not in ('', '0'):
+        print('warm_kernels: NUMBA_DISABLE_JIT is set, nothing to warm')
+        return 0
+    directory = args.scenarios or scenario_dir()
+    start = time.monotonic()
+    where = directory
+    try:
+        paths: List[str] = sorted(glob.glob(os.path.join(directory, '*.yaml')))
+        if not paths:
+            raise ValueError('no *.yaml scenario there')
+        where = 'the entry points'
+        warm_entry_points()
+        plain = 0
+        for path in paths:
+            where = os.path.basename(path)
+            plain += warm_scenario(path, max(1, args.frames))
+        n, sigs, compiled, loaded = kernel_counts()
+    except Exception as exc:   # one clear line for bootstrap.sh, no traceback
+        msg = ' '.join(str(exc).split()) or type(exc).__name__
+        print(f'warm_kernels: FAILED at {where}: {type(exc).__name__}: {msg}',
+              file=sys.stderr)
+        return 1
+    print(f'warm_kernels: {n} kernels, {sigs} signatures ({compiled} compiled, {loaded} from '
+          f'the cache), {len(paths)} scenarios ({plain} with the plain loop), '
+          f'{time.monotonic() - start:.1f} s')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,80 @@
+"""numba cache warm-up of the bootstrap (``sim_node.tools.warm_kernels``).
+
+Node processes that compile and save one kernel at the same time can corrupt numba's on-disk
+cache (numba #4807, #10128), so ``ros2_ws/bootstrap.sh`` fills it once, serially. That only
+helps if the warm-up leaves nothing for a node process to compile: after it, a process that
+runs the nodes' core classes (the plain closed loop builds them from the nodes' parameters,
+``sim_node.tools.closed_loop``) must write no file into the cache, and its kernels must count
+no cache miss. Both processes use a fresh ``NUMBA_CACHE_DIR``, so no earlier run's cache
+entries can hide a kernel the warm-up forgot.
+"""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+pytest.importorskip('numba')
+pytest.importorskip('sim_node.tools.closed_loop')
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCENARIO = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
+
+# the work of a graph's nodes on one scenario (estimator, controllers, manager, environment,
+# dynamics), then the numba dispatchers' counts: (kernels, signatures, compiled, loaded)
+NODE_WORK = """
+import json, sys
+from adcs_nodes.tools.scenario import load_scenario
+from sim_node.tools.closed_loop import ClosedLoop
+from sim_node.tools.warm_kernels import kernel_counts
+sc = load_scenario(sys.argv[1])
+ClosedLoop(sc, duration_s=3 * float(sc['timing']['frame_s'])).run()
+print(json.dumps(kernel_counts()))
+"""
+
+
+def _run(args, cache_dir, cwd, **env):
+    environ = dict(os.environ)
+    environ.pop('NUMBA_DISABLE_JIT', None)
+    environ.update(NUMBA_CACHE_DIR=str(cache_dir), **env)
+    return subprocess.run([sys.executable, *args], cwd=str(cwd), env=environ, text=True,
+                          capture_output=True, timeout=300)
+
+
+def _files(cache_dir):
+    return {os.path.join(d, f): os.stat(os.path.join(d, f)).st_mtime_ns
+            for d, _, names in os.walk(cache_dir) for f in names}
+
+
+def test_after_the_warm_up_the_nodes_work_compiles_nothing(tmp_path):
+    cache = tmp_path / 'numba-cache'
+    warm = _run(['-m', 'sim_node.tools.warm_kernels', '--frames', '1'], cache, tmp_path)
+    assert warm.returncode == 0, warm.stderr
+    line = warm.stdout.strip()
+    assert line.startswith('warm_kernels: ') and '\n' not in line, warm.stdout
+    before = _files(cache)
+    assert any(f.endswith('.nbi') for f in before) and any(f.endswith('.nbc') for f in before)
+
+    work = _run(['-c', NODE_WORK, SCENARIO], cache, tmp_path)
+    assert work.returncode == 0, work.stderr
+    kernels, signatures, compiled, loaded = json.loads(work.stdout.strip().splitlines()[-1])
+    assert kernels > 10 and loaded > 0
+    assert compiled == 0, f'{compiled} kernel signature(s) compiled after the warm-up'
+    assert _files(cache) == before, 'the cache changed after the warm-up'
+
+
+def test_a_missing_scenario_directory_fails_in_one_line(tmp_path):
+    empty = tmp_path / 'none'
+    empty.mkdir()
+    out = _run(['-m', 'sim_node.tools.warm_kernels', '--scenarios', str(empty)],
+               tmp_path / 'cache', tmp_path)
+    assert out.returncode == 1 and out.stdout == ''
+    assert out.stderr.count('\n') == 1 and out.stderr.startswith('warm_kernels: FAILED')
+    assert 'Traceback' not in out.stderr and str(empty) in out.stderr
+
+
+def test_nothing_to_warm_without_jit(tmp_path):
+    out = _run(['-m', 'sim_node.tools.warm_kernels'], tmp_path / 'cache', tmp_path,
+               NUMBA_DISABLE_JIT='1')
+    assert out.returncode == 0 and 'NUMBA_DISABLE_JIT' in out.stdout
+    assert not (tmp_path / 'cache').exists()
