@@ -157,7 +157,7 @@ warm_stamp() {
         ls -d "$VENV"/lib/python3*/site-packages/numba-*.dist-info
         echo "NUMBA_CACHE_DIR=${NUMBA_CACHE_DIR:-}"
         find -L "${dirs[@]}" "$WS/src/adcs_nodes/scenarios" -type f \
-            \( -name '*.py' -o -name '*.yaml' \) | sort | xargs sha256sum
+            \( -name '*.py' -o -name '*.yaml' \) -print0 | sort -z | xargs -0 sha256sum
         find -L "${dirs[@]}" -name '*.nbi' | sort
     } 2>&1 | sha256sum | cut -d' ' -f1
 }
