@@ -166,10 +166,11 @@ if [ "${NUMBA_DISABLE_JIT:-0}" = 0 ] && [ "$(cat "$VENV/.numba-warm.sha256" 2>/d
     # shellcheck disable=SC1091
     if ! ( set +u; source "$VENV/bin/activate"; source "$WS/install/local_setup.bash"
            exec python -m sim_node.tools.warm_kernels ) > "$WS/log/warm-kernels.out" 2>&1 < /dev/null; then
+        # not fatal: the nodes then compile what they need themselves (tried again next time)
         cat "$WS/log/warm-kernels.out" >&2
-        echo "bootstrap: numba kernel warm-up failed (log: ros2_ws/log/warm-kernels.out)" >&2
-        exit 1
+        echo "bootstrap: WARNING: numba kernel warm-up failed (log: ros2_ws/log/warm-kernels.out)" >&2
+    else
+        say "$(tail -n 1 "$WS/log/warm-kernels.out")"
+        warm_stamp > "$VENV/.numba-warm.sha256"
     fi
-    say "$(tail -n 1 "$WS/log/warm-kernels.out")"
-    warm_stamp > "$VENV/.numba-warm.sha256"
 fi

@@ -78,3 +78,18 @@ def test_nothing_to_warm_without_jit(tmp_path):
                NUMBA_DISABLE_JIT='1')
     assert out.returncode == 0 and 'NUMBA_DISABLE_JIT' in out.stdout
     assert not (tmp_path / 'cache').exists()
+
+
+def test_a_scenario_that_does_not_load_is_skipped_not_fatal(tmp_path):
+    """A scenario being edited must not block the bootstrap (``adcs validate`` reports it)."""
+    scenarios = tmp_path / 'scenarios'
+    scenarios.mkdir()
+    with open(os.path.join(ROOT, 'scenarios', 'free_tumble.yaml')) as fh:
+        (scenarios / 'free_tumble.yaml').write_text(fh.read())
+    (scenarios / 'broken.yaml').write_text('timing: {frame_s: -1}\n')
+    environ = {k: v for k, v in os.environ.items() if k != 'NUMBA_DISABLE_JIT'}
+    out = subprocess.run([sys.executable, '-m', 'sim_node.tools.warm_kernels', '--scenarios',
+                          str(scenarios), '--frames', '1'], cwd=str(tmp_path), env=environ,
+                         text=True, capture_output=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert '1 scenarios' in out.stdout and 'skipped (invalid): broken.yaml' in out.stdout

@@ -21,8 +21,10 @@ What it runs, in this order:
    engine accepts the scenario, the plain closed loop (:class:`sim_node.tools.closed_loop
    .ClosedLoop`: the nodes' core classes built from the nodes' parameters) for a few frames.
 
-It prints one line (kernels, signatures compiled / loaded from the cache, wall time) and exits
-0, or prints one ``warm_kernels: FAILED ...`` line to stderr and exits 1.
+It prints one line (kernels, signatures compiled / loaded from the cache, wall time, scenarios
+skipped because they do not load) and exits 0, or prints one ``warm_kernels: FAILED ...`` line
+to stderr and exits 1 (``bootstrap.sh`` then warns and goes on: the nodes compile what they
+need themselves, as before).
 """
 from __future__ import annotations
 
@@ -130,6 +132,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if os.environ.get('NUMBA_DISABLE_JIT', '0') not in ('', '0'):
         print('warm_kernels: NUMBA_DISABLE_JIT is set, nothing to warm')
         return 0
+    from adcs_nodes.tools.scenario import ScenarioError
+
     directory = args.scenarios or scenario_dir()
     start = time.monotonic()
     where = directory
@@ -139,10 +143,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             raise ValueError('no *.yaml scenario there')
         where = 'the entry points'
         warm_entry_points()
-        plain = 0
+        plain, skipped = 0, []
         for path in paths:
             where = os.path.basename(path)
-            plain += warm_scenario(path, max(1, args.frames))
+            try:
+                plain += warm_scenario(path, max(1, args.frames))
+            except ScenarioError:   # a scenario being edited: `adcs validate` says what is wrong
+                skipped.append(where)
         n, sigs, compiled, loaded = kernel_counts()
     except Exception as exc:   # one clear line for bootstrap.sh, no traceback
         msg = ' '.join(str(exc).split()) or type(exc).__name__
@@ -150,8 +157,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
               file=sys.stderr)
         return 1
     print(f'warm_kernels: {n} kernels, {sigs} signatures ({compiled} compiled, {loaded} from '
-          f'the cache), {len(paths)} scenarios ({plain} with the plain loop), '
-          f'{time.monotonic() - start:.1f} s')
+          f'the cache), {len(paths) - len(skipped)} scenarios ({plain} with the plain loop), '
+          f'{time.monotonic() - start:.1f} s'
+          + (f'; skipped (invalid): {", ".join(skipped)}' if skipped else ''))
     return 0
 
 
