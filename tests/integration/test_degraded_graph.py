@@ -7,8 +7,10 @@
   summary line naming it, with the true number of missed frames.
 """
 import os
+import queue
 import re
 import signal
+import threading
 import time
 
 import yaml
@@ -66,19 +68,48 @@ def test_killed_manager_costs_three_timeouts_then_the_world_runs_on(tmp_path):
     assert 'treated as dead' in log
 
 
+def _stderr_lines(proc):
+    """A queue of ``proc``'s stderr lines, filled by a reader thread (``None`` at the end)."""
+    lines = queue.Queue()
+
+    def read():
+        for line in proc.stderr:
+            lines.put(line)
+        lines.put(None)
+
+    threading.Thread(target=read, daemon=True).start()
+    return lines
+
+
 def test_run_that_lost_its_estimator_ends_degraded_with_exit_code_3(tmp_path):
-    proc = start_adcs('run', control_scenario(tmp_path), '--duration', '4000', '--quiet')
+    # The kill must land well before the end: the run takes 4000 s of sim time in about 15 s
+    # of wall time, and one `adcs status` poll under load took long enough for the run to end
+    # first (CI). The launcher's progress lines (stderr, one per 10 % when not a terminal)
+    # come within 0.1 s: the estimator is killed at the 10 % line.
+    proc = start_adcs('run', control_scenario(tmp_path), '--duration', '4000')
+    lines, err = _stderr_lines(proc), []
     try:
         manifest = wait_manifest(proc)
-        wait_node(proc.pid, 'estimator', lambda f, m: f >= 10, timeout=60.0)
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline:
+            line = lines.get(timeout=max(0.0, deadline - time.monotonic()))
+            assert line is not None, ''.join(err)
+            err.append(line)
+            m = re.search(r'\] sim\s+([0-9.]+)/', line)
+            if m and float(m.group(1)) >= 20.0:
+                break
         os.kill(manifest['pids']['estimator'], signal.SIGKILL)
-        out, err = proc.communicate(timeout=600)
+        proc.wait(timeout=600)
     finally:
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
-            proc.communicate(timeout=60)
-    text = out + err
+            proc.wait(timeout=60)
+    while (line := lines.get(timeout=10.0)) is not None:
+        err.append(line)
+    text = proc.stdout.read() + ''.join(err)
     assert proc.returncode == 3, text
     assert 'DEGRADED' in text and 'lost estimator' in text, text
-    m = re.search(r'missed frames (\d+)', text)
-    assert m is not None and int(m.group(1)) >= 3, text    # the consumers' timeouts, counted
+    died = re.search(r'died at sim t = ([0-9.]+) s', text)
+    assert died is not None and float(died.group(1)) < 4000.0, text
+    m = re.findall(r'wall \(.*\), missed frames (\d+)', text)         # the final summary
+    assert len(m) == 1 and int(m[0]) >= 3, text    # the consumers' timeouts, counted
