@@ -2,7 +2,7 @@
 RUN := ros2_ws/run.sh
 STAMP := $(shell date +%Y%m%d-%H%M%S)
 
-.PHONY: demo test lint bench reproduce build clean help
+.PHONY: demo test lint bench reproduce stress build clean help
 
 help:  ## list the targets
 	@grep -E '^[a-z]+:.*##' $(MAKEFILE_LIST) | sed 's/:.*## /\t/'
@@ -27,6 +27,9 @@ bench:  ## fair throughput table of paper000_control: ring, graph, composed, pla
 
 reproduce:  ## long paper reproductions (papers 000, 004): pass/fail tables against the papers
 	$(RUN) python -m pytest -m slow -s -p no:warnings tests/reproductions
+
+stress:  ## reliable delivery under load: 3 recorded runs beside 3 CPU burners lose nothing (~2 min)
+	$(RUN) python -m pytest -m slow -p no:warnings tests/integration/test_stress_loss.py
 
 clean:  ## remove build products (keeps the venv and your bags in out/)
 	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log

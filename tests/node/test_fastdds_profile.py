@@ -66,6 +66,11 @@ def test_child_env_names_the_profile_unless_the_user_named_one():
     assert profile_env({}) == {'FASTDDS_DEFAULT_PROFILES_FILE': FASTDDS_PROFILES}
 
 
+def test_an_empty_profiles_file_means_none(monkeypatch):
+    monkeypatch.setenv('FASTDDS_DEFAULT_PROFILES_FILE', '')
+    assert 'FASTDDS_DEFAULT_PROFILES_FILE' not in child_env(7)   # not even the empty path
+
+
 def test_a_node_loads_the_profile_and_gets_its_socket_buffers(tmp_path):
     env = child_env(worker_domain(120, 10))
     sizes, err = _probe(env)
@@ -74,9 +79,10 @@ def test_a_node_loads_the_profile_and_gets_its_socket_buffers(tmp_path):
     assert max(sizes) == 2 * min(PROFILE_BUFFER_B, _sysctl('rmem_max')), sizes
 
     # control 1: without the profile the sockets keep the system default
-    plain = dict(env, FASTDDS_DEFAULT_PROFILES_FILE='')
-    plain_sizes, _ = _probe(plain)
+    plain = {k: v for k, v in env.items() if k != 'FASTDDS_DEFAULT_PROFILES_FILE'}
+    plain_sizes, plain_err = _probe(plain)
     assert max(plain_sizes) == _sysctl('rmem_default'), plain_sizes
+    assert 'XMLPARSER' not in plain_err, plain_err
 
     # control 2: a profile Fast DDS cannot parse is reported on stderr
     with open(FASTDDS_PROFILES) as fh:

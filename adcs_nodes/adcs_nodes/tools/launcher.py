@@ -266,6 +266,8 @@ def child_env(domain: int) -> Dict[str, str]:
     # loopback measured as fast for this graph (125-163 vs 131-132 frames/s)
     env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
     env.update(profile_env(env))
+    if env.get('FASTDDS_DEFAULT_PROFILES_FILE') == '':   # "no file": Fast DDS would log an
+        del env['FASTDDS_DEFAULT_PROFILES_FILE']         # error for the empty path
     return env
 
 
@@ -280,7 +282,11 @@ def profile_env(environ) -> Dict[str, str]:
 def use_dds_env(env: Dict[str, str]) -> None:
     """Give this process the run's middleware settings (:data:`DDS_ENV_KEYS` of ``env``);
     before its first rclpy node, since Fast DDS reads its profiles file once per process."""
-    os.environ.update({k: env[k] for k in DDS_ENV_KEYS if k in env})
+    for key in DDS_ENV_KEYS:
+        if key in env:
+            os.environ[key] = env[key]
+        else:
+            os.environ.pop(key, None)
 
 
 class _Monitor:
