@@ -4,7 +4,7 @@ Three recorded runs of paper000_control at once (2 s magnetometer, 1 s input tim
 of sim time each) beside three CPU burners on the machine: no node may miss a frame, the
 middleware may report no lost message, and each bag must hold every estimate and every
 command (one each 2 s). With Fast DDS's default 3 s heartbeat this failed in 6 of 9 runs;
-with the project's profile (50 ms heartbeat, 4 MiB socket buffers) in none of 12
+with the project's profile (50 ms heartbeat, 4 MiB socket buffers) in none of 18
 (docs/reliability.md, "Reliable samples under load"). ``FASTDDS_DEFAULT_PROFILES_FILE=
 make stress`` runs it without the profile.
 """
