@@ -7,12 +7,27 @@ import sys
 import time
 
 import pytest
+import yaml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENARIOS = os.path.join(ROOT, 'scenarios')
 RUNS = os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'runs')
 
 pytest.importorskip('rclpy')
+
+
+def control_scenario(tmp_path, **changes):
+    """paper000_control with a 2 s magnetometer (B-dot needs samples) and a 1 s input timeout,
+    plus top-level ``changes``, written to ``tmp_path/control.yaml``; returns its path."""
+    with open(os.path.join(SCENARIOS, 'paper000_control.yaml')) as fh:
+        sc = yaml.safe_load(fh)
+    sc['sensors']['magnetometer']['period_s'] = 2.0
+    sc['timing']['timeout_s'] = 1.0
+    for key, value in changes.items():
+        sc[key] = value
+    path = tmp_path / 'control.yaml'
+    path.write_text(yaml.safe_dump(sc))
+    return str(path)
 
 
 def adcs(*args, timeout=300, check=True):

@@ -12,24 +12,11 @@ import numpy as np
 import pytest
 import yaml
 
-from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
+from adcs_launch import SCENARIOS, adcs, control_scenario, start_adcs, wait_manifest
 from adcs_nodes.core import attitude as att
 from adcs_nodes.tools.bag import header_stamp_ns, read_messages, topic_summary
 
 EPOCH_NS = 1767225600 * 10**9
-
-
-def control_scenario(tmp_path, **changes):
-    """paper000_control with a 2 s magnetometer (B-dot needs samples) and a short timeout."""
-    with open(os.path.join(SCENARIOS, 'paper000_control.yaml')) as fh:
-        sc = yaml.safe_load(fh)
-    sc['sensors']['magnetometer']['period_s'] = 2.0
-    sc['timing']['timeout_s'] = 1.0
-    for key, value in changes.items():
-        sc[key] = value
-    path = tmp_path / 'control.yaml'
-    path.write_text(yaml.safe_dump(sc))
-    return str(path)
 
 
 def commands(bag):

@@ -13,20 +13,8 @@ import signal
 import threading
 import time
 
-import yaml
 
-from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
-
-
-def control_scenario(tmp_path):
-    """paper000_control with a 2 s magnetometer and a 1 s input timeout (dynamics: 2 s)."""
-    with open(os.path.join(SCENARIOS, 'paper000_control.yaml')) as fh:
-        sc = yaml.safe_load(fh)
-    sc['sensors']['magnetometer']['period_s'] = 2.0
-    sc['timing']['timeout_s'] = 1.0
-    path = tmp_path / 'control.yaml'
-    path.write_text(yaml.safe_dump(sc))
-    return str(path)
+from adcs_launch import adcs, control_scenario, start_adcs, wait_manifest
 
 
 def node_status(pid, name):

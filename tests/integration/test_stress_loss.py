@@ -8,39 +8,27 @@ with the project's profile (50 ms heartbeat, 4 MiB socket buffers) in none of 18
 (docs/reliability.md, "Reliable samples under load"). ``FASTDDS_DEFAULT_PROFILES_FILE=
 make stress`` runs it without the profile.
 """
-import os
 import re
 import subprocess
 import sys
 
 import numpy as np
 import pytest
-import yaml
 
-from adcs_launch import SCENARIOS, start_adcs
+from adcs_launch import control_scenario, start_adcs
 
 from adcs_nodes.tools.bag import header_stamp_ns, read_messages  # noqa: E402
 
 RUNS = 3
 BURNERS = 3
 DURATION_S = 8000
-GRID_S = 2.0
+GRID_S = 2.0                     # the magnetometer's (and so the commands') period [s]
 TOPICS = ('/adcs/attitude_estimate', '/adcs/actuator_command')
-
-
-def _scenario(tmp_path):
-    with open(os.path.join(SCENARIOS, 'paper000_control.yaml')) as fh:
-        sc = yaml.safe_load(fh)
-    sc['sensors']['magnetometer']['period_s'] = GRID_S
-    sc['timing']['timeout_s'] = 1.0
-    path = tmp_path / 'control.yaml'
-    path.write_text(yaml.safe_dump(sc))
-    return str(path)
 
 
 @pytest.mark.slow
 def test_three_recorded_runs_beside_cpu_burners_lose_nothing(tmp_path):
-    scenario = _scenario(tmp_path)
+    scenario = control_scenario(tmp_path)            # 2 s magnetometer, 1 s input timeout
     burners = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
                for _ in range(BURNERS)]
     procs = []
