@@ -34,8 +34,10 @@ def _sample(ref, epoch_ns, t_abs_ns):
 
 def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros_context,
                                                                              spin):
+    # live_latency_s 5: clock-time frames stay 5 s back, so none overtakes a sample stamped
+    # 1 ms back while it is delivered under load (that sample would be rejected as late)
     node = EstimatorNode(context=ros_context, parameter_overrides=[
-        Parameter('period_s', value=0.2)])
+        Parameter('period_s', value=0.2), Parameter('live_latency_s', value=5.0)])
     assert node.timing_mode == 'live'
     driver = rclpy.create_node('fake_driver', context=ros_context)
     est, diag = [], []
@@ -115,7 +117,9 @@ def test_live_frame_takes_the_newest_stamp_and_fresh_tells_new_samples(ros_conte
 
     class LiveProbe(LockstepNode):
         def __init__(self):
-            super().__init__('live_probe', context=ros_context)
+            # max_future_s 5: the last sample below is stamped 2 s ahead (see there)
+            super().__init__('live_probe', context=ros_context, parameter_overrides=[
+                Parameter('max_future_s', value=5.0)])
             self.fired = []
             self.lockstep_inputs({'a': (LockstepStatus, 'sensors/a', 1.0),
                                   'b': (LockstepStatus, 'in/b', 1.0)}, 0.1, self.on_frame)
@@ -144,7 +148,9 @@ def test_live_frame_takes_the_newest_stamp_and_fresh_tells_new_samples(ros_conte
     n = len(node.fired)
     assert spin([node, src], lambda: len(node.fired) > n)       # nothing new: clock time
     assert node.fired[n][1:] == (False, False) and node.fired[n][0] > b_stamp
-    a2 = time.time_ns() - 2_000_000
+    # stamped 2 s ahead: a clock-time frame (now - 50 ms) cannot overtake it, however long the
+    # delivery takes under load (stamped 2 ms back, it was once rejected as late in CI)
+    a2 = time.time_ns() + 2_000_000_000
     send(pa, a2)
     assert spin([node, src], lambda: any(f[0] == a2 - node.epoch_ns for f in node.fired))
     assert [f[1:] for f in node.fired if f[0] == a2 - node.epoch_ns] == [(True, False)]
