@@ -14,14 +14,24 @@ EPOCH_NS = 1767225600 * 10**9
 S = 10**9
 
 
+#: Wall time a due input is waited for, unless a test wants a timeout: every input a test sends
+#: arrives long before it, however slow this process is under load (a frame fires as soon as
+#: its inputs are there, so a long timeout costs nothing when the node is right).
+NO_TIMEOUT_S = 60.0
+
+
 class Probe(LockstepNode):
-    def __init__(self, context, timeout_s=5.0, inputs=None, extra=()):
+    def __init__(self, context, timeout_s=NO_TIMEOUT_S, inputs=None, extra=()):
         super().__init__('probe_node', context=context, parameter_overrides=[
             Parameter('timeout_s', value=timeout_s), Parameter('timing_mode', value='lockstep'),
             *extra])
         self.fired = []
+        self.arrived = []       # names of the inputs taken, in order (input_arrived hook)
         self.lockstep_inputs(inputs or {'a': (LockstepStatus, 'in/a', 1.0),
                                         'b': (LockstepStatus, 'in/b', 2.0)}, 1.0, self.on_frame)
+
+    def input_arrived(self, name):
+        self.arrived.append(name)
 
     def on_frame(self, t, msgs, missing):
         self.fired.append((t // S, *(msgs[k] and msgs[k].node for k in sorted(msgs)),
@@ -39,16 +49,16 @@ def test_fires_when_due_inputs_arrive_in_order(ros_context, spin):
     pb = src.create_publisher(LockstepStatus, 'in/b', 10)
     assert spin([node, src], lambda: pa.get_subscription_count() and pb.get_subscription_count())
     pa.publish(msg(0, 'a0'))
-    spin([node, src], lambda: False, timeout=0.2)
-    assert node.fired == []                    # b is due at 0 and missing
+    # a0 taken (the frame would fire in its callback): b is due at 0 and missing
+    assert spin([node, src], lambda: node.arrived == ['a'], timeout=30.0)
+    assert node.fired == []
     pb.publish(msg(0, 'b0'))
     pa.publish(msg(1, 'a1'))                   # at 1 s only a is due; b is latest (b0)
     pa.publish(msg(2, 'a2'))                   # at 2 s b is due again
-    assert spin([node, src], lambda: len(node.fired) >= 2)
-    spin([node, src], lambda: False, timeout=0.2)
+    assert spin([node, src], lambda: len(node.arrived) == 4, timeout=30.0)   # a2 taken too
     assert node.fired == [(0, 'a0', 'b0', ()), (1, 'a1', 'b0', ())]
     pb.publish(msg(2, 'b2'))
-    assert spin([node, src], lambda: len(node.fired) >= 3)
+    assert spin([node, src], lambda: len(node.fired) >= 3, timeout=30.0)
     assert node.fired[2] == (2, 'a2', 'b2', ())
     assert node.missed_frames == 0
     src.destroy_node()
@@ -65,7 +75,10 @@ def test_missing_input_times_out_and_fires_with_latest(ros_context, spin):
     pb.publish(msg(0, 'b0'))
     pa.publish(msg(1, 'a1'))
     pa.publish(msg(2, 'a2'))                   # b2 never comes
-    assert spin([node, src], lambda: len(node.fired) >= 3, timeout=5.0)
+    # (a0 and b0 are taken in one pass of the executor, before any timer can run: frame 0
+    # cannot time out however slow this process is)
+    assert spin([node, src], lambda: len(node.fired) >= 3, timeout=30.0)
+    assert node.fired[:2] == [(0, 'a0', 'b0', ()), (1, 'a1', 'b0', ())]
     assert node.fired[2] == (2, 'a2', 'b0', ('/in/b',))
     assert node.missed_frames == 1
     src.destroy_node()
@@ -86,35 +99,42 @@ def test_dead_producer_is_no_longer_awaited_until_it_publishes_again(ros_context
     pb.publish(msg(0, 'b0'))
     for k in range(8):                       # b (due every 2 s) dies after t = 0
         pa.publish(msg(k, f'a{k}'))
-    assert spin([node, src], lambda: len(node.fired) >= 8, timeout=10.0)
+    assert spin([node, src], lambda: len(node.fired) >= 8, timeout=30.0)
     missing = {f[0]: f[-1] for f in node.fired}
     assert missing[2] == ('/in/b',) and missing[4] == ('/in/b',)   # 2 timeouts ...
     assert missing[6] == ()                                        # ... then not awaited
     assert node.missed_frames == 2 and node.sync.is_dead('b')
     assert node.timing_diagnostics()['dead_inputs'] == '/in/b'
+    # b8 (taken alone: it must revive b before a8 comes) makes frame 8 wait for a8 from then
+    # on; with 0.3 s a stall of this process under load timed a8 out (injected: 0.35 s):
+    # no timeout while this test still delivers, 0.3 s again where it wants one
+    node.timeout_s = NO_TIMEOUT_S
     pb.publish(msg(8, 'b8'))                 # it publishes again: awaited again
-    assert spin([node, src], lambda: not node.sync.is_dead('b'))
-    for k in (8, 9, 10):
+    assert spin([node, src], lambda: not node.sync.is_dead('b'), timeout=30.0)
+    for k in (8, 9):
         pa.publish(msg(k, f'a{k}'))
-    assert spin([node, src], lambda: len(node.fired) >= 11, timeout=10.0)
-    assert node.fired[8] == (8, 'a8', 'b8', ())
+    assert spin([node, src], lambda: len(node.fired) >= 10, timeout=30.0)
+    assert node.fired[8] == (8, 'a8', 'b8', ()) and node.fired[9] == (9, 'a9', 'b8', ())
+    node.timeout_s = 0.3
+    pa.publish(msg(10, 'a10'))               # b10 never comes: times out again
+    assert spin([node, src], lambda: len(node.fired) >= 11, timeout=30.0)
     assert node.fired[10] == (10, 'a10', 'b8', ('/in/b',)) and node.missed_frames == 3
     src.destroy_node()
     node.destroy_node()
 
 
 def test_previous_frame_input_gets_exactly_the_message_of_the_frame_before(ros_context, spin):
-    node = Probe(ros_context, timeout_s=5.0, inputs={
+    node = Probe(ros_context, inputs={
         'a': (LockstepStatus, 'in/a', 1.0), 'c': (LockstepStatus, 'in/c', 1.0, 'previous')})
     src, (pa, pc) = _pubs(node, ros_context, spin, 'in/a', 'in/c')
     pa.publish(msg(0, 'a0'))
     pa.publish(msg(1, 'a1'))
     pc.publish(msg(1, 'c1'))                 # the command of frame 1 arrives first
-    assert spin([node, src], lambda: len(node.fired) >= 1)
-    spin([node, src], lambda: len(node.fired) >= 2, timeout=0.3)
-    assert node.fired == [(0, 'a0', None, ())]          # frame 1 waits for c stamped 0
+    # all three taken (a1 last, it comes after a0 on its topic): frame 1 waits for c stamped 0
+    assert spin([node, src], lambda: len(node.arrived) == 3, timeout=30.0)
+    assert node.fired == [(0, 'a0', None, ())]
     pc.publish(msg(0, 'c0'))
-    assert spin([node, src], lambda: len(node.fired) >= 2)
+    assert spin([node, src], lambda: len(node.fired) >= 2, timeout=30.0)
     assert node.fired[1] == (1, 'a1', 'c0', ())          # never "whatever arrived" (c1)
     src.destroy_node()
     node.destroy_node()
@@ -130,7 +150,7 @@ def test_status_is_stamped_with_sim_time_once_per_sim_second(ros_context, spin):
     assert spin([node, src], lambda: node._status_pub.get_subscription_count() > 0)
     for k in range(6):
         pa.publish(msg(k, f'a{k}'))
-    assert spin([node, src], lambda: any(m.final for m in got), timeout=10.0)
+    assert spin([node, src], lambda: any(m.final for m in got), timeout=30.0)
     stamps = [(m.header.stamp.sec * S + m.header.stamp.nanosec - EPOCH_NS) / S for m in got
               if m.frames > 0]
     assert stamps[:6] == [0, 1, 2, 3, 4, 5]
@@ -175,7 +195,7 @@ def test_qos_overrides_let_a_best_effort_driver_match(ros_context, spin):
         Parameter('qos_overrides./in/a.subscription.reliability', value='best_effort')])
     assert spin([over, src], lambda: pub.get_subscription_count() > 0)
     pub.publish(msg(0, 'a0'))
-    assert spin([over, src], lambda: len(over.fired) >= 1)
+    assert spin([over, src], lambda: len(over.fired) >= 1, timeout=30.0)
     # the override applies to that subscription only, not to the shared profile (rclpy
     # applies overrides in place: in a composed process it would leak into every node)
     from adcs_nodes.nodes.lockstep_node import QOS_DATA
