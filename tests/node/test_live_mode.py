@@ -35,9 +35,13 @@ def _sample(ref, epoch_ns, t_abs_ns):
 def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros_context,
                                                                              spin):
     # live_latency_s 5: clock-time frames stay 5 s back, so none overtakes a sample stamped
-    # 1 ms back while it is delivered under load (that sample would be rejected as late)
+    # 1 ms back while it is delivered under load (that sample would be rejected as late);
+    # max_sample_age_s 30: the out-of-order sample below (1 s before the last good one) stays
+    # young enough, however long the spins before it took under load (with the default 5 s,
+    # a 4 s stall made it 'too_old' instead)
     node = EstimatorNode(context=ros_context, parameter_overrides=[
-        Parameter('period_s', value=0.2), Parameter('live_latency_s', value=5.0)])
+        Parameter('period_s', value=0.2), Parameter('live_latency_s', value=5.0),
+        Parameter('max_sample_age_s', value=30.0)])
     assert node.timing_mode == 'live'
     driver = rclpy.create_node('fake_driver', context=ros_context)
     est, diag = [], []
@@ -49,7 +53,7 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
     # matched both ways (a best-effort sample sent before the reader knows the writer is lost)
     sub = node._subs['/sensors/magnetometer']
     assert spin([node, driver], lambda: mag.get_subscription_count() > 0
-                and sub.get_publisher_count() > 0)
+                and sub.get_publisher_count() > 0, timeout=30.0)
     ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
     sent = []
     for k in range(8):
@@ -57,8 +61,8 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
         sent.append(s)
         mag.publish(_sample(ref, node.epoch_ns, s))
         assert spin([node, driver], lambda: any(stamp_ns(m.header.stamp) == s for m in est),
-                    timeout=5.0), (f'no estimate stamped with sample {k}',
-                                   node.rejected_samples, node.last_rejected_sample)
+                    timeout=30.0), (f'no estimate stamped with sample {k}',
+                                    node.rejected_samples, node.last_rejected_sample)
     stamps = [stamp_ns(m.header.stamp) for m in est]
     assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)  # never replayed
     assert set(sent) <= set(stamps)                   # each sample used at its own stamp
@@ -67,16 +71,17 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
         q = [m.q_orbit_body.x, m.q_orbit_body.y, m.q_orbit_body.z, m.q_orbit_body.w]
         assert np.all(np.isfinite(q))
         assert np.degrees(att.angle_between(q, [0.0, 0.0, 0.0, 1.0])) < 1.0
-    assert spin([node, driver], lambda: diag and diag[-1].update_count >= 8)
+    assert spin([node, driver], lambda: diag and diag[-1].update_count >= 8, timeout=30.0)
     assert sum(node.rejected_samples.values()) == 0
 
-    # bad stamps: each rejected with its reason, none used
+    # bad stamps: each rejected with its reason, none used (100 s old: past the 30 s limit)
     now = time.time_ns()
     n_est = len(est)
     for stamp in (0, now + 10 * S, now - 100 * S, sent[-1] - S):
         mag.publish(_sample(ref, node.epoch_ns, max(stamp, 1)) if stamp else
                     _sample(ref, node.epoch_ns, 0))
-    assert spin([node, driver], lambda: sum(node.rejected_samples.values()) >= 4)
+    assert spin([node, driver], lambda: sum(node.rejected_samples.values()) >= 4,
+                timeout=30.0)
     r = node.rejected_samples
     assert (r['zero_stamp'], r['future'], r['too_old'], r['out_of_order']) == (1, 1, 1, 1)
     assert node.timing_diagnostics()['rejected_samples'] == '4'
@@ -97,11 +102,11 @@ def test_same_node_in_lockstep_mode_gives_exact_frames(ros_context, spin):
     est = []
     driver.create_subscription(AttitudeState, 'adcs/attitude_estimate', est.append, 100)
     mag = driver.create_publisher(MagneticField, 'sensors/magnetometer', 100)
-    assert spin([node, driver], lambda: mag.get_subscription_count() > 0)
+    assert spin([node, driver], lambda: mag.get_subscription_count() > 0, timeout=30.0)
     ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
     for k in range(4):
         mag.publish(_sample(ref, node.epoch_ns, node.epoch_ns + 2 * k * S))
-    assert spin([node, driver], lambda: len(est) >= 4)
+    assert spin([node, driver], lambda: len(est) >= 4, timeout=30.0)
     assert [stamp_ns(m.header.stamp) - node.epoch_ns for m in est] == [0, 2 * S, 4 * S, 6 * S]
     driver.destroy_node()
     node.destroy_node()
@@ -134,25 +139,30 @@ def test_live_frame_takes_the_newest_stamp_and_fresh_tells_new_samples(ros_conte
     pb = src.create_publisher(LockstepStatus, 'in/b', 10)
     subs = [node._subs['/sensors/a'], node._subs['/in/b']]
     assert spin([node, src], lambda: pa.get_subscription_count() and pb.get_subscription_count()
-                and all(s.get_publisher_count() for s in subs))
+                and all(s.get_publisher_count() for s in subs), timeout=30.0)
 
     def send(pub, stamp):
         pub.publish(LockstepStatus(header=Header(stamp=to_stamp(stamp))))
 
-    now = time.time_ns()
-    send(pa, now - 10_000_000)
-    send(pb, now - 5_000_000)
-    b_stamp = now - 5_000_000 - node.epoch_ns
-    assert spin([node, src], lambda: any(f[0] == b_stamp for f in node.fired))
+    # stamped 2 s ahead (a 5 ms before b), like a2 below: a clock-time frame (now - 50 ms)
+    # cannot overtake them, however long their delivery takes under load (stamped 10 and 5 ms
+    # back, a 45 ms stall before the spin made both 'late': fires with an injected 0.1 s stall)
+    ahead = time.time_ns() + 2_000_000_000
+    send(pa, ahead - 5_000_000)
+    send(pb, ahead)
+    b_stamp = ahead - node.epoch_ns
+    assert spin([node, src], lambda: any(f[0] == b_stamp for f in node.fired), timeout=30.0)
     assert [f for f in node.fired if f[0] == b_stamp] == [(b_stamp, True, True)]
     n = len(node.fired)
-    assert spin([node, src], lambda: len(node.fired) > n)       # nothing new: clock time
+    # nothing new: a clock-time frame, once the clock is 50 ms past b (about 2 s)
+    assert spin([node, src], lambda: len(node.fired) > n, timeout=30.0)
     assert node.fired[n][1:] == (False, False) and node.fired[n][0] > b_stamp
     # stamped 2 s ahead: a clock-time frame (now - 50 ms) cannot overtake it, however long the
     # delivery takes under load (stamped 2 ms back, it was once rejected as late in CI)
     a2 = time.time_ns() + 2_000_000_000
     send(pa, a2)
-    assert spin([node, src], lambda: any(f[0] == a2 - node.epoch_ns for f in node.fired))
+    assert spin([node, src], lambda: any(f[0] == a2 - node.epoch_ns for f in node.fired),
+                timeout=30.0)
     assert [f[1:] for f in node.fired if f[0] == a2 - node.epoch_ns] == [(True, False)]
     src.destroy_node()
     node.destroy_node()
