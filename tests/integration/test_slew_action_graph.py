@@ -36,10 +36,17 @@ def test_a_preempted_slew_ends_at_the_second_target(tmp_path):
     bag = str(tmp_path / 'slew')
     proc = start_adcs('run', _scenario(tmp_path), '--record', bag, '--duration', '100000',
                       '--quiet')
+    first = None
     try:
         wait_manifest(proc)
         _wait_running(proc.pid)
+        # The first goal must still run when the second one arrives: the lockstep graph does
+        # the 60 deg slew in about 100 s of sim time, a few s of wall time, and the second
+        # `adcs slew` process took 8-11 s to start and send its goal at load 8 (the first one
+        # was 0.9 deg from done once). With a tolerance it cannot reach (the fuzzy law ends
+        # 0.01 deg off) and no sim-time timeout, only the preemption can end it.
         first = start_adcs('slew', '--to', '60', '0', '0', '--frame', 'orbit',
+                           '--tolerance-deg', '1e-9', '--timeout-s', '1e9',
                            '--run', str(proc.pid))
         assert first.stdout.readline().lstrip().startswith('t ')   # accepted: feedback
         second = adcs('slew', '--to', '0', '10', '0', '--frame', 'orbit', '--run',
@@ -48,6 +55,9 @@ def test_a_preempted_slew_ends_at_the_second_target(tmp_path):
         assert first.returncode == 2 and 'preempted' in (out1 + err1)
         assert second.stdout.strip().splitlines()[-1].startswith('succeeded'), second.stdout
     finally:
+        if first is not None and first.poll() is None:    # not preempted: it would never end
+            first.kill()
+            first.communicate()
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=60)
     states = list(read_messages(bag, ['/sim/state']))
