@@ -34,13 +34,15 @@ def spin(ros_context):
     """``spin(nodes, until, timeout, executor=None)``: spin nodes on one executor (a
     ``SingleThreadedExecutor`` unless one is given) until ``until()`` or timeout.
 
-    Returns True when ``until()`` became true, False on timeout.
+    Returns True when ``until()`` became true, False on timeout. The default timeout (30 s)
+    only costs time when the condition never comes: beside CPU burners a wait of a few
+    seconds can run out before a correct node answered.
     """
     from rclpy.executors import SingleThreadedExecutor
 
     executors = []
 
-    def _spin(nodes, until, timeout=10.0, executor=None):
+    def _spin(nodes, until, timeout=30.0, executor=None):
         ex = executor if executor is not None else SingleThreadedExecutor(context=ros_context)
         executors.append(ex)
         for n in nodes:

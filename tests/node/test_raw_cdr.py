@@ -90,7 +90,7 @@ def _env(k):
     return m
 
 
-def _spin_with(executor_kind, ros_context, spin, nodes, until, timeout=10.0):
+def _spin_with(executor_kind, ros_context, spin, nodes, until, timeout=30.0):
     executor = make_executor(ros_context) if executor_kind == 'events' else None
     return spin(nodes, until, timeout, executor=executor)
 

@@ -85,7 +85,7 @@ class Rig:
         for st, env in frames:
             self.env_pub.publish(env)
             self.state_pub.publish(st)
-        ok = self.spin([self.node, self.probe], lambda: len(self.got) >= expect, timeout=5.0)
+        ok = self.spin([self.node, self.probe], lambda: len(self.got) >= expect, timeout=30.0)
         self.spin([self.node, self.probe], lambda: False, timeout=0.3)
         return ok
 
@@ -265,7 +265,7 @@ def test_each_node_runs_alone_with_defaults():
         for p in procs:
             p.send_signal(signal.SIGINT)
         for p in procs:
-            _, err = p.communicate(timeout=10)
+            _, err = p.communicate(timeout=60)     # (rclpy's shutdown is slow under load)
             assert p.returncode == 0, err
             assert 'Traceback' not in err
     finally:
