@@ -67,7 +67,7 @@ def executor(context):
     ex.shutdown()
 
 
-def spin_until(executor, predicate, timeout=10.0, what='condition'):
+def spin_until(executor, predicate, timeout=30.0, what='condition'):
     deadline = time.monotonic() + timeout
     while not predicate():
         if time.monotonic() > deadline:
@@ -351,11 +351,14 @@ def test_sigkill_keeps_everything_but_the_last_seconds(context, executor, tmp_pa
     phase1 = list(range(37))        # clocks 0 .. 18 s
     phase2 = list(range(37, 41))    # clocks 18.5 .. 20 s
     try:
+        # ... and its own latched lockstep/ready recorded (frames >= 1): with it still to come,
+        # "phase 1 written" below could hold one message early, and a phase-1 chatter message
+        # taken after the first phase-2 clock gets log time 18.5 s, which may be lost
         spin_until(executor, lambda: (clock_pub.get_subscription_count() > 0
                                       and chat_pub.get_subscription_count() > 0
-                                      and statuses),
-                   timeout=30.0, what='recorder subscribed')
-        written0 = statuses[-1].frames   # its own latched lockstep/ready, recorded or not yet
+                                      and statuses and statuses[-1].frames >= 1),
+                   timeout=60.0, what='recorder subscribed, its lockstep/ready recorded')
+        written0 = statuses[-1].frames
 
         def publish(steps):
             for i in steps:
@@ -364,11 +367,11 @@ def test_sigkill_keeps_everything_but_the_last_seconds(context, executor, tmp_pa
 
         publish(phase1)
         spin_until(executor, lambda: statuses[-1].frames >= written0 + 2 * len(phase1),
-                   timeout=20.0, what='phase 1 written')
+                   timeout=60.0, what='phase 1 written')
         publish(phase2)
         spin_until(executor, lambda: statuses[-1].frames >= written0 + 2 * (len(phase1)
                                                                             + len(phase2)),
-                   timeout=20.0, what='phase 2 written')
+                   timeout=60.0, what='phase 2 written')
         os.kill(proc.pid, signal.SIGKILL)
         _wait_proc(proc, 10.0)
     finally:
