@@ -30,6 +30,9 @@ def _compose_cmd(tmp_path):
 
     sc = copy.deepcopy(load_scenario(os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')))
     sc['timing']['frame_s'], sc['timing']['substeps'] = 1.0, 10
+    # no input may time out (5 s of wall time in the scenario): a missed frame under load would
+    # change one run's final state; every input comes at once when the nodes are right
+    sc['timing']['timeout_s'] = 60.0
     launcher = Launcher(sc, duration_s=60.0, compose=True, progress=False,
                         run_dir=str(tmp_path), log=lambda *a, **k: None)
     params = tmp_path / 'params.yaml'
