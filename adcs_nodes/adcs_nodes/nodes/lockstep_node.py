@@ -544,8 +544,10 @@ class LockstepNode(Node):
         """Also wait, before ready, until ``check()`` (what is still missing) is empty."""
         self._ready_checks = getattr(self, '_ready_checks', []) + [check]
 
-    def unmatched(self) -> List[str]:
-        """Handshake expectations not met yet, as readable strings."""
+    def unmatched(self, graph_view: bool = False) -> List[str]:
+        """Handshake expectations not met yet, as readable strings; with ``graph_view``, also
+        how many peer endpoints this node's discovery knows on that topic (more known than
+        matched: discovered but not matched; as few: never discovered)."""
         missing = [m for check in getattr(self, '_ready_checks', []) for m in check()]
         for kind, topic, n in self._expectations():
             table = self._pubs if kind == 'pub' else self._subs
@@ -556,6 +558,10 @@ class LockstepNode(Node):
             have = ent.get_subscription_count() if kind == 'pub' else ent.get_publisher_count()
             if have < n:
                 missing.append(f'{kind}:{topic} {have}/{n}')
+                if graph_view:
+                    known = (self.count_subscribers(topic) if kind == 'pub'
+                             else self.count_publishers(topic))
+                    missing[-1] += f' (discovery knows {known})'
         return missing
 
     def start_handshake(self, on_ready: Optional[Callable[[], None]] = None) -> None:
@@ -571,8 +577,8 @@ class LockstepNode(Node):
             waited = time.monotonic() - self._hs_t0
             if waited - self._hs_warned > 10.0:
                 self._hs_warned = waited
-                self.get_logger().warning(
-                    f'still waiting for endpoints after {waited:.0f} s: ' + ', '.join(missing))
+                self.get_logger().warning(f'still waiting for endpoints after {waited:.0f} s: '
+                                          + ', '.join(self.unmatched(graph_view=True)))
             return
         self._hs_timer.cancel()
         self.destroy_timer(self._hs_timer)

@@ -295,9 +295,10 @@ class DynamicsNode(LockstepNode):
             waited = time.monotonic() - self._created
             if waited > self.start_timeout_s and not self.done:
                 missing = sorted(set(self.wait_for_nodes) - self.ready_nodes)
+                own = ', '.join(self.unmatched(graph_view=True))
                 self.get_logger().error(
                     f'lockstep not started after {waited:.0f} s: no ready from '
-                    f'{", ".join(missing) or "(own endpoints: " + ", ".join(self.unmatched())}'
+                    f'{", ".join(missing) or f"(own endpoints: {own})"}'
                     ' (did a node die during start-up?)')
                 self.exit_code = 1
                 self.done = True
