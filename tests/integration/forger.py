@@ -1,6 +1,7 @@
 """A stranger on a run's ROS domain (test helper, not a test): forged actuator commands.
 
-Started with the run's ``ROS_DOMAIN_ID`` after the run's start handshake. On each new
+Started with the run's ``ROS_DOMAIN_ID``; it joins the domain after the run's start handshake
+(``--go-on-stdin``: started early, it joins when a line arrives on stdin). On each new
 ``/clock`` tick t, once each of its publishers is matched to ``--min-subscribers`` readers
 (the consumer and the recorder), it publishes on every topic given a valid command (a
 dipole inside the magnetorquer limits, source ``forger``) stamped t and one stamped t +
@@ -33,7 +34,12 @@ def main(argv=None) -> int:
     ap.add_argument('--timeout', type=float, default=120.0)
     ap.add_argument('--min-subscribers', type=int, default=2,
                     help='forge only once every topic has this many matched readers')
+    ap.add_argument('--go-on-stdin', action='store_true',
+                    help='join the domain only when a line arrives on stdin (started early, '
+                         'the imports are done when the test says go)')
     args = ap.parse_args(argv)
+    if args.go_on_stdin and not sys.stdin.readline():
+        return 0                        # the test ended before its go: nothing to forge
     rclpy.init()
     node = Node(args.name)
     pubs = {t: node.create_publisher(ActuatorCommand, t, QOS_DATA) for t in args.topics}

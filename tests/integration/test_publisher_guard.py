@@ -122,13 +122,17 @@ def test_forged_commands_are_dropped_counted_and_recorded(scenario, clean, tmp_p
         manifest = wait_manifest(proc, timeout=60.0)
         log = os.path.join(manifest['run_dir'], 'logs',
                            ('composed' if compose else 'dynamics') + '.log')
-        _wait_for(lambda: _log_has(log, 'lockstep start'), 120.0, 'the lockstep start', proc)
+        # The forger must forge before the run ends: the composed run takes 4-5 s of wall
+        # time from its lockstep start at load 8, the forger needed 1.6-1.8 s of it when
+        # started there (mostly its Python and rclpy imports). It starts now, while the graph
+        # starts, and joins the domain when told (after the handshake).
         forger = subprocess.Popen(
             [sys.executable, os.path.join(HERE, 'forger.py'), '--topics', *FORGED,
-             '--name', name],
-            cwd=ROOT, env=child_env(manifest['domain']), stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE, text=True)
-        f_out, f_err = forger.communicate(timeout=180)
+             '--name', name, '--go-on-stdin'],
+            cwd=ROOT, env=child_env(manifest['domain']), stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        _wait_for(lambda: _log_has(log, 'lockstep start'), 120.0, 'the lockstep start', proc)
+        f_out, f_err = forger.communicate('go\n', timeout=180)
         out, err = proc.communicate(timeout=600)
     finally:
         for p in (forger, proc):
