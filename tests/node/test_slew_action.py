@@ -77,7 +77,7 @@ def spin(ros_context):
     ex = SingleThreadedExecutor(context=ros_context)
     added = set()
 
-    def _spin(nodes, until, timeout=10.0):
+    def _spin(nodes, until, timeout=30.0):
         for n in nodes:
             if id(n) not in added:
                 ex.add_node(n)
@@ -135,7 +135,7 @@ def test_goal_reaches_target_with_result_numbers(graph, spin):
                    lambda m: fbs.append(m.feedback))
     assert handle.accepted
     res = handle.get_result_async()
-    assert spin(nodes, res.done, timeout=20.0)
+    assert spin(nodes, res.done, timeout=60.0)
     out = res.result()
     assert out.status == GoalStatus.STATUS_SUCCEEDED and out.result.success
     assert plant.targets[0][1] == 'eci'

@@ -31,7 +31,7 @@ def test_status_skipped_only_when_the_monitor_alone_would_drop_it(ros_context, s
     # the names of the readers come with discovery: wait until both nodes know them
     assert spin(nodes, lambda: all(
         [i.node_name for i in n.get_subscriptions_info_by_topic('/lockstep/status')]
-        == [MONITOR_NODE] for n in (other, master)), timeout=10.0)
+        == [MONITOR_NODE] for n in (other, master)), timeout=30.0)
     assert not other._status_wanted()           # the monitor's filter would drop it
     assert master._status_wanted()              # the clock master's: kept
     other.missed_frames = 1
@@ -41,7 +41,7 @@ def test_status_skipped_only_when_the_monitor_alone_would_drop_it(ros_context, s
         other.frames = master.frames = k + 1
         other.publish_status()
         master.publish_status()
-    assert spin(nodes, lambda: len(got) >= 3, timeout=10.0)
+    assert spin(nodes, lambda: len(got) >= 3, timeout=30.0)
     assert {m.node for m in got} == {MONITOR_STATUS_OF}
 
     # a second reader of any other name (a recorder, ros2 topic echo): every status again
@@ -49,9 +49,9 @@ def test_status_skipped_only_when_the_monitor_alone_would_drop_it(ros_context, s
     echo = _reader(ros_context, 'echo', got2)
     nodes.append(echo)
     assert spin(nodes, lambda: other._status_pub.get_subscription_count() == 2
-                and other._status_wanted(), timeout=10.0)
+                and other._status_wanted(), timeout=30.0)
     other.publish_status()
-    assert spin(nodes, lambda: any(m.node == 'estimator' for m in got2), timeout=10.0)
+    assert spin(nodes, lambda: any(m.node == 'estimator' for m in got2), timeout=30.0)
     for n in nodes:
         n.destroy_node()
 
@@ -74,7 +74,7 @@ def test_master_status_to_the_monitor_alone_is_held_to_its_wall_period(ros_conte
     monitor = _reader(ros_context, MONITOR_NODE, [])
     nodes = [master, monitor]
     assert spin(nodes, lambda: [i.node_name for i in master.get_subscriptions_info_by_topic(
-        '/lockstep/status')] == [MONITOR_NODE], timeout=10.0)
+        '/lockstep/status')] == [MONITOR_NODE], timeout=30.0)
     assert master._status_wanted()       # (reads the readers' names)
     sent = []
     publish = master._status_pub.publish
@@ -101,7 +101,7 @@ def test_master_status_to_the_monitor_alone_is_held_to_its_wall_period(ros_conte
     master.missed_frames = 0
     echo = _reader(ros_context, 'echo', [])
     nodes.append(echo)
-    assert spin(nodes, lambda: master._status_pub.get_subscription_count() == 2, timeout=10.0)
+    assert spin(nodes, lambda: master._status_pub.get_subscription_count() == 2, timeout=30.0)
     n = len(sent)
     frames(221, 20)
     assert len(sent) == n + 20
