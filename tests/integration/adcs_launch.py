@@ -46,8 +46,9 @@ def start_adcs(*args):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def wait_manifest(proc, timeout=30.0):
-    """The active-run manifest of launcher ``proc`` once its nodes are spawned."""
+def wait_manifest(proc, timeout=120.0):
+    """The active-run manifest of launcher ``proc`` once its nodes are spawned (the
+    launcher's own start: imports, validation, rclpy; seconds, longer under load)."""
     path = os.path.join(RUNS, f'active-{proc.pid}.json')
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

@@ -66,7 +66,7 @@ def _manifest(proc, home):
     saved = adcs_launch.RUNS
     adcs_launch.RUNS = os.path.join(str(home), '.cache', 'adcs', 'runs')
     try:
-        return wait_manifest(proc, timeout=60.0)
+        return wait_manifest(proc, timeout=120.0)
     finally:
         adcs_launch.RUNS = saved
 
@@ -90,10 +90,10 @@ def test_sigkill_of_the_launcher_leaves_no_node_and_a_readable_bag(tmp_path, mod
         manifest = _manifest(proc, tmp_path)
         pids = manifest['pids']
         assert len(pids) == (1 if mode else 3)
-        _wait(lambda: _states_in(bag) >= 20, 60.0, 'the recorder writing 20 states')
+        _wait(lambda: _states_in(bag) >= 20, 120.0, 'the recorder writing 20 states')
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
-        _wait(lambda: not any(_alive(p) for p in pids.values()), 15.0,
+        _wait(lambda: not any(_alive(p) for p in pids.values()), 60.0,
               f'every node to die with its launcher ({pids})')
     finally:
         if proc.poll() is None:
@@ -168,7 +168,7 @@ def test_sigkill_of_the_recorder_stops_the_run_and_export_and_report_read_the_ba
                   '--quiet')
     try:
         pids = _manifest(proc, tmp_path)['pids']
-        _wait(lambda: _states_in(bag) >= 20, 60.0, 'the recorder writing 20 states')
+        _wait(lambda: _states_in(bag) >= 20, 120.0, 'the recorder writing 20 states')
         os.kill(pids['recorder'], signal.SIGKILL)
         out, err = proc.communicate(timeout=60)
     finally:

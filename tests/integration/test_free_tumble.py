@@ -198,7 +198,7 @@ def _run_with_stalled_recorder(bag, frames_after=None):
         manifest = wait_manifest(proc)
         recorder = manifest['pids']['recorder']
         latest, close = _probe_clock(manifest['domain'])
-        _wait_until(lambda: latest() >= 20 * 10**9, 60.0, 'frame 20')
+        _wait_until(lambda: latest() >= 20 * 10**9, 120.0, 'frame 20')
         os.kill(recorder, signal.SIGSTOP)
         try:
             stopped_at = latest()
@@ -321,7 +321,7 @@ def test_a_killed_node_stops_the_run_naming_it():
     manifest = wait_manifest(proc)
     latest, close = _probe_clock(manifest['domain'])
     try:                 # mid-run: the lockstep has started and stepped a few frames
-        _wait_until(lambda: latest() >= 5 * 10**9 or proc.poll() is not None, 60.0,
+        _wait_until(lambda: latest() >= 5 * 10**9 or proc.poll() is not None, 120.0,
                     'frame 5')
     finally:
         close()

@@ -95,9 +95,9 @@ def test_lockstep_replay_gives_the_recorded_estimates_bit_for_bit(bag, tmp_path)
     try:
         proc = subprocess.Popen(
             [sys.executable, '-m', 'adcs_nodes.tools.cli', 'replay', bag, '--lockstep',
-             '--wait', '40'],
+             '--wait', '120'],
             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        deadline = time.monotonic() + 50.0
+        deadline = time.monotonic() + 180.0     # the estimator's start (--wait), 61 frames
         while proc.poll() is None and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         if proc.poll() is None:
