@@ -288,15 +288,24 @@ def test_ctrl_c_stops_every_node_and_leaves_a_valid_bag(bag_dir):
     proc = start_adcs('run', FREE_TUMBLE, '--record', bag, '--duration', '100000', '--quiet')
     manifest = wait_manifest(proc)
     import time
-    deadline = time.monotonic() + 60.0       # let it record a while (the recorder flushes
-    while time.monotonic() < deadline:       # its chunks as it goes: the file grows)
+    # let it record a while: the recorder flushes its chunks as it goes, so the file grows;
+    # 50 kB (some 30 frames) past its first chunk (schemas and about 3 frames, 20-25 kB: with
+    # the former 20 kB mark the Ctrl-C came there, and the frames run during the stop had to
+    # make the 10 states checked below)
+    deadline = time.monotonic() + 120.0
+    first = size = None
+    while time.monotonic() < deadline and proc.poll() is None:
         sizes = [e.stat().st_size for e in os.scandir(bag) if e.name.endswith('.mcap')] \
             if os.path.isdir(bag) else []
-        if sizes and max(sizes) > 20_000:
+        size = max(sizes, default=0)
+        if first is None and size > 1000:          # past the file header (43 bytes)
+            first = size
+        if first is not None and size > first + 50_000:
             break
         time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
+    assert first is not None and size > first + 50_000, (first, size, out + err)
     assert proc.returncode == 130, out + err
     assert 'interrupted' in err
     for pid in manifest['pids'].values():    # no orphan node processes
