@@ -5,8 +5,8 @@ best-effort (SensorDataQoS), with stamps shifted 0.37 s off the simulator's 2 s 
 ``/clock`` at 100x; the estimator runs alone (``timing_mode: live``, ``use_sim_time``), its
 onboard epoch shifted by the same 0.37 s (what the replay prints). Truth: the recorded
 ``sim/state``, interpolated at the estimate's stamp with scipy's Slerp. The live node
-(irregular prediction steps, a few samples lost as 'late' when a /clock tick fires the frame
-first) converges more slowly than the lockstep run, so the check is over 2000-2400 s
+(irregular prediction steps; its latency and age allowances widened for a 100x clock)
+converges more slowly than the lockstep run, so the check is over 2000-2400 s
 (measured: 0.93 deg median there).
 """
 import os
@@ -67,8 +67,15 @@ def _live_estimator_params(path):
                 if n.name == 'estimator')
     for key in ('expected_matches', 'duration_s', 'frame_period_s', 'timing_mode'):
         spec.params.pop(key, None)
+    # The allowances are in ROS (sim) time, 100x the wall time here: the defaults (50 ms
+    # transport latency, 5 s sample age) are 0.5 ms and 50 ms of wall time, below one 10 ms
+    # replay tick. Beside a CPU burner at load 8-15, 13-51 of 240 samples were rejected
+    # (late, too old), the filter diverged and was reset (median error 96-107 deg), or
+    # fewer than 960 estimates came: 3 runs of 3 failed. 2 s and 30 s (20 and 300 ms of wall
+    # time): nothing rejected, 0.8-1.0 deg, 3 runs of 3 passed.
     spec.params.update(timing_mode='live', use_sim_time=True,
-                       epoch=f'2026-01-01T00:00:00.{int(OFFSET_S * 1e6):06d}Z')
+                       epoch=f'2026-01-01T00:00:00.{int(OFFSET_S * 1e6):06d}Z',
+                       live_latency_s=2.0, max_sample_age_s=30.0)
     with open(path, 'w', encoding='utf-8') as fh:
         fh.write(params_file_text([spec]))
 
