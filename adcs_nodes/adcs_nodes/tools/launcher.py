@@ -326,6 +326,7 @@ class _Monitor:
         self.status: Dict[str, LockstepStatus] = {}
         self.recorder_clock_ns = -1
         self.recorder_count = 0
+        self.recorder_statuses = 0        # recorder/status messages received
         self.recorder_error = ''
         self.recorder_lost = 0            # messages the middleware reported lost to the bag
         self.recorder_lost_topic = ''
@@ -380,6 +381,7 @@ class _Monitor:
     def _on_rec(self, msg) -> None:
         self.recorder_clock_ns = self._stamp_ns(msg.header.stamp) - self.epoch_ns
         self.recorder_count = int(msg.frames)
+        self.recorder_statuses += 1
         if msg.last_missed_input.startswith('write failed: '):
             self.recorder_error = msg.last_missed_input[len('write failed: '):]
         elif msg.missed_frames > self.recorder_lost:
@@ -389,6 +391,23 @@ class _Monitor:
     def spin(self, seconds: float) -> None:
         from rclpy.task import Future
         self.executor.spin_until_future_complete(Future(), timeout_sec=seconds)
+
+    def wait_recorder_settled(self, deadline: float) -> bool:
+        """Spin until two recorder statuses in a row carry the same message count (the bag
+        has every message published so far), or until ``deadline`` (monotonic); True if
+        settled. Once the graph stops, the recorder's statuses come from its wall timer only
+        (``status_period_s``, 0.5 s): a count that did not grow between two of them means its
+        queues are empty. Waiting a fixed 0.3 s for the count to change could end between two
+        statuses while the recorder was still writing."""
+        seen, last = self.recorder_statuses, None
+        while time.monotonic() < deadline:
+            self.spin(0.1)
+            if self.recorder_statuses != seen:
+                seen = self.recorder_statuses
+                if self.recorder_count == last:
+                    return True
+                last = self.recorder_count
+        return False
 
     @property
     def missed_frames(self) -> int:
@@ -630,11 +649,7 @@ class Launcher:
         self._signal_and_wait(others, grace_s)
         if 'recorder' in self.procs:
             if monitor is not None and self.procs['recorder'].poll() is None:
-                deadline = time.monotonic() + grace_s
-                last = -1
-                while monitor.recorder_count != last and time.monotonic() < deadline:
-                    last = monitor.recorder_count
-                    monitor.spin(0.3)
+                monitor.wait_recorder_settled(time.monotonic() + grace_s)
             self._signal_and_wait(['recorder'], grace_s)
 
     # ------------------------------------------------------------------ run
@@ -886,10 +901,8 @@ class Launcher:
                 monitor.spin(0.1)
             # every node has done its last frame (the master waited for them): the recorder
             # has everything once its message count stops growing
-            last = -1
-            while monitor.recorder_count != last and time.monotonic() < deadline:
-                last = monitor.recorder_count
-                monitor.spin(0.3)
+            if self.procs['recorder'].poll() is None:
+                monitor.wait_recorder_settled(deadline)
             if monitor.recorder_clock_ns < total_ns:
                 return 1, ('recorder did not receive the final frame within 15 s: '
                            'the bag may miss the end of the run')
