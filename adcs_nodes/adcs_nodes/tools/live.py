@@ -94,7 +94,11 @@ class _Session:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
-    def call(self, srv_type, name: str, request, timeout_s: float = 10.0):
+    #: Wall seconds to wait for a service, then as long for its answer: discovery of a new
+    #: process on a domain took 10-13 s at load 18; both fit in the session deadline.
+    CALL_WAIT_S = 25.0
+
+    def call(self, srv_type, name: str, request, timeout_s: float = CALL_WAIT_S):
         client = self.node.create_client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout_s):
             raise LiveError(f'service {name} not available within {timeout_s:g} s '

@@ -39,7 +39,7 @@ def make_goal(q_xyzw: Sequence[float], frame: str, controller: str = '',
     return goal
 
 
-def run_goal(node, executor, goal, server_wait_s: float = 10.0,
+def run_goal(node, executor, goal, server_wait_s: float = 25.0,
              on_feedback: Optional[Callable] = None, deadline_s: float = math.inf):
     """Send ``goal`` to ``adcs/slew`` and wait for the result.
 
