@@ -60,14 +60,6 @@ def vec(row, pattern, names):
     return np.array([float(row[pattern.format(n)]) for n in names])
 
 
-def states_in(bag) -> int:
-    """``/sim/state`` messages in a (possibly unfinished) bag now, 0 if none yet."""
-    try:
-        return sum(1 for _ in read_messages(bag, topics=['/sim/state']))
-    except (OSError, ValueError):
-        return 0
-
-
 def recording(bag) -> bool:
     """Whether the recorder of ``bag`` has written data (a non-empty ``.mcap``): cheap,
     unlike reading the unfinished bag, which lags further behind the larger the bag."""
@@ -356,8 +348,9 @@ def test_ctrl_c_keeps_finished_runs(tmp_path):
     # lockstep took 0.7 s unloaded, and waiting for 3 states read from its unfinished bag
     # lagged (the bag held 900-1900 messages when the read saw 3): once the run finished
     # first and was recorded as captured. Now 1200 frames (about 3 s of lockstep unloaded)
-    # and the Ctrl-C as soon as its bag has data (a stat, no read); the 3 states are
-    # checked afterwards.
+    # and the Ctrl-C as soon as its bag has data (a stat, no read). How many states it has
+    # then depends on the load (2 once, beside a second test suite), so none are counted:
+    # the run is under way (its recorder opened its bag) and the campaign says 'interrupted'.
     out = tmp_path / 'interrupted'
     proc = subprocess.Popen(campaign_cmd(out, '--runs', '2', '--jobs', '1', '--compose',
                                          duration=2400.0),
@@ -377,7 +370,6 @@ def test_ctrl_c_keeps_finished_runs(tmp_path):
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=90)
     assert proc.returncode == 130, stdout + stderr
-    assert states_in(second_bag) >= 3, 'run 1 was not under way when it was interrupted'
     assert 'interrupted' in stdout
     rows = table(out)
     assert rows[0]['status'] in ('captured', 'not_captured')

@@ -185,8 +185,11 @@ def run(factory: Callable[[], Node], args=None) -> int:
     """
     try:
         faulthandler.enable()
-    except (OSError, ValueError):   # stderr without a file descriptor (captured in tests)
-        pass
+        # SIGUSR1: every thread's stack to the log, the process goes on (the launcher asks a
+        # node that does not become active in time, to say where it is stuck)
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
+    except (OSError, ValueError, AttributeError):   # stderr without a file descriptor
+        pass                                         # (captured in tests); no SIGUSR1
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         try:

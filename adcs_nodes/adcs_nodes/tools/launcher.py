@@ -874,6 +874,28 @@ class Launcher:
                 return 1, (f'node {name} exited with code {rc} before the end of the run; '
                            f'last lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
 
+    def _dump_stack(self, name: str, wait_s: float = 2.0) -> str:
+        """Ask a live node process for its Python stacks (SIGUSR1: ``faulthandler`` in
+        ``runtime.run`` writes every thread's stack to its log); the log's last lines once
+        the dump is there (``''`` if the process is gone or wrote none within ``wait_s``)."""
+        proc = self.procs.get(name)
+        if proc is None or proc.poll() is not None or not hasattr(signal, 'SIGUSR1'):
+            return ''
+        before = self._log_tail(name, 10_000)
+        try:
+            os.kill(proc.pid, signal.SIGUSR1)
+        except OSError:
+            return ''
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            now = self._log_tail(name, 10_000)
+            if len(now) > len(before) and 'File ' in now[len(before):]:
+                time.sleep(0.2)          # the dump is written in one go; let it finish
+                return ('(its Python stacks, asked with SIGUSR1)\n'
+                        + self._log_tail(name, 60))
+            time.sleep(0.05)
+        return ''
+
     def _transition_failed(self, name: str, transition: str):
         """Exit code and message for a managed node that was not made active."""
         log = os.path.join(self.run_dir, 'logs', f'{name}.log')
@@ -886,8 +908,10 @@ class Launcher:
                        f'{why}; last lines of its log ({log}):\n{tail}')
         if transition == 'deadline':
             step = self._transitions.step.get(name)
+            stack = self._dump_stack(name)
             return 1, (f'node {name} was not active {self._transitions.deadline_s:g} s after '
-                       f'its start (lifecycle: {step}); last lines of its log ({log}):\n{tail}')
+                       f'its start (lifecycle: {step}); last lines of its log ({log}):\n'
+                       f'{stack or tail}')
         return 1, (f'node {name} refused the lifecycle transition {transition}; last lines '
                    f'of its log ({log}):\n{tail}')
 
