@@ -32,7 +32,8 @@ from scipy.spatial.transform import Rotation
 from adcs_nodes.core.estimation.algorithms import EstimatorInputs, MagneticFilterEstimator
 from adcs_nodes.core.estimation.onboard import OnboardReference, OnboardState
 from adcs_nodes.core.geomag import DipoleField
-from adcs_nodes.core.orbit import MU_EARTH, CircularOrbit
+from adcs_nodes.core.orbit import CircularOrbit
+from paper000_truth import rigid_body_rhs
 
 EPOCH = datetime(2024, 3, 1, tzinfo=timezone.utc)
 I_PAPER = np.diag([118.0, 118.0, 19.6])  # paper 000 example [kg m^2]
@@ -100,20 +101,11 @@ def world():
     """Truth of paper 000's example as a dense solution (any stamp, not only the 2 s grid)."""
     orbit = CircularOrbit(690e3, math.radians(98.0), epoch=EPOCH)
     field = DipoleField(EPOCH, pole_colatitude_rad=0.0)
-    i_inv = np.linalg.inv(I_PAPER)
     lam0 = np.array([0.36, 0.48, -0.48, 0.64])  # paper's Lambda(0), scalar first
     q_eci_body0 = (Rotation.from_quat(orbit.state(0.0).q_eci_orbit)
                    * Rotation.from_quat(np.r_[lam0[1:], lam0[0]])).as_quat()
 
-    def rhs(t, x):  # absolute kinematics in ECI, gravity gradient from the position
-        q, w = x[:4], x[4:]
-        r = orbit.state(t).r_eci
-        r_b = Rotation.from_quat(q).inv().apply(r) / np.linalg.norm(r)
-        torque = 3 * MU_EARTH / np.linalg.norm(r) ** 3 * np.cross(r_b, I_PAPER @ r_b)
-        big_omega = np.array([[0, w[2], -w[1], w[0]], [-w[2], 0, w[0], w[1]],
-                              [w[1], -w[0], 0, w[2]], [-w[0], -w[1], -w[2], 0]])
-        return np.r_[0.5 * big_omega @ q,
-                     i_inv @ (torque - np.cross(w, I_PAPER @ w)) + M_DIST]
+    rhs = rigid_body_rhs(orbit, I_PAPER, M_DIST)  # absolute kinematics in ECI, GG torque
 
     sol = solve_ivp(rhs, (0.0, T_END), np.r_[q_eci_body0, np.radians([-3.0, 3.0, 3.0])],
                     dense_output=True, method='DOP853', rtol=1e-10, atol=1e-12)

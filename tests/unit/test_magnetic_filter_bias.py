@@ -27,7 +27,8 @@ from adcs_nodes.core.estimation.magnetic_filter_bias import (MagneticFilterBias,
                                                              MagneticFilterBiasEstimator)
 from adcs_nodes.core.estimation.onboard import OnboardReference
 from adcs_nodes.core.geomag import DipoleField
-from adcs_nodes.core.orbit import MU_EARTH, CircularOrbit
+from adcs_nodes.core.orbit import CircularOrbit
+from paper000_truth import rigid_body_rhs
 
 sensors = pytest.importorskip('sim_node.models.sensors')
 
@@ -45,16 +46,9 @@ def tumble():
     lam0 = np.array([0.36, 0.48, -0.48, 0.64])
     q0 = (Rotation.from_quat(orbit.state(0.0).q_eci_orbit)
           * Rotation.from_quat(np.r_[lam0[1:], lam0[0]])).as_quat()
-    m_dist, i_inv = np.array([1e-8, 1e-8, 3e-8]), np.linalg.inv(I_PAPER)
+    m_dist = np.array([1e-8, 1e-8, 3e-8])
 
-    def rhs(t, x):
-        q, w = x[:4], x[4:]
-        r = orbit.state(t).r_eci
-        rb = Rotation.from_quat(q).inv().apply(r) / np.linalg.norm(r)
-        torque = 3 * MU_EARTH / np.linalg.norm(r) ** 3 * np.cross(rb, I_PAPER @ rb)
-        big = np.array([[0, w[2], -w[1], w[0]], [-w[2], 0, w[0], w[1]],
-                        [w[1], -w[0], 0, w[2]], [-w[0], -w[1], -w[2], 0]])
-        return np.r_[0.5 * big @ q, i_inv @ (torque - np.cross(w, I_PAPER @ w)) + m_dist]
+    rhs = rigid_body_rhs(orbit, I_PAPER, m_dist)
 
     times = np.arange(0.0, ORBITS * period, 2.0)
     sol = solve_ivp(rhs, (0.0, times[-1]), np.r_[q0, np.radians([-3.0, 3.0, 3.0])],
