@@ -874,7 +874,7 @@ class Launcher:
                 return 1, (f'node {name} exited with code {rc} before the end of the run; '
                            f'last lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
 
-    def _dump_stack(self, name: str, wait_s: float = 2.0) -> str:
+    def _dump_stack(self, name: str, wait_s: float = 5.0) -> str:
         """Ask a live node process for its Python stacks (SIGUSR1: ``faulthandler`` in
         ``runtime.run`` writes every thread's stack to its log); the log's last lines once
         the dump is there (``''`` if the process is gone or wrote none within ``wait_s``)."""
