@@ -881,15 +881,21 @@ class Launcher:
         proc = self.procs.get(name)
         if proc is None or proc.poll() is not None or not hasattr(signal, 'SIGUSR1'):
             return ''
-        before = self._log_tail(name, 10_000)
+        log = os.path.join(self.run_dir, 'logs', f'{name}.log')
         try:
+            before = os.path.getsize(log)
             os.kill(proc.pid, signal.SIGUSR1)
         except OSError:
             return ''
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
-            now = self._log_tail(name, 10_000)
-            if len(now) > len(before) and 'File ' in now[len(before):]:
+            try:
+                with open(log, 'rb') as fh:
+                    fh.seek(before)
+                    new = fh.read()
+            except OSError:
+                return ''
+            if b'File ' in new:
                 time.sleep(0.2)          # the dump is written in one go; let it finish
                 return ('(its Python stacks, asked with SIGUSR1)\n'
                         + self._log_tail(name, 60))

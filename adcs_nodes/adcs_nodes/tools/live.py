@@ -64,6 +64,10 @@ def pick_run(pid: Optional[int]) -> Dict:
 #: that joined a busy domain was once seen never to return (``adcs status`` beside a graph
 #: running flat out after a controller was killed); it then exits 1 with a message.
 SESSION_DEADLINE_S = 60.0
+#: Wall seconds a command waits for a service or action server, then as long for its answer:
+#: discovery of a new process on a domain took 10-13 s at load 18; both fit in the session
+#: deadline.
+SERVER_WAIT_S = 25.0
 
 
 def _give_up() -> None:
@@ -94,11 +98,7 @@ class _Session:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
-    #: Wall seconds to wait for a service, then as long for its answer: discovery of a new
-    #: process on a domain took 10-13 s at load 18; both fit in the session deadline.
-    CALL_WAIT_S = 25.0
-
-    def call(self, srv_type, name: str, request, timeout_s: float = CALL_WAIT_S):
+    def call(self, srv_type, name: str, request, timeout_s: float = SERVER_WAIT_S):
         client = self.node.create_client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout_s):
             raise LiveError(f'service {name} not available within {timeout_s:g} s '

@@ -250,11 +250,13 @@ def replay(bag: str, topics: Optional[Sequence[str]] = None, rate: float = 1.0,
                 f'epoch:={shifted.isoformat().replace("+00:00", "Z")} (scenario epoch + offset)')
         deadline = time.monotonic() + wait_s
         everyone = list(pubs.values()) + ([clock_pub] if clock_pub else [])
-        while wait_s and time.monotonic() < deadline and \
-                not all(p.get_subscription_count() for p in everyone):
-            time.sleep(0.02)
-        if wait_s and all(p.get_subscription_count() for p in everyone):
-            time.sleep(MATCH_SETTLE_S)      # the readers match our writers too
+        if wait_s:
+            while not all(p.get_subscription_count() for p in everyone):
+                if time.monotonic() > deadline:
+                    break
+                time.sleep(0.02)
+            else:
+                time.sleep(MATCH_SETTLE_S)      # the readers match our writers too
         for s in static:
             pubs[s.topic].publish(s.data)
         t0_wall = time.monotonic()

@@ -13,6 +13,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from adcs_nodes.core import attitude
+from adcs_nodes.tools.live import SERVER_WAIT_S
 
 #: CLI frame names -> goal frame names.
 FRAME_NAMES = {'inertial': 'eci', 'eci': 'eci', 'orbit': 'orbit'}
@@ -39,7 +40,7 @@ def make_goal(q_xyzw: Sequence[float], frame: str, controller: str = '',
     return goal
 
 
-def run_goal(node, executor, goal, server_wait_s: float = 25.0,
+def run_goal(node, executor, goal, server_wait_s: float = SERVER_WAIT_S,
              on_feedback: Optional[Callable] = None, deadline_s: float = math.inf):
     """Send ``goal`` to ``adcs/slew`` and wait for the result.
 
