@@ -33,6 +33,7 @@ from geometry_msgs.msg import TransformStamped
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
+from adcs_nodes.components.base import covariance_to_body  # noqa: F401 (re-export)
 from adcs_nodes.core import attitude as att
 from adcs_nodes.nodes.convert import quat, to_quat, to_vec3
 
@@ -105,26 +106,6 @@ def mount_transforms(stamp: Any, mounts: Dict[str, Sequence[float]]) -> List[Tra
     measurement here depends on them), so the translation is zero.
     """
     return [transform(BODY, frame, q, stamp) for frame, q in sorted(mounts.items())]
-
-
-def covariance_to_body(covariance: Sequence[float],
-                       q_body_sensor: Sequence[float]) -> Optional[np.ndarray]:
-    """A message's 3x3 covariance (row-major, sensor axes) in body axes, or ``None``.
-
-    ``C_body = R C_sensor R^T`` with ``R = R(q_body_sensor)``. ``None`` when the message
-    gives none, by the ``sensor_msgs`` conventions: all zeros ("unknown"), ``covariance[0]
-    = -1`` ("not provided"), or anything not finite, not symmetric or not positive
-    semi-definite.
-    """
-    c = np.asarray(covariance, dtype=float).reshape(-1)
-    if c.size != 9 or not np.all(np.isfinite(c)) or c[0] == -1.0 or not np.any(c):
-        return None
-    c = c.reshape(3, 3)
-    if not np.allclose(c, c.T, rtol=1e-9, atol=0.0) or np.linalg.eigvalsh(c)[0] < \
-            -1e-12 * max(float(np.abs(c).max()), 1e-300):
-        return None
-    r = att.to_matrix(att.normalize(np.asarray(q_body_sensor, dtype=float)))
-    return r @ c @ r.T
 
 
 class TfPublisher:

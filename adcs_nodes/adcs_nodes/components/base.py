@@ -1,0 +1,76 @@
+"""What every component shares: the frame clock (elapsed sim time <-> absolute stamps), a log
+callback, and the mount table of the sensors (``/tf_static`` in a graph, the scenario in the
+FrameLoop)."""
+from __future__ import annotations
+
+from typing import Callable, Dict, Optional, Sequence
+
+import numpy as np
+
+from adcs_nodes.core import attitude as att
+from adcs_nodes.nodes.convert import to_stamp
+
+#: ``log(level, text)`` with level ``'debug' | 'info' | 'warning' | 'error'``.
+Log = Callable[[str, str], None]
+
+
+def silent(level: str, text: str) -> None:
+    """A log that drops everything (a component built without a node)."""
+
+
+class FrameClock:
+    """Elapsed sim time [ns] <-> absolute ``builtin_interfaces/Time`` of the run's epoch."""
+
+    def __init__(self, epoch_ns: int) -> None:
+        self.epoch_ns = int(epoch_ns)
+
+    def stamp(self, elapsed_ns: int):
+        """Absolute stamp of an elapsed sim time."""
+        return to_stamp(self.epoch_ns + int(elapsed_ns))
+
+    def elapsed_ns(self, stamp_ns: int) -> int:
+        """Elapsed sim time of an absolute stamp [ns]."""
+        return int(stamp_ns) - self.epoch_ns
+
+
+class Mounts:
+    """Sensor mounts ``q_body_sensor`` (scalar last) by the samples' ``header.frame_id``.
+
+    The FrameLoop fills it from the sensors' parameters (what their nodes put on
+    ``/tf_static``); a node wraps its ``MountTable``, which fills it from ``/tf_static``.
+    """
+
+    def __init__(self, mounts: Optional[Dict[str, Sequence[float]]] = None) -> None:
+        self._q: Dict[str, np.ndarray] = {}
+        for frame, q in (mounts or {}).items():
+            self.set(frame, q)
+
+    def set(self, frame_id: str, q_body_sensor: Sequence[float]) -> None:
+        """Record the mount of ``frame_id`` (normalised)."""
+        self._q[str(frame_id)] = att.normalize(np.asarray(q_body_sensor, dtype=float))
+
+    def lookup(self, frame_id: str) -> Optional[np.ndarray]:
+        """``q_body_sensor`` of ``frame_id`` (``body`` itself: identity), or None if unknown."""
+        if frame_id in ('', 'body'):
+            return np.array([0.0, 0.0, 0.0, 1.0])
+        return self._q.get(frame_id)
+
+
+def covariance_to_body(covariance: Sequence[float],
+                       q_body_sensor: Sequence[float]) -> Optional[np.ndarray]:
+    """A message's 3x3 covariance (row-major, sensor axes) in body axes, or ``None``.
+
+    ``C_body = R C_sensor R^T`` with ``R = R(q_body_sensor)``. ``None`` when the message
+    gives none, by the ``sensor_msgs`` conventions: all zeros ("unknown"), ``covariance[0]
+    = -1`` ("not provided"), or anything not finite, not symmetric or not positive
+    semi-definite.
+    """
+    c = np.asarray(covariance, dtype=float).reshape(-1)
+    if c.size != 9 or not np.all(np.isfinite(c)) or c[0] == -1.0 or not np.any(c):
+        return None
+    c = c.reshape(3, 3)
+    if not np.allclose(c, c.T, rtol=1e-9, atol=0.0) or np.linalg.eigvalsh(c)[0] < \
+            -1e-12 * max(float(np.abs(c).max()), 1e-300):
+        return None
+    r = att.to_matrix(att.normalize(np.asarray(q_body_sensor, dtype=float)))
+    return r @ c @ r.T

@@ -1,0 +1,245 @@
+"""The estimator's frame step: sensor messages -> checked core inputs -> the registered
+estimator's ``step`` -> ``adcs/attitude_estimate`` (+ ``adcs/estimator/diagnostics``).
+
+Conditioning (the same for the node and the FrameLoop):
+
+* magnetometer: finite, ``min_field_T <= |B| <= max_field_T``, rotated from its sensor frame
+  into body axes with the mount of its ``header.frame_id``; its covariance, when given, rotated
+  the same way (per-axis variances);
+* horizon sensor: ``valid`` and finite roll, pitch;
+* gyro: finite, rotated by its mount; star tracker: finite unit quaternion;
+* the applied command of the previous command frame (the estimator's prediction input): its
+  dipole, zero when absent or not finite;
+* the onboard reference (orbit, field) at the frame time: the flight software's own models.
+
+A rejected sample is counted with its reason (``rejected_count``, ``last_rejection``) and
+logged; a non-finite estimate is never published.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+from sensor_msgs.msg import Imu, MagneticField
+from std_msgs.msg import Header
+
+from adcs_msgs.msg import AttitudeState, FilterDiagnostics, HorizonSensor
+from adcs_nodes.components.base import FrameClock, Log, covariance_to_body, silent
+from adcs_nodes.core import attitude as att
+from adcs_nodes.components.controller import inertia_matrix
+from adcs_nodes.core.estimation.algorithms import EstimatorInputs, omega_orbit_from_eci
+from adcs_nodes.core.estimation.onboard import make_onboard_reference
+from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.nodes.convert import all_finite, quat, to_quat, to_vec3, vec3
+from adcs_nodes.nodes.messages import make
+from adcs_nodes.registry import Param
+
+#: ``fresh(key, msg) -> bool``: is ``msg`` a new sample of input ``key`` in this frame
+#: (lockstep: stamped with the frame; live: newer than the one used before).
+Fresh = Callable[[str, Any], bool]
+
+
+#: What every estimator node knows besides its algorithm's own parameters.
+CONTEXT_PARAMS = (
+    Param('expected_mounts', 'str[]', [], '-', 'sensor frames whose /tf_static mount must '
+          'have arrived before the node is ready (the launcher sets them)', read_only=True),
+    Param('algorithm', 'str', 'magnetic_filter', '-', 'registered estimator algorithm',
+          read_only=True),
+    Param('period_s', 'float', 2.0, 's', 'estimator period', positive=True, read_only=True),
+    Param('magnetometer_period_s', 'float', 10.0, 's', 'period of sensors/magnetometer',
+          positive=True, read_only=True),
+    Param('horizon_period_s', 'float', 1.0, 's', 'period of sensors/horizon', positive=True,
+          read_only=True),
+    Param('star_tracker_period_s', 'float', 1.0, 's', 'period of sensors/star_tracker',
+          positive=True, read_only=True),
+    Param('gyro_period_s', 'float', 1.0, 's', 'period of sensors/gyro', positive=True,
+          read_only=True),
+    Param('command_period_s', 'float', 0.0, 's', 'period of adcs/actuator_command (0: the '
+          'latest command)', min=0.0, read_only=True),
+    Param('inertia_kgm2', 'float[]', [118.0, 118.0, 19.6], 'kg m^2',
+          'onboard inertia: 3 diagonal values or 9 (row-major)', read_only=True),
+    Param('initial_q_orbit_body', 'float[]', [0.0, 0.0, 0.0, 1.0], '-',
+          'initial attitude estimate, body -> orbit, scalar last', length=4, read_only=True),
+    Param('initial_omega_body_orbit_body', 'float[]', [0.0, 0.0, 0.0], 'rad/s',
+          'initial rate estimate w.r.t. the orbit frame, body axes', length=3,
+          read_only=True),
+    Param('min_field_T', 'float', 1e-6, 'T', 'smallest plausible |B| (smaller: rejected)',
+          positive=True),
+    Param('max_field_T', 'float', 1e-3, 'T', 'largest plausible |B| (larger: rejected)',
+          positive=True),
+)
+
+
+class EstimatorComponent:
+    """One estimator (a registered algorithm's core) with its input conditioning.
+
+    Parameters
+    ----------
+    core
+        The built estimator core (``entry.build(params, context)``), initialised.
+    algorithm : str
+        Its registry name (for the diagnostics).
+    reference
+        Onboard reference (``make_onboard_reference``): ``at(t)`` -> orbit and field.
+    field_range : (float, float)
+        Plausible ``|B|`` [T].
+    mounts
+        ``lookup(frame_id) -> q_body_sensor or None``.
+    clock : FrameClock
+        Stamps of the run.
+    log : Log
+        Where rejections are reported.
+    """
+
+    def __init__(self, core: Any, algorithm: str, reference: Any,
+                 field_range: Tuple[float, float], mounts: Any, clock: FrameClock,
+                 log: Log = silent) -> None:
+        self.core = core
+        self.algorithm = algorithm
+        self.reference = reference
+        self.field_range = field_range
+        self.mounts = mounts
+        self.clock = clock
+        self.log = log
+        self.update_count = 0
+        self.rejected_count = 0
+        self.last_rejection = ''
+        self._last_t: Optional[int] = None
+        self.last_step = None
+        self.last_ref = None
+
+    # ------------------------------------------------------------------ inputs
+    def reject(self, why: str) -> None:
+        """Count and log a rejected sample."""
+        self.rejected_count += 1
+        self.last_rejection = why
+        self.log('warning', f'measurement rejected: {why}')
+
+    def _mount(self, frame_id: str) -> Optional[np.ndarray]:
+        q_body_sensor = self.mounts.lookup(frame_id)
+        if q_body_sensor is None:
+            self.reject(f'no /tf_static mount body -> {frame_id!r}')
+        return q_body_sensor
+
+    def field_body(self, msg: MagneticField) -> Optional[np.ndarray]:
+        """Magnetometer sample rotated into body axes, or None (rejected) if implausible."""
+        b_sensor = vec3(msg.magnetic_field)
+        if not all_finite(b_sensor):
+            self.reject('magnetometer sample is not finite')
+            return None
+        norm = float(np.linalg.norm(b_sensor))
+        lo, hi = self.field_range
+        if not lo <= norm <= hi:
+            self.reject(f'magnetometer |B| = {norm:.3g} T outside [{lo:g}, {hi:g}] T')
+            return None
+        q_body_sensor = self._mount(msg.header.frame_id)
+        return None if q_body_sensor is None else att.rotate(q_body_sensor, b_sensor)
+
+    def field_var(self, msg: MagneticField) -> Optional[np.ndarray]:
+        """Per-body-axis variances [T^2] of a sample's ``magnetic_field_covariance``, or None
+        when the message gives none (all zeros, ``[0] = -1``) or its mount is unknown."""
+        q_body_sensor = self.mounts.lookup(msg.header.frame_id)
+        cov = None if q_body_sensor is None else covariance_to_body(
+            msg.magnetic_field_covariance, q_body_sensor)
+        return None if cov is None else np.diag(cov).copy()
+
+    def horizon(self, msg: HorizonSensor) -> Optional[tuple]:
+        """(roll, pitch) [rad] of a valid horizon sample, or None (rejected)."""
+        if not msg.valid or not math.isfinite(msg.roll) or not math.isfinite(msg.pitch):
+            self.reject('horizon sensor sample invalid (out of view or not finite)')
+            return None
+        return (float(msg.roll), float(msg.pitch))
+
+    def gyro(self, msg: Imu) -> Optional[np.ndarray]:
+        """Gyro rate in body axes [rad/s], or None (rejected)."""
+        w = vec3(msg.angular_velocity)
+        if not all_finite(w):
+            self.reject('gyro sample is not finite')
+            return None
+        q_body_sensor = self._mount(msg.header.frame_id)
+        return None if q_body_sensor is None else att.rotate(q_body_sensor, w)
+
+    def star(self, msg: Imu) -> Optional[np.ndarray]:
+        """Star-tracker ``q_eci_body``, or None (rejected)."""
+        q = quat(msg.orientation)
+        if not all_finite(q) or abs(float(np.linalg.norm(q)) - 1.0) > 1e-3:
+            self.reject('star tracker attitude not finite or not a unit quaternion')
+            return None
+        return att.normalize(q)
+
+    def inputs_for(self, t_ns: int, msgs: Dict[str, Any], fresh: Fresh) -> EstimatorInputs:
+        """Fresh, checked samples of frame ``t_ns`` -> the core's :class:`EstimatorInputs`."""
+        def take(key, convert):
+            msg = msgs.get(key)
+            return convert(msg) if fresh(key, msg) else None
+        cmd = msgs.get('cmd')
+        dipole = vec3(cmd.dipole_body) if cmd is not None else np.zeros(3)
+        return EstimatorInputs(
+            self.reference.at(t_ns / NS_PER_S), b_body=take('mag', self.field_body),
+            horizon_roll_pitch=take('horizon', self.horizon),
+            dipole_body=dipole if all_finite(dipole) else np.zeros(3),
+            gyro_rate_body=take('gyro', self.gyro), q_eci_body_meas=take('star', self.star),
+            b_body_var=take('mag', self.field_var))
+
+    # ------------------------------------------------------------------ frame
+    def step(self, t_ns: int, msgs: Dict[str, Any], fresh: Fresh,
+             missing: List[str] = ()) -> Optional[AttitudeState]:
+        """One estimator step at elapsed sim time ``t_ns``; the estimate message, or None."""
+        t = t_ns / NS_PER_S
+        for topic in missing:
+            self.reject(f'stale input {topic} at t={t:g} s (timeout)')
+        inputs = self.inputs_for(t_ns, msgs, fresh)
+        self.last_ref = inputs.ref
+        dt = 0.0 if self._last_t is None else (t_ns - self._last_t) / NS_PER_S
+        self._last_t = t_ns
+        step = self.core.step(inputs, t, dt)
+        self.last_step = step
+        self.update_count += step.updates
+        for why in step.rejections:
+            self.reject(why)
+        if step.estimate is None:
+            return None
+        return self.estimate_msg(t_ns, inputs.ref, step)
+
+    def estimate_msg(self, t_ns: int, ref: Any, step: Any) -> AttitudeState:
+        """``adcs/attitude_estimate`` of a step."""
+        est = step.estimate
+        q_orbit_body = est.q_orbit_body
+        q_eci_body = att.multiply(ref.q_eci_orbit, q_orbit_body)
+        return make(AttitudeState,
+                    header=make(Header, stamp=self.clock.stamp(t_ns), frame_id='body'),
+                    q_eci_body=to_quat(q_eci_body), q_orbit_body=to_quat(q_orbit_body),
+                    omega_body_eci_body=to_vec3(est.omega_body_eci_body),
+                    omega_body_orbit_body=to_vec3(omega_orbit_from_eci(
+                        q_orbit_body, est.omega_body_eci_body, ref.omega0)),
+                    covariance=np.asarray(est.covariance, dtype=float).reshape(-1))
+
+    def diagnostics_msg(self, header: Any) -> FilterDiagnostics:
+        """``adcs/estimator/diagnostics`` of the last step (built only when someone reads it)."""
+        step = self.last_step
+        d = FilterDiagnostics()
+        d.header = header
+        d.algorithm = self.algorithm
+        d.innovation = list(step.innovation)
+        d.covariance_trace = float(step.covariance_trace)
+        d.update_count = self.update_count
+        d.rejected_count = self.rejected_count
+        d.last_rejection = self.last_rejection
+        return d
+
+
+def build_estimator(entry: Any, p: Dict[str, Any], own: Dict[str, Any],
+                    onboard_orbit: Dict[str, Any], onboard_field: Dict[str, Any], epoch: Any,
+                    seed: int, mounts: Any, clock: FrameClock,
+                    log: Log = silent) -> EstimatorComponent:
+    """The estimator of registry ``entry`` from its :data:`CONTEXT_PARAMS` values ``p`` and
+    its own parameter values ``own``, initialised; the onboard models from their sections."""
+    reference = make_onboard_reference(onboard_orbit, onboard_field, epoch)
+    ctx = {'inertia_kgm2': inertia_matrix(p['inertia_kgm2']), 'period_s': p['period_s'],
+           'epoch': epoch, 'seed': seed, 'reference': reference}
+    core = entry.build(own, ctx)
+    core.initialise(att.normalize(p['initial_q_orbit_body']),
+                    np.asarray(p['initial_omega_body_orbit_body'], dtype=float))
+    return EstimatorComponent(core, entry.name, reference,
+                              (p['min_field_T'], p['max_field_T']), mounts, clock, log)
