@@ -29,17 +29,14 @@ from __future__ import annotations
 import time
 from typing import Any, Dict, List, Optional, Tuple
 
-import numpy as np
-
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, ControllerStatus
 from adcs_msgs.srv import ListControllers, SwitchController
-from adcs_nodes.core.control import Command
-from adcs_nodes.core.lockstep import NS_PER_S
-from adcs_nodes.core.manager import AutoSequence, ControllerManagerCore
+from adcs_nodes.components.base import FrameClock
+from adcs_nodes.components.manager import MANAGER_PARAMS, ManagerComponent, manager_core
+from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.actuator_topics import ActuatorTopics, wheel_names_for
-from adcs_nodes.nodes.controller import command_msg, estimate_from_msg
-from adcs_nodes.nodes.convert import stamp_ns, vec3
+from adcs_nodes.nodes.adapter import node_log
 from adcs_nodes.nodes.lockstep_node import QOS_LATCHED
 from adcs_nodes.nodes.managed import ManagedLockstepNode
 
@@ -52,54 +49,19 @@ LIST_SERVICE = 'adcs/list_controllers'
 class ControllerManagerNode(ManagedLockstepNode):
     """Controller manager (see module docstring); a managed node (:mod:`.managed`)."""
 
-    #: Descriptions of this node's own parameters (``ros2 param describe``).
-    PARAM_DOCS = {
-        'controllers': 'controllers whose commands are forwarded',
-        'safe': 'safe-mode controller (fallback)',
-        'initial': 'controller active at start (empty: auto or safe)',
-        'period_s': 'manager period [s]',
-        'controller_period_s': 'period of the controller commands [s]',
-        'estimator_period_s': 'period of the watched estimate [s] (0: not watched)',
-        'schedule_t_s': 'scripted switch times [s]',
-        'schedule_controller': 'scripted switch targets',
-        'max_wheel_torque_Nm': 'wheel torque limits [N m] ([-1]: no wheels)',
-        'estimate_users': 'controllers that need the estimate (* all)',
-        'max_dipole_Am2': 'magnetorquer limits [A m^2]',
-        'max_torque_Nm': 'ideal body-torque limits [N m]',
-        'stale_after_s': 'a command older than this is stale [s]',
-        'wheel_names': 'wheel names (JointState order)',
-    }
-
     def __init__(self, name: str = 'controller_manager', **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
 
     def configure(self) -> None:
         """Parameters, manager core, endpoints and services (lifecycle configure)."""
-        self.names: List[str] = [n for n in self.param('controllers', ['bdot']) if n]
-        safe = str(self.param('safe', 'bdot'))
-        initial = str(self.param('initial', '')) or None
-        period_s = float(self.param('period_s', 2.0))
-        ctrl_period_s = float(self.param('controller_period_s', period_s))
-        est_period_s = float(self.param('estimator_period_s', 0.0))
-        sched_t = list(self.param('schedule_t_s', [-1.0]))
-        sched_name = list(self.param('schedule_controller', ['']))
-        if len(sched_t) != len(sched_name):
-            raise ValueError('schedule_t_s and schedule_controller differ in length')
-        schedule = [(float(t), str(n)) for t, n in zip(sched_t, sched_name) if n]
-        auto_cfg = self.section('auto', {}, merge=False)
-        auto = AutoSequence.from_dict(auto_cfg) if auto_cfg else None
-        wheel_limits = list(self.param('max_wheel_torque_Nm', [-1.0]))
-        users = [n for n in self.param('estimate_users', ['*']) if n]
-        stale_default = 1.5 * max(period_s, ctrl_period_s, est_period_s) if self.live else 0.0
-        self.core = ControllerManagerCore(
-            self.names, safe, initial=initial,
-            max_dipole_Am2=list(self.param('max_dipole_Am2', [40.0, 40.0, 40.0])),
-            max_wheel_torque=[] if wheel_limits == [-1.0] else wheel_limits,
-            max_torque=list(self.param('max_torque_Nm', [0.0, 0.0, 0.0])),
-            stale_after_s=float(self.param('stale_after_s', stale_default)),
-            schedule=schedule, auto=auto,
-            estimate_period_s=est_period_s if est_period_s > 0 else None,
-            estimate_users=None if users == ['*'] else users)
+        p = node_params.declare_all(self, MANAGER_PARAMS)
+        self.core = manager_core(p, self.section('auto', {}, merge=False), self.live)
+        self.names: List[str] = list(self.core.names)
+        period_s = float(p['period_s'])
+        ctrl_period_s = float(p['controller_period_s']) or period_s
+        est_period_s = float(p['estimator_period_s'])
+        wheel_limits = list(p['max_wheel_torque_Nm'])
+        self.component = ManagerComponent(self.core, FrameClock(self.epoch_ns), node_log(self))
         inputs: Dict[str, tuple] = {
             n: (ActuatorCommand, f'adcs/controllers/{n}/command', ctrl_period_s)
             for n in self.names}
@@ -107,17 +69,14 @@ class ControllerManagerNode(ManagedLockstepNode):
             inputs['_estimate'] = (AttitudeState, 'adcs/attitude_estimate', est_period_s)
         self.cmd_pub = self.publisher(ActuatorCommand, 'adcs/actuator_command')
         self.actuators = ActuatorTopics(    # standard per-actuator topics, for drivers
-            self, bool(self.param('max_dipole_Am2', [40.0, 40.0, 40.0])), wheel_names_for(
-                0 if wheel_limits == [-1.0] else len(wheel_limits),
-                self.param('wheel_names', [''])))
+            self, bool(p['max_dipole_Am2']), wheel_names_for(
+                0 if wheel_limits == [-1.0] else len(wheel_limits), p['wheel_names']))
         self.status_pub = self.publisher(ControllerStatus, 'adcs/controller_status',
                                          QOS_LATCHED)
         self.create_service(SwitchController, SWITCH_SERVICE, self.on_switch)
         self.create_service(ListControllers, LIST_SERVICE, self.on_list)
         self._last_status: Optional[Tuple] = None
         self._last_status_wall = 0.0
-        self._t_last: Optional[float] = None
-        self._fault_kind: List[str] = []
         self.lockstep_inputs(inputs, period_s, self.on_frame)
         self.start_handshake()
 
@@ -128,7 +87,7 @@ class ControllerManagerNode(ManagedLockstepNode):
     # ------------------------------------------------------------------ services
     def on_switch(self, request, response):
         """``adcs/switch_controller``: validate now, apply at the next frame boundary."""
-        ok, message = self.core.request_switch(request.name, self._t_last)
+        ok, message = self.core.request_switch(request.name, self.component.t_last)
         response.success = ok
         response.message = message
         response.active = self.core.active
@@ -163,28 +122,7 @@ class ControllerManagerNode(ManagedLockstepNode):
     # ------------------------------------------------------------------ frames
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Decide and publish the actuator command of frame ``t_ns``."""
-        t = t_ns / NS_PER_S
-        self._t_last = t
-        commands: Dict[str, Tuple[float, Optional[Command]]] = {}
-        for n in self.names:
-            m = msgs.get(n)
-            if m is None:
-                continue
-            commands[n] = (self.elapsed_ns(stamp_ns(m.header.stamp)) / NS_PER_S,
-                           Command(vec3(m.dipole_body), np.asarray(m.wheel_torque, float),
-                                   vec3(m.torque_body)))
-        est_msg = msgs.get('_estimate')
-        est_t = None if est_msg is None else \
-            self.elapsed_ns(stamp_ns(est_msg.header.stamp)) / NS_PER_S
-        cmd, status = self.core.step(t, commands, estimate_from_msg(est_msg), estimate_t=est_t)
-        fault_kind = status.get('fault', '').split(' ', 2)[:2]   # e.g. ['magnetic:', 'stale:']
-        if fault_kind != self._fault_kind:
-            if status.get('fault'):
-                self.get_logger().warning(f't={t:g} s: {status["fault"]} (logged once)')
-            else:
-                self.get_logger().info(f't={t:g} s: fault cleared')
-            self._fault_kind = fault_kind
-        out = command_msg(cmd, self.stamp(t_ns), status.get('source') or 'zero')
+        out, _ = self.component.step(t_ns, msgs)
         self.cmd_pub.publish(out)
         self.actuators.publish(out)
         self._publish_status()

@@ -56,12 +56,13 @@ class EstimatorNode(ManagedLockstepNode):
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
         self.add_ready_check(lambda: self.mounts.missing(p['expected_mounts']))
         self.tf_pub = TfPublisher(self)   # /tf: eci -> body_estimate
+        orbit = self.section('onboard_orbit', DEFAULT_ORBIT, merge=False)
+        field = self.section('onboard_field', DEFAULT_FIELD, merge=False)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
-        self.component = build_estimator(
-            self.entry, p, own, self.section('onboard_orbit', DEFAULT_ORBIT, merge=False),
-            self.section('onboard_field', DEFAULT_FIELD, merge=False), self.epoch, self.seed,
-            self.mounts, FrameClock(self.epoch_ns), log=node_log(self))
+        self.component = build_estimator(self.entry, p, own, orbit, field, self.epoch,
+                                         self.seed, self.mounts, FrameClock(self.epoch_ns),
+                                         log=node_log(self))
         self.core, self.reference = self.component.core, self.component.reference
         self.field_range = self.component.field_range
         topics = {
