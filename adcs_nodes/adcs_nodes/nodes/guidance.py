@@ -17,65 +17,18 @@ deterministic (a scripted profile is).
 """
 from __future__ import annotations
 
-import json
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Tuple
 
 import numpy as np
-from std_msgs.msg import Header
 
 from adcs_msgs.msg import AttitudeTarget
 from adcs_msgs.srv import SwitchController
-from adcs_nodes.core.guidance import FRAMES, SEGMENT_TYPES, TargetSample, guidance_from_params
-from adcs_nodes.core.guidance_profiles import profile_from_dicts
-from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.components.base import FrameClock
+from adcs_nodes.components.guidance import PARAMS, GuidanceComponent
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import to_quat, to_vec3
 from adcs_nodes.nodes.managed import ManagedLockstepNode
-from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.slew_action import SlewActionServer
-from adcs_nodes.registry import Param
-
-PARAMS = (
-    Param('period_s', 'float', 2.0, 's', 'publication period', positive=True, read_only=True),
-    Param('frame', 'str', 'orbit', '-', 'frame of the profile attitudes', choices=FRAMES,
-          read_only=True),
-    Param('profile_t_s', 'float[]', [0.0], 's', 'start time of each segment', min=0.0,
-          read_only=True),
-    Param('profile_type', 'str[]', ['hold'], '-', 'type of each segment: '
-          + ', '.join(SEGMENT_TYPES), read_only=True),
-    Param('profile_q_xyzw', 'float[]', [0.0, 0.0, 0.0, 1.0], '-', 'attitude of each segment '
-          '(4 values each, scalar last)', min=-1.0, max=1.0, read_only=True),
-    Param('profile_duration_s', 'float[]', [0.0], 's', 'slew duration of each segment',
-          min=0.0, read_only=True),
-    Param('profile_axis_body', 'float[]', [0.0, 0.0, 1.0], '-', 'tracking axis of each '
-          'segment (3 values each)', read_only=True),
-    Param('profile_amplitude_deg', 'float[]', [0.0], 'deg', 'tracking amplitude of each '
-          'segment', min=0.0, max=180.0, read_only=True),
-    Param('profile_period_s', 'float[]', [0.0], 's', 'tracking period of each segment',
-          min=0.0, read_only=True),
-    Param('controllers', 'str[]', [''], '-', 'controllers a slew goal may name (the run\'s)',
-          read_only=True),
-    Param('euler312_profile', 'str', '', '-', "paper 001 profile as JSON: a list of "
-          "{type: maneuver|hold|sine, start_s, end_s, ...} in LVLH 3-1-2 Euler degrees "
-          "(replaces the segments; '': none)", read_only=True),
-)
-
-
-class _Euler312:
-    """Adapter: a paper 001 :class:`Profile` with the quaternion guidance's ``at(t)``."""
-
-    def __init__(self, text: str) -> None:
-        try:
-            items = json.loads(text)
-        except ValueError as exc:
-            raise ValueError(f'euler312_profile is not JSON: {exc}') from None
-        self.profile = profile_from_dicts(items)
-
-    def at(self, t: float) -> TargetSample:
-        q, w, a, ttg, frame = self.profile.profile_at(t)
-        kind = 'maneuver' if ttg > 0 else 'hold'
-        return TargetSample(q, w, a, frame, ttg, kind)
 
 
 class GuidanceNode(ManagedLockstepNode):
@@ -89,15 +42,8 @@ class GuidanceNode(ManagedLockstepNode):
         p = node_params.declare_all(self, PARAMS)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
-        if p['euler312_profile']:
-            self.guidance = _Euler312(p['euler312_profile'])
-        else:
-            self.guidance = guidance_from_params(
-                p['profile_t_s'], p['profile_type'], p['profile_q_xyzw'],
-                p['profile_duration_s'], p['profile_axis_body'], p['profile_amplitude_deg'],
-                p['profile_period_s'], p['frame'])
+        self.component = GuidanceComponent(p, FrameClock(self.epoch_ns))
         self.pub = self.publisher(AttitudeTarget, 'adcs/attitude_target')
-        self.override: Optional[TargetSample] = None     # a slew goal's hold target
         names = [n for n in p['controllers'] if n]
         self.switch_client = self.create_client(SwitchController, 'adcs/switch_controller')
         self.slew = SlewActionServer(self, self.set_goal_target, self.request_switch,
@@ -107,9 +53,7 @@ class GuidanceNode(ManagedLockstepNode):
 
     def set_goal_target(self, q_xyzw: np.ndarray, frame: str) -> None:
         """Slew action: hold ``q_xyzw`` in ``frame`` from the next frame on."""
-        zero = np.zeros(3)
-        self.override = TargetSample(np.asarray(q_xyzw, dtype=float), zero, zero, frame, 0.0,
-                                     'slew_goal')
+        self.component.hold(q_xyzw, frame)
 
     def request_switch(self, name: str) -> Tuple[bool, str]:
         """Slew action: ask the manager to switch to ``name`` (answered asynchronously)."""
@@ -122,12 +66,7 @@ class GuidanceNode(ManagedLockstepNode):
 
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Publish the target of frame ``t_ns``."""
-        s = self.override or self.guidance.at(t_ns / NS_PER_S)
-        self.pub.publish(make(
-            AttitudeTarget, header=make(Header, stamp=self.stamp(t_ns), frame_id=s.frame),
-            q_ref_body=to_quat(s.q_ref_body), omega_body_ref_body=to_vec3(s.omega_body_ref_body),
-            omega_dot_body_ref_body=to_vec3(s.omega_dot_body_ref_body),
-            time_to_go_s=float(s.time_to_go_s), profile=s.profile))
+        self.pub.publish(self.component.step(t_ns))
 
 
 def main(args=None) -> int:

@@ -20,14 +20,9 @@ name)``.
 """
 from __future__ import annotations
 
-from typing import Optional
-
 from sensor_msgs.msg import Imu
 
-from adcs_msgs.msg import AttitudeState, Environment
-from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import all_finite, to_vec3, vec3
 from sim_node.nodes.sensor_node import SensorNode
 
 
@@ -36,24 +31,7 @@ class GyroNode(SensorNode):
 
     def __init__(self, name: str = 'gyro', **kwargs) -> None:
         super().__init__(name, 'gyro', Imu, **kwargs)
-        self.covariance = self.model.covariance.reshape(-1).tolist()
-        self._last_t_ns: Optional[int] = None
         self.start()
-
-    def sample(self, t_ns: int, state: AttitudeState, env: Environment) -> None:
-        """Measure the rate at sim time ``t_ns`` and publish it (see module)."""
-        omega = vec3(state.omega_body_eci_body)
-        if not all_finite(omega):
-            self.truth_ok(t_ns, 'omega_body_eci_body', omega)   # logs the warning
-            return
-        dt = 0.0 if self._last_t_ns is None else (t_ns - self._last_t_ns) / NS_PER_S
-        self._last_t_ns = t_ns
-        msg = self.header(Imu(), t_ns)
-        msg.angular_velocity = to_vec3(self.model.measure(omega, dt))
-        msg.angular_velocity_covariance = self.covariance
-        msg.orientation_covariance[0] = -1.0
-        msg.linear_acceleration_covariance[0] = -1.0
-        self.pub.publish(msg)
 
 
 def main(args=None) -> int:

@@ -17,41 +17,19 @@ pitch), ``bias_rad`` ([0, 0]), ``scale_factor_error`` ([0, 0]), ``fov_rad`` (30 
 """
 from __future__ import annotations
 
-
-import numpy as np
-
-from adcs_msgs.msg import AttitudeState, Environment, HorizonSensor as HorizonMsg
-from adcs_nodes.core import attitude as att
+from adcs_msgs.msg import HorizonSensor as HorizonMsg
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import quat, vec3
 from sim_node.nodes.sensor_node import SensorNode
 
 
 class HorizonSensorNode(SensorNode):
     """Publishes roll/pitch samples of the truth attitude (see module docstring)."""
 
+    invalid = property(lambda self: self.component.invalid)
+
     def __init__(self, name: str = 'horizon_sensor', **kwargs) -> None:
         super().__init__(name, 'horizon_sensor', HorizonMsg, **kwargs)
-        self.invalid = 0
         self.start()
-
-    def sample(self, t_ns: int, state: AttitudeState, env: Environment) -> None:
-        """Measure roll and pitch at sim time ``t_ns`` and publish them (see module)."""
-        q_eci_body, r_eci = quat(state.q_eci_body), vec3(env.r_eci)
-        if not self.truth_ok(t_ns, 'q_eci_body or r_eci', q_eci_body, r_eci):
-            return
-        zenith_body = att.to_matrix(q_eci_body).T @ (r_eci / np.linalg.norm(r_eci))
-        m = self.model.measure_zenith(zenith_body)
-        if not m.valid:
-            self.invalid += 1
-        var = self.model.variance
-        msg = self.header(HorizonMsg(), t_ns)
-        msg.roll = float(m.roll)
-        msg.pitch = float(m.pitch)
-        msg.roll_variance = float(var[0])
-        msg.pitch_variance = float(var[1])
-        msg.valid = bool(m.valid)
-        self.pub.publish(msg)
 
 
 def main(args=None) -> int:

@@ -17,42 +17,20 @@ Parameters (SI, radians; defaults: paper 000's noise and LSB, no other error):
 from __future__ import annotations
 
 
-import numpy as np
 from sensor_msgs.msg import MagneticField
 
-from adcs_msgs.msg import AttitudeState, Environment
-from adcs_nodes.core import attitude as att
-from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import quat, to_vec3, vec3
 from sim_node.nodes.sensor_node import SensorNode
 
 
 class MagnetometerNode(SensorNode):
     """Publishes magnetometer samples of the truth field (see module docstring)."""
 
+    dropouts = property(lambda self: self.component.dropouts)
+
     def __init__(self, name: str = 'magnetometer', **kwargs) -> None:
         super().__init__(name, 'magnetometer', MagneticField, **kwargs)
-        self.covariance = self.model.covariance.reshape(-1).tolist()
-        self.dropouts = 0
         self.start()
-
-    def sample(self, t_ns: int, state: AttitudeState, env: Environment) -> None:
-        """Measure the field at sim time ``t_ns`` and publish it (NaN on a dropout)."""
-        q_eci_body, b_eci = quat(state.q_eci_body), vec3(env.b_eci)
-        if not self.truth_ok(t_ns, 'q_eci_body or b_eci', q_eci_body, b_eci):
-            return
-        b_sensor = self.model.measure(att.to_matrix(q_eci_body).T @ b_eci)
-        if b_sensor is None:
-            # a lost sample is published as NaN (the ROS convention for "no data"), so the
-            # lockstep goes on and the estimator counts it as rejected instead of waiting
-            self.dropouts += 1
-            self.get_logger().debug(f't={t_ns / NS_PER_S:.3f} s: dropout ({self.dropouts})')
-            b_sensor = np.full(3, np.nan)
-        msg = self.header(MagneticField(), t_ns)
-        msg.magnetic_field = to_vec3(b_sensor)
-        msg.magnetic_field_covariance = self.covariance
-        self.pub.publish(msg)
 
 
 def main(args=None) -> int:

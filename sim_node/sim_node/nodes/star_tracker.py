@@ -20,9 +20,7 @@ from __future__ import annotations
 
 from sensor_msgs.msg import Imu
 
-from adcs_msgs.msg import AttitudeState, Environment
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import quat, to_quat
 from sim_node.nodes.sensor_node import SensorNode
 
 
@@ -31,20 +29,7 @@ class StarTrackerNode(SensorNode):
 
     def __init__(self, name: str = 'star_tracker', **kwargs) -> None:
         super().__init__(name, 'star_tracker', Imu, **kwargs)
-        self.covariance = self.model.covariance.reshape(-1).tolist()
         self.start()
-
-    def sample(self, t_ns: int, state: AttitudeState, env: Environment) -> None:
-        """Measure the attitude at sim time ``t_ns`` and publish it (see module)."""
-        q_eci_body = quat(state.q_eci_body)
-        if not self.truth_ok(t_ns, 'q_eci_body', q_eci_body):
-            return
-        msg = self.header(Imu(), t_ns)
-        msg.orientation = to_quat(self.model.measure(q_eci_body))
-        msg.orientation_covariance = self.covariance
-        msg.angular_velocity_covariance[0] = -1.0
-        msg.linear_acceleration_covariance[0] = -1.0
-        self.pub.publish(msg)
 
 
 def main(args=None) -> int:

@@ -1,0 +1,94 @@
+"""Guidance's frame step: the scenario's profile (or a slew goal's hold) at the frame time ->
+``adcs/attitude_target``.
+
+The profile is either quaternion segments (:mod:`adcs_nodes.core.guidance`: hold, slew, track)
+or, with ``euler312_profile`` (JSON text), paper 001's maneuvers, holds and sine tracking in
+its LVLH 3-1-2 Euler angles (:mod:`adcs_nodes.core.guidance_profiles`).
+"""
+from __future__ import annotations
+
+import json
+from typing import Any, Dict, Optional
+
+import numpy as np
+from std_msgs.msg import Header
+
+from adcs_msgs.msg import AttitudeTarget
+from adcs_nodes.components.base import FrameClock
+from adcs_nodes.core.guidance import FRAMES, SEGMENT_TYPES, TargetSample, guidance_from_params
+from adcs_nodes.core.guidance_profiles import profile_from_dicts
+from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.nodes.convert import to_quat, to_vec3
+from adcs_nodes.nodes.messages import make
+from adcs_nodes.registry import Param
+
+PARAMS = (
+    Param('period_s', 'float', 2.0, 's', 'publication period', positive=True, read_only=True),
+    Param('frame', 'str', 'orbit', '-', 'frame of the profile attitudes', choices=FRAMES,
+          read_only=True),
+    Param('profile_t_s', 'float[]', [0.0], 's', 'start time of each segment', min=0.0,
+          read_only=True),
+    Param('profile_type', 'str[]', ['hold'], '-', 'type of each segment: '
+          + ', '.join(SEGMENT_TYPES), read_only=True),
+    Param('profile_q_xyzw', 'float[]', [0.0, 0.0, 0.0, 1.0], '-', 'attitude of each segment '
+          '(4 values each, scalar last)', min=-1.0, max=1.0, read_only=True),
+    Param('profile_duration_s', 'float[]', [0.0], 's', 'slew duration of each segment',
+          min=0.0, read_only=True),
+    Param('profile_axis_body', 'float[]', [0.0, 0.0, 1.0], '-', 'tracking axis of each '
+          'segment (3 values each)', read_only=True),
+    Param('profile_amplitude_deg', 'float[]', [0.0], 'deg', 'tracking amplitude of each '
+          'segment', min=0.0, max=180.0, read_only=True),
+    Param('profile_period_s', 'float[]', [0.0], 's', 'tracking period of each segment',
+          min=0.0, read_only=True),
+    Param('controllers', 'str[]', [''], '-', 'controllers a slew goal may name (the run\'s)',
+          read_only=True),
+    Param('euler312_profile', 'str', '', '-', "paper 001 profile as JSON: a list of "
+          "{type: maneuver|hold|sine, start_s, end_s, ...} in LVLH 3-1-2 Euler degrees "
+          "(replaces the segments; '': none)", read_only=True),
+)
+
+
+class _Euler312:
+    """Adapter: a paper 001 :class:`Profile` with the quaternion guidance's ``at(t)``."""
+
+    def __init__(self, text: str) -> None:
+        try:
+            items = json.loads(text)
+        except ValueError as exc:
+            raise ValueError(f'euler312_profile is not JSON: {exc}') from None
+        self.profile = profile_from_dicts(items)
+
+    def at(self, t: float) -> TargetSample:
+        q, w, a, ttg, frame = self.profile.profile_at(t)
+        kind = 'maneuver' if ttg > 0 else 'hold'
+        return TargetSample(q, w, a, frame, ttg, kind)
+
+
+class GuidanceComponent:
+    """The target of each frame: the profile's, or a slew goal's hold (:meth:`hold`)."""
+
+    def __init__(self, p: Dict[str, Any], clock: FrameClock) -> None:
+        if p['euler312_profile']:
+            self.guidance = _Euler312(p['euler312_profile'])
+        else:
+            self.guidance = guidance_from_params(
+                p['profile_t_s'], p['profile_type'], p['profile_q_xyzw'],
+                p['profile_duration_s'], p['profile_axis_body'], p['profile_amplitude_deg'],
+                p['profile_period_s'], p['frame'])
+        self.clock = clock
+        self.override: Optional[TargetSample] = None     # a slew goal's hold target
+
+    def hold(self, q_xyzw: np.ndarray, frame: str) -> None:
+        """Hold ``q_xyzw`` in ``frame`` from the next frame on (a slew goal)."""
+        zero = np.zeros(3)
+        self.override = TargetSample(np.asarray(q_xyzw, dtype=float), zero, zero, frame, 0.0,
+                                     'slew_goal')
+
+    def step(self, t_ns: int) -> AttitudeTarget:
+        """The target message of frame ``t_ns``."""
+        s = self.override or self.guidance.at(t_ns / NS_PER_S)
+        return make(
+            AttitudeTarget, header=make(Header, stamp=self.clock.stamp(t_ns), frame_id=s.frame),
+            q_ref_body=to_quat(s.q_ref_body), omega_body_ref_body=to_vec3(s.omega_body_ref_body),
+            omega_dot_body_ref_body=to_vec3(s.omega_dot_body_ref_body),
+            time_to_go_s=float(s.time_to_go_s), profile=s.profile)
