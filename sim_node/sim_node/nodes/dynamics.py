@@ -29,27 +29,25 @@ from __future__ import annotations
 import json
 import os
 import time
-from typing import Any, List, Optional
+from typing import Any, List
 
-import numpy as np
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Header, String
+from std_msgs.msg import String
 
 from adcs_msgs.msg import (ActuatorCommand, AppendageState, AttitudeState, Environment,
                            LockstepStatus, WheelState)
-from adcs_nodes.core import attitude as att
-from adcs_nodes.core.lockstep import (ZERO, Act, Action, ClockMaster, derive_seed,
-                                      ns_to_seconds, seconds_to_ns)
+from adcs_nodes.components.base import FrameClock
+from adcs_nodes.core.lockstep import Act, Action, ClockMaster, ns_to_seconds, seconds_to_ns
 from adcs_nodes.nodes import publisher_guard, runtime
-from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
-from adcs_nodes.nodes.messages import make
-from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
+from adcs_nodes.nodes.adapter import node_log
+from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, vec3
 from adcs_nodes.nodes.lockstep_node import (MAX_LAG_FRAMES, QOS_DATA, QOS_READY,
                                             LockstepNode)
+from adcs_nodes.nodes.messages import make
+from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
+from sim_node.components.dynamics import DynamicsComponent
 from sim_node.models.dynamics import ActuatorCommand as Command
-from sim_node.models.dynamics import FrameEnvironment, SpacecraftState, propagate_environment
-from sim_node.models.spacecraft_config import (DEFAULT_INITIAL, DEFAULT_SPACECRAFT,
-                                               initial_state, spacecraft_from_config)
+from sim_node.models.spacecraft_config import DEFAULT_INITIAL, DEFAULT_SPACECRAFT
 
 QOS_CLOCK = QOS_DATA
 #: The recorder may lag no further than the lockstep nodes: what it has not received must
@@ -89,13 +87,12 @@ class DynamicsNode(LockstepNode):
             raise ValueError('command_period_s must be a multiple of frame_period_s')
         self.wait_for_nodes = [n for n in self.param('wait_for_nodes', ['']) if n]
         self.result_file = str(self.param('result_file', ''))
-        cfg = self.section('spacecraft', DEFAULT_SPACECRAFT)
-        self.spacecraft = spacecraft_from_config(
-            cfg, seed=derive_seed(self.seed, 'dynamics/disturbance'))
-        self.initial_cfg = self.section('initial', DEFAULT_INITIAL)
-        self.wheel_names = list(cfg.get('wheel_names', [])) or [
-            f'wheel{i}' for i in range(self.spacecraft.n_wheels)]
-        self.wheel_h0 = cfg.get('wheel_h0_Nms')
+        self.component = DynamicsComponent(
+            self.section('spacecraft', DEFAULT_SPACECRAFT),
+            self.section('initial', DEFAULT_INITIAL), self.seed, self.frame_ns, self.substeps,
+            FrameClock(self.epoch_ns), node_log(self))
+        self.spacecraft = self.component.spacecraft
+        self.wheel_names = self.component.wheel_names
 
         self.master = ClockMaster(
             self.frame_ns, self.duration_ns, cmd_ns, self.wait_for_nodes, self.timeout_s,
@@ -123,15 +120,6 @@ class DynamicsNode(LockstepNode):
                                  QOS_DATA)
         self.create_subscription(LockstepStatus, 'recorder/status', self.on_recorder, 10)
 
-        self.state: Optional[SpacecraftState] = None
-        self._last_q_orbit_body: Optional[np.ndarray] = None
-        self.last_cmd = self.spacecraft.zero_command()
-        self.rejected_commands = 0
-        self.applied_wheel_torque = np.zeros(self.spacecraft.n_wheels)
-        self.wheel_torque_limited = np.zeros(self.spacecraft.n_wheels, dtype=bool)
-        self.wheel_momentum_limited = np.zeros(self.spacecraft.n_wheels, dtype=bool)
-        self.torque_limited_frames = 0
-        self.momentum_limited_frames = 0
         self.started = False
         self.create_timer(min(0.05, self.timeout_s / 4.0), self.on_watchdog)
         self.start_timeout_s = float(self.param('start_timeout_s', 120.0))
@@ -225,69 +213,27 @@ class DynamicsNode(LockstepNode):
         self._run(self.master.on_command(t_ns, self.to_command(msg), time.monotonic()))
 
     def to_command(self, msg: ActuatorCommand) -> Command:
-        """Message -> model command; NaN or a wrong wheel count -> zero command, logged."""
-        n = self.spacecraft.n_wheels
-        wheel = np.asarray(msg.wheel_torque, dtype=float)
-        if wheel.size == 0:
-            wheel = np.zeros(n)
-        dipole, torque = vec3(msg.dipole_body), vec3(msg.torque_body)
-        if wheel.size != n or not all_finite(dipole, torque, wheel):
-            self.rejected_commands += 1
-            self.get_logger().warning(
-                f'rejected actuator command from {msg.source!r} (non-finite or '
-                f'{wheel.size} wheel torques for {n} wheels): using zero command')
-            return self.spacecraft.zero_command()
-        return Command(dipole_body=dipole, wheel_torque=wheel, torque_body=torque)
+        """Message -> model command (the component's: a malformed one is a zero command)."""
+        return self.component.to_command(msg)
 
     def step_frame(self, t: int, env_msg: Environment, cmd: Any) -> None:
-        """Zero-order-hold the command and integrate from t_k to t_k+1.
-
-        ``cmd``: a model command, :data:`~adcs_nodes.core.lockstep.ZERO` (timeout or dead
-        producer) or ``None`` (no command due: hold the previous one).
-        """
-        if cmd is ZERO:
-            self.last_cmd = self.spacecraft.zero_command()
-        elif cmd is not None:
-            self.last_cmd = cmd
-        env = FrameEnvironment(r_eci=vec3(env_msg.r_eci), v_eci=vec3(env_msg.v_eci),
-                               b_eci=vec3(env_msg.b_eci), b_dot_eci=vec3(env_msg.b_dot_eci))
-        # environment stamped earlier (timeout, real-time mode): carry it along its orbit and
-        # field line; such a sample is no base for the model's in-frame field cubic (E8)
-        dt_env = ns_to_seconds(t - self.elapsed_ns(stamp_ns(env_msg.header.stamp)))
-        if dt_env:
-            env = propagate_environment(env, dt_env, self.spacecraft.mu)
-            self.spacecraft.reset_field_history()
-        self.state, self.applied = self.spacecraft.step(
-            self.state, ns_to_seconds(t), ns_to_seconds(self.frame_ns), env, self.last_cmd,
-            self.substeps)
-        if dt_env:
-            self.spacecraft.reset_field_history()
-        self.applied_wheel_torque = self.applied.get('wheel_torque', self.applied_wheel_torque)
-        if 'momentum_limited' in self.applied:
-            self._wheel_status(self.applied['torque_limited'], self.applied['momentum_limited'])
+        """Zero-order-hold the command and integrate from t_k to t_k+1 (the component's)."""
+        self.component.step(t, env_msg, cmd)
         self.frames += 1
 
-    def _wheel_status(self, torque_limited: np.ndarray, momentum_limited: np.ndarray) -> None:
-        """Keep the wheel driver status of the last frame; log momentum-limit transitions."""
-        for i in np.flatnonzero(momentum_limited != self.wheel_momentum_limited):
-            self.get_logger().info(
-                f'{self.wheel_names[i]}: torque cut at the momentum limit' if momentum_limited[i]
-                else f'{self.wheel_names[i]}: off the momentum limit')
-        self.wheel_torque_limited = np.asarray(torque_limited, dtype=bool)
-        self.wheel_momentum_limited = np.asarray(momentum_limited, dtype=bool)
-        self.torque_limited_frames += int(self.wheel_torque_limited.any())
-        self.momentum_limited_frames += int(self.wheel_momentum_limited.any())
+    @property
+    def state(self):
+        """The spacecraft state (None before frame 0)."""
+        return self.component.state
+
+    @property
+    def rejected_commands(self) -> int:
+        """Malformed commands replaced by a zero command."""
+        return self.component.rejected_commands
 
     def diagnostic_values(self) -> dict:
         """Wheel driver status for ``/diagnostics`` (wheels only)."""
-        if not self.spacecraft.n_wheels:
-            return {}
-        names = np.asarray(self.wheel_names, dtype=object)
-        return {'wheels_torque_limited': ', '.join(names[self.wheel_torque_limited]) or 'none',
-                'wheels_momentum_limited':
-                    ', '.join(names[self.wheel_momentum_limited]) or 'none',
-                'torque_limited_frames': self.torque_limited_frames,
-                'momentum_limited_frames': self.momentum_limited_frames}
+        return self.component.wheel_diagnostics()
 
     def on_watchdog(self) -> None:
         """Wall-clock timeout of the current wait: count a missed frame and go on."""
@@ -316,52 +262,16 @@ class DynamicsNode(LockstepNode):
     # ------------------------------------------------------------------ outputs
     def publish_state(self, env_msg: Environment) -> None:
         """Phase B: publish truth state and wheels of frame k (initialises at frame 0)."""
-        q_eci_orbit = quat(env_msg.q_eci_orbit)
-        omega_orbit_eci_eci = vec3(env_msg.omega_orbit_eci_eci)
-        if self.state is None:
-            self.state = initial_state(self.initial_cfg, q_eci_orbit, omega_orbit_eci_eci,
-                                       self.spacecraft, self.wheel_h0)
-        st = self.state
         self.sim_t_ns = self.t_ns
-        r_body_eci = att.to_matrix(st.q_eci_body).T
-        q_orbit_body = att.multiply(att.conjugate(q_eci_orbit), st.q_eci_body)
-        if self._last_q_orbit_body is not None and q_orbit_body @ self._last_q_orbit_body < 0:
-            q_orbit_body = -q_orbit_body     # keep the published sign continuous in time
-        self._last_q_orbit_body = q_orbit_body
-        msg = make(AttitudeState, header=make(Header, stamp=self.stamp(self.t_ns),
-                                              frame_id='body'),
-                   q_eci_body=to_quat(st.q_eci_body), q_orbit_body=to_quat(q_orbit_body),
-                   omega_body_eci_body=to_vec3(st.omega_body_eci_body),
-                   omega_body_orbit_body=to_vec3(st.omega_body_eci_body
-                                                 - r_body_eci @ omega_orbit_eci_eci),
-                   covariance=np.zeros(36))     # truth: no covariance
+        msg = self.component.state_msg(self.t_ns, env_msg)
         self.state_pub.publish(msg)
         if self.tf_pub.wanted():     # /tf, sim/wheels, sim/appendages: built only when read
             self.tf_pub.send(truth_transforms(msg.header.stamp, vec3(env_msg.r_eci),
-                                              q_eci_orbit, q_orbit_body))
+                                              quat(env_msg.q_eci_orbit), quat(msg.q_orbit_body)))
         if self.wheels_pub.get_subscription_count() > 0:
-            self._publish_wheels(msg.header, st)
+            self.wheels_pub.publish(self.component.wheels_msg(msg.header))
         if self.appendages_pub is not None and self.appendages_pub.get_subscription_count() > 0:
-            a = AppendageState()
-            a.header = msg.header
-            a.eta = np.asarray(st.eta, dtype=float).tolist()
-            a.eta_dot = np.asarray(st.eta_dot, dtype=float).tolist()
-            a.frequency_hz = self.spacecraft.flexible.frequencies_hz.tolist()
-            self.appendages_pub.publish(a)
-
-    def _publish_wheels(self, header, st: SpacecraftState) -> None:
-        """``sim/wheels`` of frame k (momentum, speed, applied torque)."""
-        w = WheelState()
-        w.header = header
-        w.names = self.wheel_names
-        h = np.asarray(st.h_wheels, dtype=float)
-        w.momentum = h.tolist()
-        wheels = self.spacecraft.wheels
-        if wheels is not None:
-            w.speed = wheels.speed(h, st.omega_body_eci_body).tolist()
-            w.torque = np.asarray(self.applied_wheel_torque, dtype=float).tolist()
-            w.h_wheels_body = to_vec3(wheels.h_body(h))
-        self.wheels_pub.publish(w)
+            self.appendages_pub.publish(self.component.appendages_msg(msg.header))
 
     def finish(self) -> None:
         """End of the scenario: report and let the runtime stop the process."""

@@ -14,25 +14,16 @@ parameters ``orbit.*`` and ``field.*`` (same keys as the scenario YAML sections)
 """
 from __future__ import annotations
 
-from datetime import timedelta
-
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Header
 
 from adcs_msgs.msg import Environment
-from adcs_nodes.core.lockstep import ns_to_seconds
+from adcs_nodes.components.base import FrameClock
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import quat, stamp_ns, to_quat, to_vec3
+from adcs_nodes.nodes.convert import quat, stamp_ns
 from adcs_nodes.nodes.lockstep_node import LockstepNode
-from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.tf import TfPublisher, earth_transforms
-from adcs_nodes.core.geomag import make_field
-from adcs_nodes.core.orbit import make_orbit, q_eci_ecef
-
-#: Defaults when run alone: paper 000's 690 km, 98 deg circular orbit and a tilted dipole.
-DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
-                 'raan_deg': 0.0, 'arg_latitude0_deg': 0.0}
-DEFAULT_FIELD = {'model': 'dipole'}
+from sim_node.components.environment import (  # noqa: F401 (re-exported)
+    DEFAULT_FIELD, DEFAULT_ORBIT, EnvironmentComponent)
 
 
 class EnvironmentNode(LockstepNode):
@@ -42,8 +33,11 @@ class EnvironmentNode(LockstepNode):
 
     def __init__(self, name: str = 'environment', **kwargs) -> None:
         super().__init__(name, **kwargs)
-        self.orbit = make_orbit(self.section('orbit', DEFAULT_ORBIT, merge=False), self.epoch)
-        self.field = make_field(self.section('field', DEFAULT_FIELD, merge=False), self.epoch)
+        self.component = EnvironmentComponent(
+            self.section('orbit', DEFAULT_ORBIT, merge=False),
+            self.section('field', DEFAULT_FIELD, merge=False), self.epoch,
+            FrameClock(self.epoch_ns))
+        self.orbit, self.field = self.component.orbit, self.component.field
         self.pub = self.publisher(Environment, 'sim/environment')
         self.tf_pub = TfPublisher(self)            # /tf: eci -> ecef
         self.subscription(Clock, '/clock', self.on_clock)
@@ -52,18 +46,8 @@ class EnvironmentNode(LockstepNode):
         self.start_handshake()
 
     def compute(self, t_ns: int) -> Environment:
-        """Environment message for elapsed sim time ``t_ns``."""
-        t = ns_to_seconds(t_ns)
-        st = self.orbit.state(t)
-        b_eci, b_dot_eci = self.field.field_and_rate(self.orbit, t)
-        return make(Environment, header=make(Header, stamp=self.stamp(t_ns), frame_id='eci'),
-                    r_eci=to_vec3(st.r_eci), v_eci=to_vec3(st.v_eci),
-                    q_eci_orbit=to_quat(st.q_eci_orbit),
-                    omega_orbit_eci_eci=to_vec3(st.omega_orbit_eci_eci),
-                    orbit_rate=float(st.orbit_rate),
-                    argument_of_latitude=float(st.argument_of_latitude),
-                    b_eci=to_vec3(b_eci), b_dot_eci=to_vec3(b_dot_eci),
-                    q_eci_ecef=to_quat(q_eci_ecef(self.epoch + timedelta(seconds=t))))
+        """Environment message for elapsed sim time ``t_ns`` (the component's)."""
+        return self.component.step(t_ns)
 
     def on_clock(self, msg: Clock) -> None:
         """One frame: publish for the clock's time unless that was done ahead, then (lockstep)

@@ -1,0 +1,182 @@
+"""The dynamics' frame step: the truth of frame k (``sim/state``, ``sim/wheels``,
+``sim/appendages``) and the integration from t_k to t_k+1 with the held command.
+
+The equations of motion are :mod:`sim_node.models.dynamics` (rigid body, wheels, flexible
+modes and the orbit in one compiled RK4 kernel); here: the initial state from the first
+environment, the message edge, a malformed command made safe (zero), the environment carried
+along its orbit when it is stamped earlier than the frame, and the wheel driver status.
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+from std_msgs.msg import Header
+
+from adcs_msgs.msg import AppendageState, AttitudeState, WheelState
+from adcs_nodes.components.base import FrameClock, Log, silent
+from adcs_nodes.core import attitude as att
+from adcs_nodes.core.lockstep import ZERO, derive_seed, ns_to_seconds
+from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
+from adcs_nodes.nodes.messages import make
+from sim_node.models.dynamics import ActuatorCommand as Command
+from sim_node.models.dynamics import FrameEnvironment, SpacecraftState, propagate_environment
+from sim_node.models.spacecraft_config import initial_state, spacecraft_from_config
+
+
+class DynamicsComponent:
+    """The spacecraft's motion (see module docstring).
+
+    Parameters
+    ----------
+    spacecraft_cfg, initial_cfg : dict
+        The ``spacecraft.*`` and ``initial.*`` sections (scenario keys).
+    seed : int
+        The scenario seed (the disturbance stream is ``derive_seed(seed,
+        'dynamics/disturbance')``).
+    frame_ns, substeps : int
+        Frame length and RK4 substeps per frame.
+    clock : FrameClock
+    log : Log
+    """
+
+    def __init__(self, spacecraft_cfg: Dict[str, Any], initial_cfg: Dict[str, Any],
+                 seed: int, frame_ns: int, substeps: int, clock: FrameClock,
+                 log: Log = silent) -> None:
+        if substeps < 1:
+            raise ValueError('substeps must be >= 1')
+        self.spacecraft = spacecraft_from_config(
+            spacecraft_cfg, seed=derive_seed(seed, 'dynamics/disturbance'))
+        self.initial_cfg = initial_cfg
+        self.wheel_names = list(spacecraft_cfg.get('wheel_names', [])) or [
+            f'wheel{i}' for i in range(self.spacecraft.n_wheels)]
+        self.wheel_h0 = spacecraft_cfg.get('wheel_h0_Nms')
+        self.frame_ns = int(frame_ns)
+        self.substeps = int(substeps)
+        self.clock = clock
+        self.log = log
+        self.state: Optional[SpacecraftState] = None
+        self._last_q_orbit_body: Optional[np.ndarray] = None
+        self.last_cmd = self.spacecraft.zero_command()
+        self.applied: Dict[str, Any] = {}
+        self.rejected_commands = 0
+        n = self.spacecraft.n_wheels
+        self.applied_wheel_torque = np.zeros(n)
+        self.wheel_torque_limited = np.zeros(n, dtype=bool)
+        self.wheel_momentum_limited = np.zeros(n, dtype=bool)
+        self.torque_limited_frames = 0
+        self.momentum_limited_frames = 0
+
+    # ------------------------------------------------------------------ commands
+    def to_command(self, msg: Any) -> Command:
+        """Message -> model command; NaN or a wrong wheel count -> zero command, logged."""
+        n = self.spacecraft.n_wheels
+        wheel = np.asarray(msg.wheel_torque, dtype=float)
+        if wheel.size == 0:
+            wheel = np.zeros(n)
+        dipole, torque = vec3(msg.dipole_body), vec3(msg.torque_body)
+        if wheel.size != n or not all_finite(dipole, torque, wheel):
+            self.rejected_commands += 1
+            self.log('warning', f'rejected actuator command from {msg.source!r} (non-finite '
+                     f'or {wheel.size} wheel torques for {n} wheels): using zero command')
+            return self.spacecraft.zero_command()
+        return Command(dipole_body=dipole, wheel_torque=wheel, torque_body=torque)
+
+    # ------------------------------------------------------------------ truth of frame k
+    def state_msg(self, t_ns: int, env_msg: Any) -> AttitudeState:
+        """``sim/state`` of frame ``t_ns`` (the state is initialised at the first frame)."""
+        q_eci_orbit = quat(env_msg.q_eci_orbit)
+        omega_orbit_eci_eci = vec3(env_msg.omega_orbit_eci_eci)
+        if self.state is None:
+            self.state = initial_state(self.initial_cfg, q_eci_orbit, omega_orbit_eci_eci,
+                                       self.spacecraft, self.wheel_h0)
+        st = self.state
+        r_body_eci = att.to_matrix(st.q_eci_body).T
+        q_orbit_body = att.multiply(att.conjugate(q_eci_orbit), st.q_eci_body)
+        if self._last_q_orbit_body is not None and q_orbit_body @ self._last_q_orbit_body < 0:
+            q_orbit_body = -q_orbit_body     # keep the published sign continuous in time
+        self._last_q_orbit_body = q_orbit_body
+        return make(AttitudeState, header=make(Header, stamp=self.clock.stamp(t_ns),
+                                               frame_id='body'),
+                    q_eci_body=to_quat(st.q_eci_body), q_orbit_body=to_quat(q_orbit_body),
+                    omega_body_eci_body=to_vec3(st.omega_body_eci_body),
+                    omega_body_orbit_body=to_vec3(st.omega_body_eci_body
+                                                  - r_body_eci @ omega_orbit_eci_eci),
+                    covariance=np.zeros(36))     # truth: no covariance
+
+    def wheels_msg(self, header: Any) -> WheelState:
+        """``sim/wheels`` of the current state (momentum, speed, applied torque)."""
+        st = self.state
+        w = WheelState()
+        w.header = header
+        w.names = self.wheel_names
+        h = np.asarray(st.h_wheels, dtype=float)
+        w.momentum = h.tolist()
+        wheels = self.spacecraft.wheels
+        if wheels is not None:
+            w.speed = wheels.speed(h, st.omega_body_eci_body).tolist()
+            w.torque = np.asarray(self.applied_wheel_torque, dtype=float).tolist()
+            w.h_wheels_body = to_vec3(wheels.h_body(h))
+        return w
+
+    def appendages_msg(self, header: Any) -> Optional[AppendageState]:
+        """``sim/appendages`` (modal coordinates) of a flexible spacecraft, else None."""
+        if not self.spacecraft.n_modes:
+            return None
+        st = self.state
+        a = AppendageState()
+        a.header = header
+        a.eta = np.asarray(st.eta, dtype=float).tolist()
+        a.eta_dot = np.asarray(st.eta_dot, dtype=float).tolist()
+        a.frequency_hz = self.spacecraft.flexible.frequencies_hz.tolist()
+        return a
+
+    # ------------------------------------------------------------------ t_k -> t_k+1
+    def step(self, t_ns: int, env_msg: Any, cmd: Any) -> None:
+        """Zero-order-hold the command and integrate from t_k to t_k+1.
+
+        ``cmd``: a model command, :data:`~adcs_nodes.core.lockstep.ZERO` (timeout or dead
+        producer) or ``None`` (no command due: hold the previous one).
+        """
+        if cmd is ZERO:
+            self.last_cmd = self.spacecraft.zero_command()
+        elif cmd is not None:
+            self.last_cmd = cmd
+        env = FrameEnvironment(r_eci=vec3(env_msg.r_eci), v_eci=vec3(env_msg.v_eci),
+                               b_eci=vec3(env_msg.b_eci), b_dot_eci=vec3(env_msg.b_dot_eci))
+        # environment stamped earlier (timeout, real-time mode): carry it along its orbit and
+        # field line; such a sample is no base for the model's in-frame field cubic (E8)
+        dt_env = ns_to_seconds(t_ns - self.clock.elapsed_ns(stamp_ns(env_msg.header.stamp)))
+        if dt_env:
+            env = propagate_environment(env, dt_env, self.spacecraft.mu)
+            self.spacecraft.reset_field_history()
+        self.state, self.applied = self.spacecraft.step(
+            self.state, ns_to_seconds(t_ns), ns_to_seconds(self.frame_ns), env, self.last_cmd,
+            self.substeps)
+        if dt_env:
+            self.spacecraft.reset_field_history()
+        self.applied_wheel_torque = self.applied.get('wheel_torque', self.applied_wheel_torque)
+        if 'momentum_limited' in self.applied:
+            self._wheel_status(self.applied['torque_limited'], self.applied['momentum_limited'])
+
+    def _wheel_status(self, torque_limited: np.ndarray, momentum_limited: np.ndarray) -> None:
+        """Keep the wheel driver status of the last frame; log momentum-limit transitions."""
+        for i in np.flatnonzero(momentum_limited != self.wheel_momentum_limited):
+            self.log('info', f'{self.wheel_names[i]}: torque cut at the momentum limit'
+                     if momentum_limited[i] else f'{self.wheel_names[i]}: off the momentum limit')
+        self.wheel_torque_limited = np.asarray(torque_limited, dtype=bool)
+        self.wheel_momentum_limited = np.asarray(momentum_limited, dtype=bool)
+        self.torque_limited_frames += int(self.wheel_torque_limited.any())
+        self.momentum_limited_frames += int(self.wheel_momentum_limited.any())
+
+    def wheel_diagnostics(self) -> Dict[str, Any]:
+        """Wheel driver status for ``/diagnostics`` (wheels only)."""
+        if not self.spacecraft.n_wheels:
+            return {}
+        names = np.asarray(self.wheel_names, dtype=object)
+        limited: List[str] = list(names[self.wheel_torque_limited])
+        return {'wheels_torque_limited': ', '.join(limited) or 'none',
+                'wheels_momentum_limited':
+                    ', '.join(names[self.wheel_momentum_limited]) or 'none',
+                'torque_limited_frames': self.torque_limited_frames,
+                'momentum_limited_frames': self.momentum_limited_frames}
