@@ -3,12 +3,17 @@ callback, and the mount table of the sensors (``/tf_static`` in a graph, the sce
 FrameLoop)."""
 from __future__ import annotations
 
-from typing import Callable, Dict, Optional, Sequence
+from datetime import datetime, timezone
+from typing import Any, Callable, Dict, Optional, Sequence
 
 import numpy as np
 
 from adcs_nodes.core import attitude as att
+from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes.convert import to_stamp
+
+#: Epoch of a node started without one (ISO-8601 UTC).
+DEFAULT_EPOCH = '2026-01-01T00:00:00Z'
 
 #: ``log(level, text)`` with level ``'debug' | 'info' | 'warning' | 'error'``.
 Log = Callable[[str, str], None]
@@ -16,6 +21,23 @@ Log = Callable[[str, str], None]
 
 def silent(level: str, text: str) -> None:
     """A log that drops everything (a component built without a node)."""
+
+
+def parse_epoch(text: str) -> datetime:
+    """ISO-8601 UTC text (``2026-01-01T00:00:00Z``) -> aware ``datetime``; ValueError if bad."""
+    try:
+        dt = datetime.fromisoformat(str(text).replace('Z', '+00:00'))
+    except ValueError as exc:
+        raise ValueError(f'epoch {text!r} is not an ISO-8601 date-time') from exc
+    if dt.tzinfo is None:
+        dt = dt.replace(tzinfo=timezone.utc)
+    return dt.astimezone(timezone.utc)
+
+
+def epoch_to_ns(epoch: datetime) -> int:
+    """Aware datetime -> integer ns since the Unix epoch (exact to the microsecond)."""
+    delta = epoch - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    return (delta.days * 86400 + delta.seconds) * NS_PER_S + delta.microseconds * 1000
 
 
 class FrameClock:
@@ -74,3 +96,35 @@ def covariance_to_body(covariance: Sequence[float],
         return None
     r = att.to_matrix(att.normalize(np.asarray(q_body_sensor, dtype=float)))
     return r @ c @ r.T
+
+
+# ---------------------------------------------------------------------- flat parameters
+def param_value(spec: Any, params: Dict[str, Any]) -> Any:
+    """The value of registry parameter ``spec`` in the flat node parameters ``params``, as the
+    node declares it (:func:`adcs_nodes.nodes.params.declare`): the given value, integers
+    promoted to floats where a float is due, validated; else the default."""
+    if spec.name not in params or params[spec.name] is None:
+        return list(spec.default) if spec.type.endswith('[]') else spec.default
+    given = params[spec.name]
+    if spec.type == 'float' and isinstance(given, int) and not isinstance(given, bool):
+        given = float(given)
+    if spec.type == 'float[]' and isinstance(given, (list, tuple)):
+        given = [float(v) if isinstance(v, int) and not isinstance(v, bool) else v
+                 for v in given]
+    return spec.validate(list(given) if isinstance(given, tuple) else given)
+
+
+def param_values(specs: Sequence[Any], params: Dict[str, Any]) -> Dict[str, Any]:
+    """``{name: value}`` of every spec (:func:`param_value`)."""
+    return {s.name: param_value(s, params) for s in specs}
+
+
+def section(params: Dict[str, Any], prefix: str, defaults: Dict[str, Any],
+            merge: bool = True) -> Dict[str, Any]:
+    """The ``prefix.*`` keys of the flat parameters as a dict, as a node's ``section`` reads
+    them: merged over ``defaults``, or (``merge=False``) ``defaults`` only when none is given."""
+    n = len(prefix) + 1
+    given = {k[n:]: v for k, v in params.items() if k.startswith(prefix + '.')}
+    if merge:
+        return {**defaults, **given}
+    return given if given else dict(defaults)

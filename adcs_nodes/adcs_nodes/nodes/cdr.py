@@ -364,8 +364,14 @@ def codec(msg_type: type):
     return got
 
 
+def deserialize_message(data: bytes, msg_type: type) -> Any:
+    """rclpy's deserialiser, imported on first use (a big-endian payload only), so encoding
+    needs no rclpy (the plain engine's bags)."""
+    from rclpy.serialization import deserialize_message as rclpy_deserialize
+    return rclpy_deserialize(data, msg_type)
+
+
 def _generate(msg_type: type) -> Codec:
-    from rclpy.serialization import deserialize_message
     g = _Gen()
     enc, dec = g.body(msg_type)
     g.env['deserialize_message'] = deserialize_message

@@ -36,6 +36,8 @@ from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typest
 from rosbags.typesys.store import Typestore
 
 ADCS_PACKAGE = 'adcs_msgs'
+#: rosbag2 metadata version of the bags the recorder and the plain engine write.
+BAG_VERSION = 8
 
 #: Types whose content depends on the wall clock (``wall_time``, per-second publication), so
 #: two runs of the same deterministic simulation legitimately differ in them.
