@@ -410,8 +410,9 @@ class BagSink:
             msgtype = topic_type(topic)
             if not self._ensure_type(self._store, msgtype):
                 raise EngineError(f'no .msg definition found for {msgtype}')
+            name = topic if topic.startswith('/') else '/' + topic    # resolved, as recorded
             got = self._conns[topic] = (
-                self._writer.add_connection(topic, msgtype, typestore=self._store),
+                self._writer.add_connection(name, msgtype, typestore=self._store),
                 codec(type(msg)))
         return got
 
@@ -440,3 +441,76 @@ class BagSink:
         if self._writer is not None:
             self._writer.close()
             self._writer = None
+
+
+# ---------------------------------------------------------------------- adcs run --engine plain
+def run_plain(sc: Dict[str, Any], duration_s: Optional[float] = None,
+              record: Optional[str] = None, progress: bool = True,
+              out=None) -> Any:
+    """``adcs run SCENARIO --engine plain``: the FrameLoop to the end, the bag if asked.
+
+    Returns a :class:`adcs_nodes.tools.launcher.RunResult`: exit code 0, 3 (degraded: the
+    manager could not forward the active controller in some frames) or 130 (Ctrl-C: the bag
+    keeps every frame run so far, closed properly), and 2 when the bag cannot be written (disk
+    full: the frames written so far are kept).
+    """
+    import signal
+    import sys
+    import time
+
+    import yaml
+
+    from adcs_nodes.tools.launcher import EXIT_DEGRADED, RunResult
+    out = out or sys.stderr
+    loop = FrameLoop.from_scenario(sc, duration_s)
+    duration = loop.duration_ns / 1e9
+    sink = None
+    if record:
+        if os.path.exists(record):
+            raise EngineError(f'the bag {record} exists already (give a new directory)')
+        sink = BagSink(record).bind(loop)
+        effective = {k: v for k, v in sc.items() if not k.startswith('_')}
+        effective['duration_s'] = duration
+        with open(os.path.join(record, 'scenario.yaml'), 'w') as fh:
+            fh.write(f'# effective scenario of this bag (from {sc.get("_path", "?")})\n')
+            yaml.safe_dump(effective, fh, sort_keys=False)
+    stop = []
+    old = signal.signal(signal.SIGINT, lambda *_: stop.append(True))
+    t0, cpu0, last = time.monotonic(), time.process_time(), 0.0
+    code, message = 0, 'done'
+    try:
+        for frame in loop.run():
+            if sink is not None:
+                try:
+                    sink.write(frame)
+                except OSError as exc:
+                    code, message = 2, f'the bag could not be written: {exc.strerror or exc}'
+                    break
+            now = time.monotonic()
+            if progress and now - last > 0.5:
+                last = now
+                print(f'\r[adcs] plain: {frame.t_ns / 1e9:9.0f} / {duration:g} s sim',
+                      end='', file=out, flush=True)
+            if stop:
+                code, message = 130, 'interrupted (Ctrl-C): the bag keeps every frame run'
+                break
+    finally:
+        signal.signal(signal.SIGINT, old)
+        if sink is not None:
+            try:
+                sink.close()
+            except OSError as exc:
+                code, message = 2, f'the bag could not be closed: {exc.strerror or exc}'
+    if progress:
+        print('', file=out)
+    wall = time.monotonic() - t0
+    manager = getattr(loop, 'manager', None)
+    st = manager.core.status() if manager is not None else {}
+    if code == 0 and st.get('missed_frames', 0) > 0:
+        code = EXIT_DEGRADED
+        message = (f'done, DEGRADED: the controller manager could not forward the active '
+                   f'controller in {st["missed_frames"]} frames (last fault: '
+                   f'{st.get("last_fault") or "?"})')
+    message += f' (plain engine: {time.process_time() - cpu0:.2f} s CPU)'
+    return RunResult(code, loop.t_ns / 1e9 if not loop.done else duration, wall, loop.k,
+                     0, record, '', message, loop.k / wall if wall > 0 else 0.0)

@@ -2,10 +2,11 @@
 
 Commands
 --------
-``adcs run SCENARIO [--record BAG] [--duration S] [--real-time [--rate F]] [--compose]
-[--report]``
-    Validate the scenario, start its nodes (one process each, or composed), show progress,
-    stop everything cleanly at the end, on Ctrl-C or when a node dies.
+``adcs run SCENARIO [--record BAG] [--duration S] [--real-time [--rate F]]
+[--engine plain|composed|graph] [--report]``
+    Validate the scenario, start its nodes (one process each, all in one process, or the
+    plain FrameLoop without ROS), show progress, stop everything cleanly at the end, on
+    Ctrl-C or when a node dies.
 ``adcs switch NAME [--run PID]`` / ``adcs status [--run PID]``
     Switch the active controller of a graph started by ``adcs run``, or show its controllers
     and lockstep health (missed frames per node).
@@ -88,17 +89,31 @@ def _default_scenario_dir() -> str:
 
 def cmd_run(args) -> int:
     from adcs_nodes.tools.launcher import LaunchError, Launcher
+    engine = args.engine or ('composed' if args.compose else 'graph')
     try:
         sc = load_scenario(args.scenario)
+        if args.compose and engine != 'composed':
+            raise LaunchError(f'--compose means --engine composed, not {engine}')
         if args.rate is not None and not args.real_time:
             raise LaunchError('--rate needs --real-time')
-        launcher = Launcher(sc, duration_s=args.duration, record=args.record,
-                            real_time=args.real_time, rate_factor=args.rate or 1.0,
-                            compose=args.compose, progress=not args.quiet)
-    except (ScenarioError, LaunchError) as exc:
+        if engine == 'plain':
+            if args.real_time:
+                raise LaunchError('the plain engine has no real-time mode (it runs as fast '
+                                  'as it can): use --engine graph or composed')
+            from sim_node.engine import EngineError, run_plain
+            try:
+                result = run_plain(sc, args.duration, args.record, progress=not args.quiet)
+            except EngineError as exc:
+                raise LaunchError(str(exc)) from None
+        else:
+            launcher = Launcher(sc, duration_s=args.duration, record=args.record,
+                                real_time=args.real_time, rate_factor=args.rate or 1.0,
+                                compose=engine == 'composed', progress=not args.quiet)
+    except (ScenarioError, LaunchError, ValueError) as exc:
         print(f'adcs run: {exc}', file=sys.stderr)
         return 2
-    result = launcher.run()
+    if engine != 'plain':
+        result = launcher.run()
     rtf = result.sim_time_s / result.wall_time_s if result.wall_time_s else 0.0
     stream = sys.stdout if result.exit_code == 0 else sys.stderr
     print(f'[adcs] {result.message}', file=stream)
@@ -225,8 +240,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help='pace the clock by the wall clock (latest-value inputs, no lockstep)')
     p.add_argument('--rate', type=float, metavar='F',
                    help='with --real-time: sim seconds per wall second (default 1)')
-    p.add_argument('--compose', action='store_true',
-                   help='all nodes in one process on one executor (faster, same trajectory)')
+    p.add_argument('--engine', choices=('plain', 'composed', 'graph'),
+                   help='graph (default): one process per node; composed: all nodes in one '
+                   'process; plain: the FrameLoop without ROS (fastest; the same series on '
+                   'every data topic, no drivers)')
+    p.add_argument('--compose', action='store_true', help='the same as --engine composed')
     p.add_argument('--report', action='store_true', help='write the report of the bag after')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.set_defaults(func=cmd_run)
