@@ -27,6 +27,10 @@ Commands
 ``adcs report BAG [--out DIR]``
     Metrics, PNG plots and ``summary.md``.
 
+``adcs soak [--launches N] [--burners N] [--time-budget S] [--scenarios ...] [--out DIR]``
+    Start-up soak: short runs of every scenario back to back (processes and composed) beside
+    CPU burners; a table of outcomes (finished, start or lifecycle timeout, crash, hang).
+
 ``adcs slew --to ROLL PITCH YAW [--frame inertial|orbit] [--controller NAME] [--run PID]``
     Slew a running graph (``adcs/slew`` action): feedback, then settling time, energy, error.
 
@@ -289,6 +293,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('replay', help='publish recorded sensor topics as a driver would')
     replay.add_arguments(p)
     p.set_defaults(func=replay.run_from_args)
+
+    from adcs_nodes.tools import soak
+    p = sub.add_parser('soak', help='start-up soak: short runs of every scenario back to back '
+                       'beside CPU burners, outcomes counted by kind')
+    soak.add_arguments(p)
+    p.set_defaults(func=soak.run_from_args)
 
     p = sub.add_parser('schema', help='print every scenario key (Markdown table)')
     p.set_defaults(func=cmd_schema)
