@@ -514,3 +514,129 @@ def run_plain(sc: Dict[str, Any], duration_s: Optional[float] = None,
     message += f' (plain engine: {time.process_time() - cpu0:.2f} s CPU)'
     return RunResult(code, loop.t_ns / 1e9 if not loop.done else duration, wall, loop.k,
                      0, record, '', message, loop.k / wall if wall > 0 else 0.0)
+
+
+# ---------------------------------------------------------------------- series and Monte Carlo
+def run_series(loop: FrameLoop) -> Dict[str, Any]:
+    """Run ``loop`` to the end and return the per-frame series a study or a Monte Carlo run
+    needs (numpy arrays, one row per frame).
+
+    ``t_s`` [s]; ``q_orbit_body`` (n, 4) truth; ``w_eci``, ``w_orbit`` (n, 3) true
+    ``omega_body_eci_body``, ``omega_body_orbit_body`` [rad/s]; ``q_est`` (n, 4) and
+    ``w_est`` (n, 3) the latest estimate (NaN before the first); ``angle_deg`` truth angle
+    body to orbit frame; ``est_err_deg``, ``rate_err_deg_s`` estimate errors; ``active``
+    the controller whose command was forwarded (``source`` of ``adcs/actuator_command``);
+    ``period_s`` the orbital period at the end.
+    """
+    import math
+
+    import numpy as np
+
+    from adcs_nodes.nodes.convert import quat, vec3
+    from adcs_nodes.tools import metrics
+    rows: Dict[str, List[Any]] = {k: [] for k in ('t_s', 'q_orbit_body', 'w_eci', 'w_orbit',
+                                                  'q_est', 'w_est', 'active')}
+    q_est, w_est = np.full(4, np.nan), np.full(3, np.nan)
+    active, rate = 'zero', 0.0
+    for frame in loop.run():
+        state = None
+        for topic, msg in frame.outputs:
+            if topic == 'sim/state':
+                state = msg
+            elif topic == 'adcs/attitude_estimate':
+                q_est, w_est = quat(msg.q_orbit_body), vec3(msg.omega_body_eci_body)
+            elif topic == 'adcs/actuator_command':
+                active = msg.source
+            elif topic == 'sim/environment':
+                rate = float(msg.orbit_rate)
+        rows['t_s'].append(frame.t_ns / 1e9)
+        rows['q_orbit_body'].append(quat(state.q_orbit_body))
+        rows['w_eci'].append(vec3(state.omega_body_eci_body))
+        rows['w_orbit'].append(vec3(state.omega_body_orbit_body))
+        rows['q_est'].append(q_est)
+        rows['w_est'].append(w_est)
+        rows['active'].append(active)
+    out = {k: np.asarray(v) for k, v in rows.items()}
+    out['angle_deg'] = metrics.angle_to_identity_deg(out['q_orbit_body'])
+    out['est_err_deg'] = metrics.angle_between_deg(out['q_est'], out['q_orbit_body'])
+    out['rate_err_deg_s'] = np.degrees(np.linalg.norm(out['w_est'] - out['w_eci'], axis=1))
+    out['period_s'] = 2.0 * math.pi / rate if rate > 0 else float('nan')
+    return out
+
+
+def mc_worker(run_dir: str) -> int:
+    """One Monte Carlo run on the plain engine (``adcs montecarlo``, any scenario).
+
+    Reads ``job.json`` and ``scenario.yaml`` of the prepared run directory, runs the
+    FrameLoop, writes ``series.npz`` (per-frame truth and estimate error) and ``result.json``
+    with :func:`adcs_nodes.tools.montecarlo.results.series_metrics` (the same result as a
+    graph run), or ``failed.json``. Exit code 130 on SIGINT (nothing written).
+    """
+    import json
+    import time
+
+    import numpy as np
+
+    from adcs_nodes.tools import metrics
+    from adcs_nodes.tools.montecarlo.files import RESULT_FILE, SERIES_FILE, write_json_atomic
+    from adcs_nodes.tools.montecarlo.results import series_metrics
+    from adcs_nodes.tools.montecarlo.runner import fail, result_head
+    from adcs_nodes.tools.scenario import ScenarioError, load_scenario
+
+    t0 = time.monotonic()
+    with open(os.path.join(run_dir, 'job.json'), encoding='utf-8') as fh:
+        job = json.load(fh)
+    try:
+        sc = load_scenario(os.path.join(run_dir, 'scenario.yaml'))
+        s = run_series(FrameLoop.from_scenario(sc, job['duration_s']))
+    except KeyboardInterrupt:
+        return 130
+    except (ScenarioError, ValueError) as exc:
+        return fail(run_dir, job, 2, str(exc), time.monotonic() - t0)
+    tmp = os.path.join(run_dir, 'series.tmp.npz')
+    np.savez_compressed(tmp, **{k: s[k] for k in ('t_s', 'q_orbit_body', 'angle_deg',
+                                                  'est_err_deg', 'rate_err_deg_s', 'w_eci',
+                                                  'w_orbit')})
+    os.replace(tmp, os.path.join(run_dir, SERIES_FILE))
+    m = series_metrics(s['t_s'], s['q_orbit_body'], s['w_eci'], s['w_orbit'],
+                       job['capture_deg'], job.get('period_s') or s['period_s'])
+    est = metrics.hold_stats(s['t_s'], s['est_err_deg'], 0.5 * s['period_s'])
+    result = {**result_head(job), **m, 'engine': 'plain', 'bag': None,
+              'est_err_median_deg': est.median if est.samples else None,
+              'sim_time_s': float(s['t_s'][-1]), 'wall_time_s': time.monotonic() - t0,
+              'frames': int(s['t_s'].size), 'missed_frames': 0, 'compose': False,
+              'message': 'plain engine (sim_node.engine.FrameLoop)'}
+    write_json_atomic(os.path.join(run_dir, RESULT_FILE), result)
+    return 0
+
+
+def one_blas_thread() -> None:
+    """One BLAS/OpenMP thread in this process and its children (tiny LAPACK calls: extra
+    threads cost CPU, same bits; DESIGN section 6)."""
+    for key in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
+        os.environ[key] = '1'
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - pinned in ros2_ws/requirements.txt
+        return
+    threadpool_limits(limits=1)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """``python -m sim_node.engine _mc_worker RUN_DIR`` (the Monte Carlo's plain worker)."""
+    import sys
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ['_mc_worker'] and len(argv) == 2:
+        return mc_worker(argv[1])
+    print('usage: python -m sim_node.engine _mc_worker RUN_DIR (adcs run --engine plain runs '
+          'a scenario)', file=sys.stderr)
+    return 2
+
+
+if __name__ == '__main__':
+    import signal
+    # a Monte Carlo run started under ``--dask-local`` inherits an ignored SIGINT: the
+    # supervisor's SIGINT must stop it
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    one_blas_thread()
+    raise SystemExit(main())

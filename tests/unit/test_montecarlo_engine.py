@@ -1,5 +1,6 @@
-"""``adcs montecarlo --engine auto`` (the default): plain for the scenarios the plain loop wires,
-graph for the others, an explicit engine wins, a resumed campaign keeps its recorded engine."""
+"""``adcs montecarlo --engine auto`` (the default): plain for every scenario without an external
+sensor, graph with one (a driver publishes it), an explicit engine wins, a resumed campaign
+keeps its recorded engine."""
 import json
 import os
 
@@ -16,21 +17,22 @@ def scenario(name):
     return load_scenario(os.path.join(ROOT, 'scenarios', f'{name}.yaml'))
 
 
-@pytest.mark.parametrize('name', ['paper000_control', 'paper000_control_misaligned'])
-def test_auto_is_plain_for_the_paper000_closed_loop(name, tmp_path):
+SHIPPED = sorted(f[:-5] for f in os.listdir(os.path.join(ROOT, 'scenarios'))
+                 if f.endswith('.yaml'))
+
+
+@pytest.mark.parametrize('name', SHIPPED)
+def test_auto_is_plain_for_every_shipped_scenario(name, tmp_path):
     assert plain_engine_problem(scenario(name)) is None
     assert resolve_engine('auto', scenario(name), str(tmp_path))[0] == 'plain'
     assert resolve_engine(None, scenario(name), str(tmp_path))[0] == 'plain'
 
 
-@pytest.mark.parametrize('name, why', [
-    ('paper003_slew', 'horizon_sensor'),         # a sensor the plain loop does not model
-    ('paper001_mpi', 'magnetometer'),            # no magnetometer at all
-    ('paper000_estimation', 'controller_manager'),  # open loop: nothing to command
-    ('free_tumble', 'magnetometer')])
-def test_auto_is_graph_when_the_plain_loop_lacks_a_node(name, why, tmp_path):
-    engine, reason = resolve_engine('auto', scenario(name), str(tmp_path))
-    assert engine == 'graph' and why in reason, reason
+def test_auto_is_graph_with_an_external_sensor(tmp_path):
+    sc = scenario('paper000_control')
+    sc['sensors']['magnetometer']['external'] = True
+    engine, reason = resolve_engine('auto', sc, str(tmp_path))
+    assert engine == 'graph' and 'magnetometer' in reason and 'driver' in reason, reason
 
 
 def test_explicit_engine_wins(tmp_path):
@@ -58,7 +60,7 @@ def test_first_line_names_the_chosen_engine(tmp_path, capsys):
                  '--duration', '2', '--out', str(out)])
     lines = capsys.readouterr().out.splitlines()
     assert code == 0, lines
-    assert 'engine plain [auto: the plain loop runs this scenario]' in lines[0], lines[0]
+    assert 'engine plain [auto: the plain engine runs this scenario]' in lines[0], lines[0]
     with open(out / 'campaign.json', encoding='utf-8') as fh:
         assert json.load(fh)['engine'] == 'plain'
 

@@ -127,7 +127,7 @@ def sigint_ignored() -> Iterator[None]:
     here inherit the ignored SIGINT: a Ctrl-C in the terminal reaches the whole foreground
     process group, and the ``LocalCluster`` workers must keep supervising their runs while
     the campaign stops them through its stop file (as with the local thread pool). The run
-    processes restore the default handler (:mod:`sim_node.tools.closed_loop`, the launcher)."""
+    processes restore the default handler (:mod:`sim_node.engine`, the launcher)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

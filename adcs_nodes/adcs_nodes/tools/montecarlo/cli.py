@@ -13,11 +13,12 @@ from adcs_nodes.tools.montecarlo.engine import plain_engine_problem, resolve_eng
 from adcs_nodes.tools.montecarlo.runner import worker_main
 
 
-#: Printed by a multi-run campaign on the graph engine when the plain loop could run it.
+#: Printed by a multi-run campaign on the graph engine when the plain engine could run it.
 GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, recorded to a bag '
               '(paper000_control, 6 orbits: 60-185 s CPU per run, by machine load). '
-              '--engine plain (the auto choice for this scenario) runs the same cores without '
-              'ROS, gives the same trajectory (to 1e-9) and a few s CPU per run, without bags.')
+              '--engine plain (the auto choice for this scenario) runs the same components '
+              'without ROS, gives the same series to the last bit and a few s CPU per run, '
+              'without bags.')
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,11 +61,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='B-dot gain of the detumble [A m^2 s/T] (default: the '
                         'scenario\'s)')
     parser.add_argument('--engine', choices=ENGINES + ('auto',), default='auto',
-                        help='auto (default): plain when the plain loop runs the scenario '
-                        '(paper000_control and its variants), else graph; a campaign being '
-                        'resumed keeps the engine in its campaign.json. graph: the ROS graph, '
-                        'one bag per run; plain: the same cores in a plain loop without ROS '
-                        '(sim_node.tools.closed_loop: the graph\'s trajectory to 1e-9, no bag, '
+                        help='auto (default): plain unless a sensor is external, else graph; '
+                        'a campaign being resumed keeps the engine in its campaign.json. '
+                        'graph: the ROS graph, one bag per run; plain: the FrameLoop without '
+                        'ROS (sim_node.engine: the graph\'s series to the last bit, no bag, '
                         'far less CPU)')
     parser.add_argument('--compose', action='store_true',
                         help='each run composed in one process (faster, same trajectory)')

@@ -57,8 +57,8 @@ class CampaignConfig:
     bdot_gain : float or None
         B-dot gain of the detumble [A m^2 s/T]; None: the scenario's.
     engine : str
-        ``'graph'`` (the ROS graph, recorded bag) or ``'plain'`` (the plain loop
-        :mod:`sim_node.tools.closed_loop`: the same cores without ROS, no bag).
+        ``'graph'`` (the ROS graph, recorded bag) or ``'plain'`` (the FrameLoop,
+        :mod:`sim_node.engine`: the same components without ROS, no bag).
     compose : bool
         Run each graph composed in one process (same trajectory, faster; not part of the
         identity).

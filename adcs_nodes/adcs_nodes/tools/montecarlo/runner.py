@@ -22,7 +22,7 @@ SIGINT_REPEAT_S = 2.0
 #: a simulator tool: the flight-software package names it but never imports it.
 WORKER_COMMANDS = {
     'graph': ['-m', 'adcs_nodes.tools.montecarlo', '_worker'],
-    'plain': ['-m', 'sim_node.tools.closed_loop', '_mc_worker'],
+    'plain': ['-m', 'sim_node.engine', '_mc_worker'],
 }
 #: Set in every run process's environment: one BLAS/OpenMP/numba thread per run (J runs share
 #: J cores; the models make only tiny LAPACK calls, where extra threads cost CPU and give the
@@ -96,7 +96,7 @@ def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
 
     This is the unit of work submitted to the local thread pool or to Dask workers. It
     starts ``python -m adcs_nodes.tools.montecarlo _worker RUN_DIR`` (graph engine) or
-    ``python -m sim_node.tools.closed_loop _mc_worker RUN_DIR`` (plain engine), output to
+    ``python -m sim_node.engine _mc_worker RUN_DIR`` (plain engine), output to
     ``worker.log``, one BLAS thread (:func:`worker_env`). While waiting it watches
     ``job['stop_file']``: when that file appears (Ctrl-C on the campaign) the run gets
     SIGINT, closes its bag and is reported ``interrupted``.
