@@ -40,23 +40,23 @@ the scenario's circular orbit; the hold is the angle from 4 orbits to the end (R
 Execution
 ---------
 Engine (:mod:`.engine`): ``--engine auto`` (the default) is ``plain`` for every scenario
-without an external sensor, else ``graph``; a campaign being resumed keeps the engine
-recorded in its ``campaign.json``. The command's first line names the engine and why.
-Engine ``graph``: each run is one ``python -m adcs_nodes.tools.montecarlo _worker RUN_DIR``
-process that starts the graph with :class:`~adcs_nodes.tools.launcher.Launcher` in its own
-main thread (the launcher needs signal handlers and sets ``ROS_DOMAIN_ID`` in its environment; a fresh process
+without an external sensor, else ``graph``; a campaign being resumed keeps the engine recorded
+in its ``campaign.json``. The command's first line names the engine and why. Engine ``graph``:
+each run is one ``python -m adcs_nodes.tools.montecarlo _worker RUN_DIR`` process that starts
+the graph with :class:`~adcs_nodes.tools.launcher.Launcher` in its own main thread (the
+launcher needs signal handlers and sets ``ROS_DOMAIN_ID`` in its environment; a fresh process
 per run keeps every graph isolated, each with its own domain). ``--jobs J`` supervises J such
 processes at once from a thread pool; ``--scheduler ADDRESS`` submits the same supervisor
 function (:func:`execute_run`) to an existing Dask distributed scheduler, whose workers start
 the run processes on their machines. Workers need this package (and ROS 2) installed and
 ``--out`` on a file system they see under the same path. ``--dask-local`` starts a Dask
-``LocalCluster`` of J worker processes with one thread each (a worker supervises one run at
-a time, like one slot of the thread pool) for the campaign and stops it at the end. Engine
+``LocalCluster`` of J worker processes with one thread each (a worker supervises one run at a
+time, like one slot of the thread pool) for the campaign and stops it at the end. Engine
 ``plain``: the run process is ``python -m sim_node.engine _mc_worker RUN_DIR``, the FrameLoop:
 the graph's components without ROS (the same series as the graph to the last bit, the engine
 parity test; no bag, the per-frame series go to ``series.npz``), a few seconds of CPU for a
-6-orbit paper000_control run against 60-185 s for the graph (docs/montecarlo.md). Every
-run process gets one BLAS/OpenMP thread (:data:`.runner.ONE_THREAD_ENV`) and loads the numba
+6-orbit paper000_control run against 60-185 s for the graph (docs/montecarlo.md). Every run
+process gets one BLAS/OpenMP thread (:data:`.runner.ONE_THREAD_ENV`) and loads the numba
 kernels from their on-disk cache.
 
 Files (``OUT`` = ``--out``)
