@@ -107,8 +107,12 @@ class FrameLoop:
     :meth:`run`.
     """
 
-    def __init__(self, specs: Sequence[NodeSpec], duration_s: float) -> None:
+    def __init__(self, specs: Sequence[NodeSpec], duration_s: float,
+                 ideal_estimate: bool = False) -> None:
         by_name = {s.name: s for s in specs}
+        #: a study's reference: ``adcs/attitude_estimate`` is the truth (``sim/state``) of
+        #: each estimator frame instead of the estimator's (perfect knowledge)
+        self.ideal_estimate = bool(ideal_estimate)
         for s in specs:
             registry.load_plugins(s.params.get('plugins', []) or [])
         self.warnings: List[Tuple[str, str, str]] = []
@@ -160,16 +164,18 @@ class FrameLoop:
 
     # ------------------------------------------------------------------ building
     @classmethod
-    def from_scenario(cls, sc: Dict[str, Any], duration_s: Optional[float] = None
-                      ) -> 'FrameLoop':
+    def from_scenario(cls, sc: Dict[str, Any], duration_s: Optional[float] = None,
+                      ideal_estimate: bool = False) -> 'FrameLoop':
         """The FrameLoop of a validated scenario (:func:`adcs_nodes.tools.scenario.load_scenario`);
-        :class:`EngineError` for what the plain engine cannot run (external sensors)."""
+        :class:`EngineError` for what the plain engine cannot run (external sensors).
+        ``ideal_estimate``: the controllers get the true state as the estimate (a study's
+        perfect-knowledge reference; not a graph mode)."""
         external = [k for k, cfg in sc.get('sensors', {}).items() if cfg.get('external')]
         if external:
             raise EngineError(f'the plain engine has no drivers: sensors {", ".join(external)} '
                               'are external (run it as a graph: --engine graph)')
         duration = float(sc['duration_s'] if duration_s is None else duration_s)
-        return cls(build_graph(sc, duration), duration)
+        return cls(build_graph(sc, duration), duration, ideal_estimate)
 
     @staticmethod
     def _sensor_entry(spec: NodeSpec) -> Optional[Any]:
@@ -213,6 +219,8 @@ class FrameLoop:
 
         def fire(t_ns: int, msgs: Dict[str, Any]) -> List[Output]:
             msg = comp.step(t_ns, msgs, lambda key, m: self._fresh(m, t_ns))
+            if self.ideal_estimate:      # the truth of the frame (the study's reference)
+                return [('adcs/attitude_estimate', self._latest['sim/state'])]
             if msg is None:
                 return []
             return [('adcs/attitude_estimate', msg),
