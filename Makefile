@@ -29,7 +29,7 @@ reproduce:  ## long paper reproductions (papers 000, 004): pass/fail tables agai
 	$(RUN) python -m pytest -m slow -s -p no:warnings tests/reproductions
 
 stress:  ## reliable delivery under load: 3 recorded runs beside 3 CPU burners lose nothing (~2 min)
-	$(RUN) python -m pytest -m slow -p no:warnings tests/integration/test_stress_loss.py
+	$(RUN) python -m pytest -m slow -p no:warnings tests/graph/test_stress_loss.py
 
 clean:  ## remove build products (keeps the venv and your bags in out/)
 	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log

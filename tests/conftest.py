@@ -1,6 +1,9 @@
-"""Shared pytest set-up: make the source packages importable without an install step."""
+"""Shared pytest set-up: make the source packages importable without an install step, keep the
+runs' directories inside the test run, and group the launched-graph tests for pytest-xdist."""
 import os
+import shutil
 import sys
+import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 for pkg in ('adcs_nodes', 'sim_node'):
@@ -8,15 +11,34 @@ for pkg in ('adcs_nodes', 'sim_node'):
     if path not in sys.path:
         sys.path.insert(0, path)
 
+#: The runs directory this pytest process created (removed at its end), or None.
+_OWN_RUNS_DIR = None
+
+
+def pytest_configure(config):
+    """Run directories (node logs, parameter files, active-run manifests) go to a temporary
+    directory of this test run, not the user's ``~/.cache/adcs/runs``: ``ADCS_RUNS_DIR``, set
+    here before any test module imports the launcher. pytest-xdist workers are started after
+    this hook and inherit the variable (the same directory for the whole session); a value
+    already set (by the caller) is kept."""
+    global _OWN_RUNS_DIR
+    if not os.environ.get('ADCS_RUNS_DIR'):
+        _OWN_RUNS_DIR = tempfile.mkdtemp(prefix='adcs-test-runs-')
+        os.environ['ADCS_RUNS_DIR'] = _OWN_RUNS_DIR
+
+
+def pytest_unconfigure(config):
+    if _OWN_RUNS_DIR is not None:
+        shutil.rmtree(_OWN_RUNS_DIR, ignore_errors=True)
+
 
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``make test``: 2 workers, ``--dist loadgroup``) the launched-graph
-    tests of ``tests/integration`` run one after the other on one worker, as before; the
-    unit and node tests share the other worker and fill the CPU time the graph tests spend
-    waiting (start-up, discovery, deadlines). Each test's ROS domain is its own
-    (``tests/domains.py``)."""
+    tests of ``tests/graph`` run one after the other on one worker; the unit and node tests
+    share the other worker and fill the CPU time the graph tests spend waiting (start-up,
+    discovery, deadlines). Each test's ROS domain is its own (``tests/domains.py``)."""
     import pytest
-    integration = os.path.join(ROOT, 'tests', 'integration') + os.sep
+    graph = os.path.join(ROOT, 'tests', 'graph') + os.sep
     for item in items:
-        if str(item.fspath).startswith(integration):
-            item.add_marker(pytest.mark.xdist_group('integration'))
+        if str(item.fspath).startswith(graph):
+            item.add_marker(pytest.mark.xdist_group('graph'))

@@ -1,7 +1,7 @@
 """Plain closed loop (sim_node.tools.closed_loop): scenario edits and a short run's series.
 
 That it gives the graph's trajectory is checked against recorded bags in
-tests/integration/test_montecarlo.py (test_plain_engine_gives_the_graph_trajectory)."""
+tests/graph/test_montecarlo.py (test_plain_engine_gives_the_graph_trajectory)."""
 import math
 import os
 

@@ -1,7 +1,7 @@
 """``adcs montecarlo`` execution: one BLAS thread per run process, ``--dask-local``.
 
 Short: the run processes here are stand-ins or 20 s plain-engine runs. The full campaigns
-(graph engine, ``--scheduler``) are in tests/integration/test_montecarlo.py.
+(graph engine, ``--scheduler``) are in tests/graph/test_montecarlo.py.
 """
 import json
 import os

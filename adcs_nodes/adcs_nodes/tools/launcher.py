@@ -56,7 +56,10 @@ import yaml
 from adcs_nodes.tools.graph import NodeSpec, build_graph, params_file_text
 from adcs_nodes.tools.launch_graph import is_managed
 
-RUNS_DIR = os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'runs')
+#: Run directories and active-run manifests: ``$ADCS_RUNS_DIR`` when set (the test suite sets
+#: its own temporary directory), else ``~/.cache/adcs/runs``.
+RUNS_DIR = os.environ.get('ADCS_RUNS_DIR') or os.path.join(os.path.expanduser('~'), '.cache',
+                                                           'adcs', 'runs')
 #: ``ROS_DOMAIN_ID`` values a run draws from (at random among the free ones). Fast DDS over
 #: UDP accepts 0..232; 0 is everybody's default domain; 100..199 are used without a lock by
 #: the node tests and claimed by the bench rings; 102..214 put the DDS ports inside Linux's

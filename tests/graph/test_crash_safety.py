@@ -24,6 +24,7 @@ LONG_S = '500000'
 
 def _env(home):
     env = dict(os.environ, HOME=str(home))
+    env.pop('ADCS_RUNS_DIR', None)     # the run directories under HOME, as a user's
     env.pop('XDG_RUNTIME_DIR', None)   # domain locks in <tmp>/adcs-domain-locks-<uid>
     return env
 

@@ -11,9 +11,13 @@ import yaml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENARIOS = os.path.join(ROOT, 'scenarios')
-RUNS = os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'runs')
-
 pytest.importorskip('rclpy')
+
+from adcs_nodes.tools.launcher import RUNS_DIR  # noqa: E402
+
+#: The launcher's runs directory (active-run manifests, run directories): ``$ADCS_RUNS_DIR``,
+#: which tests/conftest.py sets to a temporary directory of the test run.
+RUNS = RUNS_DIR
 
 
 def control_scenario(tmp_path, **changes):
