@@ -45,6 +45,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from adcs_msgs.msg import ControllerStatus
+from adcs_nodes import inputs as input_records
 from adcs_nodes import registry
 from adcs_nodes.components import controller as ccomp
 from adcs_nodes.components import estimator as ecomp
@@ -208,13 +209,7 @@ class FrameLoop:
             entry, p, own, section(spec.params, 'onboard_orbit', ccomp.DEFAULT_ORBIT, False),
             section(spec.params, 'onboard_field', ccomp.DEFAULT_FIELD, False), self.epoch,
             self.seed, self.mounts, self.clock, _log_into(self.warnings, spec.name))
-        topics = {'magnetometer': ('mag', 'sensors/magnetometer', 'magnetometer_period_s'),
-                  'horizon': ('horizon', 'sensors/horizon', 'horizon_period_s'),
-                  'star_tracker': ('star', 'sensors/star_tracker', 'star_tracker_period_s'),
-                  'gyro': ('gyro', 'sensors/gyro', 'gyro_period_s'),
-                  'actuator_command': ('cmd', 'adcs/actuator_command', 'command_period_s')}
-        inputs = {key: (topic, 'previous' if key == 'cmd' else 'frame', seconds_to_ns(p[pk]))
-                  for need, (key, topic, pk) in topics.items() if need in entry.inputs}
+        inputs = self._input_specs(entry.inputs, p)
         period = self._period(p['period_s'], 'estimator period_s')
 
         def fire(t_ns: int, msgs: Dict[str, Any]) -> List[Output]:
@@ -227,6 +222,13 @@ class FrameLoop:
                     ('adcs/estimator/diagnostics', comp.diagnostics_msg(msg.header))]
         self.estimator = comp
         self.consumers.append(_Consumer(spec.name, period, inputs, fire))
+
+    @staticmethod
+    def _input_specs(names: Sequence[str], periods: Dict[str, Any]
+                     ) -> Dict[str, Tuple[str, str, int]]:
+        """``{key: (topic, kind, period_ns)}`` of declared inputs (the input records)."""
+        return {rec.key: (rec.topic, rec.kind, seconds_to_ns(periods[rec.period_param]))
+                for rec in map(input_records.get, names)}
 
     def _add_guidance(self, spec: NodeSpec) -> None:
         p = param_values(GUIDANCE_PARAMS, spec.params)
@@ -245,12 +247,7 @@ class FrameLoop:
             section(spec.params, 'onboard_field', ccomp.DEFAULT_FIELD, False))
         comp = ccomp.ControllerComponent(entry.build(own, ctx), entry.name, ctx, self.mounts,
                                          self.clock)
-        topics = {'estimate': ('est', 'adcs/attitude_estimate', 'estimator_period_s'),
-                  'target': ('target', 'adcs/attitude_target', 'target_period_s'),
-                  'magnetometer': ('mag', 'sensors/magnetometer', 'magnetometer_period_s'),
-                  'wheel_speeds': ('wheels', 'sensors/wheels', 'tachometer_period_s')}
-        inputs = {key: (topic, 'frame', seconds_to_ns(ctx_p[pk]))
-                  for need, (key, topic, pk) in topics.items() if need in entry.inputs}
+        inputs = self._input_specs(entry.inputs, ctx_p)
         topic = f'adcs/controllers/{entry.name}/command'
         self.consumers.append(_Consumer(
             spec.name, self._period(ctx_p['period_s'], f'{spec.name} period_s'), inputs,

@@ -21,6 +21,8 @@ import numpy as np
 from std_msgs.msg import Header
 
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, AttitudeTarget
+from adcs_nodes import inputs
+from adcs_nodes.components import conditioning as cond
 from adcs_nodes.components.base import FrameClock
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.control import Command, ControlInputs, Estimate, Target
@@ -44,14 +46,6 @@ CONTEXT_PARAMS = (
     Param('controller', 'str', 'magnetic', '-', 'registered controller this node runs',
           read_only=True),
     Param('period_s', 'float', 2.0, 's', 'control period', positive=True, read_only=True),
-    Param('estimator_period_s', 'float', 2.0, 's', 'period of adcs/attitude_estimate',
-          positive=True, read_only=True),
-    Param('target_period_s', 'float', 2.0, 's', 'period of adcs/attitude_target (guidance)',
-          positive=True, read_only=True),
-    Param('magnetometer_period_s', 'float', 10.0, 's', 'period of sensors/magnetometer',
-          positive=True, read_only=True),
-    Param('tachometer_period_s', 'float', 1.0, 's', 'period of sensors/wheels',
-          positive=True, read_only=True),
     Param('inertia_kgm2', 'float[]', [118.0, 118.0, 19.6], 'kg m^2',
           "the controller's own inertia: 3 diagonal values or 9 (row-major)",
           read_only=True),
@@ -66,7 +60,7 @@ CONTEXT_PARAMS = (
           positive=True, read_only=True),
     Param('wheel_inertia_kgm2', 'float[]', [], 'kg m^2', 'wheel inertias about their axes',
           positive=True, read_only=True),
-)
+) + inputs.period_params(inputs.NAMES)
 
 
 def inertia_matrix(values) -> np.ndarray:
@@ -177,37 +171,34 @@ class ControllerComponent:
         self.n_wheels = len(ctx.get('wheel_max_torque_Nm') or [])
         self._last_t: Optional[int] = None
 
-    def field_body(self, msg: Any, fresh: bool) -> Optional[np.ndarray]:
-        """Fresh magnetometer sample in body axes, or None."""
-        if not fresh:      # lockstep: stamped t; live: a newer sample
-            return None
-        b = vec3(msg.magnetic_field)
-        q_body_sensor = self.mounts.lookup(msg.header.frame_id)   # None: no mount known yet
-        if q_body_sensor is None or not all_finite(b):
-            return None
-        return att.rotate(q_body_sensor, b)
-
-    def wheel_speeds(self, msg: Any) -> Optional[np.ndarray]:
-        """Measured wheel speeds [rad/s], or None (absent, wrong count, not finite)."""
-        if msg is None or len(msg.velocity) != self.n_wheels:
-            return None
-        w = np.asarray(msg.velocity, dtype=float)
-        return w if all_finite(w) else None
-
     def inputs_for(self, t_ns: int, msgs: Dict[str, Any],
                    fresh: Callable[[str, Any], bool]) -> ControlInputs:
-        """Messages of frame ``t_ns`` -> the core's :class:`ControlInputs`."""
+        """Messages of frame ``t_ns`` -> the core's :class:`ControlInputs`.
+
+        Sensor samples (magnetometer, horizon, gyro, star tracker) only when fresh (lockstep:
+        stamped t; live: newer than the last one used), each checked
+        (:mod:`~adcs_nodes.components.conditioning`; a rejected one reads as None); the
+        estimate, target and wheel speeds are the latest.
+        """
+        def sample(key, convert):
+            msg = msgs.get(key)
+            return convert(msg)[0] if msg is not None and fresh(key, msg) else None
         t = t_ns / NS_PER_S
         estimate = estimate_from_msg(msgs.get('est'))
         b_model = None
         ref = self.ctx['reference']
         if ref is not None and estimate is not None and estimate.is_usable():
             b_model = att.to_matrix(estimate.q_orbit_body).T @ ref.at(t).b_orbit  # n* = R^T B*
-        speeds = self.wheel_speeds(msgs.get('wheels'))
-        mag = msgs.get('mag')
-        return ControlInputs(estimate, target_from_msg(msgs.get('target')),
-                             self.field_body(mag, fresh('mag', mag)), b_model, speeds,
-                             wheel_momentum(speeds, self.ctx))
+        wheels = msgs.get('wheels')
+        speeds = None if wheels is None else cond.wheel_speeds(wheels, self.n_wheels)[0]
+        return ControlInputs(
+            estimate, target_from_msg(msgs.get('target')),
+            sample('mag', lambda m: cond.field_body(m, self.mounts)), b_model, speeds,
+            wheel_momentum(speeds, self.ctx),
+            horizon_roll_pitch=sample('horizon', cond.horizon_roll_pitch),
+            gyro_rate_body=sample('gyro', lambda m: cond.gyro_rate_body(m, self.mounts)),
+            q_eci_body_meas=sample('star', cond.star_q_eci_body),
+            applied_dipole_body=cond.applied_dipole(msgs['cmd']) if 'cmd' in msgs else None)
 
     def step(self, t_ns: int, msgs: Dict[str, Any],
              fresh: Callable[[str, Any], bool]) -> ActuatorCommand:

@@ -17,7 +17,6 @@ logged; a non-finite estimate is never published.
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
@@ -25,13 +24,15 @@ from sensor_msgs.msg import Imu, MagneticField
 from std_msgs.msg import Header
 
 from adcs_msgs.msg import AttitudeState, FilterDiagnostics, HorizonSensor
+from adcs_nodes import inputs
+from adcs_nodes.components import conditioning as cond
 from adcs_nodes.components.base import FrameClock, Log, covariance_to_body, silent
 from adcs_nodes.core import attitude as att
 from adcs_nodes.components.controller import inertia_matrix
 from adcs_nodes.core.estimation.algorithms import EstimatorInputs, omega_orbit_from_eci
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
-from adcs_nodes.nodes.convert import all_finite, quat, to_quat, to_vec3, vec3
+from adcs_nodes.nodes.convert import to_quat, to_vec3
 from adcs_nodes.nodes.messages import make
 from adcs_nodes.registry import Param
 
@@ -47,16 +48,6 @@ CONTEXT_PARAMS = (
     Param('algorithm', 'str', 'magnetic_filter', '-', 'registered estimator algorithm',
           read_only=True),
     Param('period_s', 'float', 2.0, 's', 'estimator period', positive=True, read_only=True),
-    Param('magnetometer_period_s', 'float', 10.0, 's', 'period of sensors/magnetometer',
-          positive=True, read_only=True),
-    Param('horizon_period_s', 'float', 1.0, 's', 'period of sensors/horizon', positive=True,
-          read_only=True),
-    Param('star_tracker_period_s', 'float', 1.0, 's', 'period of sensors/star_tracker',
-          positive=True, read_only=True),
-    Param('gyro_period_s', 'float', 1.0, 's', 'period of sensors/gyro', positive=True,
-          read_only=True),
-    Param('command_period_s', 'float', 0.0, 's', 'period of adcs/actuator_command (0: the '
-          'latest command)', min=0.0, read_only=True),
     Param('inertia_kgm2', 'float[]', [118.0, 118.0, 19.6], 'kg m^2',
           'onboard inertia: 3 diagonal values or 9 (row-major)', read_only=True),
     Param('initial_q_orbit_body', 'float[]', [0.0, 0.0, 0.0, 1.0], '-',
@@ -68,7 +59,7 @@ CONTEXT_PARAMS = (
           positive=True),
     Param('max_field_T', 'float', 1e-3, 'T', 'largest plausible |B| (larger: rejected)',
           positive=True),
-)
+) + inputs.period_params(inputs.NAMES)
 
 
 class EstimatorComponent:
@@ -116,25 +107,15 @@ class EstimatorComponent:
         self.last_rejection = why
         self.log('warning', f'measurement rejected: {why}')
 
-    def _mount(self, frame_id: str) -> Optional[np.ndarray]:
-        q_body_sensor = self.mounts.lookup(frame_id)
-        if q_body_sensor is None:
-            self.reject(f'no /tf_static mount body -> {frame_id!r}')
-        return q_body_sensor
+    def _checked(self, result) -> Optional[Any]:
+        value, why = result
+        if why is not None:
+            self.reject(why)
+        return value
 
     def field_body(self, msg: MagneticField) -> Optional[np.ndarray]:
         """Magnetometer sample rotated into body axes, or None (rejected) if implausible."""
-        b_sensor = vec3(msg.magnetic_field)
-        if not all_finite(b_sensor):
-            self.reject('magnetometer sample is not finite')
-            return None
-        norm = float(np.linalg.norm(b_sensor))
-        lo, hi = self.field_range
-        if not lo <= norm <= hi:
-            self.reject(f'magnetometer |B| = {norm:.3g} T outside [{lo:g}, {hi:g}] T')
-            return None
-        q_body_sensor = self._mount(msg.header.frame_id)
-        return None if q_body_sensor is None else att.rotate(q_body_sensor, b_sensor)
+        return self._checked(cond.field_body(msg, self.mounts, self.field_range))
 
     def field_var(self, msg: MagneticField) -> Optional[np.ndarray]:
         """Per-body-axis variances [T^2] of a sample's ``magnetic_field_covariance``, or None
@@ -146,39 +127,25 @@ class EstimatorComponent:
 
     def horizon(self, msg: HorizonSensor) -> Optional[tuple]:
         """(roll, pitch) [rad] of a valid horizon sample, or None (rejected)."""
-        if not msg.valid or not math.isfinite(msg.roll) or not math.isfinite(msg.pitch):
-            self.reject('horizon sensor sample invalid (out of view or not finite)')
-            return None
-        return (float(msg.roll), float(msg.pitch))
+        return self._checked(cond.horizon_roll_pitch(msg))
 
     def gyro(self, msg: Imu) -> Optional[np.ndarray]:
         """Gyro rate in body axes [rad/s], or None (rejected)."""
-        w = vec3(msg.angular_velocity)
-        if not all_finite(w):
-            self.reject('gyro sample is not finite')
-            return None
-        q_body_sensor = self._mount(msg.header.frame_id)
-        return None if q_body_sensor is None else att.rotate(q_body_sensor, w)
+        return self._checked(cond.gyro_rate_body(msg, self.mounts))
 
     def star(self, msg: Imu) -> Optional[np.ndarray]:
         """Star-tracker ``q_eci_body``, or None (rejected)."""
-        q = quat(msg.orientation)
-        if not all_finite(q) or abs(float(np.linalg.norm(q)) - 1.0) > 1e-3:
-            self.reject('star tracker attitude not finite or not a unit quaternion')
-            return None
-        return att.normalize(q)
+        return self._checked(cond.star_q_eci_body(msg))
 
     def inputs_for(self, t_ns: int, msgs: Dict[str, Any], fresh: Fresh) -> EstimatorInputs:
         """Fresh, checked samples of frame ``t_ns`` -> the core's :class:`EstimatorInputs`."""
         def take(key, convert):
             msg = msgs.get(key)
             return convert(msg) if fresh(key, msg) else None
-        cmd = msgs.get('cmd')
-        dipole = vec3(cmd.dipole_body) if cmd is not None else np.zeros(3)
         return EstimatorInputs(
             self.reference.at(t_ns / NS_PER_S), b_body=take('mag', self.field_body),
             horizon_roll_pitch=take('horizon', self.horizon),
-            dipole_body=dipole if all_finite(dipole) else np.zeros(3),
+            dipole_body=cond.applied_dipole(msgs.get('cmd')),
             gyro_rate_body=take('gyro', self.gyro), q_eci_body_meas=take('star', self.star),
             b_body_var=take('mag', self.field_var))
 

@@ -24,10 +24,9 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any, Dict, List, Optional
 
-from sensor_msgs.msg import JointState, MagneticField
-
-from adcs_msgs.msg import ActuatorCommand, AttitudeState, AttitudeTarget
+from adcs_msgs.msg import ActuatorCommand
 from adcs_nodes import registry
+from adcs_nodes.inputs import lockstep_inputs as node_inputs
 from adcs_nodes.components.base import FrameClock
 from adcs_nodes.components.controller import (  # noqa: F401 (the node's names, re-exported)
     CONTEXT_PARAMS, DEFAULT_FIELD, DEFAULT_ORBIT, ControllerComponent, command_msg,
@@ -67,18 +66,7 @@ class ControllerNode(ManagedLockstepNode):
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
         self.core = self.entry.build(own, self.ctx)
-        topics = {
-            'estimate': ('est', AttitudeState, 'adcs/attitude_estimate',
-                         ctx_p['estimator_period_s']),
-            'target': ('target', AttitudeTarget, 'adcs/attitude_target',
-                       ctx_p['target_period_s']),
-            'magnetometer': ('mag', MagneticField, 'sensors/magnetometer',
-                             ctx_p['magnetometer_period_s']),
-            'wheel_speeds': ('wheels', JointState, 'sensors/wheels',
-                             ctx_p['tachometer_period_s']),
-        }
-        inputs = {key: (mtype, topic, period) for need, (key, mtype, topic, period)
-                  in topics.items() if need in self.entry.inputs}
+        inputs = node_inputs(self.entry.inputs, ctx_p)
         self.pub = self.publisher(ActuatorCommand,
                                   f'adcs/controllers/{self.controller_name}/command')
         self.component = ControllerComponent(self.core, self.controller_name, self.ctx,

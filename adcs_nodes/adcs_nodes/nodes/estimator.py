@@ -24,10 +24,9 @@ from __future__ import annotations
 
 from typing import Any, Dict, List
 
-from sensor_msgs.msg import Imu, MagneticField
-
-from adcs_msgs.msg import ActuatorCommand, AttitudeState, FilterDiagnostics, HorizonSensor
+from adcs_msgs.msg import AttitudeState, FilterDiagnostics
 from adcs_nodes import registry
+from adcs_nodes.inputs import lockstep_inputs as node_inputs
 from adcs_nodes.components.base import FrameClock
 from adcs_nodes.components.estimator import (  # noqa: F401 (the node's names, re-exported)
     CONTEXT_PARAMS, build_estimator)
@@ -65,19 +64,8 @@ class EstimatorNode(ManagedLockstepNode):
                                          log=node_log(self))
         self.core, self.reference = self.component.core, self.component.reference
         self.field_range = self.component.field_range
-        topics = {
-            'magnetometer': ('mag', MagneticField, 'sensors/magnetometer',
-                             p['magnetometer_period_s']),
-            'horizon': ('horizon', HorizonSensor, 'sensors/horizon', p['horizon_period_s']),
-            'star_tracker': ('star', Imu, 'sensors/star_tracker', p['star_tracker_period_s']),
-            'gyro': ('gyro', Imu, 'sensors/gyro', p['gyro_period_s']),
-            'actuator_command': ('cmd', ActuatorCommand, 'adcs/actuator_command',
-                                 p['command_period_s']),
-        }
         # the command applied over [t_k-1, t_k] is the one stamped t_k-1: awaited (determinism)
-        inputs = {key: (mtype, topic, period, 'previous' if key == 'cmd' else 'frame')
-                  for need, (key, mtype, topic, period) in topics.items()
-                  if need in self.entry.inputs}
+        inputs = node_inputs(self.entry.inputs, p)
         self.est_pub = self.publisher(AttitudeState, 'adcs/attitude_estimate')
         self.diag_pub = self.publisher(FilterDiagnostics, 'adcs/estimator/diagnostics')
         self.lockstep_inputs(inputs, p['period_s'], self.on_frame)

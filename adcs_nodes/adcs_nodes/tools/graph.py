@@ -16,6 +16,7 @@ from typing import Any, Dict, List
 
 import yaml
 
+from adcs_nodes import inputs as input_records
 from adcs_nodes import registry
 from adcs_nodes.core.orbit import MU_EARTH, R_EARTH
 from adcs_nodes.tools.scenario import default_safe
@@ -103,7 +104,6 @@ def _sensor_params(cfg: Dict[str, Any]) -> Dict[str, Any]:
 
 def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
     est = sc['estimator']
-    sensors = sc['sensors']
     entry = registry.get('estimator', est['algorithm'])
     inertia = [float(v) for row in sc['spacecraft']['inertia_kgm2'] for v in row]
     p: Dict[str, Any] = {
@@ -111,13 +111,7 @@ def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
         'initial_q_orbit_body': est['initial_q_orbit_body_xyzw'],
         'initial_omega_body_orbit_body': _rad(est['initial_omega_body_orbit_body_deg_s']),
         **{prm.name: est[prm.name] for prm in entry.params}}
-    for key, sensor in (('magnetometer_period_s', 'magnetometer'),
-                        ('horizon_period_s', 'horizon_sensor'),
-                        ('star_tracker_period_s', 'star_tracker'), ('gyro_period_s', 'gyro')):
-        if sensor in sensors:
-            p[key] = sensors[sensor]['period_s']
-    if 'controllers' in sc:
-        p['command_period_s'] = sc['controllers']['period_s']
+    p.update(_input_periods(sc, entry.inputs))
     flatten('onboard_orbit', est['onboard_orbit'], p)
     flatten('onboard_field', est['onboard_field'], p)
     return p
@@ -253,7 +247,7 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                               publishes=[topic, '/tf_static'], subscribes=['/clock'] + inputs))
     if 'estimator' in sc:
         entry = registry.get('estimator', sc['estimator']['algorithm'])
-        subs = ['/clock', '/tf_static'] + [_INPUT_TOPICS[i] for i in entry.inputs]
+        subs = ['/clock', '/tf_static'] + [input_records.get(i).topic for i in entry.inputs]
         nodes.append(NodeSpec('estimator', 'adcs_nodes', 'estimator',
                               'adcs_nodes.nodes.estimator', 'EstimatorNode',
                               {**flight, **plugins, **_estimator_params(sc),
@@ -280,24 +274,35 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
     return nodes
 
 
-#: Registry input -> the topic a node subscribes to for it.
-_INPUT_TOPICS = {'estimate': 'adcs/attitude_estimate', 'target': 'adcs/attitude_target',
-                 'magnetometer': 'sensors/magnetometer', 'wheel_speeds': 'sensors/wheels',
-                 'horizon': 'sensors/horizon', 'star_tracker': 'sensors/star_tracker',
-                 'gyro': 'sensors/gyro', 'actuator_command': 'adcs/actuator_command'}
-
-
-def _mounts(sc: Dict[str, Any], inputs) -> Dict[str, Any]:
-    """``expected_mounts`` of a consumer: the frames of the simulated sensors it reads
-    (a node waits for their ``/tf_static`` mounts before it is ready)."""
-    from adcs_nodes.tools.scenario import SENSOR_OF_INPUT
+def _mounts(sc: Dict[str, Any], names) -> Dict[str, Any]:
+    """``expected_mounts`` of a consumer: the frames of the simulated sensors it reads whose
+    samples are rotated by a mount (a node waits for their ``/tf_static`` mounts before it is
+    ready)."""
     frames = []
-    for need in inputs:
-        key = SENSOR_OF_INPUT.get(need)
-        cfg = sc['sensors'].get(key) if key else None
-        if cfg is not None and not cfg.get('external') and key != 'wheel_tachometer':
-            frames.append(key)        # a sensor node's frame_id is its name
+    for name in names:
+        rec = input_records.get(name)
+        cfg = sc['sensors'].get(rec.sensor) if rec.sensor else None
+        if rec.mounted and cfg is not None and not cfg.get('external'):
+            frames.append(rec.sensor)        # a sensor node's frame_id is its name
     return {'expected_mounts': frames} if frames else {}
+
+
+def _input_periods(sc: Dict[str, Any], names) -> Dict[str, float]:
+    """The producer periods of inputs ``names`` in this scenario, by their period parameter
+    (inputs whose producer the scenario lacks are left out: the node's default applies)."""
+    ctrl = sc.get('controllers') or {}
+    producers = {
+        'estimate': (sc.get('estimator') or {}).get('period_s'),
+        'target': (sc.get('guidance') or {}).get('period_s') or ctrl.get('period_s'),
+        'actuator_command': ctrl.get('period_s')}
+    out = {}
+    for name in names:
+        rec = input_records.get(name)
+        period = (sc['sensors'].get(rec.sensor, {}).get('period_s') if rec.sensor
+                  else producers.get(name))
+        if period is not None:
+            out[rec.period_param] = period
+    return out
 
 
 def _spacecraft_context(sc: Dict[str, Any]) -> Dict[str, Any]:
@@ -344,35 +349,25 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
                    plugins: Dict[str, Any]) -> List[NodeSpec]:
     """Guidance, one node per configured controller (any registered one), the manager."""
     ctrl = sc['controllers']
-    sensors = sc['sensors']
     est_period = sc['estimator']['period_s'] if 'estimator' in sc else 0.0
     craft = _spacecraft_context(sc)
     limits = craft['max_dipole_Am2']
     wheels = sc['spacecraft'].get('wheels') or []
     names = [k for k in ctrl if k != 'period_s']
     entries = {n: registry.get('controller', n) for n in names}
-    target_period = (sc.get('guidance') or {}).get('period_s') or ctrl['period_s']
     shared = {**flight, **craft, 'period_s': ctrl['period_s']}
-    periods = {'estimate': ('estimator_period_s', est_period),
-               'target': ('target_period_s', target_period),
-               'magnetometer': ('magnetometer_period_s',
-                                sensors.get('magnetometer', {}).get('period_s')),
-               'wheel_speeds': ('tachometer_period_s',
-                                sensors.get('wheel_tachometer', {}).get('period_s'))}
     nodes = []
     nodes.append(_guidance_node(sc, flight))     # targets, and the adcs/slew action
     for name, entry in entries.items():
         params = {**shared, **plugins, 'controller': name, **ctrl[name],
                   **_mounts(sc, entry.inputs),
                   'timeout_s': CHAIN_TIMEOUT['controller'] * flight['timeout_s']}
-        for need in entry.inputs:
-            key, period = periods[need]
-            params[key] = period
+        params.update(_input_periods(sc, entry.inputs))
         if {'estimate', 'magnetometer'} <= set(entry.inputs):
             flatten('onboard_orbit', sc['estimator']['onboard_orbit'], params)
             flatten('onboard_field', sc['estimator']['onboard_field'], params)
-        subs = ['/clock'] + [_INPUT_TOPICS[i] for i in entry.inputs]
-        if 'magnetometer' in entry.inputs:
+        subs = ['/clock'] + [input_records.get(i).topic for i in entry.inputs]
+        if any(input_records.get(i).mounted for i in entry.inputs):
             subs.append('/tf_static')
         nodes.append(NodeSpec(f'{name}_controller', 'adcs_nodes', 'controller',
                               'adcs_nodes.nodes.controller', 'ControllerNode', params,

@@ -20,6 +20,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import yaml
 
+from adcs_nodes import inputs as _inputs
 from adcs_nodes import registry
 from adcs_nodes.registry import Param
 
@@ -553,10 +554,8 @@ def _check_wheels(checker: _Checker, wheels: List[Any], line: Optional[int]) -> 
     return out
 
 
-#: Registry input -> the sensor section that provides it.
-SENSOR_OF_INPUT = {'magnetometer': 'magnetometer', 'horizon': 'horizon_sensor',
-                   'star_tracker': 'star_tracker', 'gyro': 'gyro',
-                   'wheel_speeds': 'wheel_tachometer'}
+#: Registry input -> the sensor section that provides it (from the input records).
+SENSOR_OF_INPUT = {i.name: i.sensor for i in _inputs.INPUTS if i.sensor}
 
 
 def controller_names(sc: Dict[str, Any]) -> List[str]:
@@ -1077,3 +1076,125 @@ def schema_markdown() -> str:
     walk('', schema())
     walk('spacecraft.wheels[i].', _WHEEL_KEYS)
     return '\n'.join(rows) + '\n'
+
+
+# ---------------------------------------------------------------------- overrides (--set)
+def parse_overrides(items: Any) -> Dict[str, Any]:
+    """``--set`` arguments to overrides: ``['a.b=3', 'x=[1, 2]']`` -> ``{'a.b': 3, 'x': [1, 2]}``.
+
+    The key is a dotted scenario key (a list element by its index: ``spacecraft.wheels.0.
+    max_torque_Nm``); the value is YAML, read as a scenario file reads it (``1e-5`` is a
+    float); ``null`` removes the key (its default applies again). A dict is returned as is.
+
+    Raises
+    ------
+    ScenarioError
+        An item without ``=``, an empty key or key part, an empty value, or a value that is
+        not YAML; the message names the item.
+    """
+    if isinstance(items, dict):
+        return dict(items)
+    out: Dict[str, Any] = {}
+    for item in items:
+        key, sep, text = str(item).partition('=')
+        key = key.strip()
+        if not sep or not key or not all(part.strip() for part in key.split('.')):
+            raise ScenarioError(f'--set {item}: expected KEY=VALUE with a dotted scenario key '
+                                '(e.g. seed=3, spacecraft.disturbance.random_period_s=0.5)')
+        if not text.strip():
+            raise ScenarioError(f'--set {key}: no value (write {key}=null to remove the key)')
+        try:
+            out[key] = _plain(yaml.load(text, Loader=_LineLoader))  # noqa: S506 - SafeLoader
+        except (yaml.YAMLError, ScenarioError, RecursionError) as exc:
+            why = getattr(exc, 'problem', None) or str(exc) or type(exc).__name__
+            raise ScenarioError(shorten_message(f'--set {key}: the value is not YAML: {why}')) \
+                from None
+    return out
+
+
+def _plain(value: Any) -> Any:
+    """Plain dicts, lists and Python scalars (what ``yaml.safe_dump`` writes)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if hasattr(value, 'tolist') and not isinstance(value, (str, bytes)):
+        return _plain(value.tolist())        # numpy arrays and scalars
+    return value
+
+
+def _set_dotted(data: Dict[str, Any], key: str, value: Any) -> None:
+    node: Any = data
+    *path, leaf = key.split('.')
+    for i, part in enumerate(path + [leaf]):
+        where = '.'.join(path[:i]) or '<top>'
+        last = i == len(path)
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise ScenarioError(f'--set {key}: {where} is a list of {len(node)}: '
+                                    f'{part!r} is not an index of it')
+            if last:
+                if value is None:
+                    raise ScenarioError(f'--set {key}: a list element cannot be removed')
+                node[int(part)] = value
+                return
+            node = node[int(part)]
+        elif isinstance(node, dict):
+            if last:
+                if value is None:
+                    node.pop(part, None)
+                else:
+                    node[part] = value
+                return
+            if node.get(part) is None:
+                node[part] = {}            # a new section (the validation names a bad one)
+            node = node[part]
+        else:
+            raise ScenarioError(f'--set {key}: {where} is a value ({node!r}), not a section')
+
+
+def apply_overrides(sc: Dict[str, Any], overrides: Any) -> Dict[str, Any]:
+    """A validated copy of scenario ``sc`` with ``overrides`` set (``--set KEY=VALUE``).
+
+    Parameters
+    ----------
+    sc : dict
+        A validated scenario (:func:`load_scenario`; it is not changed).
+    overrides : dict or sequence of str
+        ``{dotted key: value}`` (``None`` removes the key) or ``KEY=VALUE`` strings
+        (:func:`parse_overrides`).
+
+    Returns
+    -------
+    dict
+        The edited scenario, validated again by every check of :func:`load_scenario` (as if
+        the file said so); ``_path`` stays the original file's. The overrides apply to the
+        effective scenario: the flight software's onboard models are their own keys
+        (``estimator.onboard_orbit.*``, ``estimator.onboard_field.*``), so a change of the
+        truth ``orbit`` or ``field`` leaves them as they were (a model error), unless set too.
+
+    Raises
+    ------
+    ScenarioError
+        An unknown key, a bad value or a physically impossible combination; the message starts
+        with ``--set`` and the overridden keys and names the offending key (no file line: the
+        edit has none).
+    """
+    import tempfile
+
+    changes = parse_overrides(overrides)
+    data = copy.deepcopy({k: v for k, v in sc.items() if not str(k).startswith('_')})
+    for key, value in changes.items():
+        _set_dotted(data, key, copy.deepcopy(value))
+    what = ', '.join(f'{k}={v!r}' for k, v in changes.items())
+    with tempfile.TemporaryDirectory(prefix='adcs-set-') as tmp:
+        path = os.path.join(tmp, 'scenario.yaml')
+        with open(path, 'w', encoding='utf-8') as fh:
+            yaml.safe_dump(_plain(data), fh, sort_keys=False)
+        try:
+            out = load_scenario(path)
+        except ScenarioError as exc:
+            text = re.sub(r'^' + re.escape(path) + r'(:\d+)?: ', '', str(exc))
+            raise ScenarioError(shorten_message(f'--set {what}: {text}')) from None
+    out['_path'] = sc.get('_path', out['_path'])
+    return out

@@ -289,6 +289,14 @@ class ControlInputs:
     b_body_model: Optional[np.ndarray] = None
     wheel_speed_rad_s: Optional[np.ndarray] = None
     wheel_momentum_Nms: Optional[np.ndarray] = None
+    #: a fresh horizon-sensor sample: (roll, pitch) [rad] of the body w.r.t. the orbit frame
+    horizon_roll_pitch: Optional[tuple] = None
+    #: a fresh gyro sample [rad/s, body axes]
+    gyro_rate_body: Optional[np.ndarray] = None
+    #: a fresh star-tracker attitude ``q_eci_body`` (scalar last)
+    q_eci_body_meas: Optional[np.ndarray] = None
+    #: the dipole applied over the previous command frame [A m^2, body axes]
+    applied_dipole_body: Optional[np.ndarray] = None
 
     def field_body(self) -> Optional[np.ndarray]:
         """The fresh measurement when there is one, else the onboard-model field."""
