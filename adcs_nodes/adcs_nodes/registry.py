@@ -21,6 +21,7 @@ Pure Python; no rclpy.
 """
 from __future__ import annotations
 
+import array
 import difflib
 import importlib
 import importlib.util
@@ -30,11 +31,13 @@ import sys
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
+from adcs_nodes import inputs as _inputs
+
 KINDS = ('controller', 'estimator', 'sensor')
 
-#: What a controller may read (``ControlInputs`` fields) or an estimator may take.
-INPUTS = ('estimate', 'target', 'magnetometer', 'wheel_speeds', 'horizon', 'star_tracker',
-          'gyro', 'actuator_command')
+#: What a controller may read or an estimator may take: the input records' names
+#: (:mod:`adcs_nodes.inputs`: topic, type, providing sensor, period parameter).
+INPUTS = _inputs.NAMES
 #: What a controller may command.
 ACTUATORS = ('magnetorquer', 'wheels', 'torque')
 
@@ -98,7 +101,8 @@ class Param:
         """Return ``value`` converted to this parameter's type, or raise ``ValueError``.
 
         The message says why (type, range, choices, length), never echoing more than 80
-        characters of the value.
+        characters of the value. An array may come as a list, a tuple or an ``array.array``
+        (what rclpy hands over for a ``double_array_value`` set at run time).
         """
         t = self.type
         if t == 'float':
@@ -121,6 +125,8 @@ class Param:
                 raise ValueError(f'{self.name}: {short(value)} is not one of '
                                  f'{", ".join(self.choices)}{hint}')
             return value
+        if isinstance(value, array.array):
+            value = value.tolist()
         if not isinstance(value, (list, tuple)):
             raise ValueError(f'{self.name}: expected a list, got {short(value)}')
         if self.length is not None and len(value) != self.length:
@@ -244,11 +250,6 @@ class Entry:
         for key, value in given.items():
             out[key] = self.param(key).validate(value)
         return out
-
-    def core_class(self) -> type:
-        """Import and return the core class."""
-        module, _, cls = self.core.partition(':')
-        return getattr(importlib.import_module(module), cls)
 
 
 def unknown_message(key: str, known: Sequence[str], where: str) -> str:

@@ -192,8 +192,3 @@ def guidance_from_params(t_s: Sequence[float], types: Sequence[str],
                     math.radians(float(amplitude_deg[i])), float(period_s[i]))
             for i in range(n)]
     return Guidance(segs, frame)
-
-
-def hold_orbit() -> Guidance:
-    """The default: hold the orbital frame (paper 000's target)."""
-    return Guidance([Segment(0.0, 'hold', att.identity())], 'orbit')
