@@ -1,0 +1,42 @@
+"""A plugin controller that reads the gyro and the star tracker runs in a launched graph (issue
+19: inputs are records, so a registered controller may declare any input kind, and the graph
+builder wires it with no other change).
+
+The scenario of ``tests/unit/test_frameloop_plugin_inputs.py`` (paper 003's spacecraft with a
+gyro, a star tracker and ``tests/plugins/gyro_damper.py`` active from t = 0) runs one process
+per node; its bag equals the plain engine's on every data topic, and the damper's torque was
+applied (it commands nothing until both inputs have reached it).
+"""
+import os
+import sys
+
+import numpy as np
+import yaml
+
+from adcs_launch import ROOT, adcs
+from adcs_nodes.tools.bag import content_digest, read_messages
+
+sys.path.insert(0, os.path.join(ROOT, 'tests', 'unit'))
+from test_frameloop_plugin_inputs import damper_scenario  # noqa: E402
+
+NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
+            '/adcs/controller_status')
+
+
+def test_gyro_and_star_tracker_plugin_runs_in_a_launched_graph(tmp_path):
+    sc = damper_scenario(tmp_path)
+    path = tmp_path / 'damper_graph.yaml'
+    path.write_text(yaml.safe_dump({k: v for k, v in sc.items() if not k.startswith('_')}))
+    graph, plain = str(tmp_path / 'graph'), str(tmp_path / 'plain')
+    adcs('run', str(path), '--record', graph, '--duration', '2', '--quiet', timeout=600)
+    adcs('run', str(path), '--engine', 'plain', '--record', plain, '--duration', '2',
+         '--quiet', timeout=600)
+    torques = [np.array([m.torque_body.x, m.torque_body.y, m.torque_body.z])
+               for _, _, m in read_messages(graph, ['/adcs/actuator_command'])
+               if m.source == 'gyro_damper']
+    assert len(torques) == 21                       # every 0.1 s frame of 2 s
+    assert np.linalg.norm(torques[-1]) > 0.1        # the damper got the gyro and the star
+    a = {t: d for t, d in content_digest(graph).items() if t not in NOT_DATA}
+    b = {t: d for t, d in content_digest(plain).items() if t not in NOT_DATA}
+    assert '/sensors/gyro' in a and '/sensors/star_tracker' in a
+    assert a == b
