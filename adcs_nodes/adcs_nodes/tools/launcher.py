@@ -27,6 +27,14 @@
   set before it executes the node, :data:`PDEATHSIG_SHIM`), so a launcher killed with SIGKILL
   takes its nodes with it (the recorder closes its bag on SIGTERM). A full disk (``ENOSPC``)
   stops the run with a message saying so; what was written is kept.
+* Self-healing before frame 0 (one process per node): a node whose expected endpoints stay
+  unmatched for :data:`HEAL_WAIT_S` while every other node of the handshake is ready, or a
+  managed node whose lifecycle requests go unanswered for :data:`HEAL_UNANSWERED_S`, is
+  stopped and started again (at most :data:`MAX_RESTARTS` times; nothing has happened yet,
+  so the run stays deterministic). A consumer that already locked the restarted node's
+  publisher identity is restarted with it, and the clock master too when a node that had
+  said ready is restarted. Each restart is logged and counted in the run summary; a node
+  stuck again after its restart fails the run with the reason (:func:`heal_decision`).
 * Privacy: the run directory (logs, parameters) and the manifests are readable by the owner
   only (0700 / 0600); ``~/.cache/adcs/runs`` keeps the last :data:`KEEP_RUNS` run directories.
 * While a run is active, ``~/.cache/adcs/runs/active-<pid>.json`` names its domain, run
@@ -98,6 +106,23 @@ ESSENTIAL = {'dynamics', 'environment', 'recorder', 'composed'}
 #: start (imports), service discovery, configure (parameters, core, endpoints), activate.
 #: The clock master's own start limit (``start_timeout_s``) is the same.
 LIFECYCLE_DEADLINE_S = 120.0
+#: Self-healing (issue 20): wall seconds a node's handshake may wait for its endpoints (its
+#: ``still waiting for endpoints after N s`` log line) while every other node is ready,
+#: before it is restarted.
+HEAL_WAIT_S = 30.0
+#: ... seconds a managed node's lifecycle requests (change_state, get_state) may go
+#: unanswered before it is restarted (a lost answer is asked again after 5 s).
+HEAL_UNANSWERED_S = 30.0
+#: Restarts per node before frame 0; a node stuck again after them fails the run.
+MAX_RESTARTS = 1
+#: The clock master's start limit (``start_timeout_s``) in a launched run: the launcher's own
+#: deadlines (lifecycle, restarts) end a stuck start first and say why.
+START_TIMEOUT_S = 180.0
+#: Test only: ``<node>[@<starts>]:<ros args>[;...]`` appended to that node's command (e.g.
+#: ``guidance:-r /clock:=/nowhere``: a node that never matches; ``guidance@1:...``: only its
+#: first process), to test the self-healing.
+TEST_NODE_ARGS_ENV = 'ADCS_TEST_NODE_ROS_ARGS'
+_WAITING = re.compile(r'still waiting for endpoints after ([0-9.]+) s: (.*)')
 
 
 def external_devices(sc: Dict[str, Any]) -> List[str]:
@@ -110,6 +135,60 @@ def external_devices(sc: Dict[str, Any]) -> List[str]:
             out.append(f'external {name}: no simulated node; expecting a driver publishing '
                        f'{entry.node[3]} ({entry.node[4]}) on ROS_DOMAIN_ID of this run '
                        '(docs/topics.md)')
+    return out
+
+
+def heal_decision(expected: List[str], ready: Iterable[str], waiting: Dict[str, Tuple[float, str]],
+                  master: str, restarts: Dict[str, int], guards: Dict[str, List[str]],
+                  wait_s: float = HEAL_WAIT_S, max_restarts: int = MAX_RESTARTS):
+    """Which nodes to restart before frame 0, from the start handshake's state.
+
+    ``expected``: the nodes that say ``lockstep/ready`` (the clock master among them);
+    ``ready``: those that did; ``waiting``: per node, ``(seconds, unmatched)`` of its last
+    ``still waiting for endpoints`` line; ``restarts``: restarts so far per node; ``guards``:
+    per node, the nodes that accept its messages only from its publisher identity.
+
+    Nothing is decided while a node that is not ready has not waited ``wait_s`` for its
+    endpoints (it is starting, or being configured): a node is restarted only when its
+    expected endpoints stay unmatched after all its peers matched. Of the nodes stuck, the
+    clock master is restarted only when it is the only one (its missing matches are
+    otherwise those of the others).
+
+    Returns None, ``('restart', [(node, reason), ...])``, or ``('fail', node, reason)`` for
+    a node stuck again after ``max_restarts`` restarts.
+    """
+    ready = set(ready)
+    unready = [n for n in expected if n not in ready]
+    if not unready or any(waiting.get(n, (0.0, ''))[0] < wait_s for n in unready):
+        return None
+    targets = [n for n in unready if n != master] or [master]
+    for name in targets:
+        if restarts.get(name, 0) >= max_restarts:
+            return ('fail', name, f'node {name} still has unmatched endpoints after '
+                    f'{restarts.get(name, 0)} restart(s) before frame 0: {waiting[name][1]}')
+    return ('restart', restart_plan(
+        [(n, f'its endpoints stayed unmatched for {waiting[n][0]:g} s while every other '
+          f'node was ready: {waiting[n][1]}') for n in targets], ready, master, guards))
+
+
+def restart_plan(targets: List[Tuple[str, str]], ready: Iterable[str], master: str,
+                 guards: Dict[str, List[str]]) -> List[Tuple[str, str]]:
+    """``targets`` ``(node, reason)`` and the nodes to restart with them: each ready consumer
+    that accepts a target's messages only from the publisher identity it locked at its
+    handshake (it would refuse the new process), and the clock master when a node that had
+    said ready is restarted (the master must wait for its new ready)."""
+    ready = set(ready)
+    out = list(targets)
+    names = {n for n, _ in targets}
+    for name, _ in targets:
+        for guard in guards.get(name, []):
+            if guard in ready and guard not in names:
+                names.add(guard)
+                out.append((guard, f'it accepts {name}\'s messages only from the publisher it '
+                            'locked at its handshake (the old process)'))
+    if master not in names and names & ready:
+        out.append((master, 'a node that had said ready is restarted: the clock master must '
+                    'wait for its new ready'))
     return out
 
 
@@ -131,6 +210,8 @@ class RunResult:
     message: str
     #: lockstep throughput measured by the clock master from frame 0 to its end [frames/s]
     frames_per_s: float = 0.0
+    #: nodes restarted before frame 0 (self-healing), per node
+    restarts: Optional[Dict[str, int]] = None
 
 
 def _private_dir(path: str) -> str:
@@ -307,7 +388,7 @@ class _Monitor:
     (``nodes/lockstep_node.py``); final statuses and missed frames are never held back.
     """
 
-    def __init__(self, epoch_ns: int) -> None:
+    def __init__(self, epoch_ns: int, watch_ready: bool = False) -> None:
         import rclpy
         from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -352,6 +433,14 @@ class _Monitor:
             self.node.create_subscription(LockstepStatus, 'lockstep/status',
                                           self._on_status_msg, 50)
         self.node.create_subscription(LockstepStatus, 'recorder/status', self._on_rec, 10)
+        #: nodes that said ``lockstep/ready`` (one process per node: the self-healing)
+        self.ready: set = set()
+        if watch_ready:
+            from std_msgs.msg import String
+
+            from adcs_nodes.nodes.lockstep_node import QOS_READY
+            self.node.create_subscription(String, 'lockstep/ready',
+                                          lambda m: self.ready.add(m.data), QOS_READY)
         # degraded-run accounting (H-lockstep): the manager's latched status, max missed/node
         from rclpy.qos import DurabilityPolicy
 
@@ -467,6 +556,19 @@ class _Transitions:
         self.failed: Dict[str, str] = {}     # node -> the transition it refused
         self.deadline = time.monotonic() + deadline_s
         self.deadline_s = deadline_s
+        #: per node: its deadline (moved on by a restart), the last answer or first request
+        self._deadlines: Dict[str, float] = {n: self.deadline for n in names}
+        self._heard: Dict[str, float] = {}
+        self.unanswered_s = math.inf         # (the launcher sets HEAL_UNANSWERED_S)
+
+    def reset(self, name: str) -> None:
+        """Forget ``name``'s progress (its process was restarted): start again from
+        'starting', late answers of the old process ignored, a full deadline."""
+        self._token[name] += 1
+        self.step[name] = 'starting'
+        self._heard.pop(name, None)
+        self._sent_at.pop(name, None)
+        self._deadlines[name] = time.monotonic() + self.deadline_s
 
     @property
     def pending(self) -> bool:
@@ -475,20 +577,26 @@ class _Transitions:
 
     def poll(self) -> Optional[Tuple[str, str]]:
         """Send what is due. Returns ``(node, transition)`` of the first refused transition,
-        ``(node, 'deadline')`` for a node not active in time, else None."""
+        ``(node, 'deadline')`` for a node not active in time, ``(node, 'unanswered')`` for a
+        node whose requests got no answer for ``unanswered_s``, else None."""
         if self.failed:
             return next(iter(self.failed.items()))
         now = time.monotonic()
         for name, step in self.step.items():
             if step == 'starting' and self.clients[name].service_is_ready():
                 self._call(name, 'configure')
+                self._heard.setdefault(name, now)
             elif step not in ('starting', 'active') and \
                     now - self._sent_at[name] > self.RESEND_S:
                 self.resent[name] += 1
                 self._ask_state(name)
         late = [n for n, s in self.step.items() if s != 'active']
-        if late and now > self.deadline:
-            return late[0], 'deadline'
+        for name in late:
+            if now > self._deadlines[name]:
+                return name, 'deadline'
+        for name in late:
+            if name in self._heard and now - self._heard[name] > self.unanswered_s:
+                return name, 'unanswered'
         return None
 
     def _send(self, name: str, step: str, client, request, on_answer) -> None:
@@ -514,6 +622,7 @@ class _Transitions:
 
     def _answered(self, name: str, transition: str, future) -> None:
         result = future.result() if not future.cancelled() else None
+        self._heard[name] = time.monotonic()
         if result is None or not result.success:
             self.failed.setdefault(name, transition)
         elif transition == 'configure':
@@ -523,6 +632,8 @@ class _Transitions:
 
     def _state_answered(self, name: str, _step: str, future) -> None:
         result = future.result() if not future.cancelled() else None
+        if result is not None:
+            self._heard[name] = time.monotonic()
         due = self._next.get(result.current_state.id) if result is not None else None
         if due is None:          # no answer, or a transition still under way: ask again later
             return
@@ -582,37 +693,71 @@ class Launcher:
         self.lost: set = set()     # non-essential nodes that died during the run
         self.lost_at: Dict[str, float] = {}   # ... and the sim time they were seen dead [s]
         self._stop_requested = False
+        #: self-healing: restarts per node, their log lines, each log's start offset
+        self.restarts: Dict[str, int] = {}
+        self.restart_notes: List[str] = []
+        self._log_start: Dict[str, int] = {}
+        self._spawn_count: Dict[str, int] = {}
+        #: per node, the nodes that accept its messages only from its publisher identity
+        self._guards: Dict[str, List[str]] = {}
+        for node in self.nodes:
+            for item in node.params.get('expected_publishers', []) or []:
+                producer = str(item).rsplit('=', 1)[-1]
+                self._guards.setdefault(producer, []).append(node.name)
 
     # ------------------------------------------------------------------ processes
     def _started_nodes(self) -> List[NodeSpec]:
         """The graph as started: the managed nodes with ``autostart: false`` (the launcher,
         or the composed process, drives their transitions)."""
-        return [replace(n, params={**n.params, 'autostart': False}) if is_managed(n) else n
-                for n in self.nodes]
+        out = []
+        for n in self.nodes:
+            if is_managed(n):
+                n = replace(n, params={**n.params, 'autostart': False})
+            if n.name == 'dynamics' and not self.compose:
+                n = replace(n, params={'start_timeout_s': START_TIMEOUT_S, **n.params})
+            out.append(n)
+        return out
 
     def _commands(self, params_path: str) -> Dict[str, List[str]]:
         if self.compose:
             spec = [f'{n.name}={n.module}:{n.cls}' for n in self.nodes]
             return {'composed': [sys.executable, '-m', 'adcs_nodes.tools.compose',
                                  '--params-file', params_path, '--nodes', *spec]}
+        extra: Dict[str, List[str]] = {}
+        for item in filter(None, os.environ.get(TEST_NODE_ARGS_ENV, '').split(';')):
+            node, _, args = item.partition(':')
+            node, _, starts = node.strip().partition('@')
+            if not starts or self._spawn_count.get(node, 0) < int(starts):
+                extra[node] = args.split()
         return {n.name: [sys.executable, '-m', n.module, '--ros-args', '-r',
                          f'__node:={n.name}', '--params-file', params_path]
-                for n in self.nodes}
+                + extra.get(n.name, []) for n in self.nodes}
 
     def _spawn(self, env: Dict[str, str], params_path: str) -> None:
         logs = os.path.join(self.run_dir, 'logs')
         os.makedirs(logs, mode=0o700, exist_ok=True)
-        shim = [sys.executable, '-S', '-c', PDEATHSIG_SHIM, str(os.getpid())]
+        self._env, self._params_path = env, params_path
         for name, cmd in self._commands(params_path).items():
-            fd = os.open(os.path.join(logs, f'{name}.log'),
-                         os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o600)
-            with os.fdopen(fd, 'w') as fh:
-                # own session: a Ctrl-C in the terminal reaches the launcher only, which
-                # stops the graph in order; the parent-death signal covers a killed launcher
-                self.procs[name] = subprocess.Popen(shim + cmd, env=env, stdout=fh,
-                                                    stderr=subprocess.STDOUT,
-                                                    stdin=subprocess.DEVNULL,
-                                                    start_new_session=True)
+            self._spawn_one(name, cmd, env)
+
+    def _spawn_one(self, name: str, cmd: List[str], env: Dict[str, str],
+                   note: str = '') -> None:
+        """Start one node; its log is created, or appended to after ``note`` (a restart)."""
+        shim = [sys.executable, '-S', '-c', PDEATHSIG_SHIM, str(os.getpid())]
+        flags = os.O_WRONLY | os.O_CREAT | os.O_CLOEXEC | (os.O_APPEND if note else os.O_TRUNC)
+        fd = os.open(os.path.join(self.run_dir, 'logs', f'{name}.log'), flags, 0o600)
+        with os.fdopen(fd, 'w') as fh:
+            if note:
+                fh.write(f'\n----- {note} -----\n')
+                fh.flush()
+            self._log_start[name] = fh.tell()
+            self._spawn_count[name] = self._spawn_count.get(name, 0) + 1
+            # own session: a Ctrl-C in the terminal reaches the launcher only, which
+            # stops the graph in order; the parent-death signal covers a killed launcher
+            self.procs[name] = subprocess.Popen(shim + cmd, env=env, stdout=fh,
+                                                stderr=subprocess.STDOUT,
+                                                stdin=subprocess.DEVNULL,
+                                                start_new_session=True)
 
     def _log_tail(self, name: str, lines: int = 15) -> str:
         path = os.path.join(self.run_dir, 'logs', f'{name}.log')
@@ -689,7 +834,7 @@ class Launcher:
             return RunResult(1, 0.0, time.monotonic() - t0, 0, 0, None, self.run_dir,
                              f'cannot write {manifest_path}: {exc.strerror or exc}')
         epoch_ns = epoch_to_ns(parse_epoch(self.sc['epoch']))
-        monitor = _Monitor(epoch_ns)
+        monitor = _Monitor(epoch_ns, watch_ready=not self.compose)
         old_int = signal.signal(signal.SIGINT, self._on_signal)
         old_term = signal.signal(signal.SIGTERM, self._on_signal)
         self.log(f'[adcs] run {self.sc["name"]}: {len(self.nodes)} nodes '
@@ -703,6 +848,8 @@ class Launcher:
             self._transitions = _Transitions(
                 monitor.node, [] if self.compose else
                 [n.name for n in self.nodes if is_managed(n)])
+            self._transitions.unanswered_s = HEAL_UNANSWERED_S
+            self._manifest, self._manifest_path = manifest, manifest_path
             manifest['pids'] = {name: proc.pid for name, proc in self.procs.items()}
             try:
                 _write_private(manifest_path, json.dumps(manifest))
@@ -732,6 +879,9 @@ class Launcher:
                 message += (f'\n[adcs] WARNING: the bag misses {monitor.recorder_lost} '
                             'message(s) that the middleware reported lost (last on '
                             f'{monitor.recorder_lost_topic}; docs/reliability.md)')
+            if self.restarts:
+                message += (f'\n[adcs] restarts: {sum(self.restarts.values())} before frame 0 '
+                            f'(self-healing: ' + '; '.join(self.restart_notes) + ')')
             degraded = self._degraded(monitor)
             if degraded and code == 0:
                 code, message = EXIT_DEGRADED, f'done, DEGRADED: {degraded}'
@@ -751,7 +901,7 @@ class Launcher:
             elif saved:
                 message += f'\n{saved}'
         return RunResult(code, sim_s, wall, frames, missed, self.record, self.run_dir, message,
-                         fps)
+                         fps, dict(self.restarts))
 
     def _degraded(self, monitor: '_Monitor') -> str:
         """Why the run lost its controller or estimator for part of the time ('' if not)."""
@@ -821,12 +971,20 @@ class Launcher:
         master = self._master_name()
         transitions = getattr(self, '_transitions', None)
         seen_ns, seen_at = -1, time.monotonic()
+        healed_at = 0.0
         while True:
             monitor.spin(0.02 if transitions is not None and transitions.pending else 0.1)
             failed = transitions.poll() if transitions is not None else None
+            if failed is not None and failed[1] == 'unanswered':
+                failed = self._heal_lifecycle(monitor, failed[0])
             if failed is not None:
                 return self._transition_failed(*failed)
             now = time.monotonic()
+            if not self.compose and not monitor.clock_seen and now - healed_at >= 1.0:
+                healed_at = now
+                stuck = self._heal(monitor)
+                if stuck is not None:
+                    return stuck
             if self.progress and now - last_print > 0.5:
                 last_print = now
                 self._print_progress(monitor, now - t0, total_ns)
@@ -877,6 +1035,74 @@ class Launcher:
                 return 1, (f'node {name} exited with code {rc} before the end of the run; '
                            f'last lines of its log ({self.run_dir}/logs/{name}.log):\n{tail}')
 
+    # ------------------------------------------------------------------ self-healing
+    def _waiting(self, name: str) -> Tuple[float, str]:
+        """``(seconds, unmatched)`` of the last ``still waiting for endpoints`` line that the
+        node's current process logged (``(0.0, '')`` if none)."""
+        path = os.path.join(self.run_dir, 'logs', f'{name}.log')
+        last = (0.0, '')
+        try:
+            with open(path, 'rb') as fh:
+                fh.seek(self._log_start.get(name, 0))
+                text = fh.read().decode('utf-8', errors='replace')
+        except OSError:
+            return last
+        for m in _WAITING.finditer(text):
+            last = (float(m.group(1)), m.group(2).strip())
+        return last
+
+    def _heal(self, monitor: '_Monitor'):
+        """The start handshake's self-healing check (before frame 0, about once a second):
+        restarts what :func:`heal_decision` says; ``(1, message)`` when a node is stuck
+        again after its restarts, else None."""
+        expected = [n.name for n in self.nodes if n.lockstep and n.name in self.procs]
+        waiting = {n: self._waiting(n) for n in expected if n not in monitor.ready}
+        verdict = heal_decision(expected, monitor.ready, waiting, self._master_name(),
+                                self.restarts, self._guards, HEAL_WAIT_S, MAX_RESTARTS)
+        if verdict is None:
+            return None
+        if verdict[0] == 'fail':
+            name = verdict[1]
+            return 1, (f'{verdict[2]}; last lines of its log '
+                       f'({self.run_dir}/logs/{name}.log):\n{self._log_tail(name)}')
+        for name, reason in verdict[1]:
+            self._restart(monitor, name, reason)
+        return None
+
+    def _heal_lifecycle(self, monitor: '_Monitor', name: str):
+        """A managed node whose lifecycle requests went unanswered: restarted (with what
+        :func:`restart_plan` adds), or ``(name, 'unanswered')`` after its restarts."""
+        if self.restarts.get(name, 0) >= MAX_RESTARTS:
+            return name, 'unanswered'
+        reason = (f'its lifecycle requests went unanswered for {HEAL_UNANSWERED_S:g} s '
+                  f'(step: {self._transitions.step.get(name)})')
+        for node, why in restart_plan([(name, reason)], monitor.ready, self._master_name(),
+                                      self._guards):
+            self._restart(monitor, node, why)
+        return None
+
+    def _restart(self, monitor: '_Monitor', name: str, reason: str) -> None:
+        """Stop node ``name`` and start it again with the same command (before frame 0)."""
+        k = self.restarts.get(name, 0) + 1
+        self.restarts[name] = k
+        self.restart_notes.append(f'{name}: {reason}')
+        self.log(f'[adcs] restarting node {name} before frame 0 (restart {k} of at most '
+                 f'{MAX_RESTARTS}): {reason}')
+        self._signal_and_wait([name], 5.0)
+        self._spawn_one(name, self._commands(self._params_path)[name], self._env,
+                        f'restarted by the launcher before frame 0: {reason}')
+        monitor.ready.discard(name)
+        transitions = getattr(self, '_transitions', None)
+        if transitions is not None and name in transitions.step:
+            transitions.reset(name)
+        manifest = getattr(self, '_manifest', None)
+        if manifest is not None:
+            manifest['pids'] = {n: proc.pid for n, proc in self.procs.items()}
+            try:
+                _write_private(self._manifest_path, json.dumps(manifest))
+            except OSError:
+                pass
+
     def _dump_stack(self, name: str, wait_s: float = 5.0) -> str:
         """Ask a live node process for its Python stacks (SIGUSR1: ``faulthandler`` in
         ``runtime.run`` writes every thread's stack to its log); the log's last lines once
@@ -915,6 +1141,12 @@ class Launcher:
             why = reasons[-1] if reasons else 'no reason in its log'
             return 2, (f'node {name} refused its configuration (lifecycle configure failed): '
                        f'{why}; last lines of its log ({log}):\n{tail}')
+        if transition == 'unanswered':
+            stack = self._dump_stack(name)
+            return 1, (f'node {name} did not answer its lifecycle requests for '
+                       f'{HEAL_UNANSWERED_S:g} s, also after {self.restarts.get(name, 0)} '
+                       f'restart(s) before frame 0; last lines of its log ({log}):\n'
+                       f'{stack or tail}')
         if transition == 'deadline':
             step = self._transitions.step.get(name)
             stack = self._dump_stack(name)

@@ -51,9 +51,10 @@ FAILURES = ('start_timeout', 'lifecycle_timeout', 'crash', 'hang', 'failed')
 MODES = ('processes', 'composed')
 #: Seconds between SIGINT and SIGKILL of a run that outlived its deadline.
 KILL_GRACE_S = 15.0
-#: Default wall-clock deadline of one run [s]: the launcher's lifecycle deadline and the clock
-#: master's start limit are 120 s each, so a failed start ends by itself well before this.
-RUN_DEADLINE_S = 200.0
+#: Default wall-clock deadline of one run [s]: the launcher's lifecycle deadline (120 s from a
+#: node's start or restart) and the clock master's start limit in a launched run (180 s) end
+#: a failed start by themselves before this.
+RUN_DEADLINE_S = 260.0
 #: A launch is not started with less than this much of the time budget left [s].
 MIN_LAUNCH_S = 15.0
 #: Busy loop of one CPU burner; it dies with the soak process (parent-death signal).
