@@ -55,7 +55,10 @@ class ControllerManagerNode(ManagedLockstepNode):
     def configure(self) -> None:
         """Parameters, manager core, endpoints and services (lifecycle configure)."""
         p = node_params.declare_all(self, MANAGER_PARAMS)
-        self.core = manager_core(p, self.section('auto', {}, merge=False), self.live)
+        auto = self.section('auto', {}, merge=False)     # (specs: params.AUTO_PARAMS)
+        node_params.refuse_unknown(self)
+        node_params.install_validator(self)
+        self.core = manager_core(p, auto, self.live)
         self.names: List[str] = list(self.core.names)
         period_s = float(p['period_s'])
         ctrl_period_s = float(p['controller_period_s']) or period_s

@@ -110,7 +110,20 @@ def epoch_to_ns(epoch: datetime) -> int:
     return (delta.days * 86400 + delta.seconds) * NS_PER_S + delta.microseconds * 1000
 
 
-class LockstepNode(Node):
+#: ``rclpy.node.Node`` options of every lockstep node: what the params file or ``-p`` gives is
+#: declared at once (so an unknown name can be refused with a did-you-mean), and nothing
+#: undeclared can be set at run time (:class:`adcs_nodes.nodes.params.SpecParameters` says
+#: why, with a did-you-mean).
+NODE_OPTIONS = {'allow_undeclared_parameters': False,
+                'automatically_declare_parameters_from_overrides': True}
+#: Registry kinds whose own parameters a node applies at run time: the core is rebuilt from
+#: its entry with the new values at the next frame boundary. A controller starts again from
+#: its reset state (as a controller switched in does); an estimator would lose its filter
+#: and a sensor its seeded noise stream, so their parameters are read-only.
+REBUILT_AT_RUN_TIME = ('controller',)
+
+
+class LockstepNode(node_params.SpecParameters, Node):
     """rclpy node with the project's parameter, handshake, timing and status conventions.
 
     Parameters common to every node: ``epoch`` (ISO UTC of sim time 0), ``frame_period_s``
@@ -119,14 +132,18 @@ class LockstepNode(Node):
     ``timing_mode`` (``lockstep`` | ``live``), ``dead_after_frames`` (missed frames in a row
     before a producer is dead), ``status_period_s`` (sim seconds between ``lockstep/status``),
     and in live mode ``max_sample_age_s``, ``max_future_s`` and ``live_latency_s``.
+
+    Run-time parameter changes (``ros2 param set``): only the own parameters of a registered
+    controller (:data:`REBUILT_AT_RUN_TIME`) are writable; they are validated when set and
+    applied at the next frame boundary. Every other parameter is read-only (see
+    :mod:`adcs_nodes.nodes.params`).
     """
 
     #: True for the simulator's own nodes: they run in lockstep only.
     SIMULATED_WORLD = False
 
     def __init__(self, name: str, **kwargs: Any) -> None:
-        Node.__init__(self, name, allow_undeclared_parameters=True,
-                      automatically_declare_parameters_from_overrides=True, **kwargs)
+        Node.__init__(self, name, **NODE_OPTIONS, **kwargs)
         self.setup_lockstep()
 
     def setup_lockstep(self) -> None:
@@ -205,33 +222,91 @@ class LockstepNode(Node):
         self._asked.add(name)
         spec = node_params.COMMON.get(name)
         doc = doc or getattr(self, 'PARAM_DOCS', {}).get(name, '')
-        if spec is None and doc:
-            spec = node_params.infer(name, default, doc)
-        if spec is not None:
-            if name in getattr(self, '_adcs_specs', {}):
-                return self.get_parameter(name).value
-            return node_params.declare(self, spec)
-        if not self.has_parameter(name):
-            self.declare_parameter(name, default)
-        value = self.get_parameter(name).value
-        return default if value is None else value
+        if spec is None:    # (a plugin's parameter: typed from its default)
+            spec = node_params.infer(name, default, doc or name.replace('_', ' '))
+        if name in getattr(self, '_adcs_specs', {}):
+            value = self.get_parameter(name).value
+            return list(value) if spec.type.endswith('[]') else value
+        return node_params.declare(self, spec)
 
     def section(self, prefix: str, defaults: Dict[str, Any],
                 merge: bool = True, docs: Optional[Dict[str, str]] = None) -> Dict[str, Any]:
         """Parameters ``prefix.*`` as a dict (for model factories).
 
-        With ``merge`` the given keys override ``defaults``; without it ``defaults`` are used
-        only when no key is given, for sections that select their own variant
-        (``orbit.type: tle`` has other keys than the default circular orbit).
+        Each given key is declared with its spec (:func:`adcs_nodes.nodes.params.
+        declare_section`: validated, described with unit and range, read-only); a key the
+        section does not have is refused with a did-you-mean. With ``merge`` the given keys
+        override ``defaults``; without it ``defaults`` are used only when no key is given,
+        for sections that select their own variant (``orbit.type: tle`` has other keys than
+        the default circular orbit). ``docs`` is not used (the specs describe the keys).
         """
-        node_params.known_prefix(self, prefix)
-        given = {k: p.value for k, p in self.get_parameters_by_prefix(prefix).items()}
-        for key in given:   # descriptions of the section's keys (ros2 param describe)
-            node_params.describe_given(self, f'{prefix}.{key}', (docs or {}).get(
-                key, f'{prefix} section key {key} (docs/scenarios.md: {prefix}.{key})'))
+        given = node_params.declare_section(self, prefix)
         if merge:
             return {**defaults, **given}
         return given if given else dict(defaults)
+
+    # ------------------------------------------------------------------ run-time changes
+    def _rebuilt_entry(self):
+        """The registry entry whose core this node rebuilds on a run-time change, or None."""
+        entry = getattr(self, 'entry', None)
+        return entry if getattr(entry, 'kind', None) in REBUILT_AT_RUN_TIME else None
+
+    def applies_at_run_time(self, name: str) -> bool:
+        """Whether a run-time change of parameter ``name`` takes effect (else it is declared
+        read-only): the own parameters of a registered controller."""
+        entry = self._rebuilt_entry()
+        return entry is not None and any(p.name == name for p in entry.params)
+
+    def _core_and_context(self):
+        """The core object this node steps and its build context (on the node's frame
+        component or on the node)."""
+        holders = [h for h in (getattr(self, 'component', None), self) if h is not None]
+        core = next((getattr(h, 'core') for h in holders if hasattr(h, 'core')), None)
+        ctx = next((getattr(h, 'ctx') for h in holders if hasattr(h, 'ctx')), None)
+        return core, ctx
+
+    def _build_core(self, changes: Dict[str, Any]):
+        """A core of this node's entry with its current parameters overlaid by ``changes``."""
+        entry = self._rebuilt_entry()
+        values = {p.name: changes[p.name] if p.name in changes
+                  else node_params._plain(self.get_parameter(p.name).value)
+                  for p in entry.params}
+        return entry.build(entry.validate(values), self._core_and_context()[1])
+
+    def check_parameters(self, changes: Dict[str, Any]) -> str:
+        """Set-parameters check beyond the specs: the controller must build with the new
+        values (e.g. magnetic's k > beta / (2 alpha)); the reason if not, else ''."""
+        if self._rebuilt_entry() is None or self._core_and_context()[1] is None:
+            return ''
+        try:
+            self._build_core(changes)
+        except ValueError as exc:
+            return f'{", ".join(changes)}: {exc}'
+        return ''
+
+    def parameters_set(self, names: List[str]) -> None:
+        """Run-time change accepted: applied at the next frame boundary."""
+        self._params_pending = getattr(self, '_params_pending', set()) | set(names)
+
+    def apply_parameters(self) -> None:
+        """At a frame boundary: the controller core is rebuilt with the parameters changed
+        since the last frame (the same object, so every holder of it sees the change; it
+        starts from its reset state)."""
+        names = getattr(self, '_params_pending', None)
+        if not names or self._rebuilt_entry() is None:
+            return
+        self._params_pending = set()
+        core, _ = self._core_and_context()
+        new = self._build_core({})
+        if core is None or type(new) is not type(core) or not hasattr(core, '__dict__'):
+            self.get_logger().error(f'parameters {", ".join(sorted(names))} set but not '
+                                    'applied: no controller core to rebuild')
+            return
+        vars(core).clear()
+        vars(core).update(vars(new))
+        self.get_logger().info(f'parameters {", ".join(sorted(names))} applied from this '
+                               f'frame on (t={self.sim_t_ns / NS_PER_S:g} s; the controller '
+                               'restarts from its reset state)')
 
     # ------------------------------------------------------------------ endpoints
     def publisher(self, msg_type, topic: str, qos: QoSProfile = QOS_DATA):
@@ -401,6 +476,7 @@ class LockstepNode(Node):
         self.sync.prune(t)
         self.frames += 1
         self.sim_t_ns = t
+        self.apply_parameters()              # run-time parameter changes: at frame boundaries
         self._on_frame(t, msgs, missing)
         last = self.is_last_frame(t, self._own_period_ns)
         self.frame_done(t, final=last)
@@ -489,6 +565,7 @@ class LockstepNode(Node):
         self._live_last_t = t
         self.frames += 1
         self.sim_t_ns = t
+        self.apply_parameters()              # run-time parameter changes: at frame boundaries
         self._on_frame(t, msgs, [])
         self._live_prev = {n: stamp_ns(m.header.stamp) for n, m in msgs.items() if m is not None}
         self.frame_done(t)

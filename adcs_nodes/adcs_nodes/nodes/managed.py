@@ -49,7 +49,7 @@ from typing import Any, Dict, Optional
 from rclpy.lifecycle import LifecycleNodeMixin, LifecyclePublisher, TransitionCallbackReturn
 from rclpy.node import Node
 
-from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.lockstep_node import NODE_OPTIONS, LockstepNode
 
 #: Node attributes of the parameter layer (``adcs_nodes.nodes.params``) that exist before
 #: ``configure`` (the ``autostart`` parameter) and grow in it: restored by ``cleanup``.
@@ -65,8 +65,7 @@ class ManagedLockstepNode(LifecycleNodeMixin, LockstepNode):
     """
 
     def __init__(self, name: str, **kwargs: Any) -> None:
-        Node.__init__(self, name, allow_undeclared_parameters=True,
-                      automatically_declare_parameters_from_overrides=True, **kwargs)
+        Node.__init__(self, name, **NODE_OPTIONS, **kwargs)   # (no undeclared parameters)
         LifecycleNodeMixin.__init__(self)
         self.done = False
         self.exit_code = 0

@@ -99,12 +99,9 @@ from typing import Dict, List, Optional, Sequence, Set
 
 from adcs_msgs.msg import LockstepStatus
 from builtin_interfaces.msg import Time
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
                                 QosTime)
@@ -112,7 +109,9 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import String
 
+from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
+from adcs_nodes.registry import Param
 from adcs_nodes.tools.bag import (cdr_stamp_ns, ensure_type, flush_writer, make_typestore,
                                   stamp_kind)
 from adcs_nodes.tools.distro import close_writer
@@ -137,6 +136,29 @@ EXIT_WRITE_FAILED = 3
 #: Prefix of ``recorder/status.last_missed_input`` after a write error.
 WRITE_FAILED_PREFIX = 'write failed: '
 DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+
+#: The recorder's parameters (module docstring). All read-only: the bag, its topics and its
+#: flush periods are set when the recording starts.
+PARAMS = (
+    Param('output', 'str', '', '-', "bag directory to create ('': adcs_bag_<UTC time>; an "
+          'existing path is refused)', read_only=True),
+    Param('topics', 'str[]', [], '-', 'topics to record, optionally topic=pkg/msg/Name '
+          '(empty: every topic)', read_only=True),
+    Param('exclude', 'str[]', list(DEFAULT_EXCLUDE), '-', 'topics (or fnmatch patterns) never '
+          'recorded', read_only=True),
+    Param('discovery_period_s', 'float', 0.5, 's', 'wall-clock period of the graph scan',
+          positive=True, max=3600.0, read_only=True),
+    Param('status_period_s', 'float', 0.5, 's', 'wall-clock period of recorder/status',
+          positive=True, max=3600.0, read_only=True),
+    Param('flush_sim_s', 'float', 2.0, 's', 'write the pending chunk once it spans this log '
+          '(simulated) time', positive=True, max=1e6, read_only=True),
+    Param('flush_period_s', 'float', 0.5, 's', 'write the pending chunk at least this often '
+          '(wall clock)', positive=True, max=3600.0, read_only=True),
+    Param('fsync_period_s', 'float', 2.0, 's', 'fsync the bag file this often (wall clock)',
+          positive=True, max=3600.0, read_only=True),
+    Param('expected_matches', 'str[]', [], '-', 'start handshake: "sub:<topic>=<n>" publishers '
+          'matched to our subscription (lockstep/ready when all hold)', read_only=True),
+)
 
 
 class OutputExistsError(FileExistsError, ValueError):
@@ -231,7 +253,7 @@ class _Topic:
     lost: int = 0
 
 
-class RecorderNode(Node):
+class RecorderNode(node_params.SpecParameters, Node):
     """Record topics raw into a rosbag2 MCAP bag (parameters and QoS: module docstring).
 
     Parameters
@@ -249,6 +271,9 @@ class RecorderNode(Node):
     """
 
     def __init__(self, node_name: str = 'recorder', **kwargs) -> None:
+        # what is given is declared at once (unknown names refused with a did-you-mean), and
+        # nothing undeclared can be set at run time
+        kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
         super().__init__(node_name, **kwargs)
         self._writer: Optional[Writer] = None
         try:
@@ -262,35 +287,16 @@ class RecorderNode(Node):
 
     def _configure(self) -> None:
         """Read the parameters, open the bag, create the timers and the status publisher."""
-        self.declare_parameter('output', '', ParameterDescriptor(
-            description='bag directory to create (default adcs_bag_<UTC time>)'))
-        # no default value: rclpy would type an empty list as a byte array
-        self.declare_parameter('topics', Parameter.Type.STRING_ARRAY, ParameterDescriptor(
-            description='topics to record; unset or empty: every topic'))
-        self.declare_parameter('exclude', list(DEFAULT_EXCLUDE), ParameterDescriptor(
-            description='topics (or fnmatch patterns) never recorded'))
-        self.declare_parameter('discovery_period_s', 0.5)
-        self.declare_parameter('status_period_s', 0.5)
-        self.declare_parameter('flush_sim_s', 2.0, ParameterDescriptor(
-            description='write the pending chunk once it spans this log time [s]'))
-        self.declare_parameter('flush_period_s', 0.5, ParameterDescriptor(
-            description='write the pending chunk at least this often (wall clock) [s]'))
-        self.declare_parameter('fsync_period_s', 2.0, ParameterDescriptor(
-            description='fsync the bag file this often (wall clock) [s]'))
-        self.declare_parameter('expected_matches', Parameter.Type.STRING_ARRAY,
-                               ParameterDescriptor(description=(
-                                   'start handshake: "sub:<topic>=<n>" publishers matched to '
-                                   'our subscription (lockstep/ready when all hold)')))
+        p = node_params.declare_all(self, PARAMS)
+        node_params.refuse_unknown(self)
+        node_params.install_validator(self)
 
-        output = str(self.get_parameter('output').value or '') or default_output()
+        output = p['output'] or default_output()
         self.output = Path(output)
         if self.output.exists():
             raise OutputExistsError(f"output {self.output} exists already, not overwriting "
                                     "(choose another 'output')")
-        try:
-            entries = [str(t) for t in (self.get_parameter('topics').value or []) if str(t)]
-        except ParameterUninitializedException:
-            entries = []
+        entries = [str(t) for t in p['topics'] if str(t)]
         self._declared_types: Dict[str, str] = {}
         wanted = set()
         for entry in entries:
@@ -300,17 +306,11 @@ class RecorderNode(Node):
             if msgtype.strip():
                 self._declared_types[topic] = msgtype.strip()
         self._wanted: Optional[Set[str]] = wanted or None
-        self._exclude = [self._resolve(t) for t in (self.get_parameter('exclude').value or [])]
-        self._expected = self._parse_expected()
-        discovery_s = float(self.get_parameter('discovery_period_s').value)
-        status_s = float(self.get_parameter('status_period_s').value)
-        if discovery_s <= 0.0 or status_s <= 0.0:
-            raise ValueError('discovery_period_s and status_period_s must be > 0')
-        flush_sim_s = float(self.get_parameter('flush_sim_s').value)
-        flush_s = float(self.get_parameter('flush_period_s').value)
-        self._fsync_s = float(self.get_parameter('fsync_period_s').value)
-        if not (flush_sim_s > 0.0 and flush_s > 0.0 and self._fsync_s > 0.0):
-            raise ValueError('flush_sim_s, flush_period_s and fsync_period_s must be > 0')
+        self._exclude = [self._resolve(t) for t in p['exclude']]
+        self._expected = self._parse_expected(p['expected_matches'])
+        discovery_s, status_s = p['discovery_period_s'], p['status_period_s']
+        flush_sim_s, flush_s = p['flush_sim_s'], p['flush_period_s']
+        self._fsync_s = p['fsync_period_s']
         self._flush_sim_ns = int(flush_sim_s * 1e9)
         self._chunk_t0_ns: Optional[int] = None   # log time of the first pending message
         self._last_fsync = time.monotonic()
@@ -445,11 +445,7 @@ class RecorderNode(Node):
             f'{qos.durability.name.lower()}, {len(publishers)} publisher(s))')
 
     # ------------------------------------------------------------------ handshake
-    def _parse_expected(self) -> List[tuple]:
-        try:
-            items = list(self.get_parameter('expected_matches').value or [])
-        except ParameterUninitializedException:
-            items = []
+    def _parse_expected(self, items: List[str]) -> List[tuple]:
         out = []
         for item in items:
             if not item:
