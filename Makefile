@@ -2,10 +2,10 @@
 RUN := ros2_ws/run.sh
 STAMP := $(shell date +%Y%m%d-%H%M%S)
 
-.PHONY: demo test lint bench reproduce stress build clean help
+.PHONY: demo test test-long lint bench reproduce stress soak build clean help
 
 help:  ## list the targets
-	@grep -E '^[a-z]+:.*##' $(MAKEFILE_LIST) | sed 's/:.*## /\t/'
+	@grep -E '^[a-z-]+:.*##' $(MAKEFILE_LIST) | sed 's/:.*## /\t/'
 
 build:  ## venv + pinned ROS 2 wheels + colcon build (idempotent, seconds when up to date)
 	ros2_ws/bootstrap.sh
@@ -15,9 +15,12 @@ demo:  ## run the free-tumble scenario end to end: record a bag, write the repor
 
 TEST_WORKERS ?= 2
 
-test: lint  ## flake8 + unit, node and integration tests (not the long reproductions); TEST_WORKERS=0: one process
-	$(RUN) python -m pytest -m "not slow and not alone" --durations=15 -n $(TEST_WORKERS) --dist loadgroup tests
-	$(RUN) python -m pytest -m "alone and not slow" --durations=5 tests
+test: lint  ## flake8 + unit, node and graph tests (not test-long, not the reproductions); TEST_WORKERS=0: one process
+	$(RUN) python -m pytest -m "not slow and not long and not alone" --durations=15 -n $(TEST_WORKERS) --dist loadgroup tests
+	$(RUN) python -m pytest -m "alone and not slow and not long" --durations=5 tests
+
+test-long:  ## long launched-graph tests whose behaviour FrameLoop tests check in make test (~5 min)
+	$(RUN) python -m pytest -m "long and not slow" --durations=15 -p no:warnings tests/graph
 
 lint:  ## flake8 at 99 columns on the packages and tests
 	$(RUN) python -m flake8 adcs_nodes sim_node tests
@@ -30,6 +33,13 @@ reproduce:  ## long paper reproductions (papers 000, 004): pass/fail tables agai
 
 stress:  ## reliable delivery under load: 3 recorded runs beside 3 CPU burners lose nothing (~2 min)
 	$(RUN) python -m pytest -m slow -p no:warnings tests/graph/test_stress_loss.py
+
+SOAK_LAUNCHES ?= 40
+SOAK_BURNERS ?= 2
+SOAK_BUDGET ?= 900
+
+soak:  ## start-up soak: SOAK_LAUNCHES short runs of every scenario (processes, composed) beside SOAK_BURNERS burners, outcome table
+	$(RUN) adcs soak --launches $(SOAK_LAUNCHES) --burners $(SOAK_BURNERS) --time-budget $(SOAK_BUDGET) --out out/soak-$(STAMP)
 
 clean:  ## remove build products (keeps the venv and your bags in out/)
 	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log

@@ -177,3 +177,10 @@ def test_cli_arguments_are_checked(tmp_path, capsys):
     assert code == 0
     out = capsys.readouterr().out
     assert '| total | 2 | 2 |' in out
+
+
+def test_discovery_probe_table():
+    trials = [[(3, 3, 0.2), (3, 3, 0.4), (3, 3, 3.1)], [(3, 3, 0.3), (2, 2, -1.0), (3, 3, 0.1)]]
+    table = soak.discovery_table('P', 3, trials, 2, {'K': 'v'})
+    assert '2 trials of 3 participants' in table and 'env K=v' in table
+    assert '| 6 | 1 | 1 | 0.30 s | 0.40 s | 3.10 s |' in table

@@ -434,6 +434,98 @@ class Soak:
         return sum(r.outcome in FAILURES for r in self.results)
 
 
+# ---------------------------------------------------------------------------------- discovery
+#: One participant of :func:`probe_discovery`: a node with a writer and a reader on one topic;
+#: at the end it prints how many writers its reader matched and when it first matched all.
+PROBE = (
+    'import os, sys, time\n'
+    'import rclpy\n'
+    'from std_msgs.msg import String\n'
+    't_end, n = float(sys.argv[1]), int(sys.argv[2])\n'
+    'rclpy.init()\n'
+    'node = rclpy.create_node("probe%d" % os.getpid())\n'
+    'node.create_publisher(String, "adcs_probe", 10)\n'
+    'sub = node.create_subscription(String, "adcs_probe", lambda m: None, 10)\n'
+    't0, full = time.time(), -1.0\n'
+    'while time.time() < t_end:\n'
+    '    rclpy.spin_once(node, timeout_sec=0.05)\n'
+    '    if full < 0 and sub.get_publisher_count() >= n:\n'
+    '        full = time.time() - t0\n'
+    'print("PROBE %d %d %.3f" % (sub.get_publisher_count(), node.count_publishers("adcs_probe"),'
+    ' full), flush=True)\n'
+    'os._exit(0)\n')
+
+
+def probe_discovery(n: int, wait_s: float, env: Dict[str, str]) -> List[tuple]:
+    """Start ``n`` participants at once on a free run domain (the launcher's discovery
+    settings and Fast DDS profile, or ``env``'s); after ``wait_s`` each says how many of the
+    ``n`` writers (its own included) its reader matched, how many its discovery knew, and
+    when it had matched all (-1: never). Returns those ``(matched, known, full_s)``."""
+    from adcs_nodes.tools.launcher import acquire_domain, child_env
+    domain, lock = acquire_domain()
+    try:
+        run_env = child_env(domain)
+        run_env.update(env)
+        t_end = time.time() + wait_s
+        procs = [subprocess.Popen([sys.executable, '-c', PROBE, f'{t_end:.3f}', str(n)],
+                                  env=run_env, stdout=subprocess.PIPE,
+                                  stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
+                                  start_new_session=True) for _ in range(n)]
+        out = []
+        for proc in procs:
+            try:
+                text, _ = proc.communicate(timeout=max(1.0, t_end - time.time()) + 30.0)
+            except subprocess.TimeoutExpired:
+                _kill_group(proc, 1.0)
+                text = b''
+            m = re.search(rb'PROBE (\d+) (\d+) (-?[0-9.]+)', text or b'')
+            out.append((int(m.group(1)), int(m.group(2)), float(m.group(3))) if m
+                       else (-1, -1, -1.0))
+        return out
+    finally:
+        lock.close()
+
+
+def discovery_table(label: str, n: int, trials: List[List[tuple]], burners: int,
+                    env: Dict[str, str]) -> str:
+    """Markdown summary of :func:`probe_discovery` trials."""
+    parts = [p for t in trials for p in t]
+    incomplete = [p for p in parts if p[0] < n]
+    fulls = sorted(p[2] for p in parts if p[2] >= 0)
+    missing = sum(n - max(p[0], 0) for p in parts)
+    med = fulls[len(fulls) // 2] if fulls else float('nan')
+    return (f'discovery probe{" " + label if label else ""}: {len(trials)} trials of {n} '
+            f'participants started at once beside {burners} CPU burner(s)'
+            + (f'; env {" ".join(f"{k}={v}" for k, v in env.items())}' if env else '')
+            + f'\n\n| participants | not matched with all at the end | writer matches '
+            f'missing | time to all matched: median | p90 | max |\n|---:|---:|---:|---:|---:|'
+            f'---:|\n| {len(parts)} | {len(incomplete)} | {missing} | {med:.2f} s | '
+            + (f'{fulls[int(0.9 * (len(fulls) - 1))]:.2f} s | {fulls[-1]:.2f} s |' if fulls
+               else '- | - |'))
+
+
+def run_probe(args, env: Dict[str, str], out: str) -> int:
+    """``adcs soak --discovery-probe N``: trials of :func:`probe_discovery`."""
+    os.makedirs(out, exist_ok=True)
+    trials: List[List[tuple]] = []
+    end = time.monotonic() + args.time_budget
+    with Burners(args.burners):
+        for i in range(args.launches):
+            if end - time.monotonic() < args.probe_wait + 5.0:
+                break
+            trials.append(probe_discovery(args.discovery_probe, args.probe_wait, env))
+            print(f'[soak] probe {i + 1}: matched ' + ' '.join(str(p[0]) for p in trials[-1])
+                  + '  all after ' + ' '.join(f'{p[2]:.1f}' for p in trials[-1]), flush=True)
+    table = discovery_table(args.label, args.discovery_probe, trials, args.burners, env)
+    with open(os.path.join(out, 'summary.md'), 'w', encoding='utf-8') as fh:
+        fh.write(table + '\n')
+    with open(os.path.join(out, 'probe.json'), 'w', encoding='utf-8') as fh:
+        json.dump(trials, fh)
+    print(table)
+    parts = [p for t in trials for p in t]
+    return 1 if any(p[0] < args.discovery_probe for p in parts) else 0
+
+
 # ---------------------------------------------------------------------------------- CLI
 def default_scenarios() -> List[str]:
     from adcs_nodes.tools.cli import _default_scenario_dir
@@ -462,6 +554,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='environment of the runs (A/B experiments, e.g. '
                    'FASTDDS_DEFAULT_PROFILES_FILE=other.xml); repeatable')
     p.add_argument('--label', default='', help='name of the experiment in the table')
+    p.add_argument('--discovery-probe', type=int, default=0, metavar='N',
+                   help='instead of runs: --launches trials of N bare participants started '
+                   'at once (the launcher\'s discovery settings), each saying how many '
+                   'writers it matched and when')
+    p.add_argument('--probe-wait', type=float, default=20.0, metavar='S',
+                   help='seconds each discovery-probe trial lasts (default 20)')
     p.add_argument('--launcher-cmd', default='', help=argparse.SUPPRESS)   # tests: a fake
 
 
@@ -480,12 +578,14 @@ def run_from_args(args: argparse.Namespace) -> int:
             print(f'adcs soak: --env wants KEY=VALUE, got {item!r}', file=sys.stderr)
             return 2
         env[key] = value
+    out = args.out or os.path.join('out', time.strftime('soak-%Y%m%d-%H%M%S'))
+    if args.discovery_probe > 0:
+        return run_probe(args, env, out)
     scenarios = [os.path.abspath(s) for s in (args.scenarios or default_scenarios())]
     missing = [s for s in scenarios if not os.path.isfile(s)]
     if missing or not scenarios:
         print(f'adcs soak: no scenario file {", ".join(missing) or "found"}', file=sys.stderr)
         return 2
-    out = args.out or os.path.join('out', time.strftime('soak-%Y%m%d-%H%M%S'))
     template = args.launcher_cmd
 
     def fake_command(scenario, mode, duration_s):
