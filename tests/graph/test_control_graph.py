@@ -1,7 +1,13 @@
-"""The closed-loop graph: run-time switching, unknown names, a killed controller, estimation.
+"""The closed-loop graph: run-time switching through the manager's service, unknown names, a
+killed controller.
 
 Runs go through the real ``adcs`` command; switches through ``adcs switch`` on the running
 graph (a long lockstep run, stopped with Ctrl-C once the checks are done).
+
+The behaviour tests that were here run on the FrameLoop now, with the same assertions:
+the estimator converging, paper 004's yaw reproduction, the scheduled switch and the
+automatic sequence (``tests/unit/test_frameloop_control.py``); the graph gives the
+FrameLoop's series on every data topic (``tests/graph/test_engine_parity.py``).
 """
 import os
 import re
@@ -9,11 +15,8 @@ import signal
 import time
 
 import numpy as np
-import pytest
-import yaml
 
-from adcs_launch import SCENARIOS, adcs, control_scenario, start_adcs, wait_manifest
-from adcs_nodes.core import attitude as att
+from adcs_launch import adcs, control_scenario, start_adcs, wait_manifest
 from adcs_nodes.tools.bag import header_stamp_ns, read_messages, topic_summary
 
 EPOCH_NS = 1767225600 * 10**9
@@ -142,92 +145,3 @@ def test_killed_controller_falls_back_to_bdot_and_the_graph_goes_on(tmp_path):
     assert len(after) > 5 and set(after) == {'bdot'}            # fallback holds
     summary = topic_summary(bag)         # the bag is valid (stopped by Ctrl-C: the topics may
     assert summary['/sim/state'][1] > 10  # end a few frames apart, as the recorder's lag)
-
-
-def test_estimator_converges_in_the_launched_graph(tmp_path):
-    """paper000_estimation shortened: below 2 deg after 1200 s (paper: within T/2)."""
-    bag = str(tmp_path / 'estimation')
-    adcs('run', os.path.join(SCENARIOS, 'paper000_estimation.yaml'), '--duration', '1600',
-         '--record', bag, '--quiet')
-    truth = {header_stamp_ns(m): m for _, _, m in read_messages(bag, ['/sim/state'])}
-    errors = []
-    stamps = []
-    for _, _, m in read_messages(bag, ['/adcs/attitude_estimate']):
-        t = header_stamp_ns(m)
-        s = truth[t]
-        q_est = [m.q_orbit_body.x, m.q_orbit_body.y, m.q_orbit_body.z, m.q_orbit_body.w]
-        q_true = [s.q_orbit_body.x, s.q_orbit_body.y, s.q_orbit_body.z, s.q_orbit_body.w]
-        errors.append(np.degrees(att.angle_between(q_est, q_true)))
-        stamps.append((t - EPOCH_NS) / 1e9)
-    expected = list(np.arange(0.0, 1600.1, 2.0))                   # one estimate per 2 s
-    assert len(stamps) == len(expected), (len(stamps), stamps[:3], stamps[-3:])
-    assert np.allclose(stamps, expected)
-    errors = np.array(errors)
-    late = errors[np.array(stamps) >= 1200.0]
-    assert errors[0] > 30.0                                       # started far off
-    assert late.max() < 2.0, f'max error after 1200 s: {late.max():.2f} deg'
-    diag = [m for _, _, m in read_messages(bag, ['/adcs/estimator/diagnostics'])]
-    assert diag[-1].update_count == 161 and diag[-1].rejected_count == 0
-
-
-def test_paper004_yaw_reproduction_in_the_launched_graph(tmp_path):
-    """Formula (3) vs TRIAD over one orbit; independent truth: the digest's numbers for
-    i = 82 deg, 5 % on a_x (alg. (3) 3.07 / 0.94 deg max / RMS, TRIAD 2.83 / 0.92 deg)."""
-    from adcs_nodes.tools.reproductions import expectations_for, yaw_errors_paper004
-    bag = str(tmp_path / 'paper004')
-    adcs('run', os.path.join(SCENARIOS, 'paper004_yaw.yaml'), '--record', bag, '--quiet')
-    name, rows = expectations_for(bag)
-    assert name == 'paper004_yaw' and all(ok for *_, ok in rows if ok is not None), rows
-    sc = yaml.safe_load(open(os.path.join(bag, 'scenario.yaml')))
-    e = yaw_errors_paper004(bag, sc)
-    rms3 = float(np.sqrt(np.mean(e['eq3_deg'] ** 2)))
-    rmst = float(np.sqrt(np.mean(e['triad_deg'] ** 2)))
-    assert abs(rms3 - 0.94) < 0.1 and abs(rmst - 0.92) < 0.1
-    # the estimator node's own yaw output equals formula (3) on the same samples
-    est = {header_stamp_ns(m): m for _, _, m in read_messages(bag, ['/adcs/attitude_estimate'])}
-    truth = {header_stamp_ns(m): m for _, _, m in read_messages(bag, ['/sim/state'])}
-    for t_s, err in zip(e['t_s'][:50], e['eq3_deg'][:50]):
-        k = EPOCH_NS + int(round(t_s * 1e9))
-        q_est = est[k].q_orbit_body
-        q_true = truth[k].q_orbit_body
-        yaw_est = att.to_euler_321([q_est.x, q_est.y, q_est.z, q_est.w])[2]
-        yaw_true = att.to_euler_321([q_true.x, q_true.y, q_true.z, q_true.w])[2]
-        assert np.degrees(yaw_est - yaw_true) == pytest.approx(err, abs=1e-9)
-
-
-def test_scheduled_switch_happens_at_the_exact_sim_time(tmp_path):
-    """manager.schedule from the scenario: magnetic until 20 s, zero at 20 s, bdot after."""
-    bag = str(tmp_path / 'scheduled')
-    path = control_scenario(tmp_path)
-    with open(path) as fh:
-        sc = yaml.safe_load(fh)
-    sc['manager']['schedule'] = [{'t_s': 20.0, 'controller': 'bdot'}]
-    with open(path, 'w') as fh:
-        yaml.safe_dump(sc, fh)
-    adcs('run', path, '--record', bag, '--duration', '40', '--quiet')
-    cmds = commands(bag)
-    assert [t for t, _, _ in cmds] == [float(t) for t in range(0, 41, 2)]
-    by_t = {t: s for t, s, _ in cmds}
-    assert all(by_t[t] == 'magnetic' for t in range(0, 20, 2))
-    assert by_t[20.0] == 'zero'
-    assert all(by_t[t] == 'bdot' for t in range(22, 41, 2))
-
-
-def test_automatic_sequence_detumble_then_acquire(tmp_path):
-    """manager.auto: B-dot until the estimated rate is below the threshold for 3 frames."""
-    bag = str(tmp_path / 'auto')
-    path = control_scenario(tmp_path)
-    with open(path) as fh:
-        sc = yaml.safe_load(fh)
-    sc['manager'] = {'safe': 'bdot', 'auto': {
-        'detumble': 'bdot', 'acquire': 'magnetic', 'rate_enter_deg_s': 8.0,
-        'rate_exit_deg_s': 30.0, 'confirm_frames': 3}}
-    with open(path, 'w') as fh:
-        yaml.safe_dump(sc, fh)
-    adcs('run', path, '--record', bag, '--duration', '60', '--quiet')
-    sources = [s for _, s, _ in commands(bag)]
-    runs = [sources[0]] + [s for a, s in zip(sources, sources[1:]) if s != a]
-    assert runs == ['bdot', 'zero', 'magnetic'], runs
-    assert sources.count('zero') == 1
-    status = [m for _, _, m in read_messages(bag, ['/adcs/controller_status'])]
-    assert status[-1].mode == 'acquire' and status[-1].active == 'magnetic'

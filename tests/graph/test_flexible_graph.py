@@ -4,13 +4,22 @@ integrates the wings' modes with the body and the wheels, and the bag shows them
 Truth: the modal frequencies are the paper's (Sec. 6); the modes start at rest (digest
 section 6) and the first seconds of the maneuver (torque at the 1 N m limit) must excite them;
 the modal momentum ``F eta_dot`` the bag implies must stay below the body's momentum scale.
+
+``make test-long`` (marker ``long``): the modal motion is tested with the same assertions on
+the FrameLoop in ``make test`` (``tests/unit/test_frameloop_wheels.py``), and the graph gives
+the FrameLoop's series for paper001_mpi (``tests/graph/test_engine_parity.py``); only the
+dynamics node's ``/diagnostics`` keys (``wheels_torque_limited``, ``wheels_momentum_limited``)
+are checked here alone.
 """
 import os
 
 import numpy as np
+import pytest
 
 from adcs_launch import SCENARIOS, adcs
 from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+
+pytestmark = pytest.mark.long
 
 EPOCH_NS = 1767225600 * 10**9
 PAPER_HZ = [0.16, 0.85, 0.96, 2.10, 2.55]

@@ -1,10 +1,18 @@
-"""The adcs/slew action on a running graph (issue 10): a goal preempted by a second goal ends
-at the second target; bad goals are refused with a reason before anything is sent."""
+"""The adcs/slew action on a running graph (issue 10): a goal succeeds at its target; a goal
+preempted by a second goal ends at the second target (``make test-long``); bad goals are
+refused with a reason before anything is sent.
+
+Behaviour on the FrameLoop, with the same assertions, in ``make test``: a target replaced
+mid-slew ends at the new one, and a scheduled switch to the fuzzy law starts a slew within the
+torque limit (``tests/unit/test_frameloop_slew.py``; the switch test was here). The action
+server's preemption and cancel: ``tests/node/test_slew_action.py``.
+"""
 import os
 import signal
 import time
 
 import numpy as np
+import pytest
 import yaml
 
 from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
@@ -32,7 +40,34 @@ def _wait_running(pid, timeout=120.0):
     raise AssertionError('the graph did not come up')
 
 
+def test_a_slew_goal_succeeds_at_its_target(tmp_path):
+    """One goal on a running graph: ``adcs slew`` gets the action's feedback and its success,
+    and the recorded attitude ends within 0.5 deg of the goal."""
+    bag = str(tmp_path / 'slew')
+    proc = start_adcs('run', _scenario(tmp_path), '--record', bag, '--duration', '100000',
+                      '--quiet')
+    try:
+        wait_manifest(proc)
+        _wait_running(proc.pid)
+        done = adcs('slew', '--to', '0', '10', '0', '--frame', 'orbit', '--run',
+                    str(proc.pid), timeout=300)
+        lines = done.stdout.strip().splitlines()
+        assert any(line.lstrip().startswith('t ') for line in lines), done.stdout  # feedback
+        assert lines[-1].startswith('succeeded'), done.stdout
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=60)
+    states = list(read_messages(bag, ['/sim/state']))
+    q = states[-1][2].q_orbit_body
+    target = att.from_euler_321(0.0, np.radians(10.0), 0.0)
+    assert np.degrees(att.angle_between([q.x, q.y, q.z, q.w], target)) < 0.5
+
+
+@pytest.mark.long
 def test_a_preempted_slew_ends_at_the_second_target(tmp_path):
+    """``make test-long``: the preemption is the action server's (``tests/node/
+    test_slew_action.py``), the slew to a replaced target the FrameLoop's (``tests/unit/
+    test_frameloop_slew.py``); this is both on a launched graph (about two minutes)."""
     bag = str(tmp_path / 'slew')
     proc = start_adcs('run', _scenario(tmp_path), '--record', bag, '--duration', '100000',
                       '--quiet')
@@ -69,31 +104,3 @@ def test_a_preempted_slew_ends_at_the_second_target(tmp_path):
 def test_bad_goals_are_refused_before_sending():
     bad = adcs('slew', '--to', '0', '0', '0', '--controller', 'nope', check=False)
     assert bad.returncode == 2 and 'nope' in bad.stderr
-
-
-def test_switching_to_fuzzy_mid_run_starts_a_slew_within_the_torque_limit(tmp_path):
-    """reference_slew holds the start attitude (target = itself), then a scripted switch to
-    fuzzy with a 20 deg target: one zero frame, then a slew; no command above 1 N m/axis."""
-    with open(os.path.join(SCENARIOS, 'paper003_slew.yaml')) as fh:
-        sc = yaml.safe_load(fh)
-    start = [float(c) for c in att.from_euler_321(0.0, 0.0, np.radians(20.0))]
-    sc['initial'] = {'q_orbit_body_xyzw': start, 'omega_body_orbit_body_deg_s': [0.0] * 3}
-    sc['guidance']['profile'] = [
-        {'t_s': 0.0, 'type': 'hold', 'q_xyzw': start},
-        {'t_s': 5.0, 'type': 'hold', 'q_xyzw': [0.0, 0.0, 0.0, 1.0]}]
-    sc['manager'] = {'safe': 'reference_slew', 'initial': 'reference_slew',
-                     'schedule': [{'t_s': 5.0, 'controller': 'fuzzy'}]}
-    path = tmp_path / 'switch.yaml'
-    path.write_text(yaml.safe_dump(sc))
-    bag = str(tmp_path / 'switch')
-    adcs('run', str(path), '--record', bag, '--duration', '40', '--quiet', timeout=600)
-    cmds = list(read_messages(bag, ['/adcs/actuator_command']))
-    src = [m.source for _, _, m in cmds]
-    assert src[:50] == ['reference_slew'] * 50 and src[50] == 'zero'
-    assert set(src[51:]) == {'fuzzy'}
-    torque = np.array([[m.torque_body.x, m.torque_body.y, m.torque_body.z]
-                       for _, _, m in cmds])
-    assert np.max(np.abs(torque)) <= 1.0 + 1e-12          # no jump above the limit
-    assert np.max(np.abs(torque[51:])) > 0.2                # the slew did start
-    q = list(read_messages(bag, ['/sim/state']))[-1][2].q_orbit_body
-    assert np.degrees(att.angle_between([q.x, q.y, q.z, q.w], att.identity())) < 2.0

@@ -1,14 +1,23 @@
 """Reaction wheels in the launched graph (issue 9): a short MPI maneuver, and live switching
-between mpi, magnetic and bdot on one spacecraft with magnetorquers and wheels."""
+between mpi, magnetic and bdot on one spacecraft with magnetorquers and wheels.
+
+``make test-long`` (marker ``long``, about two minutes of graph runs): the same behaviour,
+with the same assertions, is tested on the FrameLoop in ``make test``
+(``tests/unit/test_frameloop_wheels.py``), and the graph gives the FrameLoop's series for
+paper001_mpi (``tests/graph/test_engine_parity.py``).
+"""
 import copy
 import os
 
 import numpy as np
+import pytest
 import yaml
 
 from adcs_launch import SCENARIOS, adcs
 from adcs_nodes.core import attitude as att
 from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+
+pytestmark = pytest.mark.long
 
 EPOCH_NS = 1767225600 * 10**9
 Q_LVLH = [1.0, 0.0, 0.0, 0.0]          # body on the LVLH axes (180 deg about x of the orbit frame)
