@@ -4,9 +4,11 @@ nodes in one process) and as a graph (one process per node), to the last bit on 
 
 Each run is short: two periods of the slowest component of the scenario (every sensor,
 estimator, controller and the manager fire at least twice; the estimator's
-previous-frame command is used). The plain run goes through ``adcs run --engine plain``; the
-bags are compared with :func:`adcs_nodes.tools.bag.content_digest` (per topic: count and a
-hash of every message's values in stamp order).
+previous-frame command is used). The plain bags are written in this process
+(:func:`sim_node.engine.run_plain`, what ``adcs run --engine plain`` calls), one of them
+(:data:`PLAIN_CLI`) through the command itself; the bags are compared with
+:func:`adcs_nodes.tools.bag.content_digest` (per topic: count and a hash of every message's
+values in stamp order).
 
 Not compared: ``/tf``, ``/tf_static`` and ``/diagnostics`` (the plain engine does not publish
 them: no data topics), ``adcs/security_events`` (the graph's publisher guard), and
@@ -31,6 +33,10 @@ SHIPPED = sorted(f for f in os.listdir(SCENARIOS) if f.endswith('.yaml'))
 #: horizon sensor. (Each costs about 10 s of processes; composed covers all of them.)
 GRAPH = ('paper000_control.yaml', 'paper001_mpi.yaml', 'paper003_slew.yaml',
          'paper004_yaw.yaml')
+#: The scenario whose plain bag comes from ``adcs run --engine plain`` (a process, the command
+#: line); the others' from :func:`sim_node.engine.run_plain` in this process (the same code
+#: under the command, without an interpreter start each).
+PLAIN_CLI = 'paper000_control.yaml'
 
 
 def short_duration(path):
@@ -52,14 +58,22 @@ def data_digest(bag):
 
 @pytest.fixture(scope='module')
 def plain_bags(tmp_path_factory):
-    """Each shipped scenario's plain-engine bag (in a subprocess: the real command)."""
+    """Each shipped scenario's plain-engine bag: :data:`PLAIN_CLI`'s by the real command (a
+    subprocess), the others' by :func:`sim_node.engine.run_plain` in this process."""
+    from adcs_nodes.tools.scenario import load_scenario
+    from sim_node.engine import run_plain
     out = {}
     root = tmp_path_factory.mktemp('plain')
     for name in SHIPPED:
         path = os.path.join(SCENARIOS, name)
         bag = str(root / name[:-5])
-        adcs('run', path, '--engine', 'plain', '--record', bag, '--duration',
-             short_duration(path), '--quiet', timeout=600)
+        if name == PLAIN_CLI:
+            adcs('run', path, '--engine', 'plain', '--record', bag, '--duration',
+                 short_duration(path), '--quiet', timeout=600)
+        else:
+            res = run_plain(load_scenario(path), float(short_duration(path)), bag,
+                            progress=False)
+            assert res.exit_code == 0, f'{name}: {res.message}'
         out[name] = data_digest(bag)
     return out
 
