@@ -33,7 +33,7 @@ from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tupl
 
 from adcs_nodes import inputs as _inputs
 
-KINDS = ('controller', 'estimator', 'sensor')
+KINDS = ('controller', 'estimator', 'sensor', 'fault')
 
 #: What a controller may read or an estimator may take: the input records' names
 #: (:mod:`adcs_nodes.inputs`: topic, type, providing sensor, period parameter).
@@ -182,7 +182,7 @@ class Entry:
     Attributes
     ----------
     kind : str
-        ``'controller'``, ``'estimator'`` or ``'sensor'``.
+        ``'controller'``, ``'estimator'``, ``'sensor'`` or ``'fault'`` (a fault kind of the world).
     name : str
         Unique within its kind (scenario key, node-name stem, topic segment).
     description : str
@@ -203,6 +203,8 @@ class Entry:
         Sensors: ``(package, module, class, topic, message type)`` of the node publishing it.
     requires : tuple of str
         Scenario sections it needs besides its inputs, e.g. ``'spacecraft.wheels'``.
+    targets : tuple of str
+        Faults: what it may strike (``'sensor'``, ``'wheel'``, ``'magnetorquer'``).
     """
 
     kind: str
@@ -215,6 +217,7 @@ class Entry:
     actuators: Tuple[str, ...] = ()
     node: Optional[Tuple[str, str, str, str, str]] = None
     requires: Tuple[str, ...] = ()
+    targets: Tuple[str, ...] = ()
     origin: str = field(default='', compare=False)
 
     def __post_init__(self) -> None:

@@ -56,11 +56,13 @@ from adcs_nodes.components.guidance import GuidanceComponent
 from adcs_nodes.components.manager import MANAGER_PARAMS, ManagerComponent, manager_core
 from adcs_nodes.core.lockstep import derive_seed, seconds_to_ns
 from adcs_nodes.nodes.actuator_topics import MAGNETORQUER_TOPIC, WHEELS_TOPIC, wheel_names_for
+from adcs_nodes.nodes.convert import stamp_ns
 from adcs_nodes.nodes.messages import make
 from adcs_nodes.tools.graph import NodeSpec, build_graph
 from sim_node.components.dynamics import DynamicsComponent
 from sim_node.components.environment import DEFAULT_FIELD, DEFAULT_ORBIT, EnvironmentComponent
-from sim_node.components.sensors import SENSOR_COMPONENTS
+from sim_node.components.sensors import SENSOR_COMPONENTS, sensor_faults
+from sim_node.faults import parse as parse_faults
 from sim_node.models.spacecraft_config import DEFAULT_INITIAL, DEFAULT_SPACECRAFT
 
 #: ``(topic, message)`` published in a frame.
@@ -83,7 +85,14 @@ class _Consumer:
     name: str
     period_ns: int
     inputs: Dict[str, Tuple[str, str, int]]
-    fire: Callable[[int, Dict[str, Any]], List[Output]]
+    fire: Callable[[int, Dict[str, Any], List[str]], List[Output]]
+    #: per frame input, FrameSync's view: misses in a row, dead, the stamp of the last
+    #: message seen, the stamp that revived it, the last message it took
+    misses: Dict[str, int] = field(default_factory=dict)
+    dead: Dict[str, bool] = field(default_factory=dict)
+    seen: Dict[str, int] = field(default_factory=dict)
+    revived: Dict[str, int] = field(default_factory=dict)
+    taken: Dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -133,7 +142,10 @@ class FrameLoop:
         self.dynamics = DynamicsComponent(
             section(dyn_p, 'spacecraft', DEFAULT_SPACECRAFT),
             section(dyn_p, 'initial', DEFAULT_INITIAL), self.seed, self.frame_ns,
-            int(dyn_p.get('substeps', 10)), self.clock, _log_into(self.warnings, 'dynamics'))
+            int(dyn_p.get('substeps', 10)), self.clock, _log_into(self.warnings, 'dynamics'),
+            parse_faults(str(dyn_p.get('faults', ''))))
+        #: a due input missing this many frames in a row is dead (not awaited), as in a node
+        self.dead_after = int(env_p.get('dead_after_frames', 3))
         cmd_s = float(dyn_p.get('command_period_s', 0.0))
         self.command_ns = seconds_to_ns(cmd_s) if cmd_s > 0 else 0
         self.mounts = Mounts()
@@ -190,8 +202,9 @@ class FrameLoop:
         frame = Param('frame_id', 'str', entry.name)
         p = param_values(entry.params + (frame,), spec.params)
         model = entry.build(p, {'seed': derive_seed(self.seed, spec.name)})
-        comp = SENSOR_COMPONENTS[entry.name](model, p['frame_id'], self.clock,
-                                             _log_into(self.warnings, spec.name))
+        comp = SENSOR_COMPONENTS[entry.name](
+            model, p['frame_id'], self.clock, _log_into(self.warnings, spec.name),
+            sensor_faults(entry.name, str(spec.params.get('faults', '')), self.seed))
         self.mounts.set(p['frame_id'], p.get('q_body_sensor_xyzw', [0.0, 0.0, 0.0, 1.0]))
         self.sensors.append((entry.node[3], seconds_to_ns(p['period_s']), comp))
 
@@ -212,8 +225,9 @@ class FrameLoop:
         inputs = self._input_specs(entry.inputs, p)
         period = self._period(p['period_s'], 'estimator period_s')
 
-        def fire(t_ns: int, msgs: Dict[str, Any]) -> List[Output]:
-            msg = comp.step(t_ns, msgs, lambda key, m: self._fresh(m, t_ns))
+        def fire(t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> List[Output]:
+            msg = comp.step(t_ns, msgs, lambda key, m: self._fresh(m, t_ns),
+                            [self._topic_name(inputs[k][0]) for k in missing])
             if self.ideal_estimate:      # the truth of the frame (the study's reference)
                 return [('adcs/attitude_estimate', self._latest['sim/state'])]
             if msg is None:
@@ -235,7 +249,7 @@ class FrameLoop:
         comp = GuidanceComponent(p, self.clock)
         self.consumers.append(_Consumer(
             spec.name, self._period(p['period_s'], 'guidance period_s'), {},
-            lambda t_ns, msgs: [('adcs/attitude_target', comp.step(t_ns))]))
+            lambda t_ns, msgs, missing: [('adcs/attitude_target', comp.step(t_ns))]))
 
     def _add_controller(self, spec: NodeSpec) -> None:
         ctx_p = param_values(ccomp.CONTEXT_PARAMS, spec.params)
@@ -251,8 +265,8 @@ class FrameLoop:
         topic = f'adcs/controllers/{entry.name}/command'
         self.consumers.append(_Consumer(
             spec.name, self._period(ctx_p['period_s'], f'{spec.name} period_s'), inputs,
-            lambda t_ns, msgs: [(topic, comp.step(t_ns, msgs,
-                                                  lambda key, m: self._fresh(m, t_ns)))]))
+            lambda t_ns, msgs, missing: [(topic, comp.step(
+                t_ns, msgs, lambda key, m: self._fresh(m, t_ns)))]))
 
     def _add_manager(self, spec: NodeSpec) -> None:
         p = param_values(MANAGER_PARAMS, spec.params)
@@ -269,7 +283,7 @@ class FrameLoop:
         wheel_names = wheel_names_for(0 if limits == [-1.0] else len(limits), p['wheel_names'])
         self.manager = comp
 
-        def fire(t_ns: int, msgs: Dict[str, Any]) -> List[Output]:
+        def fire(t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> List[Output]:
             cmd, status = comp.step(t_ns, msgs)
             out = [('adcs/actuator_command', cmd), (MAGNETORQUER_TOPIC, make(
                 Vector3Stamped, header=make(Header, stamp=cmd.header.stamp, frame_id='body'),
@@ -304,28 +318,46 @@ class FrameLoop:
     # ------------------------------------------------------------------ stepping
     def _fresh(self, msg: Any, t_ns: int) -> bool:
         """Lockstep freshness: a sample stamped with the frame."""
-        from adcs_nodes.nodes.convert import stamp_ns
         return msg is not None and self.clock.elapsed_ns(stamp_ns(msg.header.stamp)) == t_ns
 
     def _publish(self, frame: Frame, topic: str, msg: Any) -> None:
         frame.outputs.append((topic, msg))
         self._latest[topic] = msg
         if topic in self._previous_topics:
-            from adcs_nodes.nodes.convert import stamp_ns
             hist = self._by_stamp.setdefault(topic, {})
             hist[self.clock.elapsed_ns(stamp_ns(msg.header.stamp))] = msg
             if len(hist) > 4:
                 del hist[min(hist)]
 
-    def _inputs(self, c: _Consumer, t_ns: int) -> Dict[str, Any]:
+    def _topic_name(self, topic: str) -> str:
+        return topic if topic.startswith('/') else '/' + topic
+
+    def _inputs(self, c: _Consumer, t_ns: int) -> Tuple[Dict[str, Any], List[str]]:
+        """A consumer's messages for frame ``t_ns`` and its due inputs that did not come (a
+        silent producer), with ``FrameSync``'s rule: missing ``dead_after`` frames in a row,
+        an input is dead (no longer missed) until a message of it arrives again."""
         msgs: Dict[str, Any] = {}
+        missing: List[str] = []
         for key, (topic, kind, period) in c.inputs.items():
             if kind == 'previous':
                 s = None if t_ns <= 0 or period <= 0 else ((t_ns - 1) // period) * period
                 msgs[key] = None if s is None else self._by_stamp.get(topic, {}).get(s)
-            else:
-                msgs[key] = self._latest.get(topic)
-        return msgs
+                continue
+            msg = self._latest.get(topic)
+            stamp = -1 if msg is None else self.clock.elapsed_ns(stamp_ns(msg.header.stamp))
+            if stamp > c.seen.get(key, -1):              # a message arrived
+                c.seen[key], c.misses[key] = stamp, 0
+                if c.dead.get(key):                      # a revival: not taken (FrameSync)
+                    c.dead[key], c.revived[key] = False, stamp
+                else:
+                    c.taken[key] = msg
+            msgs[key] = c.taken.get(key)
+            if period > 0 and t_ns % period == 0 and t_ns > c.revived.get(key, -1) \
+                    and stamp != t_ns and not c.dead.get(key):
+                missing.append(key)
+                c.misses[key] = c.misses.get(key, 0) + 1
+                c.dead[key] = c.misses[key] >= self.dead_after
+        return msgs, missing
 
     @property
     def t_ns(self) -> int:
@@ -341,6 +373,9 @@ class FrameLoop:
         self._publish(frame, '/clock', make(Clock, clock=self.clock.stamp(t)))
         env = self.environment.step(t)
         self._publish(frame, 'sim/environment', env)
+        faults = self.dynamics.faults_msg(t)
+        if faults is not None:
+            self._publish(frame, 'sim/faults', faults)
         state = self.dynamics.state_msg(t, env)
         self._publish(frame, 'sim/state', state)
         self._publish(frame, 'sim/wheels', self.dynamics.wheels_msg(state.header))
@@ -355,7 +390,7 @@ class FrameLoop:
                     self._publish(frame, topic, msg)
         for c in self.consumers:
             if t % c.period_ns == 0:
-                for topic, msg in c.fire(t, self._inputs(c, t)):
+                for topic, msg in c.fire(t, *self._inputs(c, t)):
                     self._publish(frame, topic, msg)
         if t >= self.duration_ns:
             self.done = True

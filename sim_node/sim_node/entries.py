@@ -139,3 +139,6 @@ register(Entry(
     _build_tachometer,
     node=('sim_node', 'sim_node.nodes.wheel_tachometer', 'WheelTachometerNode',
           'sensors/wheels', 'sensor_msgs/msg/JointState')))
+
+# the fault kinds of the world register themselves (sim_node.faults)
+import sim_node.faults  # noqa: E402,F401

@@ -24,7 +24,8 @@ class NaiveSync:
         for name, spec in specs.items():
             period, kind = spec if isinstance(spec, tuple) else (spec, 'frame')
             self.inp[name] = {'p': period, 'kind': kind if period else 'latest',
-                              'msgs': {}, 'latest': None, 'misses': 0, 'dead': False}
+                              'msgs': {}, 'latest': None, 'misses': 0, 'dead': False,
+                              'revived': -1}
         self.history, self.dead_after = history, dead_after
 
     def required(self, name, t):
@@ -37,17 +38,19 @@ class NaiveSync:
 
     def add(self, name, s, v):
         i = self.inp[name]
+        i['misses'] = 0
+        if i['dead']:                   # a revival: not stored, awaited after its stamp
+            i['dead'], i['revived'] = False, s
+            return True
         i['msgs'][s] = v
         if len(i['msgs']) > self.history:
             del i['msgs'][min(i['msgs'])]
         if i['latest'] is None or s >= i['latest'][0]:
             i['latest'] = (s, v)
-        i['misses'] = 0
-        revived, i['dead'] = i['dead'], False
-        return revived
+        return False
 
     def missing(self, t):
-        return [n for n, i in self.inp.items() if not i['dead']
+        return [n for n, i in self.inp.items() if not i['dead'] and t > i['revived']
                 and self.required(n, t) is not None and self.required(n, t) not in i['msgs']]
 
     def value(self, name, t):

@@ -146,8 +146,11 @@ def test_producer_dead_after_n_misses_in_a_row_and_revived_by_a_message():
     assert sync.is_dead('ctrl') and sync.dead() == ['ctrl']
     assert 'ctrl' not in sync.missing(5 * S) and not sync.due('ctrl', 5 * S)
     assert sync.add('ctrl', 5 * S, 'c5') is True  # revived ...
+    assert sync.value('ctrl', 5 * S) == 'c1'      # ... by a message that is not used
+    assert not sync.due('ctrl', 5 * S) and 'ctrl' not in sync.missing(5 * S)
     assert sync.due('ctrl', 6 * S) and sync.missing(6 * S) == ['ctrl', 'mag']
     assert sync.add('ctrl', 6 * S, 'c6') is False
+    assert sync.value('ctrl', 6 * S) == 'c6'
 
 
 def test_dead_after_zero_never_gives_up():

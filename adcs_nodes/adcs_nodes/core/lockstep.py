@@ -15,6 +15,10 @@ Timing model (DESIGN section 6)
   node's output in lockstep (that would make the output depend on arrival order).
 * Dead producers: a due input that times out ``dead_after`` frames in a row is *dead*: it is
   no longer awaited until a message of it arrives again (:meth:`FrameSync.add` revives it).
+  That first message only revives the input: it is not stored, and the input is awaited again
+  from the frames after its stamp. A node does not wait for a dead input, so whether the
+  revival arrived before it fired for that frame is a matter of timing; dropping it makes the
+  frame the same either way (and the plain engine does the same).
 * Seeds: one scenario seed; each node derives its own stream with :func:`derive_seed`, so
   adding a node never changes another node's random numbers.
 
@@ -94,6 +98,7 @@ class _Input:
     latest: Optional[Tuple[int, Any]] = None
     misses: int = 0           # due frames missed in a row
     dead: bool = False
+    revived_at: int = -1      # stamp of the message that last revived it (not stored)
 
 
 class FrameSync:
@@ -186,7 +191,9 @@ class FrameSync:
 
     def due(self, name: str, t_ns: int) -> bool:
         """True when input ``name`` must have arrived (with its required stamp) for ``t_ns``."""
-        return not self._inputs[name].dead and self.required_stamp(name, t_ns) is not None
+        inp = self._inputs[name]
+        return not inp.dead and int(t_ns) > inp.revived_at and \
+            self.required_stamp(name, t_ns) is not None
 
     def add(self, name: str, stamp_ns: int, value: Any) -> bool:
         """Store a message of input ``name`` with stamp ``stamp_ns``.
@@ -194,7 +201,8 @@ class FrameSync:
         Returns
         -------
         bool
-            True when the input was dead and is awaited again from now on.
+            True when the input was dead and is awaited again from the frames after
+            ``stamp_ns``; that message itself is not stored (see the module docstring).
 
         Raises
         ------
@@ -203,6 +211,10 @@ class FrameSync:
         """
         inp = self._inputs[name]
         stamp_ns = int(stamp_ns)
+        inp.misses = 0
+        if inp.dead:
+            inp.dead, inp.revived_at = False, stamp_ns
+            return True
         by, stamps = inp.by_stamp, inp.stamps
         if stamp_ns not in by:
             if not stamps or stamp_ns > stamps[-1]:
@@ -214,9 +226,7 @@ class FrameSync:
             del by[stamps.pop(0)]          # the oldest stamp (may be the one just added)
         if inp.latest is None or stamp_ns >= inp.latest[0]:
             inp.latest = (stamp_ns, value)
-        inp.misses = 0
-        revived, inp.dead = inp.dead, False
-        return revived
+        return False
 
     def has(self, name: str, t_ns: int) -> bool:
         """True when input ``name`` has a message stamped exactly ``t_ns``."""
@@ -226,7 +236,7 @@ class FrameSync:
         """True when ``inp`` is due at ``t_ns`` and its required message has not arrived
         (:meth:`due` and :meth:`required_stamp` in one, for the per-message path)."""
         p = inp.period_ns
-        if p <= 0 or inp.dead:
+        if p <= 0 or inp.dead or t_ns <= inp.revived_at:
             return False
         if inp.kind is InputKind.PREVIOUS:
             return t_ns > 0 and ((t_ns - 1) // p) * p not in inp.by_stamp
@@ -603,8 +613,8 @@ class ClockMaster:
         """Command to apply over frame t: the one stamped t, ZERO (dead producer) or HOLD."""
         if self.sync.required_stamp('cmd', t) is None:
             return HOLD                            # not a command frame (or no commands)
-        if self.sync.is_dead('cmd'):
-            return ZERO
+        if self.sync.is_dead('cmd') or not self.sync.due('cmd', t):
+            return ZERO                            # dead, or revived by this frame's command
         return self.sync.value('cmd', t)
 
     def _step(self, cmd: Any, now: float) -> List[Action]:

@@ -65,6 +65,7 @@ TOPIC_TYPES = {
     'sim/state': 'adcs_msgs/msg/AttitudeState',
     'sim/wheels': 'adcs_msgs/msg/WheelState',
     'sim/appendages': 'adcs_msgs/msg/AppendageState',
+    'sim/faults': 'diagnostic_msgs/msg/DiagnosticArray',
     'adcs/actuator_command': 'adcs_msgs/msg/ActuatorCommand',
     'lockstep/status': 'adcs_msgs/msg/LockstepStatus',
     'sensors/magnetometer': 'sensor_msgs/msg/MagneticField',
@@ -121,7 +122,12 @@ def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
 #: frame's chain (estimator -> controllers -> manager -> dynamics): a node waits longer than
 #: its producers, so a missing input upstream times out there first and the consumers get
 #: the fallback instead of timing out themselves at the same moment.
-CHAIN_TIMEOUT = {'estimator': 1.0, 'controller': 2.0, 'manager': 3.0, 'dynamics': 4.0}
+CHAIN_TIMEOUT = {'estimator': 1.0, 'controller': 2.0, 'manager': 3.0, 'dynamics': 4.0,
+                 # a sensor waits for the truth of the next frame, which comes only once the
+                 # world has stepped: after the clock master's own wait (a silent sensor made
+                 # the estimator, then the world, wait; a sensor that timed out first used an
+                 # old truth and broke determinism)
+                 'sensor': 5.0}
 
 
 def flatten(prefix: str, data: Dict[str, Any], out: Dict[str, Any]) -> None:
@@ -229,9 +235,12 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                   'rate_factor': float(rate_factor), **_spacecraft_params(sc),
                   **_initial_params(sc)},
                  publishes=['/clock', 'sim/state', 'sim/wheels', '/tf']
-                 + (['sim/appendages'] if 'flexible' in sc['spacecraft'] else []),
+                 + (['sim/appendages'] if 'flexible' in sc['spacecraft'] else [])
+                 + (['sim/faults'] if sc.get('faults') else []),
                  subscribes=['sim/environment', 'adcs/actuator_command']),
     ]
+    if sc.get('faults'):      # the world announces every fault; the actuators' are its own
+        nodes[1].params['faults'] = json.dumps(sc['faults'], sort_keys=True)
     flight = {**common, 'timing_mode': 'lockstep'}
     # nodes that build registry components load the scenario's plugins too
     # (an empty list has no type in a ROS parameter file)
@@ -242,8 +251,12 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         package, module, cls, topic, _ = registry.get('sensor', key).node
         inputs = ['sim/wheels'] if key == 'wheel_tachometer' else ['sim/state',
                                                                    'sim/environment']
+        mine = [f for f in sc.get('faults', []) if f['target'] == key
+                and 'sensor' in registry.get('fault', f['kind']).targets]
         nodes.append(NodeSpec(key, package, module.rsplit('.', 1)[1], module, cls,
-                              {**common, **_sensor_params(cfg)},
+                              {**common, **_sensor_params(cfg),
+                               'timeout_s': CHAIN_TIMEOUT['sensor'] * common['timeout_s'],
+                               **({'faults': json.dumps(mine, sort_keys=True)} if mine else {})},
                               publishes=[topic, '/tf_static'], subscribes=['/clock'] + inputs))
     if 'estimator' in sc:
         entry = registry.get('estimator', sc['estimator']['algorithm'])

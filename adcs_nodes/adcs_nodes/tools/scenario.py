@@ -194,6 +194,10 @@ SCHEMA: Dict[str, Any] = {
     'record': {
         'topics': F('strlist', [], 'topics to record (empty: every topic of the graph)'),
     },
+    'faults': F('faults', [], 'scripted faults of the world: list of {at_s, kind, target, '
+                'params}; kinds: `adcs list` (sensor: dropout, nan, stuck, bias_step, '
+                'noise_burst; wheel: wheel_stuck, wheel_torque_lost; magnetorquer axis x|y|z: '
+                'coil_open); params.duration_s: how long (0: to the end)'),
 }
 
 _WHEEL_KEYS = {
@@ -503,6 +507,27 @@ def _convert(value: Any, spec: F) -> Any:
         if value:
             profile_from_dicts(value)     # ValueError with the reason
         return value
+    if kind == 'faults':
+        if not isinstance(value, list):
+            raise ValueError(f'expected a list of {{at_s, kind, target, params}}, got '
+                             f'{registry.short(value)}')
+        out = []
+        for i, item in enumerate(value):
+            if not isinstance(item, dict) or not {'at_s', 'kind', 'target'} <= set(item) \
+                    or not set(item) <= {'at_s', 'kind', 'target', 'params'}:
+                raise ValueError(f'fault {i} needs at_s, kind, target and optional params: '
+                                 f'{registry.short(item)}')
+            params = item.get('params') or {}
+            if not isinstance(params, dict):
+                raise ValueError(f'fault {i}: params must be a mapping, got '
+                                 f'{registry.short(params)}')
+            if not isinstance(item['kind'], str) or not isinstance(item['target'], str):
+                raise ValueError(f'fault {i}: kind and target are names (text)')
+            out.append({'index': i, 'at_s': _finite(item['at_s']), 'kind': item['kind'],
+                        'target': item['target'],
+                        'params': {k: (list(v) if isinstance(v, list) else v)
+                                   for k, v in params.items()}})
+        return out
     if kind == 'wheels':
         if not isinstance(value, list):
             raise ValueError(f'expected a list of wheels, got {value!r}')
@@ -592,6 +617,40 @@ def controller_problems(sc: Dict[str, Any], name: str) -> List[str]:
     return out
 
 
+def _check_faults(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, int]) -> None:
+    """Each fault: a registered kind, a target it can strike, a time inside the run, its
+    parameters in range (filled with their defaults)."""
+    line = lines.get('faults')
+    sensors = sc.get('sensors', {})
+    craft = sc['spacecraft']
+    wheels = [w['name'] for w in craft.get('wheels') or []]
+    for f in sc.get('faults', []):
+        key = f'faults[{f["index"]}]'
+        try:
+            entry = registry.get('fault', f['kind'])
+        except ValueError as exc:
+            checker.fail(line, f'{key}.kind', str(exc))
+            continue
+        if not 0.0 <= f['at_s'] <= sc['duration_s']:
+            checker.fail(line, f'{key}.at_s', f'{f["at_s"]:g} s is outside the run '
+                         f'[0, {sc["duration_s"]:g}] s')
+        target = f['target']
+        if 'sensor' in entry.targets:
+            known = [k for k, cfg in sensors.items() if not cfg.get('external')]
+        elif 'wheel' in entry.targets:
+            known = wheels
+        else:
+            known = ['x', 'y', 'z'] if 'magnetorquer' in craft else []
+        if target not in known:
+            checker.fail(line, f'{key}.target', f'{f["kind"]} cannot strike {target!r}; '
+                         f'it strikes {", ".join(entry.targets)}: '
+                         f'{", ".join(known) or "none in this scenario"}')
+        try:
+            f['params'] = entry.validate(f['params'])
+        except ValueError as exc:
+            checker.fail(line, f'{key}.params', str(exc))
+
+
 def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, int]) -> None:
     if sc['duration_s'] <= 0:
         checker.fail(lines.get('duration_s'), 'duration_s', 'must be positive')
@@ -664,6 +723,7 @@ def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, i
                                    > 1e-9):
             checker.fail(lines.get(key.split('.')[0]), key,
                          f'{period} s is not a positive multiple of the frame {frame} s')
+    _check_faults(checker, sc, lines)
     inertia = sc['spacecraft']['inertia_kgm2']
     sym = all(abs(inertia[i][j] - inertia[j][i]) <= 1e-9 * max(1.0, abs(inertia[i][j]))
               for i in range(3) for j in range(3))

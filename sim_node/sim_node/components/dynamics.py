@@ -8,9 +8,10 @@ along its orbit when it is stamped earlier than the frame, and the wheel driver 
 """
 from __future__ import annotations
 
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_msgs.msg import Header
 
 from adcs_msgs.msg import AppendageState, AttitudeState, WheelState
@@ -19,6 +20,7 @@ from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import ZERO, derive_seed, ns_to_seconds
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
 from adcs_nodes.nodes.messages import make
+from sim_node.faults import ActuatorFaults, Fault
 from sim_node.models.dynamics import ActuatorCommand as Command
 from sim_node.models.dynamics import FrameEnvironment, SpacecraftState, propagate_environment
 from sim_node.models.spacecraft_config import initial_state, spacecraft_from_config
@@ -42,7 +44,7 @@ class DynamicsComponent:
 
     def __init__(self, spacecraft_cfg: Dict[str, Any], initial_cfg: Dict[str, Any],
                  seed: int, frame_ns: int, substeps: int, clock: FrameClock,
-                 log: Log = silent) -> None:
+                 log: Log = silent, faults: Sequence[Fault] = ()) -> None:
         if substeps < 1:
             raise ValueError('substeps must be >= 1')
         self.spacecraft = spacecraft_from_config(
@@ -66,6 +68,7 @@ class DynamicsComponent:
         self.wheel_momentum_limited = np.zeros(n, dtype=bool)
         self.torque_limited_frames = 0
         self.momentum_limited_frames = 0
+        self.faults = ActuatorFaults(faults, self.wheel_names)
 
     # ------------------------------------------------------------------ commands
     def to_command(self, msg: Any) -> Command:
@@ -103,6 +106,28 @@ class DynamicsComponent:
                     omega_body_orbit_body=to_vec3(st.omega_body_eci_body
                                                   - r_body_eci @ omega_orbit_eci_eci),
                     covariance=np.zeros(36))     # truth: no covariance
+
+    def faults_msg(self, t_ns: int) -> Optional[DiagnosticArray]:
+        """``sim/faults`` of frame ``t_ns``: the faults that start or end in it (None: none)."""
+        events = self.faults.events(t_ns, self.frame_ns)
+        if not events:
+            return None
+        msg = DiagnosticArray()
+        msg.header.stamp = self.clock.stamp(t_ns)
+        for e in events:
+            f = e['fault']
+            st = DiagnosticStatus()
+            st.level = DiagnosticStatus.WARN if e['active'] else DiagnosticStatus.OK
+            st.name = f'fault/{f.index}'
+            st.hardware_id = f.target
+            st.message = ('active: ' if e['active'] else 'cleared: ') + f.describe()
+            st.values = [KeyValue(key='kind', value=f.kind),
+                         KeyValue(key='target', value=f.target),
+                         *(KeyValue(key=k, value=str(v)) for k, v in sorted(f.params.items()))]
+            msg.status.append(st)
+            self.log('warning' if e['active'] else 'info',
+                     f't={t_ns / 1e9:g} s: fault {st.message}')
+        return msg
 
     def wheels_msg(self, header: Any) -> WheelState:
         """``sim/wheels`` of the current state (momentum, speed, applied torque)."""
@@ -150,8 +175,12 @@ class DynamicsComponent:
         if dt_env:
             env = propagate_environment(env, dt_env, self.spacecraft.mu)
             self.spacecraft.reset_field_history()
+        cmd = self.last_cmd
+        dipole, wheel = self.faults.apply(t_ns, cmd.dipole_body, cmd.wheel_torque)
+        if dipole is not cmd.dipole_body or wheel is not cmd.wheel_torque:
+            cmd = Command(dipole_body=dipole, wheel_torque=wheel, torque_body=cmd.torque_body)
         self.state, self.applied = self.spacecraft.step(
-            self.state, ns_to_seconds(t_ns), ns_to_seconds(self.frame_ns), env, self.last_cmd,
+            self.state, ns_to_seconds(t_ns), ns_to_seconds(self.frame_ns), env, cmd,
             self.substeps)
         if dt_env:
             self.spacecraft.reset_field_history()

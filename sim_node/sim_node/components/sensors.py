@@ -19,6 +19,7 @@ from adcs_nodes.components.base import FrameClock, Log, silent
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes.convert import all_finite, quat, to_quat, to_vec3, vec3
+from sim_node.faults import SensorFaults, parse
 
 
 class SensorComponent:
@@ -37,8 +38,10 @@ class SensorComponent:
     #: The truth topics it reads: ``('state', 'env')`` or ``('wheels',)``.
     truth = ('state', 'env')
 
-    def __init__(self, model: Any, frame_id: str, clock: FrameClock, log: Log = silent) -> None:
+    def __init__(self, model: Any, frame_id: str, clock: FrameClock, log: Log = silent,
+                 faults: Optional[SensorFaults] = None) -> None:
         self.model = model
+        self.faults = faults
         self.frame_id = frame_id
         self.clock = clock
         self.log = log
@@ -63,9 +66,21 @@ class SensorComponent:
         if any(truth.get(k) is None for k in self.truth):
             self.log('warning', f't={t_ns / NS_PER_S:.3f} s: no truth yet, no sample')
             return None
-        return self.sample(t_ns, *(truth[k] for k in self.truth))
+        msg = self.sample(t_ns, *(truth[k] for k in self.truth))
+        if msg is None or self.faults is None:
+            return msg
+        values = self.faults.apply(t_ns, self.values(msg))      # the scenario's faults
+        return None if values is None else self.with_values(msg, values)
 
     def sample(self, t_ns: int, *truth: Any) -> Optional[Any]:
+        raise NotImplementedError     # pragma: no cover (every sensor defines it)
+
+    def values(self, msg: Any) -> np.ndarray:
+        """The sample's measured values (what a fault changes)."""
+        raise NotImplementedError     # pragma: no cover (every sensor defines it)
+
+    def with_values(self, msg: Any, values: np.ndarray) -> Any:
+        """``msg`` with its measured values replaced."""
         raise NotImplementedError     # pragma: no cover (every sensor defines it)
 
 
@@ -92,6 +107,13 @@ class MagnetometerComponent(SensorComponent):
         msg.magnetic_field_covariance = self.covariance
         return msg
 
+    def values(self, msg: MagneticField) -> np.ndarray:
+        return vec3(msg.magnetic_field)
+
+    def with_values(self, msg: MagneticField, values: np.ndarray) -> MagneticField:
+        msg.magnetic_field = to_vec3(values)
+        return msg
+
 
 class GyroComponent(SensorComponent):
     """``sensors/gyro``: the measured body rate [rad/s, body axes]; the bias random walk spans
@@ -115,6 +137,13 @@ class GyroComponent(SensorComponent):
         msg.linear_acceleration_covariance[0] = -1.0
         return msg
 
+    def values(self, msg: Imu) -> np.ndarray:
+        return vec3(msg.angular_velocity)
+
+    def with_values(self, msg: Imu, values: np.ndarray) -> Imu:
+        msg.angular_velocity = to_vec3(values)
+        return msg
+
 
 class StarTrackerComponent(SensorComponent):
     """``sensors/star_tracker``: the measured ``q_eci_body`` (``Imu.orientation``)."""
@@ -128,6 +157,13 @@ class StarTrackerComponent(SensorComponent):
         msg.orientation_covariance = self.covariance
         msg.angular_velocity_covariance[0] = -1.0
         msg.linear_acceleration_covariance[0] = -1.0
+        return msg
+
+    def values(self, msg: Imu) -> np.ndarray:
+        return quat(msg.orientation)
+
+    def with_values(self, msg: Imu, values: np.ndarray) -> Imu:
+        msg.orientation = to_quat(values)
         return msg
 
 
@@ -156,6 +192,14 @@ class HorizonSensorComponent(SensorComponent):
         msg.valid = bool(m.valid)
         return msg
 
+    def values(self, msg: HorizonMsg) -> np.ndarray:
+        return np.array([msg.roll, msg.pitch])
+
+    def with_values(self, msg: HorizonMsg, values: np.ndarray) -> HorizonMsg:
+        msg.roll, msg.pitch = float(values[0]), float(values[1])
+        msg.valid = bool(msg.valid and np.all(np.isfinite(values)))
+        return msg
+
 
 class WheelTachometerComponent(SensorComponent):
     """``sensors/wheels``: measured wheel speeds relative to the body [rad/s]."""
@@ -172,6 +216,13 @@ class WheelTachometerComponent(SensorComponent):
         msg.velocity = [float(v) for v in self.model.measure(speed)]
         return msg
 
+    def values(self, msg: JointState) -> np.ndarray:
+        return np.asarray(msg.velocity, dtype=float)
+
+    def with_values(self, msg: JointState, values: np.ndarray) -> JointState:
+        msg.velocity = [float(v) for v in values]
+        return msg
+
 
 #: The component of each registered sensor model, by registry name.
 SENSOR_COMPONENTS: Dict[str, Type[SensorComponent]] = {
@@ -181,3 +232,10 @@ SENSOR_COMPONENTS: Dict[str, Type[SensorComponent]] = {
     'horizon_sensor': HorizonSensorComponent,
     'wheel_tachometer': WheelTachometerComponent,
 }
+
+
+def sensor_faults(sensor: str, text: str, seed: int) -> Optional[SensorFaults]:
+    """The faults of a sensor from its node parameter ``faults`` (JSON; '' none), seeded from
+    the scenario ``seed``; a star tracker's bias is a rotation."""
+    faults = parse(text)
+    return SensorFaults(faults, seed, rotation=sensor == 'star_tracker') if faults else None

@@ -31,6 +31,7 @@ import os
 import time
 from typing import Any, List
 
+from diagnostic_msgs.msg import DiagnosticArray
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
@@ -48,6 +49,8 @@ from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
 from adcs_nodes.registry import Param
 from sim_node.components.dynamics import DynamicsComponent
+from sim_node.faults import FAULTS_PARAM
+from sim_node.faults import parse as parse_faults
 from sim_node.models.dynamics import ActuatorCommand as Command
 from sim_node.models.spacecraft_config import DEFAULT_INITIAL, DEFAULT_SPACECRAFT
 
@@ -148,7 +151,7 @@ class DynamicsNode(LockstepNode):
     def __init__(self, name: str = 'dynamics', **kwargs) -> None:
         super().__init__(name, **kwargs)
         self.duration_ns = seconds_to_ns(self.param('duration_s', 0.0))
-        p = node_params.declare_all(self, PARAMS)
+        p = node_params.declare_all(self, PARAMS + (FAULTS_PARAM,))
         self.substeps = p['substeps']
         self.rate_factor = p['rate_factor']
         cmd_period_s = p['command_period_s']
@@ -160,7 +163,8 @@ class DynamicsNode(LockstepNode):
         self.component = DynamicsComponent(
             self.section('spacecraft', DEFAULT_SPACECRAFT),
             self.section('initial', DEFAULT_INITIAL), self.seed, self.frame_ns, self.substeps,
-            FrameClock(self.epoch_ns), node_log(self))
+            FrameClock(self.epoch_ns), node_log(self),
+            parse_faults(p['faults']))
         self.spacecraft = self.component.spacecraft
         self.wheel_names = self.component.wheel_names
 
@@ -176,6 +180,8 @@ class DynamicsNode(LockstepNode):
         self.appendages_pub = (self.publisher(AppendageState, 'sim/appendages')
                                if self.spacecraft.n_modes else None)
         self.tf_pub = TfPublisher(self)             # /tf: eci -> orbit -> body (truth)
+        self.faults_pub = self.publisher(DiagnosticArray, 'sim/faults') \
+            if self.component.faults.all else None
         # expected_publishers (the launcher: environment, controller_manager): messages of
         # any other publisher, and duplicate stamps, are dropped and reported (publisher_guard)
         guard = publisher_guard.for_node(self)
@@ -335,6 +341,9 @@ class DynamicsNode(LockstepNode):
     def publish_state(self, env_msg: Environment) -> None:
         """Phase B: publish truth state and wheels of frame k (initialises at frame 0)."""
         self.sim_t_ns = self.t_ns
+        faults = self.component.faults_msg(self.t_ns)
+        if faults is not None:
+            self.faults_pub.publish(faults)
         msg = self.component.state_msg(self.t_ns, env_msg)
         self.state_pub.publish(msg)
         if self.tf_pub.wanted():     # /tf, sim/wheels, sim/appendages: built only when read

@@ -20,7 +20,8 @@ from adcs_nodes.nodes.adapter import node_log
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 from adcs_nodes.registry import Param
 from adcs_nodes.nodes.tf import TfPublisher, mount_transforms
-from sim_node.components.sensors import SENSOR_COMPONENTS
+from sim_node.components.sensors import SENSOR_COMPONENTS, sensor_faults
+from sim_node.faults import FAULTS_PARAM
 
 
 class SensorNode(LockstepNode):
@@ -44,14 +45,15 @@ class SensorNode(LockstepNode):
         frame = Param('frame_id', 'str', sensor, '-', 'header.frame_id of the samples and '
                       'the child frame of the body -> sensor mount on /tf_static',
                       read_only=True)
-        self.p = node_params.declare_all(self, self.entry.params + (frame,))
+        self.p = node_params.declare_all(self, self.entry.params + (frame, FAULTS_PARAM))
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
         self.frame_id = str(self.p['frame_id'])
         self.sensor_seed = derive_seed(self.seed, self.get_name())
         self.model = self.entry.build(self.p, {'seed': self.sensor_seed})
-        self.component = SENSOR_COMPONENTS[sensor](self.model, self.frame_id,
-                                                   FrameClock(self.epoch_ns), node_log(self))
+        self.component = SENSOR_COMPONENTS[sensor](
+            self.model, self.frame_id, FrameClock(self.epoch_ns), node_log(self),
+            sensor_faults(sensor, self.p['faults'], self.seed))
         self.pub = self.publisher(msg_type, self.entry.node[3])
         # the mount, defined once (parameter q_body_sensor_xyzw, identity when the model has
         # none) and published for every consumer on /tf_static: body -> frame_id

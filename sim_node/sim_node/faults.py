@@ -1,0 +1,201 @@
+"""Faults of the simulated world: the registered kinds and how a component applies them.
+
+A scenario's ``faults:`` list (``{at_s, kind, target, params}``) is validated against the
+kinds registered here (``adcs list`` shows them; ``docs/scenarios.md``). Each fault happens at
+exact sim time ``at_s`` and lasts ``params.duration_s`` (0: to the end of the run), is seeded
+(``derive_seed(seed, 'fault/<index>')``), and is announced on ``sim/faults``
+(``diagnostic_msgs/DiagnosticArray``: one status per fault starting or ending that frame, level
+WARN while active, OK when it ends). The components apply them, so the plain, composed and
+graph engines see the same faults:
+
+* sensor faults, in the sensor's component (:class:`SensorFaults`) on the sample it publishes:
+
+  - ``dropout``: the sensor is silent (publishes nothing; a consumer in lockstep waits its
+    timeout, counts a missed frame, then no longer waits for a dead producer);
+  - ``nan``: samples with every value NaN (what a driver sends for "no data");
+  - ``stuck``: every sample repeats the values of the last sample before the fault;
+  - ``bias_step``: ``bias`` added to the values (sensor units: T, rad/s, rad; a star tracker's
+    bias is a rotation vector [rad] applied to its attitude);
+  - ``noise_burst``: white noise of ``std`` per axis added (seeded);
+
+* actuator faults, in the dynamics (:class:`ActuatorFaults`) on the held command:
+
+  - ``wheel_stuck``: the wheel's motor torque is zero (its speed relative to the body stays
+    where it was) and stays so;
+  - ``wheel_torque_lost``: the wheel's motor delivers ``fraction`` of its command (0: none);
+  - ``coil_open``: the magnetorquer axis (``x``, ``y``, ``z``) gives no dipole.
+
+Killing a node at a time is not a fault kind yet (the launcher's ``adcs fault`` and a scenario
+kill are not built).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Sequence
+
+import numpy as np
+
+from adcs_nodes.core import attitude as att
+from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
+from adcs_nodes.registry import Entry, Param, register
+
+#: What a fault kind may strike.
+SENSOR, WHEEL, MAGNETORQUER = 'sensor', 'wheel', 'magnetorquer'
+AXES = ('x', 'y', 'z')
+
+#: The node parameter that carries a node's faults (JSON text of the scenario's entries).
+FAULTS_PARAM = Param('faults', 'str', '', '-', "the scenario's faults this node applies (JSON "
+                     "list of {index, at_s, kind, target, params}; '': none)", read_only=True)
+
+_DURATION = Param('duration_s', 'float', 0.0, 's', 'how long the fault lasts (0: to the end of '
+                  'the run)', min=0.0)
+
+
+def _fault(name: str, description: str, targets: Sequence[str], *params: Param) -> None:
+    register(Entry('fault', name, description, 'sim_node.faults', tuple(params),
+                   lambda p, ctx: p, targets=tuple(targets)))
+
+
+_fault('dropout', 'the sensor publishes nothing', (SENSOR,), _DURATION)
+_fault('nan', 'samples with every value NaN ("no data")', (SENSOR,), _DURATION)
+_fault('stuck', 'samples repeat the last values before the fault', (SENSOR,), _DURATION)
+_fault('bias_step', 'a constant added to the samples (a star tracker: a rotation vector)',
+       (SENSOR,), _DURATION,
+       Param('bias', 'float[]', [0.0, 0.0, 0.0], 'sensor unit', 'the step per axis (T, '
+             'rad/s or rad; horizon sensor: roll, pitch, unused)', length=3, min=-1.0, max=1.0))
+_fault('noise_burst', 'white noise added to the samples (seeded)', (SENSOR,), _DURATION,
+       Param('std', 'float[]', [0.0, 0.0, 0.0], 'sensor unit', 'noise std per axis', length=3,
+             min=0.0, max=1.0))
+_fault('wheel_stuck', "the wheel's motor gives no torque: its speed freezes", (WHEEL,),
+       _DURATION)
+_fault('wheel_torque_lost', "the wheel's motor delivers a fraction of its command", (WHEEL,),
+       _DURATION, Param('fraction', 'float', 0.0, '-', 'share of the commanded torque '
+                        'delivered', min=0.0, max=1.0))
+_fault('coil_open', 'a magnetorquer axis gives no dipole', (MAGNETORQUER,), _DURATION)
+
+
+@dataclass
+class Fault:
+    """One validated fault of a scenario (times in integer nanoseconds)."""
+
+    index: int
+    kind: str
+    target: str
+    start_ns: int
+    end_ns: Optional[int]            #: None: to the end of the run
+    params: Dict[str, Any] = field(default_factory=dict)
+
+    def active(self, t_ns: int) -> bool:
+        """True at frame ``t_ns`` while the fault lasts."""
+        return t_ns >= self.start_ns and (self.end_ns is None or t_ns < self.end_ns)
+
+    def describe(self) -> str:
+        """``kind target (params)`` for logs and reports."""
+        extra = {k: v for k, v in self.params.items() if k != 'duration_s'}
+        return f'{self.kind} {self.target}' + (f' {extra}' if extra else '')
+
+
+def parse(text: str) -> List[Fault]:
+    """Faults from the JSON text of a node parameter (what the graph builder writes)."""
+    if not text:
+        return []
+    out = []
+    for item in json.loads(text):
+        start = int(round(float(item['at_s']) * NS_PER_S))
+        duration = float(item.get('params', {}).get('duration_s', 0.0))
+        out.append(Fault(int(item['index']), str(item['kind']), str(item['target']), start,
+                         start + int(round(duration * NS_PER_S)) if duration > 0 else None,
+                         dict(item.get('params', {}))))
+    return out
+
+
+def to_text(faults: Sequence[Dict[str, Any]]) -> str:
+    """JSON text of validated scenario faults (with their index) for a node parameter."""
+    return json.dumps(list(faults), sort_keys=True)
+
+
+# ---------------------------------------------------------------------- sensors
+class SensorFaults:
+    """The faults striking one sensor, applied to its samples.
+
+    ``values(msg)`` / ``with_values(msg, v)`` give and set the sample's values (the sensor
+    component's accessors); ``kind`` of the sensor selects the star tracker's rotation.
+    """
+
+    def __init__(self, faults: Sequence[Fault], seed: int, rotation: bool = False) -> None:
+        self.faults = list(faults)
+        self.rotation = rotation
+        self._rng = {f.index: np.random.default_rng(derive_seed(seed, f'fault/{f.index}'))
+                     for f in self.faults if f.kind == 'noise_burst'}
+        self._last_good: Optional[np.ndarray] = None
+
+    def apply(self, t_ns: int, values: np.ndarray) -> Optional[np.ndarray]:
+        """The sample's values under the active faults, or None (silent: a dropout)."""
+        out = np.array(values, dtype=float)
+        stuck = False
+        for f in self.faults:
+            if not f.active(t_ns):
+                continue
+            if f.kind == 'dropout':
+                return None
+            if f.kind == 'nan':
+                out[:] = np.nan
+            elif f.kind == 'stuck':
+                stuck = True
+            elif f.kind == 'bias_step':
+                out = self._add(out, np.asarray(f.params['bias'], dtype=float))
+            elif f.kind == 'noise_burst':
+                noise = self._rng[f.index].standard_normal(3) * np.asarray(f.params['std'])
+                out = self._add(out, noise)
+        if stuck and self._last_good is not None:
+            return self._last_good.copy()
+        if not any(f.active(t_ns) for f in self.faults):
+            self._last_good = np.array(values, dtype=float)
+        return out
+
+    def _add(self, values: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        if self.rotation:                           # q_eci_body * exp(delta): a small rotation
+            return att.multiply(values, att.from_rotation_vector(delta))
+        n = min(values.size, 3)
+        out = values.copy()
+        out[:n] = out[:n] + delta[:n]
+        return out
+
+
+# ---------------------------------------------------------------------- actuators
+class ActuatorFaults:
+    """Wheel and magnetorquer faults applied to the held command, and the ``sim/faults``
+    announcements of every fault of the scenario."""
+
+    def __init__(self, faults: Sequence[Fault], wheel_names: Sequence[str]) -> None:
+        self.all = list(faults)
+        self.wheel_index = {n: i for i, n in enumerate(wheel_names)}
+        self.faults = [f for f in self.all if f.kind in ('wheel_stuck', 'wheel_torque_lost',
+                                                         'coil_open')]
+
+    def apply(self, t_ns: int, dipole: np.ndarray, wheel_torque: np.ndarray):
+        """``(dipole, wheel_torque)`` as the faulty actuators deliver them at ``t_ns``."""
+        if not any(f.active(t_ns) for f in self.faults):
+            return dipole, wheel_torque
+        dipole, wheel_torque = np.array(dipole, float), np.array(wheel_torque, float)
+        for f in self.faults:
+            if not f.active(t_ns):
+                continue
+            if f.kind == 'coil_open':
+                dipole[AXES.index(f.target)] = 0.0
+            elif f.kind == 'wheel_stuck':
+                wheel_torque[self.wheel_index[f.target]] = 0.0
+            else:
+                wheel_torque[self.wheel_index[f.target]] *= float(f.params['fraction'])
+        return dipole, wheel_torque
+
+    def events(self, t_ns: int, frame_ns: int) -> List[Dict[str, Any]]:
+        """Faults that start (``active``) or end (``cleared``) in the frame at ``t_ns``."""
+        out = []
+        for f in self.all:
+            if f.start_ns <= t_ns < f.start_ns + frame_ns:
+                out.append({'fault': f, 'active': True})
+            elif f.end_ns is not None and f.end_ns <= t_ns < f.end_ns + frame_ns:
+                out.append({'fault': f, 'active': False})
+        return out

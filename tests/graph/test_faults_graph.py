@@ -1,0 +1,46 @@
+"""Faults are part of the world, in every engine (issue 21): a launched graph (one process per
+node) with a silent star tracker, a stuck wheel, a gyro bias step and a gyro noise burst gives
+the plain engine's series on every data topic, ``sim/faults`` included.
+
+The silent star tracker is the hard case for lockstep: the estimator waits for it, times out,
+counts it, and after three misses stops waiting (a dead producer); the world waits on the
+estimator's command meanwhile, so the sensors must outwait the clock master (their input
+timeout is the chain's longest, ``tools.graph.CHAIN_TIMEOUT``), and the sample that revives
+the star tracker is not used in its own frame (``core.lockstep.FrameSync.add``), so the run
+does not depend on which of the two the estimator saw first.
+"""
+import yaml
+
+from adcs_launch import SCENARIOS, adcs
+from adcs_nodes.tools.bag import content_digest, read_messages
+
+NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
+            '/adcs/controller_status')
+
+
+def test_sensor_and_wheel_faults_give_the_plain_engines_series_in_a_graph(tmp_path):
+    with open(f'{SCENARIOS}/paper001_mpi.yaml') as fh:
+        sc = yaml.safe_load(fh)
+    sc['timing']['timeout_s'] = 1.0          # the silent sensor costs 3 timeouts of wall time
+    sc['faults'] = [
+        {'at_s': 2.0, 'kind': 'dropout', 'target': 'star_tracker', 'params': {'duration_s': 3.0}},
+        {'at_s': 1.0, 'kind': 'wheel_stuck', 'target': sc['spacecraft']['wheels'][0]['name']},
+        {'at_s': 0.4, 'kind': 'bias_step', 'target': 'gyro', 'params': {'bias': [1e-4, 0, 0]}},
+        {'at_s': 0.6, 'kind': 'noise_burst', 'target': 'gyro',
+         'params': {'duration_s': 1.0, 'std': [1e-5, 1e-5, 1e-5]}}]
+    path = tmp_path / 'faults.yaml'
+    path.write_text(yaml.safe_dump(sc))
+    graph, plain = str(tmp_path / 'graph'), str(tmp_path / 'plain')
+    run = adcs('run', str(path), '--record', graph, '--duration', '8', '--quiet', timeout=600)
+    assert 'missed frames 3' in run.stdout + run.stderr      # the estimator's 3 timeouts
+    adcs('run', str(path), '--engine', 'plain', '--record', plain, '--duration', '8',
+         '--quiet', timeout=600)
+    faults = [st.message for _, _, m in read_messages(graph, ['/sim/faults']) for st in m.status]
+    assert faults == ['active: bias_step gyro {\'bias\': [0.0001, 0.0, 0.0]}',
+                      'active: noise_burst gyro {\'std\': [1e-05, 1e-05, 1e-05]}',
+                      'active: wheel_stuck wheel_x', 'cleared: noise_burst gyro '
+                      '{\'std\': [1e-05, 1e-05, 1e-05]}', 'active: dropout star_tracker',
+                      'cleared: dropout star_tracker']
+    a = {t: d for t, d in content_digest(graph).items() if t not in NOT_DATA}
+    b = {t: d for t, d in content_digest(plain).items() if t not in NOT_DATA}
+    assert a == b
