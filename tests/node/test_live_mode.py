@@ -166,3 +166,29 @@ def test_live_frame_takes_the_newest_stamp_and_fresh_tells_new_samples(ros_conte
     assert [f[1:] for f in node.fired if f[0] == a2 - node.epoch_ns] == [(True, False)]
     src.destroy_node()
     node.destroy_node()
+
+
+def test_a_late_sample_is_counted_and_never_applied(ros_context):
+    """Issue 23, defect 1: a sample that arrives after a later frame was processed is
+    rejected as late and is not used by the next frame (before, it stayed the newest entry,
+    looked fresh and was applied 2-4 s away from its stamp). Driven through the node's own
+    live callbacks and tick, so no transport timing is involved."""
+    node = EstimatorNode(context=ros_context, parameter_overrides=[
+        Parameter('period_s', value=0.2), Parameter('max_sample_age_s', value=30.0)])
+    assert node.timing_mode == 'live'
+    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    cb = node._live_cb('mag')
+    cb(_sample(ref, node.epoch_ns, time.time_ns() - 3 * S))       # a good sample ...
+    node._live_tick()                                             # ... used at its stamp
+    assert node.update_count == 1
+    node._live_tick()              # no new sample: a frame at the clock's time (now - 50 ms)
+    cb(_sample(ref, node.epoch_ns, time.time_ns() - 2 * S))       # stamped before that frame
+    node._live_tick()
+    assert node.rejected_samples['late'] == 1
+    assert node.update_count == 1                                 # not applied
+    node._live_tick()
+    assert node.update_count == 1                                 # nor later
+    cb(_sample(ref, node.epoch_ns, time.time_ns()))               # a good one again
+    node._live_tick()
+    assert node.update_count == 2
+    node.destroy_node()

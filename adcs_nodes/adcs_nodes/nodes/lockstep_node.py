@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import copy
 import time
-from datetime import datetime, timezone
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from rclpy.node import Node
@@ -50,6 +49,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from adcs_msgs.msg import LockstepStatus
+from adcs_nodes.components.base import DEFAULT_EPOCH, epoch_to_ns, parse_epoch  # noqa: F401
 from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, InputKind, input_kind, seconds_to_ns
 from adcs_nodes.nodes import cdr
 from adcs_nodes.nodes import params as node_params
@@ -68,7 +68,6 @@ QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                        history=HistoryPolicy.KEEP_LAST,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
-DEFAULT_EPOCH = '2026-01-01T00:00:00Z'
 #: A node reports its progress every this many base frames.
 PROGRESS_EVERY = 10
 #: The clock master waits when a node is more than this many frames behind (the data QoS
@@ -91,23 +90,6 @@ SENSOR_PREFIXES = ('sensors/', '/sensors/')
 #: ``undecodable``: raw CDR bytes that do not decode (only a stranger on the domain sends them;
 #: ``nodes/cdr.py``), in either timing mode.
 REJECT_REASONS = ('zero_stamp', 'future', 'too_old', 'out_of_order', 'late', 'undecodable')
-
-
-def parse_epoch(text: str) -> datetime:
-    """ISO-8601 UTC text (``2026-01-01T00:00:00Z``) -> aware ``datetime``; ValueError if bad."""
-    try:
-        dt = datetime.fromisoformat(str(text).replace('Z', '+00:00'))
-    except ValueError as exc:
-        raise ValueError(f'epoch {text!r} is not an ISO-8601 date-time') from exc
-    if dt.tzinfo is None:
-        dt = dt.replace(tzinfo=timezone.utc)
-    return dt.astimezone(timezone.utc)
-
-
-def epoch_to_ns(epoch: datetime) -> int:
-    """Aware datetime -> integer ns since the Unix epoch (exact to the microsecond)."""
-    delta = epoch - datetime(1970, 1, 1, tzinfo=timezone.utc)
-    return (delta.days * 86400 + delta.seconds) * NS_PER_S + delta.microseconds * 1000
 
 
 #: ``rclpy.node.Node`` options of every lockstep node: what the params file or ``-p`` gives is
@@ -421,6 +403,8 @@ class LockstepNode(node_params.SpecParameters, Node):
         if self.live:
             self._live_latest: Dict[str, Tuple[int, Any]] = {}
             self._live_used: Dict[str, int] = {}
+            #: the sample of each trigger input last taken for a frame (a late one never is)
+            self._live_taken: Dict[str, Tuple[int, Any]] = {}
             self._live_last_t: Optional[int] = None
             self._live_triggers = [n for n, (p, k) in specs.items() if k is InputKind.FRAME]
             self.create_timer(self._own_period_ns / NS_PER_S, self._live_tick)
@@ -550,7 +534,12 @@ class LockstepNode(node_params.SpecParameters, Node):
             self._live_used[n] = ent[0]
             if last is not None and self.elapsed_ns(ent[0]) <= last:
                 self._reject_sample(n, 'late', 'arrived after a later frame was processed')
+                # never used: the frame reads the sample taken before it (not fresh)
+                self._live_latest[n] = self._live_taken.get(n)
+                if self._live_latest[n] is None:
+                    del self._live_latest[n]
                 continue
+            self._live_taken[n] = ent
             new.append(ent[0])
         # nothing new: fire at the clock's time minus the expected transport latency, so a
         # sample taken just before now and still on its way is not made "late"
