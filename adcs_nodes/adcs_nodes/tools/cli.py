@@ -3,7 +3,7 @@
 Commands
 --------
 ``adcs run SCENARIO [--record BAG] [--duration S] [--real-time [--rate F]]
-[--engine plain|composed|graph] [--report]``
+[--engine plain|composed|graph] [--set KEY=VALUE ...] [--report]``
     Validate the scenario, start its nodes (one process each, all in one process, or the
     plain FrameLoop without ROS), show progress, stop everything cleanly at the end, on
     Ctrl-C or when a node dies.
@@ -96,6 +96,9 @@ def cmd_run(args) -> int:
     engine = args.engine or ('composed' if args.compose else 'graph')
     try:
         sc = load_scenario(args.scenario)
+        if args.set:
+            from adcs_nodes.tools.scenario import apply_overrides
+            sc = apply_overrides(sc, args.set)
         if args.compose and engine != 'composed':
             raise LaunchError(f'--compose means --engine composed, not {engine}')
         if args.rate is not None and not args.real_time:
@@ -251,6 +254,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--compose', action='store_true', help='the same as --engine composed')
     p.add_argument('--report', action='store_true', help='write the report of the bag after')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
+    p.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                   help='change one scenario key (dotted, YAML value; null removes it), '
+                   'validated as the file is, e.g. --set spacecraft.flexible.wings=one '
+                   '--set manager.initial=reference_slew; repeatable')
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser('list', help='list scenarios and nodes')
