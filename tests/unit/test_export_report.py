@@ -229,6 +229,19 @@ def test_report_metrics_plots_and_summary(bag, tmp_path):
                             expectations=[('final angle', '(not given)', 59.5, None)])
     assert only_info['all_pass'] is None
 
+    # a paper claim the run cannot check: printed with its reason, never counted as a pass
+    from adcs_nodes.tools.papers import NotComparable
+    nc = make_report(bag, tmp_path / 'report5', expectations=[
+        ('final pointing error', '< 60 deg', 59.5, True),
+        ('ratio to the reference', '1.5x', '0.66x', NotComparable('reference undescribed'))])
+    text = (tmp_path / 'report5' / 'summary.md').read_text()
+    assert '| ratio to the reference | 1.5x | 0.66x | not comparable: reference undescribed |' \
+        in text
+    assert '1 of 1 comparisons with the paper pass; 0 rows are information (no paper value); ' \
+        '1 not comparable' in text
+    assert nc['all_pass'] is True and nc['expectations'][1]['pass'] is None
+    assert nc['expectations'][1]['verdict'] == 'not comparable: reference undescribed'
+
 
 def test_missing_and_corrupt_bags(tmp_path):
     missing = tmp_path / 'nope'

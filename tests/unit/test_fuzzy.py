@@ -289,12 +289,29 @@ def test_output_terms_without_rules_never_fire():
 
 @pytest.mark.parametrize('angle_deg', [180.0])
 def test_slews_to_any_inertial_target_including_180_deg(angle_deg):
-    from adcs_nodes.tools import paper003
+    """On the FrameLoop: paper003_slew with the fuzzy controller (its registry defaults, as
+    ``FuzzyEigenaxisController(J)``) fed the true state, the target held in the orbit frame."""
+    import os
+
+    from adcs_nodes import registry
+    from adcs_nodes.tools.papers import paper003
+    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.tools.study import run_topics
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    sc = load_scenario(os.path.join(root, 'scenarios', 'paper003_slew.yaml'))
     axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
     q0 = paper003.initial_quaternion()
+    np.testing.assert_allclose(q0, sc['initial']['q_orbit_body_xyzw'], atol=1e-8)
     q_t = attitude.multiply(q0, attitude.from_axis_angle(axis, math.radians(angle_deg)))
-    run = paper003.simulate(fz.FuzzyEigenaxisController(J), q_target_eci=q_t, t_end=90.0)
-    assert run.phi[0] == pytest.approx(math.radians(angle_deg), abs=1e-9)
-    assert math.degrees(run.phi[-1]) < 0.05
-    assert np.abs(run.omega[-1]).max() < math.radians(0.01)
-    assert run.max_abs_torque_Nm <= 1.0 + 1e-12
+    defaults = {f'controllers.fuzzy.{k}': v for k, v in
+                registry.get('controller', 'fuzzy').defaults().items()}
+    topics = run_topics(sc, paper003.TOPICS, 90.0, {
+        **defaults, 'initial.q_orbit_body_xyzw': q0.tolist(), 'manager.initial': 'fuzzy',
+        'guidance.profile': [{'t_s': 0.0, 'type': 'hold', 'q_xyzw': q_t.tolist()}]},
+        ideal=True)
+    run = paper003.series(topics, sc)
+    assert set(run['source'][1:]) == {'fuzzy'}
+    assert run['phi'][0] == pytest.approx(math.radians(angle_deg), abs=1e-9)
+    assert math.degrees(run['phi'][-1]) < 0.05
+    assert np.abs(run['omega'][-1]).max() < math.radians(0.01)   # w.r.t. the target frame
+    assert np.abs(run['torque']).max() <= 1.0 + 1e-12

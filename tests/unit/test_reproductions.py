@@ -1,9 +1,13 @@
-"""Paper-comparison rows (adcs_nodes.tools.reproductions): verdicts only where the paper has a
+"""Paper 000's closed-loop rows (adcs_nodes.tools.papers.paper000, printed by `adcs report` and
+`make reproduce` through adcs_nodes.tools.reproductions): verdicts only where the paper has a
 number; the metrics come from adcs_nodes.tools.metrics on a synthetic angle signal."""
 import numpy as np
 
 from adcs_nodes.tools import metrics
-from adcs_nodes.tools.reproductions import INFO, control_rows, sensitivity_markdown
+from adcs_nodes.tools.paper000_sensitivity import sensitivity_markdown
+from adcs_nodes.tools.papers import NotComparable, table_lines
+from adcs_nodes.tools.papers.paper000 import INFO, control_rows
+from adcs_nodes.tools.reproductions import failed, table_text
 
 PERIOD = 6000.0
 
@@ -52,3 +56,16 @@ def test_sensitivity_table_has_one_line_per_case():
     assert '| random torque correlation [s] | 0.5 | 2.50 | never | 1.00 / 0.80 / 1.90 | ' \
         '0.90 / 0.70 / 1.50 | 0.30 |' in text
     assert '| magnetometer misalignment [deg] | 2 |' in text
+
+
+def test_reproduction_prints_the_report_table_and_fails_only_on_fail_rows():
+    rows = [('a', '1', 1.0, True), ('b', '2', 3.0, False), ('c', '(not given)', 4.0, INFO),
+            ('d', '1.5x', '0.66x', NotComparable('undescribed reference'))]
+    text = table_text('paper003_slew', rows)
+    assert text.startswith('paper003_slew: paper vs measured\n')
+    for line in table_lines(rows):
+        assert line in text
+    assert '| d | 1.5x | 0.66x | not comparable: undescribed reference |' in text
+    assert '1 of 2 comparisons with the paper pass; 1 rows are information (no paper value); ' \
+        '1 not comparable' in text
+    assert failed(rows) == [rows[1]]

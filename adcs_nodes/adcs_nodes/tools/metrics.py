@@ -1,8 +1,8 @@
 """End-of-run metrics of an attitude-error signal, as the papers word them (pure numpy).
 
-One definition for everything that judges a run: ``adcs report`` (paper comparison table,
-:mod:`adcs_nodes.tools.reproductions`), the Monte Carlo campaigns
-(:mod:`adcs_nodes.tools.montecarlo`) and the plain-loop sensitivity studies.
+One definition for everything that judges a run: ``adcs report`` (the paper tables,
+:mod:`adcs_nodes.tools.papers`), the Monte Carlo campaigns (:mod:`adcs_nodes.tools.montecarlo`)
+and the studies on the FrameLoop (:mod:`adcs_nodes.tools.study`).
 
 Definitions (``t`` [s] increasing, ``e`` error [deg] >= 0, same length n)
 ---------------------------------------------------------------------------
@@ -35,7 +35,7 @@ Non-finite errors count as outside every band and are left out of the hold stati
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any, Dict, Optional
 
 import numpy as np
@@ -223,11 +223,6 @@ def run_metrics(t: ArrayLike, e: ArrayLike, period_s: Optional[float],
         'final_deg': float(e[-1]), 'band_deg': float(band), 'hold_band_deg': float(hold_band),
         'period_s': float(period_s) if period_s else None,
     }
-
-
-def stats_dict(s: HoldStats) -> Dict[str, Any]:
-    """:class:`HoldStats` as a dict."""
-    return asdict(s)
 
 
 def angle_to_identity_deg(q_xyzw: ArrayLike) -> np.ndarray:

@@ -13,11 +13,13 @@ two runs of the same simulation give the same report):
 * estimate error (``/adcs/attitude_estimate``, if any): ``angle(q_eci_body_est, q_eci_body_true)``
   [deg] and ``|omega_est - omega_true|`` [deg/s], pairs matched on equal header stamps;
 * paper comparison: a table filled from ``expectations`` (empty by default), so scenarios that
-  reproduce a paper add their rows ``(name, paper value, measured value, verdict)``; verdict
+  reproduce a paper add their rows ``(name, paper value, measured value, verdict)``
+  (:mod:`adcs_nodes.tools.papers`, the same table ``make reproduce`` prints); verdict
   True/False prints PASS/FAIL (a comparison with a paper number), ``None`` prints ``info`` (no
-  paper value) and is not counted in ``all_pass``;
-* extra sections (e.g. paper 000's sensitivity table) from
-  :func:`adcs_nodes.tools.reproductions.sections_for`.
+  paper value), :class:`~adcs_nodes.tools.papers.NotComparable` prints ``not comparable:
+  <reason>`` (a paper claim this run cannot check); only PASS/FAIL count in ``all_pass``;
+* the paper's own figures (papers 001 and 003) and extra sections (e.g. paper 000's
+  sensitivity table) from :func:`adcs_nodes.tools.reproductions.sections_for`.
 
 Time axes are in orbits when the run lasts at least half an orbit (orbit rate from
 ``/sim/environment``), else in seconds, counted from the first ``/sim/state`` stamp.
@@ -37,6 +39,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from adcs_nodes.core import attitude
+from adcs_nodes.tools import papers
 from adcs_nodes.tools.bag import cdr_stamp_ns, open_bag, stamp_kind
 from adcs_nodes.tools.metrics import angle_to_identity_deg, run_metrics
 
@@ -46,7 +49,7 @@ MAG_TOPIC = '/sensors/magnetometer'
 WHEELS_TOPIC = '/sim/wheels'
 ESTIMATE_TOPIC = '/adcs/attitude_estimate'
 
-Expectation = Tuple[str, str, Any, Optional[bool]]
+Expectation = Tuple[str, str, Any, Any]   # verdict: True, False, None (info), NotComparable
 
 _RAD2DEG = 180.0 / math.pi
 _T2UT = 1e6
@@ -289,19 +292,15 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-def _md(text: Any) -> str:
-    """Text safe inside a markdown table cell."""
-    return str(text).replace('|', '\\|').replace('\n', ' ')
-
-
 def _utc(t_ns: int) -> str:
     return datetime.fromtimestamp(t_ns * 1e-9, tz=timezone.utc).strftime(
         '%Y-%m-%d %H:%M:%S.%f UTC')
 
 
-def verdict_text(ok: Optional[bool]) -> str:
-    """``PASS`` / ``FAIL`` for a comparison with the paper, ``info`` for ``None``."""
-    return 'info' if ok is None else ('PASS' if ok else 'FAIL')
+def verdict_text(ok: Any) -> str:
+    """``PASS`` / ``FAIL`` for a comparison with the paper, ``info`` for ``None``, ``not
+    comparable: <reason>`` (:func:`adcs_nodes.tools.papers.verdict_text`)."""
+    return papers.verdict_text(ok)
 
 
 def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expectation],
@@ -350,18 +349,12 @@ def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expect
         lines += [f'| {label} | {_fmt(metrics[key])} | {unit} |' for label, key, unit in present]
     else:
         lines.append(f'No `{STATE_TOPIC}` in the bag.')
-    lines += ['', '## Paper comparison', '',
-              '| quantity | paper | measured | verdict |', '|---|---|---|---|']
-    for name, paper, measured, ok in expectations:
-        cells = [_md(name), _md(paper), _md(_fmt(measured)), verdict_text(ok)]
-        lines.append('| ' + ' | '.join(cells) + ' |')
+    lines += ['', '## Paper comparison', '']
     if not expectations:
-        lines += ['', '_No paper comparison for this run._']
+        lines += ['| quantity | paper | measured | verdict |', '|---|---|---|---|', '',
+                  '_No paper comparison for this run._']
     else:
-        counted = [e for e in expectations if e[3] is not None]
-        lines += ['', f'{sum(1 for e in counted if e[3])} of {len(counted)} comparisons with '
-                  f'the paper pass; {len(expectations) - len(counted)} rows are information '
-                  '(no paper value).']
+        lines += papers.table_lines(expectations)
     for title, text in sections:
         lines += ['', f'## {title}', '', text.rstrip()]
     lines += ['', '## Plots', '']
@@ -492,11 +485,18 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         })
         _plot_estimate(errors, axis, out, plots)
 
+    if expectations:
+        try:
+            drawn = papers.figures_for_bag(str(bag_path), str(out))
+            plots += [os.path.relpath(p, out) for p in drawn]
+        except (OSError, ValueError, KeyError) as exc:   # a bag without the paper's topics
+            metrics['paper_figures_error'] = str(exc)
     metrics['expectations'] = [
         {'name': name, 'paper': paper, 'measured': _json_value(measured),
-         'pass': None if ok is None else bool(ok)}
+         'pass': bool(ok) if papers.is_counted(ok) else None,
+         'verdict': papers.verdict_text(ok)}
         for name, paper, measured, ok in expectations]
-    counted = [bool(e[3]) for e in expectations if e[3] is not None]
+    counted = [bool(e[3]) for e in expectations if papers.is_counted(e[3])]
     metrics['all_pass'] = all(counted) if counted else None
     metrics['plots'] = plots
     summary = out / 'summary.md'
