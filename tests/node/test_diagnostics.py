@@ -93,3 +93,18 @@ def test_nothing_is_built_while_nobody_reads_diagnostics(ros_context, spin):
     assert stamp_ns(got[0].header.stamp) - EPOCH_NS == 2_000_000_000 and built == [1]
     probe.destroy_node()
     node.destroy_node()
+
+
+def test_the_estimator_reports_its_filter_restarts(ros_context):
+    """Issue 23: docs/topics.md promises filter restarts on /diagnostics: the estimator node
+    reports the core's ``resets`` (paper 000's filter resets a diverged estimate)."""
+    from rclpy.parameter import Parameter
+
+    from adcs_nodes.nodes.estimator import EstimatorNode
+    node = EstimatorNode(context=ros_context, parameter_overrides=[
+        Parameter('timing_mode', value='lockstep')])
+    values = dict(node.diagnostics.values())
+    assert values['resets'] == 0
+    node.component.core.resets = 2        # as the filter counts a divergence reset
+    assert dict(node.diagnostics.values())['resets'] == 2
+    node.destroy_node()

@@ -75,6 +75,8 @@ class EstimatorNode(ManagedLockstepNode):
     update_count = property(lambda self: self.component.update_count)
     rejected_count = property(lambda self: self.component.rejected_count)
     last_rejection = property(lambda self: self.component.last_rejection)
+    #: filter restarts (a diverged filter reset to its initial estimate), on /diagnostics
+    resets = property(lambda self: int(getattr(self.component.core, 'resets', 0)))
 
     def _reject(self, why: str) -> None:
         self.component.reject(why)
