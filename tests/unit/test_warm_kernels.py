@@ -3,9 +3,9 @@
 Node processes that compile and save one kernel at the same time can corrupt numba's on-disk
 cache (numba #4807, #10128), so ``ros2_ws/bootstrap.sh`` fills it once, serially. That only
 helps if the warm-up leaves nothing for a node process to compile: after it, a process that
-runs the nodes' core classes (the plain closed loop builds them from the nodes' parameters,
-``sim_node.tools.closed_loop``) must write no file into the cache, and its kernels must count
-no cache miss. Both processes use a fresh ``NUMBA_CACHE_DIR``, so no earlier run's cache
+runs the nodes' components (the FrameLoop builds them from the nodes' parameters,
+``sim_node.engine``) must write no file into the cache, and its kernels must count no cache
+miss. Both processes use a fresh ``NUMBA_CACHE_DIR``, so no earlier run's cache
 entries can hide a kernel the warm-up forgot.
 """
 import json
@@ -16,7 +16,6 @@ import sys
 import pytest
 
 pytest.importorskip('numba')
-pytest.importorskip('sim_node.tools.closed_loop')
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENARIO = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
 
@@ -25,10 +24,11 @@ SCENARIO = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
 NODE_WORK = """
 import json, sys
 from adcs_nodes.tools.scenario import load_scenario
-from sim_node.tools.closed_loop import ClosedLoop
+from sim_node.engine import FrameLoop
 from sim_node.tools.warm_kernels import kernel_counts
 sc = load_scenario(sys.argv[1])
-ClosedLoop(sc, duration_s=3 * float(sc['timing']['frame_s'])).run()
+for _ in FrameLoop.from_scenario(sc, duration_s=3 * float(sc['timing']['frame_s'])).run():
+    pass
 print(json.dumps(kernel_counts()))
 """
 

@@ -15,8 +15,11 @@ Every row is measured in the same run, on the same machine, at the same time (is
    ``ADCS_COMPOSE_INPROC=1``: DDS only where an outside subscriber is matched; the
    launcher's progress monitor reads only ``lockstep/status``, which no node of the graph
    reads, so every topic between the nodes goes in process);
-4. ``plain loop``: the same models in a plain Python loop without ROS
-   (:class:`sim_node.tools.closed_loop.ClosedLoop`, built from the same node parameters);
+4. ``plain engine``: the FrameLoop (:class:`sim_node.engine.FrameLoop`: the same components
+   as the nodes, built from the same node parameters, stepped in the lockstep order, no ROS)
+   at the bench's 1 s frames; ``4p``: the same at the scenario's own frames (paper000_control:
+   2 s frames, 20 substeps), the issue's 10,000 x real-time target printed with the factor
+   it misses by;
 5. ``free body``: free rigid body + gravity gradient with this project's RK4
    (``Spacecraft.step``, paper 000 inertia diag(118, 118, 19.6) kg m^2, 0.1 s step);
 6. ``Basilisk``: the same model set in Basilisk (``bsk`` from PyPI: ``Spacecraft`` hub with
@@ -34,13 +37,13 @@ when the row started. Repeats are interleaved; the table gives medians (rate: mi
 Targets, as ratios of this run (a target not met prints NOT MET with its ratio):
 (a) graph >= 0.5 x the matching ring; (b) composed >= 3 x graph; (c) composed paper000 at
 1 s frames >= 2000 x real time ((b) and (c) for both composed rows); (d) free-body plain loop
->= 0.5 x Basilisk.
+>= 0.5 x Basilisk; (e) the plain engine >= 10,000 x real time (rows 4 and 4p; issue 19).
 
 Usage::
 
     python -m sim_node.tools.bench [--frames 2000] [--repeats 2] [--quick]
                                    [--basilisk auto|skip] [--out out/bench.txt]
-                                   [--rows 2,3,3i]
+                                   [--rows 2,3,3i,4,4p]
 """
 from __future__ import annotations
 
@@ -74,6 +77,7 @@ TARGET_GRAPH_VS_RING = 0.5
 TARGET_COMPOSED_VS_GRAPH = 3.0
 TARGET_REAL_TIME = 2000.0
 TARGET_LOOP_VS_BASILISK = 0.5
+TARGET_PLAIN_REAL_TIME = 10_000.0
 BSK_VENV = os.environ.get('ADCS_BSK_VENV',
                           os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'bsk-venv'))
 
@@ -254,23 +258,24 @@ class GraphMeasure:
         return s
 
 
-# ---------------------------------------------------------------------- (4) plain loop
+# ---------------------------------------------------------------------- (4) plain engine
 def plain_sample(sc: dict, frames: int) -> Sample:
-    """The closed loop's models in a plain loop without ROS, ``frames`` frames.
+    """The plain engine (:class:`sim_node.engine.FrameLoop`), ``frames`` frames, no sink.
 
-    :class:`sim_node.tools.closed_loop.ClosedLoop`: the same core models and laws as the
-    nodes, built from the same node parameters (``build_graph``), in the graph's order.
-    Construction (and kernel compilation/cache load) is in the wall and CPU columns, not in
-    the rate.
+    The same components as the nodes, built from the same node parameters (``build_graph``),
+    stepped in the lockstep order. Construction (and kernel compilation/cache load) is in the
+    wall and CPU columns, not in the rate.
     """
-    from sim_node.tools.closed_loop import ClosedLoop
+    from sim_node.engine import FrameLoop
 
     cpu0, w0 = _cpu_now(), time.monotonic()
-    loop = ClosedLoop(sc, duration_s=frames * float(sc['timing']['frame_s']))
+    loop = FrameLoop.from_scenario(sc, duration_s=frames * float(sc['timing']['frame_s']))
     c1, t1 = time.process_time(), time.perf_counter()
-    loop.run()
+    for _ in loop.run():
+        pass
     dt, dc = time.perf_counter() - t1, time.process_time() - c1
-    return Sample(frames, frames / dt, time.monotonic() - w0, _cpu_now() - cpu0, dc / frames)
+    n = loop.k + 1                                  # frames 0 .. frames
+    return Sample(n, n / dt, time.monotonic() - w0, _cpu_now() - cpu0, dc / n)
 
 
 # ---------------------------------------------------------------------- (5) free body
@@ -441,8 +446,12 @@ def verdict(name: str, ratio: Optional[float], target: float, detail: str) -> st
 
 
 # ---------------------------------------------------------------------- main
-def plan(sc: dict, frames: int, basilisk: Optional[str], bsk_why: str) -> List[Row]:
-    """The table's rows, each with the measurement that fills it (not run yet)."""
+def plan(sc: dict, frames: int, basilisk: Optional[str], bsk_why: str,
+         own: Optional[dict] = None) -> List[Row]:
+    """The table's rows, each with the measurement that fills it (not run yet); ``own``: the
+    scenario at its own frames (row 4p; default ``sc``)."""
+    own = sc if own is None else own
+    own_frame = float(own['timing']['frame_s'])
     hops = hop_pattern(sc, FRAME_S)
     mean_hops = sum(hops) / len(hops)
     rows = [Row('(1)', 'ring, 2 processes', note=f'{mean_hops:.2f} hops/frame '
@@ -455,8 +464,12 @@ def plan(sc: dict, frames: int, basilisk: Optional[str], bsk_why: str) -> List[R
             Row('(3i)', 'composed, in-process path', note='the default: DDS only for '
                 'outside subscribers',
                 measure=GraphMeasure(sc, frames, compose=True, inproc=True)),
-            Row('(4)', 'plain loop, same models', note='no ROS',
+            Row('(4)', 'FrameLoop (plain engine)', note=f'no ROS, {FRAME_S:g} s frames',
                 measure=lambda: plain_sample(sc, frames)),
+            Row('(4p)', f'FrameLoop (plain engine), {own["name"]} at its frames',
+                step_s=own_frame, note=f'{own_frame:g} s frames x '
+                f'{own["timing"]["substeps"]} substeps',
+                measure=lambda: plain_sample(own, frames)),
             Row('(5)', 'free body + GG, this RK4', unit='RK4 steps', step_s=0.1,
                 note='Spacecraft.step, 0.1 s step',
                 measure=lambda: free_body_sample(20 * frames))]
@@ -486,11 +499,12 @@ def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
     from adcs_nodes.tools.scenario import load_scenario
 
     limit_blas_threads()   # this process runs the plain loops: one BLAS thread as the nodes
-    sc = bench_scenario(load_scenario(scenario))
+    own = load_scenario(scenario)
+    sc = bench_scenario(own)
     info = machine_info()
     t_start = time.monotonic()
     bsk_py, bsk_why = basilisk_python(basilisk_mode, log)
-    rows = plan(sc, frames, bsk_py, bsk_why)
+    rows = plan(sc, frames, bsk_py, bsk_why, own)
     for r in rows:
         if only and r.key.strip('()') not in only:
             r.measure, r.skipped = None, 'not selected (--rows)'
@@ -511,6 +525,7 @@ def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
     ring, graph, comp = _row(rows, '(1)'), _row(rows, '(2)'), _row(rows, '(3)')
     inproc = _row(rows, '(3i)')
     free, bsk = _row(rows, '(5)'), _row(rows, '(6)')
+    plain, plain_own = _row(rows, '(4)'), _row(rows, '(4p)')
     cmd = 'make bench  (= ros2_ws/run.sh python -m sim_node.tools.bench ' + \
         ' '.join(sys.argv[1:]) + ')'
     out = [
@@ -543,6 +558,14 @@ def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
                        TARGET_LOOP_VS_BASILISK,
                        f'{_num(free.rate)} vs {_num(bsk.rate)} RK4 steps/s'
                        if bsk.samples else bsk.skipped))
+    for key, row in (('(4)', plain), ('(4p)', plain_own)):
+        rtf = row.rate * row.step_s if row.rate else None
+        miss = (f'; misses 10,000 x by a factor {TARGET_PLAIN_REAL_TIME / rtf:.1f}'
+                if rtf and rtf < TARGET_PLAIN_REAL_TIME else '')
+        out.append(verdict(f'(e) plain engine {key} >= 10,000 x real time',
+                           _ratio(rtf, 1.0), TARGET_PLAIN_REAL_TIME,
+                           f'{_num(rtf)} x real time at {row.step_s:g} s frames, '
+                           f'{_num(row.rate)} frames/s{miss}'))
     out += ['', f'Noise: {info["nproc"]} cores, other work may be running (load average above).']
     return '\n'.join(out) + '\n'
 
@@ -562,7 +585,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help='comma-separated row keys to measure (e.g. 2,3,3i); default: all')
     args = ap.parse_args(argv)
     only = [k.strip() for k in args.rows.split(',') if k.strip()]
-    known = ('1', '2', '3', '3i', '4', '5', '6')
+    known = ('1', '2', '3', '3i', '4', '4p', '5', '6')
     if any(k not in known for k in only):
         ap.error(f'--rows: known keys are {", ".join(known)}')
     if args.quick:

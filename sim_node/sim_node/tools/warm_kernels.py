@@ -16,10 +16,10 @@ What it runs, in this order:
 
 1. every module's ``warm_up()`` and the other kernel entry points with the argument types of
    their callers (node constructors, dynamics, environment, disturbances);
-2. for every ``scenarios/*.yaml``: the world of the ``environment`` and ``dynamics`` nodes
-   (orbit, field, spacecraft with its wheels and modes) for a few frames, and, when the plain
-   engine accepts the scenario, the plain closed loop (:class:`sim_node.tools.closed_loop
-   .ClosedLoop`: the nodes' core classes built from the nodes' parameters) for a few frames.
+2. for every ``scenarios/*.yaml``: a few frames of the FrameLoop (:class:`sim_node.engine
+   .FrameLoop`: every node's component, world and flight software, built from the nodes'
+   parameters and stepped in the lockstep order); a scenario the plain engine cannot run (an
+   external sensor) gets the same frames with its external sensors simulated.
 
 It prints one line (kernels, signatures compiled / loaded from the cache, wall time, scenarios
 skipped because they do not load) and exits 0, or prints one ``warm_kernels: FAILED ...`` line
@@ -65,36 +65,22 @@ def warm_entry_points() -> None:
 
 
 def warm_scenario(path: str, frames: int = FRAMES) -> bool:
-    """Step 2 for one scenario; True when the plain closed loop ran too."""
-    from adcs_nodes.tools.graph import build_graph
-    from adcs_nodes.tools.montecarlo.engine import plain_engine_problem
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.models.dynamics import FrameEnvironment
-    from sim_node.models.spacecraft_config import initial_state
-    from sim_node.tools.closed_loop import ClosedLoop, _World
+    """Step 2 for one scenario: ``frames`` frames of its FrameLoop (the nodes' components).
+
+    Returns True when the scenario ran as it is, False when its external sensors had to be
+    simulated for the plain engine (their drivers are outside; the nodes' kernels are the
+    same)."""
+    from adcs_nodes.tools.scenario import apply_overrides, load_scenario
+    from sim_node.engine import FrameLoop
 
     sc = load_scenario(path)
+    external = [k for k, cfg in (sc.get('sensors') or {}).items() if cfg.get('external')]
+    if external:
+        sc = apply_overrides(sc, {f'sensors.{k}.external': False for k in external})
     frame_s = float(sc['timing']['frame_s'])
-    nodes = {n.name: n.params for n in build_graph(sc, frames * frame_s)}
-    if 'environment' in nodes and 'dynamics' in nodes:
-        world = _World(sc, nodes)
-        craft, state = world.spacecraft, None
-        command = craft.zero_command()
-        for k in range(frames):
-            t = k * frame_s
-            st = world.orbit.state(t)
-            world.field.field_and_rate(world.orbit, t)             # environment node
-            b_eci, b_dot_eci = world.field.field_and_rate(world.orbit, t, st.r_eci)
-            if state is None:
-                state = initial_state(world.initial, st.q_eci_orbit, st.omega_orbit_eci_eci,
-                                      craft, world.wheel_h0)
-            env = FrameEnvironment(r_eci=st.r_eci, v_eci=st.v_eci, b_eci=b_eci,
-                                   b_dot_eci=b_dot_eci)
-            state, _ = craft.step(state, t, frame_s, env, command, int(sc['timing']['substeps']))
-    if plain_engine_problem(sc) is not None:
-        return False
-    ClosedLoop(sc, duration_s=frames * frame_s).run()
-    return True
+    for _ in FrameLoop.from_scenario(sc, duration_s=frames * frame_s).run():
+        pass
+    return not external
 
 
 def kernel_counts() -> Tuple[int, int, int, int]:
@@ -157,7 +143,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
               file=sys.stderr)
         return 1
     print(f'warm_kernels: {n} kernels, {sigs} signatures ({compiled} compiled, {loaded} from '
-          f'the cache), {len(paths) - len(skipped)} scenarios ({plain} with the plain loop), '
+          f'the cache), {len(paths) - len(skipped)} scenarios on the FrameLoop ({plain} as they '
+          'are), '
           f'{time.monotonic() - start:.1f} s'
           + (f'; skipped (invalid): {", ".join(skipped)}' if skipped else ''))
     return 0
