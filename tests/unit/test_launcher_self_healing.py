@@ -60,6 +60,13 @@ def test_stuck_again_after_its_restart_fails_with_the_reason():
                        '1 restart(s) before frame 0: sub:/clock 0/1 (discovery knows 0)')
 
 
+class _Future:
+    """A request that is never answered (no rclpy in the unit tier)."""
+
+    def add_done_callback(self, callback):
+        pass
+
+
 class _Client:
     def __init__(self):
         self.sent = []
@@ -68,10 +75,8 @@ class _Client:
         return True
 
     def call_async(self, request):
-        from rclpy.task import Future
-        future = Future()
-        self.sent.append(future)
-        return future
+        self.sent.append(_Future())
+        return self.sent[-1]
 
 
 class _Node:
@@ -89,3 +94,43 @@ def test_unanswered_lifecycle_requests_are_reported_and_a_reset_starts_again():
     tr.reset('estimator')
     assert tr.step['estimator'] == 'starting'
     assert tr.poll() is None and tr.step['estimator'] == 'configure'
+
+
+def test_an_unanswered_node_that_uses_cpu_is_waited_for_an_idle_one_restarted(monkeypatch):
+    """A node configuring (or compiling a kernel) keeps its executor busy and answers
+    nothing: it is given more time. One that used no CPU in the window is restarted."""
+    from types import SimpleNamespace
+
+    from adcs_nodes.tools import launcher
+    cpu = {'t': 10.0}
+    monkeypatch.setattr(launcher, '_cpu_seconds', lambda pid: cpu['t'])
+    run = launcher.Launcher.__new__(launcher.Launcher)
+    run.procs = {'estimator': SimpleNamespace(pid=1)}
+    run._cpu_seen, run.restarts, run.restart_notes, lines, restarted = {}, {}, [], [], []
+    run.log = lines.append
+    run._guards, run.compose = {}, False
+    run._restart = lambda monitor, name, why: restarted.append(name)
+    run._transitions = _Transitions(_Node(), ['estimator'], deadline_s=600.0)
+    monitor = SimpleNamespace(ready=set())
+    assert run._heal_lifecycle(monitor, 'estimator') is None       # window starts
+    cpu['t'] = 13.0                                                 # 3 s of CPU: busy
+    assert run._heal_lifecycle(monitor, 'estimator') is None and not restarted
+    assert 'is busy (3.0 s CPU' in lines[-1]
+    assert run._heal_lifecycle(monitor, 'estimator') is None       # a new window
+    assert run._heal_lifecycle(monitor, 'estimator') is None       # no CPU used: stuck
+    assert restarted == ['estimator']
+    run.restarts = {'estimator': 1}
+    run._heal_lifecycle(monitor, 'estimator')
+    assert run._heal_lifecycle(monitor, 'estimator') == ('estimator', 'unanswered')
+
+
+def test_cpu_seconds_of_this_process():
+    import os
+
+    from adcs_nodes.tools.launcher import _cpu_seconds
+    t0 = _cpu_seconds(os.getpid())
+    end = time.process_time() + 0.2
+    while time.process_time() < end:
+        pass
+    assert _cpu_seconds(os.getpid()) - t0 >= 0.1
+    assert _cpu_seconds(2 ** 22 + 12345) is None

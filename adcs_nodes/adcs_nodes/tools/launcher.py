@@ -113,6 +113,11 @@ HEAL_WAIT_S = 30.0
 #: ... seconds a managed node's lifecycle requests (change_state, get_state) may go
 #: unanswered before it is restarted (a lost answer is asked again after 5 s).
 HEAL_UNANSWERED_S = 30.0
+#: A node that used at least this much CPU time [s] over :data:`HEAL_BUSY_WINDOW_S` while
+#: its lifecycle requests went unanswered is busy (configuring, compiling a kernel), not
+#: stuck: it is given another :data:`HEAL_UNANSWERED_S` instead of a restart.
+HEAL_BUSY_CPU_S = 1.0
+HEAL_BUSY_WINDOW_S = 10.0
 #: Restarts per node before frame 0; a node stuck again after them fails the run.
 MAX_RESTARTS = 1
 #: The clock master's start limit (``start_timeout_s``) in a launched run: the launcher's own
@@ -190,6 +195,16 @@ def restart_plan(targets: List[Tuple[str, str]], ready: Iterable[str], master: s
         out.append((master, 'a node that had said ready is restarted: the clock master must '
                     'wait for its new ready'))
     return out
+
+
+def _cpu_seconds(pid: int) -> Optional[float]:
+    """CPU time (user + system) of process ``pid`` [s], None if it cannot be read."""
+    try:
+        with open(f'/proc/{pid}/stat', 'rb') as fh:
+            fields = fh.read().rsplit(b')', 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 class LaunchError(RuntimeError):
@@ -561,6 +576,10 @@ class _Transitions:
         self._heard: Dict[str, float] = {}
         self.unanswered_s = math.inf         # (the launcher sets HEAL_UNANSWERED_S)
 
+    def postpone(self, name: str, seconds: float) -> None:
+        """Report ``name`` as unanswered again ``seconds`` from now (at the earliest)."""
+        self._heard[name] = time.monotonic() - self.unanswered_s + seconds
+
     def reset(self, name: str) -> None:
         """Forget ``name``'s progress (its process was restarted): start again from
         'starting', late answers of the old process ignored, a full deadline."""
@@ -698,6 +717,7 @@ class Launcher:
         self.restart_notes: List[str] = []
         self._log_start: Dict[str, int] = {}
         self._spawn_count: Dict[str, int] = {}
+        self._cpu_seen: Dict[str, float] = {}
         #: per node, the nodes that accept its messages only from its publisher identity
         self._guards: Dict[str, List[str]] = {}
         for node in self.nodes:
@@ -1072,10 +1092,24 @@ class Launcher:
     def _heal_lifecycle(self, monitor: '_Monitor', name: str):
         """A managed node whose lifecycle requests went unanswered: restarted (with what
         :func:`restart_plan` adds), or ``(name, 'unanswered')`` after its restarts."""
+        proc = self.procs.get(name)
+        cpu = _cpu_seconds(proc.pid) if proc is not None else None
+        if cpu is not None:
+            if name not in self._cpu_seen:       # measure its CPU time over a window first
+                self._cpu_seen[name] = cpu
+                self._transitions.postpone(name, HEAL_BUSY_WINDOW_S)
+                return None
+            used = cpu - self._cpu_seen.pop(name)
+            if used >= HEAL_BUSY_CPU_S:          # working (configure, a kernel compile)
+                self.log(f'[adcs] node {name} has not answered its lifecycle requests for '
+                         f'{HEAL_UNANSWERED_S:g} s but is busy ({used:.1f} s CPU in '
+                         f'{HEAL_BUSY_WINDOW_S:g} s): waiting')
+                self._transitions.postpone(name, HEAL_UNANSWERED_S)
+                return None
         if self.restarts.get(name, 0) >= MAX_RESTARTS:
             return name, 'unanswered'
         reason = (f'its lifecycle requests went unanswered for {HEAL_UNANSWERED_S:g} s '
-                  f'(step: {self._transitions.step.get(name)})')
+                  f'and it used no CPU (step: {self._transitions.step.get(name)})')
         for node, why in restart_plan([(name, reason)], monitor.ready, self._master_name(),
                                       self._guards):
             self._restart(monitor, node, why)
@@ -1092,6 +1126,7 @@ class Launcher:
         self._spawn_one(name, self._commands(self._params_path)[name], self._env,
                         f'restarted by the launcher before frame 0: {reason}')
         monitor.ready.discard(name)
+        self._cpu_seen.pop(name, None)
         transitions = getattr(self, '_transitions', None)
         if transitions is not None and name in transitions.step:
             transitions.reset(name)
