@@ -27,15 +27,42 @@ def test_core_and_models_import_without_ros(monkeypatch):
 
 
 def test_flight_software_never_imports_the_simulator():
+    """The flight software (core, components, nodes, the registry) never imports sim_node; the
+    tools that orchestrate runs reach the simulator only through the FrameLoop
+    (``sim_node.engine``), never through its models (DESIGN section 2)."""
     import pathlib
     root = pathlib.Path(adcs_nodes.core.__file__).parents[1]
-    offenders = [str(p) for p in root.rglob('*.py') if _imports_sim(p)]
+    offenders = []
+    for p in root.rglob('*.py'):
+        tool = 'tools' in p.relative_to(root).parts
+        for module in _sim_imports(p):
+            if not (tool and module == 'sim_node.engine'):
+                offenders.append(f'{p.relative_to(root)}: {module}')
     assert offenders == []
 
 
-def _imports_sim(path):
+def _sim_imports(path):
+    """The sim_node modules a file imports (``import sim_node.x`` / ``from sim_node.x ...``)."""
+    out = []
     for line in path.read_text().splitlines():
         s = line.strip()
         if s.startswith(('import sim_node', 'from sim_node')):
-            return True
-    return False
+            out.append(s.split()[1])
+    return out
+
+
+def test_components_and_the_frameloop_import_without_rclpy(monkeypatch):
+    """The components and the FrameLoop use the generated message classes but no rclpy: the
+    plain engine runs where ROS does not (issue 19)."""
+    for name in list(sys.modules):
+        if name.split('.')[0] == 'rclpy' or name.startswith(
+                ('adcs_nodes.components', 'sim_node.components', 'sim_node.engine',
+                 'adcs_nodes.nodes', 'adcs_nodes.tools', 'sim_node.faults')):
+            monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, 'rclpy', None)      # any import of it now fails
+    import adcs_nodes.components
+    import sim_node.components
+    mods = _modules(adcs_nodes.components) + _modules(sim_node.components)
+    assert 'adcs_nodes.components.estimator' in mods and 'sim_node.components.dynamics' in mods
+    for mod in mods + ['sim_node.engine', 'sim_node.faults']:
+        importlib.import_module(mod)
