@@ -34,11 +34,12 @@ def pytest_unconfigure(config):
 
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``make test``: 2 workers, ``--dist loadgroup``) the launched-graph
-    tests of ``tests/graph`` run one after the other on one worker; the unit and node tests
+    tests of ``tests/graph`` run one after the other on one worker; the unit and node tests,
+    and the ``tests/graph`` tests marked ``parallel`` (processes that may run beside a graph),
     share the other worker and fill the CPU time the graph tests spend waiting (start-up,
     discovery, deadlines). Each test's ROS domain is its own (``tests/domains.py``)."""
     import pytest
     graph = os.path.join(ROOT, 'tests', 'graph') + os.sep
     for item in items:
-        if str(item.fspath).startswith(graph):
+        if str(item.fspath).startswith(graph) and item.get_closest_marker('parallel') is None:
             item.add_marker(pytest.mark.xdist_group('graph'))

@@ -1,9 +1,16 @@
-"""``make bench`` machinery at tiny sizes: it runs and prints the table (no speed checks)."""
+"""``make bench`` machinery at tiny sizes: it runs and prints the table (no speed checks).
+
+It starts processes (the bench and its graphs, on domains it claims): graph tier, marked
+``parallel`` (not serialized with the launched-graph tests; was ``tests/unit``)."""
 import os
 import subprocess
 import sys
 
+import pytest
+
 from sim_node.tools.bench import Row, Sample, format_table, hop_pattern, verdict
+
+pytestmark = pytest.mark.parallel
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

@@ -5,6 +5,8 @@ node's log; the process goes on), and the launcher's report of a node not active
 deadline carries that dump instead of an empty log tail (a clean-clone run once showed an
 estimator silent for 120 s with an empty log). Truth: a real process stuck in a known
 function; its dump names that function and the process is still alive afterwards.
+
+It starts processes (no graph): graph tier, marked ``parallel`` (was ``tests/unit``).
 """
 import os
 import subprocess
@@ -12,7 +14,11 @@ import sys
 import time
 from types import SimpleNamespace
 
+import pytest
+
 from adcs_nodes.tools.launcher import Launcher
+
+pytestmark = pytest.mark.parallel
 
 STUCK = '''
 import sys, time

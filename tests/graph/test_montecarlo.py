@@ -30,6 +30,8 @@ from adcs_launch import ROOT, SCENARIOS
 from adcs_nodes.tools import montecarlo as mc
 from adcs_nodes.tools.bag import read_messages
 
+pytestmark = pytest.mark.parallel
+
 SCENARIO = os.path.join(SCENARIOS, 'paper000_control.yaml')
 DURATION = 60.0
 #: Disperse the magnetometer errors too (the default keeps the scenario's), so the tests see

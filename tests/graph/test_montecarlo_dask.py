@@ -1,7 +1,9 @@
 """``adcs montecarlo`` execution: one BLAS thread per run process, ``--dask-local``.
 
 Short: the run processes here are stand-ins or 20 s plain-engine runs. The full campaigns
-(graph engine, ``--scheduler``) are in tests/graph/test_montecarlo.py.
+(``--scheduler``, resume, Ctrl-C; the graph engine in ``make test-long``) are in
+tests/graph/test_montecarlo.py. Processes, no ROS graph: graph tier, marked ``parallel``
+(was ``tests/unit``).
 """
 import json
 import os
@@ -17,6 +19,7 @@ from adcs_nodes.tools.montecarlo import runner
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENARIO = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
+pytestmark = pytest.mark.parallel
 
 #: Stand-in run process: reports the thread counts its BLAS libraries really use.
 PROBE = r'''

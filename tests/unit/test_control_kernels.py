@@ -7,17 +7,14 @@
 * the manager's checks (:func:`manager.limit_violation`, :func:`manager.clip_finite`) against
   the numpy expressions (``isfinite``, ``abs > limit``, ``nan_to_num`` + ``clip``);
 * the dipole field (G1), (G2) and the onboard reference's (R1) against the numpy expressions;
-* compiled and uncompiled (``NUMBA_DISABLE_JIT=1``, a fresh interpreter) give the same bits.
+* compiled and uncompiled (``NUMBA_DISABLE_JIT=1``, a fresh interpreter) give the same bits
+  for :func:`sample`: ``tests/graph/test_fresh_interpreters.py`` (processes).
 
 "The same bits" as the numpy code holds where numpy's BLAS sums small dot products in index
 order (checked first, :func:`_blas_sums_in_index_order`; true on the development machine);
 elsewhere the comparison is to 1e-12 relative.
 """
-import json
 import math
-import os
-import subprocess
-import sys
 from datetime import datetime, timezone
 
 import numpy as np
@@ -31,7 +28,6 @@ from adcs_nodes.core.control.magnetic import (MagneticController, dipole_from_to
                                               target_rate_three_axis, torque_demand)
 from adcs_nodes.core.estimation import onboard
 
-HERE = os.path.abspath(__file__)
 EPOCH = datetime(2025, 3, 20, tzinfo=timezone.utc)
 
 
@@ -228,18 +224,3 @@ def sample():
                                         manager.clip_finite, geomag.dipole_eci,
                                         onboard.to_orbit_axes)]
     return kinds, [float(x).hex() for x in out]
-
-
-def test_compiled_and_uncompiled_kernels_give_the_same_bits():
-    kinds, compiled = sample()
-    assert set(kinds) == {'CPUDispatcher'}                      # numba-compiled here
-    code = ('import json, runpy; m = runpy.run_path(%r); print(json.dumps(m["sample"]()))'
-            % HERE)
-    env = {**os.environ, 'NUMBA_DISABLE_JIT': '1'}
-    proc = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
-                          text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    kinds_py, python = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert set(kinds_py) == {'function'}                        # plain Python there
-    assert len(compiled) == len(python) > 3000
-    assert compiled == python

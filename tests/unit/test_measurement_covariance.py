@@ -1,12 +1,10 @@
 """A sensor's covariance enters the paper 000 filter per body axis (``theta_axes``).
 
 Independent truth: the scalar update (38) written out by hand (s = theta_j + h P h^T,
-K = P h / s) for one axis; the limit theta -> infinity (no correction); and a rotation of a
-covariance by scipy's own rotation matrix.
+K = P h / s) for one axis; the limit theta -> infinity (no correction). (A rotation of a
+covariance by scipy's own rotation matrix: ``tests/node/test_covariance_to_body.py``.)
 """
 import numpy as np
-import pytest
-from scipy.spatial.transform import Rotation
 
 from adcs_nodes.core import attitude
 from adcs_nodes.core.estimation import magnetic_filter as mf
@@ -61,20 +59,6 @@ def test_huge_covariance_means_no_correction_and_bad_values_are_rejected():
         out = g.update(_measurement(), B_ORBIT, theta_axes=bad)
         assert not out['accepted'] and 'theta_axes' in out['reason']
         assert np.array_equal(g.q_orbit_body, q)
-
-
-def test_covariance_to_body_rotates_and_follows_the_ros_conventions():
-    tf = pytest.importorskip('adcs_nodes.nodes.tf')
-    q = Rotation.from_euler('zyx', [90.0, 20.0, -30.0], degrees=True).as_quat()
-    c_sensor = np.diag([375e-9, 25e-9, 65e-9]) ** 2
-    c_body = tf.covariance_to_body(c_sensor.reshape(-1), q)
-    r = Rotation.from_quat(q).as_matrix()
-    assert np.allclose(c_body, r @ c_sensor @ r.T, rtol=1e-12, atol=0.0)
-    assert tf.covariance_to_body([0.0] * 9, q) is None                  # unknown
-    assert tf.covariance_to_body([-1.0] + [0.0] * 8, q) is None         # not provided
-    assert tf.covariance_to_body([np.nan] * 9, q) is None
-    assert tf.covariance_to_body([1.0, 2.0, 0, 0, 1.0, 0, 0, 0, 1.0], q) is None   # asymmetric
-    assert tf.covariance_to_body([1.0] * 4, q) is None                  # wrong size
 
 
 def test_estimator_core_uses_the_sample_variances_floored_at_theta():

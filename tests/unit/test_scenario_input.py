@@ -9,7 +9,6 @@ The property tests mutate the shipped scenarios and random bytes: either the val
 import copy
 import os
 import random
-import subprocess
 import time
 
 import pytest
@@ -141,15 +140,6 @@ def test_shipped_scenarios_pass(capsys):
     for path in SHIPPED:
         code, err = validate(path, capsys)
         assert code == 0, err
-
-
-def test_run_sh_resolves_paths_against_the_callers_directory():
-    """``ros2_ws/run.sh adcs validate free_tumble.yaml`` from inside scenarios/ finds it."""
-    proc = subprocess.run([os.path.join(ROOT, 'ros2_ws', 'run.sh'), 'adcs', 'validate',
-                           'free_tumble.yaml'], cwd=SCENARIOS, capture_output=True, text=True,
-                          timeout=120)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert 'free_tumble.yaml: OK' in proc.stdout
 
 
 # ---------------------------------------------------------------------- property tests
