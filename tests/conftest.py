@@ -32,14 +32,24 @@ def pytest_unconfigure(config):
         shutil.rmtree(_OWN_RUNS_DIR, ignore_errors=True)
 
 
+#: Launched-graph test files whose checks are bag contents only (a run against the plain
+#: engine's or the recorded truth: no killed process, no CPU burner, no wall-clock bound):
+#: their own xdist group, so they may run beside the other launched-graph tests.
+BAG_ONLY = frozenset({'test_engine_parity.py', 'test_tf_bag.py', 'test_registry_graph.py',
+                      'test_plugin_inputs_graph.py', 'test_faults_graph.py'})
+
+
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``make test``: 2 workers, ``--dist loadgroup``) the launched-graph
-    tests of ``tests/graph`` run one after the other on one worker; the unit and node tests,
-    and the ``tests/graph`` tests marked ``parallel`` (processes that may run beside a graph),
-    share the other worker and fill the CPU time the graph tests spend waiting (start-up,
-    discovery, deadlines). Each test's ROS domain is its own (``tests/domains.py``)."""
+    tests of ``tests/graph`` run one after the other on one worker (group ``graph``: killed
+    processes, CPU burners, wall-clock bounds), except the bag-only ones (:data:`BAG_ONLY`,
+    group ``graph-bags``), which run one after the other too but may run beside them. The
+    unit and node tests, and the ``tests/graph`` tests marked ``parallel`` (processes that may
+    run beside a graph), fill both workers. Each test's ROS domain is its own
+    (``tests/domains.py``)."""
     import pytest
     graph = os.path.join(ROOT, 'tests', 'graph') + os.sep
     for item in items:
         if str(item.fspath).startswith(graph) and item.get_closest_marker('parallel') is None:
-            item.add_marker(pytest.mark.xdist_group('graph'))
+            group = 'graph-bags' if os.path.basename(str(item.fspath)) in BAG_ONLY else 'graph'
+            item.add_marker(pytest.mark.xdist_group(group))
