@@ -155,14 +155,14 @@ def sensitivity_markdown(data: Optional[Dict[str, Any]] = None) -> str:
 
 #: The baseline run (the scenario's own values), listed under both parameters.
 _BASELINE_RESULT = {
-    "capture_orbits": 5.6917,
-    "last_exit_orbits": 5.6917,
-    "first_entry_s": 33660.0,
-    "hold_rms_deg": 71.0813,
-    "hold_median_deg": 51.6907,
-    "hold_p95_deg": 134.6058,
-    "hold_max_deg": 141.6325,
-    "est_err_median_deg": 0.4349,
+    "capture_orbits": 5.6924,
+    "last_exit_orbits": 5.6924,
+    "first_entry_s": 33664.0,
+    "hold_rms_deg": 71.0963,
+    "hold_median_deg": 51.8452,
+    "hold_p95_deg": 134.6131,
+    "hold_max_deg": 141.6376,
+    "est_err_median_deg": 0.4347,
     "hold_only": {
         "rms_deg": 1.0361,
         "median_deg": 0.7065,
@@ -182,6 +182,7 @@ MEASURED = {
         "random_period_s": 0.1,
         "misalignment_deg": 0.0
     },
+    "engine": "FrameLoop (plain engine)",
     "cases": [
         {"parameter": "random_period_s", "value": 0.1, **_BASELINE_RESULT},
         {
@@ -190,11 +191,11 @@ MEASURED = {
             "capture_orbits": None,
             "last_exit_orbits": None,
             "first_entry_s": None,
-            "hold_rms_deg": 98.1231,
-            "hold_median_deg": 102.5104,
-            "hold_p95_deg": 132.9284,
-            "hold_max_deg": 136.2517,
-            "est_err_median_deg": 0.4288,
+            "hold_rms_deg": 98.1345,
+            "hold_median_deg": 102.5386,
+            "hold_p95_deg": 132.9524,
+            "hold_max_deg": 136.2585,
+            "est_err_median_deg": 0.4284,
             "hold_only": {
                 "rms_deg": 1.2259,
                 "median_deg": 0.9413,
@@ -209,11 +210,11 @@ MEASURED = {
             "capture_orbits": 4.1016,
             "last_exit_orbits": None,
             "first_entry_s": 24256.0,
-            "hold_rms_deg": 3.3834,
-            "hold_median_deg": 1.5243,
-            "hold_p95_deg": 6.8268,
-            "hold_max_deg": 12.2677,
-            "est_err_median_deg": 0.5413,
+            "hold_rms_deg": 3.3831,
+            "hold_median_deg": 1.5261,
+            "hold_p95_deg": 6.8263,
+            "hold_max_deg": 12.2668,
+            "est_err_median_deg": 0.5399,
             "hold_only": {
                 "rms_deg": 1.6447,
                 "median_deg": 1.2657,
@@ -229,10 +230,10 @@ MEASURED = {
             "capture_orbits": None,
             "last_exit_orbits": None,
             "first_entry_s": None,
-            "hold_rms_deg": 96.8649,
-            "hold_median_deg": 100.2883,
-            "hold_p95_deg": 130.1902,
-            "hold_max_deg": 131.982,
+            "hold_rms_deg": 96.8641,
+            "hold_median_deg": 100.2854,
+            "hold_p95_deg": 130.1761,
+            "hold_max_deg": 131.9782,
             "est_err_median_deg": 0.6837,
             "hold_only": {
                 "rms_deg": 0.9592,
@@ -248,11 +249,11 @@ MEASURED = {
             "capture_orbits": 2.6514,
             "last_exit_orbits": 3.4641,
             "first_entry_s": 12782.0,
-            "hold_rms_deg": 2.2023,
-            "hold_median_deg": 1.2572,
-            "hold_p95_deg": 4.0837,
-            "hold_max_deg": 4.2052,
-            "est_err_median_deg": 1.1388,
+            "hold_rms_deg": 2.199,
+            "hold_median_deg": 1.2568,
+            "hold_p95_deg": 4.0736,
+            "hold_max_deg": 4.2018,
+            "est_err_median_deg": 1.138,
             "hold_only": {
                 "rms_deg": 1.9483,
                 "median_deg": 1.3558,
@@ -282,12 +283,16 @@ MEASURED = {
         }
     ],
     "note": (
-        "Measured on 2026-11-26 (tree of about 13:55 UTC) with `python -m sim_node.tools."
-        "closed_loop sensitivity scenarios/paper000_control.yaml`; rerun it and pass the "
-        "JSON to `reproductions.sensitivity_markdown` to refresh. The \"from the paper sta"
-        "te\" columns are one acquisition each: whether a run gets stuck at 80-140 deg for"
-        " orbits changes with tiny perturbations (different random draws), so they do not"
-        " order the parameters; the \"on target\" columns do: the hold error grows with the"
-        " correlation time (the random torque's power spectral density is std^2 x correla"
-        "tion time) and with the misalignment (unmodelled, it biases the estimate).")
+        "Measured on 2026-12-02 (01:48-02:05 UTC, shared machine) with `python -m adcs_nodes."
+        "tools.study sensitivity scenarios/paper000_control.yaml --out FILE` (FrameLoop runs)"
+        "; rerun it and paste the JSON here to refresh. Against the retired plain loop's meas"
+        "urement (2026-11-26) the on-target columns agree to the rounding and the acquisition"
+        "s differ in the last digits (hold RMS 71.10 vs 71.08 deg at the baseline): the Frame"
+        "Loop is the graph's series to the last bit, the plain loop was within 1e-9 of it, an"
+        "d a chaotic acquisition amplifies that. The \"from the paper state\" columns are one a"
+        "cquisition each: whether a run gets stuck at 80-140 deg for orbits changes with tiny"
+        " perturbations (different random draws), so they do not order the parameters; the \"o"
+        "n target\" columns do: the hold error grows with the correlation time (the random tor"
+        "que's power spectral density is std^2 x correlation time) and with the misalignment "
+        "(unmodelled, it biases the estimate).")
 }
