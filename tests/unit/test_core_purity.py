@@ -57,12 +57,12 @@ def test_components_and_the_frameloop_import_without_rclpy(monkeypatch):
     for name in list(sys.modules):
         if name.split('.')[0] == 'rclpy' or name.startswith(
                 ('adcs_nodes.components', 'sim_node.components', 'sim_node.engine',
-                 'adcs_nodes.nodes', 'adcs_nodes.tools', 'sim_node.faults')):
+                 'adcs_nodes.nodes', 'adcs_nodes.tools')):
             monkeypatch.delitem(sys.modules, name)
     monkeypatch.setitem(sys.modules, 'rclpy', None)      # any import of it now fails
     import adcs_nodes.components
     import sim_node.components
     mods = _modules(adcs_nodes.components) + _modules(sim_node.components)
     assert 'adcs_nodes.components.estimator' in mods and 'sim_node.components.dynamics' in mods
-    for mod in mods + ['sim_node.engine', 'sim_node.faults']:
+    for mod in mods + ['sim_node.engine']:
         importlib.import_module(mod)
