@@ -17,7 +17,8 @@ logged; a non-finite estimate is never published.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Dict, List, Optional, Tuple
+import copy
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from sensor_msgs.msg import Imu, MagneticField
@@ -60,6 +61,12 @@ CONTEXT_PARAMS = (
     Param('max_field_T', 'float', 1e-3, 'T', 'largest plausible |B| (larger: rejected)',
           positive=True),
 ) + inputs.period_params(inputs.NAMES)
+
+
+def _has_measurement(inputs: EstimatorInputs) -> bool:
+    """True when the frame's inputs hold a fresh measurement of any sensor."""
+    return any(v is not None for v in (inputs.b_body, inputs.horizon_roll_pitch,
+                                       inputs.gyro_rate_body, inputs.q_eci_body_meas))
 
 
 class EstimatorComponent:
@@ -151,23 +158,53 @@ class EstimatorComponent:
 
     # ------------------------------------------------------------------ frame
     def step(self, t_ns: int, msgs: Dict[str, Any], fresh: Fresh,
-             missing: List[str] = ()) -> Optional[AttitudeState]:
-        """One estimator step at elapsed sim time ``t_ns``; the estimate message, or None."""
+             missing: List[str] = (), samples: Sequence[Tuple[int, str, Any]] = (),
+             sample_keys: Sequence[str] = ()) -> Optional[AttitudeState]:
+        """One estimator step at elapsed sim time ``t_ns``; the estimate message, or None.
+
+        ``samples``: inputs in sample timing (a driver's, ``sample_keys``): ``(elapsed stamp,
+        key, message)`` in stamp order, each used once at its own stamp (predicted to it with
+        the true time difference, then updated), before the frame's own step; a sample older
+        than the filter's time is rejected (late), never used.
+        """
         t = t_ns / NS_PER_S
         for topic in missing:
             self.reject(f'stale input {topic} at t={t:g} s (timeout)')
+        for s_ns, key, msg in samples:
+            if self._last_t is not None and s_ns < self._last_t:
+                self.reject(f'{key} sample stamped {s_ns / NS_PER_S:g} s: older than the '
+                            'filter (late)')
+                continue
+            self._core_step(s_ns, self.inputs_for(s_ns, {key: msg, 'cmd': msgs.get('cmd')},
+                                                  lambda k, m, key=key: k == key))
+        if sample_keys:
+            taken = set(sample_keys)
+            frame_fresh = fresh
+            fresh = lambda k, m: k not in taken and frame_fresh(k, m)  # noqa: E731
         inputs = self.inputs_for(t_ns, msgs, fresh)
         self.last_ref = inputs.ref
+        if sample_keys and not _has_measurement(inputs) and self._last_t is not None:
+            # sample timing: the filter stays at its last sample (the next frame's samples
+            # may be older than t); the estimate of frame t is predicted on a copy
+            dt = (t_ns - self._last_t) / NS_PER_S
+            step = copy.deepcopy(self.core).step(inputs, t, dt)
+            self.last_step = step
+        else:
+            step = self._core_step(t_ns, inputs)
+        if step.estimate is None:
+            return None
+        return self.estimate_msg(t_ns, inputs.ref, step)
+
+    def _core_step(self, t_ns: int, inputs: EstimatorInputs) -> Any:
+        """The core's step to ``t_ns`` (from the last step's time), counted."""
         dt = 0.0 if self._last_t is None else (t_ns - self._last_t) / NS_PER_S
         self._last_t = t_ns
-        step = self.core.step(inputs, t, dt)
+        step = self.core.step(inputs, t_ns / NS_PER_S, dt)
         self.last_step = step
         self.update_count += step.updates
         for why in step.rejections:
             self.reject(why)
-        if step.estimate is None:
-            return None
-        return self.estimate_msg(t_ns, inputs.ref, step)
+        return step
 
     def estimate_msg(self, t_ns: int, ref: Any, step: Any) -> AttitudeState:
         """``adcs/attitude_estimate`` of a step."""

@@ -84,8 +84,9 @@ class EstimatorNode(ManagedLockstepNode):
     # ------------------------------------------------------------------ frame
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """One estimator step at elapsed sim time ``t_ns`` (the component's), published."""
-        msg = self.component.step(t_ns, msgs, lambda key, m: self.fresh(key, m, t_ns),
-                                  missing)
+        msg = self.component.step(
+            t_ns, msgs, lambda key, m: self.fresh(key, m, t_ns), missing,
+            self.external_samples(t_ns) if self.external else (), tuple(self.external))
         if msg is None:
             return
         self.est_pub.publish(msg)

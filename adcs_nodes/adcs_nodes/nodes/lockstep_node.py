@@ -152,6 +152,7 @@ class LockstepNode(node_params.SpecParameters, Node):
         # read once at start (read-only: the handshake polls it every 20 ms)
         self._expected_raw = list(self.param('expected_matches', ['']) or [])
         self.timing_mode = self._timing_mode()
+        self._external_inputs = [n for n in self.param('external_inputs', []) if n]
         self.max_sample_age_s = float(self.param('max_sample_age_s', 5.0))
         self.max_future_s = float(self.param('max_future_s', 0.5))
         # ASSUMPTION: 50 ms covers a driver's publish-to-receive latency on one machine
@@ -378,6 +379,14 @@ class LockstepNode(node_params.SpecParameters, Node):
                              f'{self.frame_ns / NS_PER_S:g} s')
         specs: Dict[str, Tuple[int, InputKind]] = {}
         self._topics_of: Dict[str, str] = {}
+        # inputs in sample timing (an external driver's, or every sensor in real-time mode):
+        # never awaited, each sample used once at its own stamp (see external_samples)
+        self.external = set() if self.live else {
+            n for n in self._external_inputs if n in inputs}
+        self._ext_queue: Dict[str, List[Tuple[int, Any]]] = {n: [] for n in self.external}
+        self._ext_latest: Dict[str, int] = {}
+        self._ext_done_t = -1                    # the last frame the samples were taken for
+        self._ext_used: Dict[str, int] = {}
         for name, spec in inputs.items():
             if len(spec) not in (3, 4):
                 raise ValueError(f'input {name}: want (msg_type, topic, period_s[, kind])')
@@ -386,13 +395,14 @@ class LockstepNode(node_params.SpecParameters, Node):
             p_ns = seconds_to_ns(p_s) if p_s else 0
             if not self.live and p_ns % self.frame_ns:
                 raise ValueError(f'input {name}: period {p_s} s is not a multiple of the frame')
-            if kind is InputKind.LATEST:
+            if kind is InputKind.LATEST or name in self.external:
                 p_ns = 0
             specs[name] = (p_ns, kind if p_ns else InputKind.LATEST)
             qos = QOS_DATA
-            if self.live and topic.startswith(SENSOR_PREFIXES):
-                qos = qos_profile_sensor_data
-            cb = self._live_cb(name) if self.live else self._input_cb(name)
+            if (self.live or name in self.external) and topic.startswith(SENSOR_PREFIXES):
+                qos = qos_profile_sensor_data     # a best-effort driver matches too
+            cb = self._live_cb(name) if self.live else (
+                self._external_cb(name) if name in self.external else self._input_cb(name))
             sub = self.subscription(msg_type, topic, cb, qos)
             self._topics_of[name] = sub.topic_name
         self.sync = FrameSync(specs, dead_after=self.dead_after)
@@ -453,6 +463,57 @@ class LockstepNode(node_params.SpecParameters, Node):
                 return
             self._fire(t, [])
 
+    def _external_cb(self, name: str) -> Callable[[Any], None]:
+        """A sample of an input in sample timing: checked (zero, future, too old, out of
+        order, each counted), then queued by stamp for the frame that covers it."""
+        def cb(msg: Any) -> None:
+            self.input_arrived(name)
+            s = stamp_ns(msg.header.stamp)
+            now = self.epoch_ns + max(self._seen_t, 0)        # sim time: the latest /clock
+            if s == 0:
+                self._reject_sample(name, 'zero_stamp', 'stamped zero')
+                return
+            if s > now + self.max_future_s * NS_PER_S + self._own_period_ns:
+                self._reject_sample(name, 'future', f'stamped {(s - now) / NS_PER_S:.3f} s '
+                                    f'ahead of the clock (limit {self.max_future_s:g} s)')
+                return
+            if now - s > self.max_sample_age_s * NS_PER_S:
+                self._reject_sample(name, 'too_old', f'{(now - s) / NS_PER_S:.3f} s old '
+                                    f'(limit {self.max_sample_age_s:g} s)')
+                return
+            if s <= self._ext_latest.get(name, -1):
+                self._reject_sample(name, 'out_of_order', 'not newer than the sample before')
+                return
+            self._ext_latest[name] = s
+            t = self.elapsed_ns(s)
+            if t <= self._ext_done_t:
+                self._reject_sample(name, 'late', 'arrived after the frame that covers its '
+                                    'stamp was processed')
+                return
+            self._ext_queue[name].append((t, msg))
+            self.sync.add(name, t, msg)
+        return cb
+
+    def external_samples(self, t_ns: int) -> List[Tuple[int, str, Any]]:
+        """The samples in sample timing that frame ``t_ns`` takes, in stamp order:
+        ``(elapsed stamp, input name, message)``, each returned once.
+
+        A frame takes the samples stamped up to one own period before it (``t - P``): a
+        sample on its way while its frame fires (a real-time clock tick comes before the
+        samples of that instant) is taken by the next frame, at its own stamp, instead of
+        being late; a sample that arrives after the frame that took its interval is late
+        (rejected, counted, never used).
+        """
+        cover = t_ns - self._own_period_ns
+        out = []
+        for name, queue in self._ext_queue.items():
+            keep = []
+            for t, msg in queue:
+                (out if t <= cover else keep).append((t, name, msg))
+            self._ext_queue[name] = [(t, m) for t, _, m in keep]
+        self._ext_done_t = max(self._ext_done_t, cover)
+        return sorted(out, key=lambda e: e[0])
+
     def _fire(self, t: int, missing: List[str]) -> None:
         msgs = {name: self.sync.value(name, t) for name in self.sync.names}
         self._wait_since = None
@@ -462,6 +523,11 @@ class LockstepNode(node_params.SpecParameters, Node):
         self.sim_t_ns = t
         self.apply_parameters()              # run-time parameter changes: at frame boundaries
         self._on_frame(t, msgs, missing)
+        if self.external:        # consumers that did not take their samples: now covered
+            self.external_samples(t)
+            for n in self.external:
+                if msgs.get(n) is not None:
+                    self._ext_used[n] = stamp_ns(msgs[n].header.stamp)
         last = self.is_last_frame(t, self._own_period_ns)
         self.frame_done(t, final=last)
         if last:
@@ -568,6 +634,8 @@ class LockstepNode(node_params.SpecParameters, Node):
         if msg is None:
             return False
         s = stamp_ns(msg.header.stamp)
+        if name in getattr(self, 'external', ()):     # sample timing: newer than last used
+            return s > self._ext_used.get(name, -1)
         if not self.live:
             return self.elapsed_ns(s) == int(t_ns)
         prev = getattr(self, '_live_prev', {}).get(name)

@@ -478,6 +478,9 @@ COMMON = {p.name: p for p in (
           max=60.0),
     Param('status_period_s', 'float', 1.0, 's', 'lockstep/status period (sim time)',
           positive=True),
+    Param('external_inputs', 'str[]', [], '-', 'lockstep mode: inputs taken in sample '
+          'timing (a driver publishes them, or --real-time): never awaited, each sample used '
+          'once at its own stamp, in stamp order; late ones rejected', read_only=True),
     Param('timing_mode', 'str', '', '-', "lockstep (with the simulator) or live (real "
           "drivers); '': live when started alone", choices=('', 'lockstep', 'live'),
           read_only=True),

@@ -264,7 +264,8 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         nodes.append(NodeSpec('estimator', 'adcs_nodes', 'estimator',
                               'adcs_nodes.nodes.estimator', 'EstimatorNode',
                               {**flight, **plugins, **_estimator_params(sc),
-                               **_mounts(sc, entry.inputs)},
+                               **_mounts(sc, entry.inputs),
+                               **_sample_timing(sc, entry.inputs, real_time)},
                               publishes=['adcs/attitude_estimate',
                                          'adcs/estimator/diagnostics', '/tf'],
                               subscribes=subs))
@@ -298,6 +299,19 @@ def _mounts(sc: Dict[str, Any], names) -> Dict[str, Any]:
         if rec.mounted and cfg is not None and not cfg.get('external'):
             frames.append(rec.sensor)        # a sensor node's frame_id is its name
     return {'expected_mounts': frames} if frames else {}
+
+
+def _sample_timing(sc: Dict[str, Any], names, real_time: bool) -> Dict[str, Any]:
+    """``external_inputs`` of a consumer: the sensor inputs it takes in sample timing (each
+    sample once, at its own stamp; never awaited): a driver's (``external: true``), or every
+    sensor's in real-time mode (DESIGN section 6: one timing rule outside lockstep)."""
+    keys = []
+    for name in names:
+        rec = input_records.get(name)
+        cfg = sc['sensors'].get(rec.sensor) if rec.sensor else None
+        if cfg is not None and (cfg.get('external') or real_time):
+            keys.append(rec.key)
+    return {'external_inputs': keys} if keys else {}
 
 
 def _input_periods(sc: Dict[str, Any], names) -> Dict[str, float]:
@@ -374,6 +388,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     for name, entry in entries.items():
         params = {**shared, **plugins, 'controller': name, **ctrl[name],
                   **_mounts(sc, entry.inputs),
+                  **_sample_timing(sc, entry.inputs, flight['real_time']),
                   'timeout_s': CHAIN_TIMEOUT['controller'] * flight['timeout_s']}
         params.update(_input_periods(sc, entry.inputs))
         if {'estimate', 'magnetometer'} <= set(entry.inputs):
