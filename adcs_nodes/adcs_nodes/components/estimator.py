@@ -18,6 +18,7 @@ logged; a non-finite estimate is never published.
 from __future__ import annotations
 
 import copy
+import itertools
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -164,19 +165,21 @@ class EstimatorComponent:
 
         ``samples``: inputs in sample timing (a driver's, ``sample_keys``): ``(elapsed stamp,
         key, message)`` in stamp order, each used once at its own stamp (predicted to it with
-        the true time difference, then updated), before the frame's own step; a sample older
-        than the filter's time is rejected (late), never used.
+        the true time difference, then updated; samples of one instant together, as a
+        two-vector estimator needs them), before the frame's own step; a sample older than
+        the filter's time is rejected (late), never used.
         """
         t = t_ns / NS_PER_S
         for topic in missing:
             self.reject(f'stale input {topic} at t={t:g} s (timeout)')
-        for s_ns, key, msg in samples:
+        for s_ns, group in itertools.groupby(samples, key=lambda e: e[0]):
+            group = {key: msg for _, key, msg in group}    # one instant: taken together
             if self._last_t is not None and s_ns < self._last_t:
-                self.reject(f'{key} sample stamped {s_ns / NS_PER_S:g} s: older than the '
-                            'filter (late)')
+                self.reject(f'{", ".join(group)} sample stamped {s_ns / NS_PER_S:g} s: older '
+                            'than the filter (late)')
                 continue
-            self._core_step(s_ns, self.inputs_for(s_ns, {key: msg, 'cmd': msgs.get('cmd')},
-                                                  lambda k, m, key=key: k == key))
+            self._core_step(s_ns, self.inputs_for(s_ns, {**group, 'cmd': msgs.get('cmd')},
+                                                  lambda k, m, g=group: k in g))
         if sample_keys:
             taken = set(sample_keys)
             frame_fresh = fresh
