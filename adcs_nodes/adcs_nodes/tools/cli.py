@@ -115,7 +115,8 @@ def cmd_run(args) -> int:
         else:
             launcher = Launcher(sc, duration_s=args.duration, record=args.record,
                                 real_time=args.real_time, rate_factor=args.rate or 1.0,
-                                compose=engine == 'composed', progress=not args.quiet)
+                                compose=engine == 'composed', progress=not args.quiet,
+                                domain=args.domain)
     except (ScenarioError, LaunchError, ValueError) as exc:
         print(f'adcs run: {exc}', file=sys.stderr)
         return 2
@@ -252,6 +253,9 @@ def build_parser() -> argparse.ArgumentParser:
                    'process; plain: the FrameLoop without ROS (fastest; the same series on '
                    'every data topic, no drivers)')
     p.add_argument('--compose', action='store_true', help='the same as --engine composed')
+    p.add_argument('--domain', type=int, metavar='N',
+                   help='ROS_DOMAIN_ID of the run (0..232; default: a free one at random), '
+                   'e.g. the one your driver already uses')
     p.add_argument('--report', action='store_true', help='write the report of the bag after')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',

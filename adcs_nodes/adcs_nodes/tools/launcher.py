@@ -668,8 +668,12 @@ class Launcher:
     def __init__(self, scenario: dict, duration_s: Optional[float] = None,
                  record: Optional[str] = None, real_time: bool = False,
                  rate_factor: float = 1.0, compose: bool = False, progress: bool = True,
-                 run_dir: Optional[str] = None, log=print) -> None:
+                 run_dir: Optional[str] = None, log=print,
+                 domain: Optional[int] = None) -> None:
         self.sc = scenario
+        if domain is not None and not (isinstance(domain, int) and 0 <= domain <= 232):
+            raise LaunchError(f'--domain must be a ROS_DOMAIN_ID in 0..232, got {domain!r}')
+        self.domain = domain     # None: a free one drawn at random (RUN_DOMAINS)
         self.duration_s = float(duration_s if duration_s is not None else scenario['duration_s'])
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise LaunchError(f'duration must be a positive finite number of seconds, got '
@@ -840,7 +844,12 @@ class Launcher:
     def _run(self, params_path: str, t0: float) -> RunResult:
         from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
 
-        domain, lock = acquire_domain()
+        try:
+            domain, lock = acquire_domain(RUN_DOMAINS if self.domain is None
+                                          else [self.domain])
+        except LaunchError as exc:
+            return RunResult(2, 0.0, time.monotonic() - t0, 0, 0, None, self.run_dir,
+                             f'{exc} (another run holds it: give another --domain)')
         env = child_env(domain)
         use_dds_env(env)
         manifest = {'pid': os.getpid(), 'domain': domain, 'scenario': self.sc['_path'],
@@ -860,8 +869,12 @@ class Launcher:
         self.log(f'[adcs] run {self.sc["name"]}: {len(self.nodes)} nodes '
                  f'({"composed in one process" if self.compose else "one process each"}), '
                  f'ROS_DOMAIN_ID={domain}, logs in {self.run_dir}/logs')
-        for line in external_devices(self.sc):
+        lines = external_devices(self.sc)
+        for line in lines:
             self.log(f'[adcs] {line}')
+        if lines:      # what a driver needs to join this run's (private) domain
+            self.log('[adcs] a driver joins with: ' + ' '.join(
+                f'{k}={env[k]}' for k in DDS_ENV_KEYS if env.get(k)))
         code, message = 0, ''
         try:
             self._spawn(env, params_path)
