@@ -4,6 +4,11 @@ Alekseev, Malyavin, Shadyan, "Extensive attitude control of a near-Earth satelli
 fuzzy logic" (seed paper 003; digest ``papers/fuzzy-eigenaxis-slew.md``, sections 2-3).
 Equation numbers are the paper's (it has no (11), (12)).
 
+Also the frame both eigenaxis torque laws share (:class:`EigenaxisTorqueLaw`: the fuzzy
+controller and the reference slew): the error state in the target's frame
+(:func:`error_state`) and the torque realised as ideal body torque or on the wheels
+(:func:`realise`).
+
 Direction cosine matrix ``A`` (1): rows are body axes in the reference axes, ``v_body = A
 v_ref``; Euler-Krylov angles ``psi, theta, gamma`` (3-2-1), ``A = R1(gamma) R2(theta)
 R3(psi)``. The printed row 3 swaps ``sin psi`` and ``cos psi`` in its first products (a typo:
@@ -53,6 +58,10 @@ from typing import Optional, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from adcs_nodes.core import attitude
+from adcs_nodes.core.control import (Command, ControlInputs, Target, finite_vector,
+                                     limits_vector, scale_to_limits)
 
 __all__ = ['dcm_euler_321', 'eigen_from_dcm', 'eigen_from_quaternion', 'torque_direction',
            'gyroscopic_rate', 'RateModulusDerivative']
@@ -249,3 +258,119 @@ class RateModulusDerivative:
         if prev is None or not (math.isfinite(tau) and tau > 0.0):
             return 0.0
         return (float(g) - prev) / float(tau)                                           # (15)
+
+
+# ---------------------------------------------------------------------- the torque-law frame
+class EigenaxisTorqueLaw:
+    """Frame shared by the eigenaxis torque laws (:class:`FuzzyEigenaxisController` and
+    :class:`~adcs_nodes.core.control.reference_slew.ReferenceSlewController`).
+
+    ``update`` takes the error state (:func:`error_state`), asks the subclass's
+    ``_torque_law(q_target_body, omega_rel_body, omega_body_eci_body, dt)`` for a dict with
+    ``torque_body`` (3,) [N m, body axes] and diagnostics, and realises the torque as ideal
+    body torque or on the reaction wheels (:func:`realise`). A subclass calls
+    :meth:`_set_wheels` in its constructor.
+    """
+
+    A_w: Optional[np.ndarray] = None
+
+    def _set_wheels(self, wheel_axes_body: Optional[ArrayLike],
+                    wheel_max_torque_Nm: Optional[ArrayLike]) -> None:
+        """Reaction wheels: ``A_w`` (3, n) spin axes, body axes, ``A_w_pinv`` (n, 3) and
+        ``wheel_limit`` (n,) [N m]; ``A_w = None`` without wheels (ideal body torque).
+
+        Raises
+        ------
+        ValueError
+            If the axes are not finite or do not span 3-D, or the limits are bad.
+        """
+        if wheel_axes_body is not None and np.size(wheel_axes_body) > 0:
+            axes = np.asarray(wheel_axes_body, dtype=float).reshape(-1, 3)
+            n = axes.shape[0]
+            self.A_w = finite_vector(axes, 'wheel_axes_body', (n, 3)).T       # (3, n)
+            if np.linalg.matrix_rank(self.A_w) < 3:
+                raise ValueError('wheel axes must span 3-D for three-axis slews')
+            self.A_w_pinv = np.linalg.pinv(self.A_w)                          # (n, 3)
+            self.wheel_limit = limits_vector(wheel_max_torque_Nm, 'wheel_max_torque_Nm', n,
+                                             allow_zero=False)
+        else:
+            self.A_w = None
+
+    @property
+    def n_wheels(self) -> int:
+        return 0 if self.A_w is None else self.A_w.shape[1]
+
+    def _torque_law(self, q_err: np.ndarray, w_rel: np.ndarray, w_abs: np.ndarray,
+                    dt: float) -> dict:
+        raise NotImplementedError
+
+    def update(self, inputs: ControlInputs, t: float, dt: float) -> Command:
+        """Command for frame time ``t`` (see :mod:`adcs_nodes.core.control`)."""
+        err = error_state(inputs)
+        if isinstance(err, str):
+            return Command.zero(self.n_wheels, err)
+        q_err, w_rel, w_abs = err
+        out = self._torque_law(q_err, w_rel, w_abs, dt)
+        torque = out.pop('torque_body')
+        if not np.all(np.isfinite(torque)):
+            return Command.zero(self.n_wheels, 'non-finite torque')
+        return realise(torque, w_abs, inputs, self, out)
+
+
+def error_state(inputs: ControlInputs):
+    """``(q_target_body, omega_rel_body, omega_body_eci_body)`` or a reason string.
+
+    The error is taken in the target's own frame: ``q_target_body = q_ref_target^*
+    q_ref_body``; ``omega_rel`` is the rate relative to the target (orbit frame: minus the
+    orbit rate about the orbit normal; then minus the target's feed-forward rate).
+    """
+    est = inputs.estimate
+    if est is None or not est.is_usable():
+        return 'no valid estimate'
+    tgt = inputs.target if inputs.target is not None else Target()
+    try:
+        q_t = np.asarray(tgt.q_ref_body, dtype=float)
+        w_t = np.asarray(tgt.omega_body_ref_body, dtype=float)
+        if q_t.shape != (4,) or w_t.shape != (3,) or not (
+                np.all(np.isfinite(q_t)) and np.all(np.isfinite(w_t))):
+            return 'bad target'
+        nq = float(np.linalg.norm(q_t))
+        if not nq > 1e-9:
+            return 'bad target'
+        w = np.asarray(est.omega_body_eci_body, dtype=float)
+        if tgt.frame == 'eci':
+            if est.q_eci_body is None:
+                return 'target in eci but no inertial attitude estimate'
+            q_b = np.asarray(est.q_eci_body, dtype=float)
+            if q_b.shape != (4,) or not np.all(np.isfinite(q_b)) or np.linalg.norm(q_b) < 1e-9:
+                return 'bad inertial attitude estimate'
+            w_frame = w
+        elif tgt.frame == 'orbit':
+            q_b = np.asarray(est.q_orbit_body, dtype=float)
+            j2_body = attitude.to_matrix(q_b).T @ np.array([0.0, 1.0, 0.0])
+            w_frame = w - float(est.omega0) * j2_body
+        else:
+            return f'unknown target frame {tgt.frame!r}'
+        q_err = attitude.multiply(attitude.conjugate(q_t / nq), attitude.normalize(q_b))
+    except (TypeError, ValueError):
+        return 'bad estimate or target'
+    return q_err, w_frame - w_t, w
+
+
+def realise(torque: np.ndarray, omega: np.ndarray, inputs: ControlInputs, ctrl,
+            info: dict) -> Command:
+    """Command with ``torque`` as ideal body torque, or allocated to the wheels of ``ctrl``.
+
+    ``ctrl`` has ``A_w`` (3, n) or None, ``A_w_pinv`` and ``wheel_limit``.
+    """
+    info = dict(info, torque_demand=torque)
+    if ctrl.A_w is None:
+        return Command(torque_body=torque, info=info)
+    demand = torque.copy()
+    h = inputs.wheel_momentum_Nms
+    if h is not None:
+        h = np.asarray(h, dtype=float)
+        if h.shape == (ctrl.A_w.shape[1],) and np.all(np.isfinite(h)):
+            demand = demand + np.cross(omega, ctrl.A_w @ h)   # cancel omega x h_wheels
+    tau_w, _ = scale_to_limits(-ctrl.A_w_pinv @ demand, ctrl.wheel_limit)
+    return Command(wheel_torque=tau_w, info=info)

@@ -33,12 +33,11 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core.control import cross3, finite_vector, limits_vector, scale_to_limits
 from adcs_nodes.core.control import eigenaxis as ea
-from adcs_nodes.core.control.fuzzy import EigenaxisTorqueLaw
 
 __all__ = ['ReferenceSlewController']
 
 
-class ReferenceSlewController(EigenaxisTorqueLaw):
+class ReferenceSlewController(ea.EigenaxisTorqueLaw):
     """Near time-optimal eigenaxis slew (interface of :mod:`adcs_nodes.core.control`).
 
     Parameters
