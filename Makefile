@@ -25,10 +25,10 @@ test-long:  ## long launched-graph tests whose behaviour FrameLoop tests check i
 lint:  ## flake8 at 99 columns on the packages and tests
 	$(RUN) python -m flake8 adcs_nodes sim_node tests
 
-bench:  ## fair throughput table of paper000_control: ring, graph, composed, plain loop, Basilisk (< 5 min)
+bench:  ## fair throughput table of paper000_control: ring, graph, composed, FrameLoop, Basilisk (< 5 min)
 	$(RUN) python -m sim_node.tools.bench
 
-reproduce:  ## long paper reproductions (papers 000, 004): pass/fail tables against the papers
+reproduce:  ## long paper reproductions (papers 000, 001, 003, 004): the tables of adcs report, pass/fail
 	$(RUN) python -m pytest -m slow -s -p no:warnings tests/reproductions
 
 stress:  ## reliable delivery under load: 3 recorded runs beside 3 CPU burners lose nothing (~2 min)
