@@ -10,10 +10,23 @@ one thread (``threadpoolctl``) and sets ``OPENBLAS_NUM_THREADS=1`` and friends i
 environment, so a library loaded later in this process and every child process start with one
 thread too. The models make only tiny (3x3 to 9x9) LAPACK calls: with the default threads on 2
 cores a 9x9 ``expm`` cost 400-930 us CPU instead of 31 us (issue 13), with identical results.
+
+Exit within 2 s of SIGINT, also on a loaded machine (issue 22): on SIGINT/SIGTERM the spin
+loop ends within ``poll_s``, the nodes close (the recorder finalises its bag), a launched
+node waits for its samples to be acknowledged (bounded by :data:`FLUSH_BUDGET_S`; at once
+when its readers have them or are gone), the executor is shut down and the nodes destroyed
+(their endpoints leave the graph, so their peers stop waiting for them;
+:data:`TEARDOWN_BUDGET_S`), and the process ends (:func:`exit_now`) without rclpy's shutdown
+and the interpreter's teardown: the first hung now and then (holding the GIL), the second
+took 0.4-1.5 s of wall time per process here (load 15), for nothing that is not already on
+disk. A graph stopped beside a CPU burner (load 7-20 here) took 2.5-4.4 s per node before
+(one dynamics never ended in 15 s); 0.2-0.6 s after, a node whose teardown hung 1.5-1.9 s
+(``tests/node/test_shutdown.py``).
 """
 from __future__ import annotations
 
 import faulthandler
+import logging
 import os
 import signal
 import sys
@@ -34,6 +47,16 @@ from rclpy.task import Future
 #: recorder resumed from a stall 40 frames behind took more than 1.5 s at load 5; the
 #: launcher's grace before SIGKILL is 10 s).
 FLUSH_BUDGET_S = 4.0
+#: Wall seconds a node process gives rclpy to shut its executor down and destroy its nodes
+#: once they are closed and flushed; past it the process ends with its exit code all the same
+#: (nothing is left to save). Destroying a Fast DDS entity (publisher, subscription, service,
+#: event handler) hangs for good now and then on a loaded machine, holding the GIL (in about 1
+#: graph stop in 5 beside a CPU burner at load 8-20 here, one to three nodes of the graph): no
+#: Python thread runs then, so faulthandler's own thread ends such a process :data:`HANG_S`
+#: later (every thread's stack to the log, exit code 1), within 2 s of the SIGINT.
+#: rclpy.shutdown() is skipped (its logging finalisation hung the same way).
+TEARDOWN_BUDGET_S = 1.0
+HANG_S = 0.5
 BLAS_THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS',
                    'BLIS_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS')
 
@@ -90,12 +113,16 @@ def flush_publishers(nodes: Iterable[Node], budget_s: float = FLUSH_BUDGET_S) ->
 
 
 def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None,
-               poll_s: float = 0.1, linger_s: float = 0.3) -> None:
+               poll_s: float = 0.1, linger_s: float = 0.3,
+               teardown_s: Optional[float] = None) -> None:
     """Spin ``nodes`` on one executor until SIGINT/SIGTERM, ``until()`` or every node is done.
 
     A node signals it has finished its job by setting ``node.done = True`` (for example the
     dynamics node at the end of the scenario); the executor then spins ``linger_s`` more so
-    reliable DDS can resend the last messages before the process exits.
+    reliable DDS can resend the last messages before the process exits. With ``teardown_s``
+    (a process that ends after this), the process ends (:func:`exit_now`) if shutting the
+    executor down and destroying the nodes take longer than that once the nodes are closed
+    and flushed (see :data:`TEARDOWN_BUDGET_S`).
     """
     nodes: List[Node] = list(nodes)
     executor = make_executor()
@@ -156,10 +183,21 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
                                            daemon=True)
                 flusher.start()
                 flusher.join(FLUSH_BUDGET_S + 0.5)
+            if teardown_s is not None:     # nothing left to save: never hang in rclpy
+                code = max([int(getattr(n, 'exit_code', 0) or 0) for n in nodes] or [0])
+                watchdog = threading.Timer(teardown_s, exit_now, args=(code,))
+                watchdog.daemon = True
+                watchdog.start()
+                faulthandler.dump_traceback_later(teardown_s + HANG_S, exit=True)
+            # the executor lets go of the nodes' entities before they are destroyed: an
+            # entity destroyed while the executor held it was destroyed inside the
+            # executor's shutdown, which then hung for good now and then (holding the GIL,
+            # in an event handler's __exit__)
             for node in nodes:
                 executor.remove_node(node)
-                node.destroy_node()
             executor.shutdown()
+            for node in nodes:
+                node.destroy_node()
         finally:
             signal.signal(signal.SIGINT, old_int)
             signal.signal(signal.SIGTERM, old_term)
@@ -174,15 +212,47 @@ def _node_name(args, factory) -> str:
     return getattr(factory, '__name__', 'node')
 
 
-def run(factory: Callable[[], Node], args=None) -> int:
+def exit_now(code: int) -> None:
+    """End the process with ``code`` at once, without the interpreter's teardown.
+
+    Everything that matters is done by then (bag closed, nodes and context destroyed); what
+    is left is flushed here: the standard streams, the logging handlers, and the coverage
+    data of a measured subprocess (``COVERAGE_PROCESS_START``).
+    """
+    coverage = sys.modules.get('coverage')      # (never imported here: 0.1-0.5 s)
+    try:
+        cov = coverage.Coverage.current() if coverage is not None else None
+        if cov is not None:
+            cov.stop()
+            cov.save()
+    except Exception:  # noqa: BLE001 - it cannot save: exit anyway
+        pass
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
+
+
+def run(factory: Callable[[], Node], args=None, exit_process: bool = True) -> int:
     """Entry point body of a node executable: init rclpy, build the node, spin, shut down.
 
-    Returns the process exit code: 0 on a normal end, 2 on a configuration error (a
-    ``ValueError`` while building the node: one clear line naming the node, no traceback).
-    An exception while running propagates (traceback, exit code 1) so the launcher reports it.
-    A crash in C (rclpy, Fast DDS, a compiled kernel) writes the Python stack to stderr, i.e.
-    to the node's log (``faulthandler``).
+    The process exit code: 0 on a normal end, 2 on a configuration error (a ``ValueError``
+    while building the node: one clear line naming the node, no traceback). With
+    ``exit_process`` (the executables) the process then ends at once (:func:`exit_now`),
+    else the code is returned. An exception while running propagates (traceback, exit code
+    1) so the launcher reports it. A crash in C (rclpy, Fast DDS, a compiled kernel) writes
+    the Python stack to stderr, i.e. to the node's log (``faulthandler``).
     """
+    code = _run(factory, args, exit_process)
+    if exit_process:
+        exit_now(code)
+    return code
+
+
+def _run(factory: Callable[[], Node], args, exit_process: bool) -> int:
     try:
         faulthandler.enable()
         # SIGUSR1: every thread's stack to the log, the process goes on (the launcher asks a
@@ -205,11 +275,18 @@ def run(factory: Callable[[], Node], args=None) -> int:
             prof.runcall(spin_nodes, [node])
             prof.dump_stats(os.path.join(prof_dir, f'{name}.prof'))
         else:
-            spin_nodes([node])
+            spin_nodes([node], teardown_s=TEARDOWN_BUDGET_S if exit_process else None)
         return int(getattr(node, 'exit_code', 0))
     except KeyboardInterrupt:   # Ctrl-C (SIGINT) before spin_nodes took the signal over
         print(f'[{_node_name(args, factory)}] interrupted during start-up', file=sys.stderr)
         return 0
-    finally:
+    except BaseException:       # a bug: the traceback and exit code 1, rclpy shut down first
         if rclpy.ok():
+            rclpy.shutdown()
+        raise
+    finally:
+        # a process that ends now skips rclpy's shutdown: its nodes (and so their endpoints)
+        # are destroyed already, and the logging finalisation in rclpy.shutdown() hung for
+        # good, holding the GIL, in 1 of about 60 stops beside a CPU burner here
+        if not exit_process and rclpy.ok():
             rclpy.shutdown()

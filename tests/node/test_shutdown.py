@@ -1,0 +1,118 @@
+"""Every node exits within 2 s of SIGINT on a loaded machine, the bag closed (issue 22, 7).
+
+``ros2 launch`` sends SIGINT to every node when the run ends or on Ctrl-C, then SIGTERM after
+``sigterm_timeout`` (5 s by default): the nodes took 6.7-7.2 s beside a CPU burner. Here the
+graph of a scenario runs as the launch file starts it (one process per node, the executables'
+code, the launch file's parameters), a CPU burner is started beside it, every node gets SIGINT
+at once, and each one's exit is timed (exit code 0; or 1 when faulthandler's watchdog ended
+a teardown that hung in Fast DDS, ``runtime.TEARDOWN_BUDGET_S``, within the 2 s too). The
+recorder closes its bag first; the launch file
+gives it a longer ``sigterm_timeout`` (``launch_graph.RECORDER_SIGTERM_TIMEOUT_S``), and its
+bag must be complete (its summary and ``metadata.yaml`` written, every message readable).
+"""
+import glob
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from domains import worker_domain
+from adcs_nodes.tools.launch_graph import launch_graph
+from adcs_nodes.tools.launcher import child_env
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+#: What a node may take from SIGINT to its exit.
+EXIT_S = 2.0
+#: The recorder's limit: the launch file's sigterm_timeout for it (checked equal in
+#: tests/unit/test_launch_file.py).
+RECORDER_EXIT_S = 10.0
+
+
+def _env(domain):
+    env = child_env(domain)
+    # the source tree's packages first (the launched executables run the same code)
+    env['PYTHONPATH'] = os.pathsep.join([os.path.join(ROOT, 'adcs_nodes'),
+                                         os.path.join(ROOT, 'sim_node'),
+                                         env.get('PYTHONPATH', '')])
+    return env
+
+
+@pytest.mark.alone
+def test_every_node_exits_within_2_s_of_sigint_beside_a_cpu_burner(tmp_path):
+    bag = str(tmp_path / 'bag')
+    nodes, params = launch_graph(os.path.join(ROOT, 'scenarios', 'paper000_control.yaml'),
+                                 100000.0, bag)
+    params_path = tmp_path / 'params.yaml'
+    params_path.write_text(params)
+    env = _env(worker_domain(120, 30))
+    procs, logs = {}, {}
+    burner = None
+    try:
+        for n in nodes:
+            logs[n.name] = open(tmp_path / f'{n.name}.log', 'w')
+            procs[n.name] = subprocess.Popen(
+                [sys.executable, '-m', n.module, '--ros-args', '-r', f'__node:={n.name}',
+                 '--params-file', str(params_path)],
+                env=env, stdout=logs[n.name], stderr=subprocess.STDOUT)
+        # running: the bag grows past its first chunk (schemas and a few frames)
+        deadline = time.monotonic() + 240.0
+        while time.monotonic() < deadline:
+            files = glob.glob(os.path.join(bag, '*.mcap'))
+            if files and os.path.getsize(files[0]) > 60_000:
+                break
+            dead = [k for k, p in procs.items() if p.poll() is not None]
+            assert not dead, f'{dead} ended before the stop: ' + \
+                (tmp_path / f'{dead[0]}.log').read_text()[-2000:]
+            time.sleep(0.2)
+        else:
+            pytest.fail('the graph did not start recording within 240 s')
+        burner = subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+        time.sleep(1.0)
+        t0 = time.monotonic()
+        for p in procs.values():
+            p.send_signal(signal.SIGINT)
+        took = {}
+        while len(took) < len(procs) and time.monotonic() - t0 < RECORDER_EXIT_S + 5.0:
+            for name, p in procs.items():
+                if name not in took and p.poll() is not None:
+                    took[name] = time.monotonic() - t0
+            time.sleep(0.01)
+    finally:
+        if burner is not None:
+            burner.kill()
+            burner.wait()
+        stuck = [name for name, p in procs.items() if p.poll() is None]
+        for name in stuck:            # where it is stuck: every thread's stack to its log
+            procs[name].send_signal(signal.SIGUSR1)
+        time.sleep(1.0 if stuck else 0.0)
+        for p in procs.values():
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        for fh in logs.values():
+            fh.close()
+        for name in stuck:
+            print(f'---- {name} (stuck):\n' + (tmp_path / f'{name}.log').read_text()[-3000:])
+    report = ', '.join(f'{k} {v:.2f} s' for k, v in sorted(took.items(), key=lambda kv: kv[1]))
+    print(f'exit after SIGINT beside a CPU burner: {report}')
+    assert set(took) == set(procs), f'still running: {set(procs) - set(took)} ({report})'
+    codes = {k: p.returncode for k, p in procs.items()}
+    # exit code 0; or 1 from faulthandler's watchdog (runtime.TEARDOWN_BUDGET_S: Fast DDS hung
+    # destroying an entity, holding the GIL; the stacks are in the log), said here
+    hung = {k for k, c in codes.items()
+            if c == 1 and 'Timeout (' in (tmp_path / f'{k}.log').read_text()}
+    if hung:
+        print(f'ended by the teardown watchdog (exit code 1): {sorted(hung)}')
+    assert all(c == 0 or k in hung for k, c in codes.items()), (codes, report)
+    slow = {k: v for k, v in took.items() if k != 'recorder' and v > EXIT_S}
+    assert not slow, f'over {EXIT_S} s: {slow} ({report})'
+    assert took['recorder'] <= RECORDER_EXIT_S, report
+    # the bag is complete: summary and metadata written, every message readable
+    from rosbags.rosbag2 import Reader
+    assert os.path.isfile(os.path.join(bag, 'metadata.yaml'))
+    with Reader(bag) as reader:
+        count = sum(1 for _ in reader.messages())
+        assert count > 0 and count == reader.message_count
