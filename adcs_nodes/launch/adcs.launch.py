@@ -5,19 +5,32 @@
 
 ``scenario``: an installed scenario (``share/adcs_nodes/scenarios``) or a path. The nodes and
 their parameters come from ``adcs_nodes.tools.graph`` (see ``adcs_nodes.tools.launch_graph``);
-the parameter file is written to a private temporary file. The launch ends when the clock
-master (``dynamics``) exits at the end of the scenario.
+the parameter file is written to a private temporary file, removed when the launch shuts
+down. The launch ends when the clock master (``dynamics``) exits at the end of the scenario;
+each node gets the time it needs to stop after SIGINT (``sigterm_timeout``: the recorder
+closes its bag) before launch escalates to SIGTERM.
 """
+import atexit
 import os
 import tempfile
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, LogInfo, OpaqueFunction, Shutdown
+from launch.actions import (DeclareLaunchArgument, LogInfo, OpaqueFunction,
+                            RegisterEventHandler, Shutdown)
+from launch.event_handlers import OnShutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from adcs_nodes.tools.launch_graph import CLOCK_MASTER, launch_graph
+from adcs_nodes.tools.launch_graph import CLOCK_MASTER, launch_graph, stop_timeouts
 from adcs_nodes.tools.launcher import profile_env
+
+
+def _remove(path):
+    """Remove the launch's temporary parameter file (once; a second call does nothing)."""
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
 
 
 def _graph(context, *args, **kwargs):
@@ -29,8 +42,13 @@ def _graph(context, *args, **kwargs):
     fd, params_path = tempfile.mkstemp(prefix='adcs-', suffix='.params.yaml')
     with os.fdopen(fd, 'w', encoding='utf-8') as fh:     # mkstemp: mode 0600
         fh.write(params)
+    # removed when the launch shuts down (end of the scenario, Ctrl-C, SIGTERM), and at the
+    # latest when the launch process exits
+    atexit.register(_remove, params_path)
     actions = [LogInfo(msg=f'adcs: {scenario}: {len(nodes)} nodes, parameters in '
-                           f'{params_path}')]
+                           f'{params_path} (removed at shutdown)'),
+               RegisterEventHandler(OnShutdown(
+                   on_shutdown=lambda event, context: _remove(params_path)))]
     # the project's Fast DDS profile, as `adcs run` (unless the user set a profiles file)
     env = profile_env(os.environ)
     for n in nodes:
@@ -38,8 +56,10 @@ def _graph(context, *args, **kwargs):
             if n.name == CLOCK_MASTER else {}
         if env:
             extra['additional_env'] = env
+        term, kill = stop_timeouts(n)
         actions.append(Node(package=n.package, executable=n.executable, name=n.name,
-                            parameters=[params_path], output='screen', **extra))
+                            parameters=[params_path], output='screen',
+                            sigterm_timeout=str(term), sigkill_timeout=str(kill), **extra))
     return actions
 
 

@@ -41,19 +41,22 @@ class _LaunchConfiguration:
 def launch_stubs(monkeypatch):
     kinds = {}
     for name in ('LaunchDescription', 'DeclareLaunchArgument', 'LogInfo', 'OpaqueFunction',
-                 'Shutdown', 'Node'):
+                 'Shutdown', 'Node', 'RegisterEventHandler', 'OnShutdown'):
         kinds[name] = type(name, (_Recorder,), {})
     launch = types.ModuleType('launch')
     launch.LaunchDescription = kinds['LaunchDescription']
     actions = types.ModuleType('launch.actions')
-    for name in ('DeclareLaunchArgument', 'LogInfo', 'OpaqueFunction', 'Shutdown'):
+    for name in ('DeclareLaunchArgument', 'LogInfo', 'OpaqueFunction', 'Shutdown',
+                 'RegisterEventHandler'):
         setattr(actions, name, kinds[name])
+    handlers = types.ModuleType('launch.event_handlers')
+    handlers.OnShutdown = kinds['OnShutdown']
     subs = types.ModuleType('launch.substitutions')
     subs.LaunchConfiguration = _LaunchConfiguration
     ros = types.ModuleType('launch_ros')
     ros_actions = types.ModuleType('launch_ros.actions')
     ros_actions.Node = kinds['Node']
-    for mod in (launch, actions, subs, ros, ros_actions):
+    for mod in (launch, actions, handlers, subs, ros, ros_actions):
         monkeypatch.setitem(sys.modules, mod.__name__, mod)
     return kinds
 
@@ -63,6 +66,16 @@ def _load(path):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def _actions(module, kinds, **arguments):
+    """Every action the launch file's OpaqueFunction returns for ``arguments``."""
+    desc = module.generate_launch_description()
+    entities = desc.args[0]
+    declared = {e.args[0]: e.kwargs['default_value'] for e in entities
+                if isinstance(e, kinds['DeclareLaunchArgument'])}
+    opaque = [e for e in entities if isinstance(e, kinds['OpaqueFunction'])]
+    return opaque[0].kwargs['function']({**declared, **arguments})
 
 
 def _expand(module, kinds, **arguments):
@@ -143,3 +156,142 @@ def test_default_arguments_use_an_installed_scenario(launch_stubs):
     assert {n.kwargs['name'] for n in nodes} == {'environment', 'dynamics'}
     with pytest.raises(ValueError, match='not found'):
         scenario_path('no_such_scenario')
+
+
+# ---------------------------------------------------------------------- stopping (issue 22)
+def _shutdown_handlers(actions, kinds):
+    return [a.args[0].kwargs['on_shutdown'] for a in actions
+            if isinstance(a, kinds['RegisterEventHandler'])
+            and isinstance(a.args[0], kinds['OnShutdown'])]
+
+
+def _params_files():
+    import glob
+    import tempfile
+    return set(glob.glob(os.path.join(tempfile.gettempdir(), 'adcs-*.params.yaml')))
+
+
+def test_launch_file_removes_its_parameter_file_at_shutdown(launch_stubs, tmp_path):
+    """Each launch wrote a parameter file to the temporary directory and left it there
+    (defect 8): it is removed when the launch shuts down (``OnShutdown``), and nothing else
+    is left in the temporary directory."""
+    before = _params_files()
+    path = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
+    actions = _actions(_load(LAUNCH_FILE), launch_stubs, scenario=path, duration='60',
+                       record=str(tmp_path / 'bag'))
+    nodes = [a for a in actions if isinstance(a, launch_stubs['Node'])]
+    params_path = nodes[0].kwargs['parameters'][0]
+    assert os.path.isfile(params_path)          # the nodes read it when they start
+    handlers = _shutdown_handlers(actions, launch_stubs)
+    assert handlers, 'no OnShutdown handler: the parameter file is never removed'
+    for handler in handlers:
+        handler(None, {})
+    assert not os.path.exists(params_path)
+    for handler in handlers:                     # a second shutdown event is harmless
+        handler(None, {})
+    assert _params_files() - before == set()
+
+
+def test_every_node_gets_the_time_it_needs_to_stop(launch_stubs, tmp_path):
+    """``sigterm_timeout`` of each node: launch escalates to SIGTERM only past it. A node
+    exits within 2 s of SIGINT (tests/node/test_shutdown.py); it may wait for its last
+    samples to be acknowledged and for rclpy's teardown, the recorder closes its bag."""
+    from adcs_nodes.nodes import runtime
+    from adcs_nodes.tools import launch_graph as lg
+    assert lg.NODE_SIGTERM_TIMEOUT_S >= runtime.FLUSH_BUDGET_S + runtime.TEARDOWN_BUDGET_S
+    assert lg.RECORDER_SIGTERM_TIMEOUT_S > lg.NODE_SIGTERM_TIMEOUT_S
+    path = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
+    actions = _actions(_load(LAUNCH_FILE), launch_stubs, scenario=path, duration='60',
+                       record=str(tmp_path / 'bag'))
+    try:
+        nodes = [a for a in actions if isinstance(a, launch_stubs['Node'])]
+        for n in nodes:
+            term = lg.RECORDER_SIGTERM_TIMEOUT_S if n.kwargs['name'] == 'recorder' \
+                else lg.NODE_SIGTERM_TIMEOUT_S
+            assert float(n.kwargs['sigterm_timeout']) == term, n.kwargs['name']
+            assert float(n.kwargs['sigkill_timeout']) == lg.SIGKILL_TIMEOUT_S
+        assert {n.kwargs['name'] for n in nodes} >= {'recorder', 'dynamics', 'estimator'}
+    finally:
+        for handler in _shutdown_handlers(actions, launch_stubs):
+            handler(None, {})
+
+
+@pytest.mark.alone
+def test_interrupted_launch_leaves_no_process_behind(launch_stubs, tmp_path):
+    """Ctrl-C during ``ros2 launch``, emulated on the launch file's own actions: each node's
+    installed executable started as launch_ros starts it (``--ros-args -r __node:=NAME
+    --params-file FILE``, the action's environment); then launch's stop: the shutdown
+    handlers, SIGINT to every node, SIGTERM after its ``sigterm_timeout``, SIGKILL after
+    ``sigkill_timeout``. Every node must be gone after the SIGINT alone (no escalation),
+    nothing left behind, and the parameter file removed."""
+    import glob
+    import signal
+    import subprocess
+    import time
+
+    share = pytest.importorskip('ament_index_python.packages')
+    from domains import worker_domain
+    path = os.path.join(ROOT, 'scenarios', 'free_tumble.yaml')
+    bag = str(tmp_path / 'bag')
+    actions = _actions(_load(LAUNCH_FILE), launch_stubs, scenario=path, duration='100000',
+                       record=bag)
+    nodes = [a for a in actions if isinstance(a, launch_stubs['Node'])]
+    params_path = nodes[0].kwargs['parameters'][0]
+    env = child_env(worker_domain(120, 30, 3))
+    procs, stops = {}, {}
+    try:
+        for n in nodes:
+            kw = n.kwargs
+            try:
+                prefix = share.get_package_prefix(kw['package'])
+            except share.PackageNotFoundError:
+                pytest.skip(f'{kw["package"]} not built')
+            exe = os.path.join(prefix, 'lib', kw['package'], kw['executable'])
+            procs[kw['name']] = subprocess.Popen(
+                [exe, '--ros-args', '-r', f'__node:={kw["name"]}', '--params-file',
+                 kw['parameters'][0]], env={**env, **kw.get('additional_env', {})},
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+            stops[kw['name']] = (float(kw.get('sigterm_timeout', 5.0)),   # (launch's
+                                 float(kw.get('sigkill_timeout', 5.0)))   # defaults)
+        deadline = time.monotonic() + 180.0
+        while time.monotonic() < deadline:       # running: the bag grows
+            files = glob.glob(os.path.join(bag, '*.mcap'))
+            if files and os.path.getsize(files[0]) > 30_000:
+                break
+            assert all(p.poll() is None for p in procs.values()), 'a node ended early'
+            time.sleep(0.2)
+        else:
+            pytest.fail('the launched graph did not start recording within 180 s')
+        # launch's stop: OnShutdown handlers, then SIGINT, SIGTERM, SIGKILL
+        for handler in _shutdown_handlers(actions, launch_stubs):
+            handler(None, {})
+        t0 = time.monotonic()
+        for p in procs.values():
+            p.send_signal(signal.SIGINT)
+        escalated = []
+        for name, p in procs.items():
+            term, kill = stops[name]
+            try:
+                p.wait(timeout=max(0.0, t0 + term - time.monotonic()))
+                continue
+            except subprocess.TimeoutExpired:
+                escalated.append(f'{name}: SIGTERM')
+                p.send_signal(signal.SIGTERM)
+            try:
+                p.wait(timeout=kill)
+            except subprocess.TimeoutExpired:
+                escalated.append(f'{name}: SIGKILL')
+                p.kill()
+                p.wait()
+        assert escalated == []
+        assert all(p.returncode == 0 for p in procs.values()), \
+            {k: p.returncode for k, p in procs.items()}
+        assert not os.path.exists(params_path)
+        assert os.path.isfile(os.path.join(bag, 'metadata.yaml'))   # the bag was closed
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        for handler in _shutdown_handlers(actions, launch_stubs):
+            handler(None, {})

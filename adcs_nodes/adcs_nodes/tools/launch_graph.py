@@ -14,6 +14,11 @@ configure and activate themselves (the default ``autostart: true``), as there is
 lifecycle manager here. The launch ends when the clock master (``dynamics``) exits at the
 end of the scenario.
 
+Stopping (:func:`stop_timeouts`): ``ros2 launch`` sends SIGINT to every node at the end or on
+Ctrl-C, SIGTERM ``sigterm_timeout`` later, SIGKILL ``sigkill_timeout`` after that. A node
+exits within 2 s of SIGINT (``tests/node/test_shutdown.py``); the launch file gives the
+longer stops their time, so nothing is escalated to SIGTERM and no process is left behind.
+
 Pure Python; no rclpy.
 """
 from __future__ import annotations
@@ -30,11 +35,27 @@ CLOCK_MASTER = 'dynamics'
 #: (:class:`adcs_nodes.nodes.managed.ManagedLockstepNode`); the world nodes and the recorder
 #: are plain nodes.
 MANAGED_CLASSES = ('EstimatorNode', 'ControllerNode', 'ControllerManagerNode', 'GuidanceNode')
+#: ``sigterm_timeout`` [s] of a lockstep node: it exits within 2 s of SIGINT, but a node whose
+#: reader lags (a stalled recorder) waits up to ``runtime.FLUSH_BUDGET_S`` (4 s) for its last
+#: samples to be acknowledged, then up to ``runtime.TEARDOWN_BUDGET_S`` (1 s) for rclpy.
+NODE_SIGTERM_TIMEOUT_S = 6.0
+#: ``sigterm_timeout`` [s] of the recorder: it closes its bag (last chunk, summary,
+#: ``metadata.yaml``) after SIGINT; 0.6-3 s of wall time beside a CPU burner here (load
+#: 15-18), more for a long bag on a slow disk.
+RECORDER_SIGTERM_TIMEOUT_S = 10.0
+#: ``sigkill_timeout`` [s] after SIGTERM (launch's default).
+SIGKILL_TIMEOUT_S = 5.0
 
 
 def is_managed(node: NodeSpec) -> bool:
     """True for a managed (lifecycle) node of the graph."""
     return node.cls in MANAGED_CLASSES
+
+
+def stop_timeouts(node: NodeSpec) -> Tuple[float, float]:
+    """``(sigterm_timeout, sigkill_timeout)`` [s] of ``node`` in the launch file."""
+    term = RECORDER_SIGTERM_TIMEOUT_S if node.name == 'recorder' else NODE_SIGTERM_TIMEOUT_S
+    return term, SIGKILL_TIMEOUT_S
 
 
 def installed_scenario_dir() -> Optional[str]:
