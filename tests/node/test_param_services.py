@@ -456,3 +456,13 @@ def test_array_parameter_values_keep_their_length_rule(ros_context, spin):
     finally:
         srv.close()
         node.destroy_node()
+
+
+def test_docs_list_the_parameters_writable_at_run_time():
+    """docs/topics.md, section 'Run-time parameters': the table generated from the specs."""
+    import os
+    from adcs_nodes.nodes.params import writable_markdown
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    with open(os.path.join(root, 'docs', 'topics.md'), encoding='utf-8') as fh:
+        assert writable_markdown() in fh.read(), \
+            'regenerate the table: ros2_ws/run.sh python -m adcs_nodes.nodes.params'
