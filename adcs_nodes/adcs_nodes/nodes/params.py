@@ -165,7 +165,8 @@ def _declare(node, spec: Param) -> Any:
     if node.has_parameter(spec.name):          # declared from the overrides: take the value
         given = node.get_parameter(spec.name).value
         node.undeclare_parameter(spec.name)
-        value = spec.validate(_as_spec_type(spec, given))
+        if given is not None or spec.type.endswith('[]'):   # (a YAML null: the default)
+            value = spec.validate(_as_spec_type(spec, given))
     value = list(value) if spec.type.endswith('[]') else value
     if spec.type.endswith('[]') and not value:
         # rclpy types an empty list as a byte array and has no public way to give a
