@@ -192,13 +192,24 @@ def test_launch_file_removes_its_parameter_file_at_shutdown(launch_stubs, tmp_pa
     assert _params_files() - before == set()
 
 
+def _constants(path):
+    """Module-level numeric constants of a source file (read: the unit tier imports no
+    rclpy, and adcs_nodes.nodes.runtime does)."""
+    with open(path, encoding='utf-8') as fh:
+        tree = ast.parse(fh.read())
+    return {t.id: ast.literal_eval(node.value) for node in tree.body
+            if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant)
+            for t in node.targets if isinstance(t, ast.Name)}
+
+
 def test_every_node_gets_the_time_it_needs_to_stop(launch_stubs, tmp_path):
     """``sigterm_timeout`` of each node: launch escalates to SIGTERM only past it. A node
     exits within 2 s of SIGINT (tests/node/test_shutdown.py); it may wait for its last
     samples to be acknowledged and for rclpy's teardown, the recorder closes its bag."""
-    from adcs_nodes.nodes import runtime
     from adcs_nodes.tools import launch_graph as lg
-    assert lg.NODE_SIGTERM_TIMEOUT_S >= runtime.FLUSH_BUDGET_S + runtime.TEARDOWN_BUDGET_S
+    runtime = _constants(os.path.join(ROOT, 'adcs_nodes', 'adcs_nodes', 'nodes', 'runtime.py'))
+    assert lg.NODE_SIGTERM_TIMEOUT_S >= \
+        runtime['FLUSH_BUDGET_S'] + runtime['TEARDOWN_BUDGET_S'] + runtime['HANG_S']
     assert lg.RECORDER_SIGTERM_TIMEOUT_S > lg.NODE_SIGTERM_TIMEOUT_S
     path = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
     actions = _actions(_load(LAUNCH_FILE), launch_stubs, scenario=path, duration='60',
@@ -247,10 +258,11 @@ def test_interrupted_launch_leaves_no_process_behind(launch_stubs, tmp_path):
             except share.PackageNotFoundError:
                 pytest.skip(f'{kw["package"]} not built')
             exe = os.path.join(prefix, 'lib', kw['package'], kw['executable'])
-            procs[kw['name']] = subprocess.Popen(
-                [exe, '--ros-args', '-r', f'__node:={kw["name"]}', '--params-file',
-                 kw['parameters'][0]], env={**env, **kw.get('additional_env', {})},
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+            with open(tmp_path / f'{kw["name"]}.log', 'w') as log:
+                procs[kw['name']] = subprocess.Popen(
+                    [exe, '--ros-args', '-r', f'__node:={kw["name"]}', '--params-file',
+                     kw['parameters'][0]], env={**env, **kw.get('additional_env', {})},
+                    stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
             stops[kw['name']] = (float(kw.get('sigterm_timeout', 5.0)),   # (launch's
                                  float(kw.get('sigkill_timeout', 5.0)))   # defaults)
         deadline = time.monotonic() + 180.0
@@ -284,7 +296,10 @@ def test_interrupted_launch_leaves_no_process_behind(launch_stubs, tmp_path):
                 p.kill()
                 p.wait()
         assert escalated == []
-        assert all(p.returncode == 0 for p in procs.values()), \
+        # exit code 0, or 1 when faulthandler ended a teardown that hung in Fast DDS
+        # (runtime.TEARDOWN_BUDGET_S; its stacks in the log)
+        assert all(p.returncode == 0 or (p.returncode == 1 and 'Timeout (' in (
+            tmp_path / f'{k}.log').read_text()) for k, p in procs.items()), \
             {k: p.returncode for k, p in procs.items()}
         assert not os.path.exists(params_path)
         assert os.path.isfile(os.path.join(bag, 'metadata.yaml'))   # the bag was closed
