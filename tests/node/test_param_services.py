@@ -466,3 +466,11 @@ def test_docs_list_the_parameters_writable_at_run_time():
     with open(os.path.join(root, 'docs', 'topics.md'), encoding='utf-8') as fh:
         assert writable_markdown() in fh.read(), \
             'regenerate the table: ros2_ws/run.sh python -m adcs_nodes.nodes.params'
+
+
+def test_misspelt_section_key_is_refused_at_start_with_a_did_you_mean(ros_context):
+    """Section keys (here the manager's automatic sequence, ``auto.*``) are spec'd too."""
+    from adcs_nodes.nodes.controller_manager import ControllerManagerNode
+    with pytest.raises(ValueError, match=re.escape("(did you mean 'auto.rate_enter_deg_s'?)")):
+        ControllerManagerNode(context=ros_context, parameter_overrides=[
+            Parameter('auto.rate_entr_deg_s', value=0.5)])

@@ -300,7 +300,7 @@ def declare_section(node, prefix: str) -> Dict[str, Any]:
             continue
         if key not in specs:
             near = difflib.get_close_matches(key, list(specs), n=1)
-            hint = f' (did you mean {prefix}.{near[0]!r}?)' if near else ''
+            hint = f" (did you mean '{prefix}.{near[0]}'?)" if near else ''
             raise ValueError(f'unknown parameter {short(name, 60)}{hint}; known in '
                              f'{prefix}.*: {", ".join(sorted(specs))}')
         out[key] = declare(node, replace(specs[key], name=name, read_only=True))
