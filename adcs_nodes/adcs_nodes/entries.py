@@ -205,7 +205,9 @@ register(Entry(
      Param('model_inertia_kgm2', 'float[]', [], 'kg m^2', "the controller's own inertia, 9 values "
            'row-major (paper 001: eq. (31), 5 % off the truth); empty: the onboard inertia of '
            'the spacecraft')),
-    _build_mpi, inputs=('estimate', 'target', 'wheel_speeds'), actuators=('wheels',),
+    # the applied command: the wheel check (components/controller.py, core/wheel_health.py)
+    _build_mpi, inputs=('estimate', 'target', 'wheel_speeds', 'actuator_command'),
+    actuators=('wheels',),
     requires=('spacecraft.wheels',)))
 
 

@@ -12,6 +12,13 @@ Conditioning (the same for the node and the FrameLoop):
   samples);
 * wheel speeds (``sensors/wheels``): the right count and finite, and the wheel momentum from
   them (:func:`adcs_nodes.entries.wheel_momentum`).
+
+Wheel health: a controller that commands wheels and reads both the tachometer and the applied
+command (``actuator_command``, e.g. ``mpi``) checks that each wheel's measured speed follows
+the torque the manager applied (:class:`adcs_nodes.core.wheel_health.WheelHealth`). Once a
+wheel fails, its commands are invalid: every wheel torque NaN, and the reason after the name in
+``source`` (``'mpi: wheel wheel_x does not follow its torque: ...'``), so the manager falls
+back to the safe controller with that reason in its status.
 """
 from __future__ import annotations
 
@@ -28,8 +35,9 @@ from adcs_nodes.core import attitude as att
 from adcs_nodes.core.control import Command, ControlInputs, Estimate, Target
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.core.wheel_health import WheelHealth
 from adcs_nodes.entries import wheel_momentum
-from adcs_nodes.nodes.convert import all_finite, quat, to_vec3, vec3
+from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_vec3, vec3
 from adcs_nodes.nodes.messages import make
 from adcs_nodes.registry import Param
 
@@ -138,9 +146,12 @@ def command_msg(cmd: Command, stamp, source: str) -> ActuatorCommand:
 
 
 def command_from_msg(msg: ActuatorCommand) -> Command:
-    """``adcs_msgs/ActuatorCommand`` -> core command (values as sent, unchecked)."""
+    """``adcs_msgs/ActuatorCommand`` -> core command (values as sent, unchecked); a ``source``
+    ``'<name>: <reason>'`` (a controller saying why its command is invalid) gives the
+    ``reason``."""
+    _, sep, reason = str(msg.source).partition(': ')
     return Command(vec3(msg.dipole_body), np.asarray(msg.wheel_torque, float),
-                   vec3(msg.torque_body))
+                   vec3(msg.torque_body), reason if sep else '')
 
 
 class ControllerComponent:
@@ -170,6 +181,12 @@ class ControllerComponent:
         self.clock = clock
         self.n_wheels = len(ctx.get('wheel_max_torque_Nm') or [])
         self._last_t: Optional[int] = None
+        #: the wheel check (a controller reading the tachometer and the applied command)
+        self.wheel_health: Optional[WheelHealth] = None
+        if self.n_wheels and len(ctx.get('wheel_inertia_kgm2') or []) == self.n_wheels \
+                and len(ctx.get('wheel_max_momentum_Nms') or []) == self.n_wheels:
+            self.wheel_health = WheelHealth(ctx['wheel_inertia_kgm2'],
+                                            ctx['wheel_max_momentum_Nms'], ctx['period_s'])
 
     def inputs_for(self, t_ns: int, msgs: Dict[str, Any],
                    fresh: Callable[[str, Any], bool]) -> ControlInputs:
@@ -206,4 +223,25 @@ class ControllerComponent:
         dt = 0.0 if self._last_t is None else (t_ns - self._last_t) / NS_PER_S
         self._last_t = t_ns
         cmd = self.core.update(self.inputs_for(t_ns, msgs, fresh), t_ns / NS_PER_S, dt)
+        why = self._wheels_failed(msgs)
+        if why:        # invalid: the manager falls back with the reason
+            cmd = Command(cmd.dipole_body, np.full(self.n_wheels, np.nan), cmd.torque_body)
+            return command_msg(cmd, self.clock.stamp(t_ns), f'{self.name}: {why}')
         return command_msg(cmd, self.clock.stamp(t_ns), self.name)
+
+    def _wheels_failed(self, msgs: Dict[str, Any]) -> str:
+        """The wheel check of this frame ('' when the wheels follow their torques or the
+        controller does not read both the tachometer and the applied command)."""
+        if self.wheel_health is None or 'wheels' not in msgs or 'cmd' not in msgs:
+            return ''
+        wheels, cmd = msgs.get('wheels'), msgs.get('cmd')
+        if wheels is None:
+            return self.wheel_health.reason()
+        if len(wheels.name) == self.n_wheels:
+            self.wheel_health.names = list(wheels.name)
+        speeds = cond.wheel_speeds(wheels, self.n_wheels)[0]
+        t_cmd = None if cmd is None else \
+            self.clock.elapsed_ns(stamp_ns(cmd.header.stamp)) / NS_PER_S
+        return self.wheel_health.update(
+            self.clock.elapsed_ns(stamp_ns(wheels.header.stamp)) / NS_PER_S, speeds, t_cmd,
+            None if cmd is None else cmd.wheel_torque)

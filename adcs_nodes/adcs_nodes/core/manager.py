@@ -630,7 +630,9 @@ class ControllerManagerCore:
                 return None, f'malformed {name}: shape {arr.shape}, expected {limit.shape}'
             i = limit_violation(arr, limit, _LIMIT_RTOL)
             if i <= -2:
-                return None, f'non-finite (NaN or inf) {name}: {arr}'
+                why = str(getattr(cmd, 'reason', '') or '')      # the controller's own word
+                return None, f'non-finite (NaN or inf) {name}: {arr}' + (f' ({why})' if why
+                                                                         else '')
             if i >= 0:
                 return None, (f'out of range: {name}[{i}] = {arr[i]:.6g} {unit} exceeds the '
                               f'limit {limit[i]:.6g} {unit}')

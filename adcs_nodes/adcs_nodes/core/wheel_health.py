@@ -1,0 +1,179 @@
+"""Wheel health: does each reaction wheel's measured speed follow the torque it was given?
+(pure numpy, no ROS)
+
+A wheel controller that reads the tachometer (``sensors/wheels``) and the command the manager
+applied in the previous frame (``adcs/actuator_command``) checks each wheel over one sample
+interval ``dt``. The motor torque ``tau`` held over ``dt`` changes the wheel's momentum by
+``tau dt``; its speed relative to the body, ``h / J_w - a . omega``, by::
+
+    expected = tau dt / J_w          (the body-rate term ``a . d omega`` is J_w / J_body smaller)
+    measured = w(t) - w(t - dt)      (tachometer)
+
+A frame is *informative* for a wheel when ``|expected| >= min_change_rad_s`` (well above the
+tachometer's noise and resolution) and the wheel stays clear of its momentum limit (the
+motor's torque is cut there on purpose). An informative frame is *bad* when
+``|measured - expected| > tolerance |expected|``. ``confirm_frames`` bad informative frames in
+a row declare the wheel failed (stuck, or torque lost); a good informative frame clears the
+count, frames that are not informative leave it. A failed wheel stays failed (latched) until
+:meth:`WheelHealth.reset`: a stuck bearing does not heal, and a controller whose commands are
+refused makes no more torque to watch.
+
+ASSUMPTION (not from a paper): the thresholds (defaults ``confirm_frames`` 5,
+``min_change_rad_s`` 0.2 rad/s, ``tolerance`` 0.5) are chosen against the default tachometer
+(0.01 rad/s noise, 0.015 rad/s resolution) and paper 001's wheel momentum error (0.0033 N m s
+on a 0.1 kg m^2 rotor: 0.03 rad/s), not from a wheel's data sheet.
+
+The check runs only when the applied command was held over exactly the sample interval (the
+command stamped at the previous tachometer sample, one control period before the current
+one): with a tachometer slower than the control period the torque changes inside the interval
+and nothing is judged.
+"""
+from __future__ import annotations
+
+import math
+from typing import List, Optional, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+#: Defaults (ASSUMPTION, see module docstring).
+CONFIRM_FRAMES = 5
+MIN_CHANGE_RAD_S = 0.2
+TOLERANCE = 0.5
+#: A wheel whose momentum after the interval would pass this share of its limit is not judged.
+MOMENTUM_MARGIN = 0.95
+
+
+class WheelHealth:
+    """Per-wheel check of measured speed against applied torque (see module docstring).
+
+    Parameters
+    ----------
+    inertia_kgm2 : array_like, shape (n,)
+        Rotor inertias about the spin axes [kg m^2], > 0.
+    max_momentum_Nms : array_like, shape (n,)
+        Momentum limits [N m s], > 0 (``inf``: none).
+    period_s : float
+        The control period [s]: the interval over which an applied command is held.
+    confirm_frames : int
+        Bad informative frames in a row that declare a wheel failed (>= 1).
+    min_change_rad_s : float
+        Smallest expected speed change that is judged [rad/s] (> 0).
+    tolerance : float
+        Largest accepted ``|measured - expected| / |expected|`` (> 0).
+    names : sequence of str, optional
+        Wheel names for the reasons (default ``wheel0``, ``wheel1``, ...).
+
+    Raises
+    ------
+    ValueError
+        On inconsistent shapes or non-positive values.
+    """
+
+    def __init__(self, inertia_kgm2: ArrayLike, max_momentum_Nms: ArrayLike, period_s: float,
+                 confirm_frames: int = CONFIRM_FRAMES,
+                 min_change_rad_s: float = MIN_CHANGE_RAD_S, tolerance: float = TOLERANCE,
+                 names: Optional[Sequence[str]] = None) -> None:
+        self.inertia = np.asarray(inertia_kgm2, dtype=float).reshape(-1)
+        self.max_momentum = np.asarray(max_momentum_Nms, dtype=float).reshape(-1)
+        n = self.inertia.size
+        if n == 0 or self.max_momentum.shape != (n,):
+            raise ValueError(f'wheel health: {n} inertias and {self.max_momentum.size} '
+                             'momentum limits (one each per wheel, at least one wheel)')
+        if not np.all(np.isfinite(self.inertia)) or np.any(self.inertia <= 0.0) \
+                or np.any(~(self.max_momentum > 0.0)):
+            raise ValueError('wheel health: inertias must be finite and > 0, momentum '
+                             'limits > 0')
+        if not (math.isfinite(period_s) and period_s > 0.0):
+            raise ValueError(f'wheel health: period_s must be > 0, got {period_s!r}')
+        if isinstance(confirm_frames, bool) or int(confirm_frames) != confirm_frames \
+                or confirm_frames < 1:
+            raise ValueError(f'wheel health: confirm_frames must be an integer >= 1, got '
+                             f'{confirm_frames!r}')
+        if not min_change_rad_s > 0.0 or not tolerance > 0.0:
+            raise ValueError('wheel health: min_change_rad_s and tolerance must be > 0')
+        self.period = float(period_s)
+        self.confirm = int(confirm_frames)
+        self.min_change = float(min_change_rad_s)
+        self.tolerance = float(tolerance)
+        self.names = list(names) if names else [f'wheel{i}' for i in range(n)]
+        if len(self.names) != n:
+            raise ValueError(f'wheel health: {len(self.names)} names for {n} wheels')
+        self.reset()
+
+    @property
+    def n(self) -> int:
+        """Number of wheels."""
+        return self.inertia.size
+
+    def reset(self) -> None:
+        """Forget the history and every failure."""
+        self._t: Optional[float] = None
+        self._w: Optional[np.ndarray] = None
+        self.bad = np.zeros(self.n, dtype=int)
+        self.failed: List[Optional[str]] = [None] * self.n
+        self.judged_frames = 0
+
+    def reason(self) -> str:
+        """Why the wheels cannot be trusted ('' when every wheel is healthy)."""
+        return '; '.join(r for r in self.failed if r)
+
+    def update(self, t: float, speeds: Optional[ArrayLike], t_cmd: Optional[float],
+               torque: Optional[ArrayLike]) -> str:
+        """Judge the interval ending at the tachometer sample ``(t, speeds)``.
+
+        Parameters
+        ----------
+        t : float
+            Stamp of the speeds [s].
+        speeds : array_like, shape (n,), or None
+            Measured speeds relative to the body [rad/s] (None: no sample; nothing judged).
+        t_cmd : float or None
+            Stamp of the applied command [s]; judged only when it equals the previous sample's
+            stamp and that sample is one period before ``t``.
+        torque : array_like, shape (n,) or (0,), or None
+            The applied motor torques [N m] (empty: zero on every wheel).
+
+        Returns
+        -------
+        str
+            :meth:`reason` after this interval.
+        """
+        if speeds is None:
+            return self.reason()
+        w = np.asarray(speeds, dtype=float).reshape(-1)
+        if w.shape != (self.n,) or not np.all(np.isfinite(w)):
+            return self.reason()
+        prev_t, prev_w = self._t, self._w
+        self._t, self._w = float(t), w.copy()
+        if prev_t is None or t_cmd is None or torque is None:
+            return self.reason()
+        dt = float(t) - prev_t
+        if abs(float(t_cmd) - prev_t) > 1e-9 or abs(dt - self.period) > 1e-9:
+            return self.reason()
+        tau = np.asarray(torque, dtype=float).reshape(-1)
+        if tau.size == 0:
+            tau = np.zeros(self.n)
+        if tau.shape != (self.n,) or not np.all(np.isfinite(tau)):
+            return self.reason()
+        expected = tau * dt / self.inertia
+        measured = w - prev_w
+        h_after = np.abs(w * self.inertia)
+        self.judged_frames += 1
+        for i in range(self.n):
+            if self.failed[i] is not None or abs(expected[i]) < self.min_change \
+                    or h_after[i] > MOMENTUM_MARGIN * self.max_momentum[i] \
+                    or abs(prev_w[i] * self.inertia[i]) > MOMENTUM_MARGIN \
+                    * self.max_momentum[i]:
+                continue
+            if abs(measured[i] - expected[i]) > self.tolerance * abs(expected[i]):
+                self.bad[i] += 1
+                if self.bad[i] >= self.confirm:
+                    self.failed[i] = (
+                        f'wheel {self.names[i]} does not follow its torque: speed change '
+                        f'{measured[i]:+.3g} rad/s for {expected[i]:+.3g} rad/s expected '
+                        f'({tau[i]:+.3g} N m over {dt:g} s), {self.bad[i]} frames in a row '
+                        f'(stuck or torque lost) at t = {float(t):g} s')
+            else:
+                self.bad[i] = 0
+        return self.reason()

@@ -1,0 +1,153 @@
+"""Wheel health (adcs_nodes/core/wheel_health.py): a wheel whose measured speed does not follow
+the applied torque for ``confirm_frames`` informative frames fails, with a reason; what a wheel
+controller then sends, and what the manager makes of it (fallback with that reason).
+
+Truth: a healthy wheel changes speed by ``tau dt / J`` per interval (plus tachometer noise); a
+stuck one does not change at all.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from adcs_msgs.msg import ActuatorCommand
+from adcs_nodes.components.base import FrameClock
+from adcs_nodes.components.controller import ControllerComponent, command_from_msg
+from adcs_nodes.core.control import Command
+from adcs_nodes.core.manager import ControllerManagerCore
+from adcs_nodes.core.wheel_health import CONFIRM_FRAMES, WheelHealth
+from sensor_msgs.msg import JointState
+
+J = np.array([3e-4, 3e-4, 3e-4])
+H_MAX = np.array([0.2, 0.2, 0.2])
+NAMES = ['wheel_x', 'wheel_y', 'wheel_z']
+
+
+def _run(health, torques, stuck=(), noise=0.0, seed=0, w0=None):
+    """Feed ``health`` one interval per torque row (1 s each); wheels in ``stuck`` keep their
+    speed. Returns the reason after each interval."""
+    rng = np.random.default_rng(seed)
+    w = np.zeros(3) if w0 is None else np.array(w0, float)
+    reasons = [health.update(0.0, w + noise * rng.standard_normal(3), None, None)]
+    for k, tau in enumerate(torques):
+        tau = np.asarray(tau, float)
+        step = tau * 1.0 / J
+        step[list(stuck)] = 0.0
+        w = w + step
+        reasons.append(health.update(k + 1.0, w + noise * rng.standard_normal(3), float(k),
+                                     tau))
+    return reasons
+
+
+def test_a_healthy_wheel_with_tachometer_noise_never_fails():
+    health = WheelHealth(J, H_MAX, 1.0, names=NAMES)
+    tau = [[1e-4 * math.sin(0.1 * k), -2e-4, 5e-5 * (-1) ** k] for k in range(300)]
+    reasons = _run(health, tau, noise=0.01)          # the default tachometer's noise
+    assert not any(reasons) and health.failed == [None] * 3
+    assert health.judged_frames == 300
+
+
+def test_a_stuck_wheel_fails_after_confirm_frames_with_a_reason_naming_it():
+    health = WheelHealth(J, H_MAX, 1.0, names=NAMES)
+    tau = [[2e-4, 2e-4, -2e-4]] * 10
+    reasons = _run(health, tau, stuck=[0], noise=0.005)
+    first = next(i for i, r in enumerate(reasons) if r)
+    assert first == CONFIRM_FRAMES                   # the 5th bad interval
+    assert reasons[first].startswith('wheel wheel_x does not follow its torque')
+    assert '5 frames in a row' in reasons[first] and 'stuck or torque lost' in reasons[first]
+    assert health.failed[1] is None and health.failed[2] is None
+    assert reasons[-1] == reasons[first]             # latched, unchanged
+    health.reset()
+    assert health.reason() == '' and health.failed == [None] * 3
+
+
+def test_small_torques_are_not_judged_and_do_not_clear_the_count():
+    health = WheelHealth(J, H_MAX, 1.0)
+    big, small = [2e-4, 0.0, 0.0], [1e-5, 0.0, 0.0]   # 0.67 and 0.03 rad/s per second
+    reasons = _run(health, [big] * 3 + [small] * 20 + [big] * 2, stuck=[0])
+    assert health.bad[0] == 5 and reasons[-1].startswith('wheel wheel0 ')
+    assert not any(reasons[:-1])
+
+
+def test_a_good_interval_clears_the_count():
+    health = WheelHealth(J, H_MAX, 1.0)
+    tau = [[2e-4, 0.0, 0.0]] * 4
+    _run(health, tau, stuck=[0])
+    assert health.bad[0] == 4
+    health.update(5.0, health._w + 2e-4 / J[0] * np.array([1.0, 0.0, 0.0]), 4.0,
+                  [2e-4, 0.0, 0.0])
+    assert health.bad[0] == 0 and health.reason() == ''
+
+
+def test_no_judgement_near_the_momentum_limit_or_without_the_matching_command():
+    health = WheelHealth(J, H_MAX, 1.0)
+    # at 0.195 N m s (97.5 % of the limit) the motor's torque is cut on purpose
+    reasons = _run(health, [[2e-4, 0, 0]] * 10, stuck=[0], w0=[0.195 / J[0], 0.0, 0.0])
+    assert not any(reasons) and health.bad[0] == 0
+    health = WheelHealth(J, H_MAX, 1.0)
+    w = np.zeros(3)
+    health.update(0.0, w, None, None)
+    for k in range(1, 10):        # the command is not the one held over the interval
+        assert health.update(float(k), w, k - 0.5, [2e-4, 0, 0]) == ''
+    health.update(20.0, w, 19.0, [2e-4, 0, 0])      # 11 s since the last sample: not a period
+    assert health.judged_frames == 0
+    assert health.update(21.0, [np.nan] * 3, 20.0, [2e-4, 0, 0]) == ''   # a bad sample
+
+
+def test_bad_configuration_is_refused():
+    with pytest.raises(ValueError):
+        WheelHealth([3e-4], [0.2, 0.2], 1.0)
+    with pytest.raises(ValueError):
+        WheelHealth([0.0], [0.2], 1.0)
+    with pytest.raises(ValueError):
+        WheelHealth([3e-4], [0.2], 0.0)
+    with pytest.raises(ValueError):
+        WheelHealth([3e-4], [0.2], 1.0, confirm_frames=0)
+
+
+class _Steady:
+    """A wheel controller core that always asks for the same torques."""
+
+    def update(self, inputs, t, dt):
+        return Command(np.zeros(3), np.array([2e-4, 2e-4, 2e-4]), np.zeros(3))
+
+
+def _joint(clock, t_ns, w):
+    msg = JointState()
+    msg.header.stamp = clock.stamp(t_ns)
+    msg.name = list(NAMES)
+    msg.velocity = [float(v) for v in w]
+    return msg
+
+
+def test_the_component_invalidates_its_command_and_the_manager_falls_back_with_the_reason():
+    clock = FrameClock(0)
+    ctx = {'wheel_max_torque_Nm': [0.01] * 3, 'wheel_inertia_kgm2': list(J),
+           'wheel_max_momentum_Nms': list(H_MAX), 'period_s': 1.0, 'reference': None}
+    comp = ControllerComponent(_Steady(), 'mpi', ctx, None, clock)
+    manager = ControllerManagerCore(['bdot', 'mpi'], 'bdot', initial='mpi',
+                                    max_dipole_Am2=[5.0] * 3, max_wheel_torque=[0.01] * 3)
+    bdot = Command(np.array([0.1, 0.0, 0.0]), np.zeros(0), np.zeros(3))
+    w = np.zeros(3)
+    applied = None
+    statuses = []
+    for k in range(10):
+        t_ns = k * 10**9
+        msgs = {'wheels': _joint(clock, t_ns, w), 'cmd': applied}
+        out = comp.step(t_ns, msgs, lambda key, m: True)
+        cmd, status = manager.step(float(k), {'mpi': (float(k), command_from_msg(out)),
+                                              'bdot': (float(k), bdot)})
+        statuses.append(status)
+        assert np.all(np.isfinite(cmd.wheel_torque)) and np.all(np.isfinite(cmd.dipole_body))
+        applied = ActuatorCommand()
+        applied.header.stamp = clock.stamp(t_ns)
+        applied.wheel_torque = [float(v) for v in cmd.wheel_torque]
+        w = w + np.asarray(cmd.wheel_torque) / J * np.array([0.0, 1.0, 1.0])   # wheel_x stuck
+    sources = [s['source'] for s in statuses]
+    # frame k judges the interval [k - 1, k]: the 5th bad one is frame 5
+    assert sources[:CONFIRM_FRAMES] == ['mpi'] * CONFIRM_FRAMES
+    assert set(sources[CONFIRM_FRAMES:]) == {'bdot'}
+    fault = statuses[-1]['last_fault']
+    assert fault.startswith('mpi: non-finite (NaN or inf) wheel_torque')
+    assert '(wheel wheel_x does not follow its torque' in fault and 'fallback to bdot' in fault
+    assert out.source.startswith('mpi: wheel wheel_x does not follow its torque')
