@@ -1,0 +1,152 @@
+"""The demo mission (scenarios/demo_mission.yaml, `make demo`) on the FrameLoop (the plain
+engine: no ROS, no process): every phase is reached in order, both faults are announced and
+what the flight software does about them is seen, and no NaN reaches an actuator.
+
+One run of the whole mission (9600 frames, about 15-25 s of CPU) shared by the tests. The
+composed graph gives the same series (the engine parity contract, tests/graph/
+test_engine_parity.py).
+
+Truth: the scenario's timeline (its header): auto sequence detumble (B-dot) -> acquire
+(magnetic) -> point (MPI), scheduled fuzzy slew at 6600 s and MPI hold at 7200 s, star tracker
+NaN 5400-5700 s, wheel_x stuck from 8400 s.
+"""
+import collections
+import math
+
+import numpy as np
+import pytest
+
+from adcs_nodes.core import attitude as att
+from adcs_nodes.nodes.convert import stamp_ns
+from frameloop_run import q, raw, v, validated
+from sim_node.engine import FrameLoop
+
+#: The topics the tests read (keeping every topic of 9600 frames costs more than the run).
+KEPT = ('sim/state', 'sim/wheels', 'sim/faults', 'adcs/attitude_estimate',
+        'adcs/estimator/diagnostics', 'adcs/attitude_target', 'adcs/actuator_command',
+        'adcs/controller_status')
+EPOCH_NS = 1773964800 * 10**9          # the scenario's epoch, 2026-03-20T00:00:00Z
+
+
+def t_s(msg):
+    """Sim time [s] of a message's header stamp."""
+    return (stamp_ns(msg.header.stamp) - EPOCH_NS) / 1e9
+
+
+def by_t(msgs):
+    """``{sim time [s] rounded to 1 us: message}``."""
+    return {round(t_s(m), 6): m for m in msgs}
+
+
+@pytest.fixture(scope='module')
+def mission(tmp_path_factory):
+    sc = validated(tmp_path_factory.mktemp('demo'), raw('demo_mission'), 'demo_mission')
+    loop = FrameLoop.from_scenario(sc)
+    out = collections.defaultdict(list)
+    for frame in loop.run():
+        for topic, msg in frame.outputs:
+            if topic in KEPT:
+                out[topic].append(msg)
+    assert t_s(out['sim/state'][0]) == 0.0
+    return out, loop
+
+
+def _status(out):
+    return [(t_s(m), m) for m in out['adcs/controller_status']]
+
+
+def _sources(out):
+    """[(t, source)] at every change of the forwarded command's source."""
+    runs, last = [], None
+    for m in out['adcs/actuator_command']:
+        if m.source != last:
+            runs.append((t_s(m), m.source))
+            last = m.source
+    return runs
+
+
+def test_every_phase_is_reached_in_order(mission):
+    out, _ = mission
+    modes = [(t, m.mode, m.active) for t, m in _status(out)]
+    seq = [(mode, active) for _, mode, active in modes]
+    # the automatic sequence, then the schedule (which suspends it: mode '')
+    firsts = [seq.index(p) for p in (('detumble', 'bdot'), ('acquire', 'magnetic'),
+                                     ('point', 'mpi'), ('', 'fuzzy'), ('', 'mpi'))]
+    assert firsts == sorted(firsts)
+    when = {p: next(t for t, mode, active in modes if (mode, active) == p)
+            for p in (('acquire', 'magnetic'), ('point', 'mpi'), ('', 'fuzzy'), ('', 'mpi'))}
+    assert 1000.0 < when[('acquire', 'magnetic')] < 4000.0
+    assert when[('acquire', 'magnetic')] < when[('point', 'mpi')] < 5400.0
+    assert when[('', 'fuzzy')] == 6600.0 and when[('', 'mpi')] == 7200.0
+    sources = [s for _, s in _sources(out)]
+    for name in ('bdot', 'magnetic', 'mpi', 'fuzzy'):
+        assert name in sources                  # each controller drove the actuators
+    truth, target = by_t(out['sim/state']), by_t(out['adcs/attitude_target'])
+
+    def err(t):
+        return math.degrees(att.angle_between(q(truth[t].q_orbit_body),
+                                              q(target[t].q_ref_body)))
+    rate0 = math.degrees(np.linalg.norm(v(truth[0.0].omega_body_eci_body)))
+    rate_acq = math.degrees(np.linalg.norm(v(truth[when[('acquire', 'magnetic')]]
+                                             .omega_body_eci_body)))
+    assert rate0 > 3.0 and rate_acq < 0.6            # detumbled
+    assert err(5300.0) < 0.1                         # MPI fine pointing on the orbital frame
+    assert err(6600.0) > 40.0                        # the new attitude is 45 deg away ...
+    assert max(err(t) for t in range(6900, 7200)) < 0.5    # ... the fuzzy slew gets there
+    assert max(err(t) for t in range(7600, 8400)) < 0.1    # and MPI holds it
+    wheels = by_t(out['sim/wheels'])
+    assert max(abs(h) for t in range(6600, 8400) for h in wheels[float(t)].momentum) < 0.2
+
+
+def test_the_star_tracker_blind_the_mekf_coasts_on_the_gyro_and_comes_back(mission):
+    out, loop = mission
+    announced = [(t_s(m), s.message) for m in out['sim/faults'] for s in m.status]
+    assert (5400.0, 'active: nan star_tracker') in announced
+    assert (5700.0, 'cleared: nan star_tracker') in announced
+    diag = by_t(out['adcs/estimator/diagnostics'])
+    assert diag[5399.0].rejected_count == 0
+    assert diag[5699.0].rejected_count == 300       # every blind sample refused
+    assert 'star tracker' in diag[5699.0].last_rejection
+    assert loop.estimator.rejected_count == 300
+    est, truth = by_t(out['adcs/attitude_estimate']), by_t(out['sim/state'])
+
+    def err(t):
+        return math.degrees(att.angle_between(q(est[t].q_eci_body), q(truth[t].q_eci_body)))
+    before = max(err(float(t)) for t in range(5300, 5400))
+    coasting = [err(float(t)) for t in range(5400, 5700)]
+    after = max(err(float(t)) for t in range(5800, 5900))
+    assert len(est) == 9601                          # an estimate every frame, blind or not
+    assert max(coasting) > 2 * before                # the error grows on the gyro alone ...
+    assert max(coasting) < 0.1                       # ... slowly (bias estimated before)
+    assert after < 0.5 * max(coasting)               # the star tracker back: it comes down
+    sigma = [math.degrees(3 * math.sqrt(max(est[float(t)].covariance[k * 7] for k in range(3))))
+             for t in (5399, 5699)]
+    assert sigma[1] > 2 * sigma[0]                   # the filter knows it is coasting
+
+
+def test_the_stuck_wheel_is_seen_and_the_manager_falls_back_with_the_reason(mission):
+    out, _ = mission
+    announced = [(t_s(m), s.message) for m in out['sim/faults'] for s in m.status]
+    assert (8400.0, 'active: wheel_stuck wheel_x') in announced
+    src = _sources(out)
+    fallback = [t for t, s in src if s == 'bdot' and t > 8400.0]
+    assert fallback and fallback[0] < 8700.0         # seen within minutes
+    assert all(s == 'bdot' for t, s in src if t >= fallback[0])
+    faulted = [m for t, m in _status(out) if t >= fallback[0]]
+    assert faulted and faulted[0].active == 'mpi'
+    reason = faulted[0].last_fault
+    assert reason.startswith('mpi: non-finite (NaN or inf) wheel_torque')
+    assert 'wheel wheel_x does not follow its torque' in reason
+    assert 'fallback to bdot' in reason
+    truth = by_t(out['sim/state'])
+    rates = [math.degrees(np.linalg.norm(v(truth[float(t)].omega_body_eci_body)))
+             for t in range(int(fallback[0]), 9601)]
+    assert max(rates) < 0.3                          # B-dot keeps the rates low
+
+
+def test_no_nan_reaches_an_actuator(mission):
+    out, _ = mission
+    for m in out['adcs/actuator_command']:
+        assert np.all(np.isfinite(v(m.dipole_body))) and np.all(np.isfinite(m.wheel_torque))
+        assert np.all(np.isfinite(v(m.torque_body)))
+    assert len(out['adcs/actuator_command']) == 9601
