@@ -25,7 +25,8 @@ Commands
 ``adcs export BAG --csv DIR``
     One CSV per topic, flattened fields, time column ``t`` in seconds.
 ``adcs report BAG [--out DIR]``
-    Metrics, PNG plots and ``summary.md``.
+    Metrics, PNG plots, ``summary.md`` and ``report.html`` (one self-contained page: timeline
+    of controllers, modes and faults, pointing, wheels, dipole, estimator against the truth).
 
 ``adcs soak [--launches N] [--burners N] [--time-budget S] [--scenarios ...] [--out DIR]``
     Start-up soak: short runs of every scenario back to back (processes and composed) beside
@@ -129,8 +130,8 @@ def cmd_run(args) -> int:
           f'({rtf:.1f}x real time), missed frames {result.missed_frames}')
     if result.bag:
         print(f'[adcs] bag: {result.bag}')
-    if result.exit_code == 0 and args.report and result.bag:
-        return cmd_report(argparse.Namespace(bag=result.bag, out=None))
+    if result.exit_code in (0, 3) and args.report and result.bag:   # degraded: a whole bag
+        return cmd_report(argparse.Namespace(bag=result.bag, out=None)) or result.exit_code
     return result.exit_code
 
 
@@ -228,7 +229,13 @@ def cmd_report(args) -> int:
     if os.path.isfile(summary):
         with open(summary, encoding='utf-8') as fh:
             print(fh.read())
-    print(f'[adcs] report written to {out}')
+    from adcs_nodes.tools.report_html import write_report_html
+    try:     # the page for people, beside it (its paper table from metrics.json)
+        page = write_report_html(args.bag, out)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f'adcs report: report.html: {exc}', file=sys.stderr)
+        return 2
+    print(f'[adcs] report written to {out} (open {page} in a browser)')
     return 0
 
 
