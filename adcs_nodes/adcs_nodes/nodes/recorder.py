@@ -112,13 +112,12 @@ from std_msgs.msg import String
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.registry import Param
-from adcs_nodes.tools.bag import (cdr_stamp_ns, ensure_type, flush_writer, make_typestore,
-                                  stamp_kind)
+from adcs_nodes.tools.bag import (BAG_VERSION, cdr_stamp_ns, ensure_type, flush_writer,
+                                  make_typestore, stamp_kind)
 from adcs_nodes.tools.distro import close_writer
 
 DEFAULT_EXCLUDE = ['/rosout', '/parameter_events']
 QUEUE_DEPTH = 1000
-BAG_VERSION = 8
 STATUS_TOPIC = 'recorder/status'
 READY_TOPIC = 'lockstep/ready'
 #: Same QoS as the lockstep nodes' ready topic: reliable, transient local.
