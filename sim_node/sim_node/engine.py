@@ -421,7 +421,7 @@ class BagSink:
     """
 
     def __init__(self, path: str, scenario_text: Optional[str] = None,
-                 flush_every_frames: int = 200) -> None:
+                 flush_every_frames: int = 200, topics: Sequence[str] = ()) -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer
 
         from adcs_nodes.tools.bag import BAG_VERSION, ensure_type, make_typestore
@@ -435,6 +435,8 @@ class BagSink:
             raise EngineError(f'cannot create the bag {path}: {exc.strerror or exc}') from None
         self._writer.set_custom_data('recorder', 'sim_node.engine (plain engine)')
         self._conns: Dict[str, Tuple[Any, Any]] = {}
+        #: the scenario's ``record.topics`` (relative names; empty: every data topic)
+        self._only = {t.lstrip('/') for t in topics}
         self._frames = 0
         self._flush_every = max(1, int(flush_every_frames))
         self.messages = 0
@@ -461,6 +463,8 @@ class BagSink:
         from adcs_nodes.tools.bag import flush_writer
         t_log = self._clock_ns(frame.t_ns)
         for topic, msg in frame.outputs:
+            if self._only and topic.lstrip('/') not in self._only:
+                continue
             conn, cdc = self._connection(topic, msg)
             self._writer.write(conn, t_log, cdc.encode(msg))
             self.messages += 1
@@ -508,7 +512,7 @@ def run_plain(sc: Dict[str, Any], duration_s: Optional[float] = None,
     if record:
         if os.path.exists(record):
             raise EngineError(f'the bag {record} exists already (give a new directory)')
-        sink = BagSink(record).bind(loop)
+        sink = BagSink(record, topics=(sc.get('record') or {}).get('topics') or ()).bind(loop)
         effective = {k: v for k, v in sc.items() if not k.startswith('_')}
         effective['duration_s'] = duration
         with open(os.path.join(record, 'scenario.yaml'), 'w') as fh:
