@@ -25,8 +25,17 @@ graph engines see the same faults:
   - ``wheel_torque_lost``: the wheel's motor delivers ``fraction`` of its command (0: none);
   - ``coil_open``: the magnetorquer axis (``x``, ``y``, ``z``) gives no dipole.
 
-Killing a node at a time is not a fault kind yet (the launcher's ``adcs fault`` and a scenario
-kill are not built).
+Killing a node at a time is not a fault kind yet (a scenario kill is not built).
+
+Live faults (``adcs fault KIND TARGET``): one fault as JSON text on :data:`INJECT_TOPIC`
+(``std_msgs/String``, reliable): ``{index, kind, target, at_s, params}``, ``at_s`` null for
+"the next frame". The sensor nodes and the dynamics take it (:func:`injected`, the same
+registry specs as a scenario's fault; a fault for another node is not theirs, a bad one is
+refused with the reason in the log), hand it to their component (:meth:`SensorFaults.add`,
+:meth:`ActuatorFaults.add`), and the dynamics announces it on ``sim/faults`` like a scripted
+one. It starts at ``at_s``, or at the receiver's next frame when that time has passed or is
+not given: when that is depends on wall time (how far each node got when the message came),
+so a live fault is not deterministic, unlike a scenario's.
 """
 from __future__ import annotations
 
@@ -130,6 +139,14 @@ class SensorFaults:
                      for f in self.faults if f.kind == 'noise_burst'}
         self._last_good: Optional[np.ndarray] = None
 
+    def add(self, fault: Fault, seed: int) -> None:
+        """One more fault (a live one: :func:`injected`), seeded as a scenario's from
+        ``seed`` and its index."""
+        self.faults.append(fault)
+        if fault.kind == 'noise_burst':
+            self._rng[fault.index] = np.random.default_rng(derive_seed(seed,
+                                                                       f'fault/{fault.index}'))
+
     def apply(self, t_ns: int, values: np.ndarray) -> Optional[np.ndarray]:
         """The sample's values under the active faults, or None (silent: a dropout)."""
         out = np.array(values, dtype=float)
@@ -174,6 +191,17 @@ class ActuatorFaults:
         self.faults = [f for f in self.all if f.kind in ('wheel_stuck', 'wheel_torque_lost',
                                                          'coil_open')]
 
+    def add(self, fault: Fault) -> None:
+        """One more fault (a live one: :func:`injected`): announced by :meth:`events`, and
+        applied when it strikes an actuator."""
+        if fault.kind in ('wheel_stuck', 'wheel_torque_lost') \
+                and fault.target not in self.wheel_index:
+            raise ValueError(f'{fault.kind}: no wheel {fault.target!r}; wheels: '
+                             f'{", ".join(self.wheel_index) or "none"}')
+        self.all.append(fault)
+        if fault.kind in ('wheel_stuck', 'wheel_torque_lost', 'coil_open'):
+            self.faults.append(fault)
+
     def apply(self, t_ns: int, dipole: np.ndarray, wheel_torque: np.ndarray):
         """``(dipole, wheel_torque)`` as the faulty actuators deliver them at ``t_ns``."""
         if not any(f.active(t_ns) for f in self.faults):
@@ -199,3 +227,64 @@ class ActuatorFaults:
             elif f.end_ns is not None and f.end_ns <= t_ns < f.end_ns + frame_ns:
                 out.append({'fault': f, 'active': False})
         return out
+
+
+# ---------------------------------------------------------------------- live faults
+#: Where a running graph takes live faults (``adcs fault``): ``std_msgs/String``, JSON.
+INJECT_TOPIC = 'sim/inject_fault'
+
+
+def check(kind: str, target: str, params: Optional[Dict[str, Any]], sensors: Sequence[str],
+          wheels: Sequence[str], magnetorquer: bool) -> Dict[str, Any]:
+    """The parameters of fault ``kind`` striking ``target``, validated with the kind's
+    registry specs and filled with their defaults, as a scenario's ``faults:`` entry is
+    (``ValueError`` with the reason: unknown kind, a target it cannot strike among
+    ``sensors``, ``wheels`` and the magnetorquer axes, a parameter out of range)."""
+    from adcs_nodes import registry
+    entry = registry.get('fault', kind)
+    if SENSOR in entry.targets:
+        known = list(sensors)
+    elif WHEEL in entry.targets:
+        known = list(wheels)
+    else:
+        known = list(AXES) if magnetorquer else []
+    if target not in known:
+        raise ValueError(f'{kind} cannot strike {target!r}; it strikes '
+                         f'{", ".join(entry.targets)}: {", ".join(known) or "none here"}')
+    return entry.validate(dict(params or {}))
+
+
+def injected(text: str, earliest_ns: int, sensors: Optional[Sequence[str]] = (),
+             wheels: Sequence[str] = (), magnetorquer: bool = False) -> Optional[Fault]:
+    """The live fault of an :data:`INJECT_TOPIC` message for a node that can apply faults to
+    ``sensors`` (None: any sensor, the dynamics, which announces them all), ``wheels`` and
+    (``magnetorquer``) the coils.
+
+    Returns None when the fault is not this node's (another sensor's); raises ``ValueError``
+    with the reason for a malformed or invalid one. It starts at ``at_s``, but no earlier than
+    ``earliest_ns`` (the receiver's next frame; also when ``at_s`` is null), and lasts
+    ``params.duration_s`` from its start (0: to the end of the run).
+    """
+    try:
+        item = json.loads(text)
+    except ValueError as exc:
+        raise ValueError(f'not JSON: {exc}') from None
+    if not isinstance(item, dict) or not {'kind', 'target'} <= set(item):
+        raise ValueError('a live fault needs kind and target (and index, at_s, params)')
+    kind, target = str(item['kind']), str(item['target'])
+    from adcs_nodes import registry
+    entry = registry.get('fault', kind)
+    if SENSOR in entry.targets and sensors is not None and target not in sensors:
+        return None                                  # another sensor's
+    params = check(kind, target, item.get('params'), [target] if sensors is None else sensors,
+                   wheels, magnetorquer)
+    at = item.get('at_s')
+    start = int(earliest_ns)
+    if at is not None:
+        at = float(at)
+        if not np.isfinite(at) or at < 0.0:
+            raise ValueError(f'at_s must be a finite time >= 0, got {at!r}')
+        start = max(start, int(round(at * NS_PER_S)))
+    duration = float(params.get('duration_s', 0.0))
+    return Fault(int(item.get('index', 1000)), kind, target, start,
+                 start + int(round(duration * NS_PER_S)) if duration > 0 else None, params)

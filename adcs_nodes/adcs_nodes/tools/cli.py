@@ -7,9 +7,12 @@ Commands
     Validate the scenario, start its nodes (one process each, all in one process, or the
     plain FrameLoop without ROS), show progress, stop everything cleanly at the end, on
     Ctrl-C or when a node dies.
-``adcs switch NAME [--run PID]`` / ``adcs status [--run PID]``
+``adcs switch NAME [--run PID]`` / ``adcs status [--run PID] [--watch]``
     Switch the active controller of a graph started by ``adcs run``, or show its controllers
-    and lockstep health (missed frames per node).
+    and lockstep health (missed frames per node); ``--watch``: refreshed once a second.
+``adcs fault KIND TARGET [--at S] [--param KEY=VALUE ...] [--run PID]``
+    Inject one fault into a running graph (``sim/inject_fault``), announced on ``sim/faults``
+    like a scenario's; validated as a scenario's (exit 2 with the reason). Not deterministic.
 ``adcs list [--dir scenarios]``
     Scenarios (with their description) and the known nodes.
 ``adcs validate SCENARIO``
@@ -197,6 +200,16 @@ def cmd_status(args) -> int:
     return finish(0)
 
 
+def cmd_fault(args) -> int:
+    from adcs_nodes.tools.live import LiveError, fault, finish, parse_params
+    try:
+        print(fault(args.kind, args.target, args.at, parse_params(args.param), args.run))
+    except LiveError as exc:
+        print(f'adcs fault: {exc}', file=sys.stderr)
+        return finish(2)
+    return finish(0)
+
+
 def cmd_schema(args) -> int:
     from adcs_nodes.tools.scenario import schema_markdown
     print(schema_markdown(), end='')
@@ -301,6 +314,20 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('status', help='controllers and lockstep health of a running graph')
     p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_status)
+
+    p = sub.add_parser('fault', help='inject one fault into a running graph (sim/faults '
+                       'announces it; not deterministic: its frame depends on wall time)')
+    p.add_argument('kind', help='fault kind (adcs list: dropout, nan, stuck, bias_step, '
+                   'noise_burst, wheel_stuck, wheel_torque_lost, coil_open)')
+    p.add_argument('target', help='what it strikes: a sensor (e.g. magnetometer), a wheel '
+                   'name, a magnetorquer axis x|y|z')
+    p.add_argument('--at', type=float, metavar='S', help='sim time it starts [s] (default: '
+                   'the next frame)')
+    p.add_argument('--param', action='append', default=[], metavar='KEY=VALUE',
+                   help='a parameter of the kind (YAML value), e.g. duration_s=60 or '
+                   'bias=[1e-6,0,0]; repeatable')
+    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
+    p.set_defaults(func=cmd_fault)
 
     from adcs_nodes.tools import montecarlo
     p = sub.add_parser('montecarlo', help='dispersed Monte Carlo campaign (parallel, resumable)')

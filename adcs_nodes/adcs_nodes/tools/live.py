@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import glob
 import json
+import math
 import os
 import re
 import sys
@@ -214,3 +215,179 @@ def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
         lines.append(f'  {name:22s} frames {s.frames:8d}  missed {s.missed_frames}'
                      + (f' (last: {s.last_missed_input})' if s.last_missed_input else ''))
     return '\n'.join(lines)
+
+
+# ---------------------------------------------------------------------- adcs fault
+#: Where a running graph takes live faults (``sim_node.faults.INJECT_TOPIC``; the tools do not
+#: import the simulator).
+INJECT_TOPIC = 'sim/inject_fault'
+#: Wall seconds ``adcs fault`` waits for the fault's announcement on ``sim/faults``.
+ANNOUNCE_WAIT_S = 15.0
+#: Without ``--at`` a live fault starts at the first frame this much wall time ahead (at the
+#: run's measured pace): every node has the message by then, so the sensors and the dynamics
+#: agree on the frame (with "each node's next frame" they did not: in a composed run the
+#: dynamics announced a magnetometer fault 25 frames before the magnetometer applied it).
+LEAD_WALL_S = 1.0
+
+
+def _run_scenario(run: Dict) -> Dict:
+    """The run's scenario as YAML gives it: the bag's ``scenario.yaml`` (the effective one)
+    when the run records, else the scenario file ({} when neither reads)."""
+    import yaml
+    paths = ([os.path.join(run['bag'], 'scenario.yaml')] if run.get('bag') else []) \
+        + [run.get('scenario') or '']
+    for path in paths:
+        try:
+            with open(path, encoding='utf-8') as fh:
+                data = yaml.safe_load(fh)
+        except (OSError, ValueError):
+            continue
+        except Exception:                 # yaml.YAMLError: try the next one
+            continue
+        if isinstance(data, dict):
+            return data
+    return {}
+
+
+def parse_params(items: List[str]) -> Dict:
+    """``KEY=VALUE`` (YAML value) pairs of ``--param``; LiveError for a malformed one."""
+    import yaml
+    out: Dict = {}
+    for item in items:
+        key, sep, text = item.partition('=')
+        if not sep or not key:
+            raise LiveError(f'--param {item!r}: expected KEY=VALUE (e.g. duration_s=60)')
+        try:
+            out[key] = yaml.safe_load(text)
+        except Exception as exc:          # yaml.YAMLError
+            raise LiveError(f'--param {item!r}: not a YAML value ({exc})') from None
+    return out
+
+
+def check_fault(kind: str, target: str, params: Dict, at_s: Optional[float],
+                sc: Dict) -> Dict:
+    """The fault's parameters validated with its registry specs, its target against the
+    run's scenario (``sc``: sensors, wheels, magnetorquer), ``at_s`` inside the run; LiveError
+    with the reason (``adcs fault`` exits 2), as the scenario validator checks a scripted one
+    (``sim_node.faults.check`` is the receivers' same check)."""
+    from adcs_nodes import registry
+    try:
+        entry = registry.get('fault', kind)
+    except ValueError as exc:
+        raise LiveError(str(exc)) from None
+    craft = sc.get('spacecraft') or {}
+    if 'sensor' in entry.targets:
+        known = [k for k, cfg in (sc.get('sensors') or {}).items()
+                 if not (isinstance(cfg, dict) and cfg.get('external'))]
+        what = 'simulated sensors'
+    elif 'wheel' in entry.targets:
+        known = [w.get('name') for w in craft.get('wheels') or [] if isinstance(w, dict)]
+        what = 'wheels'
+    else:
+        known = ['x', 'y', 'z'] if 'magnetorquer' in craft else []
+        what = 'magnetorquer axes'
+    if sc and target not in known:
+        raise LiveError(f'{kind} cannot strike {target!r}: the run\'s {what} are '
+                        f'{", ".join(known) or "none"}')
+    try:
+        params = entry.validate(params)
+    except ValueError as exc:
+        raise LiveError(f'{kind} parameters: {exc}') from None
+    if at_s is not None:
+        duration = float(sc.get('duration_s') or math.inf)
+        if not (math.isfinite(at_s) and 0.0 <= at_s <= duration):
+            raise LiveError(f'--at {at_s:g} s is outside the run [0, {duration:g}] s')
+    return params
+
+
+def fault(kind: str, target: str, at_s: Optional[float] = None,
+          params: Optional[Dict] = None, pid: Optional[int] = None,
+          wait_s: float = ANNOUNCE_WAIT_S) -> str:
+    """Inject one fault into a running graph (``adcs fault``); returns what happened.
+
+    The fault goes as JSON on ``sim/inject_fault`` (reliable) to the sensor nodes and the
+    dynamics, once they all listen; the one it strikes applies it from ``at_s`` (default: the
+    first frame :data:`LEAD_WALL_S` of wall time ahead at the run's pace, measured on
+    ``/clock``; a node that gets it late starts it at its next frame), the dynamics announces
+    it on ``sim/faults``, which this waits for. Not deterministic: the frame depends on wall
+    time.
+
+    Raises
+    ------
+    LiveError
+        No run, a fault the run cannot take (kind, target, parameters, a time already past or
+        outside the run), or nobody listening.
+    """
+    from rclpy.duration import Duration
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+    run = pick_run(pid)
+    sc = _run_scenario(run)
+    params = check_fault(kind, target, dict(params or {}), at_s, sc)
+    listeners = 1 + len([k for k, cfg in (sc.get('sensors') or {}).items()
+                         if not (isinstance(cfg, dict) and cfg.get('external'))])
+    item = {'index': 1000 + int(time.time() * 1000) % 10**6, 'kind': kind, 'target': target,
+            'at_s': at_s, 'params': params}
+    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    session = _Session(run)
+    from adcs_nodes.nodes.convert import stamp_ns
+    from adcs_nodes.nodes.lockstep_node import QOS_DATA, epoch_to_ns, parse_epoch
+    epoch_ns = epoch_to_ns(parse_epoch(run['epoch']))
+    clock: List = []          # (wall s, sim s): the first and the latest /clock
+    seen: List = []
+
+    def on_clock(m) -> None:
+        sample = (time.monotonic(), (stamp_ns(m.clock) - epoch_ns) / 1e9)
+        clock[1:] = [sample] if clock else []
+        if not clock:
+            clock.append(sample)
+    try:
+        session.node.create_subscription(Clock, '/clock', on_clock, QOS_DATA)
+        session.node.create_subscription(DiagnosticArray, 'sim/faults', seen.append, QOS_DATA)
+        pub = session.node.create_publisher(String, INJECT_TOPIC, reliable)
+        deadline = time.monotonic() + SERVER_WAIT_S
+        while (pub.get_subscription_count() < listeners or len(clock) < 2
+               or clock[-1][0] - clock[0][0] < 0.3) and time.monotonic() < deadline:
+            session.spin(0.05)
+        if pub.get_subscription_count() == 0:
+            raise LiveError(f'nobody listens on {INJECT_TOPIC} after {SERVER_WAIT_S:g} s (is '
+                            'the run a graph with simulated sensors and dynamics?)')
+        now = clock[-1][1] if clock else None
+        if at_s is not None and now is not None and at_s < now:
+            raise LiveError(f'--at {at_s:g} s has passed: the run is at t = {now:.1f} s')
+        if at_s is None and now is not None:       # the frame LEAD_WALL_S ahead
+            pace = 1.0
+            if len(clock) > 1 and clock[-1][0] > clock[0][0]:
+                pace = max(pace, (clock[-1][1] - clock[0][1]) / (clock[-1][0] - clock[0][0]))
+            frame = float((sc.get('timing') or {}).get('frame_s') or 1.0)
+            ahead = now + pace * (time.monotonic() - clock[-1][0] + LEAD_WALL_S)
+            item['at_s'] = math.ceil(ahead / frame - 1e-9) * frame
+            if sc.get('duration_s') and item['at_s'] > float(sc['duration_s']):
+                raise LiveError(f'the run ends (t = {float(sc["duration_s"]):g} s) before a '
+                                f'fault could start (t = {item["at_s"]:g} s)')
+        pub.publish(String(data=json.dumps(item, sort_keys=True)))
+        pub.wait_for_all_acked(Duration(seconds=5.0))
+        deadline = time.monotonic() + wait_s
+        found = None
+        while found is None and time.monotonic() < deadline:
+            session.spin(0.05)
+            for msg in seen:
+                for st in msg.status:
+                    if st.name == f'fault/{item["index"]}' and st.message.startswith('active'):
+                        found = (stamp_ns(msg.header.stamp) - epoch_ns) / 1e9, st.message
+    finally:
+        session.close()
+    when = f'at t = {at_s:g} s' if at_s is not None else (
+        f'from t = {item["at_s"]:g} s, about {LEAD_WALL_S:g} s of wall time ahead'
+        if item['at_s'] is not None else 'at the next frame')
+    sent = (f'fault {kind} {target} {params} sent to run {run["pid"]} ({when}'
+            + (f'; the run was at t = {now:.1f} s' if now is not None else '') + ')')
+    if found is None:
+        raise LiveError(f'{sent}, but no announcement on sim/faults within {wait_s:g} s (the '
+                        'run may have ended, or a node refused it: see the node logs in '
+                        f'{run.get("run_dir", "the run directory")})')
+    return (f'{sent}; announced on sim/faults at t = {found[0]:g} s: {found[1]} '
+            '(a live fault is not deterministic: its frame depends on wall time)')

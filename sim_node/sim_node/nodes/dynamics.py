@@ -49,7 +49,7 @@ from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
 from adcs_nodes.registry import Param
 from sim_node.components.dynamics import DynamicsComponent
-from sim_node.faults import FAULTS_PARAM
+from sim_node.faults import FAULTS_PARAM, INJECT_TOPIC, injected
 from sim_node.faults import parse as parse_faults
 from sim_node.models.dynamics import ActuatorCommand as Command
 from sim_node.models.spacecraft_config import DEFAULT_INITIAL, DEFAULT_SPACECRAFT
@@ -180,8 +180,11 @@ class DynamicsNode(LockstepNode):
         self.appendages_pub = (self.publisher(AppendageState, 'sim/appendages')
                                if self.spacecraft.n_modes else None)
         self.tf_pub = TfPublisher(self)             # /tf: eci -> orbit -> body (truth)
-        self.faults_pub = self.publisher(DiagnosticArray, 'sim/faults') \
-            if self.component.faults.all else None
+        # sim/faults: the scenario's faults, and live ones (adcs fault: sim/inject_fault, not
+        # part of the lockstep handshake), announced at the frame they start or end in; there
+        # from the start, so a listener has matched it before a live fault comes
+        self.faults_pub = self.publisher(DiagnosticArray, 'sim/faults')
+        self.create_subscription(String, INJECT_TOPIC, self.on_inject_fault, QOS_DATA)
         # expected_publishers (the launcher: environment, controller_manager): messages of
         # any other publisher, and duplicate stamps, are dropped and reported (publisher_guard)
         guard = publisher_guard.for_node(self)
@@ -289,6 +292,21 @@ class DynamicsNode(LockstepNode):
         """Store an actuator command; a malformed one becomes a zero command (safe)."""
         t_ns = self.elapsed_ns(stamp_ns(msg.header.stamp))
         self._run(self.master.on_command(t_ns, self.to_command(msg), time.monotonic()))
+
+    def on_inject_fault(self, msg: String) -> None:
+        """A live fault (``adcs fault``): applied if it strikes an actuator, announced on
+        ``sim/faults`` in the frame it starts (the next one at the earliest)."""
+        next_frame = (self.sim_t_ns // self.frame_ns + 1) * self.frame_ns if self.started \
+            else 0
+        try:
+            fault = injected(msg.data, next_frame, sensors=None, wheels=self.wheel_names,
+                             magnetorquer=self.spacecraft.magnetorquer is not None)
+            self.component.faults.add(fault)
+        except ValueError as exc:
+            self.get_logger().warning(f'live fault refused: {exc}')
+            return
+        self.get_logger().warning(f'live fault {fault.describe()} from t = '
+                                  f'{fault.start_ns / 1e9:g} s (not deterministic)')
 
     def to_command(self, msg: ActuatorCommand) -> Command:
         """Message -> model command (the component's: a malformed one is a zero command)."""

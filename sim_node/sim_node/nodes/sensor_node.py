@@ -11,17 +11,19 @@ from __future__ import annotations
 
 from typing import Any, Dict, List
 
+from std_msgs.msg import String
+
 from adcs_msgs.msg import AttitudeState, Environment, WheelState
 from adcs_nodes.components.base import FrameClock
 from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
 from adcs_nodes import registry
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes.adapter import node_log
-from adcs_nodes.nodes.lockstep_node import LockstepNode
+from adcs_nodes.nodes.lockstep_node import QOS_DATA, LockstepNode
 from adcs_nodes.registry import Param
 from adcs_nodes.nodes.tf import TfPublisher, mount_transforms
 from sim_node.components.sensors import SENSOR_COMPONENTS, sensor_faults
-from sim_node.faults import FAULTS_PARAM
+from sim_node.faults import FAULTS_PARAM, INJECT_TOPIC, SensorFaults, injected
 
 
 class SensorNode(LockstepNode):
@@ -55,6 +57,8 @@ class SensorNode(LockstepNode):
             self.model, self.frame_id, FrameClock(self.epoch_ns), node_log(self),
             sensor_faults(sensor, self.p['faults'], self.seed))
         self.pub = self.publisher(msg_type, self.entry.node[3])
+        # live faults (adcs fault): not part of the lockstep handshake (QOS_DATA: reliable)
+        self.create_subscription(String, INJECT_TOPIC, self._on_inject, QOS_DATA)
         # the mount, defined once (parameter q_body_sensor_xyzw, identity when the model has
         # none) and published for every consumer on /tf_static: body -> frame_id
         self.tf_static = TfPublisher(self, static=True)
@@ -70,6 +74,22 @@ class SensorNode(LockstepNode):
         self.lockstep_inputs({k: truth[k] for k in self.component.truth},
                              float(self.p['period_s']), self._on_frame)
         self.start_handshake()
+
+    def _on_inject(self, msg: String) -> None:
+        """A live fault (``adcs fault``): this sensor's is applied from the next frame."""
+        try:
+            fault = injected(msg.data, self.sim_t_ns + 1, sensors=[self.entry.name])
+        except ValueError as exc:
+            self.get_logger().warning(f'live fault refused: {exc}')
+            return
+        if fault is None:
+            return                                      # another sensor's
+        if self.component.faults is None:
+            self.component.faults = SensorFaults([], self.seed,
+                                                 rotation=self.entry.name == 'star_tracker')
+        self.component.faults.add(fault, self.seed)
+        self.get_logger().warning(f'live fault {fault.describe()} from t = '
+                                  f'{fault.start_ns / NS_PER_S:g} s (not deterministic)')
 
     def _on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         msg = self.component.step(t_ns, msgs)
