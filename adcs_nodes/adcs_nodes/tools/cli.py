@@ -191,8 +191,10 @@ def cmd_slew(args) -> int:
 
 
 def cmd_status(args) -> int:
-    from adcs_nodes.tools.live import LiveError, finish, status
+    from adcs_nodes.tools.live import LiveError, finish, status, watch
     try:
+        if args.watch:
+            return finish(watch(args.run, count=args.count))
         print(status(args.run))
     except LiveError as exc:
         print(f'adcs status: {exc}', file=sys.stderr)
@@ -313,6 +315,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser('status', help='controllers and lockstep health of a running graph')
     p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
+    p.add_argument('--watch', action='store_true', help='refresh once a second until the run '
+                   'ends (Ctrl-C stops): controller, mode, attitude error, rates, wheel '
+                   'momentum, faults, missed frames')
+    p.add_argument('--count', type=int, metavar='N', help=argparse.SUPPRESS)   # (tests)
     p.set_defaults(func=cmd_status)
 
     p = sub.add_parser('fault', help='inject one fault into a running graph (sim/faults '

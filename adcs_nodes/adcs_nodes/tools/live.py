@@ -1,8 +1,10 @@
-"""Talk to a running graph started by ``adcs run``: ``adcs switch`` and ``adcs status``.
+"""Talk to a running graph started by ``adcs run``: ``adcs switch``, ``adcs status [--watch]``
+and ``adcs fault``.
 
 A run announces itself in ``~/.cache/adcs/runs/active-<launcher pid>.json`` (domain id,
 scenario, bag, node PIDs). These commands join that ROS domain with a short-lived node, call
-the controller manager's services or read the latched status, and leave.
+the controller manager's services, read the latched status or publish a live fault, and
+leave; ``adcs status --watch`` stays, refreshing its view once a second until the run ends.
 """
 from __future__ import annotations
 
@@ -391,3 +393,211 @@ def fault(kind: str, target: str, at_s: Optional[float] = None,
                         f'{run.get("run_dir", "the run directory")})')
     return (f'{sent}; announced on sim/faults at t = {found[0]:g} s: {found[1]} '
             '(a live fault is not deterministic: its frame depends on wall time)')
+
+
+# ---------------------------------------------------------------------- adcs status --watch
+def _sc_faults(sc: Dict) -> List[Dict]:
+    """The scenario's faults as ``{name, text, start, end}`` (times [s]; end None: to the end
+    of the run), to show those that started before the watch did."""
+    out = []
+    for i, f in enumerate(sc.get('faults') or []):
+        if not isinstance(f, dict):
+            continue
+        try:
+            start = float(f.get('at_s', 0.0))
+            duration = float((f.get('params') or {}).get('duration_s', 0.0) or 0.0)
+        except (TypeError, ValueError):
+            continue
+        out.append({'name': f'fault/{f.get("index", i)}',
+                    'text': f'{f.get("kind")} {f.get("target")}', 'start': start,
+                    'end': start + duration if duration > 0 else None})
+    return out
+
+
+class _Watch:
+    """What ``adcs status --watch`` shows, from the run's topics (the flight software's view:
+    the estimate against the target, the tachometer; the world's fault announcements)."""
+
+    def __init__(self, run: Dict, sc: Dict) -> None:
+        from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
+        self.run = run
+        self.epoch_ns = epoch_to_ns(parse_epoch(run['epoch']))
+        self.ctrl = None
+        self.source = ''
+        self.estimate = None
+        self.target = None
+        self.wheels = None
+        self.nodes: Dict = {}
+        self.t = None
+        self.seen_faults: Dict[str, Dict] = {}
+        self.sc_faults = _sc_faults(sc)
+        craft = sc.get('spacecraft') or {}
+        self.wheel_inertia = [float(w.get('inertia_kgm2', 0.001)) for w in
+                              craft.get('wheels') or [] if isinstance(w, dict)]
+
+    def _time(self, stamp) -> float:
+        from adcs_nodes.nodes.convert import stamp_ns
+        return (stamp_ns(stamp) - self.epoch_ns) / 1e9
+
+    def on_estimate(self, msg) -> None:
+        self.estimate = msg
+        self.t = self._time(msg.header.stamp)
+
+    def on_command(self, msg) -> None:
+        self.source = msg.source
+        self.t = max(self.t or 0.0, self._time(msg.header.stamp))
+
+    def on_fault(self, msg) -> None:
+        t = self._time(msg.header.stamp)
+        for st in msg.status:
+            what = ' '.join(st.message.split(': ', 1)[-1].split()[:2])    # kind target
+            self.seen_faults[st.name] = {'text': what, 'time': t,
+                                         'active': st.message.startswith('active')}
+
+    def faults(self) -> List[str]:
+        """Faults active now: the scenario's at this sim time and the announced ones."""
+        t = self.t or 0.0
+        active: Dict[str, str] = {}
+        for f in self.sc_faults:
+            if f['start'] <= t and (f['end'] is None or t < f['end']):
+                active[f['name']] = f'{f["text"]} (since {f["start"]:g} s)'
+        for name, f in self.seen_faults.items():
+            if f['active']:
+                active[name] = f'{f["text"]} (since {f["time"]:g} s)'
+            else:
+                active.pop(name, None)
+        return list(active.values())
+
+    def lines(self) -> List[str]:
+        import numpy as np
+
+        from adcs_nodes.core import attitude as att
+        run = self.run
+        out = [f'adcs status --watch: run {run["pid"]} {os.path.basename(run["scenario"])} '
+               f'(ROS_DOMAIN_ID={run["domain"]}), {time.strftime("%H:%M:%S")}; Ctrl-C ends']
+        out.append(f'sim time:        {self.t:.1f} s' if self.t is not None
+                   else 'sim time:        (no estimate or command yet)')
+        c = self.ctrl
+        if c is not None:
+            out.append(f'controller:      {c.active}   mode: {c.mode or "-"}   commanding: '
+                       f'{self.source or "-"}   switches: {c.switch_count}')
+        else:
+            out.append('controller:      (no adcs/controller_status yet)')
+        est, tgt = self.estimate, self.target
+        if est is not None:
+            q_o = [est.q_orbit_body.x, est.q_orbit_body.y, est.q_orbit_body.z,
+                   est.q_orbit_body.w]
+            q_i = [est.q_eci_body.x, est.q_eci_body.y, est.q_eci_body.z, est.q_eci_body.w]
+            if tgt is not None:
+                q_ref = [tgt.q_ref_body.x, tgt.q_ref_body.y, tgt.q_ref_body.z,
+                         tgt.q_ref_body.w]
+                frame = tgt.header.frame_id or 'orbit'
+                try:
+                    err = math.degrees(att.angle_between(q_i if frame == 'eci' else q_o,
+                                                         q_ref))
+                    out.append(f'attitude error:  {err:.3f} deg (estimate to the target, '
+                               f'{frame} frame)')
+                except ValueError:
+                    out.append('attitude error:  (estimate or target not finite)')
+            else:
+                out.append('attitude error:  (no adcs/attitude_target)')
+            w_i = np.array([est.omega_body_eci_body.x, est.omega_body_eci_body.y,
+                            est.omega_body_eci_body.z])
+            w_o = np.array([est.omega_body_orbit_body.x, est.omega_body_orbit_body.y,
+                            est.omega_body_orbit_body.z])
+            out.append(f'rates:           {math.degrees(np.linalg.norm(w_i)):.4f} deg/s '
+                       f'inertial, {math.degrees(np.linalg.norm(w_o)):.4f} deg/s to the '
+                       f'orbit frame (estimate)')
+        else:
+            out.append('attitude error:  (no adcs/attitude_estimate)')
+        w = self.wheels
+        if w is not None and len(w.velocity) == len(self.wheel_inertia) and w.velocity:
+            h = [v * j for v, j in zip(w.velocity, self.wheel_inertia)]
+            names = list(w.name) or [f'wheel{i}' for i in range(len(h))]
+            out.append('wheel momentum:  ' + '  '.join(f'{n} {v:+.4f}' for n, v in
+                                                       zip(names, h)) + ' N m s (tachometer)')
+        elif self.wheel_inertia:
+            out.append('wheel momentum:  (no sensors/wheels yet)')
+        else:
+            out.append('wheel momentum:  (no wheels)')
+        active = self.faults()
+        out.append('faults:          ' + ('; '.join(active) if active else 'none active'))
+        if c is not None and c.last_fault:
+            out.append(f'last fallback:   {c.last_fault}')
+        missed = sum(int(s.missed_frames) for s in self.nodes.values())
+        worst = ', '.join(f'{n} {int(s.missed_frames)}' for n, s in sorted(self.nodes.items())
+                          if s.missed_frames)
+        out.append(f'missed frames:   {missed} in {len(self.nodes)} nodes'
+                   + (f' ({worst})' if worst else '')
+                   + (f'; manager fallback frames {c.missed_frames}' if c is not None else ''))
+        return out
+
+
+def _alive(run: Dict) -> bool:
+    """The run's launcher is running: its manifest is there (it removes it at the end) and
+    its process exists."""
+    if not os.path.exists(os.path.join(RUNS_DIR, f'active-{run["pid"]}.json')):
+        return False
+    try:
+        os.kill(int(run['pid']), 0)
+    except OSError:
+        return False
+    return True
+
+
+def watch(pid: Optional[int] = None, interval_s: float = 1.0, out=None,
+          count: Optional[int] = None) -> int:
+    """``adcs status --watch``: the run's view refreshed every ``interval_s`` of wall time
+    until the run ends (or ``count`` refreshes, or Ctrl-C); returns 0.
+
+    On a terminal each refresh redraws the screen; otherwise the views follow each other,
+    separated by a blank line. It subscribes to the run's estimate, target, command,
+    tachometer, status and fault topics for as long as it watches (in a composed run this
+    sends them over DDS while it does: a little slower).
+    """
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    from adcs_msgs.msg import (ActuatorCommand, AttitudeState, AttitudeTarget,
+                               ControllerStatus, LockstepStatus)
+    from diagnostic_msgs.msg import DiagnosticArray
+    out = out or sys.stdout
+    run = pick_run(pid)
+    view = _Watch(run, _run_scenario(run))
+    session = _Session(run, deadline=False)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    latest = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)   # newest only
+    n = session.node
+    n.create_subscription(ControllerStatus, 'adcs/controller_status',
+                          lambda m: setattr(view, 'ctrl', m), latched)
+    n.create_subscription(AttitudeState, 'adcs/attitude_estimate', view.on_estimate, latest)
+    n.create_subscription(AttitudeTarget, 'adcs/attitude_target',
+                          lambda m: setattr(view, 'target', m), latest)
+    n.create_subscription(ActuatorCommand, 'adcs/actuator_command', view.on_command, latest)
+    n.create_subscription(JointState, 'sensors/wheels', lambda m: setattr(view, 'wheels', m),
+                          latest)
+    n.create_subscription(LockstepStatus, 'lockstep/status',
+                          lambda m: view.nodes.__setitem__(m.node, m), 50)
+    n.create_subscription(DiagnosticArray, 'sim/faults', view.on_fault, 50)
+    tty = hasattr(out, 'isatty') and out.isatty()
+    shown = 0
+    try:
+        while count is None or shown < count:
+            session.spin(interval_s)
+            text = '\n'.join(view.lines())
+            out.write(('\x1b[H\x1b[2J' + text + '\n') if tty else (text + '\n\n'))
+            out.flush()
+            shown += 1
+            if not _alive(run):
+                out.write(f'run {run["pid"]} ended\n')
+                out.flush()
+                break
+    except KeyboardInterrupt:
+        pass
+    except Exception as exc:         # rclpy's ExternalShutdownException: Ctrl-C in a spin
+        if type(exc).__name__ != 'ExternalShutdownException':
+            raise
+    finally:
+        session.close()
+    return 0
