@@ -102,3 +102,13 @@ def test_adcs_run_applies_the_override_to_the_recorded_scenario(tmp_path, capsys
                  '--record', bag, '--set', 'manager.initial=reference_slew']) == 0
     with open(os.path.join(bag, 'scenario.yaml')) as fh:
         assert yaml.safe_load(fh)['manager']['initial'] == 'reference_slew'
+
+
+def test_an_override_keeps_the_scenarios_faults():
+    """A scenario with faults (demo_mission) takes an override: its loaded faults, which
+    carry their index, validate again (it failed with exit 2 before)."""
+    sc = load_scenario(os.path.join(ROOT, 'scenarios', 'demo_mission.yaml'))
+    out = apply_overrides(sc, parse_overrides(['seed=3']))
+    assert out['seed'] == 3
+    assert [(f['index'], f['kind']) for f in out['faults']] == \
+        [(f['index'], f['kind']) for f in sc['faults']]

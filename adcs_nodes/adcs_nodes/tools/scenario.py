@@ -513,6 +513,8 @@ def _convert(value: Any, spec: F) -> Any:
                              f'{registry.short(value)}')
         out = []
         for i, item in enumerate(value):
+            if isinstance(item, dict):      # a loaded scenario's faults carry their index
+                item = {k: v for k, v in item.items() if k != 'index'}
             if not isinstance(item, dict) or not {'at_s', 'kind', 'target'} <= set(item) \
                     or not set(item) <= {'at_s', 'kind', 'target', 'params'}:
                 raise ValueError(f'fault {i} needs at_s, kind, target and optional params: '
