@@ -17,7 +17,7 @@ from adcs_launch import ROOT, adcs
 from adcs_nodes.tools.bag import content_digest, read_messages
 
 sys.path.insert(0, os.path.join(ROOT, 'tests', 'unit'))
-from test_frameloop_plugin_inputs import damper_scenario  # noqa: E402
+from test_frameloop_plugin_inputs import _forget_the_plugin, damper_scenario  # noqa: E402,F401
 
 NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
             '/adcs/controller_status')

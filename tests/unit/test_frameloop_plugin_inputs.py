@@ -24,6 +24,17 @@ INERTIA = np.diag([250.0, 200.0, 180.0])
 GAIN = 20.0
 
 
+@pytest.fixture(autouse=True)
+def _forget_the_plugin():
+    """The plugin registers into the process's registry: remove it after each test, so the
+    schema (docs/scenarios.md) other tests of this worker generate has the built-ins only."""
+    from adcs_nodes import registry
+    yield
+    registry._ENTRIES['controller'].pop('gyro_damper', None)
+    if PLUGIN in registry._LOADED:
+        registry._LOADED.remove(PLUGIN)
+
+
 def damper_scenario(tmp_path):
     """paper003_slew with a gyro, a star tracker and the damper active from t = 0."""
     with open(os.path.join(ROOT, 'scenarios', 'paper003_slew.yaml')) as fh:

@@ -334,7 +334,9 @@ def test_closed_loop_rigid_stabilisation_from_the_paper_initial_state():
 def test_registry_entry_builds_with_the_paper_inertia_and_refuses_no_wheels():
     from adcs_nodes import registry
     entry = registry.get('controller', 'mpi')
-    assert entry.inputs == ('estimate', 'target', 'wheel_speeds')
+    # the applied command too: the wheel-health check (core/wheel_health.py) compares the
+    # measured wheel speeds with the torque the manager applied
+    assert entry.inputs == ('estimate', 'target', 'wheel_speeds', 'actuator_command')
     assert entry.actuators == ('wheels',) and entry.requires == ('spacecraft.wheels',)
     ctx = dict(inertia_kgm2=IB, wheel_axes_body=np.eye(3), wheel_max_torque_Nm=[1.0] * 3,
                wheel_max_momentum_Nms=[55.0] * 3, wheel_inertia_kgm2=[0.1] * 3, period_s=0.2)
