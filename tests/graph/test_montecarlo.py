@@ -287,9 +287,9 @@ def test_dask_scheduler_runs_the_campaign(three_runs, tmp_path):
         assert np.abs(w_run - vec(row, 'disp_omega_body_eci_body_{}_deg_s', VEC)).max() < 1e-9
 
 
-@pytest.mark.long   # failed once (1 of 2 clean-clone runs, 2026-12-02): run 0's result.json was
-#                    on disk but the interrupted campaign's table said 'pending' (the supervisor
-#                    had not collected it yet): a product race to fix before it returns
+@pytest.mark.long   # its race (run 0's result.json on disk, the interrupted table saying
+#                    'pending') is fixed in Campaign._collect_written and tested without processes
+#                    in tests/unit/test_frameloop_montecarlo.py; the signal path stays in test-long
 def test_ctrl_c_keeps_finished_runs(tmp_path):
     # Run 1 must still be going when the Ctrl-C reaches it, through the campaign, a stop file
     # polled every 0.5 s and the run's process. On the plain engine a 60 s run takes about a

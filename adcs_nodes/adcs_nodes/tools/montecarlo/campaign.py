@@ -115,6 +115,7 @@ class Campaign:
                 else:
                     backend = LocalBackend(jobs)
                 interrupted = self._execute(backend, todo)
+            self._collect_written(todo)
             for i in range(self.cfg.runs):
                 self.rows.setdefault(i, {'index': i, 'status': 'pending', 'dispersion':
                                          asdict(draw_dispersion(self.cfg, i))})
@@ -133,6 +134,18 @@ class Campaign:
             self.log(f'[montecarlo] resuming: {self.cfg.runs - len(todo)} of {self.cfg.runs} '
                      f'runs already done, {len(todo)} to run')
         return todo
+
+    def _collect_written(self, todo: Sequence[int]) -> None:
+        # A run whose result.json is on disk has finished, even when the interrupt came
+        # between its write and its delivery through the backend (the row would say pending).
+        for i in todo:
+            if self.rows.get(i, {}).get('status') in _FINISHED:
+                continue
+            result = load_result(run_dir_of(self.out, i))
+            if result is not None:
+                result.setdefault('dispersion', asdict(draw_dispersion(self.cfg, i)))
+                self.rows[i] = result
+                self.executed += 1
 
     def _execute(self, backend: Any, todo: Sequence[int]) -> bool:
         t0 = time.monotonic()
