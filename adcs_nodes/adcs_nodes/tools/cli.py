@@ -22,6 +22,10 @@ Commands
 ``adcs montecarlo SCENARIO --runs N [--jobs J] [--scheduler ADDRESS] [--out DIR]``
     Dispersed runs (attitude, rate, magnetometer errors, seeds) in parallel or on a Dask
     cluster; resumable; ``campaign.csv``, ``summary.md``, ``capture_vs_rate.png``.
+``adcs sweep SCENARIO --set KEY=V1,V2,... [--set ...] --runs N [--jobs J] [--out DIR]``
+    One Monte Carlo campaign (plain engine) per point of a parameter grid of scenario keys;
+    resumable; the table of capture, hold and filter convergence per point (``sweep.md``,
+    ``sweep.csv``, ``sweep.png``).
 ``adcs replay BAG [--topics T ...] [--rate F] [--time-offset S | --now]``
     Publish a bag's recorded sensor topics (best effort, original stamps, ``/clock``) as
     drivers would, to run the flight software without ``sim_node``.
@@ -339,6 +343,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('montecarlo', help='dispersed Monte Carlo campaign (parallel, resumable)')
     montecarlo.add_arguments(p)
     p.set_defaults(func=montecarlo.run_from_args)
+
+    from adcs_nodes.tools.montecarlo import sweep
+    p = sub.add_parser('sweep', help='a Monte Carlo campaign per point of a grid of scenario '
+                       'values (plain engine, resumable): capture, hold, filter convergence')
+    sweep.add_arguments(p)
+    p.set_defaults(func=sweep.run_from_args)
 
     from adcs_nodes.tools import replay
     p = sub.add_parser('replay', help='publish recorded sensor topics as a driver would')
