@@ -149,6 +149,10 @@ class FrameLoop:
         cmd_s = float(dyn_p.get('command_period_s', 0.0))
         self.command_ns = seconds_to_ns(cmd_s) if cmd_s > 0 else 0
         self.mounts = Mounts()
+        #: node name -> its ``node_killed`` time [ns]: it fires no frame from then on
+        self.killed_ns = {s.name: seconds_to_ns(float(s.params['killed_at_s'])) for s in specs
+                          if float(s.params.get('killed_at_s', -1.0)) >= 0}
+        self._sensor_node: Dict[str, str] = {}              # sensor topic -> node name
         self.sensors: List[Tuple[str, int, Any]] = []
         self.consumers: List[_Consumer] = []
         for s in specs:
@@ -206,6 +210,7 @@ class FrameLoop:
             model, p['frame_id'], self.clock, _log_into(self.warnings, spec.name),
             sensor_faults(entry.name, str(spec.params.get('faults', '')), self.seed))
         self.mounts.set(p['frame_id'], p.get('q_body_sensor_xyzw', [0.0, 0.0, 0.0, 1.0]))
+        self._sensor_node[entry.node[3]] = spec.name
         self.sensors.append((entry.node[3], seconds_to_ns(p['period_s']), comp))
 
     def _period(self, seconds: float, what: str) -> int:
@@ -359,6 +364,11 @@ class FrameLoop:
                 c.dead[key] = c.misses[key] >= self.dead_after
         return msgs, missing
 
+    def _stopped(self, name: str, t_ns: int) -> bool:
+        """True from the frame of node ``name``'s ``node_killed`` fault on (it publishes
+        nothing more, as the node in a graph: ``LockstepNode._stops_at``)."""
+        return name in self.killed_ns and t_ns >= self.killed_ns[name]
+
     @property
     def t_ns(self) -> int:
         """Elapsed sim time of the next frame [ns]."""
@@ -384,12 +394,12 @@ class FrameLoop:
             self._publish(frame, 'sim/appendages', appendages)
         truth = {'state': state, 'env': env, 'wheels': self._latest['sim/wheels']}
         for topic, period, comp in self.sensors:
-            if t % period == 0:
+            if t % period == 0 and not self._stopped(self._sensor_node[topic], t):
                 msg = comp.step(t, truth)
                 if msg is not None:
                     self._publish(frame, topic, msg)
         for c in self.consumers:
-            if t % c.period_ns == 0:
+            if t % c.period_ns == 0 and not self._stopped(c.name, t):
                 for topic, msg in c.fire(t, *self._inputs(c, t)):
                     self._publish(frame, topic, msg)
         if t >= self.duration_ns:
@@ -550,11 +560,14 @@ def run_plain(sc: Dict[str, Any], duration_s: Optional[float] = None,
     wall = time.monotonic() - t0
     manager = getattr(loop, 'manager', None)
     st = manager.core.status() if manager is not None else {}
-    if code == 0 and st.get('missed_frames', 0) > 0:
-        code = EXIT_DEGRADED
-        message = (f'done, DEGRADED: the controller manager could not forward the active '
-                   f'controller in {st["missed_frames"]} frames (last fault: '
-                   f'{st.get("last_fault") or "?"})')
+    from sim_node.faults import lost_text
+    why = ['lost ' + ', '.join(lost)] if (lost := lost_text(sc.get('faults') or [],
+                                                            loop.t_ns / 1e9)) else []
+    if st.get('missed_frames', 0) > 0:
+        why.append(f'the controller manager could not forward the active controller in '
+                   f'{st["missed_frames"]} frames (last fault: {st.get("last_fault") or "?"})')
+    if code == 0 and why:         # (the launcher's words for a degraded graph run)
+        code, message = EXIT_DEGRADED, 'done, DEGRADED: ' + '; '.join(why)
     message += f' (plain engine: {time.process_time() - cpu0:.2f} s CPU)'
     return RunResult(code, loop.t_ns / 1e9 if not loop.done else duration, wall, loop.k,
                      0, record, '', message, loop.k / wall if wall > 0 else 0.0)

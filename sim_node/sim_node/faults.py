@@ -25,7 +25,21 @@ graph engines see the same faults:
   - ``wheel_torque_lost``: the wheel's motor delivers ``fraction`` of its command (0: none);
   - ``coil_open``: the magnetorquer axis (``x``, ``y``, ``z``) gives no dipole.
 
-Killing a node at a time is not a fault kind yet (a scenario kill is not built).
+* a node fault, in every engine:
+
+  - ``node_killed``: the node (``target``: its name in the graph, ``adcs list`` and the
+    validator name the scenario's) stops for good at ``at_s``: from that frame on it fires no
+    frame and publishes nothing (no data, no progress, no status), as a crashed process. In
+    a graph run (one process per node) the launcher then kills its process with SIGKILL as
+    soon as the run's clock has reached ``at_s``; the node went silent at exactly ``at_s``
+    first, so the series do not depend on when the signal lands and every engine gives the
+    same one. The rest of the graph reacts as to any crash: its consumers wait their
+    timeout, count the missed frames and stop waiting for a dead producer; the manager falls
+    back (a dead controller or estimator), the dynamics applies a zero command (a dead
+    manager); the run ends degraded (exit 3) and its reason names the node
+    (:func:`lost_text`). A scripted fault only: ``adcs fault`` refuses it (kill the process
+    of a running graph yourself: ``adcs status`` shows the pids). The simulated world
+    (``dynamics``, ``environment``) and the recorder cannot be killed this way.
 
 Live faults (``adcs fault KIND TARGET``): one fault as JSON text on :data:`INJECT_TOPIC`
 (``std_msgs/String``, reliable): ``{index, kind, target, at_s, params}``, ``at_s`` null for
@@ -50,7 +64,7 @@ from adcs_nodes.core.lockstep import NS_PER_S, derive_seed
 from adcs_nodes.registry import Entry, Param, register
 
 #: What a fault kind may strike.
-SENSOR, WHEEL, MAGNETORQUER = 'sensor', 'wheel', 'magnetorquer'
+SENSOR, WHEEL, MAGNETORQUER, NODE = 'sensor', 'wheel', 'magnetorquer', 'node'
 AXES = ('x', 'y', 'z')
 
 #: The node parameter that carries a node's faults (JSON text of the scenario's entries).
@@ -82,6 +96,49 @@ _fault('wheel_torque_lost', "the wheel's motor delivers a fraction of its comman
        _DURATION, Param('fraction', 'float', 0.0, '-', 'share of the commanded torque '
                         'delivered', min=0.0, max=1.0))
 _fault('coil_open', 'a magnetorquer axis gives no dipole', (MAGNETORQUER,), _DURATION)
+_fault('node_killed', 'the node stops for good: it publishes nothing more (graph: the '
+       'launcher SIGKILLs its process)', (NODE,))
+
+#: The node parameter that carries a node's kill time [s] (``tools.graph.build_graph`` sets
+#: it; every lockstep node has it: ``adcs_nodes.nodes.params.COMMON``).
+KILLED_PARAM = 'killed_at_s'
+#: Nodes a ``node_killed`` fault cannot strike: the simulated world and the recorder.
+UNKILLABLE = ('dynamics', 'environment', 'recorder')
+
+
+def node_targets(sc: Dict[str, Any]) -> List[str]:
+    """The names of the nodes of scenario ``sc`` (validated or raw) a ``node_killed``
+    fault may strike: its simulated sensors, the estimator, guidance, each controller
+    (``<name>_controller``) and the controller manager."""
+    out = [k for k, cfg in (sc.get('sensors') or {}).items()
+           if not (isinstance(cfg, dict) and cfg.get('external'))]
+    if sc.get('estimator'):
+        out.append('estimator')
+    ctrl = sc.get('controllers')
+    if isinstance(ctrl, dict):
+        out += ['guidance'] + [f'{k}_controller' for k in ctrl if k != 'period_s']
+        out.append('controller_manager')
+    return out
+
+
+def node_kills(faults: Sequence[Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
+    """``{node name: fault}`` of a scenario's validated ``node_killed`` faults (the earliest
+    one per node)."""
+    out: Dict[str, Dict[str, Any]] = {}
+    for f in sorted(faults or [], key=lambda f: float(f['at_s'])):
+        if f['kind'] == 'node_killed':
+            out.setdefault(str(f['target']), f)
+    return out
+
+
+def lost_text(faults: Sequence[Dict[str, Any]], reached_s: float,
+              skip: Sequence[str] = ()) -> List[str]:
+    """``'<node> (killed at sim t = <at_s> s: the scenario's faults[<i>])'`` for each node a
+    ``node_killed`` fault struck by sim time ``reached_s`` (a degraded run's reason), but
+    those in ``skip``."""
+    return [f'{name} (killed at sim t = {float(f["at_s"]):g} s: the scenario\'s '
+            f'faults[{f["index"]}])' for name, f in sorted(node_kills(faults).items())
+            if float(f['at_s']) <= reached_s + 1e-9 and name not in skip]
 
 
 @dataclass
@@ -242,6 +299,10 @@ def check(kind: str, target: str, params: Optional[Dict[str, Any]], sensors: Seq
     ``sensors``, ``wheels`` and the magnetorquer axes, a parameter out of range)."""
     from adcs_nodes import registry
     entry = registry.get('fault', kind)
+    if NODE in entry.targets:
+        raise ValueError(f'{kind} is a scripted fault only (a scenario\'s faults:); to kill a '
+                         'node of a running graph, kill its process (adcs status shows the '
+                         'pids)')
     if SENSOR in entry.targets:
         known = list(sensors)
     elif WHEEL in entry.targets:

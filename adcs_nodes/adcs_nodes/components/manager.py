@@ -48,6 +48,8 @@ MANAGER_PARAMS = (
           'lockstep 0, live 1.5 x the longest period)', min=-1.0, read_only=True),
     Param('wheel_names', 'str[]', [''], '-', "wheel names in JointState order (['']: "
           "wheel0, wheel1, ...)", read_only=True),
+    Param('fallback', 'str[]', [''], '-', "controllers tried in order before the safe one "
+          "when the active command is unusable (['']: none)", read_only=True),
 )
 
 
@@ -75,7 +77,8 @@ def manager_core(p: Dict[str, Any], auto_cfg: Dict[str, Any],
         max_torque=list(p['max_torque_Nm']), stale_after_s=stale, schedule=schedule,
         auto=AutoSequence.from_dict(auto_cfg) if auto_cfg else None,
         estimate_period_s=est_period_s if est_period_s > 0 else None,
-        estimate_users=None if users == ['*'] else users)
+        estimate_users=None if users == ['*'] else users,
+        fallback=[n for n in p['fallback'] if n])
 
 
 class ManagerComponent:

@@ -40,7 +40,11 @@ Rules
   only if the estimate is fresh too (stamped at the estimator's last frame at or before ``t``,
   or older by at most ``stale_after_s``) and usable. Otherwise the safe controller's
   command (same checks) is forwarded in the same frame, ``missed_frames`` counts the frame and
-  ``last_fault`` says why (stale / non-finite / out of range, naming the component). With
+  ``last_fault`` says why (stale / non-finite / out of range, naming the component). With a
+  ``fallback`` list, its controllers are tried first, in order, with the same checks (e.g.
+  ``['magnetic']``: a wheel controller whose wheel check failed hands over to the magnetic law
+  on the magnetorquers, which does not need the wheels, and B-dot is the last resort); the
+  first usable one is forwarded and named in ``last_fault`` (``; fallback to magnetic``). With
   ``latch_fallback`` the safe controller also becomes the active one (a counted switch, no
   zero frame: the safe command is needed now) and the automatic sequence is suspended; by
   default the fallback is per frame and the active controller resumes as soon as its command
@@ -261,6 +265,9 @@ class ControllerManagerCore:
     estimate_users : iterable of str, optional
         Controllers whose command depends on the estimate (default: all but ``safe``; the safe
         controller, B-dot, needs the magnetometer only).
+    fallback : sequence of str
+        Controllers tried in order, before ``safe``, when the active controller's command is
+        not usable (default none: straight to ``safe``).
 
     Raises
     ------
@@ -274,7 +281,8 @@ class ControllerManagerCore:
                  schedule: Iterable[tuple[float, str]] = (),
                  auto: Optional[AutoSequence] = None, latch_fallback: bool = False,
                  estimate_period_s: Optional[float] = None,
-                 estimate_users: Optional[Iterable[str]] = None) -> None:
+                 estimate_users: Optional[Iterable[str]] = None,
+                 fallback: Sequence[str] = ()) -> None:
         names = list(controllers)
         if not names or any(not isinstance(n, str) or not n for n in names):
             raise ValueError(f'controllers must be a non-empty list of names, got {names!r}')
@@ -325,6 +333,11 @@ class ControllerManagerCore:
         if unknown:
             raise ValueError(f'estimate_users: unknown controllers {unknown}; known: {names}')
         self.estimate_users = set(users)
+        self.fallback = [str(n) for n in fallback]
+        bad = [n for n in self.fallback if n not in names]
+        if bad or safe in self.fallback or len(set(self.fallback)) != len(self.fallback):
+            raise ValueError(f'fallback must list configured controllers other than the safe '
+                             f'one ({safe!r}), each once; got {self.fallback}; known: {names}')
         self._initial = initial
         self.reset()
 
@@ -483,20 +496,23 @@ class ControllerManagerCore:
             self.missed_frames += 1
             fault = f'{self.active}: {why}'
             source = ''
-            if self.active != self.safe:
-                cmd, why_safe = self._check(commands.get(self.safe), t)
-                if cmd is not None and est_fault and self.safe in self.estimate_users:
-                    cmd, why_safe = None, f'estimator {est_fault}'
-                if cmd is None:
-                    fault += f'; safe controller {self.safe}: {why_safe}; zero command'
-                else:
-                    fault += f'; fallback to {self.safe}'
-                    source = self.safe
-            else:
+            for name in (self.fallback + [self.safe]) if self.active != self.safe else ():
+                if name == self.active:
+                    continue
+                cmd, why_other = self._check(commands.get(name), t)
+                if cmd is not None and est_fault and name in self.estimate_users:
+                    cmd, why_other = None, f'estimator {est_fault}'
+                if cmd is not None:
+                    fault += f'; fallback to {name}'
+                    source = name
+                    break
+                fault += (f'; safe controller {name}' if name == self.safe else
+                          f'; fallback {name}') + f': {why_other}'
+            if cmd is None:
                 fault += '; zero command'
             self.last_fault = fault
             if self.latch_fallback and self.active != self.safe:
-                self.active = self.safe
+                self.active = source or self.safe
                 self.switch_count += 1
                 self._auto_on = False
         out = self._zero(fault) if cmd is None else self._sanitize(cmd, fault)

@@ -128,7 +128,9 @@ class ControllerManagerNode(ManagedLockstepNode):
         out, _ = self.component.step(t_ns, msgs)
         self.cmd_pub.publish(out)
         self.actuators.publish(out)
-        self._publish_status()
+        # the last frame's status always goes out: a degraded run's missed-frame count is the
+        # one the launcher reads from it (docs/reliability.md, engine parity of the count)
+        self._publish_status(force=self.is_last_frame(t_ns, self._own_period_ns))
 
     def _publish_status(self, force: bool = False) -> None:
         st = self.core.status()

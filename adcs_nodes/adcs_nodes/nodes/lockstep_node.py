@@ -161,6 +161,9 @@ class LockstepNode(node_params.SpecParameters, Node):
             raise ValueError('live_latency_s must be >= 0')
         if not (self.max_sample_age_s > 0 and self.max_future_s >= 0):
             raise ValueError('max_sample_age_s must be > 0 and max_future_s >= 0')
+        killed_at = float(self.param('killed_at_s', -1.0))   # a node_killed fault
+        self.killed_at_ns: Optional[int] = seconds_to_ns(killed_at) if killed_at >= 0 else None
+        self.killed = False
         self.status_period_ns = seconds_to_ns(self.param('status_period_s', 1.0))
         if self.status_period_ns <= 0:
             raise ValueError('status_period_s must be positive')
@@ -514,7 +517,24 @@ class LockstepNode(node_params.SpecParameters, Node):
         self._ext_done_t = max(self._ext_done_t, cover)
         return sorted(out, key=lambda e: e[0])
 
+    def _stops_at(self, t: int) -> bool:
+        """True from the frame of this node's ``node_killed`` fault (``killed_at_s``) on:
+        the node fires no frame and publishes nothing more (no progress, no status), as a
+        crashed process; in a graph run the launcher then kills its process."""
+        if self.killed_at_ns is None or t < self.killed_at_ns:
+            return False
+        if not self.killed:
+            self.killed, self._final_sent = True, True     # (publish_status: nothing more)
+            self.get_logger().error(
+                f'killed by the scenario (a node_killed fault) at t={t / NS_PER_S:g} s: this '
+                'node publishes nothing more')
+        self._next_t = 2 ** 62                # (_try_fire: no frame is ever due again)
+        self._wait_since = None
+        return True
+
     def _fire(self, t: int, missing: List[str]) -> None:
+        if self._stops_at(t):
+            return
         msgs = {name: self.sync.value(name, t) for name in self.sync.names}
         self._wait_since = None
         self._next_t = t + self._own_period_ns
@@ -612,6 +632,8 @@ class LockstepNode(node_params.SpecParameters, Node):
         t = self.elapsed_ns(max(new) if new else now - self.live_latency_ns)
         if last is not None and t <= last:
             return                              # clock did not advance
+        if self._stops_at(t):
+            return
         max_age = self.max_sample_age_s * NS_PER_S
         msgs = {}
         for n in self.sync.names:
@@ -747,7 +769,7 @@ class LockstepNode(node_params.SpecParameters, Node):
         has processed its last frame of the run (``final``); the clock master uses it for
         flow control and to end the run only when every node is done."""
         mark = seen_ns // (PROGRESS_EVERY * self.frame_ns)
-        if mark == self._progress_mark and not final:
+        if (mark == self._progress_mark and not final) or self.killed:
             return
         self._progress_mark = mark
         msg = LockstepStatus()

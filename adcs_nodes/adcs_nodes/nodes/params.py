@@ -511,6 +511,9 @@ COMMON = {p.name: p for p in (
     Param('timing_mode', 'str', '', '-', "lockstep (with the simulator) or live (real "
           "drivers); '': live when started alone", choices=('', 'lockstep', 'live'),
           read_only=True),
+    Param('killed_at_s', 'float', -1.0, 's', 'a node_killed fault: from this sim time on the '
+          'node fires no frame and publishes nothing, as a crashed process (-1: never)',
+          min=-1.0, read_only=True),
 )}
 
 

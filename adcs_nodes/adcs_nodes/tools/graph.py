@@ -275,6 +275,11 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         dyn.params['command_period_s'] = sc['controllers']['period_s']
     for node in nodes:      # every LockstepNode publishes /diagnostics once per sim second
         node.publishes.append('/diagnostics')
+    for f in sc.get('faults', []):      # a node_killed fault: the node stops at at_s
+        if f['kind'] == 'node_killed':
+            node = next(n for n in nodes if n.name == f['target'])
+            at = float(f['at_s'])
+            node.params['killed_at_s'] = min(at, node.params.get('killed_at_s', at))
     _add_publisher_guard(nodes)
     if record:
         topics = list(sc['record']['topics']) or sorted(
@@ -420,6 +425,8 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     if wheels:
         mparams['max_wheel_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
         mparams['wheel_names'] = [w['name'] for w in wheels]
+    if man.get('fallback'):
+        mparams['fallback'] = list(man['fallback'])
     if man['schedule']:
         mparams['schedule_t_s'] = [e['t_s'] for e in man['schedule']]
         mparams['schedule_controller'] = [e['controller'] for e in man['schedule']]

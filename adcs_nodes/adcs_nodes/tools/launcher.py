@@ -713,6 +713,10 @@ class Launcher:
         next(n for n in self.nodes if n.name == 'dynamics').params['result_file'] = \
             self.result_file
         self.procs: Dict[str, subprocess.Popen] = {}
+        from sim_node.faults import node_kills
+        #: node_killed faults {node: fault}: the launcher SIGKILLs the process (graph runs)
+        self.kills = node_kills(scenario.get('faults') or [])
+        self.killed: set = set()
         self.lost: set = set()     # non-essential nodes that died during the run
         self.lost_at: Dict[str, float] = {}   # ... and the sim time they were seen dead [s]
         self._stop_requested = False
@@ -936,13 +940,33 @@ class Launcher:
         return RunResult(code, sim_s, wall, frames, missed, self.record, self.run_dir, message,
                          fps, dict(self.restarts))
 
+    def _kill_due(self, monitor: '_Monitor') -> None:
+        """A ``node_killed`` fault (graph runs): SIGKILL the node's process once the run's
+        clock has reached its time; the node went silent at that frame already
+        (``LockstepNode._stops_at``), so the series do not depend on when the signal lands.
+        Composed, the node only stops (one process for all)."""
+        for name, f in self.kills.items():
+            proc = self.procs.get(name)
+            if self.compose or proc is None or name in self.killed \
+                    or monitor.sim_ns < round(float(f['at_s']) * 1e9):
+                continue
+            self.killed.add(name)
+            try:
+                os.kill(proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            self.log(f'[adcs] {name}: killed (SIGKILL) by the scenario\'s faults[{f["index"]}] '
+                     f'at sim t = {float(f["at_s"]):g} s')
+
     def _degraded(self, monitor: '_Monitor') -> str:
         """Why the run lost its controller or estimator for part of the time ('' if not)."""
+        from sim_node.faults import lost_text
         why = []
-        if self.lost:
-            why.append('lost ' + ', '.join(
-                f'{n} (died at sim t = {self.lost_at.get(n, 0.0):g} s)'
-                for n in sorted(self.lost)))
+        lost = [f'{n} (died at sim t = {self.lost_at.get(n, 0.0):g} s)'
+                for n in sorted(self.lost) if n not in self.kills]
+        lost += lost_text(self.sc.get('faults') or [], monitor.sim_ns / 1e9)
+        if lost:
+            why.append('lost ' + ', '.join(lost))
         st = monitor.controller_status
         if st is not None and st.missed_frames > 0:
             why.append(f'the controller manager could not forward the active controller in '
@@ -1036,6 +1060,7 @@ class Launcher:
                              + (', bag closed' if self.record else ''))
             if monitor.recorder_error:   # also in composed mode, where the process lives on
                 return 1, self._write_failed_message(monitor.recorder_error)
+            self._kill_due(monitor)
             for name, proc in self.procs.items():
                 rc = proc.poll()
                 if rc is None or name in self.lost:

@@ -278,6 +278,9 @@ def check_fault(kind: str, target: str, params: Dict, at_s: Optional[float],
     except ValueError as exc:
         raise LiveError(str(exc)) from None
     craft = sc.get('spacecraft') or {}
+    if 'node' in entry.targets:
+        raise LiveError(f'{kind} is a scripted fault only (a scenario\'s faults:); to kill a '
+                        'node of a running graph, kill its process (adcs status shows the pids)')
     if 'sensor' in entry.targets:
         known = [k for k, cfg in (sc.get('sensors') or {}).items()
                  if not (isinstance(cfg, dict) and cfg.get('external'))]

@@ -170,6 +170,9 @@ SCHEMA: Dict[str, Any] = {
     }),
     'manager': Opt({
         'safe': F('str', 'bdot', 'safe-mode controller (fallback)'),
+        'fallback': F('strlist', [], 'controllers tried in order before the safe one when the '
+                      "active command is unusable (e.g. [magnetic]: a failed wheel's "
+                      'controller hands over to the magnetorquers)'),
         'initial': F('str', '', 'controller active at start (default: auto detumble or safe)'),
         'stale_after_s': F('float', 0.0, 'a command older than this is stale [s] (0: the '
                            'frame stamp only)'),
@@ -197,7 +200,8 @@ SCHEMA: Dict[str, Any] = {
     'faults': F('faults', [], 'scripted faults of the world: list of {at_s, kind, target, '
                 'params}; kinds: `adcs list` (sensor: dropout, nan, stuck, bias_step, '
                 'noise_burst; wheel: wheel_stuck, wheel_torque_lost; magnetorquer axis x|y|z: '
-                'coil_open); params.duration_s: how long (0: to the end)'),
+                'coil_open; node: node_killed); params.duration_s: how long (0: to the end); '
+                'the kinds: the table below'),
 }
 
 _WHEEL_KEYS = {
@@ -641,6 +645,9 @@ def _check_faults(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, int]) 
             known = [k for k, cfg in sensors.items() if not cfg.get('external')]
         elif 'wheel' in entry.targets:
             known = wheels
+        elif 'node' in entry.targets:
+            from sim_node.faults import node_targets
+            known = node_targets(sc)
         else:
             known = ['x', 'y', 'z'] if 'magnetorquer' in craft else []
         if target not in known:
@@ -699,6 +706,13 @@ def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, i
             if man.get(key) and man[key] not in names:
                 checker.fail(lines.get('manager'), f'manager.{key}',
                              f'{man[key]!r} is not a configured controller ({names})')
+        for name in man.get('fallback') or []:
+            if name not in names or name == man.get('safe'):
+                checker.fail(lines.get('manager'), 'manager.fallback',
+                             f'{name!r} is not a configured controller other than the safe '
+                             f'one ({names})')
+        if len(set(man.get('fallback') or [])) != len(man.get('fallback') or []):
+            checker.fail(lines.get('manager'), 'manager.fallback', 'names a controller twice')
         for mode in ('detumble', 'acquire', 'point'):
             name = man.get('auto', {}).get(mode)
             if name and name not in names:
@@ -1137,6 +1151,17 @@ def schema_markdown() -> str:
 
     walk('', schema())
     walk('spacecraft.wheels[i].', _WHEEL_KEYS)
+    rows += ['', '## Fault kinds (`faults:`)', '',
+             'Each entry is `{at_s, kind, target, params}`; the kinds are registered in '
+             '`sim_node/faults.py` (its docstring says how each engine applies them). A '
+             '`node_killed` target is a node of the scenario\'s graph: a simulated sensor '
+             '(its key), `estimator`, `guidance`, `<controller>_controller` or '
+             '`controller_manager`.', '',
+             '| kind | strikes | params | meaning |', '|---|---|---|---|']
+    for name, entry in registry.entries('fault').items():
+        params = ', '.join(f'`{p.name}` ({p.type}, `{p.default}`)' for p in entry.params)
+        rows.append(f'| `{name}` | {", ".join(entry.targets)} | {params or "none"} | '
+                    f'{entry.description} |')
     return '\n'.join(rows) + '\n'
 
 
