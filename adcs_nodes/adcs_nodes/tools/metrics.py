@@ -248,3 +248,75 @@ def angle_between_deg(q_a: ArrayLike, q_b: ArrayLike) -> np.ndarray:
     z = aw * bz + ax * by - ay * bx + az * bw
     w = aw * bw - ax * bx - ay * by - az * bz
     return angle_to_identity_deg(np.stack([x, y, z, w], axis=1))
+
+
+def slerp_at(t_src: ArrayLike, q_src: ArrayLike, t: ArrayLike) -> np.ndarray:
+    """Quaternions ``q_src`` (n, 4) sampled at increasing times ``t_src`` (n,), at times ``t``
+    (m,): spherical linear interpolation between the two samples around each time,
+    ``q_i (q_i^* q_j)^u`` with ``u = (t - t_i) / (t_j - t_i)`` on the shorter arc; a time
+    equal to a sample's gives that sample exactly. Times outside ``[t_src[0], t_src[-1]]``
+    are clamped to the ends (use :func:`estimate_errors_deg` to leave them out). Scalar last,
+    shape (m, 4)."""
+    ts = np.asarray(t_src, dtype=float).reshape(-1)
+    qs = np.asarray(q_src, dtype=float).reshape(-1, 4)
+    t = np.asarray(t, dtype=float).reshape(-1)
+    if ts.size == 0 or ts.size != qs.shape[0]:
+        raise ValueError(f'need as many times as quaternions (> 0), got {ts.size} and '
+                         f'{qs.shape[0]}')
+    i = np.clip(np.searchsorted(ts, t, side='right') - 1, 0, ts.size - 1)
+    j = np.minimum(i + 1, ts.size - 1)
+    span = ts[j] - ts[i]
+    u = np.clip(np.where(span > 0.0, (t - ts[i]) / np.where(span > 0.0, span, 1.0), 0.0),
+                0.0, 1.0)
+    a, b = qs[i], qs[j].copy()
+    b[np.sum(a * b, axis=1) < 0.0] *= -1.0            # the shorter arc
+    dot = np.clip(np.sum(a * b, axis=1) / (np.linalg.norm(a, axis=1)
+                                           * np.linalg.norm(b, axis=1)), -1.0, 1.0)
+    omega = np.arccos(dot)                             # half the rotation angle a -> b
+    small = omega < 1e-9
+    s = np.sin(np.where(small, 1.0, omega))
+    wa = np.where(small, 1.0 - u, np.sin((1.0 - u) * omega) / s)
+    wb = np.where(small, u, np.sin(u * omega) / s)
+    out = wa[:, None] * a + wb[:, None] * b
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    exact = u == 0.0
+    out[exact] = qs[i[exact]]
+    return out
+
+
+def estimate_errors_deg(t_truth: ArrayLike, q_truth: ArrayLike, t_est: ArrayLike,
+                        q_est: ArrayLike) -> Dict[str, Any]:
+    """Attitude error of estimates against the truth interpolated at each estimate's own
+    stamp (:func:`slerp_at`), so an estimate stamped off the truth's grid (a live estimator,
+    an external driver's samples) is judged at its time, not dropped or matched to the
+    nearest truth sample.
+
+    Parameters
+    ----------
+    t_truth, q_truth : array_like, shapes (n,), (n, 4)
+        Truth stamps (increasing, any unit as long as ``t_est`` uses it) and quaternions
+        (scalar last, the same frames as the estimate's).
+    t_est, q_est : array_like, shapes (m,), (m, 4)
+        Estimate stamps and quaternions.
+
+    Returns
+    -------
+    dict
+        ``t`` (k,) the estimate stamps inside the truth's span (the others are left out:
+        no extrapolation), ``deg`` (k,) the angle of ``q_est^* q_truth(t)`` [deg],
+        ``on_grid`` the number of those stamps equal to a truth stamp, ``outside`` the number
+        left out.
+    """
+    tt = np.asarray(t_truth, dtype=float).reshape(-1)
+    te = np.asarray(t_est, dtype=float).reshape(-1)
+    qe = np.asarray(q_est, dtype=float).reshape(-1, 4)
+    if te.size != qe.shape[0]:
+        raise ValueError(f'need as many estimate stamps as quaternions, got {te.size} and '
+                         f'{qe.shape[0]}')
+    if tt.size == 0 or te.size == 0:
+        return {'t': np.zeros(0), 'deg': np.zeros(0), 'on_grid': 0, 'outside': int(te.size)}
+    inside = (te >= tt[0]) & (te <= tt[-1])
+    t_in = te[inside]
+    q_true = slerp_at(tt, q_truth, t_in)
+    return {'t': t_in, 'deg': angle_between_deg(qe[inside], q_true),
+            'on_grid': int(np.isin(t_in, tt).sum()), 'outside': int((~inside).sum())}

@@ -40,27 +40,29 @@ HOLD_RMS_LIMIT_DEG = 2.0     # "of the order of 1 deg"
 
 # ---------------------------------------------------------------------- series
 def estimate_errors(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
-    """Estimate against truth on the estimator's stamps: ``t_s`` (n,) [s], ``att_deg`` (n,)
-    angle between estimated and true ``q_orbit_body``, ``rate_deg_s`` (n,)
-    ``|omega_est - omega_true|`` (ECI rates)."""
-    truth = topics.get('sim/state', {})
+    """Estimate against truth interpolated at the estimator's own stamps (attitude: slerp,
+    :func:`adcs_nodes.tools.metrics.estimate_errors_deg`; rate: linear): ``t_s`` (n,) [s],
+    ``att_deg`` (n,) angle between estimated and true ``q_orbit_body``, ``rate_deg_s`` (n,)
+    ``|omega_est - omega_true|`` (ECI rates). Estimates outside the truth's span are left
+    out; on the truth's grid the truth sample itself is used."""
+    truth = sorted_items(topics.get('sim/state', {}))
+    est = sorted_items(topics.get('adcs/attitude_estimate', {}))
     e0 = epoch_ns(sc)
-    t, q_est, q_true, w_est, w_true = [], [], [], [], []
-    for stamp, m in sorted_items(topics.get('adcs/attitude_estimate', {})):
-        s = truth.get(stamp)
-        if s is None:
-            continue
-        t.append((stamp - e0) / 1e9)
-        q_est.append(quat(m.q_orbit_body))
-        q_true.append(quat(s.q_orbit_body))
-        w_est.append(vec(m.omega_body_eci_body))
-        w_true.append(vec(s.omega_body_eci_body))
-    if not t:
-        return {'t_s': np.zeros(0), 'att_deg': np.zeros(0), 'rate_deg_s': np.zeros(0)}
-    return {'t_s': np.asarray(t),
-            'att_deg': metrics.angle_between_deg(np.asarray(q_est), np.asarray(q_true)),
-            'rate_deg_s': np.degrees(np.linalg.norm(np.asarray(w_est) - np.asarray(w_true),
-                                                    axis=1))}
+    empty = {'t_s': np.zeros(0), 'att_deg': np.zeros(0), 'rate_deg_s': np.zeros(0)}
+    if not truth or not est:
+        return empty
+    t_true = np.array([(k - e0) / 1e9 for k, _ in truth])
+    t_est = np.array([(k - e0) / 1e9 for k, _ in est])
+    err = metrics.estimate_errors_deg(t_true, [quat(m.q_orbit_body) for _, m in truth],
+                                      t_est, [quat(m.q_orbit_body) for _, m in est])
+    if not err['t'].size:
+        return empty
+    inside = (t_est >= t_true[0]) & (t_est <= t_true[-1])
+    w_true = np.array([vec(m.omega_body_eci_body) for _, m in truth])
+    w_est = np.array([vec(m.omega_body_eci_body) for _, m in est])[inside]
+    w_at = np.stack([np.interp(err['t'], t_true, w_true[:, k]) for k in range(3)], axis=1)
+    return {'t_s': err['t'], 'att_deg': err['deg'],
+            'rate_deg_s': np.degrees(np.linalg.norm(w_est - w_at, axis=1))}
 
 
 def estimation_series(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
