@@ -60,8 +60,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
-from adcs_nodes.core.control import (Command, ControlInputs, Target, finite_vector,
-                                     limits_vector, scale_to_limits)
+from adcs_nodes.core.control import Command, ControlInputs, Target
+from adcs_nodes.core.control.wheel_allocation import WheelAllocator
 
 __all__ = ['dcm_euler_321', 'eigen_from_dcm', 'eigen_from_quaternion', 'torque_direction',
            'gyroscopic_rate', 'RateModulusDerivative']
@@ -276,8 +276,11 @@ class EigenaxisTorqueLaw:
 
     def _set_wheels(self, wheel_axes_body: Optional[ArrayLike],
                     wheel_max_torque_Nm: Optional[ArrayLike]) -> None:
-        """Reaction wheels: ``A_w`` (3, n) spin axes, body axes, ``A_w_pinv`` (n, 3) and
-        ``wheel_limit`` (n,) [N m]; ``A_w = None`` without wheels (ideal body torque).
+        """Reaction wheels: ``wheels``, a
+        :class:`~adcs_nodes.core.control.wheel_allocation.WheelAllocator` that scales onto the
+        torque limits (A2) without a momentum headroom (why: that module's docstring), and
+        ``A_w`` (3, n) its unit spin axes, body axes; ``A_w = None`` without wheels (ideal
+        body torque).
 
         Raises
         ------
@@ -285,14 +288,8 @@ class EigenaxisTorqueLaw:
             If the axes are not finite or do not span 3-D, or the limits are bad.
         """
         if wheel_axes_body is not None and np.size(wheel_axes_body) > 0:
-            axes = np.asarray(wheel_axes_body, dtype=float).reshape(-1, 3)
-            n = axes.shape[0]
-            self.A_w = finite_vector(axes, 'wheel_axes_body', (n, 3)).T       # (3, n)
-            if np.linalg.matrix_rank(self.A_w) < 3:
-                raise ValueError('wheel axes must span 3-D for three-axis slews')
-            self.A_w_pinv = np.linalg.pinv(self.A_w)                          # (n, 3)
-            self.wheel_limit = limits_vector(wheel_max_torque_Nm, 'wheel_max_torque_Nm', n,
-                                             allow_zero=False)
+            self.wheels = WheelAllocator(wheel_axes_body, wheel_max_torque_Nm, 'scale')
+            self.A_w = self.wheels.A_w                                        # (3, n)
         else:
             self.A_w = None
 
@@ -361,7 +358,10 @@ def realise(torque: np.ndarray, omega: np.ndarray, inputs: ControlInputs, ctrl,
             info: dict) -> Command:
     """Command with ``torque`` as ideal body torque, or allocated to the wheels of ``ctrl``.
 
-    ``ctrl`` has ``A_w`` (3, n) or None, ``A_w_pinv`` and ``wheel_limit``.
+    ``ctrl`` has ``A_w`` (3, n) or None and ``wheels``
+    (:class:`~adcs_nodes.core.control.wheel_allocation.WheelAllocator`). The wheels must give
+    the body ``torque``: ``-A_w tau_w = torque + omega x A_w h_w``, so the demanded wheel
+    momentum rate is ``h_dot_b = -(torque + omega x A_w h_w)`` (W3), allocated by (A1), (A2).
     """
     info = dict(info, torque_demand=torque)
     if ctrl.A_w is None:
@@ -372,5 +372,5 @@ def realise(torque: np.ndarray, omega: np.ndarray, inputs: ControlInputs, ctrl,
         h = np.asarray(h, dtype=float)
         if h.shape == (ctrl.A_w.shape[1],) and np.all(np.isfinite(h)):
             demand = demand + np.cross(omega, ctrl.A_w @ h)   # cancel omega x h_wheels
-    tau_w, _ = scale_to_limits(-ctrl.A_w_pinv @ demand, ctrl.wheel_limit)
+    tau_w, _, _ = ctrl.wheels.allocate(-demand)                                  # (A1), (A2)
     return Command(wheel_torque=tau_w, info=info)

@@ -57,7 +57,9 @@ Assumptions (not in the paper: breakpoints are only in Figs. 4, 5)
   then minus the target's feed-forward rate ``omega_body_ref_body`` (body axes).
 * Reaction wheels (when configured): motor torques ``tau_w = -pinv(A) (M + omega x A h_w)``
   (``A`` the (3, n) axes; the gyroscopic term of the wheel momentum is cancelled so that the
-  body sees ``M``), scaled by one factor onto the wheel torque limits.
+  body sees ``M``), scaled by one factor onto the wheel torque limits: (A1), (A2) of
+  :mod:`adcs_nodes.core.control.wheel_allocation`, through
+  :func:`adcs_nodes.core.control.eigenaxis.realise`.
 """
 from __future__ import annotations
 

@@ -63,10 +63,10 @@ Prediction and inversion (eqs. (18)-(29))
 
 ``N = 5`` (the paper's "order 5"). Horizon ``tau``: the time left in a maneuver (shrinking
 horizon, 5.1), one control period when stabilising or tracking (5.2). The body feels
-``-h_dot_b``; wheel motor torques ``tau_w`` solve ``A_w tau_w = h_dot_b`` (minimum norm) and are
-then limited per wheel (torque and momentum headroom) by ONE factor that keeps the direction
-(``scale_to_limits`` of :mod:`adcs_nodes.core.control`, paper 000 (31)); ``saturation='clip'``
-clips each wheel instead (digest P17).
+``-h_dot_b``; wheel motor torques ``tau_w`` solve ``A_w tau_w = h_dot_b`` (minimum norm, (A1) of
+:mod:`adcs_nodes.core.control.wheel_allocation`) and are then limited by ONE factor that keeps
+the direction ((A2), paper 000 (31)) or, with ``saturation='clip'``, per wheel ((A3), digest
+P17), then to the momentum headroom over one control period (A4).
 
 Assumptions (not in the paper)
 ------------------------------
@@ -86,8 +86,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.control import (Command, ControlInputs, Target, finite_vector,
-                                     limits_vector, positive, scale_to_limits)
+from adcs_nodes.core.control import Command, ControlInputs, Target, finite_vector, positive
+from adcs_nodes.core.control.wheel_allocation import SATURATION, WheelAllocator
 from adcs_nodes.core.orbit import Q_ORBIT_LVLH
 
 __all__ = ['MPIController', 'euler312_to_dcm', 'dcm_to_euler312', 'body_rate_from_euler312',
@@ -382,7 +382,7 @@ class MPIController:
         On a bad inertia, wheel geometry, limit, period or option.
     """
 
-    SATURATION = ('scale', 'clip')
+    SATURATION = SATURATION
     REFERENCE_TIME = ('t0', 't0_plus_tau')
 
     def __init__(self, inertia_kgm2: ArrayLike, wheel_axes_body: ArrayLike,
@@ -397,22 +397,10 @@ class MPIController:
             raise ValueError(f'inertia_kgm2 must be symmetric positive definite, got '
                              f'{inertia.tolist()}')
         self.inertia = 0.5 * (inertia + inertia.T)
-        axes = np.array(wheel_axes_body, dtype=float).reshape(-1, 3) \
-            if np.size(wheel_axes_body) else np.zeros((0, 3))
-        if axes.shape[0] == 0 or not np.all(np.isfinite(axes)):
+        if not np.size(wheel_axes_body) or not np.all(np.isfinite(
+                np.asarray(wheel_axes_body, dtype=float))):
             raise ValueError('the MPI controller needs reaction wheels (wheel_axes_body is '
                              'empty or not finite)')
-        norms = np.linalg.norm(axes, axis=1)
-        if np.any(norms < 1e-9) or np.linalg.matrix_rank(axes) < 3:
-            raise ValueError('wheel axes must be non-zero and span three dimensions for '
-                             f'three-axis MPI control, got {axes.tolist()}')
-        self.a_w = (axes / norms[:, None]).T                                         # (3, n)
-        self.a_w_pinv = np.linalg.pinv(self.a_w)                                     # (n, 3)
-        n = axes.shape[0]
-        self.max_torque = limits_vector(wheel_max_torque_Nm, 'wheel_max_torque_Nm', n,
-                                        allow_zero=False)
-        self.max_momentum = limits_vector(wheel_max_momentum_Nms, 'wheel_max_momentum_Nms', n,
-                                          allow_zero=False)
         self.period = positive(period_s, 'period_s', 's')
         if isinstance(series_order, bool) or not isinstance(series_order, (int, np.integer)) \
                 or not 1 <= series_order <= 30:
@@ -436,6 +424,12 @@ class MPIController:
         self.saturation = saturation
         self.reference_time = reference_time
         self.exact = bool(exact_transition)
+        # (A1)-(A4) of core/control/wheel_allocation.py: A_w^+ h_dot_b, the torque limit of
+        # ``saturation`` and the momentum headroom over one control period.
+        self.wheels = WheelAllocator(wheel_axes_body, wheel_max_torque_Nm, saturation,
+                                     max_momentum_Nms=wheel_max_momentum_Nms,
+                                     period_s=self.period)
+        self.a_w = self.wheels.A_w                                                   # (3, n)
 
     @property
     def n_wheels(self) -> int:
@@ -452,17 +446,6 @@ class MPIController:
         if math.isfinite(ttg) and ttg > 0.0:
             return max(ttg, self.min_horizon)
         return self.hold_horizon
-
-    def _limit(self, tau_w: np.ndarray, h_w: np.ndarray) -> tuple[np.ndarray, float]:
-        """Torque limit (one factor keeping the direction, or per-wheel clip), then the
-        momentum headroom over one period per wheel (where the direction cannot be kept)."""
-        if self.saturation == 'clip':
-            out, sigma = np.clip(tau_w, -self.max_torque, self.max_torque), 1.0
-        else:
-            out, sigma = scale_to_limits(tau_w, self.max_torque)
-        hi = np.maximum((self.max_momentum - h_w) / self.period, 0.0)
-        lo = np.minimum((-self.max_momentum - h_w) / self.period, 0.0)
-        return np.clip(out, lo, hi), sigma
 
     def update(self, inputs: ControlInputs, t: float, dt: float) -> Command:
         """Wheel torques for frame time ``t`` [s] (see the module docstring).
@@ -527,10 +510,10 @@ class MPIController:
                                 'period: zero command')
         h_dot = wheel_momentum_rate(u, x, inertia_t, h_t, omega0, self.literal)           # (27)
         h_dot_b = c_of @ h_dot                                                            # (28)
-        tau_w = self.a_w_pinv @ h_dot_b
+        tau_w = self.wheels.torques(h_dot_b)                                             # (A1)
         if not np.all(np.isfinite(tau_w)):
             return Command.zero(n, 'non-finite wheel torque demand: zero command')
-        out, sigma = self._limit(tau_w, h_w)
+        out, sigma = self.wheels.limit(tau_w, h_w)                                   # (A2)-(A4)
         info = {'horizon_s': tau, 'x': x, 'x_star': x_star, 'u': u,
                 'h_dot_body_demand': h_dot_b, 'sigma': sigma,
                 'saturated': bool(np.any(np.abs(out - tau_w) > 1e-12))}

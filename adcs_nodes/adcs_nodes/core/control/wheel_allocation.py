@@ -1,0 +1,153 @@
+"""Reaction-wheel torque allocation, written once for every wheel controller (pure numpy).
+
+Used by the MPI law (:mod:`adcs_nodes.core.control.mpi`, paper 001) and by the eigenaxis torque
+laws (:mod:`adcs_nodes.core.control.eigenaxis`: the fuzzy slew of paper 003 and the reference
+slew). The wheel model is the plant's (:mod:`sim_node.models.actuators`, (W1)-(W4))::
+
+    h_b    = A_w h_w                 wheel momentum in body axes; A_w (3, n), column k the
+                                     unit spin axis of wheel k, body axes                 (W1)
+    h_dot_b = A_w tau_w              tau_w (n,): motor torques; the body feels -A_w tau_w  (W3)
+
+Allocation (minimum-norm least squares; ``A_w`` must span 3-D)::
+
+    tau_w = A_w^+ h_dot_b,   A_w^+ = A_w^T (A_w A_w^T)^-1                                  (A1)
+
+so ``A_w tau_w = h_dot_b`` exactly and ``tau_w`` has the smallest norm among the solutions
+(for three orthogonal wheels ``A_w^+ = A_w^T``).
+
+Torque limit ``|tau_i| <= l_i``, one of two policies (``saturation``)::
+
+    'scale':  tau_w <- sigma tau_w,  sigma = min(1, min_i l_i / |tau_i|)                   (A2)
+              (paper 000, eq. (31): keeps the direction of the body torque)
+    'clip':   tau_i <- clip(tau_i, -l_i, l_i)  (what each wheel driver does on its own)    (A3)
+
+Optional momentum headroom over one hold period ``T`` (``max_momentum_Nms`` given), so that
+``h_i + T tau_i`` stays within ``[-H_i, H_i]`` (the plant's own rule, ``WheelCluster.apply``
+with ``dt``; per wheel, so it cannot keep the direction)::
+
+    tau_i <- clip(tau_i, min((-H_i - h_i) / T, 0), max((H_i - h_i) / T, 0))                (A4)
+
+Why both policies stay: the MPI law (paper 001) offers ``'scale'`` and ``'clip'`` (digest P17:
+the paper does not say which, and its settle times depend on it) and applies (A4), because it
+knows its hold period and paper 001's 55 N m s limit. The eigenaxis laws scale (A2) without
+(A4): paper 003 gives only a torque limit, their registry entries take no momentum limit, and
+the plant stops a wheel at its momentum limit anyway; adding (A4) there would change the
+shipped fuzzy and reference-slew results (demo mission) for no claim of their paper.
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional, Tuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from adcs_nodes.core.control import limits_vector, scale_to_limits
+
+__all__ = ['WheelAllocator', 'SATURATION']
+
+#: The torque-limit policies: (A2) and (A3).
+SATURATION = ('scale', 'clip')
+
+
+class WheelAllocator:
+    """Motor torques of a wheel cluster for a demanded body-axis wheel momentum rate.
+
+    Parameters
+    ----------
+    wheel_axes_body : array_like, shape (n, 3)
+        Spin axes, body axes (normalised here, as the plant does); they must span 3-D.
+    max_torque_Nm : float or array_like, shape (n,)
+        Per-wheel torque limits ``l_i > 0`` [N m] (``inf``: none).
+    saturation : {'scale', 'clip'}
+        (A2) one factor keeping the direction, or (A3) per-wheel clipping.
+    max_momentum_Nms : float or array_like, shape (n,), optional
+        Per-wheel momentum limits ``H_i > 0`` [N m s] (``inf``: none) for the headroom (A4);
+        None: no headroom check (the eigenaxis laws, see the module docstring).
+    period_s : float, optional
+        Hold period ``T`` [s] of (A4); required with ``max_momentum_Nms``.
+
+    Raises
+    ------
+    ValueError
+        Axes empty, not finite, of zero length or not spanning 3-D; bad limits; an unknown
+        ``saturation``; ``max_momentum_Nms`` without a positive finite ``period_s``.
+    """
+
+    def __init__(self, wheel_axes_body: ArrayLike, max_torque_Nm: ArrayLike,
+                 saturation: str = 'scale', max_momentum_Nms: Optional[ArrayLike] = None,
+                 period_s: Optional[float] = None) -> None:
+        axes = np.array(wheel_axes_body, dtype=float).reshape(-1, 3) \
+            if np.size(wheel_axes_body) else np.zeros((0, 3))
+        if axes.shape[0] == 0 or not np.all(np.isfinite(axes)):
+            raise ValueError('wheel_axes_body is empty or not finite')
+        norms = np.linalg.norm(axes, axis=1)
+        if np.any(norms < 1e-9) or np.linalg.matrix_rank(axes) < 3:
+            raise ValueError('wheel axes must be non-zero and span three dimensions, got '
+                             f'{axes.tolist()}')
+        if saturation not in SATURATION:
+            raise ValueError(f'saturation must be one of {SATURATION}, got {saturation!r}')
+        n = axes.shape[0]
+        self.A_w = (axes / norms[:, None]).T                                        # (3, n)
+        self.A_w_pinv = np.linalg.pinv(self.A_w)                                    # (A1)
+        self.max_torque = limits_vector(max_torque_Nm, 'wheel_max_torque_Nm', n,
+                                        allow_zero=False)
+        self.saturation = saturation
+        self.max_momentum: Optional[np.ndarray] = None
+        self.period: Optional[float] = None
+        if max_momentum_Nms is not None:
+            self.max_momentum = limits_vector(max_momentum_Nms, 'wheel_max_momentum_Nms', n,
+                                              allow_zero=False)
+            p = float(period_s) if period_s is not None else float('nan')
+            if not (math.isfinite(p) and p > 0.0):
+                raise ValueError(f'period_s must be finite and > 0 [s] with a momentum limit, '
+                                 f'got {period_s!r}')
+            self.period = p
+
+    @property
+    def n(self) -> int:
+        """Number of wheels."""
+        return self.A_w.shape[1]
+
+    def torques(self, h_dot_body: ArrayLike) -> np.ndarray:
+        """Unlimited motor torques (A1) [N m], shape (n,), for ``h_dot_b`` (3,) [N m]."""
+        return self.A_w_pinv @ np.asarray(h_dot_body, dtype=float)
+
+    def limit(self, tau_w: ArrayLike, h_w: Optional[ArrayLike] = None
+              ) -> Tuple[np.ndarray, float]:
+        """Torque limit (A2) or (A3), then the momentum headroom (A4) when configured.
+
+        Parameters
+        ----------
+        tau_w : array_like, shape (n,)
+            Motor torques [N m], finite.
+        h_w : array_like, shape (n,), optional
+            Wheel momenta [N m s] for (A4); required when a momentum limit is configured.
+
+        Returns
+        -------
+        tau_out : numpy.ndarray, shape (n,)
+            Limited motor torques [N m].
+        sigma : float
+            The factor of (A2) (1 with ``'clip'`` or when nothing is scaled).
+        """
+        tau_w = np.asarray(tau_w, dtype=float)
+        if self.saturation == 'clip':
+            out, sigma = np.clip(tau_w, -self.max_torque, self.max_torque), 1.0      # (A3)
+        else:
+            out, sigma = scale_to_limits(tau_w, self.max_torque)                     # (A2)
+        if self.max_momentum is None:
+            return out, sigma
+        if h_w is None:
+            raise ValueError('h_w is required with a momentum limit')
+        h_w = np.asarray(h_w, dtype=float)
+        hi = np.maximum((self.max_momentum - h_w) / self.period, 0.0)
+        lo = np.minimum((-self.max_momentum - h_w) / self.period, 0.0)
+        return np.clip(out, lo, hi), sigma                                           # (A4)
+
+    def allocate(self, h_dot_body: ArrayLike, h_w: Optional[ArrayLike] = None
+                 ) -> Tuple[np.ndarray, float, np.ndarray]:
+        """(A1) then :meth:`limit`: ``(tau_out, sigma, tau_unlimited)``, each [N m] or [-]."""
+        tau_w = self.torques(h_dot_body)
+        out, sigma = self.limit(tau_w, h_w)
+        return out, sigma, tau_w
