@@ -104,14 +104,22 @@ class EstimatorComponent:
         self.update_count = 0
         self.rejected_count = 0
         self.last_rejection = ''
+        #: rejections by kind: ``timeout`` (a stale lockstep input), ``check`` (a sample that
+        #: failed conditioning), ``late`` (older than the filter), ``filter`` (the core's)
+        self.rejected_by: Dict[str, int] = {}
+        #: samples that reached the core, per input key, and the stamp [ns, elapsed] of the
+        #: last one (what "usable" means for the starvation check)
+        self.samples_used: Dict[str, int] = {}
+        self.last_used_ns: Dict[str, int] = {}
         self._last_t: Optional[int] = None
         self.last_step = None
         self.last_ref = None
 
     # ------------------------------------------------------------------ inputs
-    def reject(self, why: str) -> None:
-        """Count and log a rejected sample."""
+    def reject(self, why: str, kind: str = 'check') -> None:
+        """Count and log a rejected sample (``kind``: see ``rejected_by``)."""
         self.rejected_count += 1
+        self.rejected_by[kind] = self.rejected_by.get(kind, 0) + 1
         self.last_rejection = why
         self.log('warning', f'measurement rejected: {why}')
 
@@ -149,7 +157,11 @@ class EstimatorComponent:
         """Fresh, checked samples of frame ``t_ns`` -> the core's :class:`EstimatorInputs`."""
         def take(key, convert):
             msg = msgs.get(key)
-            return convert(msg) if fresh(key, msg) else None
+            value = convert(msg) if fresh(key, msg) else None
+            if value is not None and convert != self.field_var:
+                self.samples_used[key] = self.samples_used.get(key, 0) + 1
+                self.last_used_ns[key] = t_ns
+            return value
         return EstimatorInputs(
             self.reference.at(t_ns / NS_PER_S), b_body=take('mag', self.field_body),
             horizon_roll_pitch=take('horizon', self.horizon),
@@ -171,12 +183,12 @@ class EstimatorComponent:
         """
         t = t_ns / NS_PER_S
         for topic in missing:
-            self.reject(f'stale input {topic} at t={t:g} s (timeout)')
+            self.reject(f'stale input {topic} at t={t:g} s (timeout)', 'timeout')
         for s_ns, group in itertools.groupby(samples, key=lambda e: e[0]):
             group = {key: msg for _, key, msg in group}    # one instant: taken together
             if self._last_t is not None and s_ns < self._last_t:
                 self.reject(f'{", ".join(group)} sample stamped {s_ns / NS_PER_S:g} s: older '
-                            'than the filter (late)')
+                            'than the filter (late)', 'late')
                 continue
             self._core_step(s_ns, self.inputs_for(s_ns, {**group, 'cmd': msgs.get('cmd')},
                                                   lambda k, m, g=group: k in g))
@@ -206,7 +218,7 @@ class EstimatorComponent:
         self.last_step = step
         self.update_count += step.updates
         for why in step.rejections:
-            self.reject(why)
+            self.reject(why, 'filter')
         return step
 
     def estimate_msg(self, t_ns: int, ref: Any, step: Any) -> AttitudeState:

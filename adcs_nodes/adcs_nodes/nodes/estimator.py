@@ -77,6 +77,16 @@ class EstimatorNode(ManagedLockstepNode):
     last_rejection = property(lambda self: self.component.last_rejection)
     #: filter restarts (a diverged filter reset to its initial estimate), on /diagnostics
     resets = property(lambda self: int(getattr(self.component.core, 'resets', 0)))
+    #: the component's rejections by kind (check, late, timeout, filter), in the run summary
+    rejected_by = property(lambda self: self.component.rejected_by)
+
+    def used_counts(self) -> Dict[str, int]:
+        """Samples that reached the filter, per input (the run summary)."""
+        return dict(self.component.samples_used)
+
+    def last_usable_ns(self, name: str):
+        """A sample is usable when it reached the filter (timing and conditioning passed)."""
+        return self.component.last_used_ns.get(name)
 
     def _reject(self, why: str) -> None:
         self.component.reject(why)

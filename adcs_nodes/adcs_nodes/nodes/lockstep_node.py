@@ -38,6 +38,7 @@ Timing modes (parameter ``timing_mode``, DESIGN section 6)
 from __future__ import annotations
 
 import copy
+import json
 import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
@@ -90,6 +91,15 @@ SENSOR_PREFIXES = ('sensors/', '/sensors/')
 #: ``undecodable``: raw CDR bytes that do not decode (only a stranger on the domain sends them;
 #: ``nodes/cdr.py``), in either timing mode.
 REJECT_REASONS = ('zero_stamp', 'future', 'too_old', 'out_of_order', 'late', 'undecodable')
+#: Wall seconds a consumer of an external driver's topic waits, before it says ready, for a
+#: publisher on that topic to be matched; then it starts without it (and is starved: the run
+#: is degraded, with the topic named).
+EXTERNAL_WAIT_S = 60.0
+#: Wall seconds between two "waiting for the driver" lines.
+EXTERNAL_WAIT_LOG_S = 10.0
+#: The line a flight-software node logs at its last frame, followed by its summary as JSON
+#: (the launcher prints it per node: ``tools.launcher.node_summaries``).
+SUMMARY_PREFIX = 'run summary '
 
 
 #: ``rclpy.node.Node`` options of every lockstep node: what the params file or ``-p`` gives is
@@ -170,6 +180,14 @@ class LockstepNode(node_params.SpecParameters, Node):
         #: live mode: rejected samples by reason (see REJECT_REASONS), and the last reason
         self.rejected_samples: Dict[str, int] = {r: 0 for r in REJECT_REASONS}
         self.last_rejected_sample = ''
+        #: samples replaced by a newer one before any frame used them (live and sample timing)
+        self.superseded_samples = 0
+        #: samples used per input name (frame inputs: each new stamp a frame took)
+        self._used_counts: Dict[str, int] = {}
+        self._used_mark: Dict[str, int] = {}
+        #: sample timing: inputs with nothing usable for dead_after_frames of their periods:
+        #: ``{name: {'since_s': last usable stamp (0: none), 'frames': starved frames}}``
+        self.starved: Dict[str, Dict[str, float]] = {}
         self._status_mark = -1
         self._lockstep_status_wall = time.monotonic()
         self.frames = 0
@@ -390,6 +408,8 @@ class LockstepNode(node_params.SpecParameters, Node):
         self._ext_latest: Dict[str, int] = {}
         self._ext_done_t = -1                    # the last frame the samples were taken for
         self._ext_used: Dict[str, int] = {}
+        self._ext_usable: Dict[str, int] = {}    # elapsed stamp of the last usable sample
+        self._ext_period_ns: Dict[str, int] = {}   # the producer's declared period
         for name, spec in inputs.items():
             if len(spec) not in (3, 4):
                 raise ValueError(f'input {name}: want (msg_type, topic, period_s[, kind])')
@@ -398,6 +418,8 @@ class LockstepNode(node_params.SpecParameters, Node):
             p_ns = seconds_to_ns(p_s) if p_s else 0
             if not self.live and p_ns % self.frame_ns:
                 raise ValueError(f'input {name}: period {p_s} s is not a multiple of the frame')
+            if name in self.external:
+                self._ext_period_ns[name] = p_ns
             if kind is InputKind.LATEST or name in self.external:
                 p_ns = 0
             specs[name] = (p_ns, kind if p_ns else InputKind.LATEST)
@@ -409,7 +431,11 @@ class LockstepNode(node_params.SpecParameters, Node):
             sub = self.subscription(msg_type, topic, cb, qos)
             self._topics_of[name] = sub.topic_name
         self.sync = FrameSync(specs, dead_after=self.dead_after)
+        self._frame_inputs = [n for n in specs if n not in self.external]
         self._on_frame = on_frame
+        self._ext_wait_t0: Optional[float] = None
+        self._ext_wait_logged = 0.0
+        self._ext_gave_up = False
         self._next_t = 0
         self._seen_t = -1
         self._wait_since: Optional[float] = None
@@ -419,6 +445,7 @@ class LockstepNode(node_params.SpecParameters, Node):
             #: the sample of each trigger input last taken for a frame (a late one never is)
             self._live_taken: Dict[str, Tuple[int, Any]] = {}
             self._live_last_t: Optional[int] = None
+            self._live_read: Dict[str, int] = {}     # the stamp each input's last tick read
             self._live_triggers = [n for n, (p, k) in specs.items() if k is InputKind.FRAME]
             self.create_timer(self._own_period_ns / NS_PER_S, self._live_tick)
             self.get_logger().info(
@@ -494,6 +521,7 @@ class LockstepNode(node_params.SpecParameters, Node):
                                     'stamp was processed')
                 return
             self._ext_queue[name].append((t, msg))
+            self._ext_usable[name] = t
             self.sync.add(name, t, msg)
         return cb
 
@@ -543,15 +571,98 @@ class LockstepNode(node_params.SpecParameters, Node):
         self.sim_t_ns = t
         self.apply_parameters()              # run-time parameter changes: at frame boundaries
         self._on_frame(t, msgs, missing)
-        if self.external:        # consumers that did not take their samples: now covered
-            self.external_samples(t)
-            for n in self.external:
-                if msgs.get(n) is not None:
-                    self._ext_used[n] = stamp_ns(msgs[n].header.stamp)
+        self._count_used(msgs)
+        if self.external:
+            self._external_done(t, msgs)
         last = self.is_last_frame(t, self._own_period_ns)
+        if last and not self.SIMULATED_WORLD:
+            self.get_logger().info(SUMMARY_PREFIX + json.dumps(self.run_summary(),
+                                                               sort_keys=True))
         self.frame_done(t, final=last)
         if last:
             self.report_progress(max(t, self._seen_t), final=True)
+
+    def _count_used(self, msgs: Dict[str, Any]) -> None:
+        """Samples used by a frame: each new stamp of a frame-timed input, once."""
+        for n in self._frame_inputs:
+            m = msgs.get(n)
+            if m is not None:
+                s = stamp_ns(m.header.stamp)
+                if s > self._used_mark.get(n, -1):
+                    self._used_mark[n] = s
+                    self._used_counts[n] = self._used_counts.get(n, 0) + 1
+
+    def _external_done(self, t: int, msgs: Dict[str, Any]) -> None:
+        """After frame ``t``: the samples in sample timing its consumer did not take itself
+        (a controller reads the newest one) are covered now: the newest is used, the older
+        ones never read by a frame are superseded; then the starvation check."""
+        left = self.external_samples(t)
+        prev = dict(self._ext_used)
+        for n in self.external:
+            if msgs.get(n) is not None:
+                s = stamp_ns(msgs[n].header.stamp)
+                if s > prev.get(n, -1):
+                    self._used_counts[n] = self._used_counts.get(n, 0) + 1
+                self._ext_used[n] = s
+        for s_el, n, _ in left:
+            s = self.epoch_ns + s_el
+            if prev.get(n, -1) < s < self._ext_used.get(n, -1):
+                self.superseded_samples += 1
+        self._check_starved(t)
+
+    def last_usable_ns(self, name: str) -> Optional[int]:
+        """Elapsed stamp of the last usable sample of input ``name`` in sample timing (one
+        that passed the timing checks; a consumer that checks more overrides it), or None."""
+        return self._ext_usable.get(name)
+
+    def _check_starved(self, t: int) -> None:
+        """Sample timing: an input with nothing usable for ``dead_after_frames`` of its
+        periods (the larger of the producer's declared period and this node's) starves this
+        node: logged once per episode with the topic, counted per frame, and in the run
+        summary (the launcher then says the run is degraded, exit 3)."""
+        for n in sorted(self.external):
+            period = max(self._own_period_ns, self._ext_period_ns.get(n, 0))
+            last = self.last_usable_ns(n)
+            since = 0 if last is None else last
+            topic = self._topics_of.get(n, n)
+            ent = self.starved.get(n)
+            if t - since > self.dead_after * period:
+                if ent is None or ent.get('over', False):
+                    ent = self.starved.setdefault(n, {'since_s': since / NS_PER_S, 'frames': 0,
+                                                      'episodes': 0})
+                    ent['since_s'], ent['over'] = since / NS_PER_S, False
+                    ent['episodes'] += 1
+                    self.get_logger().error(
+                        f'{topic}: nothing usable for more than {self.dead_after} periods of '
+                        f'{period / NS_PER_S:g} s (last usable sample at t={since / NS_PER_S:g}'
+                        f' s, now t={t / NS_PER_S:g} s): this node is starved and the run is '
+                        'degraded')
+                ent['frames'] += 1
+            elif ent is not None and not ent.get('over', False):
+                ent['over'] = True
+                self.get_logger().info(f'{topic}: usable samples again at t={t / NS_PER_S:g} s')
+
+    def used_counts(self) -> Dict[str, int]:
+        """Samples used per input name (a node whose component knows better overrides it)."""
+        return dict(self._used_counts)
+
+    def run_summary(self) -> Dict[str, Any]:
+        """What this node did with its inputs, by topic: ``samples_used``, ``rejected`` by
+        reason (timing reasons, and the component's own checks when it has them),
+        ``superseded``, filter ``resets``, ``starved`` inputs, frames and missed frames."""
+        topics = getattr(self, '_topics_of', {})
+        rejected = {r: n for r, n in self.rejected_samples.items() if n}
+        for r, n in dict(getattr(self, 'rejected_by', {}) or {}).items():
+            if n:
+                rejected[r] = rejected.get(r, 0) + int(n)
+        return {'frames': int(self.frames), 'missed_frames': int(self.missed_frames),
+                'samples_used': {topics.get(n, n): int(v)
+                                 for n, v in sorted(self.used_counts().items())},
+                'rejected': rejected, 'superseded': int(self.superseded_samples),
+                'resets': int(getattr(self, 'resets', 0) or 0),
+                'starved': {topics.get(n, n): {'since_s': e['since_s'],
+                                               'frames': int(e['frames'])}
+                            for n, e in sorted(self.starved.items())}}
 
     def _frame_watchdog(self) -> None:
         if self._wait_since is None or time.monotonic() - self._wait_since < self.timeout_s:
@@ -603,6 +714,8 @@ class LockstepNode(node_params.SpecParameters, Node):
                 self._reject_sample(name, 'out_of_order', 'not newer than the sample before '
                                     f'({(cur[0] - s) / NS_PER_S:.3f} s older)')
                 return
+            if cur is not None and cur[0] > self._live_read.get(name, -1):
+                self.superseded_samples += 1          # no tick read it
             self._live_latest[name] = (s, msg)
         return cb
 
@@ -639,6 +752,8 @@ class LockstepNode(node_params.SpecParameters, Node):
         for n in self.sync.names:
             ent = self._live_latest.get(n)
             msgs[n] = None if ent is None or now - ent[0] > max_age else ent[1]
+            if ent is not None:
+                self._live_read[n] = ent[0]
         self._live_last_t = t
         self.frames += 1
         self.sim_t_ns = t
@@ -676,6 +791,9 @@ class LockstepNode(node_params.SpecParameters, Node):
                'rejected_samples': str(sum(self.rejected_samples.values())),
                'last_rejected_sample': self.last_rejected_sample}
         out.update({f'rejected_{r}': str(v) for r, v in self.rejected_samples.items()})
+        out['superseded_samples'] = str(self.superseded_samples)
+        out['starved_inputs'] = ', '.join(topics.get(n, n) for n, e in self.starved.items()
+                                          if not e.get('over', False))
         guard = getattr(self, '_publisher_guard', None)
         if guard is not None:                 # publisher identity (publisher_guard)
             out.update(guard.core.diagnostic_values())
@@ -720,6 +838,37 @@ class LockstepNode(node_params.SpecParameters, Node):
                     missing[-1] += f' (discovery knows {known})'
         return missing
 
+    def _external_unmatched(self) -> List[str]:
+        """The topics of inputs in sample timing with no publisher matched yet (an external
+        driver not started, on another domain, or with a QoS that cannot match): the node
+        says ready only once each has one, or after :data:`EXTERNAL_WAIT_S` of wall time
+        (then it starts without it and is starved). Not part of :meth:`unmatched`, so the
+        launcher's self-healing never restarts a node for a driver that is not there."""
+        external = getattr(self, 'external', ())
+        if not external or self._ext_gave_up:
+            return []
+        missing = sorted(self._topics_of[n] for n in external
+                         if self._subs[self._topics_of[n]].get_publisher_count() < 1)
+        if not missing:
+            return []
+        now = time.monotonic()
+        if self._ext_wait_t0 is None:
+            self._ext_wait_t0 = now
+        waited = now - self._ext_wait_t0
+        if waited > EXTERNAL_WAIT_S:
+            self._ext_gave_up = True
+            self.get_logger().error(
+                f'no publisher on {", ".join(missing)} after {EXTERNAL_WAIT_S:g} s: starting '
+                'without it (this node will be starved and the run degraded)')
+            return []
+        if self._ext_wait_logged == 0.0 or now - self._ext_wait_logged >= EXTERNAL_WAIT_LOG_S:
+            self._ext_wait_logged = now
+            self.get_logger().warning(
+                f'waiting for a publisher on {", ".join(missing)} (an external driver: start '
+                f'it on this run\'s ROS_DOMAIN_ID; any QoS) for {waited:.0f} s; the run starts '
+                f'when it is matched, or without it after {EXTERNAL_WAIT_S:g} s')
+        return missing
+
     def start_handshake(self, on_ready: Optional[Callable[[], None]] = None) -> None:
         """Poll matching every 20 ms; when complete publish ready and call ``on_ready``."""
         self._on_ready = on_ready
@@ -735,6 +884,8 @@ class LockstepNode(node_params.SpecParameters, Node):
                 self._hs_warned = waited
                 self.get_logger().warning(f'still waiting for endpoints after {waited:.0f} s: '
                                           + ', '.join(self.unmatched(graph_view=True)))
+            return
+        if self._external_unmatched():
             return
         self._hs_timer.cancel()
         self.destroy_timer(self._hs_timer)

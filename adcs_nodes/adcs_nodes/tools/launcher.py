@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import glob
 import json
 import math
 import os
@@ -139,8 +140,56 @@ def external_devices(sc: Dict[str, Any]) -> List[str]:
             entry = registry.get('sensor', name)
             out.append(f'external {name}: no simulated node; expecting a driver publishing '
                        f'{entry.node[3]} ({entry.node[4]}) on ROS_DOMAIN_ID of this run '
-                       '(docs/topics.md)')
+                       '(docs/topics.md); frame 0 waits until its publisher is matched (at '
+                       'most 60 s)')
     return out
+
+
+_SUMMARY = re.compile(r'\[([A-Za-z0-9_./]+)\]: run summary (\{.*\})\s*$', re.M)
+
+
+def node_summaries(run_dir: str) -> Dict[str, Dict[str, Any]]:
+    """Each flight-software node's run summary (the JSON it logs at its last frame,
+    ``LockstepNode.run_summary``), by node name, from the run's logs (either deployment)."""
+    out: Dict[str, Dict[str, Any]] = {}
+    for path in sorted(glob.glob(os.path.join(run_dir, 'logs', '*.log'))):
+        try:
+            with open(path, encoding='utf-8', errors='replace') as fh:
+                text = fh.read()
+        except OSError:
+            continue
+        for m in _SUMMARY.finditer(text):
+            try:
+                out[m.group(1).rsplit('.', 1)[-1]] = json.loads(m.group(2))
+            except ValueError:
+                continue
+    return out
+
+
+def summary_lines(summaries: Dict[str, Dict[str, Any]]) -> List[str]:
+    """One line per node with inputs: samples used per topic, rejected by reason,
+    superseded, filter resets (issue 23)."""
+    lines = []
+    for name, s in sorted(summaries.items()):
+        used = s.get('samples_used') or {}
+        if not used and not s.get('rejected') and not s.get('starved'):
+            continue
+        rejected = ', '.join(f'{r} {n}' for r, n in sorted(s.get('rejected', {}).items()))
+        lines.append(f'{name}: samples used ' + (', '.join(
+            f'{t} {n}' for t, n in sorted(used.items())) or 'none')
+            + f'; rejected {rejected or "none"}; superseded {s.get("superseded", 0)}; '
+            f'filter resets {s.get("resets", 0)}')
+    return lines
+
+
+def starved_text(summaries: Dict[str, Dict[str, Any]]) -> str:
+    """The degraded reason of the nodes that got nothing usable from a topic for too long
+    ('' if none)."""
+    return '; '.join(
+        f'{name} got nothing usable from {topic} (external or sample-timed input) for '
+        f'{e["frames"]} of its frames from sim t = {e["since_s"]:g} s'
+        for name, s in sorted(summaries.items())
+        for topic, e in sorted((s.get('starved') or {}).items()))
 
 
 def heal_decision(expected: List[str], ready: Iterable[str], waiting: Dict[str, Tuple[float, str]],
@@ -919,11 +968,14 @@ class Launcher:
             if self.restarts:
                 message += (f'\n[adcs] restarts: {sum(self.restarts.values())} before frame 0 '
                             f'(self-healing: ' + '; '.join(self.restart_notes) + ')')
-            degraded = self._degraded(monitor)
+            summaries = node_summaries(self.run_dir)
+            degraded = '; '.join(d for d in (self._degraded(monitor), starved_text(summaries))
+                                 if d)
             if degraded and code == 0:
                 code, message = EXIT_DEGRADED, f'done, DEGRADED: {degraded}'
             elif degraded:
                 message += f'\n[adcs] degraded: {degraded}'
+            message += ''.join(f'\n[adcs] {line}' for line in summary_lines(summaries))
             monitor.close()
             signal.signal(signal.SIGINT, old_int)
             signal.signal(signal.SIGTERM, old_term)
