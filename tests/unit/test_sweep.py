@@ -92,10 +92,10 @@ def test_bad_campaign_arguments_exit_2(tmp_path, capsys):
 
 
 # ---------------------------------------------------------------------- metrics of a point
-def _res(status, cap=None, in_time=False, hold=None, conv=None, est=True, err=None):
+def _res(status, cap=None, in_time=False, hold=None, conv=None, est=True, err=None, conv5=0.0):
     return {'status': status, 'capture_time_s': cap, 'captured_in_time': in_time,
-            'hold_median_deg': hold, 'converged_s': conv, 'has_estimate': est,
-            'est_err_median_deg': err, 'wall_time_s': 10.0}
+            'hold_median_deg': hold, 'converged_s': conv, 'converged_5deg_s': conv5,
+            'has_estimate': est, 'est_err_median_deg': err, 'wall_time_s': 10.0}
 
 
 def test_point_metrics_count_what_the_table_says():
@@ -103,7 +103,7 @@ def test_point_metrics_count_what_the_table_says():
     results = [_res('captured', 2000.0, True, 1.0, 100.0, err=0.5),
                _res('captured', 3000.0, True, 2.0, 500.0, err=1.5),   # T/2 exactly: in
                _res('captured', 5000.0, False, 3.0, 501.0, err=2.5),  # captured late
-               _res('not_captured', None, False, 40.0, None, err=30.0),
+               _res('not_captured', None, False, 40.0, None, err=30.0, conv5=None),
                {'status': 'error', 'message': 'boom'}]                 # not counted
     m = sweep.point_metrics(results, runs=6, period_s=period)
     assert (m['runs'], m['done'], m['captured'], m['in_4_orbits']) == (6, 4, 3, 2)
@@ -112,6 +112,7 @@ def test_point_metrics_count_what_the_table_says():
     assert m['hold_median_of_medians_deg'] == 2.5                  # median of 1, 2, 3, 40
     assert (m['converged_half_orbit'], m['converged_half_orbit_pct']) == (2, 50.0)
     assert math.isinf(m['converge_p90_orbits'])                    # one run never converged
+    assert (m['converged_5deg_half_orbit'], m['converged_5deg_half_orbit_pct']) == (3, 75.0)
     assert m['est_err_median_deg'] == 2.0
     empty = sweep.point_metrics([], runs=3, period_s=period)
     assert empty['done'] == 0 and empty['in_4_orbits_pct'] is None
@@ -123,17 +124,25 @@ def test_point_metrics_count_what_the_table_says():
 
 
 def test_convergence_is_read_from_the_run_series(tmp_path):
-    t = np.arange(0.0, 100.0, 2.0)
-    err = np.where(t < 40.0, 30.0, 1.0)
-    err[30] = 2.5                                  # t = 60 s: out again, in for good at 62 s
+    period = 80.0
+    t = np.arange(0.0, 200.0, 2.0)
+    err = np.where(t < 30.0, 30.0, 1.0)
+    err[(t == 26.0) | (t == 28.0)] = 4.0           # within 5 deg from 26 s, 2 deg from 30 s
+    err[t == 50.0] = 2.5                           # out of 2 deg again: in for good at 52 s
+    err[t == 150.0] = 3.0                          # after the first orbit: not counted by 2 deg
     np.savez(tmp_path / SERIES_FILE, t_s=t + 7.0, est_err_deg=err)
-    assert sweep.run_convergence(str(tmp_path), 1000.0) == {'converged_s': 62.0,
-                                                            'has_estimate': True}
-    np.savez(tmp_path / SERIES_FILE, t_s=t, est_err_deg=np.full(t.size, np.nan))
-    assert sweep.run_convergence(str(tmp_path), 1000.0)['has_estimate'] is False
-    err[-1] = 3.0                                 # out at the end: never converged
+    assert sweep.run_convergence(str(tmp_path), period) == {
+        'converged_s': 52.0, 'converged_5deg_s': 26.0, 'has_estimate': True}
+    err[t == 190.0] = 6.0                          # out of 5 deg late in the run
     np.savez(tmp_path / SERIES_FILE, t_s=t, est_err_deg=err)
-    assert sweep.run_convergence(str(tmp_path), 1000.0)['converged_s'] is None
+    c = sweep.run_convergence(str(tmp_path), period)
+    assert c['converged_s'] == 52.0 and c['converged_5deg_s'] == 192.0
+    err[t == 80.0] = 2.5                           # the last sample of the first orbit: out
+    np.savez(tmp_path / SERIES_FILE, t_s=t, est_err_deg=err)
+    assert sweep.run_convergence(str(tmp_path), period)['converged_s'] is None
+    np.savez(tmp_path / SERIES_FILE, t_s=t, est_err_deg=np.full(t.size, np.nan))
+    assert sweep.run_convergence(str(tmp_path), period) == {
+        'converged_s': None, 'converged_5deg_s': None, 'has_estimate': False}
 
 
 def test_the_tables_put_each_point_on_its_own_line():

@@ -40,9 +40,9 @@ Outputs (``OUT`` = ``--out``, default ``sweep_<scenario name>``)
 ``sweep.csv``, ``sweep.md``
     One row per point (:data:`COLUMNS`): the overrides, runs done, captured within 4 orbits,
     capture time median and 90th percentile [orbits], hold median of the run medians (and its
-    90th percentile), filter converged within half an orbit (the estimate's error below
-    :data:`~adcs_nodes.tools.papers.paper000.CONVERGED_DEG` for good by ``T/2``, from each
-    run's ``series.npz``), the median estimation error after ``T/2``, and the median wall time
+    90th percentile), the filter converged within half an orbit in two readings (from each
+    run's ``series.npz``, :func:`run_convergence`), the median estimation error after ``T/2``,
+    and the median wall time
     of a run (it depends on the machine's load). With two swept keys ``sweep.md`` adds the
     captured-within-4-orbits map (first key down, second across), as the paper-000 digest's
     gain map.
@@ -77,6 +77,7 @@ from adcs_nodes.tools.papers.paper000 import CONVERGED_DEG
 COLUMNS = ('runs', 'done', 'captured', 'in_4_orbits', 'in_4_orbits_pct', 'capture_median_orbits',
            'capture_p90_orbits', 'hold_median_of_medians_deg', 'hold_p90_of_medians_deg',
            'converged_half_orbit', 'converged_half_orbit_pct', 'converge_p90_orbits',
+           'converged_5deg_half_orbit', 'converged_5deg_half_orbit_pct',
            'est_err_median_deg', 'run_wall_median_s', 'out')
 
 
@@ -182,20 +183,33 @@ def _value_text(v: Any) -> str:
 def run_convergence(run_dir: str, period_s: Optional[float]) -> Dict[str, Any]:
     """Filter convergence of one finished plain-engine run from its ``series.npz``.
 
+    Two readings of the paper's "the estimates converge within half an orbit":
+
+    * ``converged_s``: the paper-000 table's criterion (the estimate's attitude error below
+      :data:`~adcs_nodes.tools.papers.paper000.CONVERGED_DEG` = 2 deg for good) over the
+      first orbit, the length of the paper's estimation run (``paper000_estimation``): in the
+      closed loop the error of a converged filter peaks at 2-4 deg during the capture
+      maneuvers of later orbits, which is its accuracy under maneuvers, not its convergence;
+    * ``converged_5deg_s``: below the capture band (5 deg) for good over the whole run: no
+      late convergence and no later divergence.
+
     Returns
     -------
     dict
-        ``converged_s``: first time after which the estimate's attitude error stays below
-        :data:`CONVERGED_DEG` to the end (None: never, or no estimate); ``has_estimate``.
+        ``converged_s``, ``converged_5deg_s`` [s since the start] (None: never, or no
+        estimate); ``has_estimate``. Without a period the first reading uses the whole run.
     """
     path = os.path.join(run_dir, SERIES_FILE)
+    none = {'converged_s': None, 'converged_5deg_s': None, 'has_estimate': False}
     if not os.path.isfile(path):
-        return {'converged_s': None, 'has_estimate': False}
+        return none
     with np.load(path) as data:
-        t, err = data['t_s'], data['est_err_deg']
+        t, err = data['t_s'] - data['t_s'][0], data['est_err_deg']
     if not np.isfinite(err).any():
-        return {'converged_s': None, 'has_estimate': False}
-    return {'converged_s': metrics.last_exit_time(t - t[0], err, CONVERGED_DEG),
+        return none
+    first = t <= period_s if period_s else np.ones(t.size, bool)
+    return {'converged_s': metrics.last_exit_time(t[first], err[first], CONVERGED_DEG),
+            'converged_5deg_s': metrics.last_exit_time(t, err, metrics.CAPTURE_BAND_DEG),
             'has_estimate': True}
 
 
@@ -228,7 +242,11 @@ def point_metrics(results: Sequence[Dict[str, Any]], runs: int,
                     if isinstance(r.get('hold_median_deg'), (int, float))])
     est = [r for r in done if r.get('has_estimate')]
     half = 0.5 * period
-    conv = sum(1 for r in est if r.get('converged_s') is not None and r['converged_s'] <= half)
+
+    def within(key: str) -> int:
+        return sum(1 for r in est if r.get(key) is not None and r[key] <= half)
+
+    conv, conv5 = within('converged_s'), within('converged_5deg_s')
     conv_orbits = np.array([math.inf if r.get('converged_s') is None
                             else r['converged_s'] / period for r in est])
     err = np.array([r['est_err_median_deg'] for r in est
@@ -249,6 +267,8 @@ def point_metrics(results: Sequence[Dict[str, Any]], runs: int,
         'converged_half_orbit': conv if est else None,
         'converged_half_orbit_pct': 100.0 * conv / len(est) if est else None,
         'converge_p90_orbits': q(conv_orbits, 90) if est else None,
+        'converged_5deg_half_orbit': conv5 if est else None,
+        'converged_5deg_half_orbit_pct': 100.0 * conv5 / len(est) if est else None,
         'est_err_median_deg': q(err, 50), 'run_wall_median_s': q(wall, 50)}
 
 
@@ -273,8 +293,9 @@ def _fmt(v: Any, digits: int = 2) -> str:
 def table_markdown(rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> str:
     """The sweep table: one line per point, the swept keys first."""
     head = list(keys) + ['done', 'captured <= 4 orbits', 'capture median / p90 [orbits]',
-                         'hold median of medians / p90 [deg]', 'filter converged <= T/2',
-                         'converged p90 [orbits]', 'est. error median [deg]',
+                         'hold median of medians / p90 [deg]',
+                         'filter converged <= T/2 (2 deg, 1st orbit)', 'converged p90 [orbits]',
+                         'filter converged <= T/2 (5 deg, run)', 'est. error median [deg]',
                          'run wall median [s]']
     lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
     for r in rows:
@@ -286,7 +307,11 @@ def table_markdown(rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> str:
             f'{_fmt(r["hold_median_of_medians_deg"])} / {_fmt(r["hold_p90_of_medians_deg"])}',
             ('n/a' if r['converged_half_orbit'] is None else
              f'{r["converged_half_orbit"]}/{done} ({_fmt(r["converged_half_orbit_pct"], 0)} %)'),
-            _fmt(r['converge_p90_orbits']), _fmt(r['est_err_median_deg']),
+            _fmt(r['converge_p90_orbits']),
+            ('n/a' if r['converged_5deg_half_orbit'] is None else
+             f'{r["converged_5deg_half_orbit"]}/{done} '
+             f'({_fmt(r["converged_5deg_half_orbit_pct"], 0)} %)'),
+            _fmt(r['est_err_median_deg']),
             _fmt(r['run_wall_median_s'], 1)]
         lines.append('| ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines) + '\n'
