@@ -222,7 +222,8 @@ def _filter_args(p: Dict[str, Any]) -> Dict[str, Any]:
                 measurement_form=p['measurement_form'], literal_update=p['literal_update'],
                 substeps=p['substeps'], max_rate_rad_s=p['max_rate_rad_s'],
                 max_disturbance_rad_s2=p['max_disturbance_rad_s2'],
-                use_sensor_covariance=p['use_sensor_covariance'])
+                use_sensor_covariance=p['use_sensor_covariance'],
+                theta_interval_s=p['theta_interval_s'])
 
 
 def _build_magnetic_filter(p: Dict[str, Any], ctx: Dict[str, Any]):
@@ -247,6 +248,10 @@ MAGNETIC_FILTER_PARAMS = (
     Param('use_sensor_covariance', 'bool', True, '-', "theta per axis from the sample's "
           'magnetic_field_covariance when the driver gives one (never below theta_T2); '
           "false: the paper's single theta"),
+    Param('theta_interval_s', 'float', 10.0, 's', 'the sample interval theta_T2 and tau are '
+          'given for (paper 000: 10 s); a sample d < this after the last one updates with '
+          'theta x this/d and tau x d/this (the noise model follows the sample interval); '
+          '0: off', min=0.0),
 )
 
 register(Entry(

@@ -265,7 +265,8 @@ class MagneticFilterBiasEstimator(MagneticFilterEstimator):
         super().__init__(inertia, max_rate_rad_s=max_rate_rad_s,
                          **{k: v for k, v in filter_args.items()
                             if k not in _BIAS_KEYS})
-        filter_args.pop('use_sensor_covariance', None)     # the wrapper's option
+        filter_args.pop('use_sensor_covariance', None)     # the wrapper's options
+        filter_args.pop('theta_interval_s', None)
         self.filter = MagneticFilterBias(inertia, max_rate_rad_s=max_rate_rad_s, **filter_args)
 
 
