@@ -573,14 +573,8 @@ class Spacecraft:
         for d in self.disturbances:
             if type(d) is ConstantTorque:
                 table += d.torque_body
-            elif type(d) is RandomTorque:          # one draw per hold period, not per call
-                last, value = None, None
-                for i in range(substeps):
-                    t_mid = t + i * h + 0.5 * h
-                    j = d.index(t_mid)
-                    if j != last:
-                        value, last = d.torque(t_mid), j
-                    table[i] += value
+            elif type(d) is RandomTorque:          # one draw per hold period, compiled
+                d.add_to(table, t, h)
             else:
                 for i in range(substeps):
                     table[i] += d.torque(t + i * h + 0.5 * h)
