@@ -6,8 +6,8 @@ noise, bias and misalignment, values from the true field it reads as hardware). 
 environment the launcher prints.
 
 * make test: the contract, short (best effort, composed): frame 0 waits for the driver, the
-  samples are used (the run summary counts them), estimates on the frame grid; and a driver
-  that matches but never publishes: the run exits 3 naming the topic.
+  samples are used (the run summary counts them), estimates on the frame grid (160 s at rate
+  20); and a driver that matches but never publishes: the run exits 3 naming the topic.
 * make test-long (``long``): the accuracy against the lockstep run of the same scenario (the
   simulated magnetometer, plain engine) over 1500-3000 s: median within 0.2 deg, 95th
   percentile within 0.5 deg, no error above 3 deg once converged; best effort (one process
@@ -195,14 +195,14 @@ def test_a_best_effort_driver_off_the_grid_feeds_the_scenario_estimator(tmp_path
     """The contract, short: every sample the driver sent reaches the filter at its own
     stamp (the run summary counts them; a late one would be rejected and counted, never
     used) and estimates stay on the frame grid."""
-    duration, rate = 240.0, 20.0
+    duration, rate = 160.0, 20.0
     rc, out, bag, log = _run_with_driver(tmp_path, 'ext_contract', duration, rate,
                                          'best_effort', compose=True)
     assert rc == 0, out
     sent, dropped = _sent(log)
     epoch = EPOCH_NS
     covered = [s for s in sent if s - epoch <= (duration - 2.0) * 1e9]   # a frame took them
-    assert len(covered) >= 25, (len(sent), dropped)
+    assert len(covered) >= 15, (len(sent), dropped)
     used, rejected, superseded, resets = _used(out)
     # best effort on loopback, 2 s of sim time = 100 ms of wall time to arrive: under load
     # a few may be late (rejected, counted); none is used twice, none superseded
