@@ -659,7 +659,7 @@ class LockstepNode(node_params.SpecParameters, Node):
                 'samples_used': {topics.get(n, n): int(v)
                                  for n, v in sorted(self.used_counts().items())},
                 'rejected': rejected, 'superseded': int(self.superseded_samples),
-                'resets': int(getattr(self, 'resets', 0) or 0),
+                'resets': int(self.resets) if hasattr(self, 'resets') else None,
                 'starved': {topics.get(n, n): {'since_s': e['since_s'],
                                                'frames': int(e['frames'])}
                             for n, e in sorted(self.starved.items())}}

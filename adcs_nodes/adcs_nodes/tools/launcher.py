@@ -177,8 +177,8 @@ def summary_lines(summaries: Dict[str, Dict[str, Any]]) -> List[str]:
         rejected = ', '.join(f'{r} {n}' for r, n in sorted(s.get('rejected', {}).items()))
         lines.append(f'{name}: samples used ' + (', '.join(
             f'{t} {n}' for t, n in sorted(used.items())) or 'none')
-            + f'; rejected {rejected or "none"}; superseded {s.get("superseded", 0)}; '
-            f'filter resets {s.get("resets", 0)}')
+            + f'; rejected {rejected or "none"}; superseded {s.get("superseded", 0)}'
+            + ('' if s.get('resets') is None else f'; filter resets {s["resets"]}'))
     return lines
 
 
