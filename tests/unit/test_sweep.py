@@ -189,11 +189,11 @@ class _InProcessBackend:
         pass
 
 
-def _run_sweep(out, backends, monkeypatch, capsys):
+def _run_sweep(out, backends, monkeypatch, capsys, extra=()):
     made = iter(backends)
     monkeypatch.setattr(campaign_mod, 'LocalBackend', lambda jobs: next(made))
     code = cli.main(['sweep', SCENARIO, '--set', f'{ALPHA}=2e-3,3e-3', '--set', f'{K}=0.2',
-                     '--runs', '2', '--duration', '20', '--out', str(out)])
+                     '--runs', '2', '--duration', '20', '--out', str(out), *extra])
     return code, capsys.readouterr().out
 
 
@@ -231,6 +231,11 @@ def test_an_interrupted_sweep_resumes_to_the_table_of_an_uninterrupted_one(
         text.split('[sweep] paper000_control')[1]
     for name in ('sweep.md', 'sweep.json', 'sweep.png'):
         assert (tmp_path / 'b' / name).is_file()
+    # --table: nothing runs, even for a run that is missing, and the table says what is there
+    os.remove(os.path.join(run_dir_of(str(next((tmp_path / 'b' / 'points').iterdir())), 1),
+                           'result.json'))
+    code, table = _run_sweep(tmp_path / 'b', [], monkeypatch, capsys, ['--table'])
+    assert code == 0 and 'nothing runs' in table and '| 1/2 |' in table, table
 
 
 def test_every_point_runs_its_values_on_the_same_draws(tmp_path, monkeypatch, capsys):

@@ -420,6 +420,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='disperse the magnetometer bias per axis in +-B nT')
     parser.add_argument('--misalignment-deg', type=float, default=None, metavar='M',
                         help='disperse the magnetometer misalignment per component in +-M deg')
+    parser.add_argument('--table', action='store_true',
+                        help='run nothing: the table of the finished runs in OUT as they are '
+                        '(no identity check: after a code or scenario change, these are the '
+                        'runs of the earlier version)')
 
 
 def _config(args: argparse.Namespace, base: Dict[str, Any],
@@ -489,20 +493,17 @@ def run_from_args(args: argparse.Namespace, log=None) -> int:
         return 2
     keys = swept_keys(grid) or [grid[0][0]]
     period = orbit_period_s(base)
+    table_only = bool(getattr(args, 'table', False))
     os.makedirs(out, exist_ok=True)
-    write_json_atomic(os.path.join(out, 'sweep.json'), {
-        'scenario': base['_path'], 'grid': grid, 'runs': args.runs,
-        'seed': points[0]['cfg'].seed, 'duration_s': points[0]['cfg'].duration_s,
-        'max_rate_deg_s': args.max_rate_deg_s, 'capture_deg': args.capture_deg,
-        'mag_bias_nT': args.mag_bias_nT, 'misalignment_deg': args.misalignment_deg,
-        'points': [p['out'] for p in points], 'command': _command(args),
-        'updated_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())})
+    if not table_only:
+        _write_sweep_json(out, base, grid, points, args)
     cfg0 = points[0]['cfg']
     log(f'[sweep] {len(points)} grid point(s) x {args.runs} runs of {base["name"]} '
-        f'({cfg0.duration_s:g} s each, seed {cfg0.seed}, engine plain), output in {out}')
+        f'({cfg0.duration_s:g} s each, seed {cfg0.seed}, engine plain), output in {out}'
+        + (' (--table: nothing runs)' if table_only else ''))
     code = 0
     t0 = time.monotonic()
-    for n, p in enumerate(points, 1):
+    for n, p in enumerate([] if table_only else points, 1):
         log(f'[sweep] point {n}/{len(points)}: {_point_text(p["point"])} '
             f'(sweep {time.monotonic() - t0:.0f} s)')
         try:
@@ -532,6 +533,19 @@ def run_from_args(args: argparse.Namespace, log=None) -> int:
         log(gain_map)
     log(f'[sweep] table in {os.path.join(out, "sweep.md")} and sweep.csv')
     return code
+
+
+def _write_sweep_json(out: str, base: Dict[str, Any], grid: Any,
+                      points: Sequence[Dict[str, Any]], args: argparse.Namespace) -> None:
+    """``sweep.json``: the grid and the campaign arguments of this invocation."""
+    cfg = points[0]['cfg']
+    write_json_atomic(os.path.join(out, 'sweep.json'), {
+        'scenario': base['_path'], 'grid': grid, 'runs': args.runs, 'seed': cfg.seed,
+        'duration_s': cfg.duration_s, 'max_rate_deg_s': args.max_rate_deg_s,
+        'capture_deg': args.capture_deg, 'mag_bias_nT': args.mag_bias_nT,
+        'misalignment_deg': args.misalignment_deg, 'points': [p['out'] for p in points],
+        'command': _command(args),
+        'updated_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())})
 
 
 def write_outputs(out: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str],
