@@ -7,7 +7,8 @@ the modal momentum ``F eta_dot`` the bag implies must stay below the body's mome
 
 ``make test-long`` (marker ``long``): the modal motion is tested with the same assertions on
 the FrameLoop in ``make test`` (``tests/unit/test_frameloop_wheels.py``), and the graph gives
-the FrameLoop's series for paper001_mpi (``tests/graph/test_engine_parity.py``); only the
+the FrameLoop's series for paper001_mpi (``tests/graph/test_engine_parity.py``; the two
+wings of paper001_mpi_two_wings run here, 10 modes); only the
 dynamics node's ``/diagnostics`` keys (``wheels_torque_limited``, ``wheels_momentum_limited``)
 are checked here alone.
 """
@@ -27,8 +28,8 @@ PAPER_HZ = [0.16, 0.85, 0.96, 2.10, 2.55]
 
 def test_paper001_graph_records_nonzero_modal_motion(tmp_path):
     bag = str(tmp_path / 'p001')
-    adcs('run', os.path.join(SCENARIOS, 'paper001_mpi.yaml'), '--record', bag, '--duration',
-         '20', '--quiet', timeout=600)
+    adcs('run', os.path.join(SCENARIOS, 'paper001_mpi_two_wings.yaml'), '--record', bag,
+         '--duration', '20', '--quiet', timeout=600)
     app = {round((header_stamp_ns(m) - EPOCH_NS) / 1e9, 6): m
            for _, _, m in read_messages(bag, ['/sim/appendages'])}
     assert len(app) == 101 and sorted(app)[-1] == 20.0            # every 0.2 s frame

@@ -218,7 +218,7 @@ def test_graph_gives_the_dynamics_node_the_flexible_world():
     from adcs_nodes.tools.graph import build_graph, orbital_period_s, topic_type
     from adcs_nodes.tools.scenario import load_scenario
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    sc = load_scenario(os.path.join(root, 'scenarios', 'paper001_mpi.yaml'))
+    sc = load_scenario(os.path.join(root, 'scenarios', 'paper001_mpi_two_wings.yaml'))
     nodes = build_graph(sc, 10.0, record=True)
     dyn = next(n for n in nodes if n.name == 'dynamics')
     p = dyn.params
@@ -232,4 +232,10 @@ def test_graph_gives_the_dynamics_node_the_flexible_world():
     rec = next(n for n in nodes if n.name == 'recorder')
     assert 'sim/appendages=adcs_msgs/msg/AppendageState' in rec.params['topics']
     cfg = {k[len('spacecraft.'):]: v for k, v in p.items() if k.startswith('spacecraft.')}
-    assert spacecraft_from_config(cfg, seed=1).n_modes == 10
+    assert spacecraft_from_config(cfg, seed=1).n_modes == 10            # two wings, 5 each
+    # the replication scenario: the 5 modes of (32) only (F = C_a, digest option R)
+    one = build_graph(load_scenario(os.path.join(root, 'scenarios', 'paper001_mpi.yaml')),
+                      10.0, record=True)
+    p1 = next(n for n in one if n.name == 'dynamics').params
+    cfg1 = {k[len('spacecraft.'):]: v for k, v in p1.items() if k.startswith('spacecraft.')}
+    assert spacecraft_from_config(cfg1, seed=1).n_modes == 5

@@ -80,8 +80,9 @@ def test_switch_between_mpi_magnetic_and_bdot_on_one_spacecraft(tmp_path):
 
 
 def test_paper001_records_nonzero_modal_motion(tmp_path):
-    """The dynamics integrate the wings' modes with the body and the wheels."""
-    out, _ = run(validated(tmp_path, raw('paper001_mpi')), 20.0)
+    """The dynamics integrate the wings' modes with the body and the wheels (the two-wing
+    robustness case: 10 modes)."""
+    out, _ = run(validated(tmp_path, raw('paper001_mpi_two_wings')), 20.0)
     app = by_t(out['sim/appendages'])
     assert len(app) == 101 and sorted(app)[-1] == 20.0            # every 0.2 s frame
     first = app[0.0]

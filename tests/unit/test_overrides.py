@@ -51,11 +51,12 @@ def test_nested_key_is_set_in_a_validated_copy(sc):
 def test_dict_overrides_lists_by_index_and_removal():
     sc = load_scenario(PAPER001)
     out = apply_overrides(sc, {'spacecraft.wheels.1.max_torque_Nm': 0.5,
-                               'spacecraft.flexible.wings': 'one',
+                               'spacecraft.flexible.wings': 'two',
                                'initial.q_orbit_body_xyzw': None,
                                'initial.q_orbit_body_wxyz': [1.0, 0.0, 0.0, 0.0]})
     assert [w['max_torque_Nm'] for w in out['spacecraft']['wheels']] == [1.0, 0.5, 1.0]
-    assert out['spacecraft']['flexible']['wings'] == 'one'
+    assert sc['spacecraft']['flexible']['wings'] == 'one'       # the replication model
+    assert out['spacecraft']['flexible']['wings'] == 'two'
     assert 'q_orbit_body_xyzw' not in out['initial']
     assert out['initial']['q_orbit_body_wxyz'] == [1.0, 0.0, 0.0, 0.0]
 

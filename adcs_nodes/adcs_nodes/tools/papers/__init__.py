@@ -50,6 +50,7 @@ CHECKS: Dict[str, Tuple[str, str]] = {
     'paper000_control': ('paper000', 'check_control'),
     'paper000_control_misaligned': ('paper000', 'check_control_stress'),
     'paper001_mpi': ('paper001', 'check'),
+    'paper001_mpi_two_wings': ('paper001', 'check_two_wings'),
     'paper003_slew': ('paper003', 'check'),
     'paper004_yaw': ('paper004', 'check'),
 }
