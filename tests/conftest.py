@@ -53,3 +53,17 @@ def pytest_collection_modifyitems(config, items):
         if str(item.fspath).startswith(graph) and item.get_closest_marker('parallel') is None:
             group = 'graph-bags' if os.path.basename(str(item.fspath)) in BAG_ONLY else 'graph'
             item.add_marker(pytest.mark.xdist_group(group))
+        elif _uses_a_module_fixture(item):
+            # one worker for the file: its module-scoped fixture (a FrameLoop run, a bag) is
+            # made once, not once per worker that gets one of its tests
+            item.add_marker(pytest.mark.xdist_group('module:' + item.module.__name__))
+
+
+def _uses_a_module_fixture(item):
+    """Whether ``item`` uses a module-scoped fixture defined in its own module."""
+    info = getattr(item, '_fixtureinfo', None)
+    if info is None or getattr(item, 'module', None) is None:
+        return False
+    module_id = item.nodeid.split('::')[0]
+    return any(d.scope == 'module' and d.baseid == module_id
+               for defs in info.name2fixturedefs.values() for d in defs)

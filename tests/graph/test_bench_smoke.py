@@ -36,6 +36,7 @@ def test_hop_pattern_of_paper000_at_1s_frames():
     assert hop_pattern({}, 1.0) == [2]
 
 
+@pytest.mark.long   # make bench runs the whole table
 def test_bench_runs_at_tiny_size(tmp_path):
     out = tmp_path / 'bench.txt'
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(

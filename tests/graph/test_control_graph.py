@@ -15,6 +15,7 @@ import signal
 import time
 
 import numpy as np
+import pytest
 
 from adcs_launch import adcs, control_scenario, start_adcs, wait_manifest
 from adcs_nodes.tools.bag import header_stamp_ns, read_messages, topic_summary
@@ -112,6 +113,8 @@ def test_switch_mid_run_gives_one_zero_frame_each_and_unknown_is_refused(tmp_pat
     assert status[-1].switch_count == 2 and status[-1].active == 'magnetic'
 
 
+@pytest.mark.long   # a killed flight-software process: test_node_killed_graph in make test;
+#                    the fallback rule: tests/unit/test_frameloop_faults.py
 def test_killed_controller_falls_back_to_bdot_and_the_graph_goes_on(tmp_path):
     bag = str(tmp_path / 'killed')
     proc = start_adcs('run', control_scenario(tmp_path), '--record', bag,

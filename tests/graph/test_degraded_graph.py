@@ -13,6 +13,7 @@ import signal
 import threading
 import time
 
+import pytest
 
 from adcs_launch import adcs, control_scenario, start_adcs, wait_manifest
 
@@ -34,6 +35,8 @@ def wait_node(pid, name, predicate, timeout):
     raise AssertionError(f'{name}: condition not reached within {timeout} s; last {last}')
 
 
+@pytest.mark.long   # the dead-input rule: the FrameLoop's (tests/unit/test_frameloop_*);
+#                    a killed process: test_node_killed_graph in make test
 def test_killed_manager_costs_three_timeouts_then_the_world_runs_on(tmp_path):
     proc = start_adcs('run', control_scenario(tmp_path), '--duration', '200000', '--quiet')
     try:
@@ -72,6 +75,8 @@ def _stderr_lines(proc):
     return lines
 
 
+@pytest.mark.long   # degraded exit 3: test_external_driver (a silent driver) and
+#                    test_node_killed_graph in make test
 def test_run_that_lost_its_estimator_ends_degraded_with_exit_code_3(tmp_path):
     # The kill must land well before the end: the run takes 4000 s of sim time in about 15 s
     # of wall time, and one `adcs status` poll under load took long enough for the run to end

@@ -63,6 +63,7 @@ def test_bag_has_every_topic_at_the_frame_rate(reference_bag):
 # Once in four clean-clone runs the loaded run's bag held 517 of 601 /clock messages: the
 # clock master let the CPU-starved recorder fall 400 frames behind, more than the publishers'
 # history (100) can resend. Fixed (lag bound 40), shown by test_a_stalled_recorder_loses_nothing.
+@pytest.mark.long   # determinism under load: test_determinism_control in make test
 def test_same_seed_same_bag_under_cpu_load(reference_bag, bag_dir):
     bag = str(bag_dir / 'loaded')
     burners = [multiprocessing.Process(target=_burn, args=(120.0,)) for _ in range(2)]
@@ -216,6 +217,7 @@ def test_ctrl_c_during_a_recorder_stall_loses_nothing(bag_dir):
             assert stamps[-1] >= seen, (topic, stamps[-1], seen)
 
 
+@pytest.mark.long   # composed = plain = one process per node: test_engine_parity in make test
 def test_composed_run_gives_the_identical_trajectory(reference_bag, bag_dir):
     bag = str(bag_dir / 'composed')
     adcs('run', FREE_TUMBLE, '--record', bag, '--compose', '--quiet')

@@ -262,6 +262,7 @@ def test_restart_with_other_arguments_is_refused(three_runs, capsys):
     assert result_mtime(out, 0) == kept
 
 
+@pytest.mark.long   # the Dask backend: test_montecarlo_dask in make test
 def test_dask_scheduler_runs_the_campaign(three_runs, tmp_path):
     distributed = pytest.importorskip('distributed')
     out = tmp_path / 'dask'

@@ -84,6 +84,8 @@ def campaign(out, *args, timeout=180):
     return proc.returncode, out, err, proc.pid
 
 
+@pytest.mark.long   # the Dask backend: test_local_cluster_has_one_single_thread_process_per_job
+#                    in make test
 def test_dask_local_campaign_gives_the_local_campaigns_results(tmp_path):
     pytest.importorskip('distributed')
     psutil = pytest.importorskip('psutil')
@@ -116,6 +118,7 @@ def test_dask_local_and_scheduler_exclude_each_other(tmp_path):
     assert code == 2 and 'not allowed with argument' in err, err
 
 
+@pytest.mark.long   # the compile cache in a second process: test_fresh_interpreters in make test
 def test_plain_run_process_loads_the_compiled_kernels_from_the_cache(tmp_path):
     """A second run process compiles nothing: numba reports every kernel loaded from its
     on-disk cache (``NUMBA_DEBUG_CACHE``), none saved (a save follows a compilation)."""
@@ -142,6 +145,8 @@ def _run_processes(out):
     return found
 
 
+@pytest.mark.long   # Ctrl-C's race: tests/unit/test_frameloop_montecarlo.py; the cluster's
+#                    stop: test-long
 def test_ctrl_c_on_a_dask_local_campaign_stops_runs_and_cluster(tmp_path):
     """Ctrl-C reaches the whole foreground process group: the campaign stops its runs
     through the stop file, the cluster's workers do not die under the runs."""

@@ -109,7 +109,10 @@ def _last_diagnostics(bag, node):
     return last
 
 
-@pytest.mark.parametrize('compose,name', [(False, 'forger'), (True, 'controller_manager')],
+@pytest.mark.parametrize('compose,name', [
+    # the per-node variant in test-long: the composed one, with the harder same-name forger, in
+    # make test (the guard is the same code in each node)
+    pytest.param(False, 'forger', marks=pytest.mark.long), (True, 'controller_manager')],
                          ids=['process_per_node', 'composed_same_name'])
 def test_forged_commands_are_dropped_counted_and_recorded(scenario, clean, tmp_path, compose,
                                                           name):

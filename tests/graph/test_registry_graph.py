@@ -30,6 +30,8 @@ def toy_scenario(tmp_path, **toy):
     return str(path)
 
 
+@pytest.mark.long   # a plugin in a launched graph: test_plugin_inputs_graph; a live switch:
+#                    test_control_graph, both in make test
 def test_toy_controller_from_a_plugin_runs_and_is_switched_to(tmp_path):
     bag = str(tmp_path / 'toy')
     adcs('run', toy_scenario(tmp_path, dipole_Am2=[1.0, -2.0, 3.0]), '--record', bag,

@@ -166,6 +166,7 @@ def test_best_effort_off_grid_replay_drives_the_live_estimator(bag, tmp_path):
     assert values['timing_mode'] == 'live' and int(values['update_count']) > 100
 
 
+@pytest.mark.long   # a driver process on its own clock: test_external_driver in make test
 def test_wall_clock_driver_is_accepted_without_sim_time(bag, tmp_path):
     """A driver stamping with the wall clock (``adcs replay --now``, best-effort, real time)
     and an estimator started alone with no timing parameters (live, wall clock): every sample

@@ -27,6 +27,8 @@ def _run(monkeypatch, node_args, **kw):
     return run.run(), lines
 
 
+@pytest.mark.long   # the restart path: test_a_node_healed_by_its_restart... in make test;
+#                    the give-up rule: tests/unit/test_launcher_self_healing.py
 def test_a_node_that_never_matches_is_restarted_once_then_the_run_fails(monkeypatch):
     result, lines = _run(monkeypatch, f'environment:{NOWHERE}')
     assert result.exit_code == 1, result.message
