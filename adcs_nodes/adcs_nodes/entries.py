@@ -194,12 +194,14 @@ register(Entry(
      Param('min_horizon_s', 'float', 0.0, 's', 'horizon floor in a maneuver (ASSUMPTION); '
            '0: one control period', min=0.0),
      Param('hold_horizon_s', 'float', 0.0, 's', 'horizon when stabilising or tracking; 0: '
-           "one control period (the paper's); longer softens the rate loop (digest P14)",
-           min=0.0),
+           "one control period (the paper's); DEPARTURE from the paper when > 0: longer "
+           'softens the rate loop (digest P14); 0.4 with reference_time t0_plus_tau is the '
+           'two-wing variant (docs/paper001.md)', min=0.0),
      Param('saturation', 'str', 'scale', '-', 'wheel torque limit: scale (one factor, keeps '
            'the direction) or clip per wheel', choices=('scale', 'clip')),
      Param('reference_time', 'str', 't0', '-', "desired state from the target at t0 (the "
-           "paper's tracking lag) or propagated to t0 + tau", choices=('t0', 't0_plus_tau')),
+           "paper's tracking lag) or propagated to t0 + tau (DEPARTURE from the paper)",
+           choices=('t0', 't0_plus_tau')),
      Param('exact_transition', 'bool', False, '-', 'expm instead of the power series '
            '(digest P6 study)'),
      Param('model_inertia_kgm2', 'float[]', [], 'kg m^2', "the controller's own inertia, 9 values "

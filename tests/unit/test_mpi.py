@@ -369,3 +369,28 @@ def test_reference_time_t0_plus_tau_leads_a_tracking_target_by_one_period():
     man = _inputs(q_ref, [0.0, 0.0, 0.0], Target(q_ref, w, time_to_go_s=50.0))
     np.testing.assert_allclose(lead.update(man, 0.0, 0.2).wheel_torque,
                                plain.update(man, 0.0, 0.2).wheel_torque, atol=1e-15)
+
+
+@pytest.mark.parametrize('horizon, rho, fast_pole', [
+    (0.2, 1.0, 0.0),       # the paper on a rigid body: dead-beat rate loop
+    (0.2, 2.0, -1.02),     # the paper on a hub of half the inertia: the 2.5 Hz pole (P14)
+    (0.4, 2.0, -0.02),     # the two-wing variant: dead-beat on that hub
+])
+def test_hold_horizon_variant_moves_the_nyquist_pole(horizon, rho, fast_pole):
+    """Digest P14 and the module's 'beyond the paper' section, by hand: per axis the plant
+    over one period T = 0.2 s is a double integrator whose input acts ``rho`` times harder
+    than the law's model (hub inertia I / rho); the law is ``u = -Q^+ Phi x`` at horizon H.
+    The closed loop's fast pole is ``1 - rho g`` with ``g = T (1 + H^2/2) / (H (1 + H^2/4))``
+    and its slow pole stays near 0.98 (the paper's 10 s angle time constant)."""
+    t = 0.2
+    a = np.zeros((6, 6))
+    a[:3, 3:] = np.eye(3)
+    phi, q = mpi.transition(a, horizon, 5)
+    k = (np.linalg.pinv(q) @ phi)[0, [0, 3]]                   # u_x = -k . [phi, phi_dot]
+    g = t * (1 + horizon ** 2 / 2) / (horizon * (1 + horizon ** 2 / 4))
+    assert t * k[1] == pytest.approx(g, rel=1e-12)
+    closed = np.array([[1.0, t], [0.0, 1.0]]) - rho * np.outer([t * t / 2, t], k)
+    poles = sorted(np.linalg.eigvals(closed).real)
+    assert poles[0] == pytest.approx(1 - rho * g, abs=0.02)
+    assert poles[0] == pytest.approx(fast_pole, abs=0.01)
+    assert poles[1] == pytest.approx(0.98, abs=0.02)

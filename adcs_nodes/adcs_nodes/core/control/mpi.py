@@ -76,6 +76,25 @@ Assumptions (not in the paper)
   period; if that fails too, the command is zero with the reason.
 * ASSUMPTION: the desired state is the target at ``t0`` (digest P15, reproduces the paper's
   tracking lag); ``reference_time='t0_plus_tau'`` propagates it to ``t0 + tau``.
+
+Beyond the paper: the two-wing variant (DEPARTURE, off by default)
+-----------------------------------------------------------------
+With two mirrored wings (``scenarios/paper001_mpi_two_wings.yaml``) the rate error is corrected
+at high frequency by the hub inertia ``I_b - F F^T``, about half of ``I_b`` about y and z
+(digest 2.2). Per axis, with ``A ~ [[0, E], [0, 0]]`` and horizon ``H`` (digest 3.6), the law
+is ``u = -(H^2/2 (e + H e_dot) + H e_dot) / (H^4/4 + H^2)`` (``Q^+ Phi x``); its rate gain
+per control period ``T`` on the full inertia is ``g = T (1 + H^2/2) / (H (1 + H^2/4))``, and
+the hub sees ``rho g`` with ``rho = I / I_hub ~ 2``. The paper's ``H = T = 0.2 s`` gives
+``g = 1.01``: ``rho g ~ 2``, a closed-loop pole at ``1 - rho g ~ -1.02`` (2.5 Hz, the torque
+chatter of P14, 62 % of frames at the limit). ``hold_horizon_s = 0.4`` (``H = 2 T``) gives
+``g = 0.52`` and ``rho g ~ 1.04``: dead-beat on the hub instead of on the whole craft
+(ASSUMPTION: chosen from this estimate, ``tests/unit/test_mpi.py``; not tuned by runs: 1.0 s
+held the stabilisation rows as well in one 1000 s run). A horizon of ``H`` aiming at the target
+of ``t0`` lags a moving target by ``H`` (P15), twice the paper's; the variant therefore also
+sets ``reference_time='t0_plus_tau'``. The variant is the pair ``hold_horizon_s: 0.4``,
+``reference_time: t0_plus_tau``; the defaults (0 and ``t0``) are the paper's law. Measured
+(5000 s, plain engine): the stabilisation and tracking rows within the paper's bounds with two
+wings (``docs/paper001.md``).
 """
 from __future__ import annotations
 
@@ -367,12 +386,14 @@ class MPIController:
         Horizon floor in a maneuver [s] (ASSUMPTION); 0 means one control period.
     hold_horizon_s : float
         Horizon when stabilising or tracking [s]; 0 means one control period (the paper).
-        A longer one softens the near dead-beat rate loop (digest P14: two mirrored wings
-        give a 2.5 Hz limit cycle at one period); a departure from the paper.
+        DEPARTURE from the paper when > 0: a longer one softens the near dead-beat rate loop
+        (digest P14: two mirrored wings give a 2.5 Hz limit cycle at one period); 0.4 s is the
+        two-wing variant (module docstring, with ``reference_time='t0_plus_tau'``).
     saturation : {'scale', 'clip'}
         One factor keeping the direction, or per-wheel clipping.
     reference_time : {'t0', 't0_plus_tau'}
-        Desired state from the target at ``t0`` (paper, P15) or propagated to ``t0 + tau``.
+        Desired state from the target at ``t0`` (paper, P15) or propagated to ``t0 + tau``
+        (DEPARTURE from the paper: no lag of ``tau`` behind a moving target).
     exact_transition : bool
         Use ``expm`` instead of the series (digest P6 study).
 

@@ -301,7 +301,8 @@ def rows(m: Dict[str, Any], claim: bool = True, departed: Sequence[str] = (),
                         ("; within the paper's bound" if ok else "; outside the paper's bound"),
                         INFO))
     if 'track_angle_3sigma_deg' in m:
-        lag = ' / '.join('-' if x is None else f'{x:.3f}' for x in m['track_lag_s'])
+        lag = ' / '.join('-' if x is None else f'{0.0 if abs(x) < 5e-4 else x:.3f}'
+                         for x in m['track_lag_s'])
         out += [
             ('tracking error 3-sigma, x/y/z (a periodic error: about 2x its peak)',
              '(see the max row)', _measured('track_angle_3sigma_deg',
