@@ -62,21 +62,22 @@ def record(scenario: str, bag: str, engine: str = 'graph', cwd: Optional[str] = 
 
 
 def reproduce(scenario: str, bag: str, engine: str = 'graph', figures: Optional[str] = None,
-              cwd: Optional[str] = None, log=print) -> Tuple[Optional[str], List[Row]]:
-    """Record ``scenario`` into ``bag``, print its paper table (and write the paper's figures
-    into ``figures``); returns ``(name, rows)``.
+              cwd: Optional[str] = None, log=print, sets: Sequence[str] = ()
+              ) -> Tuple[Optional[str], List[Row]]:
+    """Record ``scenario`` (with the ``--set`` overrides ``sets``) into ``bag``, print its
+    paper table (and write the paper's figures into ``figures``); returns ``(name, rows)``.
 
     Raises
     ------
     RuntimeError
         The run failed (exit code and output in the message).
     """
-    proc = record(scenario, bag, engine, cwd)
+    proc = record(scenario, bag, engine, cwd, sets)
     if proc.returncode != 0:
         raise RuntimeError(f'adcs run {os.path.basename(scenario)} exited '
                            f'{proc.returncode}:\n{proc.stdout}{proc.stderr}')
     name, rows = expectations_for(bag)
-    log('\n' + table_text(name, rows))
+    log('\n' + table_text(name + (f' --set {" ".join(sets)}' if sets and name else ''), rows))
     if figures:
         for path in papers.figures_for_bag(bag, figures):
             log(f'  figure: {path}')

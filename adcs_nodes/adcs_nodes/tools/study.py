@@ -11,7 +11,8 @@ Command line (``python -m adcs_nodes.tools.study COMMAND ...``; every command ta
     wings [SCENARIO]                  paper 001, one wing vs two:
                                       sweep spacecraft.flexible.wings one two
     hold-horizon [SCENARIO] [--values S...]
-                                      paper 001, the MPI hold horizon:
+                                      paper 001, the MPI hold horizon (a departure
+                                      from the paper) on the two-wing robustness case:
                                       sweep controllers.mpi.hold_horizon_s 0 0.4 1 2
     table1 [SCENARIO] [--figures DIR] paper 003: both readings of Table 1, the smooth set, no
                                       compensation and the reference slew (settling time,
@@ -275,7 +276,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('scenario', nargs='?', default=_default('paper001_mpi'))
     p.set_defaults(func=lambda a: cmd_sweep(a, 'spacecraft.flexible.wings', ['one', 'two']))
     p = sub.add_parser('hold-horizon', parents=[common], help='paper 001: MPI hold horizon')
-    p.add_argument('scenario', nargs='?', default=_default('paper001_mpi'))
+    p.add_argument('scenario', nargs='?', default=_default('paper001_mpi_two_wings'))
     p.add_argument('--values', type=float, nargs='+', default=[0.0, 0.4, 1.0, 2.0],
                    metavar='S', help='horizons [s] (default 0 0.4 1 2; 0: one control period)')
     p.set_defaults(func=lambda a: cmd_sweep(a, 'controllers.mpi.hold_horizon_s', a.values))
