@@ -88,6 +88,22 @@ def covariance_to_body(covariance: Sequence[float],
     semi-definite.
     """
     c = np.asarray(covariance, dtype=float).reshape(-1)
+    q = np.asarray(q_body_sensor, dtype=float)
+    key = (c.tobytes(), q.tobytes())          # a sensor's covariance rarely changes
+    if key in _COVARIANCE_BODY:
+        got = _COVARIANCE_BODY[key]
+        return None if got is None else got.copy()
+    if len(_COVARIANCE_BODY) >= 64:
+        _COVARIANCE_BODY.clear()
+    got = _COVARIANCE_BODY[key] = _covariance_to_body(c, q)
+    return None if got is None else got.copy()
+
+
+#: Results of :func:`covariance_to_body` by the bytes of its arguments (a pure function).
+_COVARIANCE_BODY: Dict[tuple, Optional[np.ndarray]] = {}
+
+
+def _covariance_to_body(c: np.ndarray, q_body_sensor: np.ndarray) -> Optional[np.ndarray]:
     if c.size != 9 or not np.all(np.isfinite(c)) or c[0] == -1.0 or not np.any(c):
         return None
     c = c.reshape(3, 3)

@@ -22,6 +22,7 @@ back to the safe controller with that reason in its status.
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Callable, Dict, Optional
 
 import numpy as np
@@ -121,7 +122,8 @@ def estimate_from_msg(msg: Optional[AttitudeState]) -> Optional[Estimate]:
     w_abs, w_rel = vec3(msg.omega_body_eci_body), vec3(msg.omega_body_orbit_body)
     q, q_eci = quat(msg.q_orbit_body), quat(msg.q_eci_body)
     valid = all_finite(q, w_abs, w_rel, q_eci)
-    omega0 = float(np.linalg.norm(w_abs - w_rel)) if valid else 0.0
+    d = w_abs - w_rel
+    omega0 = math.sqrt(d.dot(d)) if valid else 0.0       # np.linalg.norm's operations
     return Estimate(q, w_abs, omega0, valid, q_eci if valid else None)
 
 
@@ -132,7 +134,7 @@ def target_from_msg(msg: Optional[AttitudeTarget]) -> Optional[Target]:
     q = quat(msg.q_ref_body)
     w, a = vec3(msg.omega_body_ref_body), vec3(msg.omega_dot_body_ref_body)
     frame = msg.header.frame_id or 'orbit'
-    if frame not in ('orbit', 'eci') or not all_finite(q, w, a) or np.linalg.norm(q) < 0.5:
+    if frame not in ('orbit', 'eci') or not all_finite(q, w, a) or math.sqrt(q.dot(q)) < 0.5:
         return None
     return Target(att.normalize(q), w, a, frame, float(msg.time_to_go_s))
 

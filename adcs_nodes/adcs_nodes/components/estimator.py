@@ -237,15 +237,11 @@ class EstimatorComponent:
     def diagnostics_msg(self, header: Any) -> FilterDiagnostics:
         """``adcs/estimator/diagnostics`` of the last step (built only when someone reads it)."""
         step = self.last_step
-        d = FilterDiagnostics()
-        d.header = header
-        d.algorithm = self.algorithm
-        d.innovation = list(step.innovation)
-        d.covariance_trace = float(step.covariance_trace)
-        d.update_count = self.update_count
-        d.rejected_count = self.rejected_count
-        d.last_rejection = self.last_rejection
-        return d
+        return make(FilterDiagnostics, header=header, algorithm=self.algorithm,
+                    innovation=list(step.innovation),
+                    covariance_trace=float(step.covariance_trace),
+                    update_count=self.update_count, rejected_count=self.rejected_count,
+                    last_rejection=self.last_rejection)
 
 
 def build_estimator(entry: Any, p: Dict[str, Any], own: Dict[str, Any],

@@ -211,9 +211,10 @@ class GeomagneticField(abc.ABC):
             raise ValueError(f'orbit epoch {orbit.epoch} differs from field epoch {self.epoch}')
         t = float(t)
         h = self.rate_step_s
-        b = self.field_eci(orbit.state(t).r_eci if r_eci is None else r_eci, t)
-        b_plus = self.field_eci(orbit.state(t + h).r_eci, t + h)
-        b_minus = self.field_eci(orbit.state(t - h).r_eci, t - h)
+        position = getattr(orbit, 'position', None) or (lambda s: orbit.state(s).r_eci)
+        b = self.field_eci(position(t) if r_eci is None else r_eci, t)
+        b_plus = self.field_eci(position(t + h), t + h)
+        b_minus = self.field_eci(position(t - h), t - h)
         return b, (b_plus - b_minus) / (2.0 * h)
 
 

@@ -50,6 +50,7 @@ Report #3" (2006); paper 000 (Lebedev et al.) and its digest section 1.2 for the
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
@@ -161,12 +162,18 @@ def gmst(t_utc: datetime, t: float = 0.0) -> float:
     float
         GMST [rad] in [0, 2 pi): angle from the ECI x axis to the ECEF x axis about z.
     """
-    days = ((_utc(t_utc, 't_utc') - _J2000).total_seconds() + float(t)) / 86400.0
+    days = (_seconds_since_j2000(t_utc) + float(t)) / 86400.0
     cent = days / 36525.0
     # 876600 h T = 86400 s * days, kept apart from the small terms for precision.
     sec = (67310.54841 + 86400.0 * math.fmod(days, 1.0)
            + cent * (8640184.812866 + cent * (0.093104 - 6.2e-6 * cent)))
     return (math.fmod(sec, 86400.0) / 86400.0 * _TWO_PI) % _TWO_PI
+
+
+@functools.lru_cache(maxsize=64)
+def _seconds_since_j2000(t_utc: datetime) -> float:
+    """``t_utc - J2000`` [s] (an epoch's, once: GMST is evaluated several times a frame)."""
+    return (_utc(t_utc, 't_utc') - _J2000).total_seconds()
 
 
 def q_eci_ecef(t_utc: datetime, t: float = 0.0) -> np.ndarray:
@@ -250,7 +257,8 @@ def _quat_from_axes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
     # without its orthonormality checks (40 us -> 5 us); the axes are orthonormal by construction.
     m00, m11, m22 = x[0], y[1], z[2]
     tr = m00 + m11 + m22
-    i = int(np.argmax((m00, m11, m22, tr)))
+    diag = (m00, m11, m22, tr)
+    i = diag.index(max(diag))       # the first largest, as np.argmax
     if i == 3:
         w = 0.5 * math.sqrt(1.0 + tr)
         q = np.array([y[2] - z[1], z[0] - x[2], x[1] - y[0], 4.0 * w * w]) / (4.0 * w)
@@ -308,6 +316,7 @@ class CircularOrbit:
             attitude.from_axis_angle([0.0, 0.0, 1.0], self.raan),
             attitude.from_axis_angle([1.0, 0.0, 0.0], inc)))
         self._omega = self._n * self._p[:, 2]
+        self._p1, self._p2 = self._p[:, 0].copy(), self._p[:, 1].copy()
 
     @property
     def mean_motion(self) -> float:
@@ -323,12 +332,17 @@ class CircularOrbit:
         """:class:`OrbitState` at ``t`` seconds after :attr:`epoch`."""
         u = (self.arg_latitude0 + self._n * float(t)) % _TWO_PI
         c, s = math.cos(u), math.sin(u)
-        p1, p2 = self._p[:, 0], self._p[:, 1]
+        p1, p2 = self._p1, self._p2
         zen = c * p1 + s * p2
         along = c * p2 - s * p1
         normal = self._p[:, 2]
         return OrbitState(self.radius * zen, self.radius * self._n * along,
                           _quat_from_axes(along, normal, zen), self._omega.copy(), self._n, u)
+
+    def position(self, t: float) -> np.ndarray:
+        """``state(t).r_eci`` [m] alone (the same operations)."""
+        u = (self.arg_latitude0 + self._n * float(t)) % _TWO_PI
+        return self.radius * (math.cos(u) * self._p1 + math.sin(u) * self._p2)
 
 
 class Sgp4Orbit:
@@ -391,12 +405,20 @@ class Sgp4Orbit:
         RuntimeError
             If SGP4 fails at that time (e.g. the satellite has decayed).
         """
+        r_km, v_kms = self._propagate(t)
+        return state_from_rv(np.multiply(r_km, 1e3), np.multiply(v_kms, 1e3))
+
+    def position(self, t: float) -> np.ndarray:
+        """``state(t).r_eci`` [m] alone."""
+        return np.multiply(self._propagate(t)[0], 1e3)
+
+    def _propagate(self, t: float) -> tuple:
         err, r_km, v_kms = self._sat.sgp4_tsince(self._t0_min + float(t) / 60.0)
         if err or not math.isfinite(r_km[0] + v_kms[0]):
             from sgp4.api import SGP4_ERRORS
 
             raise RuntimeError(f'SGP4 error {err}: {SGP4_ERRORS.get(err, "non-finite state")}')
-        return state_from_rv(np.multiply(r_km, 1e3), np.multiply(v_kms, 1e3))
+        return r_km, v_kms
 
 
 def _check_tle_line(line: str, number: int) -> str:

@@ -25,6 +25,8 @@ from sim_node.models.dynamics import ActuatorCommand as Command
 from sim_node.models.dynamics import FrameEnvironment, SpacecraftState, propagate_environment
 from sim_node.models.spacecraft_config import initial_state, spacecraft_from_config
 
+_ZERO3 = (0.0, 0.0, 0.0)
+
 
 class DynamicsComponent:
     """The spacecraft's motion (see module docstring).
@@ -132,17 +134,15 @@ class DynamicsComponent:
     def wheels_msg(self, header: Any) -> WheelState:
         """``sim/wheels`` of the current state (momentum, speed, applied torque)."""
         st = self.state
-        w = WheelState()
-        w.header = header
-        w.names = self.wheel_names
         h = np.asarray(st.h_wheels, dtype=float)
-        w.momentum = h.tolist()
         wheels = self.spacecraft.wheels
-        if wheels is not None:
-            w.speed = wheels.speed(h, st.omega_body_eci_body).tolist()
-            w.torque = np.asarray(self.applied_wheel_torque, dtype=float).tolist()
-            w.h_wheels_body = to_vec3(wheels.h_body(h))
-        return w
+        if wheels is None:
+            return make(WheelState, header=header, names=self.wheel_names, momentum=h.tolist(),
+                        speed=[], torque=[], h_wheels_body=to_vec3(_ZERO3))
+        return make(WheelState, header=header, names=self.wheel_names, momentum=h.tolist(),
+                    speed=wheels.speed(h, st.omega_body_eci_body).tolist(),
+                    torque=np.asarray(self.applied_wheel_torque, dtype=float).tolist(),
+                    h_wheels_body=to_vec3(wheels.h_body(h)))
 
     def appendages_msg(self, header: Any) -> Optional[AppendageState]:
         """``sim/appendages`` (modal coordinates) of a flexible spacecraft, else None."""

@@ -38,7 +38,7 @@ class EnvironmentComponent:
         """``sim/environment`` of elapsed sim time ``t_ns``."""
         t = ns_to_seconds(t_ns)
         st = self.orbit.state(t)
-        b_eci, b_dot_eci = self.field.field_and_rate(self.orbit, t)
+        b_eci, b_dot_eci = self.field.field_and_rate(self.orbit, t, st.r_eci)
         return make(Environment, header=make(Header, stamp=self.clock.stamp(t_ns), frame_id='eci'),
                     r_eci=to_vec3(st.r_eci), v_eci=to_vec3(st.v_eci),
                     q_eci_orbit=to_quat(st.q_eci_orbit),

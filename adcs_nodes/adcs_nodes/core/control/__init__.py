@@ -175,8 +175,8 @@ class Estimate:
         except (TypeError, ValueError):
             return False
         return (bool(self.valid) and q.shape == (4,) and w.shape == (3,)
-                and bool(np.all(np.isfinite(q))) and bool(np.all(np.isfinite(w)))
-                and np.isfinite(w0) and float(np.linalg.norm(q)) > 1e-9)
+                and all(map(math.isfinite, q.tolist())) and all(map(math.isfinite, w.tolist()))
+                and math.isfinite(w0) and math.sqrt(float(q @ q)) > 1e-9)
 
 
 def _identity_quat() -> np.ndarray:

@@ -184,9 +184,8 @@ class MagneticFilterEstimator:
     def step(self, inputs: EstimatorInputs, t: float, dt: float) -> Step:
         """Predict over ``dt`` with the applied dipole, then update with a fresh sample."""
         f, ref, out = self.filter, inputs.ref, Step(None)
-        omega_abs0 = omega_eci_from_orbit(self.q0, self.omega_rel0, ref.omega0)
         if not self._started:
-            f.reset(self.q0, omega_abs0)
+            f.reset(self.q0, omega_eci_from_orbit(self.q0, self.omega_rel0, ref.omega0))
             self._started = True
         elif dt > 0:
             dipole = inputs.dipole_body if _finite(inputs.dipole_body) else np.zeros(3)
@@ -203,7 +202,7 @@ class MagneticFilterEstimator:
                 out.rejections.append(
                     f"filter diverged (|omega'| beyond {self.max_rate:g} rad/s or not finite): "
                     f'reset to the initial estimate ({self.resets})')
-                f.reset(self.q0, omega_abs0)
+                f.reset(self.q0, omega_eci_from_orbit(self.q0, self.omega_rel0, ref.omega0))
         if inputs.b_body is not None:
             # the sample's own variances when given, floored at theta (ASSUMPTION: theta also
             # covers what a covariance does not: bias, misalignment, model errors)
