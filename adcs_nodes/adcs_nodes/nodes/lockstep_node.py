@@ -30,6 +30,16 @@ Timing modes (parameter ``timing_mode``, DESIGN section 6)
   more than ``max_future_s``
   ahead of the clock, more than ``max_sample_age_s`` old, or not newer than the one before is
   rejected and counted by reason (:attr:`LockstepNode.rejected_samples`).
+* sample timing (``external_inputs``: an ``external: true`` sensor's topic, or every sensor
+  in ``--real-time``; :meth:`LockstepNode.external_samples`): never awaited; the node says
+  ready only once a publisher is matched on each such topic (at most
+  :data:`EXTERNAL_WAIT_S`); nothing usable for ``dead_after_frames`` of the input's periods
+  starves the node (logged with the topic, in the run summary: the launcher ends the run
+  degraded, exit 3). In ``--real-time`` the simulated world's nodes still await their frame
+  inputs; flight software fires with the latest values.
+* run summary: at its last frame a flight-software node logs :data:`SUMMARY_PREFIX` and
+  :meth:`LockstepNode.run_summary` as JSON (samples used per topic, rejected by reason,
+  superseded, filter resets, starved inputs); ``adcs run`` prints one line per node.
 * QoS: every publisher and subscription accepts ``qos_overrides.<topic>.*`` parameters
   (``QoSOverridingOptions.with_default_policies()``); in live mode ``sensors/*`` inputs are
   subscribed best-effort (``SensorDataQoS``), which matches both kinds of driver.
