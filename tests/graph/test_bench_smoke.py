@@ -8,7 +8,8 @@ import sys
 
 import pytest
 
-from sim_node.tools.bench import Row, Sample, format_table, hop_pattern, verdict
+from sim_node.tools.bench import (Row, Sample, delivery_pattern, format_table, hop_pattern,
+                                  verdict)
 
 pytestmark = pytest.mark.parallel
 
@@ -34,6 +35,17 @@ def test_hop_pattern_of_paper000_at_1s_frames():
     assert hop_pattern(sc, 1.0) == [7, 2, 4, 2, 4, 2, 4, 2, 4, 2]
     assert hop_pattern(sc, 2.0) == [7, 4, 4, 4, 4]
     assert hop_pattern({}, 1.0) == [2]
+
+
+def test_delivery_pattern_of_paper000_at_1s_frames():
+    # the ring of target (a) makes the graph's own deliveries: /clock to the 7 nodes, the
+    # environment to dynamics and the magnetometer, sim/state to the magnetometer (10 a frame);
+    # command frames add the estimate (3 readers), the target, two commands, the applied
+    # command (3 readers): 19; the magnetometer's sample adds 3: 22
+    from adcs_nodes.tools.scenario import load_scenario
+    from sim_node.tools.bench import bench_scenario
+    sc = bench_scenario(load_scenario(os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')))
+    assert delivery_pattern(sc, 1.0) == [22, 10, 19, 10, 19, 10, 19, 10, 19, 10]
 
 
 @pytest.mark.long   # make bench runs the whole table

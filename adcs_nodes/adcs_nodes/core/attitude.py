@@ -77,8 +77,8 @@ def multiply(p, q) -> np.ndarray:
 
     ``R(p (x) q) = R(p) @ R(q)``, so ``q_A_C = multiply(q_A_B, q_B_C)``.
     """
-    px, py, pz, pw = _as_quat(p)
-    qx, qy, qz, qw = _as_quat(q)
+    px, py, pz, pw = _as_quat(p).tolist()     # Python floats: the same IEEE operations,
+    qx, qy, qz, qw = _as_quat(q).tolist()     # without numpy scalar dispatch
     return np.array([
         pw * qx + px * qw + py * qz - pz * qy,
         pw * qy - px * qz + py * qw + pz * qx,
@@ -89,13 +89,13 @@ def multiply(p, q) -> np.ndarray:
 
 def conjugate(q) -> np.ndarray:
     """Conjugate ``[-x, -y, -z, w]``; the inverse rotation of a unit quaternion."""
-    q = _as_quat(q)
-    return np.array([-q[0], -q[1], -q[2], q[3]])
+    x, y, z, w = _as_quat(q).tolist()
+    return np.array([-x, -y, -z, w])
 
 
 def to_matrix(q) -> np.ndarray:
     """Rotation matrix ``R(q_A_B)`` (3, 3) with ``v_A = R @ v_B``. ``q`` is normalised first."""
-    x, y, z, w = normalize(q)
+    x, y, z, w = normalize(q).tolist()        # Python floats: the same IEEE operations
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
