@@ -54,7 +54,7 @@ from adcs_nodes.components.base import (DEFAULT_EPOCH, FrameClock, Mounts, epoch
 from adcs_nodes.components.guidance import PARAMS as GUIDANCE_PARAMS
 from adcs_nodes.components.guidance import GuidanceComponent
 from adcs_nodes.components.manager import MANAGER_PARAMS, ManagerComponent, manager_core
-from adcs_nodes.core.lockstep import derive_seed, seconds_to_ns
+from adcs_nodes.core.lockstep import ZERO, derive_seed, seconds_to_ns
 from adcs_nodes.nodes.actuator_topics import MAGNETORQUER_TOPIC, WHEELS_TOPIC, wheel_names_for
 from adcs_nodes.nodes.convert import stamp_ns
 from adcs_nodes.nodes.messages import make
@@ -408,7 +408,6 @@ class FrameLoop:
         cmd = None                                      # hold (no command due)
         if self.command_ns and t % self.command_ns == 0:
             msg = self._latest.get('adcs/actuator_command')
-            from adcs_nodes.core.lockstep import ZERO
             cmd = ZERO if msg is None or not self._fresh(msg, t) else \
                 self.dynamics.to_command(msg)
         self.dynamics.step(t, env, cmd)

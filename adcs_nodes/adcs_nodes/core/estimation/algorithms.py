@@ -132,7 +132,9 @@ def omega_orbit_from_eci(q_orbit_body: ArrayLike, omega_body_eci_body: ArrayLike
 
 
 def _finite(*arrays) -> bool:
-    return all(bool(np.all(np.isfinite(a))) for a in arrays)
+    # math.isfinite on Python floats: np.all(np.isfinite(a)) without the numpy dispatch
+    isfinite = math.isfinite
+    return all(all(map(isfinite, np.asarray(a, dtype=float).ravel().tolist())) for a in arrays)
 
 
 class MagneticFilterEstimator:
