@@ -27,9 +27,11 @@ Algorithms here:
   carry the information of one of ``theta``; the ``sigma_j`` inflation stays per unit time),
   ``r`` floored at 1e-3; ``d >= theta_interval_s`` (the paper's rate, a lost sample) leaves
   both unchanged, so a 10 s run is bit for bit what it was. Measured on paper000_estimation
-  (plain engine, median / 95th percentile over T/2..T): samples every 0.5 s 9.32 / 34.3 deg
-  unscaled, 0.60 / 1.13 deg scaled; every 2 s 1.66 / 5.98 unscaled (the table in the
-  commit and README). ``theta_interval_s = 0``: off (the paper's numbers per sample).
+  (plain engine, one sample per interval, median / 95th percentile over T/2..T [deg],
+  without -> with): 0.1 s 3.73 / 9.66 -> 2.53 / 4.04 (not converged for good either way),
+  0.5 s 9.32 / 34.3 -> 0.62 / 1.18, 2 s 1.66 / 5.98 -> 0.62 / 1.44, 6 s 0.80 / 1.60 ->
+  0.69 / 1.15, 10 s 0.70 / 1.09 both. ``theta_interval_s = 0``: off (the paper's numbers
+  per sample).
 * :class:`GeometricEstimator`: TRIAD or paper 004's horizon + magnetometer yaw (formula (3)),
   with the rate as the finite difference of successive attitudes::
 
