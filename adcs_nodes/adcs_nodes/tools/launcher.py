@@ -1014,9 +1014,11 @@ class Launcher:
         """Why the run lost its controller or estimator for part of the time ('' if not)."""
         from sim_node.faults import lost_text
         why = []
+        kills = getattr(self, 'kills', {})
         lost = [f'{n} (died at sim t = {self.lost_at.get(n, 0.0):g} s)'
-                for n in sorted(self.lost) if n not in self.kills]
-        lost += lost_text(self.sc.get('faults') or [], monitor.sim_ns / 1e9)
+                for n in sorted(self.lost) if n not in kills]
+        if kills:
+            lost += lost_text(self.sc.get('faults') or [], monitor.sim_ns / 1e9)
         if lost:
             why.append('lost ' + ', '.join(lost))
         st = monitor.controller_status
