@@ -433,7 +433,7 @@ class BagSink:
                  flush_every_frames: int = 200, topics: Sequence[str] = ()) -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer
 
-        from adcs_nodes.tools.bag import BAG_VERSION, ensure_type, make_typestore
+        from adcs_nodes.bag import BAG_VERSION, ensure_type, make_typestore
         self._ensure_type = ensure_type
         self.path = path
         self._store = make_typestore()
@@ -469,7 +469,7 @@ class BagSink:
 
     def write(self, frame: Frame) -> None:
         """Write one frame's messages (flushed to the file every ``flush_every_frames``)."""
-        from adcs_nodes.tools.bag import flush_writer
+        from adcs_nodes.bag import flush_writer
         t_log = self._clock_ns(frame.t_ns)
         for topic, msg in frame.outputs:
             if self._only and topic.lstrip('/') not in self._only:

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from adcs_launch import adcs, control_scenario, start_adcs, wait_manifest
-from adcs_nodes.tools.bag import header_stamp_ns, read_messages, topic_summary
+from adcs_nodes.bag import header_stamp_ns, read_messages, topic_summary
 
 EPOCH_NS = 1767225600 * 10**9
 

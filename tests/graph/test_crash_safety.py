@@ -55,7 +55,7 @@ def _wait(predicate, timeout, what):
 
 def _states_in(bag) -> int:
     """Number of ``/sim/state`` messages the (unfinished) bag holds now, 0 if none yet."""
-    from adcs_nodes.tools.bag import read_messages
+    from adcs_nodes.bag import read_messages
     try:
         return sum(1 for _ in read_messages(bag, topics=['/sim/state']))
     except (OSError, ValueError):
@@ -81,7 +81,7 @@ def _kill_group(proc):
 
 @pytest.mark.parametrize('mode', [[], ['--compose']], ids=['process_per_node', 'composed'])
 def test_sigkill_of_the_launcher_leaves_no_node_and_a_readable_bag(tmp_path, mode):
-    from adcs_nodes.tools.bag import read_messages
+    from adcs_nodes.bag import read_messages
 
     bag = tmp_path / 'bag'
     proc = _start(tmp_path, 'run', FREE_TUMBLE, '--duration', LONG_S, '--record', str(bag),
@@ -125,7 +125,7 @@ def _mount_tmpfs(path, size='256k'):
 def test_disk_full_stops_the_run_says_so_and_keeps_the_data(tmp_path, mode):
     """The bag on a 256 KiB tmpfs: the run stops by itself with exit 1 and 'disk full', no
     traceback anywhere, and the bag reads back with the frames written before."""
-    from adcs_nodes.tools.bag import read_messages
+    from adcs_nodes.bag import read_messages
 
     disk = tmp_path / 'disk'
     _mount_tmpfs(disk)
@@ -162,7 +162,7 @@ def test_sigkill_of_the_recorder_stops_the_run_and_export_and_report_read_the_ba
     few seconds of sim time before the kill)."""
     import csv
 
-    from adcs_nodes.tools.bag import read_messages
+    from adcs_nodes.bag import read_messages
 
     bag = tmp_path / 'bag'
     proc = _start(tmp_path, 'run', FREE_TUMBLE, '--duration', LONG_S, '--record', str(bag),

@@ -2,7 +2,7 @@
 burners, one process per node and composed, give the same contents on every data topic as a
 run on its own (estimate, commands of every controller, the manager's output, truth,
 magnetometer, target, tf). Status-like topics with wall-clock content are excluded
-(``tools.bag.NONDETERMINISTIC_TYPES``)."""
+(``adcs_nodes.bag.NONDETERMINISTIC_TYPES``)."""
 import multiprocessing
 import os
 
@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from adcs_launch import SCENARIOS, adcs
-from adcs_nodes.tools.bag import content_digest
+from adcs_nodes.bag import content_digest
 
 DURATION = '300'
 DATA_TOPICS = ('/adcs/attitude_estimate', '/adcs/actuator_command',

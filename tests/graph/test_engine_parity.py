@@ -7,7 +7,7 @@ estimator, controller and the manager fire at least twice; the estimator's
 previous-frame command is used). The plain bags are written in this process
 (:func:`sim_node.engine.run_plain`, what ``adcs run --engine plain`` calls), one of them
 (:data:`PLAIN_CLI`) through the command itself; the bags are compared with
-:func:`adcs_nodes.tools.bag.content_digest` (per topic: count and a hash of every message's
+:func:`adcs_nodes.bag.content_digest` (per topic: count and a hash of every message's
 values in stamp order).
 
 Not compared: ``/tf``, ``/tf_static`` and ``/diagnostics`` (the plain engine does not publish
@@ -23,7 +23,7 @@ import pytest
 import yaml
 
 from adcs_launch import SCENARIOS, adcs
-from adcs_nodes.tools.bag import content_digest
+from adcs_nodes.bag import content_digest
 
 NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
             '/adcs/controller_status')

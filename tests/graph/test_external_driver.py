@@ -31,7 +31,7 @@ import pytest
 import yaml
 
 from adcs_launch import ROOT, RUNS, SCENARIOS, adcs
-from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+from adcs_nodes.bag import header_stamp_ns, read_messages
 from adcs_nodes.tools.metrics import estimate_errors_deg
 
 DRIVER = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'mag_driver.py')

@@ -17,7 +17,7 @@ import numpy as np
 import yaml
 
 from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
-from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+from adcs_nodes.bag import header_stamp_ns, read_messages
 
 EPOCH_NS = 1767225600 * 10**9          # paper000_control's epoch
 

@@ -12,7 +12,7 @@ does not depend on which of the two the estimator saw first.
 import yaml
 
 from adcs_launch import SCENARIOS, adcs
-from adcs_nodes.tools.bag import content_digest, read_messages
+from adcs_nodes.bag import content_digest, read_messages
 
 NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
             '/adcs/controller_status')

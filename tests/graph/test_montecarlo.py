@@ -28,7 +28,7 @@ import yaml
 from adcs_launch import ROOT, SCENARIOS
 
 from adcs_nodes.tools import montecarlo as mc
-from adcs_nodes.tools.bag import read_messages
+from adcs_nodes.bag import read_messages
 
 pytestmark = pytest.mark.parallel
 

@@ -11,7 +11,7 @@ import re
 import yaml
 
 from adcs_launch import adcs, control_scenario
-from adcs_nodes.tools.bag import content_digest, read_messages
+from adcs_nodes.bag import content_digest, read_messages
 
 NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
             '/adcs/controller_status')

@@ -14,7 +14,7 @@ import numpy as np
 import yaml
 
 from adcs_launch import ROOT, adcs
-from adcs_nodes.tools.bag import content_digest, read_messages
+from adcs_nodes.bag import content_digest, read_messages
 
 sys.path.insert(0, os.path.join(ROOT, 'tests', 'unit'))
 from test_frameloop_plugin_inputs import _forget_the_plugin, damper_scenario  # noqa: E402,F401

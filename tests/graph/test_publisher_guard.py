@@ -27,7 +27,7 @@ import pytest
 import yaml
 
 from adcs_launch import ROOT, SCENARIOS, adcs, start_adcs, wait_manifest
-from adcs_nodes.tools.bag import flatten_message, read_messages
+from adcs_nodes.bag import flatten_message, read_messages
 
 pytestmark = pytest.mark.ros
 

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from adcs_launch import SCENARIOS, adcs
-from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+from adcs_nodes.bag import header_stamp_ns, read_messages
 from adcs_nodes.tools.metrics import estimate_errors_deg
 from adcs_nodes.tools.papers import rows_for_bag
 

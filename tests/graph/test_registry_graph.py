@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from adcs_launch import ROOT, SCENARIOS, adcs
-from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+from adcs_nodes.bag import header_stamp_ns, read_messages
 
 EPOCH_NS = 1767225600 * 10**9
 TOY = os.path.join(ROOT, 'tests', 'plugins', 'toy_controller.py')

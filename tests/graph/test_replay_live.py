@@ -24,7 +24,7 @@ rclpy = pytest.importorskip('rclpy')
 from adcs_msgs.msg import AttitudeState  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 
-from adcs_nodes.tools.bag import header_stamp_ns, read_messages  # noqa: E402
+from adcs_nodes.bag import header_stamp_ns, read_messages  # noqa: E402
 from adcs_nodes.tools.graph import build_graph, params_file_text  # noqa: E402
 from adcs_nodes.tools.launcher import child_env, use_dds_env  # noqa: E402
 from adcs_nodes.tools.scenario import load_scenario  # noqa: E402

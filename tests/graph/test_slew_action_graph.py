@@ -17,7 +17,7 @@ import yaml
 
 from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
 from adcs_nodes.core import attitude as att
-from adcs_nodes.tools.bag import read_messages
+from adcs_nodes.bag import read_messages
 
 
 def _scenario(tmp_path):

@@ -17,7 +17,7 @@ import pytest
 
 from adcs_launch import control_scenario, start_adcs
 
-from adcs_nodes.tools.bag import header_stamp_ns, read_messages  # noqa: E402
+from adcs_nodes.bag import header_stamp_ns, read_messages  # noqa: E402
 
 RUNS = 3
 BURNERS = 3

@@ -15,7 +15,7 @@ import yaml
 
 from adcs_launch import SCENARIOS, adcs
 from adcs_nodes.core import attitude as att
-from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+from adcs_nodes.bag import header_stamp_ns, read_messages
 
 pytestmark = pytest.mark.long
 

@@ -31,7 +31,7 @@ import rosidl_parser.definition as rdef  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 
 from adcs_nodes.nodes import cdr  # noqa: E402
-from adcs_nodes.tools.bag import ensure_type, make_typestore  # noqa: E402
+from adcs_nodes.bag import ensure_type, make_typestore  # noqa: E402
 
 ADCS_MSGS = ['ActuatorCommand', 'AppendageState', 'AttitudeState', 'AttitudeTarget',
              'ControllerStatus', 'Environment', 'FilterDiagnostics', 'HorizonSensor',

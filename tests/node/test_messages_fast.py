@@ -30,7 +30,7 @@ from std_msgs.msg import Header  # noqa: E402
 from adcs_msgs.msg import (ActuatorCommand, AttitudeState, AttitudeTarget,  # noqa: E402
                            Environment, LockstepStatus)
 from adcs_nodes.nodes import messages  # noqa: E402
-from adcs_nodes.tools.bag import ensure_type, make_typestore  # noqa: E402
+from adcs_nodes.bag import ensure_type, make_typestore  # noqa: E402
 
 TYPES = [Header, Clock, Environment, AttitudeState, ActuatorCommand, AttitudeTarget,
          LockstepStatus, MagneticField, Vector3Stamped, Vector3, Quaternion, Time]

@@ -8,7 +8,7 @@ import shutil
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from adcs_nodes.tools.bag import flush_writer, make_typestore, read_messages, recover_mcap
+from adcs_nodes.bag import flush_writer, make_typestore, read_messages, recover_mcap
 
 N = 60
 FLUSH_EVERY = 10

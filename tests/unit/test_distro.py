@@ -8,7 +8,7 @@ import yaml
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from adcs_nodes.tools.distro import RCLPY_MAJOR_TO_DISTRO, close_writer, ros_distro
+from adcs_nodes.distro import RCLPY_MAJOR_TO_DISTRO, close_writer, ros_distro
 
 mcap_reader = pytest.importorskip('mcap.reader')
 

@@ -17,8 +17,8 @@ pytest.importorskip('rosbags')
 
 from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
 
-from adcs_nodes.tools.bag import (content_digest, make_typestore, read_messages,  # noqa: E402
-                                  topic_summary)
+from adcs_nodes.bag import (content_digest, make_typestore, read_messages,  # noqa: E402
+                            topic_summary)
 from adcs_nodes.tools.export import export_csv, topic_file_name  # noqa: E402
 from adcs_nodes.tools.report import make_report  # noqa: E402
 
@@ -272,7 +272,7 @@ def test_tools_import_without_rclpy():
     root = Path(__file__).resolve().parents[2]
     code = ("import sys; sys.modules['rclpy'] = None; sys.path.insert(0, 'adcs_nodes'); "
             "import adcs_nodes.tools.report, adcs_nodes.tools.export; "
-            "print(len(adcs_nodes.tools.bag.make_typestore().fielddefs))")
+            "print(len(adcs_nodes.bag.make_typestore().fielddefs))")
     out = subprocess.run([sys.executable, '-c', code], cwd=root, capture_output=True,
                          text=True, timeout=60)
     assert out.returncode == 0, out.stderr

@@ -55,7 +55,7 @@ def test_paper004_yaw_reproduction(tmp_path, reproductions_without_rclpy):
     i = 82 deg, 5 % on a_x (alg. (3) 3.07 / 0.94 deg max / RMS, TRIAD 2.83 / 0.92 deg).
 
     The bag is the plain engine's (``adcs run --engine plain``), read as a recorded one."""
-    from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+    from adcs_nodes.bag import header_stamp_ns, read_messages
     from adcs_nodes.tools.reproductions import expectations_for, yaw_errors_paper004
     from sim_node.engine import run_plain
     bag = str(tmp_path / 'paper004')

@@ -65,8 +65,8 @@ Crash safety
 The rosbags MCAP writer keeps up to 1 MiB in memory; a recorder killed with SIGKILL once left a
 0-byte bag. The recorder closes the pending chunk every ``flush_sim_s`` of log time or
 ``flush_period_s`` of wall time, whichever comes first, and flushes it
-(:func:`adcs_nodes.tools.bag.flush_writer`), so a killed recorder loses at most that much; the
-analysis tools read the unfinished file (:func:`adcs_nodes.tools.bag.recover_mcap`). A write
+(:func:`adcs_nodes.bag.flush_writer`), so a killed recorder loses at most that much; the
+analysis tools read the unfinished file (:func:`adcs_nodes.bag.recover_mcap`). A write
 error (``ENOSPC``: disk full) stops the recording, not the process with a traceback: the node
 logs what happened and how much the bag keeps, reports it in ``recorder/status``
 (``last_missed_input`` = ``disk full: ...``) and exits with :data:`EXIT_WRITE_FAILED`; the
@@ -83,7 +83,7 @@ stamp (``header.stamp``, or ``clock`` of ``rosgraph_msgs/Clock``), else the late
 written, else wall time. Log times are kept non-decreasing per topic, so
 reading a topic in log-time order gives the arrival order. Log times differ between two runs of
 the same simulation; message contents and counts do not (reliable, deep queues, no
-reordering within a topic). The analysis tools (:mod:`adcs_nodes.tools.bag`, export, report)
+reordering within a topic). The analysis tools (:mod:`adcs_nodes.bag`, export, report)
 use header stamps, never log times.
 """
 from __future__ import annotations
@@ -112,9 +112,9 @@ from std_msgs.msg import String
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.registry import Param
-from adcs_nodes.tools.bag import (BAG_VERSION, cdr_stamp_ns, ensure_type, flush_writer,
-                                  make_typestore, stamp_kind)
-from adcs_nodes.tools.distro import close_writer
+from adcs_nodes.bag import (BAG_VERSION, cdr_stamp_ns, ensure_type, flush_writer,
+                            make_typestore, stamp_kind)
+from adcs_nodes.distro import close_writer
 
 DEFAULT_EXCLUDE = ['/rosout', '/parameter_events']
 QUEUE_DEPTH = 1000

@@ -23,7 +23,7 @@ import os
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
-from adcs_nodes.tools.bag import flatten_message, header_stamp_ns, list_topics, read_messages
+from adcs_nodes.bag import flatten_message, header_stamp_ns, list_topics, read_messages
 
 
 def topic_file_name(topic: str) -> str:

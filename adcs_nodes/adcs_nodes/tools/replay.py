@@ -60,7 +60,7 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 from typing import Callable, Dict, List, Optional, Sequence
 
-from adcs_nodes.tools.bag import cdr_stamp_ns, open_bag
+from adcs_nodes.bag import cdr_stamp_ns, open_bag
 
 SENSOR_PREFIX = '/sensors/'
 STATIC_TOPICS = ('/tf_static',)
@@ -131,7 +131,7 @@ def load_samples(bag: str, topics: Optional[Sequence[str]] = None
         Missing or unreadable bag; a requested topic not in the bag; no sensor topic; a timed
         topic without ``header.stamp``.
     """
-    from adcs_nodes.tools.bag import stamp_kind
+    from adcs_nodes.bag import stamp_kind
     try:
         with open_bag(bag) as reader:
             available = {c.topic: c.msgtype for c in reader.connections}
@@ -412,7 +412,7 @@ def lockstep_plan(bag: str, nodes: Sequence[str] = ('estimator',),
                         for t in missing)
                     + f' (it has: {", ".join(sorted(available))})')
             store = reader.typestore if hasattr(reader, 'typestore') else None
-            from adcs_nodes.tools.bag import stamp_kind
+            from adcs_nodes.bag import stamp_kind
             for t in needed:
                 if t in STATIC_TOPICS or store is None:
                     continue

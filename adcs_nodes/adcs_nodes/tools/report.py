@@ -41,7 +41,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from adcs_nodes.tools import papers
-from adcs_nodes.tools.bag import cdr_stamp_ns, open_bag, stamp_kind
+from adcs_nodes.bag import cdr_stamp_ns, open_bag, stamp_kind
 from adcs_nodes.tools.metrics import angle_to_identity_deg, estimate_errors_deg, run_metrics
 
 STATE_TOPIC = '/sim/state'

@@ -40,7 +40,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 from matplotlib.figure import Figure
 
-from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+from adcs_nodes.bag import header_stamp_ns, read_messages
 
 TOPICS = ('/sim/state', '/sim/wheels', '/sim/faults', '/adcs/attitude_estimate',
           '/adcs/estimator/diagnostics', '/adcs/attitude_target', '/adcs/actuator_command',
@@ -549,7 +549,7 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
     Raises
     ------
     FileNotFoundError, ValueError
-        As :func:`adcs_nodes.tools.bag.read_messages` (no bag, not a bag).
+        As :func:`adcs_nodes.bag.read_messages` (no bag, not a bag).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

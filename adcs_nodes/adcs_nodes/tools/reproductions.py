@@ -6,7 +6,7 @@ module (:mod:`adcs_nodes.tools.papers`, picked by the scenario's ``name`` in the
 with a paper value and misses is a FAIL; information rows and claims the run cannot check
 ("not comparable", with the reason) are printed and counted apart, never as a pass.
 
-Pure Python + numpy (bag reading through :mod:`adcs_nodes.tools.bag`); no rclpy.
+Pure Python + numpy (bag reading through :mod:`adcs_nodes.bag`); no rclpy.
 """
 from __future__ import annotations
 

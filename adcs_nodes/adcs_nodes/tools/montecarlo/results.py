@@ -26,7 +26,7 @@ def read_truth(bag: str) -> Dict[str, np.ndarray]:
     ValueError
         If the bag has no ``/sim/state`` message.
     """
-    from adcs_nodes.tools.bag import header_stamp_ns, read_messages
+    from adcs_nodes.bag import header_stamp_ns, read_messages
 
     stamps: List[int] = []
     q, w_eci, w_orb = [], [], []

@@ -21,7 +21,7 @@ _LAST: Dict[tuple, Topics] = {}
 
 
 def _stamp(msg: Any) -> Optional[int]:
-    from adcs_nodes.tools.bag import header_stamp_ns
+    from adcs_nodes.bag import header_stamp_ns
     return header_stamp_ns(msg)
 
 
@@ -31,9 +31,9 @@ def from_bag(bag: str, topics: Sequence[str]) -> Topics:
     Raises
     ------
     FileNotFoundError, ValueError
-        No bag there, or not a readable one (:func:`adcs_nodes.tools.bag.read_messages`).
+        No bag there, or not a readable one (:func:`adcs_nodes.bag.read_messages`).
     """
-    from adcs_nodes.tools.bag import read_messages
+    from adcs_nodes.bag import read_messages
     names = tuple(t.lstrip('/') for t in topics)
     try:
         mtime = max(os.stat(os.path.join(bag, f)).st_mtime_ns for f in os.listdir(bag)) \

@@ -92,7 +92,7 @@ def adcs_msg_dir() -> Path:
     share = _share_msg_dir(ADCS_PACKAGE)
     if share is not None and any(share.glob('*.msg')):
         return share
-    source = Path(__file__).resolve().parents[3] / ADCS_PACKAGE / 'msg'
+    source = Path(__file__).resolve().parents[2] / ADCS_PACKAGE / 'msg'
     if source.is_dir() and any(source.glob('*.msg')):
         return source
     raise FileNotFoundError(
@@ -428,7 +428,7 @@ def open_bag(bag_path: os.PathLike | str) -> Iterator[AnyReader]:
     Types come from the definitions embedded in the bag; :func:`make_typestore` serves bags
     without embedded definitions. An unfinished bag (its recorder was killed, or the disk was
     full: no ``metadata.yaml``, no MCAP footer) is read through :func:`recover_mcap` into a
-    temporary file, with a warning on the ``adcs_nodes.tools.bag`` logger naming how much was
+    temporary file, with a warning on the ``adcs_nodes.bag`` logger naming how much was
     recovered; the bag itself is not modified.
 
     Raises
