@@ -39,6 +39,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        '(--jobs worker processes, one thread each) and stop it at the end')
     parser.add_argument('--out', metavar='DIR', help='campaign directory (default '
                         'montecarlo_<scenario name>); an existing campaign there is resumed')
+    add_dispersion_arguments(parser)
+    parser.add_argument('--auto-detumble', action='store_true',
+                        help='B-dot detumble first (below 0.5 deg/s), then the magnetic law '
+                        '(writes manager.auto into each run)')
+    parser.add_argument('--bdot-gain', type=float, default=None, metavar='K',
+                        help='B-dot gain of the detumble [A m^2 s/T] (default: the '
+                        'scenario\'s)')
+    parser.add_argument('--engine', choices=ENGINES + ('auto',), default='auto',
+                        help='auto (default): plain unless a sensor is external, else graph; '
+                        'a campaign being resumed keeps the engine in its campaign.json. '
+                        'graph: the ROS graph, one bag per run; plain: the FrameLoop without '
+                        'ROS (sim_node.engine: the graph\'s series to the last bit, no bag, '
+                        'far less CPU)')
+    parser.add_argument('--compose', action='store_true',
+                        help='each run composed in one process (faster, same trajectory)')
+
+
+def add_dispersion_arguments(parser: argparse.ArgumentParser) -> None:
+    """The run length, seed, capture threshold and dispersion options of a campaign (``adcs
+    montecarlo``; ``adcs sweep`` gives them to every grid point)."""
     parser.add_argument('--duration', type=float, metavar='S',
                         help='simulated seconds per run (default: the scenario duration_s)')
     parser.add_argument('--seed', type=int, metavar='S',
@@ -54,20 +74,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--misalignment-deg', type=float, default=None, metavar='M',
                         help='disperse the magnetometer misalignment rotation vector per '
                         'component uniform in +-M deg (default: the scenario\'s)')
-    parser.add_argument('--auto-detumble', action='store_true',
-                        help='B-dot detumble first (below 0.5 deg/s), then the magnetic law '
-                        '(writes manager.auto into each run)')
-    parser.add_argument('--bdot-gain', type=float, default=None, metavar='K',
-                        help='B-dot gain of the detumble [A m^2 s/T] (default: the '
-                        'scenario\'s)')
-    parser.add_argument('--engine', choices=ENGINES + ('auto',), default='auto',
-                        help='auto (default): plain unless a sensor is external, else graph; '
-                        'a campaign being resumed keeps the engine in its campaign.json. '
-                        'graph: the ROS graph, one bag per run; plain: the FrameLoop without '
-                        'ROS (sim_node.engine: the graph\'s series to the last bit, no bag, '
-                        'far less CPU)')
-    parser.add_argument('--compose', action='store_true',
-                        help='each run composed in one process (faster, same trajectory)')
 
 
 def config_from_args(args: argparse.Namespace) -> tuple:

@@ -67,6 +67,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from adcs_nodes.tools import metrics
+from adcs_nodes.tools.montecarlo.cli import add_dispersion_arguments
 from adcs_nodes.tools.montecarlo.config import CampaignConfig, CampaignError, scenario_hash
 from adcs_nodes.tools.montecarlo.files import (SERIES_FILE, load_result, run_dir_of,
                                                write_json_atomic, write_text_atomic)
@@ -408,18 +409,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help='a Dask LocalCluster of --jobs workers per grid point')
     parser.add_argument('--out', metavar='DIR', help='sweep directory (default '
                         'sweep_<scenario name>); a sweep there is resumed')
-    parser.add_argument('--duration', type=float, metavar='S',
-                        help='simulated seconds per run (default: the scenario duration_s)')
-    parser.add_argument('--seed', type=int, metavar='S',
-                        help='campaign seed of every point (default: the scenario seed)')
-    parser.add_argument('--max-rate-deg-s', type=float, default=3.0, metavar='W',
-                        help='each initial rate component uniform in +-W deg/s (default 3)')
-    parser.add_argument('--capture-deg', type=float, default=5.0, metavar='A',
-                        help='captured: enters A deg, then stays below 2 A (default 5)')
-    parser.add_argument('--mag-bias-nT', type=float, default=None, metavar='B',
-                        help='disperse the magnetometer bias per axis in +-B nT')
-    parser.add_argument('--misalignment-deg', type=float, default=None, metavar='M',
-                        help='disperse the magnetometer misalignment per component in +-M deg')
+    add_dispersion_arguments(parser)   # the same draws' options as adcs montecarlo
     parser.add_argument('--table', action='store_true',
                         help='run nothing: the table of the finished runs in OUT as they are '
                         '(no identity check: after a code or scenario change, these are the '
