@@ -44,7 +44,7 @@ from adcs_nodes.core import kernels
 from adcs_nodes.core.kernels import finite_vector
 
 __all__ = ['Estimate', 'Target', 'Command', 'ControlInputs', 'Controller', 'scale_to_limits',
-           'limits_vector', 'finite_vector', 'cross3']
+           'limits_vector', 'inertia_matrix', 'finite_vector', 'cross3']
 
 
 def cross3(a: ArrayLike, b: ArrayLike) -> np.ndarray:
@@ -61,6 +61,24 @@ def positive(value, name: str, unit: str) -> float:
     if not (math.isfinite(x) and x > 0.0):
         raise ValueError(f'{name} must be finite and > 0 [{unit}], got {value!r}')
     return x
+
+
+def inertia_matrix(value: ArrayLike, name: str = 'inertia_kgm2') -> np.ndarray:
+    """An inertia tensor [kg m^2] as a (3, 3) float array: a (3,) value is the diagonal; it
+    must be finite with a positive definite symmetric part.
+
+    Raises
+    ------
+    ValueError
+        On a bad shape, a non-finite entry, or a symmetric part that is not positive definite.
+    """
+    J = np.asarray(value, dtype=float)
+    if J.shape == (3,):
+        J = np.diag(J)
+    J = finite_vector(J, name, (3, 3))
+    if not np.all(np.linalg.eigvalsh(0.5 * (J + J.T)) > 0.0):
+        raise ValueError(f'{name} must be symmetric positive definite')
+    return J
 
 
 def limits_vector(value: ArrayLike, name: str, n: int, allow_zero: bool = True,

@@ -69,7 +69,7 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from adcs_nodes.core.control import finite_vector, limits_vector, scale_to_limits
+from adcs_nodes.core.control import finite_vector, inertia_matrix, limits_vector, scale_to_limits
 from adcs_nodes.core.control import eigenaxis as ea
 
 __all__ = ['PHI_TERMS', 'DPHI_TERMS', 'MK_TERMS', 'TABLE1_ROWS_PRINTED', 'TABLE1', 'G_TERMS',
@@ -359,12 +359,7 @@ class FuzzyEigenaxisController(ea.EigenaxisTorqueLaw):
                  wheel_axes_body: Optional[ArrayLike] = None,
                  wheel_max_torque_Nm: Optional[ArrayLike] = None,
                  hysteresis_deg: float = 1.0, **breakpoints: Sequence[float]) -> None:
-        J = np.asarray(inertia_kgm2, dtype=float)
-        if J.shape == (3,):
-            J = np.diag(J)
-        self.J = finite_vector(J, 'inertia_kgm2', (3, 3))
-        if not np.all(np.linalg.eigvalsh(0.5 * (self.J + self.J.T)) > 0.0):
-            raise ValueError('inertia_kgm2 must be symmetric positive definite')
+        self.J = inertia_matrix(inertia_kgm2)
         self.limit = limits_vector(max_torque_Nm, 'max_torque_Nm', 3, allow_zero=False)
         if saturation not in ('scale', 'clip'):
             raise ValueError(f"saturation must be 'scale' or 'clip', got {saturation!r}")

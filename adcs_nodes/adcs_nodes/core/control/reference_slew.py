@@ -31,7 +31,7 @@ from typing import Optional
 import numpy as np
 from numpy.typing import ArrayLike
 
-from adcs_nodes.core.control import cross3, finite_vector, limits_vector, scale_to_limits
+from adcs_nodes.core.control import cross3, inertia_matrix, limits_vector, scale_to_limits
 from adcs_nodes.core.control import eigenaxis as ea
 
 __all__ = ['ReferenceSlewController']
@@ -72,12 +72,7 @@ class ReferenceSlewController(ea.EigenaxisTorqueLaw):
                  gyroscopic_compensation: bool = True,
                  wheel_axes_body: Optional[ArrayLike] = None,
                  wheel_max_torque_Nm: Optional[ArrayLike] = None) -> None:
-        J = np.asarray(inertia_kgm2, dtype=float)
-        if J.shape == (3,):
-            J = np.diag(J)
-        self.J = finite_vector(J, 'inertia_kgm2', (3, 3))
-        if not np.all(np.linalg.eigvalsh(0.5 * (self.J + self.J.T)) > 0.0):
-            raise ValueError('inertia_kgm2 must be symmetric positive definite')
+        self.J = inertia_matrix(inertia_kgm2)
         self.limit = limits_vector(max_torque_Nm, 'max_torque_Nm', 3, allow_zero=False,
                                    allow_inf=False)
         for name, v in (('accel_fraction', accel_fraction),
