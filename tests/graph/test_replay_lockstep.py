@@ -9,7 +9,9 @@ Truth: the recorded ``adcs/attitude_estimate`` messages, compared as serialized 
 field of every message, floats exact), in order, none missing or extra.
 """
 import argparse
+import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -132,7 +134,10 @@ def test_lockstep_replay_gives_the_recorded_estimates_bit_for_bit(bag, tmp_path)
         pytest.fail(f'{len(differ)} of {len(recorded)} estimates differ, first #{i}:\n'
                     f'replayed {deserialize_message(got[i], AttitudeState)}\n'
                     f'recorded {deserialize_message(recorded[i], AttitudeState)}')
-    assert 'missed' not in log.lower(), log[-3000:]
+    # no missed frame: no lockstep warning, and the node's run summary counts none
+    assert 'missed frame' not in log.lower(), log[-3000:]
+    summaries = re.findall(r'run summary (\{.*\})', log)
+    assert summaries and json.loads(summaries[-1])['missed_frames'] == 0, log[-3000:]
 
 
 def _clock_only_bag(path):

@@ -171,10 +171,16 @@ def _params_files():
     return set(glob.glob(os.path.join(tempfile.gettempdir(), 'adcs-*.params.yaml')))
 
 
-def test_launch_file_removes_its_parameter_file_at_shutdown(launch_stubs, tmp_path):
+def test_launch_file_removes_its_parameter_file_at_shutdown(launch_stubs, tmp_path,
+                                                            monkeypatch):
     """Each launch wrote a parameter file to the temporary directory and left it there
     (defect 8): it is removed when the launch shuts down (``OnShutdown``), and nothing else
-    is left in the temporary directory."""
+    is left in the temporary directory (this test's own: another worker's launch may write
+    its file to the shared one meanwhile)."""
+    import tempfile
+    own_tmp = tmp_path / 'tmp'
+    own_tmp.mkdir()
+    monkeypatch.setattr(tempfile, 'tempdir', str(own_tmp))
     before = _params_files()
     path = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
     actions = _actions(_load(LAUNCH_FILE), launch_stubs, scenario=path, duration='60',
