@@ -153,25 +153,7 @@ def sensitivity_markdown(data: Optional[Dict[str, Any]] = None) -> str:
     return '\n'.join(lines) + '\n'
 
 
-#: The baseline run (the scenario's own values), listed under both parameters.
-_BASELINE_RESULT = {
-    "capture_orbits": 5.6924,
-    "last_exit_orbits": 5.6924,
-    "first_entry_s": 33664.0,
-    "hold_rms_deg": 71.0963,
-    "hold_median_deg": 51.8452,
-    "hold_p95_deg": 134.6131,
-    "hold_max_deg": 141.6376,
-    "est_err_median_deg": 0.4347,
-    "hold_only": {
-        "rms_deg": 1.0361,
-        "median_deg": 0.7065,
-        "p95_deg": 1.7882,
-        "max_deg": 1.8695,
-        "est_err_median_deg": 0.5768
-    }
-}
-
+#: The last run of :func:`sensitivity` (2026-12-02, alpha 2e-3: the gain map's).
 MEASURED = {
     "scenario": "paper000_control",
     "seed": 21,
@@ -184,115 +166,145 @@ MEASURED = {
     },
     "engine": "FrameLoop (plain engine)",
     "cases": [
-        {"parameter": "random_period_s", "value": 0.1, **_BASELINE_RESULT},
+        {
+            "parameter": "random_period_s",
+            "value": 0.1,
+            "capture_orbits": 3.0525086707121454,
+            "last_exit_orbits": 3.0525086707121454,
+            "first_entry_s": 15698.0,
+            "hold_rms_deg": 1.3707060154930073,
+            "hold_median_deg": 1.174779835335012,
+            "hold_p95_deg": 2.434695713582028,
+            "hold_max_deg": 2.651894843408416,
+            "est_err_median_deg": 0.47460169292482923,
+            "hold_only": {
+                "rms_deg": 1.412339348132098,
+                "median_deg": 1.2958875496762632,
+                "p95_deg": 2.449144158786734,
+                "max_deg": 2.6114205955853107,
+                "est_err_median_deg": 0.5752428450347127
+            },
+            "wall_s": 50.41996174700034
+        },
         {
             "parameter": "random_period_s",
             "value": 0.5,
-            "capture_orbits": None,
-            "last_exit_orbits": None,
-            "first_entry_s": None,
-            "hold_rms_deg": 98.1345,
-            "hold_median_deg": 102.5386,
-            "hold_p95_deg": 132.9524,
-            "hold_max_deg": 136.2585,
-            "est_err_median_deg": 0.4284,
+            "capture_orbits": 2.754900911989933,
+            "last_exit_orbits": 2.754900911989933,
+            "first_entry_s": 13230.0,
+            "hold_rms_deg": 1.4629097672949434,
+            "hold_median_deg": 0.7639671675289674,
+            "hold_p95_deg": 3.340967405987613,
+            "hold_max_deg": 3.6303559179266958,
+            "est_err_median_deg": 0.5259808156134274,
             "hold_only": {
-                "rms_deg": 1.2259,
-                "median_deg": 0.9413,
-                "p95_deg": 2.1542,
-                "max_deg": 2.5149,
-                "est_err_median_deg": 0.6016
-            }
+                "rms_deg": 1.6698145257974975,
+                "median_deg": 1.3146074203669205,
+                "p95_deg": 2.9888021175222153,
+                "max_deg": 3.36109425050473,
+                "est_err_median_deg": 0.6077271005227318
+            },
+            "wall_s": 65.30341801000031
         },
         {
             "parameter": "random_period_s",
             "value": 2.0,
-            "capture_orbits": 4.1016,
+            "capture_orbits": 2.65310553088154,
             "last_exit_orbits": None,
-            "first_entry_s": 24256.0,
-            "hold_rms_deg": 3.3831,
-            "hold_median_deg": 1.5261,
-            "hold_p95_deg": 6.8263,
-            "hold_max_deg": 12.2668,
-            "est_err_median_deg": 0.5399,
+            "first_entry_s": 15690.0,
+            "hold_rms_deg": 3.6420291709757655,
+            "hold_median_deg": 2.3448714360471103,
+            "hold_p95_deg": 7.311490851031133,
+            "hold_max_deg": 7.577011145348194,
+            "est_err_median_deg": 0.5366673805941378,
             "hold_only": {
-                "rms_deg": 1.6447,
-                "median_deg": 1.2657,
-                "p95_deg": 3.0929,
-                "max_deg": 3.356,
-                "est_err_median_deg": 0.5738
-            }
+                "rms_deg": 2.401288047415773,
+                "median_deg": 2.2611675965920055,
+                "p95_deg": 4.10458653226271,
+                "max_deg": 4.345881100534718,
+                "est_err_median_deg": 0.5754900876224194
+            },
+            "wall_s": 39.51170728100078
         },
-        {"parameter": "misalignment_deg", "value": 0.0, **_BASELINE_RESULT},
+        {
+            "parameter": "misalignment_deg",
+            "value": 0.0,
+            "capture_orbits": 3.0525086707121454,
+            "last_exit_orbits": 3.0525086707121454,
+            "first_entry_s": 15698.0,
+            "hold_rms_deg": 1.3707060154930073,
+            "hold_median_deg": 1.174779835335012,
+            "hold_p95_deg": 2.434695713582028,
+            "hold_max_deg": 2.651894843408416,
+            "est_err_median_deg": 0.47460169292482923,
+            "hold_only": {
+                "rms_deg": 1.412339348132098,
+                "median_deg": 1.2958875496762632,
+                "p95_deg": 2.449144158786734,
+                "max_deg": 2.6114205955853107,
+                "est_err_median_deg": 0.5752428450347127
+            },
+            "wall_s": 50.41996174700034
+        },
         {
             "parameter": "misalignment_deg",
             "value": 0.5,
-            "capture_orbits": None,
-            "last_exit_orbits": None,
-            "first_entry_s": None,
-            "hold_rms_deg": 96.8641,
-            "hold_median_deg": 100.2854,
-            "hold_p95_deg": 130.1761,
-            "hold_max_deg": 131.9782,
-            "est_err_median_deg": 0.6837,
+            "capture_orbits": 2.858725436907796,
+            "last_exit_orbits": 3.4769379175262096,
+            "first_entry_s": 16906.0,
+            "hold_rms_deg": 0.9715405510022911,
+            "hold_median_deg": 0.7949689742103131,
+            "hold_p95_deg": 1.6397034592695556,
+            "hold_max_deg": 1.787098869997463,
+            "est_err_median_deg": 0.7087009158564466,
             "hold_only": {
-                "rms_deg": 0.9592,
-                "median_deg": 0.653,
-                "p95_deg": 1.7353,
-                "max_deg": 1.7935,
-                "est_err_median_deg": 0.7308
-            }
+                "rms_deg": 0.8932742744892156,
+                "median_deg": 0.7180944912348703,
+                "p95_deg": 1.7160466112507593,
+                "max_deg": 1.8414137207839514,
+                "est_err_median_deg": 0.7309723388183644
+            },
+            "wall_s": 32.626612382999156
         },
         {
             "parameter": "misalignment_deg",
             "value": 1.0,
-            "capture_orbits": 2.6514,
-            "last_exit_orbits": 3.4641,
-            "first_entry_s": 12782.0,
-            "hold_rms_deg": 2.199,
-            "hold_median_deg": 1.2568,
-            "hold_p95_deg": 4.0736,
-            "hold_max_deg": 4.2018,
-            "est_err_median_deg": 1.138,
+            "capture_orbits": 3.101546312774328,
+            "last_exit_orbits": 3.101546312774328,
+            "first_entry_s": 18342.0,
+            "hold_rms_deg": 1.4015459421971357,
+            "hold_median_deg": 0.9017406390728991,
+            "hold_p95_deg": 2.742202325505536,
+            "hold_max_deg": 2.894282169784847,
+            "est_err_median_deg": 1.14770545700866,
             "hold_only": {
-                "rms_deg": 1.9483,
-                "median_deg": 1.3558,
-                "p95_deg": 3.4543,
-                "max_deg": 3.5467,
-                "est_err_median_deg": 1.1036
-            }
+                "rms_deg": 1.3165550501652166,
+                "median_deg": 0.8475431420301454,
+                "p95_deg": 2.3386104127155614,
+                "max_deg": 2.4399255110540112,
+                "est_err_median_deg": 1.0991416851603015
+            },
+            "wall_s": 44.673972524999044
         },
         {
             "parameter": "misalignment_deg",
             "value": 2.0,
-            "capture_orbits": 3.1858,
-            "last_exit_orbits": 5.5345,
-            "first_entry_s": 18840.0,
-            "hold_rms_deg": 4.3449,
-            "hold_median_deg": 3.1119,
-            "hold_p95_deg": 7.6941,
-            "hold_max_deg": 8.2521,
-            "est_err_median_deg": 2.0813,
+            "capture_orbits": 3.1286015635672566,
+            "last_exit_orbits": 5.48951038588517,
+            "first_entry_s": 12212.0,
+            "hold_rms_deg": 3.2349868515848037,
+            "hold_median_deg": 2.4824056898981772,
+            "hold_p95_deg": 5.585522552689112,
+            "hold_max_deg": 5.921678810011331,
+            "est_err_median_deg": 2.071045544541652,
             "hold_only": {
-                "rms_deg": 4.3914,
-                "median_deg": 3.208,
-                "p95_deg": 7.6062,
-                "max_deg": 7.9069,
-                "est_err_median_deg": 2.0027
-            }
+                "rms_deg": 3.2000139013584317,
+                "median_deg": 2.353689385542896,
+                "p95_deg": 5.334034456793814,
+                "max_deg": 5.641287629407025,
+                "est_err_median_deg": 2.004815415932046
+            },
+            "wall_s": 32.129711333998785
         }
-    ],
-    "note": (
-        "Measured on 2026-12-02 (01:48-02:05 UTC, shared machine) with `python -m adcs_nodes."
-        "tools.study sensitivity scenarios/paper000_control.yaml --out FILE` (FrameLoop runs)"
-        "; rerun it and paste the JSON here to refresh. Against the retired plain loop's meas"
-        "urement (2026-11-26) the on-target columns agree to the rounding and the acquisition"
-        "s differ in the last digits (hold RMS 71.10 vs 71.08 deg at the baseline): the Frame"
-        "Loop is the graph's series to the last bit, the plain loop was within 1e-9 of it, an"
-        "d a chaotic acquisition amplifies that. The \"from the paper state\" columns are one a"
-        "cquisition each: whether a run gets stuck at 80-140 deg for orbits changes with tiny"
-        " perturbations (different random draws), so they do not order the parameters; the \"o"
-        "n target\" columns do: the hold error grows with the correlation time (the random tor"
-        "que's power spectral density is std^2 x correlation time) and with the misalignment "
-        "(unmodelled, it biases the estimate).")
+    ]
 }
