@@ -80,6 +80,8 @@ def _live_estimator_params(path):
         fh.write(params_file_text([spec]))
 
 
+@pytest.mark.long      # a best-effort driver off the frame grid: test_external_driver (a driver
+#                        process of its own) in make test
 @pytest.mark.alone     # 100x replay against a live node: needs the CPU it asks for (see Makefile)
 def test_best_effort_off_grid_replay_drives_the_live_estimator(bag, tmp_path):
     env = child_env(worker_domain(100, 50))
