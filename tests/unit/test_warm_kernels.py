@@ -46,8 +46,8 @@ def _files(cache_dir):
             for d, _, names in os.walk(cache_dir) for f in names}
 
 
-@pytest.mark.long   # compiles every kernel into an empty cache (20-25 s of CPU); the cache's use by
-#                    a second process: tests/graph/test_fresh_interpreters.py in make test
+@pytest.mark.long   # compiles every kernel into an empty cache (20-25 s of CPU); the cache's use
+#                    by a second process: tests/graph/test_fresh_interpreters.py in make test
 def test_after_the_warm_up_the_nodes_work_compiles_nothing(tmp_path):
     cache = tmp_path / 'numba-cache'
     warm = _run(['-m', 'sim_node.tools.warm_kernels', '--frames', '1'], cache, tmp_path)
