@@ -19,7 +19,7 @@ test: lint  ## flake8 + unit, node and graph tests (not test-long, not the repro
 	$(RUN) python -m pytest -m "not slow and not long and not alone" --durations=15 -n $(TEST_WORKERS) --dist loadgroup tests
 	$(RUN) python -m pytest -m "alone and not slow and not long" --durations=5 tests
 
-test-long:  ## long tests whose contract another make-test test holds (named beside each mark; ~20 min)
+test-long:  ## long tests whose contract another make-test test holds (named beside each mark)
 	$(RUN) python -m pytest -m "long and not slow" --durations=15 -p no:warnings tests
 
 lint:  ## flake8 at 99 columns on the packages and tests
