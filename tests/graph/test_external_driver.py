@@ -64,30 +64,29 @@ class _Lines:
             self._q.put(line)
         self._q.put(None)
 
-    def wait_for(self, text, timeout):
+    def _lines(self, timeout):
+        """The lines read within ``timeout`` s, each kept in ``self.lines``, until the stream
+        ends."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
                 line = self._q.get(timeout=max(0.01, deadline - time.monotonic()))
             except queue.Empty:
-                break
+                return
             if line is None:
-                break
+                return
             self.lines.append(line)
+            yield line
+
+    def wait_for(self, text, timeout):
+        for line in self._lines(timeout):
             if text in line:
                 return line
         raise AssertionError(f'no line with {text!r} within {timeout} s:\n' + ''.join(self.lines))
 
     def rest(self, timeout=30.0):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            try:
-                line = self._q.get(timeout=max(0.01, deadline - time.monotonic()))
-            except queue.Empty:
-                break
-            if line is None:
-                break
-            self.lines.append(line)
+        for _ in self._lines(timeout):
+            pass
         return ''.join(self.lines)
 
 
