@@ -116,3 +116,43 @@ def test_every_node_exits_within_2_s_of_sigint_beside_a_cpu_burner(tmp_path):
     with Reader(bag) as reader:
         count = sum(1 for _ in reader.messages())
         assert count > 0 and count == reader.message_count
+
+
+#: A node whose start-up gets SIGINT and, as some library code on the way did, swallows the
+#: KeyboardInterrupt that Python's own handler raises there (``except BaseException``); it
+#: then says it is built and spins.
+SWALLOWING_NODE = """
+import os, signal, sys, time
+from rclpy.node import Node
+from adcs_nodes.nodes import runtime
+
+class Node_(Node):
+    def __init__(self):
+        super().__init__('swallower')
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.2)                 # a Python handler runs here
+        except BaseException:
+            print('start-up code swallowed KeyboardInterrupt', flush=True)
+        print('built', flush=True)
+
+runtime.run(Node_)
+"""
+
+
+def test_a_sigint_during_the_start_up_ends_the_node_once_it_spins(tmp_path):
+    """The stop asked during the start-up is kept and ends the spin loop at its start
+    (``runtime.stop_handler_from_start``); with Python's handler the signal was lost and the
+    node spun for good."""
+    proc = subprocess.Popen([sys.executable, '-c', SWALLOWING_NODE],
+                            env=_env(worker_domain(150, 20)), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, out + err
+    assert 'built' in out and 'swallowed' not in out, out + err
+    assert 'Traceback' not in err, err

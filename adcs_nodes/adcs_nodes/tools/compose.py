@@ -48,7 +48,7 @@ from rclpy.qos import DurabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 
-from adcs_nodes.nodes.runtime import limit_blas_threads, spin_nodes
+from adcs_nodes.nodes.runtime import limit_blas_threads, spin_nodes, stop_handler_from_start
 from adcs_nodes.tools.graph import flatten
 
 
@@ -255,6 +255,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     with open(args.params_file) as fh:
         doc = yaml.safe_load(fh) or {}
+    stop_handler_from_start()        # a stop during the start-up ends the spin at its start
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     try:
         try:
