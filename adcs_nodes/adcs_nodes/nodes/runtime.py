@@ -84,13 +84,17 @@ def make_executor(context=None):
     """Return an ``EventsExecutor`` when rclpy has one, else a ``SingleThreadedExecutor``.
 
     ``context``: the rclpy context to bind it to (default: the global one).
+    ``ADCS_EXECUTOR=single`` chooses the ``SingleThreadedExecutor`` (an A/B switch,
+    docs/reliability.md).
     """
-    try:
-        from rclpy.experimental import EventsExecutor
-        return EventsExecutor(context=context)
-    except ImportError:  # older rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor(context=context)
+    if os.environ.get('ADCS_EXECUTOR', '') != 'single':
+        try:
+            from rclpy.experimental import EventsExecutor
+            return EventsExecutor(context=context)
+        except ImportError:  # older rclpy
+            pass
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor(context=context)
 
 
 def flush_publishers(nodes: Iterable[Node], budget_s: float = FLUSH_BUDGET_S) -> List[str]:
@@ -124,16 +128,16 @@ def _request_stop(signum, frame) -> None:
 def stop_handler_from_start():
     """SIGINT/SIGTERM, from the start of a node process, only ask it to stop.
 
-    Python's own SIGINT handler raises ``KeyboardInterrupt`` in whatever code runs. A SIGINT
-    during a node's start-up (after the node is visible in the graph, before the spin loop
-    installs its handler: rclpy, the rest of the constructor) was now and then lost that way,
-    and the process went on to spin for good, deaf to the signal it had already had: beside 2
-    CPU burners, in 2 of 45 rounds of 4 sensor nodes sent SIGINT 3-6 s after their start,
-    1 and 3 nodes were still spinning 30 s later (their stacks: the spin loop; a thread
-    reading ``signal.set_wakeup_fd`` in the spin loop never saw the signal, so it came before
-    the loop). The test that starts them alone failed once in CI that way. With this
-    handler the start-up runs to its end, and the spin loop (:func:`spin_nodes`) sees the
-    request and ends at once.
+    If only the spin loop installed the handlers, a stop that came while the node was
+    starting (visible in the graph, the constructor not finished) met Python's own handling:
+    ``KeyboardInterrupt`` in whatever code ran, or nothing at all when the process had
+    inherited SIGINT ignored (bash starts the commands of a script's background job so, and
+    Python keeps an inherited "ignore"): the signal was lost and the node spun for good, the
+    likely cause of the one hang of the sensor-node test (start, wait until visible, SIGINT)
+    in a clean-clone CI run started in the background (``tests/node/test_shutdown.py``
+    reproduces it). With this handler the start-up runs to its end and the spin loop
+    (:func:`spin_nodes`) sees the request and ends at once.
+
     Returns the previous handlers, for :func:`restore_handlers`.
     """
     STOP_REQUESTED.clear()
