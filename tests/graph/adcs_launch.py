@@ -77,3 +77,59 @@ def node_log(run_dir, name):
 
 def latest_run_dir():
     return max(glob.glob(os.path.join(RUNS, '2*')), key=os.path.getmtime)
+
+
+class StatusWatch:
+    """``adcs status --watch --run PID`` read as it goes: one process that stays subscribed
+    for the whole test and prints a view every wall second (one ``adcs status`` per poll costs
+    a Python start with rclpy plus 3 s of listening). Views are compared with runs of spaces
+    collapsed (``controller: bdot``, ``sim time: 12.0 s``)."""
+
+    def __init__(self, pid):
+        import queue
+        import threading
+        self.views = queue.Queue()
+        self.proc = subprocess.Popen(
+            [sys.executable, '-m', 'adcs_nodes.tools.cli', 'status', '--watch', '--run',
+             str(pid)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.last = ''
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self):
+        block = []
+        for line in self.proc.stdout:
+            if line.strip():
+                block.append(line.rstrip('\n'))
+            elif block:
+                self.views.put(' '.join(' '.join(block).split()))
+                block = []
+        if block:
+            self.views.put(' '.join(' '.join(block).split()))
+        self.views.put(None)                     # the watch ended
+
+    def wait(self, predicate, timeout=120.0):
+        """The first new view for which ``predicate(view)`` holds (AssertionError at the
+        deadline, or when the watch ends first, with the last view)."""
+        import queue
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                view = self.views.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise AssertionError(f'status condition not reached in {timeout} s; '
+                                     f'last view: {self.last}') from None
+            if view is None:
+                raise AssertionError(f'adcs status --watch ended; last view: {self.last}')
+            self.last = view
+            if predicate(view):
+                return view
+
+    def close(self):
+        if self.proc.poll() is None:
+            self.proc.send_signal(2)             # SIGINT: the watch's Ctrl-C
+            try:
+                self.proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()

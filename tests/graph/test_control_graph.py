@@ -17,7 +17,7 @@ import time
 import numpy as np
 import pytest
 
-from adcs_launch import adcs, control_scenario, start_adcs, wait_manifest
+from adcs_launch import StatusWatch, adcs, control_scenario, start_adcs, wait_manifest
 from adcs_nodes.bag import header_stamp_ns, read_messages, topic_summary
 
 EPOCH_NS = 1767225600 * 10**9
@@ -79,21 +79,24 @@ def test_switch_mid_run_gives_one_zero_frame_each_and_unknown_is_refused(tmp_pat
     bag = str(tmp_path / 'switching')
     proc = start_adcs('run', control_scenario(tmp_path), '--record', bag,
                       '--duration', '200000', '--quiet')
+    watch = None
     try:
         wait_manifest(proc)
-        wait_status(proc.pid, lambda s: 'controller: magnetic' in s and running(s))
+        watch = StatusWatch(proc.pid)
+        watch.wait(lambda s: 'controller: magnetic' in s and running(s))
         bad = adcs('switch', 'no_such_law', '--run', str(proc.pid), check=False)
         assert bad.returncode == 2
         assert "unknown controller 'no_such_law'" in bad.stderr and 'magnetic' in bad.stderr
         assert 'switch magnetic -> bdot' in adcs('switch', 'bdot', '--run', str(proc.pid)).stdout
-        status = wait_status(proc.pid, lambda s: 'controller: bdot' in s and 'switches: 1' in s)
-        wait_status(proc.pid, lambda s: running(s, sim_time(status) + 10.0))   # 5 bdot frames
+        status = watch.wait(lambda s: 'controller: bdot' in s and 'switches: 1' in s)
+        watch.wait(lambda s: running(s, sim_time(status) + 10.0))   # 5 bdot frames
         back = adcs('switch', 'magnetic', '--run', str(proc.pid)).stdout
         assert 'switch bdot -> magnetic' in back
-        status = wait_status(proc.pid,
-                             lambda s: 'controller: magnetic' in s and 'switches: 2' in s)
-        wait_status(proc.pid, lambda s: running(s, sim_time(status) + 10.0))
+        status = watch.wait(lambda s: 'controller: magnetic' in s and 'switches: 2' in s)
+        watch.wait(lambda s: running(s, sim_time(status) + 10.0))
     finally:
+        if watch is not None:
+            watch.close()
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, out + err

@@ -29,10 +29,13 @@ NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
             '/adcs/controller_status')
 SHIPPED = sorted(f for f in os.listdir(SCENARIOS) if f.endswith('.yaml'))
 #: The graph engine (one process per node) for scenarios of every shape: magnetic control
-#: with the filter, wheels on a flexible craft with the MEKF, a slew with ideal torque, the
-#: horizon sensor. (Each costs about 10 s of processes; composed covers all of them.)
-GRAPH = ('paper000_control.yaml', 'paper001_mpi.yaml', 'paper003_slew.yaml',
-         'paper004_yaw.yaml')
+#: with the filter, wheels on a flexible craft with the MEKF (make test); a slew with ideal
+#: torque, the horizon sensor (test-long: the same node classes run them composed here, and
+#: the DDS between processes is the same for every scenario). Each costs about 10 s of
+#: processes; composed covers all of them.
+GRAPH = ('paper000_control.yaml', 'paper001_mpi.yaml',
+         pytest.param('paper003_slew.yaml', marks=pytest.mark.long),
+         pytest.param('paper004_yaw.yaml', marks=pytest.mark.long))
 #: The scenario whose plain bag comes from ``adcs run --engine plain`` (a process, the command
 #: line); the others' from :func:`sim_node.engine.run_plain` in this process (the same code
 #: under the command, without an interpreter start each).
