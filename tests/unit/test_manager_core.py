@@ -459,3 +459,33 @@ def test_estimate_users_must_be_known():
         _mgr(estimate_users=['fuzzy'])
     with pytest.raises(ValueError, match='estimate_period_s'):
         _mgr(estimate_period_s=-1.0)
+
+
+# ---------------------------------------------------------------------------- start-up
+def test_start_up_frames_before_the_first_command_are_not_missed():
+    """Sample timing: the first command needs the chain's periods to come through; frames
+    within ``startup_s`` of the first one that forward nothing are start-up frames (the
+    command is still zero or the fallback's), later ones are missed."""
+    mgr = _mgr(startup_s=3 * DT)
+    for k in range(3):                          # t = 0, 2, 4: no command yet
+        cmd, st = mgr.step(k * DT, {})
+        assert _source(cmd) == 'zero'
+    assert st['startup_frames'] == 3 and st['missed_frames'] == 0
+    cmd, st = mgr.step(3 * DT, _both(3 * DT))   # t = 6 = startup_s: the first command
+    assert _source(cmd) == 'magnetic' and st['missed_frames'] == 0
+    cmd, st = mgr.step(4 * DT, {'bdot': (4 * DT, _cmd(BDOT))})   # a gap after it: missed
+    assert _source(cmd) == 'bdot' and st['missed_frames'] == 1 and st['startup_frames'] == 3
+
+
+def test_a_chain_that_never_delivers_is_missed_after_the_start_up():
+    mgr = _mgr(startup_s=2 * DT)
+    for k in range(6):
+        _, st = mgr.step(k * DT, {})
+    assert st['startup_frames'] == 3 and st['missed_frames'] == 3     # t = 0, 2, 4 | 6, 8, 10
+
+
+def test_lockstep_counts_every_frame_from_the_first():
+    _, st = _mgr().step(0.0, {})
+    assert st['missed_frames'] == 1 and st['startup_frames'] == 0
+    with pytest.raises(ValueError, match='startup_s'):
+        _mgr(startup_s=-1.0)

@@ -53,10 +53,17 @@ MANAGER_PARAMS = (
 )
 
 
-def manager_core(p: Dict[str, Any], auto_cfg: Dict[str, Any],
-                 live: bool) -> ControllerManagerCore:
+def manager_core(p: Dict[str, Any], auto_cfg: Dict[str, Any], live: bool,
+                 sample_timing: bool = False) -> ControllerManagerCore:
     """The manager core of the :data:`MANAGER_PARAMS` values ``p`` and the ``auto.*``
-    section (``{}``: no automatic sequence)."""
+    section (``{}``: no automatic sequence).
+
+    ``sample_timing`` (live or real-time mode: every frame fires on the clock, with what has
+    arrived): the first command comes through the estimator, a controller and the manager
+    one period each after the samples it needs (the estimator takes a sample one own period
+    after its stamp), so the frames of that chain (plus the live staleness limit) before the
+    first command is forwarded are start-up frames, not missed ones (``startup_s``).
+    """
     names = [n for n in p['controllers'] if n]
     period_s = float(p['period_s'])
     ctrl_period_s = float(p['controller_period_s']) or period_s
@@ -70,6 +77,8 @@ def manager_core(p: Dict[str, Any], auto_cfg: Dict[str, Any],
     stale = float(p['stale_after_s'])
     if stale < 0.0:
         stale = 1.5 * max(period_s, ctrl_period_s, est_period_s) if live else 0.0
+    startup_s = (est_period_s + ctrl_period_s + period_s + (stale if live else 0.0)) \
+        if sample_timing else 0.0
     return ControllerManagerCore(
         names, str(p['safe']), initial=str(p['initial']) or None,
         max_dipole_Am2=list(p['max_dipole_Am2']),
@@ -78,7 +87,7 @@ def manager_core(p: Dict[str, Any], auto_cfg: Dict[str, Any],
         auto=AutoSequence.from_dict(auto_cfg) if auto_cfg else None,
         estimate_period_s=est_period_s if est_period_s > 0 else None,
         estimate_users=None if users == ['*'] else users,
-        fallback=[n for n in p['fallback'] if n])
+        fallback=[n for n in p['fallback'] if n], startup_s=startup_s)
 
 
 class ManagerComponent:

@@ -268,6 +268,13 @@ class ControllerManagerCore:
     fallback : sequence of str
         Controllers tried in order, before ``safe``, when the active controller's command is
         not usable (default none: straight to ``safe``).
+    startup_s : float
+        Start-up [s]: until the first frame that forwards the active controller's command,
+        a frame at most this long after the manager's first frame that forwards nothing is a
+        start-up frame (zero or fallback command, counted in ``startup_frames``), not a
+        missed one (default 0: every frame counts, lockstep). In sample timing a command
+        needs one period of each stage of the estimator-controller-manager chain before its
+        first arrival (``components.manager.manager_core``).
 
     Raises
     ------
@@ -282,7 +289,7 @@ class ControllerManagerCore:
                  auto: Optional[AutoSequence] = None, latch_fallback: bool = False,
                  estimate_period_s: Optional[float] = None,
                  estimate_users: Optional[Iterable[str]] = None,
-                 fallback: Sequence[str] = ()) -> None:
+                 fallback: Sequence[str] = (), startup_s: float = 0.0) -> None:
         names = list(controllers)
         if not names or any(not isinstance(n, str) or not n for n in names):
             raise ValueError(f'controllers must be a non-empty list of names, got {names!r}')
@@ -338,6 +345,9 @@ class ControllerManagerCore:
         if bad or safe in self.fallback or len(set(self.fallback)) != len(self.fallback):
             raise ValueError(f'fallback must list configured controllers other than the safe '
                              f'one ({safe!r}), each once; got {self.fallback}; known: {names}')
+        self.startup_s = float(startup_s)
+        if not (math.isfinite(self.startup_s) and self.startup_s >= 0.0):
+            raise ValueError(f'startup_s must be finite and >= 0 [s], got {startup_s!r}')
         self._initial = initial
         self.reset()
 
@@ -366,6 +376,9 @@ class ControllerManagerCore:
         self.active = self._initial
         self.switch_count = 0
         self.missed_frames = 0
+        self.startup_frames = 0
+        self._t_first: Optional[float] = None       # the first frame's time [s]
+        self._forwarded = False                     # the active command went out once
         self.estimate_stale_frames = 0
         self.replaced_requests = 0
         self.last_fault = ''
@@ -472,6 +485,8 @@ class ControllerManagerCore:
         t = float(t)
         if not math.isfinite(t):
             raise ValueError(f'frame time must be finite, got {t}')
+        if self._t_first is None:
+            self._t_first = t
         est_fault = self._estimate_fault(t, estimate, estimate_t)
         if est_fault:
             self.estimate_stale_frames += 1
@@ -492,8 +507,14 @@ class ControllerManagerCore:
         if cmd is not None and est_fault and self.active in self.estimate_users:
             cmd, why = None, f'estimator {est_fault}'
         source = self.active
-        if cmd is None:
+        if cmd is not None:
+            self._forwarded = True
+        elif (self.startup_s > 0.0 and not self._forwarded
+              and t - self._t_first <= self.startup_s + TIME_TOL_S):
+            self.startup_frames += 1                 # the chain's first command on its way
+        else:
             self.missed_frames += 1
+        if cmd is None:
             fault = f'{self.active}: {why}'
             source = ''
             for name in (self.fallback + [self.safe]) if self.active != self.safe else ():
@@ -673,6 +694,7 @@ class ControllerManagerCore:
                 'available': list(self.names), 'safe': self.safe, 'source': source,
                 'pending': '' if self._pending is None else self._pending[0],
                 'switch_count': self.switch_count, 'missed_frames': self.missed_frames,
+                'startup_frames': self.startup_frames,
                 'last_fault': self.last_fault, 'fault': fault, 'fallback': fallback,
                 'zero_frame': zero_frame, 'estimate_fault': estimate_fault,
                 'estimate_stale_frames': self.estimate_stale_frames,

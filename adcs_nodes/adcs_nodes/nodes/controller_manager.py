@@ -58,7 +58,7 @@ class ControllerManagerNode(ManagedLockstepNode):
         auto = self.section('auto', {}, merge=False)     # (specs: params.AUTO_PARAMS)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
-        self.core = manager_core(p, auto, self.live)
+        self.core = manager_core(p, auto, self.live, sample_timing=self.live or self.real_time)
         self.names: List[str] = list(self.core.names)
         period_s = float(p['period_s'])
         ctrl_period_s = float(p['controller_period_s']) or period_s
@@ -117,6 +117,7 @@ class ControllerManagerNode(ManagedLockstepNode):
                 'forwarding': str(st.get('source') or 'zero'),
                 'switches': str(st.get('switch_count', 0)),
                 'stale_commands': str(st.get('missed_frames', 0)),
+                'startup_frames': str(st.get('startup_frames', 0)),
                 'fallback': str(st.get('fault') or ''),
                 'last_fault': str(st.get('last_fault', '')),
                 'stale_estimate_frames': str(st.get('estimate_stale_frames', 0)),
