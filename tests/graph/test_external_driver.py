@@ -204,8 +204,12 @@ def test_a_best_effort_driver_off_the_grid_feeds_the_scenario_estimator(tmp_path
     assert len(covered) >= 15, (len(sent), dropped)
     used, rejected, superseded, resets = _used(out)
     # best effort on loopback, 2 s of sim time = 100 ms of wall time to arrive: under load
-    # a few may be late (rejected, counted); none is used twice, none superseded
-    assert 0.9 * len(covered) <= used <= len(covered), (used, len(covered), rejected)
+    # some are late (beside the soak's 2 burners, load 10-15: 3 of 20), each rejected and
+    # counted, never used; none is used twice, none superseded, none lost unaccounted
+    late = {k: int(v) for k, v in re.findall(r'(\w+) (\d+)', rejected)}
+    assert set(late) <= {'late'}, rejected
+    assert used + late.get('late', 0) == len(covered), (used, len(covered), rejected)
+    assert used >= 0.75 * len(covered), (used, len(covered), rejected)
     assert superseded == 0 and resets == 0
     _, est = _series(bag)
     assert len(est) == int(duration / 2.0) + 1

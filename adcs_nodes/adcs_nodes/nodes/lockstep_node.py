@@ -62,6 +62,7 @@ from std_msgs.msg import String
 from adcs_msgs.msg import LockstepStatus
 from adcs_nodes.components.base import DEFAULT_EPOCH, epoch_to_ns, parse_epoch  # noqa: F401
 from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, InputKind, input_kind, seconds_to_ns
+from adcs_nodes.core.sample_timing import REASONS, SampleQueue, admit
 from adcs_nodes.nodes import cdr
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import publisher_guard
@@ -100,7 +101,7 @@ SENSOR_PREFIXES = ('sensors/', '/sensors/')
 #: Reasons a live sample is rejected (keys of ``LockstepNode.rejected_samples``).
 #: ``undecodable``: raw CDR bytes that do not decode (only a stranger on the domain sends them;
 #: ``nodes/cdr.py``), in either timing mode.
-REJECT_REASONS = ('zero_stamp', 'future', 'too_old', 'out_of_order', 'late', 'undecodable')
+REJECT_REASONS = REASONS + ('undecodable',)
 #: Wall seconds a consumer of an external driver's topic waits, before it says ready, for a
 #: publisher on that topic to be matched; then it starts without it (and is starved: the run
 #: is degraded, with the topic named).
@@ -414,11 +415,10 @@ class LockstepNode(node_params.SpecParameters, Node):
         # never awaited, each sample used once at its own stamp (see external_samples)
         self.external = set() if self.live else {
             n for n in self._external_inputs if n in inputs}
-        self._ext_queue: Dict[str, List[Tuple[int, Any]]] = {n: [] for n in self.external}
-        self._ext_latest: Dict[str, int] = {}
-        self._ext_done_t = -1                    # the last frame the samples were taken for
+        self.samples = SampleQueue(self.external, self._own_period_ns,
+                                   seconds_to_ns(self.max_future_s),
+                                   seconds_to_ns(self.max_sample_age_s))
         self._ext_used: Dict[str, int] = {}
-        self._ext_usable: Dict[str, int] = {}    # elapsed stamp of the last usable sample
         self._ext_period_ns: Dict[str, int] = {}   # the producer's declared period
         for name, spec in inputs.items():
             if len(spec) not in (3, 4):
@@ -508,56 +508,25 @@ class LockstepNode(node_params.SpecParameters, Node):
             self._fire(t, [])
 
     def _external_cb(self, name: str) -> Callable[[Any], None]:
-        """A sample of an input in sample timing: checked (zero, future, too old, out of
-        order, each counted), then queued by stamp for the frame that covers it."""
+        """A sample of an input in sample timing: checked and queued by stamp for the frame
+        that covers it (:class:`adcs_nodes.core.sample_timing.SampleQueue`), or refused and
+        counted by reason."""
         def cb(msg: Any) -> None:
             self.input_arrived(name)
             s = stamp_ns(msg.header.stamp)
-            now = self.epoch_ns + max(self._seen_t, 0)        # sim time: the latest /clock
-            if s == 0:
-                self._reject_sample(name, 'zero_stamp', 'stamped zero')
-                return
-            if s > now + self.max_future_s * NS_PER_S + self._own_period_ns:
-                self._reject_sample(name, 'future', f'stamped {(s - now) / NS_PER_S:.3f} s '
-                                    f'ahead of the clock (limit {self.max_future_s:g} s)')
-                return
-            if now - s > self.max_sample_age_s * NS_PER_S:
-                self._reject_sample(name, 'too_old', f'{(now - s) / NS_PER_S:.3f} s old '
-                                    f'(limit {self.max_sample_age_s:g} s)')
-                return
-            if s <= self._ext_latest.get(name, -1):
-                self._reject_sample(name, 'out_of_order', 'not newer than the sample before')
-                return
-            self._ext_latest[name] = s
             t = self.elapsed_ns(s)
-            if t <= self._ext_done_t:
-                self._reject_sample(name, 'late', 'arrived after the frame that covers its '
-                                    'stamp was processed')
+            why = self.samples.offer(name, s, t, self.epoch_ns + max(self._seen_t, 0), msg)
+            if why is not None:
+                self._reject_sample(name, *why)
                 return
-            self._ext_queue[name].append((t, msg))
-            self._ext_usable[name] = t
             self.sync.add(name, t, msg)
         return cb
 
     def external_samples(self, t_ns: int) -> List[Tuple[int, str, Any]]:
         """The samples in sample timing that frame ``t_ns`` takes, in stamp order:
-        ``(elapsed stamp, input name, message)``, each returned once.
-
-        A frame takes the samples stamped up to one own period before it (``t - P``): a
-        sample on its way while its frame fires (a real-time clock tick comes before the
-        samples of that instant) is taken by the next frame, at its own stamp, instead of
-        being late; a sample that arrives after the frame that took its interval is late
-        (rejected, counted, never used).
-        """
-        cover = t_ns - self._own_period_ns
-        out = []
-        for name, queue in self._ext_queue.items():
-            keep = []
-            for t, msg in queue:
-                (out if t <= cover else keep).append((t, name, msg))
-            self._ext_queue[name] = [(t, m) for t, _, m in keep]
-        self._ext_done_t = max(self._ext_done_t, cover)
-        return sorted(out, key=lambda e: e[0])
+        ``(elapsed stamp, input name, message)``, each returned once (those stamped up to one
+        own period before the frame; :meth:`SampleQueue.take`)."""
+        return self.samples.take(t_ns)
 
     def _stops_at(self, t: int) -> bool:
         """True from the frame of this node's ``node_killed`` fault (``killed_at_s``) on:
@@ -627,7 +596,7 @@ class LockstepNode(node_params.SpecParameters, Node):
     def last_usable_ns(self, name: str) -> Optional[int]:
         """Elapsed stamp of the last usable sample of input ``name`` in sample timing (one
         that passed the timing checks; a consumer that checks more overrides it), or None."""
-        return self._ext_usable.get(name)
+        return self.samples.last_usable(name)
 
     def _check_starved(self, t: int) -> None:
         """Sample timing: an input with nothing usable for ``dead_after_frames`` of its
@@ -711,22 +680,11 @@ class LockstepNode(node_params.SpecParameters, Node):
         def cb(msg: Any) -> None:
             self.input_arrived(name)
             s = stamp_ns(msg.header.stamp)
-            now = self.get_clock().now().nanoseconds
-            if s == 0:
-                self._reject_sample(name, 'zero_stamp', 'stamped zero')
-                return
-            if now > 0 and s > now + self.max_future_s * NS_PER_S:
-                self._reject_sample(name, 'future', f'stamped {(s - now) / NS_PER_S:.3f} s '
-                                    f'ahead of the clock (limit {self.max_future_s:g} s)')
-                return
-            if now > 0 and now - s > self.max_sample_age_s * NS_PER_S:
-                self._reject_sample(name, 'too_old', f'{(now - s) / NS_PER_S:.3f} s old '
-                                    f'(limit {self.max_sample_age_s:g} s)')
-                return
             cur = self._live_latest.get(name)
-            if cur is not None and s <= cur[0]:
-                self._reject_sample(name, 'out_of_order', 'not newer than the sample before '
-                                    f'({(cur[0] - s) / NS_PER_S:.3f} s older)')
+            why = admit(s, self.get_clock().now().nanoseconds, None if cur is None else cur[0],
+                        seconds_to_ns(self.max_future_s), seconds_to_ns(self.max_sample_age_s))
+            if why is not None:
+                self._reject_sample(name, *why)
                 return
             if cur is not None and cur[0] > self._live_read.get(name, -1):
                 self.superseded_samples += 1          # no tick read it

@@ -1,0 +1,72 @@
+"""The sample-timing rule (``adcs_nodes.core.sample_timing``) without ROS: each sample checked
+once on arrival, used once at its own stamp in stamp order by the first frame that covers it,
+refused and named otherwise. The node-level behaviour (a driver process, a launched run) is in
+tests/node/test_external_inputs.py and tests/graph/test_external_driver.py."""
+from adcs_nodes.core.sample_timing import REASONS, SampleQueue, admit
+
+S = 1_000_000_000
+EPOCH = 1_767_225_600 * S
+
+
+def test_admit_names_each_refusal_and_accepts_at_the_limits():
+    future, age = S // 2, 5 * S
+    now = EPOCH + 100 * S
+    assert admit(0, now, None, future, age)[0] == 'zero_stamp'
+    assert admit(now + future + 1, now, None, future, age)[0] == 'future'
+    assert admit(now + future, now, None, future, age) is None           # at the limit
+    assert admit(now - age - 1, now, None, future, age)[0] == 'too_old'
+    assert admit(now - age, now, None, future, age) is None
+    assert admit(now - S, now, now - S, future, age)[0] == 'out_of_order'   # a duplicate
+    assert admit(now - 2 * S, now, now - S, future, age)[0] == 'out_of_order'
+    assert admit(now - S // 2, now, now - S, future, age) is None
+    # no clock yet (live, use_sim_time before /clock): only the stamp itself is checked
+    assert admit(now + 10 ** 6 * S, 0, None, future, age) is None
+    assert 'ahead of the clock' in admit(now + S, now, None, future, age)[1]
+
+
+def _queue(period=S):
+    return SampleQueue(['mag', 'sun'], period, max_future_ns=S // 2, max_age_ns=5 * S)
+
+
+def _offer(q, name, t, now_t, msg=None):
+    return q.offer(name, EPOCH + t, t, EPOCH + now_t, msg if msg is not None else (name, t))
+
+
+def test_a_frame_takes_the_samples_one_period_before_it_in_stamp_order_once():
+    q = _queue()
+    assert _offer(q, 'mag', int(0.3 * S), S) is None
+    assert _offer(q, 'sun', int(0.2 * S), S) is None
+    assert _offer(q, 'mag', int(1.4 * S), 2 * S) is None     # after the next frame's cover
+    got = q.take(2 * S)                                       # covers stamps <= 1 s
+    assert [(t, n) for t, n, _ in got] == [(int(0.2 * S), 'sun'), (int(0.3 * S), 'mag')]
+    assert q.take(2 * S) == []                                # each sample once
+    assert [(t, n) for t, n, _ in q.take(3 * S)] == [(int(1.4 * S), 'mag')]
+    assert q.last_usable('mag') == int(1.4 * S) and q.last_usable('sun') == int(0.2 * S)
+
+
+def test_a_sample_after_the_frame_that_covered_its_stamp_is_late_and_never_used():
+    q = _queue()
+    q.take(3 * S)                                             # frame 3 s covered <= 2 s
+    why = _offer(q, 'mag', int(1.9 * S), 3 * S)
+    assert why[0] == 'late'
+    assert q.last_usable('mag') is None
+    assert _offer(q, 'mag', int(2.1 * S), 3 * S) is None      # the next one is on time
+    assert [t for t, _, _ in q.take(4 * S)] == [int(2.1 * S)]
+
+
+def test_the_future_limit_allows_one_own_period_of_clock_lag():
+    q = _queue(period=S)                    # limit 0.5 s + the node's 1 s period
+    assert _offer(q, 'mag', 11 * S + S // 2, 10 * S) is None
+    assert _offer(q, 'sun', 11 * S + S // 2 + 1, 10 * S)[0] == 'future'
+
+
+def test_every_refusal_reason_is_one_of_the_counted_reasons():
+    q = _queue()
+    seen = {q.offer('mag', 0, -EPOCH, EPOCH + S, None)[0]}     # stamped zero
+    seen.add(_offer(q, 'mag', 100 * S, S)[0])
+    seen.add(_offer(q, 'mag', S, 100 * S)[0])
+    _offer(q, 'sun', 5 * S, 5 * S)
+    seen.add(_offer(q, 'sun', 5 * S, 5 * S)[0])
+    q.take(10 * S)
+    seen.add(_offer(q, 'sun', 8 * S, 10 * S)[0])
+    assert seen == set(REASONS)
