@@ -99,6 +99,10 @@ def _default_scenario_dir() -> str:
     return os.path.join(os.getcwd(), 'scenarios')
 
 
+#: ``adcs run --real-time``: a run that kept less than this share of the asked pace says so.
+REAL_TIME_KEPT = 0.9
+
+
 def cmd_run(args) -> int:
     from adcs_nodes.tools.launcher import LaunchError, Launcher
     engine = args.engine or ('composed' if args.compose else 'graph')
@@ -135,6 +139,13 @@ def cmd_run(args) -> int:
     print(f'[adcs] {result.message}', file=stream)
     print(f'[adcs] {result.sim_time_s:g} s sim in {result.wall_time_s:.1f} s wall '
           f'({rtf:.1f}x real time), missed frames {result.missed_frames}')
+    rate = args.rate or 1.0
+    if args.real_time and result.wall_time_s and rtf < REAL_TIME_KEPT * rate:
+        print(f'[adcs] WARNING: real time at rate {rate:g} asked for {rate:g}x; this run kept '
+              f'{rtf:.2f}x on this machine: the world ran late, and samples that came after '
+              'their frame were rejected (counted above)'
+              + ('; all nodes in one process (--engine composed) keep a faster pace'
+                 if engine == 'graph' else ''), file=sys.stderr)
     if result.bag:
         print(f'[adcs] bag: {result.bag}')
     if result.exit_code in (0, 3) and args.report and result.bag:   # degraded: a whole bag

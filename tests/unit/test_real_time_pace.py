@@ -1,0 +1,44 @@
+"""``adcs run --real-time`` says when the run did not keep the asked pace (the launcher is
+replaced by one that returns a result; the pace is sim time over wall time)."""
+import os
+
+import pytest
+
+from adcs_nodes.tools import cli, launcher
+
+SCENARIO = os.path.join(os.path.dirname(__file__), '..', '..', 'scenarios',
+                        'paper003_slew.yaml')
+
+
+def _fake(sim_s, wall_s):
+    class Fake:
+        def __init__(self, *args, **kwargs):
+            self.kwargs = kwargs
+
+        def run(self):
+            return launcher.RunResult(exit_code=0, sim_time_s=sim_s, wall_time_s=wall_s,
+                                      frames=int(sim_s * 10), missed_frames=0, bag=None,
+                                      run_dir='', message='done')
+    return Fake
+
+
+@pytest.mark.parametrize('args,sim_s,wall_s,warned', [
+    (['--rate', '20'], 80.0, 80.0 / 3.7, True),          # kept 3.7x of 20x
+    (['--rate', '20'], 80.0, 80.0 / 19.5, False),        # 97.5 %: kept
+    ([], 20.0, 32.8, True),                              # rate 1, kept 0.6x
+    ([], 20.0, 20.4, False),
+])
+def test_a_real_time_run_that_fell_behind_says_so(monkeypatch, capsys, args, sim_s,
+                                                  wall_s, warned):
+    monkeypatch.setattr(launcher, 'Launcher', _fake(sim_s, wall_s))
+    assert cli.main(['run', SCENARIO, '--real-time', *args, '--quiet']) == 0
+    err = capsys.readouterr().err
+    assert ('WARNING: real time at rate' in err) is warned, err
+    if warned:
+        assert '--engine composed' in err          # the graph engine: the faster way named
+
+
+def test_a_lockstep_run_is_not_judged_by_its_pace(monkeypatch, capsys):
+    monkeypatch.setattr(launcher, 'Launcher', _fake(20.0, 100.0))
+    assert cli.main(['run', SCENARIO, '--quiet']) == 0
+    assert 'WARNING' not in capsys.readouterr().err
