@@ -423,79 +423,8 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
     data = _collect(bag_path)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-
-    metrics: Dict[str, Any] = {'bag': str(bag_path), 'topics': {}}
-    for topic in sorted(data.stats):
-        st = data.stats[topic]
-        metrics['topics'][topic] = {
-            'type': st.msgtype, 'count': st.count, 'rate_hz': st.rate_hz(),
-            'rate_source': 'header' if st.from_header else 'log_time'}
-    stamped = [st for st in data.stats.values() if st.from_header and st.count]
-    if data.state['t']:
-        t0, t1 = data.state['t'][0], data.state['t'][-1]
-    elif stamped:
-        t0 = min(st.first_ns for st in stamped)
-        t1 = max(st.last_ns for st in stamped)
-    else:
-        t0 = t1 = 0
-    metrics['duration_s'] = (t1 - t0) * 1e-9
-    metrics['start_utc'] = _utc(t0) if t0 else None
-    rates = [n for n in data.env['n'] if n > 0.0]
-    period = 2.0 * math.pi / rates[-1] if rates else None
-    if period:
-        metrics['orbit_period_s'] = period
-    axis = _TimeAxis(t0, metrics['duration_s'], period)
-
-    plots: List[str] = []
-    if data.state['t']:
-        angles = _angle_to_identity(np.array(data.state['q_orbit_body'])) * _RAD2DEG
-        w = np.linalg.norm(np.array(data.state['w_eci']), axis=1) * _RAD2DEG
-        w_orb = np.linalg.norm(np.array(data.state['w_orbit']), axis=1) * _RAD2DEG
-        metrics.update({
-            'final_angle_orbit_deg': float(angles[-1]),
-            'max_angle_orbit_deg': float(angles.max()),
-            'final_q_orbit_body': [float(x) for x in data.state['q_orbit_body'][-1]],
-            'final_rate_deg_s': float(w[-1]),
-            'max_rate_deg_s': float(w.max()),
-            'final_rate_orbit_deg_s': float(w_orb[-1]),
-        })
-        if period:
-            t_s = (np.asarray(data.state['t'], dtype=np.int64) - t0) * 1e-9
-            run = run_metrics(t_s, angles, period)
-            metrics.update({k: run[k] for k in (
-                'capture_orbits', 'last_exit_orbits', 'hold_rms_deg', 'hold_median_deg',
-                'hold_p95_deg', 'hold_max_deg', 'hold_samples')
-                if run[k] is not None and math.isfinite(run[k])})
-        _plot_attitude(data, axis, out, plots)
-        _plot_rates(data, axis, out, plots)
-    if data.env['t']:
-        metrics['field_mean_norm_uT'] = float(
-            np.linalg.norm(np.array(data.env['b_eci']), axis=1).mean() * _T2UT)
-    if data.mag['t']:
-        metrics['magnetometer_mean_norm_uT'] = float(
-            np.linalg.norm(np.array(data.mag['b']), axis=1).mean() * _T2UT)
-    if data.env['t'] or data.mag['t']:
-        _plot_field(data, axis, out, plots)
-    if data.wheels['t']:
-        h = _wheel_matrix(data)
-        if h.size:
-            metrics['wheel_max_abs_momentum_Nms'] = float(np.nanmax(np.abs(h)))
-            metrics['wheel_final_momentum_Nms'] = [float(x) for x in h[-1]]
-            _plot_wheels(data, axis, out, plots)
-    errors = _estimate_errors(data) if data.est['t'] and data.state['t'] else None
-    if errors is not None:
-        _, angles_err, _ = errors
-        deg = angles_err * _RAD2DEG
-        metrics.update({
-            'estimate_final_error_deg': float(deg[-1]),
-            'estimate_max_error_deg': float(deg.max()),
-            'estimate_rms_error_deg': float(np.sqrt(np.mean(deg ** 2))),
-            'estimate_matched': len(deg),
-            'estimate_on_truth_grid': int(getattr(data, 'est_on_grid', 0)),
-            'estimate_truth': 'interpolated at each estimate stamp (slerp)',
-        })
-        _plot_estimate(errors, axis, out, plots)
-
+    metrics, axis, errors = _bag_metrics(data, bag_path)
+    plots = _draw_plots(data, axis, errors, out)
     if expectations:
         try:
             drawn = papers.figures_for_bag(str(bag_path), str(out))
@@ -519,6 +448,92 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
     metrics_file.write_text(json.dumps(metrics, indent=2, default=_json_value) + '\n',
                             encoding='utf-8')
     return metrics
+
+
+def _bag_metrics(data: _Data, bag_path) -> Tuple[Dict[str, Any], '_TimeAxis', Any]:
+    """The numbers of :func:`make_report` (no files): per-topic counts and rates, the time
+    span and orbit period, the truth's angle and rates, field, wheel and estimate metrics.
+    Returns ``(metrics, time axis of the plots, estimate errors or None)``."""
+    metrics: Dict[str, Any] = {'bag': str(bag_path), 'topics': {}}
+    for topic in sorted(data.stats):
+        st = data.stats[topic]
+        metrics['topics'][topic] = {
+            'type': st.msgtype, 'count': st.count, 'rate_hz': st.rate_hz(),
+            'rate_source': 'header' if st.from_header else 'log_time'}
+    stamped = [st for st in data.stats.values() if st.from_header and st.count]
+    if data.state['t']:
+        t0, t1 = data.state['t'][0], data.state['t'][-1]
+    elif stamped:
+        t0 = min(st.first_ns for st in stamped)
+        t1 = max(st.last_ns for st in stamped)
+    else:
+        t0 = t1 = 0
+    metrics['duration_s'] = (t1 - t0) * 1e-9
+    metrics['start_utc'] = _utc(t0) if t0 else None
+    rates = [n for n in data.env['n'] if n > 0.0]
+    period = 2.0 * math.pi / rates[-1] if rates else None
+    if period:
+        metrics['orbit_period_s'] = period
+    if data.state['t']:
+        metrics.update(_truth_metrics(data, t0, period))
+    if data.env['t']:
+        metrics['field_mean_norm_uT'] = float(
+            np.linalg.norm(np.array(data.env['b_eci']), axis=1).mean() * _T2UT)
+    if data.mag['t']:
+        metrics['magnetometer_mean_norm_uT'] = float(
+            np.linalg.norm(np.array(data.mag['b']), axis=1).mean() * _T2UT)
+    if data.wheels['t']:
+        h = _wheel_matrix(data)
+        if h.size:
+            metrics['wheel_max_abs_momentum_Nms'] = float(np.nanmax(np.abs(h)))
+            metrics['wheel_final_momentum_Nms'] = [float(x) for x in h[-1]]
+    errors = _estimate_errors(data) if data.est['t'] and data.state['t'] else None
+    if errors is not None:
+        deg = errors[1] * _RAD2DEG
+        metrics.update({
+            'estimate_final_error_deg': float(deg[-1]),
+            'estimate_max_error_deg': float(deg.max()),
+            'estimate_rms_error_deg': float(np.sqrt(np.mean(deg ** 2))),
+            'estimate_matched': len(deg),
+            'estimate_on_truth_grid': int(getattr(data, 'est_on_grid', 0)),
+            'estimate_truth': 'interpolated at each estimate stamp (slerp)',
+        })
+    return metrics, _TimeAxis(t0, metrics['duration_s'], period), errors
+
+
+def _truth_metrics(data: _Data, t0: int, period: Optional[float]) -> Dict[str, Any]:
+    """Angle to the orbit frame and rates of the truth (``/sim/state``), and with a known
+    orbit period the run metrics of :func:`adcs_nodes.tools.metrics.run_metrics`."""
+    angles = _angle_to_identity(np.array(data.state['q_orbit_body'])) * _RAD2DEG
+    w = np.linalg.norm(np.array(data.state['w_eci']), axis=1) * _RAD2DEG
+    w_orb = np.linalg.norm(np.array(data.state['w_orbit']), axis=1) * _RAD2DEG
+    out = {'final_angle_orbit_deg': float(angles[-1]), 'max_angle_orbit_deg': float(angles.max()),
+           'final_q_orbit_body': [float(x) for x in data.state['q_orbit_body'][-1]],
+           'final_rate_deg_s': float(w[-1]), 'max_rate_deg_s': float(w.max()),
+           'final_rate_orbit_deg_s': float(w_orb[-1])}
+    if period:
+        t_s = (np.asarray(data.state['t'], dtype=np.int64) - t0) * 1e-9
+        run = run_metrics(t_s, angles, period)
+        out.update({k: run[k] for k in (
+            'capture_orbits', 'last_exit_orbits', 'hold_rms_deg', 'hold_median_deg',
+            'hold_p95_deg', 'hold_max_deg', 'hold_samples')
+            if run[k] is not None and math.isfinite(run[k])})
+    return out
+
+
+def _draw_plots(data: _Data, axis: '_TimeAxis', errors, out: Path) -> List[str]:
+    """The PNG plots of the series the bag has; their file names."""
+    plots: List[str] = []
+    if data.state['t']:
+        _plot_attitude(data, axis, out, plots)
+        _plot_rates(data, axis, out, plots)
+    if data.env['t'] or data.mag['t']:
+        _plot_field(data, axis, out, plots)
+    if data.wheels['t'] and _wheel_matrix(data).size:
+        _plot_wheels(data, axis, out, plots)
+    if errors is not None:
+        _plot_estimate(errors, axis, out, plots)
+    return plots
 
 
 def _json_value(value: Any) -> Any:
