@@ -1,6 +1,5 @@
 """In-process rclpy fixtures: a private context on a private ROS domain per test."""
 import itertools
-import os
 import time
 
 import pytest
@@ -8,7 +7,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 
 from domains import worker_domain  # noqa: E402
-from adcs_nodes.tools.launcher import profile_env  # noqa: E402
+from adcs_nodes.tools.launcher import child_env, use_dds_env  # noqa: E402
 
 #: One domain per test (150-199, outside the launcher's run domains): a participant of an
 #: earlier test that DDS still lists (its lease not expired) is not discovered by the next.
@@ -18,10 +17,8 @@ _TEST_NUMBER = itertools.count()
 @pytest.fixture
 def ros_context():
     """A fresh rclpy context on this test's own domain (localhost discovery)."""
-    os.environ['ROS_DOMAIN_ID'] = str(worker_domain(150, 50, next(_TEST_NUMBER)))
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')   # as the launcher does
-    os.environ.update(profile_env(os.environ))                     # its Fast DDS profile too
+    # the launcher's middleware settings: loopback discovery and UDP by its Fast DDS profile
+    use_dds_env(child_env(worker_domain(150, 50, next(_TEST_NUMBER))))
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     yield ctx

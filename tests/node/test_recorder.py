@@ -41,9 +41,9 @@ LATCHED = ControllerStatus
 @pytest.fixture(scope='module')
 def context():
     """Isolated rclpy context on a per-process domain, localhost discovery only."""
-    saved = {k: os.environ.get(k) for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
-    os.environ['ROS_DOMAIN_ID'] = str(worker_domain(200, 15))   # its own range: no other test
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    from adcs_nodes.tools.launcher import DDS_ENV_KEYS, child_env, use_dds_env
+    saved = {k: os.environ.get(k) for k in DDS_ENV_KEYS}
+    use_dds_env(child_env(worker_domain(200, 15)))   # its own range: no other test
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     yield ctx

@@ -4,7 +4,6 @@ Truth is built here independently of the nodes: attitudes with scipy's ``Rotatio
 ``attitude.from_euler_321``, the field in body axes as ``R_eci_body^T b_eci``.
 """
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -21,6 +20,7 @@ from adcs_msgs.msg import AttitudeState, Environment, HorizonSensor
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import derive_seed
 from domains import worker_domain
+from adcs_nodes.tools.launcher import child_env
 from adcs_nodes.nodes.convert import quat, stamp_ns, to_quat, to_stamp, to_vec3, vec3
 from sim_node.models.sensors import StarTracker
 from sim_node.nodes.gyro import GyroNode
@@ -253,8 +253,7 @@ def _wait_for_nodes(domain_id, names, procs, timeout=120.0):
 
 def test_each_node_runs_alone_with_defaults():
     """``python -m sim_node.nodes.<name>`` starts, spins and stops cleanly on SIGINT."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(worker_domain(100, 50)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    env = child_env(worker_domain(100, 50))
     names = ('magnetometer', 'horizon_sensor', 'star_tracker', 'gyro')
     procs = [subprocess.Popen([sys.executable, '-m', f'sim_node.nodes.{n}'], env=env,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

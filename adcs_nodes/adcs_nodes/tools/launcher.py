@@ -414,6 +414,11 @@ def child_env(domain: int) -> Dict[str, str]:
     # loopback measured as fast for this graph (125-163 vs 131-132 frames/s)
     env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
     env.update(profile_env(env))
+    if env.get('FASTDDS_DEFAULT_PROFILES_FILE') == FASTDDS_PROFILES:
+        # the profile binds discovery and traffic to loopback itself; with LOCALHOST
+        # rmw_fastrtps would replace its transports by UDP plus shared memory, whose ports
+        # every run on the host shares (docs/reliability.md, "Shared memory between runs")
+        env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'SYSTEM_DEFAULT'
     if env.get('FASTDDS_DEFAULT_PROFILES_FILE') == '':   # "no file": Fast DDS would log an
         del env['FASTDDS_DEFAULT_PROFILES_FILE']         # error for the empty path
     return env
