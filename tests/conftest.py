@@ -5,6 +5,8 @@ import shutil
 import sys
 import tempfile
 
+import pytest
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 for pkg in ('adcs_nodes', 'sim_node'):
     path = os.path.join(ROOT, pkg)
@@ -39,6 +41,7 @@ BAG_ONLY = frozenset({'test_engine_parity.py', 'test_tf_bag.py', 'test_registry_
                       'test_plugin_inputs_graph.py', 'test_faults_graph.py'})
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``make test``: 2 workers, ``--dist loadgroup``) the launched-graph
     tests of ``tests/graph`` run one after the other on one worker (group ``graph``: killed
@@ -47,7 +50,6 @@ def pytest_collection_modifyitems(config, items):
     unit and node tests, and the ``tests/graph`` tests marked ``parallel`` (processes that may
     run beside a graph), fill both workers. Each test's ROS domain is its own
     (``tests/domains.py``)."""
-    import pytest
     graph = os.path.join(ROOT, 'tests', 'graph') + os.sep
     for item in items:
         if str(item.fspath).startswith(graph) and item.get_closest_marker('parallel') is None:
@@ -57,6 +59,25 @@ def pytest_collection_modifyitems(config, items):
             # one worker for the file: its module-scoped fixture (a FrameLoop run, a bag) is
             # made once, not once per worker that gets one of its tests
             item.add_marker(pytest.mark.xdist_group('module:' + item.module.__name__))
+    if config.getvalue('loadgroup'):
+        _group_node_ids(items)
+
+
+def _group_node_ids(items):
+    """pytest-xdist 3.8 schedules ``--dist loadgroup`` by an ``@group`` suffix of each node
+    id, which it writes to ``item._nodeid``; pytest 9 takes the node id from ``item._id``, so
+    the suffix was lost and every group was spread over the workers (the launched-graph tests
+    ran side by side, each module fixture was made once per worker). The suffix is written
+    here, as xdist does under pytest 8."""
+    try:
+        from _pytest.nodeid import NodeId
+    except ImportError:           # pytest < 9: xdist's own suffix works
+        return
+    for item in items:
+        names = sorted({str(m.args[0] if m.args else m.kwargs.get('name', 'default'))
+                        for m in item.iter_markers('xdist_group')})
+        if names and '@' not in item.nodeid.rsplit(']', 1)[-1]:
+            item._id = NodeId.parse(f"{item.nodeid}@{'_'.join(names)}")
 
 
 def _uses_a_module_fixture(item):
