@@ -59,7 +59,7 @@ def pytest_collection_modifyitems(config, items):
             # one worker for the file: its module-scoped fixture (a FrameLoop run, a bag) is
             # made once, not once per worker that gets one of its tests
             item.add_marker(pytest.mark.xdist_group('module:' + item.module.__name__))
-    if config.getvalue('loadgroup'):
+    if getattr(config.option, 'loadgroup', False):     # an xdist worker with loadgroup
         _group_node_ids(items)
 
 
