@@ -10,15 +10,21 @@ SCENARIO = os.path.join(os.path.dirname(__file__), '..', '..', 'scenarios',
                         'paper003_slew.yaml')
 
 
-def _fake(sim_s, wall_s):
+FRAME_S = 0.1          # paper003_slew's frame
+
+
+def _fake(sim_s, wall_s, start_s=3.0):
+    """A launcher whose run took ``wall_s`` from frame 0, plus ``start_s`` of start-up."""
     class Fake:
         def __init__(self, *args, **kwargs):
             self.kwargs = kwargs
 
         def run(self):
-            return launcher.RunResult(exit_code=0, sim_time_s=sim_s, wall_time_s=wall_s,
-                                      frames=int(sim_s * 10), missed_frames=0, bag=None,
-                                      run_dir='', message='done')
+            return launcher.RunResult(exit_code=0, sim_time_s=sim_s,
+                                      wall_time_s=wall_s + start_s,
+                                      frames=int(sim_s / FRAME_S), missed_frames=0, bag=None,
+                                      run_dir='', message='done',
+                                      frames_per_s=sim_s / FRAME_S / wall_s)
     return Fake
 
 
