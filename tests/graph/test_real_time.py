@@ -7,12 +7,14 @@ the wall clock) against the plain engine's lockstep run of the same scenario:
 * paper003_slew: it settles (5 % band of the initial eigenangle) within 10 % of the lockstep
   time.
 
-``long`` (make test-long): a 5 min and a 1 min real-time run, and both depend on the machine
-keeping the pace. Measured at load 12-15 on 2 cores (2026-12-02): paper000_estimation 592 of
-592 samples, median 0.71 deg against 0.70; paper003_slew at rate 20 did not keep the pace
-(3.7x real time instead of 20x, 392 samples rejected late or future, never settled: this test
-fails there), at rate 1 it settled in 29.1 s against 26.8 s. The estimate is judged against the
-truth interpolated at its stamp (:func:`adcs_nodes.tools.metrics.estimate_errors_deg`).
+``long`` (make test-long): a 5 min and two short real-time runs, and they depend on the
+machine keeping the pace. paper000_estimation at rate 20 (one process per node, load 12-15):
+592 of 592 samples, median 0.71 deg against 0.70. paper003_slew (0.1 s frames, 2026-12-02):
+at rate 1, one process per node, beside a soak (load about 8): settled in 29.2 s against
+26.8 s, exit 0; at rate 20 composed (near idle) 29.3 s, with 0-2 frames now and then
+degraded (a command or a sample after its 5 ms frame: exit 3). One process per node keeps
+about 3.7 x real time there, not 20 x. The estimate is judged against the truth interpolated
+at its stamp (:func:`adcs_nodes.tools.metrics.estimate_errors_deg`).
 """
 import os
 import re
@@ -66,8 +68,14 @@ def test_paper003_slew_in_real_time_settles_as_in_lockstep(tmp_path, rate, engin
     second on 2 cores (it fell behind to 3.7 x real time), all nodes in one process keep it."""
     sc = os.path.join(SCENARIOS, 'paper003_slew.yaml')
     rt, lock = str(tmp_path / 'rt'), str(tmp_path / 'lock')
-    out = adcs('run', sc, '--real-time', '--rate', rate, '--engine', engine, '--record', rt,
-               '--quiet', timeout=1200).stdout
+    run = adcs('run', sc, '--real-time', '--rate', rate, '--engine', engine, '--record', rt,
+               '--quiet', timeout=1200, check=False)
+    out = run.stdout + run.stderr
+    # at rate 20 a frame is 5 ms of wall time: now and then a command or a sample comes after
+    # its frame (the run says DEGRADED, exit 3: frames without a command, or an estimator
+    # starved for a frame or two); at most 1 % of the 800 frames each
+    counts = [int(n) for n in re.findall(r'(?:in|for) (\d+) (?:of its )?frames', out)]
+    assert run.returncode == 0 or (run.returncode == 3 and counts and max(counts) <= 8), out
     adcs('run', sc, '--engine', 'plain', '--record', lock, '--quiet', timeout=600)
     t_rt, t_lock = _settling(rt), _settling(lock)
     print(f'settling at rate {rate} ({engine}): real time {t_rt} s, lockstep {t_lock} s')
