@@ -86,17 +86,15 @@ def _probe_clock(domain):
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
-    saved = os.environ.get('FASTDDS_BUILTIN_TRANSPORTS')
-    os.environ['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'     # as the launched nodes
+    from adcs_nodes.tools.launcher import DDS_ENV_KEYS, child_env, use_dds_env
+    saved = {k: os.environ.get(k) for k in DDS_ENV_KEYS}
+    use_dds_env(child_env(domain))                         # as the launched nodes
     try:
         ctx = rclpy.Context()
         rclpy.init(context=ctx, domain_id=domain)
         node = rclpy.create_node('clock_probe', context=ctx)
     finally:
-        if saved is None:
-            os.environ.pop('FASTDDS_BUILTIN_TRANSPORTS')
-        else:
-            os.environ['FASTDDS_BUILTIN_TRANSPORTS'] = saved
+        use_dds_env({k: v for k, v in saved.items() if v is not None})
     seen = [-1]
 
     def on_clock(msg):

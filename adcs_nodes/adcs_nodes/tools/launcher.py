@@ -409,10 +409,9 @@ def child_env(domain: int) -> Dict[str, str]:
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['PYTHONUNBUFFERED'] = '1'
     env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
-    # UDP on loopback only: Fast DDS shared-memory segments left in /dev/shm by killed
-    # processes once kept two nodes of a new run from ever matching (seen in CI); UDP
-    # loopback measured as fast for this graph (125-163 vs 131-132 frames/s)
-    env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+    # UDP on loopback only, set by the profile (docs/decisions.md): FASTDDS_BUILTIN_TRANSPORTS
+    # would change nothing (the profile declares its transport; with LOCALHOST rmw_fastrtps
+    # chooses its own)
     env.update(profile_env(env))
     if env.get('FASTDDS_DEFAULT_PROFILES_FILE') == FASTDDS_PROFILES:
         # the profile binds discovery and traffic to loopback itself; with LOCALHOST
