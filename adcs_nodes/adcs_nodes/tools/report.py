@@ -424,7 +424,7 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics, axis, errors = _bag_metrics(data, bag_path)
-    plots = _draw_plots(data, axis, errors, out)
+    plots = _draw_plots(data, axis, errors, out, wheels='wheel_final_momentum_Nms' in metrics)
     if expectations:
         try:
             drawn = papers.figures_for_bag(str(bag_path), str(out))
@@ -521,15 +521,17 @@ def _truth_metrics(data: _Data, t0: int, period: Optional[float]) -> Dict[str, A
     return out
 
 
-def _draw_plots(data: _Data, axis: '_TimeAxis', errors, out: Path) -> List[str]:
-    """The PNG plots of the series the bag has; their file names."""
+def _draw_plots(data: _Data, axis: '_TimeAxis', errors, out: Path,
+                wheels: bool) -> List[str]:
+    """The PNG plots of the series the bag has (``wheels``: wheel momenta were found);
+    their file names."""
     plots: List[str] = []
     if data.state['t']:
         _plot_attitude(data, axis, out, plots)
         _plot_rates(data, axis, out, plots)
     if data.env['t'] or data.mag['t']:
         _plot_field(data, axis, out, plots)
-    if data.wheels['t'] and _wheel_matrix(data).size:
+    if wheels:
         _plot_wheels(data, axis, out, plots)
     if errors is not None:
         _plot_estimate(errors, axis, out, plots)
