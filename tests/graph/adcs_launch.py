@@ -34,6 +34,29 @@ def control_scenario(tmp_path, **changes):
     return str(path)
 
 
+#: Topics that are not data series: ``/tf``, ``/tf_static`` and ``/diagnostics`` (the plain
+#: engine publishes none), ``adcs/security_events`` (the graph's publisher guard) and
+#: ``adcs/controller_status`` (on change and once per wall second in a graph).
+NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
+            '/adcs/controller_status')
+
+
+def data_digest(bag):
+    """Per data topic with messages: (count, hash of the values in stamp order). A topic the
+    recorder subscribed to but no message came on has no connection in a plain bag."""
+    from adcs_nodes.bag import content_digest
+    return {t: d for t, d in content_digest(bag).items() if t not in NOT_DATA and d[0] > 0}
+
+
+def plain_run(scenario_path, duration_s, bag):
+    """The plain engine's run of a scenario file with its bag, in this process (what
+    ``adcs run --engine plain`` calls, without an interpreter start); the RunResult."""
+    from adcs_nodes.tools.scenario import load_scenario
+    from sim_node.engine import run_plain
+    return run_plain(load_scenario(str(scenario_path)), float(duration_s), str(bag),
+                     progress=False)
+
+
 def adcs(*args, timeout=300, check=True):
     """Run ``adcs ARGS`` to completion; returns the CompletedProcess (text output)."""
     proc = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.cli', *args], cwd=ROOT,

@@ -22,11 +22,7 @@ import os
 import pytest
 import yaml
 
-from adcs_launch import SCENARIOS, adcs
-from adcs_nodes.bag import content_digest
-
-NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
-            '/adcs/controller_status')
+from adcs_launch import SCENARIOS, adcs, data_digest
 SHIPPED = sorted(f for f in os.listdir(SCENARIOS) if f.endswith('.yaml'))
 #: The graph engine (one process per node) for scenarios of every shape: magnetic control
 #: with the filter, wheels on a flexible craft with the MEKF (make test); a slew with ideal
@@ -52,14 +48,6 @@ def short_duration(path):
     periods.append(float((sc.get('controllers') or {}).get('period_s', frame)))
     frames = max(5, math.ceil(2.0 * max(periods) / frame))
     return f'{frames * frame:g}'
-
-
-def data_digest(bag):
-    """Per data topic with messages: (count, hash). A topic the recorder subscribed to but no
-    message came on (a fault list, in a run too short for its first fault) has no connection
-    in the plain engine's bag."""
-    digest = content_digest(bag)
-    return {t: d for t, d in digest.items() if t not in NOT_DATA and d[0] > 0}
 
 
 @pytest.fixture(scope='module')

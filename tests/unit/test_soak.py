@@ -184,3 +184,10 @@ def test_discovery_probe_table():
     table = soak.discovery_table('P', 3, trials, 2, {'K': 'v'})
     assert '2 trials of 3 participants' in table and 'env K=v' in table
     assert '| 6 | 1 | 1 | 0.30 s | 0.40 s | 3.10 s |' in table
+
+
+def test_an_env_value_with_launch_is_one_value_per_launch():
+    base = {'PATH': '/bin', 'NUMBA_CACHE_DIR': '/home/cache'}
+    env = soak.launch_env(base, {'NUMBA_CACHE_DIR': '/tmp/cold/{launch}', 'A': 'b'}, 7)
+    assert env == {'PATH': '/bin', 'NUMBA_CACHE_DIR': '/tmp/cold/7', 'A': 'b'}
+    assert base['NUMBA_CACHE_DIR'] == '/home/cache'       # the base is not changed

@@ -289,6 +289,15 @@ def _kill_group(proc: subprocess.Popen, grace_s: float) -> None:
             pass
 
 
+def launch_env(base: Dict[str, str], changes: Dict[str, str], index: int) -> Dict[str, str]:
+    """``base`` with ``changes`` whose ``{launch}`` is replaced by the launch's number: a
+    value per launch, e.g. ``NUMBA_CACHE_DIR=/tmp/cold/{launch}`` (a cold kernel cache that
+    every process of the run fills at once)."""
+    env = dict(base)
+    env.update({k: v.replace('{launch}', str(index)) for k, v in changes.items()})
+    return env
+
+
 def run_one(cmd: Sequence[str], deadline_s: float, env: Optional[Dict[str, str]] = None,
             budget_end: float = float('inf'), grace_s: float = KILL_GRACE_S):
     """Run ``cmd`` (own session) until it exits, its deadline or the budget's end.
@@ -356,8 +365,8 @@ class Soak:
                 launch = Launch(i + 1, os.path.basename(scenario).rsplit('.', 1)[0], mode,
                                 load=os.getloadavg()[0])
                 code, output, timed_out, cut, wall = run_one(
-                    self.command(scenario, mode, duration), self.run_deadline_s, env,
-                    budget_end, self.grace_s)
+                    self.command(scenario, mode, duration), self.run_deadline_s,
+                    launch_env(env, self.env, i + 1), budget_end, self.grace_s)
                 launch.exit_code, launch.wall_s = code, wall
                 launch.run_dir = run_dir_of(output)
                 finished_frames = bool(launch.run_dir) and os.path.isfile(
@@ -552,7 +561,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f'a run still alive after this is a hang (default {RUN_DEADLINE_S:g})')
     p.add_argument('--env', action='append', default=[], metavar='KEY=VALUE',
                    help='environment of the runs (A/B experiments, e.g. '
-                   'FASTDDS_DEFAULT_PROFILES_FILE=other.xml); repeatable')
+                   'FASTDDS_DEFAULT_PROFILES_FILE=other.xml); {launch} in a value is the '
+                   'launch number (NUMBA_CACHE_DIR=/tmp/cold/{launch}); repeatable')
     p.add_argument('--label', default='', help='name of the experiment in the table')
     p.add_argument('--discovery-probe', type=int, default=0, metavar='N',
                    help='instead of runs: --launches trials of N bare participants started '
