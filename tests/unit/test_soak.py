@@ -27,6 +27,17 @@ def test_finished_and_healed():
                          '[adcs] done (restarts: 1: guidance)')
     outcome, _, _, restarts = classify(0, healed)
     assert (outcome, restarts) == ('healed', 1)
+    # the launcher's words (soak I): the nodes restarted and the first one's reason
+    two = out.replace('[adcs] done', (
+        '[adcs] restarting node guidance before frame 0 (restart 1 of at most 1): its '
+        'endpoints stayed unmatched for 30 s while every other node was ready: sub:/clock 0/1 '
+        '(discovery knows 0)\n[adcs] restarting node dynamics before frame 0 (restart 1 of '
+        'at most 1): it accepts guidance\'s messages only from the publisher it locked\n'
+        '[adcs] done\n[adcs] restarts: 2 before frame 0 (self-healing: ...)'))
+    outcome, detail, _, restarts = classify(0, two)
+    assert (outcome, restarts) == ('healed', 2)
+    assert detail.startswith('restarted guidance, dynamics; guidance: its endpoints stayed '
+                             'unmatched') and detail.endswith('(discovery knows 0)'), detail
 
 
 def test_start_timeout_names_the_unmatched_endpoints_and_what_discovery_knew(tmp_path):

@@ -74,6 +74,7 @@ _NOT_ACTIVE = re.compile(r'node (\S+) was not active [0-9.]+ s after its start '
 _EXITED = re.compile(r'node (\S+) exited with code (-?\d+)')
 _RESTARTED = re.compile(r'\[adcs\] restart(?:ed|ing) (?:node )?(\S+?)[: ]')
 _RESTARTS = re.compile(r'restarts?: (\d+)')
+_RESTART_WHY = re.compile(r'\[adcs\] restarting node (\S+) before frame 0 \([^)]*\): (.*)')
 _SEGV_TEXT = re.compile(r'Fatal Python error: (Segmentation fault|Aborted|Bus error)')
 
 
@@ -174,6 +175,11 @@ def classify(exit_code: Optional[int], output: str, run_dir: str = '',
         return 'crash', f'{fatal.group(0)}', name, restarts
     if exit_code in (0, 3):
         detail = '' if exit_code == 0 else 'degraded: ' + _first_line(output, 'DEGRADED')
+        if restarts:      # which nodes, and the first one's reason (the unmatched endpoints)
+            why = _RESTART_WHY.findall(output)
+            detail = '; '.join(filter(None, [
+                'restarted ' + ', '.join(n for n, _ in why) if why else '',
+                f'{why[0][0]}: {why[0][1]}' if why else '', detail]))
         return 'healed' if restarts else 'finished', detail, '', restarts
     m = _NOT_ACTIVE.search(output)
     if m:
