@@ -13,7 +13,7 @@ import os
 import pytest
 import yaml
 
-from adcs_launch import SCENARIOS, adcs
+from adcs_launch import SCENARIOS, adcs, plain_run
 from adcs_nodes.bag import content_digest
 
 DURATION = '300'
@@ -42,10 +42,8 @@ def scenario(tmp_path_factory):
 @pytest.fixture(scope='module')
 def reference(scenario, tmp_path_factory):
     """The plain engine's bag (in this process: what ``adcs run --engine plain`` calls)."""
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.engine import run_plain
     bag = str(tmp_path_factory.mktemp('det') / 'reference')
-    res = run_plain(load_scenario(scenario), float(DURATION), bag, progress=False)
+    res = plain_run(scenario, DURATION, bag)
     assert res.exit_code == 0, res.message
     return content_digest(bag)
 

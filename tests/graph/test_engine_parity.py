@@ -22,7 +22,7 @@ import os
 import pytest
 import yaml
 
-from adcs_launch import SCENARIOS, adcs, data_digest
+from adcs_launch import SCENARIOS, adcs, data_digest, plain_run
 SHIPPED = sorted(f for f in os.listdir(SCENARIOS) if f.endswith('.yaml'))
 #: The graph engine (one process per node) for scenarios of every shape: magnetic control
 #: with the filter, wheels on a flexible craft with the MEKF (make test); a slew with ideal
@@ -54,8 +54,6 @@ def short_duration(path):
 def plain_bags(tmp_path_factory):
     """Each shipped scenario's plain-engine bag: :data:`PLAIN_CLI`'s by the real command (a
     subprocess), the others' by :func:`sim_node.engine.run_plain` in this process."""
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.engine import run_plain
     out = {}
     root = tmp_path_factory.mktemp('plain')
     for name in SHIPPED:
@@ -65,8 +63,7 @@ def plain_bags(tmp_path_factory):
             adcs('run', path, '--engine', 'plain', '--record', bag, '--duration',
                  short_duration(path), '--quiet', timeout=600)
         else:
-            res = run_plain(load_scenario(path), float(short_duration(path)), bag,
-                            progress=False)
+            res = plain_run(path, short_duration(path), bag)
             assert res.exit_code == 0, f'{name}: {res.message}'
         out[name] = data_digest(bag)
     return out

@@ -175,11 +175,10 @@ def classify(exit_code: Optional[int], output: str, run_dir: str = '',
         return 'crash', f'{fatal.group(0)}', name, restarts
     if exit_code in (0, 3):
         detail = '' if exit_code == 0 else 'degraded: ' + _first_line(output, 'DEGRADED')
-        if restarts:      # which nodes, and the first one's reason (the unmatched endpoints)
-            why = _RESTART_WHY.findall(output)
-            detail = '; '.join(filter(None, [
-                'restarted ' + ', '.join(n for n, _ in why) if why else '',
-                f'{why[0][0]}: {why[0][1]}' if why else '', detail]))
+        why = _RESTART_WHY.findall(output) if restarts else []
+        if why:           # which nodes, and the first one's reason (the unmatched endpoints)
+            detail = '; '.join(filter(None, ['restarted ' + ', '.join(n for n, _ in why),
+                                             f'{why[0][0]}: {why[0][1]}', detail]))
         return 'healed' if restarts else 'finished', detail, '', restarts
     m = _NOT_ACTIVE.search(output)
     if m:
