@@ -54,7 +54,7 @@ from adcs_nodes.components.base import (DEFAULT_EPOCH, FrameClock, Mounts, epoch
 from adcs_nodes.components.guidance import PARAMS as GUIDANCE_PARAMS
 from adcs_nodes.components.guidance import GuidanceComponent
 from adcs_nodes.components.manager import MANAGER_PARAMS, ManagerComponent, manager_core
-from adcs_nodes.core.lockstep import ZERO, derive_seed, seconds_to_ns
+from adcs_nodes.core.lockstep import REVIVE_HOLD_FRAMES, ZERO, derive_seed, seconds_to_ns
 from adcs_nodes.nodes.actuator_topics import MAGNETORQUER_TOPIC, WHEELS_TOPIC, wheel_names_for
 from adcs_nodes.nodes.convert import stamp_ns
 from adcs_nodes.nodes.messages import make
@@ -146,6 +146,8 @@ class FrameLoop:
             parse_faults(str(dyn_p.get('faults', ''))))
         #: a due input missing this many frames in a row is dead (not awaited), as in a node
         self.dead_after = int(env_p.get('dead_after_frames', 3))
+        #: after a revival, an input is dropped and not awaited for this long (FrameSync)
+        self.revive_hold_ns = REVIVE_HOLD_FRAMES * self.frame_ns
         cmd_s = float(dyn_p.get('command_period_s', 0.0))
         self.command_ns = seconds_to_ns(cmd_s) if cmd_s > 0 else 0
         self.mounts = Mounts()
@@ -340,7 +342,8 @@ class FrameLoop:
     def _inputs(self, c: _Consumer, t_ns: int) -> Tuple[Dict[str, Any], List[str]]:
         """A consumer's messages for frame ``t_ns`` and its due inputs that did not come (a
         silent producer), with ``FrameSync``'s rule: missing ``dead_after`` frames in a row,
-        an input is dead (no longer missed) until a message of it arrives again."""
+        an input is dead (no longer missed) until a message of it arrives again; it is then
+        re-admitted after ``revive_hold_ns``."""
         msgs: Dict[str, Any] = {}
         missing: List[str] = []
         for key, (topic, kind, period) in c.inputs.items():
@@ -353,8 +356,8 @@ class FrameLoop:
             if stamp > c.seen.get(key, -1):              # a message arrived
                 c.seen[key], c.misses[key] = stamp, 0
                 if c.dead.get(key):                      # a revival: not taken (FrameSync)
-                    c.dead[key], c.revived[key] = False, stamp
-                else:
+                    c.dead[key], c.revived[key] = False, stamp + self.revive_hold_ns
+                elif key not in c.revived or stamp > c.revived[key]:   # not in the hold
                     c.taken[key] = msg
             msgs[key] = c.taken.get(key)
             if period > 0 and t_ns % period == 0 and t_ns > c.revived.get(key, -1) \

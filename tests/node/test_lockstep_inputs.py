@@ -111,16 +111,22 @@ def test_dead_producer_is_no_longer_awaited_until_it_publishes_again(ros_context
     node.timeout_s = NO_TIMEOUT_S
     pb.publish(msg(8, 'b8'))                 # it publishes again: awaited again
     assert spin([node, src], lambda: not node.sync.is_dead('b'), timeout=30.0)
-    for k in (8, 9):
+    from adcs_nodes.core.lockstep import REVIVE_HOLD_FRAMES
+    end = 8 + REVIVE_HOLD_FRAMES                 # frames of 1 s: b is held to t = end
+    pb.publish(msg(10, 'b10'))                   # within the hold: dropped
+    for k in range(8, end + 2):
         pa.publish(msg(k, f'a{k}'))
-    assert spin([node, src], lambda: len(node.fired) >= 10, timeout=30.0)
-    # the reviving message is not used (FrameSync.add: the frame would otherwise depend on
-    # whether it came before the node fired for it); b is awaited from the frames after it
-    assert node.fired[8] == (8, 'a8', 'b0', ()) and node.fired[9] == (9, 'a9', 'b0', ())
+    assert spin([node, src], lambda: len(node.fired) >= end + 2, timeout=30.0)
+    # the reviving message and those of the hold are not used, and b is not awaited then
+    # (FrameSync.add: otherwise a frame would depend on whether the revival came before the
+    # node fired for it); b is awaited again from the frames after the hold
+    assert all(f[2:] == ('b0', ()) for f in node.fired[8:end + 1])
+    assert node.fired[8][:2] == (8, 'a8') and node.missed_frames == 2
     node.timeout_s = 0.3
-    pa.publish(msg(10, 'a10'))               # b10 never comes: times out again
-    assert spin([node, src], lambda: len(node.fired) >= 11, timeout=30.0)
-    assert node.fired[10] == (10, 'a10', 'b0', ('/in/b',)) and node.missed_frames == 3
+    pa.publish(msg(end + 2, f'a{end + 2}'))      # b, due at end + 2, never comes: times out
+    assert spin([node, src], lambda: len(node.fired) >= end + 3, timeout=30.0)
+    assert node.fired[end + 2] == (end + 2, f'a{end + 2}', 'b0', ('/in/b',))
+    assert node.missed_frames == 3
     src.destroy_node()
     node.destroy_node()
 

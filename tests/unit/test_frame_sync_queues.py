@@ -19,14 +19,14 @@ SPECS = {'env': P, 'mag': 2 * P, 'cmd': (3 * P, 'previous'), 'live': 0}
 class NaiveSync:
     """Reference: every query scans all stored stamps."""
 
-    def __init__(self, specs, history, dead_after):
+    def __init__(self, specs, history, dead_after, hold=0):
         self.inp = {}
         for name, spec in specs.items():
             period, kind = spec if isinstance(spec, tuple) else (spec, 'frame')
             self.inp[name] = {'p': period, 'kind': kind if period else 'latest',
                               'msgs': {}, 'latest': None, 'misses': 0, 'dead': False,
-                              'revived': -1}
-        self.history, self.dead_after = history, dead_after
+                              'revived': -1, 'held': False}
+        self.history, self.dead_after, self.hold = history, dead_after, hold
 
     def required(self, name, t):
         i = self.inp[name]
@@ -39,9 +39,11 @@ class NaiveSync:
     def add(self, name, s, v):
         i = self.inp[name]
         i['misses'] = 0
-        if i['dead']:                   # a revival: not stored, awaited after its stamp
-            i['dead'], i['revived'] = False, s
+        if i['dead']:                   # a revival: not stored, awaited after the hold
+            i['dead'], i['revived'], i['held'] = False, s + self.hold, True
             return True
+        if i['held'] and s <= i['revived']:
+            return False                # within the hold: not stored
         i['msgs'][s] = v
         if len(i['msgs']) > self.history:
             del i['msgs'][min(i['msgs'])]
@@ -89,10 +91,10 @@ OPS = st.lists(st.tuples(st.sampled_from(['add', 'add', 'add', 'value', 'missing
 
 @settings(max_examples=300, deadline=None)
 @given(ops=OPS, history=st.integers(min_value=1, max_value=6),
-       dead_after=st.integers(min_value=0, max_value=3))
-def test_queues_answer_as_the_naive_scan(ops, history, dead_after):
-    sync, ref = FrameSync(SPECS, history=history, dead_after=dead_after), NaiveSync(
-        SPECS, history, dead_after)
+       dead_after=st.integers(min_value=0, max_value=3), hold=st.sampled_from([0, P, 5 * P]))
+def test_queues_answer_as_the_naive_scan(ops, history, dead_after, hold):
+    sync = FrameSync(SPECS, history=history, dead_after=dead_after, revive_hold_ns=hold)
+    ref = NaiveSync(SPECS, history, dead_after, hold)
     for k, (op, name, x) in enumerate(ops):
         t = x * P // 2          # stamps on and between frames
         if op == 'add':

@@ -153,6 +153,29 @@ def test_producer_dead_after_n_misses_in_a_row_and_revived_by_a_message():
     assert sync.value('ctrl', 6 * S) == 'c6'
 
 
+def test_a_revived_input_is_dropped_and_not_awaited_for_the_hold():
+    # the reviving message may arrive frames late (a node does not wait for a dead input):
+    # within the hold nothing of it is stored or awaited, so frames there are the same whenever
+    # it arrived
+    sync = FrameSync({'st': S}, dead_after=1, revive_hold_ns=3 * S)
+    sync.add('st', 0, 's0')
+    assert sync.record_misses(S) == ['st']
+    assert sync.add('st', 2 * S, 's2') is True            # revived at 2, held to 5
+    for k in (3, 4, 5):
+        assert sync.add('st', k * S, f's{k}') is False    # dropped
+        assert not sync.due('st', k * S) and sync.value('st', k * S) == 's0'
+    assert sync.due('st', 6 * S) and not sync.has('st', 6 * S)
+    sync.add('st', 6 * S, 's6')
+    assert sync.value('st', 6 * S) == 's6'
+    with pytest.raises(ValueError, match='revive_hold_ns'):
+        FrameSync({'a': S}, revive_hold_ns=-1)
+
+
+def test_the_hold_covers_the_farthest_the_clock_master_runs_ahead():
+    from adcs_nodes.core.lockstep import MAX_LAG_FRAMES, PROGRESS_EVERY, REVIVE_HOLD_FRAMES
+    assert REVIVE_HOLD_FRAMES >= MAX_LAG_FRAMES + PROGRESS_EVERY
+
+
 def test_dead_after_zero_never_gives_up():
     sync = FrameSync({'a': S})
     for k in range(10):

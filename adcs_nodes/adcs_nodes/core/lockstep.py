@@ -15,10 +15,14 @@ Timing model (DESIGN section 6)
   node's output in lockstep (that would make the output depend on arrival order).
 * Dead producers: a due input that times out ``dead_after`` frames in a row is *dead*: it is
   no longer awaited until a message of it arrives again (:meth:`FrameSync.add` revives it).
-  That first message only revives the input: it is not stored, and the input is awaited again
-  from the frames after its stamp. A node does not wait for a dead input, so whether the
-  revival arrived before it fired for that frame is a matter of timing; dropping it makes the
-  frame the same either way (and the plain engine does the same).
+  A revived input is re-admitted after a hold: the messages stamped up to ``REVIVE_HOLD_FRAMES``
+  base frames after the reviving one are not stored, and the input is awaited again only from
+  the frames after that (the re-admission hold of a sensor FDIR). The hold is what makes the
+  revival deterministic: a node does not wait for a dead input, so the reviving message may
+  arrive frames after its stamp (its producer was starved of CPU while the chain went on); the
+  clock master never runs more than ``MAX_LAG_FRAMES`` (+ one ``PROGRESS_EVERY`` report) ahead
+  of any node, so within the hold the node's frames are the same whenever it arrived. The plain
+  engine applies the same hold (``sim_node.engine``).
 * Seeds: one scenario seed; each node derives its own stream with :func:`derive_seed`, so
   adding a node never changes another node's random numbers.
 
@@ -41,6 +45,14 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Tuple, Union
 
 NS_PER_S = 1_000_000_000
+#: A node reports its progress (``lockstep/progress``) every this many base frames.
+PROGRESS_EVERY = 10
+#: The clock master waits when a node is more than this many frames behind (the data QoS
+#: keeps 100 messages per topic, so nothing a lagging node has not read yet is dropped).
+MAX_LAG_FRAMES = 40
+#: Base frames after a revived input's reviving message during which it is neither stored nor
+#: awaited (see the module docstring): the farthest the world can run ahead of its producer.
+REVIVE_HOLD_FRAMES = MAX_LAG_FRAMES + PROGRESS_EVERY
 
 
 def seconds_to_ns(t_s: float) -> int:
@@ -98,7 +110,8 @@ class _Input:
     latest: Optional[Tuple[int, Any]] = None
     misses: int = 0           # due frames missed in a row
     dead: bool = False
-    revived_at: int = -1      # stamp of the message that last revived it (not stored)
+    revived_at: int = -1      # end of the hold after the message that last revived it
+    held: bool = False        # revived once: messages stamped up to revived_at are dropped
 
 
 class FrameSync:
@@ -120,6 +133,9 @@ class FrameSync:
     dead_after : int
         A due input missed (:meth:`record_misses`) this many frames in a row is dead: no
         longer awaited until it publishes again. 0: never.
+    revive_hold_ns : int
+        After the message that revives a dead input, its messages stamped up to this much
+        later are dropped and it is not awaited (a node passes ``REVIVE_HOLD_FRAMES`` frames).
 
     Examples
     --------
@@ -136,7 +152,7 @@ class FrameSync:
     """
 
     def __init__(self, inputs: Mapping[str, Any], history: int = 64,
-                 dead_after: int = 0) -> None:
+                 dead_after: int = 0, revive_hold_ns: int = 0) -> None:
         self._inputs: Dict[str, _Input] = {}
         for name, spec in inputs.items():
             period, kind = spec if isinstance(spec, tuple) else (spec, InputKind.FRAME)
@@ -154,6 +170,9 @@ class FrameSync:
         if isinstance(dead_after, bool) or int(dead_after) != dead_after or dead_after < 0:
             raise ValueError(f'dead_after must be an integer >= 0, got {dead_after!r}')
         self.dead_after = int(dead_after)
+        if int(revive_hold_ns) < 0:
+            raise ValueError(f'revive_hold_ns must be >= 0, got {revive_hold_ns}')
+        self.revive_hold_ns = int(revive_hold_ns)
 
     @property
     def names(self) -> List[str]:
@@ -202,7 +221,8 @@ class FrameSync:
         -------
         bool
             True when the input was dead and is awaited again from the frames after
-            ``stamp_ns``; that message itself is not stored (see the module docstring).
+            ``stamp_ns + revive_hold_ns``; that message, and those of the hold, are not
+            stored (see the module docstring).
 
         Raises
         ------
@@ -213,8 +233,11 @@ class FrameSync:
         stamp_ns = int(stamp_ns)
         inp.misses = 0
         if inp.dead:
-            inp.dead, inp.revived_at = False, stamp_ns
+            inp.dead, inp.revived_at = False, stamp_ns + self.revive_hold_ns
+            inp.held = True
             return True
+        if inp.held and stamp_ns <= inp.revived_at:
+            return False                  # within the re-admission hold
         by, stamps = inp.by_stamp, inp.stamps
         if stamp_ns not in by:
             if not stamps or stamp_ns > stamps[-1]:

@@ -61,7 +61,9 @@ from std_msgs.msg import String
 
 from adcs_msgs.msg import LockstepStatus
 from adcs_nodes.components.base import DEFAULT_EPOCH, epoch_to_ns, parse_epoch  # noqa: F401
-from adcs_nodes.core.lockstep import NS_PER_S, FrameSync, InputKind, input_kind, seconds_to_ns
+from adcs_nodes.core.lockstep import (  # noqa: F401 (MAX_LAG_FRAMES: re-exported)
+    MAX_LAG_FRAMES, NS_PER_S, PROGRESS_EVERY, REVIVE_HOLD_FRAMES, FrameSync, InputKind,
+    input_kind, seconds_to_ns)
 from adcs_nodes.core.sample_timing import REASONS, SampleQueue, admit
 from adcs_nodes.nodes import cdr
 from adcs_nodes.nodes import params as node_params
@@ -80,11 +82,6 @@ QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                        history=HistoryPolicy.KEEP_LAST,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
-#: A node reports its progress every this many base frames.
-PROGRESS_EVERY = 10
-#: The clock master waits when a node is more than this many frames behind (the data QoS
-#: keeps 100 messages per topic, so nothing a lagging node has not read yet is dropped).
-MAX_LAG_FRAMES = 40
 #: The launcher's progress monitor (``tools.launcher._Monitor``): its node name, and the one
 #: node whose ``lockstep/status`` it takes (content filter ``node = %0 OR missed_frames > 0``).
 MONITOR_NODE, MONITOR_STATUS_OF = 'adcs_launcher', 'dynamics'
@@ -440,7 +437,8 @@ class LockstepNode(node_params.SpecParameters, Node):
                 self._external_cb(name) if name in self.external else self._input_cb(name))
             sub = self.subscription(msg_type, topic, cb, qos)
             self._topics_of[name] = sub.topic_name
-        self.sync = FrameSync(specs, dead_after=self.dead_after)
+        self.sync = FrameSync(specs, dead_after=self.dead_after,
+                              revive_hold_ns=REVIVE_HOLD_FRAMES * self.frame_ns)
         self._frame_inputs = [n for n in specs if n not in self.external]
         self._on_frame = on_frame
         self._ext_wait_t0: Optional[float] = None
@@ -485,8 +483,12 @@ class LockstepNode(node_params.SpecParameters, Node):
             self.input_arrived(name)
             t = self.elapsed_ns(stamp_ns(msg.header.stamp))
             if self.sync.add(name, t, msg):
-                self.get_logger().info(f'{self._topics_of[name]} publishes again: awaited '
-                                       'again')
+                self.get_logger().info(
+                    f'{self._topics_of[name]} publishes again (stamped t={t / NS_PER_S:g} s, '
+                    f'come before frame t={self._next_t / NS_PER_S:g} s): used and awaited '
+                    'again after '
+                    f'{REVIVE_HOLD_FRAMES} frames (t > '
+                    f'{(t + self.sync.revive_hold_ns) / NS_PER_S:g} s)')
             if t > self._seen_t:
                 self._seen_t = t
             self._try_fire()
