@@ -96,11 +96,6 @@ def get(name: str) -> Input:
         raise ValueError(f'unknown input {name!r}; known: {", ".join(NAMES)}') from None
 
 
-def sensor_of(name: str) -> Optional[str]:
-    """The simulated sensor that provides input ``name`` (None: a flight-software topic)."""
-    return get(name).sensor
-
-
 def period_params(names) -> Tuple:
     """Registry ``Param`` specs of the producer periods of inputs ``names`` (for a node's
     declared parameters: one name per input, the same in every consumer)."""

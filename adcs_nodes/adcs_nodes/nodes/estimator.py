@@ -88,9 +88,6 @@ class EstimatorNode(ManagedLockstepNode):
         """A sample is usable when it reached the filter (timing and conditioning passed)."""
         return self.component.last_used_ns.get(name)
 
-    def _reject(self, why: str) -> None:
-        self.component.reject(why)
-
     # ------------------------------------------------------------------ frame
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """One estimator step at elapsed sim time ``t_ns`` (the component's), published."""

@@ -315,13 +315,6 @@ def _describe_given(node, name: str, doc: str) -> None:
         ignore_override=True)
 
 
-def describe_given(node, name: str, doc: str) -> None:
-    """Attach a description to a parameter declared from the overrides (no spec known)."""
-    if not node.has_parameter(name) or name in _specs(node):
-        return
-    _describe_given(node, name, doc)
-
-
 def known_prefix(node, prefix: str) -> None:
     """Mark every parameter under ``prefix.`` as known (variant sections: orbit, field)."""
     _specs(node)

@@ -47,10 +47,9 @@ fall behind by fewer frames than the publishers keep (``sim_node.nodes.dynamics`
 message the recorder has not received yet can always still be resent. A launcher waits on it
 (clock stamp reached the end of the run, frame count stable) before stopping the recorder. A
 launcher that needs every message of a topic gives ``expected_matches`` and waits for
-``lockstep/ready``, or waits until :func:`recorder_subscribed` is true, before starting the
-simulation. ``/clock`` is subscribed once only (the recording subscription when ``/clock`` is
-recorded), so the recorder adds exactly one DDS match per recorded topic to the publishers'
-handshakes.
+``lockstep/ready`` before starting the simulation. ``/clock`` is subscribed once only (the
+recording subscription when ``/clock`` is recorded), so the recorder adds exactly one DDS
+match per recorded topic to the publishers' handshakes.
 
 QoS
 ---
@@ -182,20 +181,6 @@ def import_message_class(msgtype: str):
         raise ValueError(f'message type must look like pkg/msg/Name, got {msgtype!r}')
     pkg, iface, name = parts
     return getattr(importlib.import_module(f'{pkg}.{iface}'), name)
-
-
-def recorder_subscribed(node: Node, topics: Sequence[str], recorder_name: str = 'recorder'
-                        ) -> bool:
-    """Whether the node ``recorder_name`` has a subscription on every one of ``topics``.
-
-    For a launcher: wait for this (spinning) before starting the simulation, so that the bag
-    holds every message from the first frame on.
-    """
-    for topic in topics:
-        infos = node.get_subscriptions_info_by_topic(topic)
-        if not any(info.node_name == recorder_name for info in infos):
-            return False
-    return True
 
 
 def _qos_time(duration) -> QosTime:
