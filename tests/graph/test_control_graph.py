@@ -77,12 +77,12 @@ def wait_log_stamp(run_dir, name, text, after, timeout=60.0):
 
 def test_switch_mid_run_gives_one_zero_frame_each_and_unknown_is_refused(tmp_path):
     bag = str(tmp_path / 'switching')
-    # composed: one process, so the free-running lockstep takes one core, not eight
-    # processes' worth, from the switch and status clients (a client starved by the graph it
-    # talks to took 58 s instead of 20 in make test); the manager, its service and the
-    # one-zero-frame rule are the same node code in either engine
+    # composed and paced (--rate: lockstep at most 100 x real time, 50 frames/s): the run
+    # leaves the CPU to the switch and status clients it talks to (free-running, one process
+    # per node, it starved them: 58 s instead of 20 in make test); the manager, its service
+    # and the one-zero-frame rule are the same node code in any engine and at any pace
     proc = start_adcs('run', control_scenario(tmp_path), '--record', bag,
-                      '--duration', '200000', '--quiet', '--compose')
+                      '--duration', '200000', '--quiet', '--compose', '--rate', '100')
     watch = None
     try:
         wait_manifest(proc)

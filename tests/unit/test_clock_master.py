@@ -233,3 +233,40 @@ def test_real_time_mode_steps_with_the_latest_inputs_without_waiting():
     assert out[2].value == ('e0', 'c0') and out[2].t_ns == S
     out = m.free_running_frame()
     assert kinds(out)[-1] == (Act.FINISH, 2) and m.free_running_frame() == []
+
+
+def test_a_paced_run_starts_frame_k_no_earlier_than_k_paces_and_catches_up():
+    m = ClockMaster(S, duration_ns=6 * S, pace_s=0.5)
+    assert kinds(m.start(now=100.0)) == [(Act.CLOCK, 0)]      # frame 0 at once: the schedule
+    out = m.on_environment(0, 'e0', now=100.1)
+    assert kinds(out) == [(Act.STATE, 0), (Act.STEP, 0)]      # frame 1 not before 100.5
+    assert m.phase is MasterPhase.PACED
+    assert m.tick(100.4) == []
+    assert kinds(m.tick(100.5)) == [(Act.CLOCK, 1)]
+    m.on_environment(S, 'e1', now=100.6)
+    # a late tick (a loaded machine): frame 2 was due at 101.0; at 102.2 frames 2, 3 and 4 are
+    # all due, so they run back to back (the rate is kept on average), frame 5 waits again
+    assert kinds(m.tick(102.2)) == [(Act.CLOCK, 2)]
+    assert kinds(m.on_environment(2 * S, 'e2', now=102.2))[-1] == (Act.CLOCK, 3)
+    assert kinds(m.on_environment(3 * S, 'e3', now=102.2))[-1] == (Act.CLOCK, 4)
+    assert kinds(m.on_environment(4 * S, 'e4', now=102.3)) == [(Act.STATE, 4), (Act.STEP, 4)]
+    assert m.phase is MasterPhase.PACED and kinds(m.tick(102.5)) == [(Act.CLOCK, 5)]
+    # pacing is wall time only: the missed frames and the timeouts do not see it
+    assert m.missed_frames == 0
+
+
+def test_the_same_actions_paced_or_not():
+    def actions(pace):
+        m, now, out = ClockMaster(S, duration_ns=4 * S, command_period_ns=S, pace_s=pace), 0.0, []
+        out += m.start(now)
+        for k in range(5):
+            while m.phase is MasterPhase.PACED:
+                now += 0.25
+                out += m.tick(now)
+            out += m.on_environment(k * S, f'e{k}', now)
+            if k < 4:
+                out += m.on_command(k * S, f'c{k}', now)
+        return [(a.kind, a.t_ns, a.value) for a in out], m.phase
+    assert actions(0.0) == actions(1.0) and actions(1.0)[1] is MasterPhase.DONE
+    with pytest.raises(ValueError, match='pace_s'):
+        ClockMaster(S, pace_s=-1.0)

@@ -48,3 +48,29 @@ def test_a_lockstep_run_is_not_judged_by_its_pace(monkeypatch, capsys):
     monkeypatch.setattr(launcher, 'Launcher', _fake(20.0, 100.0))
     assert cli.main(['run', SCENARIO, '--quiet']) == 0
     assert 'WARNING' not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('args,rate_factor,max_rate', [
+    (['--rate', '20'], 1.0, 20.0),                     # lockstep paced to at most 20x
+    (['--real-time', '--rate', '20'], 20.0, 0.0),      # real time at 20x, no lockstep pace
+    ([], 1.0, 0.0),                                    # lockstep as fast as it goes
+])
+def test_rate_paces_the_lockstep_without_real_time(monkeypatch, args, rate_factor, max_rate):
+    fake = _fake(20.0, 1.0)
+    seen = {}
+
+    class Spy(fake):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            seen.update(kw)
+    monkeypatch.setattr(launcher, 'Launcher', Spy)
+    assert cli.main(['run', SCENARIO, *args, '--quiet']) == 0
+    assert (seen['rate_factor'], seen['max_rate']) == (rate_factor, max_rate)
+
+
+@pytest.mark.parametrize('args', [['--rate', '0'], ['--rate', 'nan'], ['--rate', '-1'],
+                                  ['--rate', '5', '--engine', 'plain']])
+def test_a_bad_rate_or_a_paced_plain_run_exits_2_saying_why(capsys, args):
+    assert cli.main(['run', SCENARIO, *args, '--quiet']) == 2
+    err = capsys.readouterr().err
+    assert '--rate must be in (0, 1e6]' in err or 'no pace' in err, err

@@ -29,6 +29,7 @@ Timing model (DESIGN section 6)
 Clock master (frame k, :class:`ClockMaster`)::
 
     THROTTLED -- a node lags > max lag --> wait for its progress
+    PACED     -- paced (``pace_s``) and ahead of the wall schedule --> wait for it
     WAIT_ENV:  /clock(t_k) published, wait sim/environment(t_k)  -> publish sim/state(t_k)
     WAIT_CMD:  wait the actuator command stamped t_k (when due)  -> step t_k -> t_k+1
     WAIT_FINAL (t_k = duration): wait every node's final progress -> DONE
@@ -342,6 +343,7 @@ class MasterPhase(enum.Enum):
 
     IDLE = 'idle'                 #: not started (handshake) or real-time mode
     THROTTLED = 'throttled'       #: a node lags more than the allowed frames: wait for it
+    PACED = 'paced'               #: ahead of the wall schedule of a paced run: wait for it
     WAIT_ENV = 'wait_env'         #: /clock(t_k) published, waiting for sim/environment(t_k)
     WAIT_CMD = 'wait_cmd'         #: sim/state(t_k) published, waiting for the command
     WAIT_FINAL = 'wait_final'     #: last frame published, waiting for every node's final
@@ -407,13 +409,18 @@ class ClockMaster:
         messages (a recorder stuck for good must not hang the run).
     patience : int
         See ``always_wait`` (>= 1).
+    pace_s : float
+        Wall seconds per frame at the least (0: as fast as the chain goes). Frame k starts no
+        earlier than ``k * pace_s`` after frame 0 (a schedule, so a frame that started late is
+        caught up); waiting for it changes no number of the run, only its wall time.
     """
 
     def __init__(self, frame_ns: int, duration_ns: int = 0, command_period_ns: int = 0,
                  wait_for_nodes: Iterable[str] = (), timeout_s: float = 5.0,
                  max_lag_frames: int = 40, lag_frames: Optional[Mapping[str, int]] = None,
                  dead_after: int = 3, no_final: Iterable[str] = (),
-                 always_wait: Iterable[str] = (), patience: int = 6) -> None:
+                 always_wait: Iterable[str] = (), patience: int = 6,
+                 pace_s: float = 0.0) -> None:
         self.frame_ns = int(frame_ns)
         if self.frame_ns <= 0:
             raise ValueError(f'frame must be positive, got {frame_ns} ns')
@@ -429,6 +436,10 @@ class ClockMaster:
         if int(dead_after) < 1:
             raise ValueError(f'dead_after must be >= 1, got {dead_after}')
         self.timeout_s = float(timeout_s)
+        if not (float(pace_s) >= 0.0 and float(pace_s) < float('inf')):
+            raise ValueError(f'pace_s must be a finite number >= 0, got {pace_s}')
+        self.pace_s = float(pace_s)
+        self._pace_t0: Optional[float] = None     # wall time of frame 0 of a paced run
         self.wait_for_nodes = [n for n in wait_for_nodes if n]
         self.max_lag_frames = int(max_lag_frames)
         self.lag_frames = dict(lag_frames or {})
@@ -519,6 +530,8 @@ class ClockMaster:
         """Watchdog: act on a wait longer than ``timeout_s`` of wall time."""
         if self.phase in (MasterPhase.IDLE, MasterPhase.DONE):
             return []
+        if self.phase is MasterPhase.PACED:
+            return self._begin_frame(now) if now >= self._paced_start() else []
         if now - self.wait_since < self.timeout_s:
             return []
         t = self.t_ns
@@ -605,6 +618,10 @@ class ClockMaster:
         return out
 
     # ------------------------------------------------------------------ internals
+    def _paced_start(self) -> float:
+        """Wall time at which frame k of a paced run may start."""
+        return self._pace_t0 + self.k * self.pace_s
+
     def _begin_frame(self, now: float) -> List[Action]:
         self.wait_since = now
         if self.lagging():
@@ -612,6 +629,12 @@ class ClockMaster:
                 self.throttled_frames += 1
             self.phase = MasterPhase.THROTTLED
             return []
+        if self.pace_s > 0.0:
+            if self._pace_t0 is None:
+                self._pace_t0 = now - self.k * self.pace_s
+            if now < self._paced_start():
+                self.phase = MasterPhase.PACED
+                return []
         self.phase = MasterPhase.WAIT_ENV
         return [Action(Act.CLOCK, self.t_ns)] + self._advance(now)
 

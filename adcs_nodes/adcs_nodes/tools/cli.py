@@ -2,11 +2,12 @@
 
 Commands
 --------
-``adcs run SCENARIO [--record BAG] [--duration S] [--real-time [--rate F]]
+``adcs run SCENARIO [--record BAG] [--duration S] [--real-time] [--rate F]
 [--engine plain|composed|graph] [--set KEY=VALUE ...] [--report]``
     Validate the scenario, start its nodes (one process each, all in one process, or the
     plain FrameLoop without ROS), show progress, stop everything cleanly at the end, on
-    Ctrl-C or when a node dies.
+    Ctrl-C or when a node dies. ``--rate F`` without ``--real-time``: lockstep paced to at
+    most F x real time (the same series).
 ``adcs switch NAME [--run PID]`` / ``adcs status [--run PID] [--watch]``
     Switch the active controller of a graph started by ``adcs run``, or show its controllers
     and lockstep health (missed frames per node); ``--watch``: refreshed once a second.
@@ -113,12 +114,13 @@ def cmd_run(args) -> int:
             sc = apply_overrides(sc, args.set)
         if args.compose and engine != 'composed':
             raise LaunchError(f'--compose means --engine composed, not {engine}')
-        if args.rate is not None and not args.real_time:
-            raise LaunchError('--rate needs --real-time')
+        if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= 1e6):
+            raise LaunchError(f'--rate must be in (0, 1e6] sim seconds per wall second, got '
+                              f'{args.rate:g}')
         if engine == 'plain':
-            if args.real_time:
-                raise LaunchError('the plain engine has no real-time mode (it runs as fast '
-                                  'as it can): use --engine graph or composed')
+            if args.real_time or args.rate is not None:
+                raise LaunchError('the plain engine has no real-time mode and no pace (it runs '
+                                  'as fast as it can): use --engine graph or composed')
             from sim_node.engine import EngineError, run_plain
             try:
                 result = run_plain(sc, args.duration, args.record, progress=not args.quiet)
@@ -126,7 +128,9 @@ def cmd_run(args) -> int:
                 raise LaunchError(str(exc)) from None
         else:
             launcher = Launcher(sc, duration_s=args.duration, record=args.record,
-                                real_time=args.real_time, rate_factor=args.rate or 1.0,
+                                real_time=args.real_time,
+                                rate_factor=(args.rate or 1.0) if args.real_time else 1.0,
+                                max_rate=0.0 if args.real_time else (args.rate or 0.0),
                                 compose=engine == 'composed', progress=not args.quiet,
                                 domain=args.domain)
     except (ScenarioError, LaunchError, ValueError) as exc:
@@ -287,7 +291,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--real-time', action='store_true',
                    help='pace the clock by the wall clock (latest-value inputs, no lockstep)')
     p.add_argument('--rate', type=float, metavar='F',
-                   help='with --real-time: sim seconds per wall second (default 1)')
+                   help='with --real-time: sim seconds per wall second (default 1); without '
+                   'it: a lockstep run paced to at most F sim seconds per wall second (the '
+                   'same series, to watch it live or to leave CPU to other programs)')
     p.add_argument('--engine', choices=('plain', 'composed', 'graph'),
                    help='graph (default): one process per node; composed: all nodes in one '
                    'process; plain: the FrameLoop without ROS (fastest; the same series on '

@@ -214,8 +214,11 @@ def _initial_params(sc: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
-                rate_factor: float = 1.0, record: bool = False) -> List[NodeSpec]:
-    """Node specs of a validated scenario (see :func:`adcs_nodes.tools.scenario.load_scenario`)."""
+                rate_factor: float = 1.0, record: bool = False,
+                max_rate: float = 0.0) -> List[NodeSpec]:
+    """Node specs of a validated scenario (see :func:`adcs_nodes.tools.scenario.load_scenario`);
+    ``max_rate``: a lockstep run paced to at most this many sim seconds per wall second (0:
+    unpaced)."""
     common = _common(sc)
     common['real_time'] = bool(real_time)
     common['duration_s'] = float(duration_s)   # every node knows its last frame
@@ -232,7 +235,8 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                   # controller after timeout_s) delivers its command before the master gives up
                   'timeout_s': CHAIN_TIMEOUT['dynamics'] * common['timeout_s'],
                   'substeps': int(sc['timing']['substeps']),
-                  'rate_factor': float(rate_factor), **_spacecraft_params(sc),
+                  'rate_factor': float(rate_factor), 'lockstep_max_rate': float(max_rate),
+                  **_spacecraft_params(sc),
                   **_initial_params(sc)},
                  publishes=['/clock', 'sim/state', 'sim/wheels', '/tf']
                  + (['sim/appendages'] if 'flexible' in sc['spacecraft'] else [])

@@ -722,7 +722,7 @@ class Launcher:
                  record: Optional[str] = None, real_time: bool = False,
                  rate_factor: float = 1.0, compose: bool = False, progress: bool = True,
                  run_dir: Optional[str] = None, log=print,
-                 domain: Optional[int] = None) -> None:
+                 domain: Optional[int] = None, max_rate: float = 0.0) -> None:
         self.sc = scenario
         if domain is not None and not (isinstance(domain, int) and 0 <= domain <= 232):
             raise LaunchError(f'--domain must be a ROS_DOMAIN_ID in 0..232, got {domain!r}')
@@ -734,6 +734,9 @@ class Launcher:
         if not (math.isfinite(rate_factor) and 0 < rate_factor <= 1e6):
             raise LaunchError(f'--rate must be in (0, 1e6] sim seconds per wall second, got '
                               f'{rate_factor}')
+        if not (math.isfinite(max_rate) and 0 <= max_rate <= 1e6):
+            raise LaunchError(f'--rate must be in (0, 1e6] sim seconds per wall second, got '
+                              f'{max_rate}')
         if not NAME_PATTERN.fullmatch(str(scenario.get('name', ''))):
             raise LaunchError(f'scenario name {str(scenario.get("name"))[:80]!r} must match '
                               f'{NAME_PATTERN.pattern} (it names the run directory)')
@@ -751,6 +754,9 @@ class Launcher:
             raise LaunchError(f'bag {self.record} exists already; choose another --record path')
         self.real_time = real_time
         self.rate_factor = rate_factor
+        # a paced frame may take long by request: a stall is a wait beyond it
+        self.stall_notice_s = STALL_NOTICE_S + (
+            scenario['timing']['frame_s'] / max_rate if max_rate > 0 else 0.0)
         self.compose = compose
         self.progress = progress
         self.log = log
@@ -758,7 +764,8 @@ class Launcher:
         self.run_dir = run_dir or os.path.join(RUNS_DIR, f'{stamp}-{scenario["name"]}-'
                                                f'{os.getpid()}')
         self.nodes: List[NodeSpec] = build_graph(scenario, self.duration_s, real_time,
-                                                 rate_factor, record=bool(record))
+                                                 rate_factor, record=bool(record),
+                                                 max_rate=max_rate)
         if self.record:
             rec = next(n for n in self.nodes if n.name == 'recorder')
             rec.params['output'] = self.record
@@ -1105,11 +1112,12 @@ class Launcher:
                 self._print_progress(monitor, now - t0, total_ns)
             if monitor.sim_ns != seen_ns:
                 seen_ns, seen_at = monitor.sim_ns, now
-            elif monitor.clock_seen and now - seen_at > STALL_NOTICE_S:
+            elif monitor.clock_seen and now - seen_at > self.stall_notice_s:
                 seen_at = now      # a stall is said, not hidden (the run is not stopped)
                 waits = [ln for ln in self._log_tail(master, 40).splitlines()
                          if 'waiting' in ln or 'behind' in ln or 'no ' in ln]
-                self.log(f'[adcs] WARNING: sim time has not advanced for {STALL_NOTICE_S:g} s '
+                self.log(f'[adcs] WARNING: sim time has not advanced for '
+                         f'{self.stall_notice_s:g} s '
                          f'(t = {seen_ns / 1e9:g} s)'
                          + (f'; {master}: {waits[-1].strip()}' if waits else
                             f'; see {self.run_dir}/logs/') + ' (Ctrl-C stops the run)')

@@ -67,6 +67,9 @@ PARAMS = (
     Param('substeps', 'int', 10, '-', 'RK4 substeps per frame', min=1, max=10000),
     Param('rate_factor', 'float', 1.0, '-', 'real-time mode: sim seconds per wall second',
           positive=True, max=1e6),
+    Param('lockstep_max_rate', 'float', 0.0, '-', 'lockstep: at most this many sim seconds '
+          'per wall second (0: as fast as the chain goes); the series do not change',
+          min=0.0, max=1e6),
     Param('command_period_s', 'float', 0.0, 's', 'period of adcs/actuator_command, a multiple '
           'of frame_period_s (0: none awaited)', min=0.0, max=86400.0),
     Param('wait_for_nodes', 'str[]', [], '-', 'nodes whose lockstep/ready starts frame 0'),
@@ -171,7 +174,9 @@ class DynamicsNode(LockstepNode):
         self.master = ClockMaster(
             self.frame_ns, self.duration_ns, cmd_ns, self.wait_for_nodes, self.timeout_s,
             max_lag_frames=MAX_LAG_FRAMES, lag_frames={'recorder': RECORDER_LAG_FRAMES},
-            dead_after=self.dead_after, no_final=['recorder'], always_wait=['recorder'])
+            dead_after=self.dead_after, no_final=['recorder'], always_wait=['recorder'],
+            pace_s=(ns_to_seconds(self.frame_ns) / p['lockstep_max_rate']
+                    if p['lockstep_max_rate'] > 0 else 0.0))
         self._exec_t = 0              # frame of the action being executed
         self._topics_of = {'env': 'sim/environment', 'cmd': 'adcs/actuator_command'}
         self.clock_pub = self.publisher(Clock, '/clock', QOS_CLOCK)
@@ -200,7 +205,10 @@ class DynamicsNode(LockstepNode):
         self.create_subscription(LockstepStatus, 'recorder/status', self.on_recorder, 10)
 
         self.started = False
-        self.create_timer(min(0.05, self.timeout_s / 4.0), self.on_watchdog)
+        # the watchdog also starts the frames of a paced run (ClockMaster.tick)
+        self.create_timer(min(0.05, self.timeout_s / 4.0,
+                              self.master.pace_s / 2.0 if self.master.pace_s else 0.05),
+                          self.on_watchdog)
         self.start_timeout_s = p['start_timeout_s']
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
