@@ -3,7 +3,7 @@
 Usage::
 
     adcs montecarlo SCENARIO --runs N [--jobs J] [--scheduler ADDRESS | --dask-local] [--out DIR]
-                    [--duration S] [--seed S] [--max-rate-deg-s 3.0] [--capture-deg 5.0]
+                    [--duration S] [--seed S] [--max-rate-deg-s W] [--capture-deg 5.0]
                     [--mag-bias-nT B] [--misalignment-deg M] [--auto-detumble]
                     [--bdot-gain K] [--engine auto|graph|plain] [--compose]
 
@@ -15,8 +15,12 @@ this order (the order is part of the file format: changing it changes every camp
 1. ``q_orbit_body`` uniform on SO(3): a 4-D standard normal vector, normalised, sign chosen
    with ``w >= 0`` (scalar last);
 2. ``omega_body_eci_body``: each body component uniform in ``[-max_rate, +max_rate]`` deg/s
-   (issue 5: "initial rates up to 3 deg/s" per axis; the paper's (-3, 3, 3) deg/s is a corner
-   of that cube, so the magnitude reaches ``sqrt(3) max_rate``);
+   (the magnitude reaches ``sqrt(3) max_rate``). Default ``max_rate`` by the scenario's paper
+   (:data:`~.config.MAX_RATE_BY_PAPER_DEG_S`): paper 000, 3 deg/s (issue 5: "initial rates up
+   to 3 deg/s" per axis; the paper's (-3, 3, 3) deg/s is a corner of that cube); paper 001,
+   0.3 deg/s (ASSUMPTION: its initial rates (0.3, -0.3, 0.3) deg/s are a corner, and the
+   wheels' 55 N m s absorb that tumble; 3 deg/s would saturate them); any other scenario,
+   3 deg/s. ``--max-rate-deg-s`` wins;
 3. magnetometer bias: each sensor axis uniform in ``+-mag_bias`` nT (only with
    ``--mag-bias-nT``; by default the scenario's bias is kept: "the scenario's sensor errors");
 4. magnetometer misalignment: a body -> sensor rotation vector, each component uniform in
@@ -32,10 +36,17 @@ kept), so a run's values never depend on the scenario's sensor set or these opti
 
 Metrics of a run (:mod:`adcs_nodes.tools.metrics`, the same definitions as ``adcs report``)
 ------------------------------------------------------------------------------------------
-Captured: the angle between body and orbit frame enters ``--capture-deg`` and then stays
-below twice that to the end; "captured within 4 orbits" compares that time with 4 orbits of
-the scenario's circular orbit; the hold is the angle from 4 orbits to the end (RMS, median,
-95th percentile); the last exit from the band is reported as ``last_exit_s``.
+Captured: the angle between the body and the attitude the scenario's guidance commands
+(``adcs/attitude_target``, :mod:`.capture`) enters ``--capture-deg`` and then stays below twice
+that to the end. Per scenario: the orbit frame for paper 000 (no guidance profile: the
+guidance holds the orbit frame; the numbers are those of the angle to the orbit frame, bit
+for bit), paper 001's profile for paper001_mpi (its maneuvers, holds and sine tracking; the
+samples of a maneuver segment, whose target is the attitude due at the segment's end, are not
+judged). "Captured within 4 orbits" compares that time with 4 orbits of the scenario's
+circular orbit; the hold is the angle from 4 orbits to the end (RMS, median, 95th
+percentile); the last exit from the band is reported as ``last_exit_s``. Each result says
+what its angle was measured to (``capture_reference``: ``orbit frame`` or ``guidance
+target``).
 
 Execution
 ---------
@@ -63,8 +74,11 @@ Files (``OUT`` = ``--out``)
 ---------------------------
 ``campaign.json``
     The campaign's identity (:data:`IDENTITY_KEYS`: scenario content hash, seed, duration,
-    dispersion bounds, capture threshold, engine) plus the last ``runs`` and ``compose``; a
-    restart with a different identity is refused. ``--runs``, ``--jobs``, ``--scheduler``,
+    dispersion bounds, capture threshold, engine, capture reference) plus the last ``runs``
+    and ``compose``; a restart with a different identity is refused (a ``campaign.json``
+    from before the guidance target measured capture to the orbit frame: it resumes where
+    the scenario's guidance holds the orbit frame, as paper 000's, with the same numbers, and
+    is refused for any other, as paper 001's). ``--runs``, ``--jobs``, ``--scheduler``,
     ``--dask-local`` and ``--compose`` may change between restarts (run ``i``'s draws depend
     only on the seed and ``i``, so a larger ``--runs`` extends the campaign; composed and
     per-process graphs give the same trajectory).
@@ -81,8 +95,9 @@ Files (``OUT`` = ``--out``)
     rate.
 
 Modules (one concern each): :mod:`.config` (campaign identity, dispersions),
-:mod:`.results` (metrics of one run), :mod:`.files` (atomic files, run directories, lock),
-:mod:`.runner` (worker process and its supervisor), :mod:`.backends` (thread pool, Dask),
+:mod:`.capture` (what capture is measured to), :mod:`.results` (metrics of one run),
+:mod:`.files` (atomic files, run directories, lock), :mod:`.runner` (worker process and its
+supervisor), :mod:`.backends` (thread pool, Dask),
 :mod:`.campaign` (the campaign), :mod:`.table` (``campaign.csv``), :mod:`.summary`
 (``summary.md``, plot), :mod:`.cli` (arguments, entry points).
 
@@ -94,26 +109,31 @@ arguments, 130 interrupted.
 """
 from adcs_nodes.tools.montecarlo.backends import DaskBackend, LocalBackend
 from adcs_nodes.tools.montecarlo.campaign import Campaign
+from adcs_nodes.tools.montecarlo.capture import (GUIDANCE_TARGET, ORBIT_FRAME,
+                                                 capture_reference, guidance_targets,
+                                                 score_plain_result)
 from adcs_nodes.tools.montecarlo.cli import add_arguments, config_from_args, main, run_from_args
 from adcs_nodes.tools.montecarlo.config import (AUTO_DETUMBLE, ENGINES, IDENTITY_KEYS,
                                                 CampaignConfig, CampaignError, Dispersion,
-                                                apply_dispersion, draw_dispersion,
-                                                scenario_hash)
+                                                apply_dispersion, default_max_rate_deg_s,
+                                                draw_dispersion, scenario_hash)
 from adcs_nodes.tools.montecarlo.files import (FAILED_FILE, RESULT_FILE, SERIES_FILE,
                                                load_result, run_dir_of, write_json_atomic)
-from adcs_nodes.tools.montecarlo.results import (STATE_TOPIC, bag_metrics, read_truth,
-                                                 series_metrics)
+from adcs_nodes.tools.montecarlo.results import (STATE_TOPIC, angle_to_target_deg,
+                                                 bag_metrics, read_truth, series_metrics)
 from adcs_nodes.tools.montecarlo.runner import (ONE_THREAD_ENV, STOP_GRACE_S, execute_run,
                                                 worker_env, worker_main)
 from adcs_nodes.tools.montecarlo.summary import (orbit_period_s, plot_capture_vs_rate,
                                                  rate_bins, summary_markdown)
 from adcs_nodes.tools.montecarlo.table import CSV_COLUMNS, read_table, table_row, write_table
 
-__all__ = ['AUTO_DETUMBLE', 'CSV_COLUMNS', 'ENGINES', 'FAILED_FILE', 'IDENTITY_KEYS',
-           'ONE_THREAD_ENV', 'RESULT_FILE', 'SERIES_FILE', 'STATE_TOPIC', 'STOP_GRACE_S',
-           'Campaign', 'CampaignConfig', 'CampaignError', 'DaskBackend', 'Dispersion',
-           'LocalBackend', 'add_arguments', 'apply_dispersion', 'bag_metrics', 'config_from_args',
-           'draw_dispersion', 'execute_run', 'load_result', 'main', 'orbit_period_s',
-           'plot_capture_vs_rate', 'rate_bins', 'read_table', 'read_truth', 'run_dir_of',
-           'run_from_args', 'scenario_hash', 'series_metrics', 'summary_markdown', 'table_row',
-           'worker_env', 'worker_main', 'write_json_atomic', 'write_table']
+__all__ = ['AUTO_DETUMBLE', 'CSV_COLUMNS', 'ENGINES', 'FAILED_FILE', 'GUIDANCE_TARGET',
+           'IDENTITY_KEYS', 'ONE_THREAD_ENV', 'ORBIT_FRAME', 'RESULT_FILE', 'SERIES_FILE',
+           'STATE_TOPIC', 'STOP_GRACE_S', 'Campaign', 'CampaignConfig', 'CampaignError',
+           'DaskBackend', 'Dispersion', 'LocalBackend', 'add_arguments', 'angle_to_target_deg',
+           'apply_dispersion', 'bag_metrics', 'capture_reference', 'config_from_args',
+           'default_max_rate_deg_s', 'draw_dispersion', 'execute_run', 'guidance_targets',
+           'load_result', 'main', 'orbit_period_s', 'plot_capture_vs_rate', 'rate_bins',
+           'read_table', 'read_truth', 'run_dir_of', 'run_from_args', 'scenario_hash',
+           'score_plain_result', 'series_metrics', 'summary_markdown', 'table_row', 'worker_env',
+           'worker_main', 'write_json_atomic', 'write_table']

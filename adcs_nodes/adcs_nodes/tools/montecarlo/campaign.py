@@ -14,6 +14,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 import yaml
 
 from adcs_nodes.tools.montecarlo.backends import DaskBackend, LocalBackend
+from adcs_nodes.tools.montecarlo.capture import ORBIT_FRAME
 from adcs_nodes.tools.montecarlo.config import (IDENTITY_KEYS, CampaignConfig, CampaignError,
                                                 apply_dispersion, draw_dispersion)
 from adcs_nodes.tools.montecarlo.files import (campaign_lock, clean_old_stop_files, load_result,
@@ -63,12 +64,19 @@ class Campaign:
                 old = json.load(fh)
             new = self.cfg.identity()
             old.setdefault('engine', 'graph')   # written before the engines: the graph
+            # written before the guidance target: every capture was measured to the orbit frame
+            old.setdefault('capture_reference', ORBIT_FRAME)
             diff = [f'{k}: {old.get(k)!r} in campaign.json, {new[k]!r} now'
                     for k in IDENTITY_KEYS if old.get(k) != new[k]]
             if diff:
+                why = (' Its runs measured capture to the orbit frame; this scenario\'s is '
+                       'measured to its guidance target (adcs_nodes/tools/montecarlo/'
+                       'capture.py): run it again in another --out.'
+                       if old['capture_reference'] == ORBIT_FRAME != new['capture_reference']
+                       else '')
                 raise CampaignError(f'{self.out} holds a campaign with other arguments ('
                                     + '; '.join(diff) + '). Repeat its arguments to resume, '
-                                    'or choose another --out.')
+                                    'or choose another --out.' + why)
         data = {**asdict(self.cfg), 'version': 1,
                 'updated_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}
         write_json_atomic(path, data)

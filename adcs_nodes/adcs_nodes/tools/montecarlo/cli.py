@@ -4,11 +4,12 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from typing import List, Optional
+from typing import Any, Dict, List, Optional
 
 from adcs_nodes.tools.montecarlo.campaign import Campaign
+from adcs_nodes.tools.montecarlo.capture import capture_reference, plain_capture_problem
 from adcs_nodes.tools.montecarlo.config import (ENGINES, CampaignConfig, CampaignError,
-                                                scenario_hash)
+                                                default_max_rate_deg_s, scenario_hash)
 from adcs_nodes.tools.montecarlo.engine import plain_engine_problem, resolve_engine
 from adcs_nodes.tools.montecarlo.runner import worker_main
 
@@ -63,17 +64,26 @@ def add_dispersion_arguments(parser: argparse.ArgumentParser) -> None:
                         help='simulated seconds per run (default: the scenario duration_s)')
     parser.add_argument('--seed', type=int, metavar='S',
                         help='campaign seed (default: the scenario seed)')
-    parser.add_argument('--max-rate-deg-s', type=float, default=3.0, metavar='W',
-                        help='each initial rate component uniform in +-W deg/s (default 3)')
+    parser.add_argument('--max-rate-deg-s', type=float, default=None, metavar='W',
+                        help='each initial rate component uniform in +-W deg/s (default: the '
+                        'scenario paper\'s: 3 for paper 000, 0.3 for paper 001, else 3)')
     parser.add_argument('--capture-deg', type=float, default=5.0, metavar='A',
-                        help='captured when the angle to the orbit frame enters A deg and '
-                        'then stays below 2 A to the end (default 5)')
+                        help='captured when the angle between the body and the guidance '
+                        'target (the orbit frame without a guidance profile, as paper 000) '
+                        'enters A deg and then stays below 2 A to the end (default 5)')
     parser.add_argument('--mag-bias-nT', type=float, default=None, metavar='B',
                         help='disperse the magnetometer bias per axis uniform in +-B nT '
                         '(default: the scenario\'s bias)')
     parser.add_argument('--misalignment-deg', type=float, default=None, metavar='M',
                         help='disperse the magnetometer misalignment rotation vector per '
                         'component uniform in +-M deg (default: the scenario\'s)')
+
+
+def max_rate_deg_s(args: argparse.Namespace, base: Dict[str, Any]) -> float:
+    """``--max-rate-deg-s``, else the scenario's default
+    (:func:`~adcs_nodes.tools.montecarlo.config.default_max_rate_deg_s`) [deg/s]."""
+    value = getattr(args, 'max_rate_deg_s', None)
+    return float(value) if value is not None else default_max_rate_deg_s(base)
 
 
 def config_from_args(args: argparse.Namespace) -> tuple:
@@ -96,7 +106,7 @@ def config_from_args(args: argparse.Namespace) -> tuple:
         raise CampaignError(f'--jobs must be >= 1, got {args.jobs}')
     for name in ('max_rate_deg_s', 'mag_bias_nT', 'misalignment_deg', 'bdot_gain'):
         value = getattr(args, name, None)
-        if value is None and name != 'max_rate_deg_s':
+        if value is None:
             continue
         if not (math.isfinite(value) and value >= 0.0):
             raise CampaignError(f'--{name.replace("_", "-")} must be >= 0, got {value}')
@@ -109,14 +119,17 @@ def config_from_args(args: argparse.Namespace) -> tuple:
                             f'{base["timing"]["frame_s"]:g} s frames')
     out = args.out or f'montecarlo_{base["name"]}'
     engine, args.engine_reason = resolve_engine(getattr(args, 'engine', None), base, out)
+    problem = plain_capture_problem(base) if engine == 'plain' else None
+    if problem is not None:
+        raise CampaignError(f'the capture test cannot run on the plain engine: {problem}')
     cfg = CampaignConfig(
         scenario_path=base['_path'], scenario_sha256=scenario_hash(base), runs=args.runs,
         seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
-        max_rate_deg_s=args.max_rate_deg_s, capture_deg=args.capture_deg,
+        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
         mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
         auto_detumble=bool(getattr(args, 'auto_detumble', False)),
         bdot_gain=getattr(args, 'bdot_gain', None),
-        engine=engine, compose=bool(args.compose))
+        engine=engine, compose=bool(args.compose), capture_reference=capture_reference(base))
     if cfg.auto_detumble and not {'magnetic', 'bdot'} <= set(base.get('controllers', {})):
         raise CampaignError('--auto-detumble needs the controllers magnetic and bdot in the '
                             'scenario')
@@ -140,6 +153,10 @@ def run_from_args(args: argparse.Namespace) -> int:
         print(f'[montecarlo] {cfg.runs} runs of {base["name"]} ({cfg.duration_s:g} s each, '
               f'seed {cfg.seed}, engine {cfg.engine} [{args.engine_reason}]) {mode}, output in '
               f'{campaign.out}', flush=True)
+        print(f'[montecarlo] initial rate components uniform in +-{cfg.max_rate_deg_s:g} deg/s; '
+              f'captured: the angle to the {cfg.capture_reference} enters '
+              f'{cfg.capture_deg:g} deg and stays below {2 * cfg.capture_deg:g} deg',
+              flush=True)
         if cfg.engine == 'graph' and cfg.runs > 1 and plain_engine_problem(base) is None:
             print(GRAPH_HINT, flush=True)
         return campaign.run(jobs=args.jobs, scheduler=args.scheduler, dask_local=dask_local)

@@ -9,9 +9,25 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-#: Keys of ``campaign.json`` that must match for a restart to resume the campaign.
+#: Keys of ``campaign.json`` that must match for a restart to resume the campaign. A
+#: ``campaign.json`` without ``capture_reference`` is from before the capture test used the
+#: guidance target: it measured the angle to the orbit frame (``'orbit frame'``).
 IDENTITY_KEYS = ('scenario_sha256', 'seed', 'duration_s', 'max_rate_deg_s', 'capture_deg',
-                 'mag_bias_nT', 'misalignment_deg', 'auto_detumble', 'bdot_gain', 'engine')
+                 'mag_bias_nT', 'misalignment_deg', 'auto_detumble', 'bdot_gain', 'engine',
+                 'capture_reference')
+#: Default bound of each initial rate component [deg/s] by the scenario's paper (the first 3
+#: characters of its ``paper:`` key); :data:`DEFAULT_MAX_RATE_DEG_S` for any other scenario.
+#:
+#: * ``'000'``: 3 deg/s, paper 000's "initial rate components up to 3 deg/s" (its example
+#:   (-3, 3, 3) deg/s is a corner of the cube);
+#: * ``'001'``: 0.3 deg/s, ASSUMPTION (paper 001 gives one initial state, no dispersion): its
+#:   initial rates (0.3, -0.3, 0.3) deg/s are a corner of the cube, as paper 000's are of
+#:   its own; the three wheels (55 N m s, 1 N m each) absorb ``I omega`` of up to 17 N m s per
+#:   wheel at this bound (inertia (30)) beside the maneuvers' momentum, where 3 deg/s asks
+#:   up to 174 N m s per wheel: the runs would measure wheel saturation, not the law.
+MAX_RATE_BY_PAPER_DEG_S = {'000': 3.0, '001': 0.3}
+#: Default bound for a scenario of another paper or of none [deg/s] (paper 000's).
+DEFAULT_MAX_RATE_DEG_S = 3.0
 ENGINES = ('graph', 'plain')
 #: Automatic sequence written by ``--auto-detumble`` (``manager.auto``; the scenario schema's
 #: defaults): B-dot until ``|omega_body_eci_body|`` < 0.5 deg/s for 10 frames, then magnetic;
@@ -42,9 +58,10 @@ class CampaignConfig:
     duration_s : float
         Simulated duration of every run [s].
     max_rate_deg_s : float
-        Bound of each initial rate component [deg/s].
+        Bound of each initial rate component [deg/s] (default of the command:
+        :func:`default_max_rate_deg_s`).
     capture_deg : float
-        Capture threshold on the angle between body and orbit frame [deg].
+        Capture threshold on the angle between the body and the guidance target [deg].
     mag_bias_nT : float or None
         Bound of each magnetometer bias component [nT]; None: the scenario's bias (not
         dispersed).
@@ -62,6 +79,12 @@ class CampaignConfig:
     compose : bool
         Run each graph composed in one process (same trajectory, faster; not part of the
         identity).
+    capture_reference : str
+        What the capture angle is measured to, from the scenario's guidance
+        (:func:`~adcs_nodes.tools.montecarlo.capture.capture_reference`): ``'orbit frame'``
+        or ``'guidance target'``. A label for the identity (a campaign measured to the orbit
+        frame is not resumed as one measured to a guidance target); the runs' metrics follow
+        their scenario.
     """
 
     scenario_path: str
@@ -77,6 +100,7 @@ class CampaignConfig:
     bdot_gain: Optional[float] = None
     engine: str = 'graph'
     compose: bool = False
+    capture_reference: str = 'orbit frame'
 
     def identity(self) -> Dict[str, Any]:
         """The values a restart must repeat (see :data:`IDENTITY_KEYS`)."""
@@ -110,6 +134,13 @@ class Dispersion:
     omega_body_eci_body_deg_s: List[float]
     mag_bias_T: Optional[List[float]]
     mag_misalignment_deg: Optional[List[float]]
+
+
+def default_max_rate_deg_s(scenario: Dict[str, Any]) -> float:
+    """Default bound of each initial rate component [deg/s] of a campaign of ``scenario``
+    (:data:`MAX_RATE_BY_PAPER_DEG_S`, else :data:`DEFAULT_MAX_RATE_DEG_S`)."""
+    paper = str(scenario.get('paper') or '')[:3]
+    return MAX_RATE_BY_PAPER_DEG_S.get(paper, DEFAULT_MAX_RATE_DEG_S)
 
 
 def scenario_hash(scenario: Dict[str, Any]) -> str:

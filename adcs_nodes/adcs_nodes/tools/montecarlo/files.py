@@ -42,8 +42,14 @@ def load_result(run_dir: str) -> Optional[Dict[str, Any]]:
     """The run's ``result.json`` when the run is done, else None.
 
     Done: the result and its data are present (graph engine: the bag's ``metadata.yaml``;
-    plain engine: ``series.npz``).
+    plain engine: ``series.npz``). A plain run's capture is judged here against its guidance
+    target the first time its result is read
+    (:func:`~adcs_nodes.tools.montecarlo.capture.score_plain_result`, written back to
+    ``result.json``); when that fails, the reason goes to ``failed.json`` and the run is not
+    done (the campaign reports it as an error and runs it again on restart).
     """
+    from adcs_nodes.tools.montecarlo.capture import score_plain_result
+
     path = os.path.join(run_dir, RESULT_FILE)
     metadata = os.path.join(run_dir, 'bag', 'metadata.yaml')
     series = os.path.join(run_dir, SERIES_FILE)
@@ -51,8 +57,15 @@ def load_result(run_dir: str) -> Optional[Dict[str, Any]]:
         return None
     try:
         with open(path, encoding='utf-8') as fh:
-            return json.load(fh)
+            result = json.load(fh)
     except (OSError, ValueError):
+        return None
+    try:
+        return score_plain_result(run_dir, result)
+    except (OSError, ValueError, KeyError) as exc:      # ScenarioError is a ValueError
+        write_json_atomic(os.path.join(run_dir, FAILED_FILE), {
+            'index': result.get('index'), 'status': 'error', 'exit_code': 1,
+            'message': f'capture test against the guidance target failed: {exc}'})
         return None
 
 

@@ -10,6 +10,7 @@ import sys
 import time
 from typing import Any, Dict, Optional
 
+from adcs_nodes.tools.montecarlo.capture import capture_reference
 from adcs_nodes.tools.montecarlo.files import (FAILED_FILE, RESULT_FILE, load_result,
                                                write_json_atomic)
 from adcs_nodes.tools.montecarlo.results import bag_metrics
@@ -41,8 +42,9 @@ def worker_env() -> Dict[str, str]:
 def worker_main(run_dir: str) -> int:
     """Body of the per-run process: launch the dispersed scenario, record, write the result.
 
-    Writes ``result.json`` (atomically) when the graph ran to its end, ``failed.json`` when
-    it failed; writes nothing when interrupted (exit code 130).
+    Writes ``result.json`` (atomically; capture judged against the recorded guidance target,
+    :mod:`.capture`) when the graph ran to its end, ``failed.json`` when it failed; writes
+    nothing when interrupted (exit code 130).
     """
     from adcs_nodes.tools.launcher import LaunchError, Launcher
     from adcs_nodes.tools.scenario import ScenarioError, load_scenario
@@ -65,7 +67,8 @@ def worker_main(run_dir: str) -> int:
     if res.exit_code != 0:
         return fail(run_dir, job, res.exit_code, res.message, time.monotonic() - t0)
     try:
-        metrics = bag_metrics(bag, job['capture_deg'], job.get('period_s'))
+        metrics = bag_metrics(bag, job['capture_deg'], job.get('period_s'),
+                              capture_reference(sc))
     except (FileNotFoundError, ValueError) as exc:
         return fail(run_dir, job, 1, f'bag unreadable: {exc}', time.monotonic() - t0)
     result = {**result_head(job), **metrics, 'engine': 'graph',

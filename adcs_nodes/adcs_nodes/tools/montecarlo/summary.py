@@ -6,6 +6,7 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from adcs_nodes.tools.montecarlo.capture import ORBIT_FRAME
 from adcs_nodes.tools.montecarlo.config import AUTO_DETUMBLE, CampaignConfig
 
 
@@ -59,10 +60,10 @@ def summary_markdown(cfg: CampaignConfig, results: Sequence[Dict[str, Any]],
              f'Scenario `{cfg.scenario_path}`, seed {cfg.seed}, {cfg.runs} runs of '
              f'{cfg.duration_s:g} s ({cfg.engine} engine); initial rate components uniform in '
              f'+-{cfg.max_rate_deg_s:g} deg/s, attitude uniform on SO(3), {bias}, {mis}; '
-             f'{mode}. Captured: the angle between body and orbit frame enters '
-             f'{cfg.capture_deg:g} deg and then stays below {2 * cfg.capture_deg:g} deg to the '
-             'end of the run (:mod:`adcs_nodes.tools.metrics`). Hold: the angle from 4 orbits '
-             'to the end.', '',
+             f'{mode}. Captured: the angle between the body and the {_reference_text(cfg)} '
+             f'enters {cfg.capture_deg:g} deg and then stays below {2 * cfg.capture_deg:g} deg '
+             'to the end of the run (:mod:`adcs_nodes.tools.metrics`). Hold: the angle from 4 '
+             'orbits to the end.', '',
              '| quantity | value |', '|---|---|',
              f'| runs completed | {len(done)} of {cfg.runs} |',
              f'| runs failed | {sum(1 for r in results if r.get("status") == "error")} |',
@@ -82,6 +83,14 @@ def summary_markdown(cfg: CampaignConfig, results: Sequence[Dict[str, Any]],
                      f'{_rate_text(in_time, n)} |')
     lines += ['', 'Table: `campaign.csv`; plot: `capture_vs_rate.png`.', '']
     return '\n'.join(lines)
+
+
+def _reference_text(cfg: CampaignConfig) -> str:
+    """What the capture angle is measured to (:mod:`.capture`)."""
+    if cfg.capture_reference == ORBIT_FRAME:
+        return 'orbit frame (the scenario\'s guidance holds it)'
+    return ('guidance target (`adcs/attitude_target`, the attitude the controllers track; '
+            'samples of a maneuver toward a segment\'s end state are not judged)')
 
 
 def _hold_stats(done: Sequence[Dict[str, Any]]) -> List[str]:

@@ -418,13 +418,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _config(args: argparse.Namespace, base: Dict[str, Any],
             point_sc: Dict[str, Any]) -> CampaignConfig:
+    from adcs_nodes.tools.montecarlo.capture import capture_reference
+    from adcs_nodes.tools.montecarlo.cli import max_rate_deg_s
     duration = float(args.duration if args.duration is not None else point_sc['duration_s'])
     return CampaignConfig(
         scenario_path=base['_path'], scenario_sha256=scenario_hash(point_sc), runs=args.runs,
         seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
-        max_rate_deg_s=args.max_rate_deg_s, capture_deg=args.capture_deg,
+        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
         mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
-        engine='plain', compose=False)
+        engine='plain', compose=False, capture_reference=capture_reference(point_sc))
 
 
 Prepared = Tuple[Dict[str, Any], List[Tuple[str, List[Any]]], List[Dict[str, Any]], str]
@@ -439,6 +441,7 @@ def prepare(args: argparse.Namespace) -> Prepared:
     SweepError, CampaignError, adcs_nodes.tools.scenario.ScenarioError
         A bad argument, grid key or value (exit 2).
     """
+    from adcs_nodes.tools.montecarlo.capture import plain_capture_problem
     from adcs_nodes.tools.montecarlo.cli import config_from_args
     from adcs_nodes.tools.montecarlo.engine import plain_engine_problem
     from adcs_nodes.tools.scenario import apply_overrides, load_scenario
@@ -461,6 +464,9 @@ def prepare(args: argparse.Namespace) -> Prepared:
             raise SweepError(f'grid point {_point_text(point)}: the duration '
                              f'{cfg.duration_s:g} s is not a whole number of '
                              f'{sc["timing"]["frame_s"]:g} s frames')
+        problem = plain_capture_problem(sc)
+        if problem is not None:
+            raise SweepError(f'grid point {_point_text(point)}: {problem}')
         points.append({'point': point, 'scenario': sc, 'cfg': cfg,
                        'out': os.path.join(out, 'points', point_name(point))})
     return base, grid, points, out
@@ -531,7 +537,7 @@ def _write_sweep_json(out: str, base: Dict[str, Any], grid: Any,
     cfg = points[0]['cfg']
     write_json_atomic(os.path.join(out, 'sweep.json'), {
         'scenario': base['_path'], 'grid': grid, 'runs': args.runs, 'seed': cfg.seed,
-        'duration_s': cfg.duration_s, 'max_rate_deg_s': args.max_rate_deg_s,
+        'duration_s': cfg.duration_s, 'max_rate_deg_s': cfg.max_rate_deg_s,
         'capture_deg': args.capture_deg, 'mag_bias_nT': args.mag_bias_nT,
         'misalignment_deg': args.misalignment_deg, 'points': [p['out'] for p in points],
         'command': _command(args),
@@ -558,7 +564,7 @@ def _command(args: argparse.Namespace) -> str:
     for name in ('seed', 'duration', 'mag_bias_nT', 'misalignment_deg'):
         if getattr(args, name, None) is not None:
             parts += [f'--{name.replace("_", "-")}', str(getattr(args, name))]
-    if args.max_rate_deg_s != 3.0:
+    if args.max_rate_deg_s is not None:
         parts += ['--max-rate-deg-s', str(args.max_rate_deg_s)]
     if args.capture_deg != 5.0:
         parts += ['--capture-deg', str(args.capture_deg)]

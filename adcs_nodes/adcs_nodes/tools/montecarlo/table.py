@@ -17,8 +17,9 @@ CSV_COLUMNS: List[str] = (
     + ['disp_rate_deg_s']
     + [f'disp_mag_bias_{c}_T' for c in _VEC]
     + [f'disp_mag_misalignment_{c}_deg' for c in _VEC]
-    + ['capture_time_s', 'captured_in_time', 'last_exit_s', 'hold_rms_deg', 'hold_median_deg',
-       'hold_p95_deg', 'final_angle_deg', 'final_rate_deg_s', 'max_rate_deg_s']
+    + ['capture_reference', 'capture_time_s', 'captured_in_time', 'last_exit_s',
+       'hold_rms_deg', 'hold_median_deg', 'hold_p95_deg', 'final_angle_deg', 'final_rate_deg_s',
+       'max_rate_deg_s']
     + [f'bag_q_orbit_body_{c}' for c in _QUAT]
     + [f'bag_omega_body_eci_body_{c}_deg_s' for c in _VEC]
     + ['engine', 'sim_time_s', 'wall_time_s', 'missed_frames', 'host', 'supervisor_pid',
@@ -39,10 +40,10 @@ def table_row(result: Dict[str, Any]) -> Dict[str, Any]:
     _put(row, 'disp_mag_misalignment_{}_deg', _VEC, disp.get('mag_misalignment_deg'))
     _put(row, 'bag_q_orbit_body_{}', _QUAT, init.get('q_orbit_body_xyzw'))
     _put(row, 'bag_omega_body_eci_body_{}_deg_s', _VEC, init.get('omega_body_eci_body_deg_s'))
-    for key in ('capture_time_s', 'captured_in_time', 'last_exit_s', 'hold_rms_deg',
-                'hold_median_deg', 'hold_p95_deg', 'final_angle_deg', 'final_rate_deg_s',
-                'max_rate_deg_s', 'engine', 'sim_time_s', 'wall_time_s', 'missed_frames',
-                'host', 'supervisor_pid', 'message'):
+    for key in ('capture_reference', 'capture_time_s', 'captured_in_time', 'last_exit_s',
+                'hold_rms_deg', 'hold_median_deg', 'hold_p95_deg', 'final_angle_deg',
+                'final_rate_deg_s', 'max_rate_deg_s', 'engine', 'sim_time_s', 'wall_time_s',
+                'missed_frames', 'host', 'supervisor_pid', 'message'):
         value = result.get(key)
         row[key] = '' if value is None else (repr(value) if isinstance(value, float)
                                              else value)
