@@ -586,16 +586,28 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
     body to orbit frame; ``est_err_deg``, ``rate_err_deg_s`` estimate errors; ``active``
     the controller whose command was forwarded (``source`` of ``adcs/actuator_command``);
     ``period_s`` the orbital period at the end.
+
+    ``q_orbit_target`` (n, 4): the guidance target the run published (``q_ref_body`` of the
+    latest ``adcs/attitude_target``, held between guidance frames; NaN before the first, and
+    throughout a run without guidance) in the orbit frame: a target in the ECI frame
+    (``header.frame_id`` ``'eci'``) is converted with the frame's truth,
+    ``q_orbit_target = q_orbit_body (x) q_eci_body^* (x) q_eci_target``. ``target_judged``
+    (n,) bool: False while that target is a paper 001 maneuver's end state (``profile``
+    ``'maneuver'``; the capture test leaves those samples out,
+    :mod:`adcs_nodes.tools.montecarlo.capture`), else True.
     """
     import math
 
     import numpy as np
 
+    from adcs_nodes.core import attitude
     from adcs_nodes.nodes.convert import quat, vec3
     from adcs_nodes.tools import metrics
     rows: Dict[str, List[Any]] = {k: [] for k in ('t_s', 'q_orbit_body', 'w_eci', 'w_orbit',
-                                                  'q_est', 'w_est', 'active')}
+                                                  'q_est', 'w_est', 'active', 'q_orbit_target',
+                                                  'target_judged')}
     q_est, w_est = np.full(4, np.nan), np.full(3, np.nan)
+    q_target, eci, judged = np.full(4, np.nan), False, True    # the latest target
     active, rate = 'zero', 0.0
     for frame in loop.run():
         state = None
@@ -608,13 +620,20 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
                 active = msg.source
             elif topic == 'sim/environment':
                 rate = float(msg.orbit_rate)
+            elif topic == 'adcs/attitude_target':
+                q_target, eci = quat(msg.q_ref_body), msg.header.frame_id == 'eci'
+                judged = msg.profile != 'maneuver'
+        q_body = quat(state.q_orbit_body)
         rows['t_s'].append(frame.t_ns / 1e9)
-        rows['q_orbit_body'].append(quat(state.q_orbit_body))
+        rows['q_orbit_body'].append(q_body)
         rows['w_eci'].append(vec3(state.omega_body_eci_body))
         rows['w_orbit'].append(vec3(state.omega_body_orbit_body))
         rows['q_est'].append(q_est)
         rows['w_est'].append(w_est)
         rows['active'].append(active)
+        rows['q_orbit_target'].append(attitude.multiply(attitude.multiply(
+            q_body, attitude.conjugate(quat(state.q_eci_body))), q_target) if eci else q_target)
+        rows['target_judged'].append(judged)
     out = {k: np.asarray(v) for k, v in rows.items()}
     out['angle_deg'] = metrics.angle_to_identity_deg(out['q_orbit_body'])
     out['est_err_deg'] = metrics.angle_between_deg(out['q_est'], out['q_orbit_body'])
@@ -627,9 +646,12 @@ def mc_worker(run_dir: str) -> int:
     """One Monte Carlo run on the plain engine (``adcs montecarlo``, any scenario).
 
     Reads ``job.json`` and ``scenario.yaml`` of the prepared run directory, runs the
-    FrameLoop, writes ``series.npz`` (per-frame truth and estimate error) and ``result.json``
-    with :func:`adcs_nodes.tools.montecarlo.results.series_metrics` (the same result as a
-    graph run), or ``failed.json``. Exit code 130 on SIGINT (nothing written).
+    FrameLoop, writes ``series.npz`` (per-frame truth, estimate error and the guidance target
+    the run published, :func:`run_series`) and ``result.json`` with
+    :func:`adcs_nodes.tools.montecarlo.results.series_metrics` (the same result as a graph
+    run): capture judged against the recorded target, or the orbit frame, as the scenario's
+    ``capture_reference`` says (:mod:`adcs_nodes.tools.montecarlo.capture`); or
+    ``failed.json``. Exit code 130 on SIGINT (nothing written).
     """
     import json
     import time
@@ -637,8 +659,9 @@ def mc_worker(run_dir: str) -> int:
     import numpy as np
 
     from adcs_nodes.tools import metrics
+    from adcs_nodes.tools.montecarlo.capture import ORBIT_FRAME, capture_reference
     from adcs_nodes.tools.montecarlo.files import RESULT_FILE, SERIES_FILE, write_json_atomic
-    from adcs_nodes.tools.montecarlo.results import series_metrics
+    from adcs_nodes.tools.montecarlo.results import angle_to_target_deg, series_metrics
     from adcs_nodes.tools.montecarlo.runner import fail, result_head
     from adcs_nodes.tools.scenario import ScenarioError, load_scenario
 
@@ -647,6 +670,7 @@ def mc_worker(run_dir: str) -> int:
         job = json.load(fh)
     try:
         sc = load_scenario(os.path.join(run_dir, 'scenario.yaml'))
+        reference = capture_reference(sc)
         s = run_series(FrameLoop.from_scenario(sc, job['duration_s']))
     except KeyboardInterrupt:
         return 130
@@ -655,12 +679,19 @@ def mc_worker(run_dir: str) -> int:
     tmp = os.path.join(run_dir, 'series.tmp.npz')
     np.savez_compressed(tmp, **{k: s[k] for k in ('t_s', 'q_orbit_body', 'angle_deg',
                                                   'est_err_deg', 'rate_err_deg_s', 'w_eci',
-                                                  'w_orbit')})
+                                                  'w_orbit', 'q_orbit_target',
+                                                  'target_judged')})
     os.replace(tmp, os.path.join(run_dir, SERIES_FILE))
+    angle = judged = None                 # the orbit frame
+    if reference != ORBIT_FRAME:          # the target the run published
+        angle = angle_to_target_deg(s['q_orbit_body'], s['q_orbit_target'])
+        judged = s['target_judged']
     m = series_metrics(s['t_s'], s['q_orbit_body'], s['w_eci'], s['w_orbit'],
-                       job['capture_deg'], job.get('period_s') or s['period_s'])
+                       job['capture_deg'], job.get('period_s') or s['period_s'],
+                       angle_deg=angle, judged=judged)
     est = metrics.hold_stats(s['t_s'], s['est_err_deg'], 0.5 * s['period_s'])
-    result = {**result_head(job), **m, 'engine': 'plain', 'bag': None,
+    result = {**result_head(job), **m, 'capture_reference': reference, 'engine': 'plain',
+              'bag': None,
               'est_err_median_deg': est.median if est.samples else None,
               'sim_time_s': float(s['t_s'][-1]), 'wall_time_s': time.monotonic() - t0,
               'frames': int(s['t_s'].size), 'missed_frames': 0, 'compose': False,

@@ -4,11 +4,14 @@ the angle between the body and the attitude the scenario's guidance commands.
 paper001_mpi: a 3-run campaign of 400 s on the plain engine (real run processes), judged
 against paper 001's profile: the angle is computed here again from the run's ``series.npz``
 with numpy alone (the paper's 3-1-2 Euler hold attitude written out as matrices, not through
-the package), so a capture measured to the orbit frame fails. The recorded target (a bag of the
-same run from the plain engine) is the rebuilt one, bit for bit. paper000_control: the numbers
-are those of the angle to the orbit frame, and a campaign from before the guidance target
-resumes with them; a paper001 campaign from before is refused with the reason. The default
-initial-rate bound follows the scenario's paper; ``--max-rate-deg-s`` wins.
+the package), so a capture measured to the orbit frame fails. The target the plain worker
+records is the one the run published (a bag of the same run), bit for bit; a profile in the
+ECI frame is judged on the plain engine as the graph engine reads its bag. paper000_control:
+the numbers are those of the angle to the orbit frame (the recorded target is the identity),
+and a campaign from before the guidance target resumes with them; a paper001 campaign from
+before is refused with the reason, and a paper001 run from before the worker recorded the
+target is run again. The default initial-rate bound follows the scenario's paper;
+``--max-rate-deg-s`` wins.
 """
 import argparse
 import json
@@ -123,9 +126,9 @@ def test_paper001_capture_is_not_measured_to_the_orbit_frame(campaign001):
     assert 'initial rate components uniform in +-0.3 deg/s' in text
 
 
-def test_the_recorded_target_is_the_rebuilt_one(campaign001, tmp_path):
-    """Run 0 again on the plain engine with a bag: its recorded ``adcs/attitude_target`` is
-    the target the capture test rebuilt from the scenario, bit for bit, and the bag's metrics
+def test_the_worker_records_the_published_target(campaign001, tmp_path):
+    """Run 0 again on the plain engine with a bag: the ``adcs/attitude_target`` it published
+    is the target the worker recorded in ``series.npz``, bit for bit, and the bag's metrics
     (the graph engine's reading) are the plain result's."""
     from adcs_nodes.bag import read_messages
     from sim_node.engine import run_plain
@@ -140,15 +143,41 @@ def test_the_recorded_target_is_the_rebuilt_one(campaign001, tmp_path):
         q_rec.append((o.x, o.y, o.z, o.w))
         judged_rec.append(msg.profile != 'maneuver')
     with np.load(os.path.join(run_dir, mc.SERIES_FILE)) as s:
-        t = s['t_s']
-    q_built, judged = mc.guidance_targets(sc, t)
-    assert np.array_equal(np.array(q_rec), q_built)
+        t, q_target, judged = s['t_s'], s['q_orbit_target'], s['target_judged']
+    assert np.array_equal(np.array(q_rec), q_target)      # a target every 0.2 s frame
     assert np.array_equal(np.array(judged_rec), judged) and not judged[t < 200.0].any()
     m = mc.bag_metrics(bag, 5.0, results[0]['period_s'], mc.GUIDANCE_TARGET)
     for key in ('status', 'capture_time_s', 'first_entry_s', 'last_exit_s', 'samples',
                 'capture_reference'):
         assert m[key] == results[0][key], key
     assert m['final_angle_deg'] == pytest.approx(results[0]['final_angle_deg'], abs=1e-9)
+
+
+def test_a_paper001_run_from_before_the_recorded_target_is_run_again(campaign001, tmp_path,
+                                                                     capsys):
+    """A run of a campaign made when the target was rebuilt from the scenario, its result
+    not judged yet (no ``capture_reference``; ``series.npz`` without the target): not done,
+    the reason in ``failed.json``; the resumed campaign runs it again, the same numbers."""
+    out, results = campaign001
+    old = tmp_path / 'old'
+    shutil.copytree(out, old)
+    run_dir = mc.run_dir_of(str(old), 1)
+    with np.load(os.path.join(run_dir, mc.SERIES_FILE)) as s:
+        series = {k: s[k] for k in s.files if k not in ('q_orbit_target', 'target_judged')}
+    np.savez_compressed(os.path.join(run_dir, mc.SERIES_FILE), **series)
+    worker = {k: v for k, v in results[1].items() if k != 'capture_reference'}
+    mc.write_json_atomic(os.path.join(run_dir, mc.RESULT_FILE), worker)
+    assert mc.load_result(run_dir) is None
+    with open(os.path.join(run_dir, mc.FAILED_FILE), encoding='utf-8') as fh:
+        assert 'from before the plain worker recorded the guidance target' in json.load(fh)[
+            'message']
+    capsys.readouterr()
+    assert main([P001, '--runs', '3', '--duration', f'{DURATION:g}', '--engine', 'plain',
+                 '--out', str(old)]) == 0
+    assert 'executed 1 run(s)' in capsys.readouterr().out
+    again = mc.load_result(run_dir)
+    for key in ('status', 'capture_time_s', 'final_angle_deg', 'capture_reference'):
+        assert again[key] == results[1][key], key
 
 
 def test_a_paper001_campaign_from_before_is_refused_with_the_reason(campaign001, tmp_path,
@@ -173,8 +202,10 @@ def test_a_paper001_campaign_from_before_is_refused_with_the_reason(campaign001,
 # ---------------------------------------------------------------------- paper 000
 def test_paper000_numbers_are_the_orbit_frame_ones_and_an_old_campaign_resumes(tmp_path,
                                                                                capsys):
-    """The worker's result (angle to the orbit frame) is kept as it is, labelled; a campaign
-    from before (no capture_reference anywhere) resumes with nothing to run, same numbers."""
+    """The worker's numbers are those of the angle to the orbit frame (the recorded target
+    is the identity: the angle to it is the angle to the orbit frame, bit for bit); a campaign
+    from before (no capture_reference anywhere, no target in series.npz) resumes with nothing
+    to run, same numbers."""
     out = tmp_path / 'mc'
     args = [P000, '--runs', '1', '--duration', '20', '--out', str(out), '--engine', 'plain']
     assert main(args) == 0
@@ -183,9 +214,17 @@ def test_paper000_numbers_are_the_orbit_frame_ones_and_an_old_campaign_resumes(t
         scored = json.load(fh)
     assert scored['capture_reference'] == 'orbit frame'
     with np.load(os.path.join(run_dir, mc.SERIES_FILE)) as s:
-        expected = mc.series_metrics(s['t_s'], s['q_orbit_body'], s['w_eci'], s['w_orbit'],
-                                     5.0, scored['period_s'])
+        series = {k: s[k] for k in s.files}
+    expected = mc.series_metrics(series['t_s'], series['q_orbit_body'], series['w_eci'],
+                                 series['w_orbit'], 5.0, scored['period_s'])
     assert {k: scored[k] for k in expected} == expected
+    assert np.array_equal(series['q_orbit_target'],
+                          np.tile([0.0, 0.0, 0.0, 1.0], (series['t_s'].size, 1)))
+    assert series['target_judged'].all()
+    to_target = mc.angle_to_target_deg(series['q_orbit_body'], series['q_orbit_target'])
+    assert np.array_equal(to_target, series['angle_deg'])      # the orbit frame's, bit for bit
+    np.savez_compressed(os.path.join(run_dir, mc.SERIES_FILE), **{
+        k: v for k, v in series.items() if k not in ('q_orbit_target', 'target_judged')})
     # as before this change: no capture_reference in campaign.json nor in result.json
     with open(out / 'campaign.json', encoding='utf-8') as fh:
         data = json.load(fh)
@@ -221,22 +260,46 @@ def test_defaults_follow_the_scenario_and_the_option_wins(name, bound, reference
     assert cfg.max_rate_deg_s == 1.5
 
 
-def test_an_eci_profile_is_refused_on_the_plain_engine(tmp_path):
+def test_an_eci_profile_is_judged_on_the_plain_engine(tmp_path):
+    """paper003_slew with its target held in the ECI frame, published every 0.5 s (5 frames):
+    the worker's angle (the held ECI target converted to the orbit frame with each frame's
+    truth) is the angle the graph engine reads from a bag of the same run, in the ECI frame."""
     import yaml
+
+    from sim_node.engine import run_plain
     with open(os.path.join(ROOT, 'scenarios', 'paper003_slew.yaml'), encoding='utf-8') as fh:
         sc = yaml.safe_load(fh)
-    sc['guidance']['frame'] = 'eci'
+    sc['guidance'].update(frame='eci', period_s=0.5)
     path = tmp_path / 'eci.yaml'
     path.write_text(yaml.safe_dump(sc))
-    with pytest.raises(mc.CampaignError, match='eci frame.*--engine graph'):
-        config_from_args(_args(str(path), out=str(tmp_path / 'c')))
-    cfg, _, _ = config_from_args(_args(str(path), out=str(tmp_path / 'c'), engine='graph'))
-    assert cfg.capture_reference == 'guidance target'
+    out = str(tmp_path / 'c')
+    assert main([str(path), '--runs', '1', '--engine', 'plain', '--out', out]) == 0
+    run_dir = mc.run_dir_of(out, 0)
+    res = mc.load_result(run_dir)
+    assert res['capture_reference'] == 'guidance target' and res['samples'] == 801
+    bag = str(tmp_path / 'bag')
+    # exit 3, degraded: from this dispersed start the manager gets no estimate (the
+    # measurement is what is tested here, not the capture)
+    assert run_plain(load_scenario(os.path.join(run_dir, 'scenario.yaml')), record=bag,
+                     progress=False).exit_code in (0, 3)
+    truth = mc.read_truth(bag)
+    with np.load(os.path.join(run_dir, mc.SERIES_FILE)) as s:
+        angle = mc.angle_to_target_deg(s['q_orbit_body'], s['q_orbit_target'])
+        q_target, judged = s['q_orbit_target'], s['target_judged']
+    assert judged.all() and not np.isnan(angle).any()
+    assert np.abs(angle - truth['target_angle_deg']).max() < 1e-9
+    # an ECI target moves in the orbit frame (the orbit rate, about 0.06 deg/s), also
+    # between the guidance's frames
+    moved = mc.angle_to_target_deg(q_target[:1], q_target[-1:])[0]
+    assert 3.0 < moved < 7.0 and not np.array_equal(q_target[1], q_target[0])
+    m = mc.bag_metrics(bag, 5.0, res['period_s'], mc.GUIDANCE_TARGET)
+    for key in ('status', 'capture_time_s', 'first_entry_s', 'last_exit_s', 'samples'):
+        assert m[key] == res[key], key
+    assert m['final_angle_deg'] == pytest.approx(res['final_angle_deg'], abs=1e-9)
 
 
-def test_the_judged_samples_and_a_recorded_target():
-    """Samples of a maneuver toward an end state are left out of the capture test; a
-    ``q_orbit_target`` in ``series.npz`` (the worker recording the target) is used as is."""
+def test_the_judged_samples():
+    """Samples of a maneuver toward an end state are left out of the capture test."""
     t = np.arange(6.0)
     ang = np.array([90.0, 60.0, 3.0, 40.0, 2.0, 1.0])     # the 40 deg inside a maneuver
     q = np.tile([0.0, 0.0, 0.0, 1.0], (6, 1))
@@ -248,22 +311,3 @@ def test_the_judged_samples_and_a_recorded_target():
     assert mc.series_metrics(t, q, w, w, 5.0, None, angle_deg=ang)['capture_time_s'] == 4.0
     none = mc.series_metrics(t, q, w, w, 5.0, None, angle_deg=ang, judged=np.zeros(6, bool))
     assert none['status'] == 'not_captured' and none['hold_median_deg'] is None
-
-
-def test_a_recorded_target_in_the_series_is_used(tmp_path):
-    run_dir = tmp_path / 'run'
-    run_dir.mkdir()
-    shutil.copy(P001, run_dir / 'scenario.yaml')
-    (run_dir / 'job.json').write_text(json.dumps({'capture_deg': 5.0}))
-    half = math.sqrt(0.5)
-    t = np.arange(4.0)
-    q_body = np.tile([half, 0.0, 0.0, half], (4, 1))          # 90 deg about x from orbit
-    q_target = np.tile([half, 0.0, 0.0, half], (4, 1))
-    q_target[0] = [0.0, 0.0, 0.0, 1.0]
-    np.savez(run_dir / mc.SERIES_FILE, t_s=t, q_orbit_body=q_body, w_eci=np.zeros((4, 3)),
-             w_orbit=np.zeros((4, 3)), q_orbit_target=q_target)
-    res = mc.score_plain_result(str(run_dir), {'engine': 'plain', 'period_s': None})
-    assert res['capture_reference'] == 'guidance target'
-    assert res['capture_time_s'] == 1.0 and res['final_angle_deg'] == pytest.approx(0.0)
-    with open(run_dir / mc.RESULT_FILE, encoding='utf-8') as fh:
-        assert json.load(fh) == res

@@ -110,8 +110,7 @@ arguments, 130 interrupted.
 from adcs_nodes.tools.montecarlo.backends import DaskBackend, LocalBackend
 from adcs_nodes.tools.montecarlo.campaign import Campaign
 from adcs_nodes.tools.montecarlo.capture import (GUIDANCE_TARGET, ORBIT_FRAME,
-                                                 capture_reference, guidance_targets,
-                                                 score_plain_result)
+                                                 capture_reference, label_old_result)
 from adcs_nodes.tools.montecarlo.cli import add_arguments, config_from_args, main, run_from_args
 from adcs_nodes.tools.montecarlo.config import (AUTO_DETUMBLE, ENGINES, IDENTITY_KEYS,
                                                 CampaignConfig, CampaignError, Dispersion,
@@ -132,8 +131,8 @@ __all__ = ['AUTO_DETUMBLE', 'CSV_COLUMNS', 'ENGINES', 'FAILED_FILE', 'GUIDANCE_T
            'STATE_TOPIC', 'STOP_GRACE_S', 'Campaign', 'CampaignConfig', 'CampaignError',
            'DaskBackend', 'Dispersion', 'LocalBackend', 'add_arguments', 'angle_to_target_deg',
            'apply_dispersion', 'bag_metrics', 'capture_reference', 'config_from_args',
-           'default_max_rate_deg_s', 'draw_dispersion', 'execute_run', 'guidance_targets',
+           'default_max_rate_deg_s', 'draw_dispersion', 'execute_run', 'label_old_result',
            'load_result', 'main', 'orbit_period_s', 'plot_capture_vs_rate', 'rate_bins',
            'read_table', 'read_truth', 'run_dir_of', 'run_from_args', 'scenario_hash',
-           'score_plain_result', 'series_metrics', 'summary_markdown', 'table_row', 'worker_env',
+           'series_metrics', 'summary_markdown', 'table_row', 'worker_env',
            'worker_main', 'write_json_atomic', 'write_table']

@@ -7,7 +7,7 @@ import sys
 from typing import Any, Dict, List, Optional
 
 from adcs_nodes.tools.montecarlo.campaign import Campaign
-from adcs_nodes.tools.montecarlo.capture import capture_reference, plain_capture_problem
+from adcs_nodes.tools.montecarlo.capture import capture_reference
 from adcs_nodes.tools.montecarlo.config import (ENGINES, CampaignConfig, CampaignError,
                                                 default_max_rate_deg_s, scenario_hash)
 from adcs_nodes.tools.montecarlo.engine import plain_engine_problem, resolve_engine
@@ -119,9 +119,6 @@ def config_from_args(args: argparse.Namespace) -> tuple:
                             f'{base["timing"]["frame_s"]:g} s frames')
     out = args.out or f'montecarlo_{base["name"]}'
     engine, args.engine_reason = resolve_engine(getattr(args, 'engine', None), base, out)
-    problem = plain_capture_problem(base) if engine == 'plain' else None
-    if problem is not None:
-        raise CampaignError(f'the capture test cannot run on the plain engine: {problem}')
     cfg = CampaignConfig(
         scenario_path=base['_path'], scenario_sha256=scenario_hash(base), runs=args.runs,
         seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,

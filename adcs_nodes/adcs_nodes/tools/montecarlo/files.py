@@ -42,13 +42,13 @@ def load_result(run_dir: str) -> Optional[Dict[str, Any]]:
     """The run's ``result.json`` when the run is done, else None.
 
     Done: the result and its data are present (graph engine: the bag's ``metadata.yaml``;
-    plain engine: ``series.npz``). A plain run's capture is judged here against its guidance
-    target the first time its result is read
-    (:func:`~adcs_nodes.tools.montecarlo.capture.score_plain_result`, written back to
-    ``result.json``); when that fails, the reason goes to ``failed.json`` and the run is not
-    done (the campaign reports it as an error and runs it again on restart).
+    plain engine: ``series.npz``). A plain result from before the worker recorded the
+    guidance target (:func:`~adcs_nodes.tools.montecarlo.capture.label_old_result`) is
+    labelled ``capture_reference: orbit frame`` when that is its scenario's reference; for any
+    other scenario, and when its scenario cannot be read, the reason goes to ``failed.json``
+    and the run is not done (the campaign runs it again).
     """
-    from adcs_nodes.tools.montecarlo.capture import score_plain_result
+    from adcs_nodes.tools.montecarlo.capture import label_old_result
 
     path = os.path.join(run_dir, RESULT_FILE)
     metadata = os.path.join(run_dir, 'bag', 'metadata.yaml')
@@ -61,11 +61,11 @@ def load_result(run_dir: str) -> Optional[Dict[str, Any]]:
     except (OSError, ValueError):
         return None
     try:
-        return score_plain_result(run_dir, result)
+        return label_old_result(run_dir, result)
     except (OSError, ValueError, KeyError) as exc:      # ScenarioError is a ValueError
         write_json_atomic(os.path.join(run_dir, FAILED_FILE), {
             'index': result.get('index'), 'status': 'error', 'exit_code': 1,
-            'message': f'capture test against the guidance target failed: {exc}'})
+            'message': f'cannot resume this run: {exc}'})
         return None
 
 

@@ -441,7 +441,6 @@ def prepare(args: argparse.Namespace) -> Prepared:
     SweepError, CampaignError, adcs_nodes.tools.scenario.ScenarioError
         A bad argument, grid key or value (exit 2).
     """
-    from adcs_nodes.tools.montecarlo.capture import plain_capture_problem
     from adcs_nodes.tools.montecarlo.cli import config_from_args
     from adcs_nodes.tools.montecarlo.engine import plain_engine_problem
     from adcs_nodes.tools.scenario import apply_overrides, load_scenario
@@ -464,9 +463,6 @@ def prepare(args: argparse.Namespace) -> Prepared:
             raise SweepError(f'grid point {_point_text(point)}: the duration '
                              f'{cfg.duration_s:g} s is not a whole number of '
                              f'{sc["timing"]["frame_s"]:g} s frames')
-        problem = plain_capture_problem(sc)
-        if problem is not None:
-            raise SweepError(f'grid point {_point_text(point)}: {problem}')
         points.append({'point': point, 'scenario': sc, 'cfg': cfg,
                        'out': os.path.join(out, 'points', point_name(point))})
     return base, grid, points, out
