@@ -49,8 +49,9 @@ def _faults(bag):
 
 def test_a_live_magnetometer_nan_is_announced_and_refused_by_the_estimator(tmp_path):
     bag = str(tmp_path / 'live')
+    # paced (at most 100 x real time): open-ended, it leaves the CPU to the fault clients
     proc = start_adcs('run', _scenario(tmp_path), '--compose', '--record', bag,
-                      '--duration', '2000000', '--quiet')
+                      '--duration', '2000000', '--quiet', '--rate', '100')
     try:
         wait_manifest(proc)
         pid = str(proc.pid)

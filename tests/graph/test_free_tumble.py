@@ -226,7 +226,9 @@ def test_composed_run_gives_the_identical_trajectory(reference_bag, bag_dir):
 
 def test_ctrl_c_stops_every_node_and_leaves_a_valid_bag(bag_dir):
     bag = str(bag_dir / 'interrupted')
-    proc = start_adcs('run', FREE_TUMBLE, '--record', bag, '--duration', '100000', '--quiet')
+    # paced (at most 50 frames/s): open-ended, it need not burn the CPU until the Ctrl-C
+    proc = start_adcs('run', FREE_TUMBLE, '--record', bag, '--duration', '100000', '--quiet',
+                      '--rate', '50')
     manifest = wait_manifest(proc)
     import time
     # let it record a while: the recorder flushes its chunks as it goes, so the file grows;
@@ -267,7 +269,7 @@ def test_ctrl_c_stops_every_node_and_leaves_a_valid_bag(bag_dir):
 
 
 def test_a_killed_node_stops_the_run_naming_it():
-    proc = start_adcs('run', FREE_TUMBLE, '--duration', '100000', '--quiet')
+    proc = start_adcs('run', FREE_TUMBLE, '--duration', '100000', '--quiet', '--rate', '50')
     manifest = wait_manifest(proc)
     latest, close = _probe_clock(manifest['domain'])
     try:                 # mid-run: the lockstep has started and stepped a few frames
