@@ -161,7 +161,9 @@ def _check_campaign_rows(out, proc, first, effective_scenario):
             assert not quat_close(qs[a], qs[b], 1e-3)
             assert np.abs(ws[a] - ws[b]).max() > 1e-3
     assert len({r['seed'] for r in rows}) == 3
-    assert (out / 'summary.md').read_text().count('| runs completed | 3 of 3 |') == 1
+    text = (out / 'summary.md').read_text()
+    assert text.count('| runs completed | 3 of 3 |') == 1
+    assert 'magnetometer bias +-120 nT per axis, misalignment +-1 deg per axis' in text
     assert (out / 'capture_vs_rate.png').read_bytes()[:4] == b'\x89PNG'
 
 

@@ -124,6 +124,7 @@ def test_paper001_capture_is_not_measured_to_the_orbit_frame(campaign001):
     text = (out / 'summary.md').read_text()
     assert 'the angle between the body and the guidance target' in text
     assert 'initial rate components uniform in +-0.3 deg/s' in text
+    assert 'magnetometer' not in text          # paper 001 has none: no bias to speak of
 
 
 def test_the_worker_records_the_published_target(campaign001, tmp_path):

@@ -48,10 +48,13 @@ def summary_markdown(cfg: CampaignConfig, results: Sequence[Dict[str, Any]],
     done = [r for r in results if r.get('status') in ('captured', 'not_captured')]
     captured = [r for r in done if r['status'] == 'captured']
     period = orbit_period_s(base)
-    bias = ('the scenario\'s magnetometer bias' if cfg.mag_bias_nT is None
-            else f'magnetometer bias +-{cfg.mag_bias_nT:g} nT per axis')
-    mis = ('the scenario\'s misalignment' if cfg.misalignment_deg is None
-           else f'misalignment +-{cfg.misalignment_deg:g} deg per axis')
+    if 'magnetometer' in (base.get('sensors') or {}):
+        bias = (', the scenario\'s magnetometer bias' if cfg.mag_bias_nT is None
+                else f', magnetometer bias +-{cfg.mag_bias_nT:g} nT per axis')
+        mis = (', the scenario\'s misalignment' if cfg.misalignment_deg is None
+               else f', misalignment +-{cfg.misalignment_deg:g} deg per axis')
+    else:                        # no magnetometer: its errors are drawn, not applied
+        bias, mis = '', ''
     mode = (f'automatic B-dot detumble first (below {AUTO_DETUMBLE["rate_enter_deg_s"]} deg/s, '
             f'then the magnetic law; B-dot gain '
             f'{"of the scenario" if cfg.bdot_gain is None else f"{cfg.bdot_gain:g} A m^2 s/T"})'
@@ -59,7 +62,7 @@ def summary_markdown(cfg: CampaignConfig, results: Sequence[Dict[str, Any]],
     lines = [f'# Monte Carlo campaign: {base.get("name", "?")}', '',
              f'Scenario `{cfg.scenario_path}`, seed {cfg.seed}, {cfg.runs} runs of '
              f'{cfg.duration_s:g} s ({cfg.engine} engine); initial rate components uniform in '
-             f'+-{cfg.max_rate_deg_s:g} deg/s, attitude uniform on SO(3), {bias}, {mis}; '
+             f'+-{cfg.max_rate_deg_s:g} deg/s, attitude uniform on SO(3){bias}{mis}; '
              f'{mode}. Captured: the angle between the body and the {_reference_text(cfg)} '
              f'enters {cfg.capture_deg:g} deg and then stays below {2 * cfg.capture_deg:g} deg '
              'to the end of the run (:mod:`adcs_nodes.tools.metrics`). Hold: the angle from 4 '
