@@ -30,12 +30,13 @@ def _scenario(tmp_path):
 
 
 def _start(tmp_path):
-    """The slew scenario's graph, one process per node, paced at 20 x real time (200 frames
-    a wall second): free-running, it starved the status and slew clients it talks to (CI run
-    of stop 29: no ``adcs status`` poll saw the manager in 120 s beside a CPU burner). The
-    action and the law are the same at any pace."""
+    """The slew scenario's graph, composed and paced at 50 x real time (500 frames a wall
+    second): one process per node free-running starved the status and slew clients it talks
+    to (CI of stop 29: no ``adcs status`` poll saw the manager in 120 s beside a CPU burner),
+    and paced at 20 x the slew took 45 s of wall time. The action server, its feedback and
+    the law are the same node code in any engine and at any pace."""
     return start_adcs('run', _scenario(tmp_path), '--record', str(tmp_path / 'slew'),
-                      '--duration', '100000', '--quiet', '--rate', '20')
+                      '--duration', '100000', '--quiet', '--compose', '--rate', '50')
 
 
 def _wait_running(proc):
