@@ -29,14 +29,14 @@ def _scenario(tmp_path):
     return str(path)
 
 
-def _start(tmp_path):
+def _start(tmp_path, bag):
     """The slew scenario's graph, composed and paced at 50 x real time (500 frames a wall
     second): one process per node free-running starved the status and slew clients it talks
     to (CI of stop 29: no ``adcs status`` poll saw the manager in 120 s beside a CPU burner),
     and paced at 20 x the slew took 45 s of wall time. The action server, its feedback and
     the law are the same node code in any engine and at any pace."""
-    return start_adcs('run', _scenario(tmp_path), '--record', str(tmp_path / 'slew'),
-                      '--duration', '100000', '--quiet', '--compose', '--rate', '50')
+    return start_adcs('run', _scenario(tmp_path), '--record', bag, '--duration', '100000',
+                      '--quiet', '--compose', '--rate', '50')
 
 
 def _wait_running(proc):
@@ -54,7 +54,7 @@ def test_a_slew_goal_succeeds_at_its_target(tmp_path):
     """One goal on a running graph: ``adcs slew`` gets the action's feedback and its success,
     and the recorded attitude ends within 0.5 deg of the goal."""
     bag = str(tmp_path / 'slew')
-    proc = _start(tmp_path)
+    proc = _start(tmp_path, bag)
     try:
         _wait_running(proc)
         done = adcs('slew', '--to', '0', '10', '0', '--frame', 'orbit', '--run',
@@ -77,7 +77,7 @@ def test_a_preempted_slew_ends_at_the_second_target(tmp_path):
     test_slew_action.py``), the slew to a replaced target the FrameLoop's (``tests/unit/
     test_frameloop_slew.py``); this is both on a launched graph (about two minutes)."""
     bag = str(tmp_path / 'slew')
-    proc = _start(tmp_path)
+    proc = _start(tmp_path, bag)
     first = None
     try:
         _wait_running(proc)
