@@ -105,7 +105,7 @@ REAL_TIME_KEPT = 0.9
 
 
 def cmd_run(args) -> int:
-    from adcs_nodes.tools.launcher import LaunchError, Launcher
+    from adcs_nodes.tools.launcher import LaunchError, Launcher, pace
     engine = args.engine or ('composed' if args.compose else 'graph')
     try:
         sc = load_scenario(args.scenario)
@@ -114,9 +114,7 @@ def cmd_run(args) -> int:
             sc = apply_overrides(sc, args.set)
         if args.compose and engine != 'composed':
             raise LaunchError(f'--compose means --engine composed, not {engine}')
-        if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= 1e6):
-            raise LaunchError(f'--rate must be in (0, 1e6] sim seconds per wall second, got '
-                              f'{args.rate:g}')
+        rate_factor, max_rate = pace(args.rate, args.real_time)
         if engine == 'plain':
             if args.real_time or args.rate is not None:
                 raise LaunchError('the plain engine has no real-time mode and no pace (it runs '
@@ -129,8 +127,7 @@ def cmd_run(args) -> int:
         else:
             launcher = Launcher(sc, duration_s=args.duration, record=args.record,
                                 real_time=args.real_time,
-                                rate_factor=(args.rate or 1.0) if args.real_time else 1.0,
-                                max_rate=0.0 if args.real_time else (args.rate or 0.0),
+                                rate_factor=rate_factor, max_rate=max_rate,
                                 compose=engine == 'composed', progress=not args.quiet,
                                 domain=args.domain)
     except (ScenarioError, LaunchError, ValueError) as exc:

@@ -260,6 +260,29 @@ class LaunchError(RuntimeError):
     """The graph could not be started or a node failed; the message says which and why."""
 
 
+#: The largest ``--rate`` [sim seconds per wall second].
+MAX_RATE = 1e6
+
+
+def check_rate(rate: float) -> float:
+    """``rate`` if it is a ``--rate`` (finite, in (0, :data:`MAX_RATE`]), else LaunchError."""
+    if not (math.isfinite(rate) and 0 < rate <= MAX_RATE):
+        raise LaunchError(f'--rate must be in (0, 1e6] sim seconds per wall second, '
+                          f'got {rate:g}')
+    return float(rate)
+
+
+def pace(rate: Optional[float], real_time: bool) -> Tuple[float, float]:
+    """``adcs run``'s ``--rate`` as the launcher's ``(rate_factor, max_rate)``: with
+    ``--real-time`` the sim seconds per wall second (default 1), without it the lockstep's
+    pace limit (default 0: none). A rate outside (0, :data:`MAX_RATE`] is a LaunchError."""
+    if rate is not None:
+        check_rate(rate)
+    if real_time:
+        return (1.0 if rate is None else float(rate)), 0.0
+    return 1.0, (0.0 if rate is None else float(rate))
+
+
 @dataclass
 class RunResult:
     """Outcome of a run."""
@@ -731,12 +754,9 @@ class Launcher:
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise LaunchError(f'duration must be a positive finite number of seconds, got '
                               f'{self.duration_s}')
-        if not (math.isfinite(rate_factor) and 0 < rate_factor <= 1e6):
-            raise LaunchError(f'--rate must be in (0, 1e6] sim seconds per wall second, got '
-                              f'{rate_factor}')
-        if not (math.isfinite(max_rate) and 0 <= max_rate <= 1e6):
-            raise LaunchError(f'--rate must be in (0, 1e6] sim seconds per wall second, got '
-                              f'{max_rate}')
+        check_rate(rate_factor)
+        if max_rate != 0.0:                      # (0: no pace)
+            check_rate(max_rate)
         if not NAME_PATTERN.fullmatch(str(scenario.get('name', ''))):
             raise LaunchError(f'scenario name {str(scenario.get("name"))[:80]!r} must match '
                               f'{NAME_PATTERN.pattern} (it names the run directory)')
