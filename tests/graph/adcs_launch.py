@@ -20,6 +20,18 @@ from adcs_nodes.tools.launcher import RUNS_DIR  # noqa: E402
 RUNS = RUNS_DIR
 
 
+def phase(what):
+    """One line in ``RUNS/test_phases.log``: wall clock, the current test, what was reached
+    (where a launched test's wall time goes, read after a slow or failed suite run; the runs
+    directory is a temporary one unless ``ADCS_RUNS_DIR`` keeps it)."""
+    test = os.environ.get('PYTEST_CURRENT_TEST', '?').split(' ')[0]
+    try:
+        with open(os.path.join(RUNS, 'test_phases.log'), 'a') as fh:
+            fh.write(f'{time.time():.3f} {test} {what}\n')
+    except OSError:
+        pass
+
+
 def control_scenario(tmp_path, **changes):
     """paper000_control with a 2 s magnetometer (B-dot needs samples) and a 1 s input timeout,
     plus top-level ``changes``, written to ``tmp_path/control.yaml``; returns its path."""
@@ -59,8 +71,10 @@ def plain_run(scenario_path, duration_s, bag):
 
 def adcs(*args, timeout=300, check=True):
     """Run ``adcs ARGS`` to completion; returns the CompletedProcess (text output)."""
+    phase(f'adcs {args[0]} starts')
     proc = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.cli', *args], cwd=ROOT,
                           capture_output=True, text=True, timeout=timeout)
+    phase(f'adcs {args[0]} ended ({proc.returncode})')
     if check and proc.returncode != 0:
         raise AssertionError(f'adcs {" ".join(args)} failed ({proc.returncode}):\n'
                              f'{proc.stdout}\n{proc.stderr}')
@@ -69,6 +83,7 @@ def adcs(*args, timeout=300, check=True):
 
 def start_adcs(*args):
     """Start ``adcs ARGS`` in the background; returns the Popen."""
+    phase(f'adcs {args[0]} launched in the background')
     return subprocess.Popen([sys.executable, '-m', 'adcs_nodes.tools.cli', *args], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
@@ -86,6 +101,7 @@ def wait_manifest(proc, timeout=120.0):
                 except ValueError:
                     data = {}
             if 'pids' in data:
+                phase('manifest')
                 return data
         if proc.poll() is not None:
             raise AssertionError(f'launcher exited early: {proc.communicate()}')
@@ -112,6 +128,7 @@ class StatusWatch:
         import queue
         import threading
         self.views = queue.Queue()
+        phase('status watch starts')
         self.proc = subprocess.Popen(
             [sys.executable, '-m', 'adcs_nodes.tools.cli', 'status', '--watch', '--run',
              str(pid)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -144,8 +161,11 @@ class StatusWatch:
                                      f'last view: {self.last}') from None
             if view is None:
                 raise AssertionError(f'adcs status --watch ended; last view: {self.last}')
+            if not self.last:
+                phase(f'status watch: first view: {view[:120]}')
             self.last = view
             if predicate(view):
+                phase(f'status watch: condition met: {view[:120]}')
                 return view
 
     def close(self):

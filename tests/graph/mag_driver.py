@@ -15,7 +15,8 @@ derivative), so the value is the true body field at ``s``. The sample is publish
 the truth frame after ``s`` has arrived (a sensor's conversion latency).
 
 ``--silent``: the publisher exists (it matches) but never publishes. ``--log FILE``: one line
-per scheduled sample, ``<stamp ns> published|dropped``, flushed at once.
+per scheduled sample, ``<stamp ns> published|dropped <matched>``, flushed at once, where
+``matched`` is the number of subscriptions the publisher knew of when it published.
 """
 import argparse
 import signal
@@ -23,7 +24,7 @@ import sys
 
 import numpy as np
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation, Slerp
@@ -127,12 +128,13 @@ class MagDriver(Node):
         m.magnetic_field_covariance = [float(NOISE_T[0]**2), 0.0, 0.0,
                                        0.0, float(NOISE_T[1]**2), 0.0,
                                        0.0, 0.0, float(NOISE_T[2]**2)]
+        matched = self.pub.get_subscription_count()   # readers this writer knows of
         self.pub.publish(m)
-        self.write(stamp, 'published')
+        self.write(stamp, 'published', matched)
 
-    def write(self, stamp: int, what: str) -> None:
+    def write(self, stamp: int, what: str, matched: int = 0) -> None:
         if self.log is not None:
-            self.log.write(f'{stamp} {what}\n')
+            self.log.write(f'{stamp} {what} {matched}\n')
 
 
 def main(argv=None) -> int:
@@ -153,8 +155,8 @@ def main(argv=None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     try:
         executor.spin()
-    except (KeyboardInterrupt, SystemExit):
-        pass
+    except (KeyboardInterrupt, SystemExit, ExternalShutdownException):
+        pass                       # Ctrl-C, SIGTERM, or the context shut down by SIGINT
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

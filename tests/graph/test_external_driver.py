@@ -128,8 +128,8 @@ def _sent(log):
     """Driver log: stamps [ns] of the published samples and the number dropped."""
     with open(log) as fh:
         rows = [ln.split() for ln in fh if ln.strip()]
-    return [int(s) for s, what in rows if what == 'published'], sum(
-        1 for _, what in rows if what == 'dropped')
+    return [int(r[0]) for r in rows if r[1] == 'published'], sum(
+        1 for r in rows if r[1] == 'dropped')
 
 
 def _used(out, node='estimator'):
@@ -200,7 +200,14 @@ def test_a_best_effort_driver_off_the_grid_feeds_the_scenario_estimator(tmp_path
     assert rc == 0, out
     sent, dropped = _sent(log)
     epoch = EPOCH_NS
-    covered = [s for s in sent if s - epoch <= (duration - 2.0) * 1e9]   # a frame took them
+    # a sample is counted (used or rejected) only if it arrives before the run's last frame:
+    # the driver publishes a sample once the truth frame after its stamp has reached it, and
+    # beside a CPU burner and the other test worker that can take more than 6 s of sim time
+    # (300 ms of wall time) for the last one (the likely cause of CI runs 40 and 41: 19 of 20
+    # counted, none refused; not reproduced in 12 runs beside a burner);
+    # so every sample stamped at least 10 s (500 ms of wall time) before the end is counted,
+    # the later ones may be, and none is counted twice
+    covered = [s for s in sent if s - epoch <= (duration - 10.0) * 1e9]
     assert len(covered) >= 15, (len(sent), dropped)
     used, rejected, superseded, resets = _used(out)
     # best effort on loopback, 2 s of sim time = 100 ms of wall time to arrive: under load
@@ -210,7 +217,8 @@ def test_a_best_effort_driver_off_the_grid_feeds_the_scenario_estimator(tmp_path
     # burner); none is used twice, none superseded, none lost unaccounted
     late = {k: int(v) for k, v in re.findall(r'(\w+) (\d+)', rejected)}
     assert set(late) <= {'late', 'too_old'}, rejected
-    assert used + sum(late.values()) == len(covered), (used, len(covered), rejected)
+    counted = used + sum(late.values())
+    assert len(covered) <= counted <= len(sent), (used, len(covered), len(sent), rejected)
     assert used >= 0.75 * len(covered), (used, len(covered), rejected)
     assert superseded == 0 and resets == 0
     _, est = _series(bag)
