@@ -54,6 +54,7 @@ import argparse
 import faulthandler
 import math
 import os
+import signal
 import sys
 from typing import List, Optional
 
@@ -402,7 +403,26 @@ def main(argv: Optional[List[str]] = None) -> int:
     except (OSError, ValueError):   # stderr without a file descriptor (captured in tests)
         pass
     args = build_parser().parse_args(argv)
+    if args.command in CTRL_C_COMMANDS:
+        ctrl_c_stops()
     return args.func(args)
+
+
+#: The commands that talk to a running graph for as long as the user wants: SIGINT (Ctrl-C,
+#: ``kill -INT``) ends them cleanly, whatever the starting process did with SIGINT.
+CTRL_C_COMMANDS = ('status', 'slew', 'switch', 'fault', 'replay')
+
+
+def ctrl_c_stops() -> None:
+    """Python's own SIGINT handling (``KeyboardInterrupt``) where SIGINT was inherited ignored.
+
+    Python keeps an inherited "ignore": bash starts the commands of a script's background job
+    so, and pytest-xdist its workers. ``adcs status --watch`` started so went on after
+    ``kill -INT`` until it was killed (30 s in the switch and slew tests of ``make test``);
+    the node processes already do the same (``nodes/runtime.stop_handler_from_start``).
+    """
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 if __name__ == '__main__':
