@@ -15,8 +15,8 @@ derivative), so the value is the true body field at ``s``. The sample is publish
 the truth frame after ``s`` has arrived (a sensor's conversion latency).
 
 ``--silent``: the publisher exists (it matches) but never publishes. ``--log FILE``: one line
-per scheduled sample, ``<stamp ns> published|dropped <matched>``, flushed at once, where
-``matched`` is the number of subscriptions the publisher knew of when it published.
+per scheduled sample, ``<stamp ns> published <matched>`` or ``<stamp ns> dropped``, flushed at
+once, where ``matched`` is the number of subscriptions the publisher knew of when it published.
 """
 import argparse
 import signal
@@ -132,9 +132,9 @@ class MagDriver(Node):
         self.pub.publish(m)
         self.write(stamp, 'published', matched)
 
-    def write(self, stamp: int, what: str, matched: int = 0) -> None:
+    def write(self, stamp: int, what: str, *extra: int) -> None:
         if self.log is not None:
-            self.log.write(f'{stamp} {what} {matched}\n')
+            self.log.write(' '.join(map(str, (stamp, what, *extra))) + '\n')
 
 
 def main(argv=None) -> int:
