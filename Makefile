@@ -31,7 +31,7 @@ lint:  ## flake8 at 99 columns on the packages and tests
 	$(RUN) python -m flake8 adcs_nodes sim_node tests
 
 bench:  ## fair throughput table of paper000_control: ring, graph, composed, FrameLoop, Basilisk (< 5 min)
-	$(RUN) python -m sim_node.tools.bench
+	$(RUN) env PYTHONPATH=tests python -m perf.bench
 
 reproduce:  ## long paper reproductions (papers 000, 001, 003, 004): the tables of adcs report, pass/fail
 	$(RUN) python -m pytest -m slow -s -p no:warnings tests/reproductions
@@ -44,7 +44,7 @@ SOAK_BURNERS ?= 2
 SOAK_BUDGET ?= 900
 
 soak:  ## start-up soak: SOAK_LAUNCHES short runs of every scenario (processes, composed) beside SOAK_BURNERS burners, outcome table
-	$(RUN) adcs soak --launches $(SOAK_LAUNCHES) --burners $(SOAK_BURNERS) --time-budget $(SOAK_BUDGET) --out out/soak-$(STAMP)
+	$(RUN) env PYTHONPATH=tests python -m perf.soak --launches $(SOAK_LAUNCHES) --burners $(SOAK_BURNERS) --time-budget $(SOAK_BUDGET) --out out/soak-$(STAMP)
 
 clean:  ## remove build products (keeps the venv and your bags in out/)
 	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log

@@ -25,7 +25,7 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={PACKAGE: ['config/*.xml']},     # the Fast DDS profile (tools/launcher.py)
+    package_data={PACKAGE: ['config/*.xml']},     # the Fast DDS profile (tools/run/launcher.py)
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
@@ -49,7 +49,7 @@ setup(
             'controller = adcs_nodes.nodes.controller:main',
             'guidance = adcs_nodes.nodes.guidance:main',
             'controller_manager = adcs_nodes.nodes.controller_manager:main',
-            'compose = adcs_nodes.tools.compose:main',
+            'compose = adcs_nodes.tools.run.compose:main',
         ],
     },
 )

@@ -3,13 +3,13 @@
 ``make test`` runs two pytest-xdist workers. A test that starts ROS 2 participants takes a
 domain from :func:`worker_domain`: worker k of K only uses the ids ``id % K == k`` of the
 test's range (two workers never meet on a domain), and the id is claimed with the launcher's
-lock file (:func:`adcs_nodes.tools.launcher.acquire_domain`), so a bench ring or another tool
+lock file (:func:`adcs_nodes.tools.run.launcher.acquire_domain`), so a bench ring or another tool
 claiming domains with the same lock files never takes it either. The claim lasts until the
 same process claims its next domain (one test runs at a time in a worker).
 """
 import os
 
-from adcs_nodes.tools.launcher import LaunchError, acquire_domain
+from adcs_nodes.tools.run.launcher import LaunchError, acquire_domain
 
 _held = []      # the lock file of this process's current domain
 

@@ -99,7 +99,7 @@ def get(name: str) -> Input:
 def period_params(names) -> Tuple:
     """Registry ``Param`` specs of the producer periods of inputs ``names`` (for a node's
     declared parameters: one name per input, the same in every consumer)."""
-    from adcs_nodes.registry import Param
+    from adcs_nodes.spec import Param
     out = []
     for name in names:
         rec = get(name)

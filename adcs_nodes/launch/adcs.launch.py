@@ -4,7 +4,7 @@
         [duration:=600] [record:=/tmp/bag]
 
 ``scenario``: an installed scenario (``share/adcs_nodes/scenarios``) or a path. The nodes and
-their parameters come from ``adcs_nodes.tools.graph`` (see ``adcs_nodes.tools.launch_graph``);
+their parameters come from ``adcs_nodes.graph`` (see ``adcs_nodes.tools.run.launch_graph``);
 the parameter file is written to a private temporary file, removed when the launch shuts
 down. The launch ends when the clock master (``dynamics``) exits at the end of the scenario;
 each node gets the time it needs to stop after SIGINT (``sigterm_timeout``: the recorder
@@ -21,8 +21,8 @@ from launch.event_handlers import OnShutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from adcs_nodes.tools.launch_graph import CLOCK_MASTER, launch_graph, stop_timeouts
-from adcs_nodes.tools.launcher import profile_env
+from adcs_nodes.tools.run.launch_graph import CLOCK_MASTER, launch_graph, stop_timeouts
+from adcs_nodes.tools.run.launcher import profile_env
 
 
 def _remove(path):

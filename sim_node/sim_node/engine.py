@@ -1,7 +1,7 @@
 """The FrameLoop: one scenario's world and flight software stepped in the lockstep order, in one
 process, without ROS (the ``plain`` engine).
 
-It builds every component from the node parameters :func:`adcs_nodes.tools.graph.build_graph`
+It builds every component from the node parameters :func:`adcs_nodes.graph.build_graph`
 gives the graph (the single source of wiring and parameters), with the same parameter
 defaults, validation and seeds as the nodes, and calls the same component ``step`` the nodes
 call. The messages between components are the generated message objects, passed in process:
@@ -35,7 +35,6 @@ Pure Python: no rclpy (``tests/unit/test_core_purity.py``).
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
@@ -58,7 +57,7 @@ from adcs_nodes.core.lockstep import REVIVE_HOLD_FRAMES, ZERO, derive_seed, seco
 from adcs_nodes.nodes.actuator_topics import MAGNETORQUER_TOPIC, WHEELS_TOPIC, wheel_names_for
 from adcs_nodes.nodes.convert import stamp_ns
 from adcs_nodes.nodes.messages import make
-from adcs_nodes.tools.graph import NodeSpec, build_graph
+from adcs_nodes.graph import NodeSpec, build_graph
 from sim_node.components.dynamics import DynamicsComponent
 from sim_node.components.environment import DEFAULT_FIELD, DEFAULT_ORBIT, EnvironmentComponent
 from sim_node.components.sensors import SENSOR_COMPONENTS, sensor_faults
@@ -185,7 +184,7 @@ class FrameLoop:
     @classmethod
     def from_scenario(cls, sc: Dict[str, Any], duration_s: Optional[float] = None,
                       ideal_estimate: bool = False) -> 'FrameLoop':
-        """The FrameLoop of a validated scenario (:func:`adcs_nodes.tools.scenario.load_scenario`);
+        """The FrameLoop of a validated scenario (:func:`adcs_nodes.scenario.load_scenario`);
         :class:`EngineError` for what the plain engine cannot run (external sensors).
         ``ideal_estimate``: the controllers get the true state as the estimate (a study's
         perfect-knowledge reference; not a graph mode)."""
@@ -421,312 +420,3 @@ class FrameLoop:
         """Every frame to the end of the run."""
         while not self.done:
             yield self.step()
-
-
-# ---------------------------------------------------------------------- the bag
-class BagSink:
-    """Writes frames to a rosbag2 MCAP bag, as the recorder does (message definitions
-    embedded; log time = the message's sim time, so the bag reads like a recorded one).
-
-    The bytes are the project's CDR encoder's (:mod:`adcs_nodes.nodes.cdr`: byte-identical to
-    a typed publish, read back by ``rosbags``): no rclpy.
-    """
-
-    def __init__(self, path: str, scenario_text: Optional[str] = None,
-                 flush_every_frames: int = 200, topics: Sequence[str] = ()) -> None:
-        from rosbags.rosbag2 import StoragePlugin, Writer
-
-        from adcs_nodes.bag import BAG_VERSION, ensure_type, make_typestore
-        self._ensure_type = ensure_type
-        self.path = path
-        self._store = make_typestore()
-        self._writer = Writer(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
-        try:
-            self._writer.open()
-        except OSError as exc:
-            raise EngineError(f'cannot create the bag {path}: {exc.strerror or exc}') from None
-        self._writer.set_custom_data('recorder', 'sim_node.engine (plain engine)')
-        self._conns: Dict[str, Tuple[Any, Any]] = {}
-        #: the scenario's ``record.topics`` (relative names; empty: every data topic)
-        self._only = {t.lstrip('/') for t in topics}
-        self._frames = 0
-        self._flush_every = max(1, int(flush_every_frames))
-        self.messages = 0
-        if scenario_text is not None:
-            with open(os.path.join(path, 'scenario.yaml'), 'w') as fh:
-                fh.write(scenario_text)
-
-    def _connection(self, topic: str, msg: Any) -> Tuple[Any, Any]:
-        got = self._conns.get(topic)
-        if got is None:
-            from adcs_nodes.nodes.cdr import codec
-            from adcs_nodes.tools.graph import topic_type
-            msgtype = topic_type(topic)
-            if not self._ensure_type(self._store, msgtype):
-                raise EngineError(f'no .msg definition found for {msgtype}')
-            name = topic if topic.startswith('/') else '/' + topic    # resolved, as recorded
-            got = self._conns[topic] = (
-                self._writer.add_connection(name, msgtype, typestore=self._store),
-                codec(type(msg)))
-        return got
-
-    def write(self, frame: Frame) -> None:
-        """Write one frame's messages (flushed to the file every ``flush_every_frames``)."""
-        from adcs_nodes.bag import flush_writer
-        t_log = self._clock_ns(frame.t_ns)
-        for topic, msg in frame.outputs:
-            if self._only and topic.lstrip('/') not in self._only:
-                continue
-            conn, cdc = self._connection(topic, msg)
-            self._writer.write(conn, t_log, cdc.encode(msg))
-            self.messages += 1
-        self._frames += 1
-        if self._frames % self._flush_every == 0:
-            flush_writer(self._writer)
-
-    def _clock_ns(self, t_ns: int) -> int:
-        return self._epoch_ns + t_ns
-
-    def bind(self, loop: FrameLoop) -> 'BagSink':
-        """Log times from ``loop``'s epoch."""
-        self._epoch_ns = loop.clock.epoch_ns
-        return self
-
-    def close(self) -> None:
-        """Finish the bag (index, metadata)."""
-        if self._writer is not None:
-            self._writer.close()
-            self._writer = None
-
-
-# ---------------------------------------------------------------------- adcs run --engine plain
-def run_plain(sc: Dict[str, Any], duration_s: Optional[float] = None,
-              record: Optional[str] = None, progress: bool = True,
-              out=None) -> Any:
-    """``adcs run SCENARIO --engine plain``: the FrameLoop to the end, the bag if asked.
-
-    Returns a :class:`adcs_nodes.tools.launcher.RunResult`: exit code 0, 3 (degraded: the
-    manager could not forward the active controller in some frames) or 130 (Ctrl-C: the bag
-    keeps every frame run so far, closed properly), and 2 when the bag cannot be written (disk
-    full: the frames written so far are kept).
-    """
-    import signal
-    import sys
-    import time
-
-    import yaml
-
-    from adcs_nodes.tools.launcher import EXIT_DEGRADED, RunResult
-    out = out or sys.stderr
-    loop = FrameLoop.from_scenario(sc, duration_s)
-    duration = loop.duration_ns / 1e9
-    sink = None
-    if record:
-        if os.path.exists(record):
-            raise EngineError(f'the bag {record} exists already (give a new directory)')
-        sink = BagSink(record, topics=(sc.get('record') or {}).get('topics') or ()).bind(loop)
-        effective = {k: v for k, v in sc.items() if not k.startswith('_')}
-        effective['duration_s'] = duration
-        with open(os.path.join(record, 'scenario.yaml'), 'w') as fh:
-            fh.write(f'# effective scenario of this bag (from {sc.get("_path", "?")})\n')
-            yaml.safe_dump(effective, fh, sort_keys=False)
-    stop = []
-    old = signal.signal(signal.SIGINT, lambda *_: stop.append(True))
-    t0, cpu0, last = time.monotonic(), time.process_time(), 0.0
-    code, message = 0, 'done'
-    try:
-        for frame in loop.run():
-            if sink is not None:
-                try:
-                    sink.write(frame)
-                except OSError as exc:
-                    code, message = 2, f'the bag could not be written: {exc.strerror or exc}'
-                    break
-            now = time.monotonic()
-            if progress and now - last > 0.5:
-                last = now
-                print(f'\r[adcs] plain: {frame.t_ns / 1e9:9.0f} / {duration:g} s sim',
-                      end='', file=out, flush=True)
-            if stop:
-                code, message = 130, 'interrupted (Ctrl-C): the bag keeps every frame run'
-                break
-    finally:
-        signal.signal(signal.SIGINT, old)
-        if sink is not None:
-            try:
-                sink.close()
-            except OSError as exc:
-                code, message = 2, f'the bag could not be closed: {exc.strerror or exc}'
-    if progress:
-        print('', file=out)
-    wall = time.monotonic() - t0
-    manager = getattr(loop, 'manager', None)
-    st = manager.core.status() if manager is not None else {}
-    from sim_node.faults import lost_text
-    why = ['lost ' + ', '.join(lost)] if (lost := lost_text(sc.get('faults') or [],
-                                                            loop.t_ns / 1e9)) else []
-    if st.get('missed_frames', 0) > 0:
-        why.append(f'the controller manager could not forward the active controller in '
-                   f'{st["missed_frames"]} frames (last fault: {st.get("last_fault") or "?"})')
-    if code == 0 and why:         # (the launcher's words for a degraded graph run)
-        code, message = EXIT_DEGRADED, 'done, DEGRADED: ' + '; '.join(why)
-    message += f' (plain engine: {time.process_time() - cpu0:.2f} s CPU)'
-    return RunResult(code, loop.t_ns / 1e9 if not loop.done else duration, wall, loop.k,
-                     0, record, '', message, loop.k / wall if wall > 0 else 0.0)
-
-
-# ---------------------------------------------------------------------- series and Monte Carlo
-def run_series(loop: FrameLoop) -> Dict[str, Any]:
-    """Run ``loop`` to the end and return the per-frame series a study or a Monte Carlo run
-    needs (numpy arrays, one row per frame).
-
-    ``t_s`` [s]; ``q_orbit_body`` (n, 4) truth; ``w_eci``, ``w_orbit`` (n, 3) true
-    ``omega_body_eci_body``, ``omega_body_orbit_body`` [rad/s]; ``q_est`` (n, 4) and
-    ``w_est`` (n, 3) the latest estimate (NaN before the first); ``angle_deg`` truth angle
-    body to orbit frame; ``est_err_deg``, ``rate_err_deg_s`` estimate errors; ``active``
-    the controller whose command was forwarded (``source`` of ``adcs/actuator_command``);
-    ``period_s`` the orbital period at the end.
-
-    ``q_orbit_target`` (n, 4): the guidance target the run published (``q_ref_body`` of the
-    latest ``adcs/attitude_target``, held between guidance frames; NaN before the first, and
-    throughout a run without guidance) in the orbit frame: a target in the ECI frame
-    (``header.frame_id`` ``'eci'``) is converted with the frame's truth,
-    ``q_orbit_target = q_orbit_body (x) q_eci_body^* (x) q_eci_target``. ``target_judged``
-    (n,) bool: False while that target is a paper 001 maneuver's end state (``profile``
-    ``'maneuver'``; the capture test leaves those samples out,
-    :mod:`adcs_nodes.tools.montecarlo.capture`), else True.
-    """
-    import math
-
-    import numpy as np
-
-    from adcs_nodes.core import attitude
-    from adcs_nodes.nodes.convert import quat, vec3
-    from adcs_nodes.tools import metrics
-    rows: Dict[str, List[Any]] = {k: [] for k in ('t_s', 'q_orbit_body', 'w_eci', 'w_orbit',
-                                                  'q_est', 'w_est', 'active', 'q_orbit_target',
-                                                  'target_judged')}
-    q_est, w_est = np.full(4, np.nan), np.full(3, np.nan)
-    q_target, eci, judged = np.full(4, np.nan), False, True    # the latest target
-    active, rate = 'zero', 0.0
-    for frame in loop.run():
-        state = None
-        for topic, msg in frame.outputs:
-            if topic == 'sim/state':
-                state = msg
-            elif topic == 'adcs/attitude_estimate':
-                q_est, w_est = quat(msg.q_orbit_body), vec3(msg.omega_body_eci_body)
-            elif topic == 'adcs/actuator_command':
-                active = msg.source
-            elif topic == 'sim/environment':
-                rate = float(msg.orbit_rate)
-            elif topic == 'adcs/attitude_target':
-                q_target, eci = quat(msg.q_ref_body), msg.header.frame_id == 'eci'
-                judged = msg.profile != 'maneuver'
-        q_body = quat(state.q_orbit_body)
-        rows['t_s'].append(frame.t_ns / 1e9)
-        rows['q_orbit_body'].append(q_body)
-        rows['w_eci'].append(vec3(state.omega_body_eci_body))
-        rows['w_orbit'].append(vec3(state.omega_body_orbit_body))
-        rows['q_est'].append(q_est)
-        rows['w_est'].append(w_est)
-        rows['active'].append(active)
-        rows['q_orbit_target'].append(attitude.multiply(attitude.multiply(
-            q_body, attitude.conjugate(quat(state.q_eci_body))), q_target) if eci else q_target)
-        rows['target_judged'].append(judged)
-    out = {k: np.asarray(v) for k, v in rows.items()}
-    out['angle_deg'] = metrics.angle_to_identity_deg(out['q_orbit_body'])
-    out['est_err_deg'] = metrics.angle_between_deg(out['q_est'], out['q_orbit_body'])
-    out['rate_err_deg_s'] = np.degrees(np.linalg.norm(out['w_est'] - out['w_eci'], axis=1))
-    out['period_s'] = 2.0 * math.pi / rate if rate > 0 else float('nan')
-    return out
-
-
-def mc_worker(run_dir: str) -> int:
-    """One Monte Carlo run on the plain engine (``adcs montecarlo``, any scenario).
-
-    Reads ``job.json`` and ``scenario.yaml`` of the prepared run directory, runs the
-    FrameLoop, writes ``series.npz`` (per-frame truth, estimate error and the guidance target
-    the run published, :func:`run_series`) and ``result.json`` with
-    :func:`adcs_nodes.tools.montecarlo.results.series_metrics` (the same result as a graph
-    run): capture judged against the recorded target, or the orbit frame, as the scenario's
-    ``capture_reference`` says (:mod:`adcs_nodes.tools.montecarlo.capture`); or
-    ``failed.json``. Exit code 130 on SIGINT (nothing written).
-    """
-    import json
-    import time
-
-    import numpy as np
-
-    from adcs_nodes.tools import metrics
-    from adcs_nodes.tools.montecarlo.capture import ORBIT_FRAME, capture_reference
-    from adcs_nodes.tools.montecarlo.files import RESULT_FILE, SERIES_FILE, write_json_atomic
-    from adcs_nodes.tools.montecarlo.results import angle_to_target_deg, series_metrics
-    from adcs_nodes.tools.montecarlo.runner import fail, result_head
-    from adcs_nodes.tools.scenario import ScenarioError, load_scenario
-
-    t0 = time.monotonic()
-    with open(os.path.join(run_dir, 'job.json'), encoding='utf-8') as fh:
-        job = json.load(fh)
-    try:
-        sc = load_scenario(os.path.join(run_dir, 'scenario.yaml'))
-        reference = capture_reference(sc)
-        s = run_series(FrameLoop.from_scenario(sc, job['duration_s']))
-    except KeyboardInterrupt:
-        return 130
-    except (ScenarioError, ValueError) as exc:
-        return fail(run_dir, job, 2, str(exc), time.monotonic() - t0)
-    tmp = os.path.join(run_dir, 'series.tmp.npz')
-    np.savez_compressed(tmp, **{k: s[k] for k in ('t_s', 'q_orbit_body', 'angle_deg',
-                                                  'est_err_deg', 'rate_err_deg_s', 'w_eci',
-                                                  'w_orbit', 'q_orbit_target',
-                                                  'target_judged')})
-    os.replace(tmp, os.path.join(run_dir, SERIES_FILE))
-    angle = judged = None                 # the orbit frame
-    if reference != ORBIT_FRAME:          # the target the run published
-        angle = angle_to_target_deg(s['q_orbit_body'], s['q_orbit_target'])
-        judged = s['target_judged']
-    m = series_metrics(s['t_s'], s['q_orbit_body'], s['w_eci'], s['w_orbit'],
-                       job['capture_deg'], job.get('period_s') or s['period_s'],
-                       angle_deg=angle, judged=judged)
-    est = metrics.hold_stats(s['t_s'], s['est_err_deg'], 0.5 * s['period_s'])
-    result = {**result_head(job), **m, 'capture_reference': reference, 'engine': 'plain',
-              'bag': None,
-              'est_err_median_deg': est.median if est.samples else None,
-              'sim_time_s': float(s['t_s'][-1]), 'wall_time_s': time.monotonic() - t0,
-              'frames': int(s['t_s'].size), 'missed_frames': 0, 'compose': False,
-              'message': 'plain engine (sim_node.engine.FrameLoop)'}
-    write_json_atomic(os.path.join(run_dir, RESULT_FILE), result)
-    return 0
-
-
-def one_blas_thread() -> None:
-    """One BLAS/OpenMP thread in this process and its children (tiny LAPACK calls: extra
-    threads cost CPU, same bits; DESIGN section 6)."""
-    for key in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
-        os.environ[key] = '1'
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - pinned in ros2_ws/requirements.txt
-        return
-    threadpool_limits(limits=1)
-
-
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m sim_node.engine _mc_worker RUN_DIR`` (the Monte Carlo's plain worker)."""
-    import sys
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ['_mc_worker'] and len(argv) == 2:
-        return mc_worker(argv[1])
-    print('usage: python -m sim_node.engine _mc_worker RUN_DIR (adcs run --engine plain runs '
-          'a scenario)', file=sys.stderr)
-    return 2
-
-
-if __name__ == '__main__':
-    import signal
-    # a Monte Carlo run started under ``--dask-local`` inherits an ignored SIGINT: the
-    # supervisor's SIGINT must stop it
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    one_blas_thread()
-    raise SystemExit(main())

@@ -106,21 +106,6 @@ KILLED_PARAM = 'killed_at_s'
 UNKILLABLE = ('dynamics', 'environment', 'recorder')
 
 
-def node_targets(sc: Dict[str, Any]) -> List[str]:
-    """The names of the nodes of scenario ``sc`` (validated or raw) a ``node_killed``
-    fault may strike: its simulated sensors, the estimator, guidance, each controller
-    (``<name>_controller``) and the controller manager."""
-    out = [k for k, cfg in (sc.get('sensors') or {}).items()
-           if not (isinstance(cfg, dict) and cfg.get('external'))]
-    if sc.get('estimator'):
-        out.append('estimator')
-    ctrl = sc.get('controllers')
-    if isinstance(ctrl, dict):
-        out += ['guidance'] + [f'{k}_controller' for k in ctrl if k != 'period_s']
-        out.append('controller_manager')
-    return out
-
-
 def node_kills(faults: Sequence[Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
     """``{node name: fault}`` of a scenario's validated ``node_killed`` faults (the earliest
     one per node)."""

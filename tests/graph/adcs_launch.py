@@ -13,7 +13,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 SCENARIOS = os.path.join(ROOT, 'scenarios')
 pytest.importorskip('rclpy')
 
-from adcs_nodes.tools.launcher import RUNS_DIR  # noqa: E402
+from adcs_nodes.tools.run.launcher import RUNS_DIR  # noqa: E402
 
 #: The launcher's runs directory (active-run manifests, run directories): ``$ADCS_RUNS_DIR``,
 #: which tests/conftest.py sets to a temporary directory of the test run.
@@ -63,8 +63,8 @@ def data_digest(bag):
 def plain_run(scenario_path, duration_s, bag):
     """The plain engine's run of a scenario file with its bag, in this process (what
     ``adcs run --engine plain`` calls, without an interpreter start); the RunResult."""
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.engine import run_plain
+    from adcs_nodes.scenario import load_scenario
+    from adcs_nodes.tools.run.plain import run_plain
     return run_plain(load_scenario(str(scenario_path)), float(duration_s), str(bag),
                      progress=False)
 

@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from sim_node.tools.bench import (Row, Sample, delivery_pattern, format_table, hop_pattern,
-                                  verdict)
+from perf.bench import (Row, Sample, delivery_pattern, format_table, hop_pattern,
+                        verdict)
 
 pytestmark = pytest.mark.parallel
 
@@ -42,8 +42,8 @@ def test_delivery_pattern_of_paper000_at_1s_frames():
     # environment to dynamics and the magnetometer, sim/state to the magnetometer (10 a frame);
     # command frames add the estimate (3 readers), the target, two commands, the applied
     # command (3 readers): 19; the magnetometer's sample adds 3: 22
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.tools.bench import bench_scenario
+    from adcs_nodes.scenario import load_scenario
+    from perf.bench import bench_scenario
     sc = bench_scenario(load_scenario(os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')))
     assert delivery_pattern(sc, 1.0) == [22, 10, 19, 10, 19, 10, 19, 10, 19, 10]
 
@@ -55,7 +55,7 @@ def test_bench_runs_at_tiny_size(tmp_path):
         [os.path.join(ROOT, 'adcs_nodes'), os.path.join(ROOT, 'sim_node'),
          os.environ.get('PYTHONPATH', '')]))
     # row (3) is row (3i)'s code with the in-process path off: left out (two launches less)
-    proc = subprocess.run([sys.executable, '-m', 'sim_node.tools.bench', '--frames', '25',
+    proc = subprocess.run([sys.executable, '-m', 'perf.bench', '--frames', '25',
                            '--repeats', '1', '--basilisk', 'skip', '--rows', '1,2,3i,4,5,6',
                            '--out', str(out)],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)

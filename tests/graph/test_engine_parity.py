@@ -5,7 +5,7 @@ nodes in one process) and as a graph (one process per node), to the last bit on 
 Each run is short: two periods of the slowest component of the scenario (every sensor,
 estimator, controller and the manager fire at least twice; the estimator's
 previous-frame command is used). The plain bags are written in this process
-(:func:`sim_node.engine.run_plain`, what ``adcs run --engine plain`` calls), one of them
+(:func:`adcs_nodes.tools.run.plain.run_plain`, what ``adcs run --engine plain`` calls), one of them
 (:data:`PLAIN_CLI`) through the command itself; the bags are compared with
 :func:`adcs_nodes.bag.content_digest` (per topic: count and a hash of every message's
 values in stamp order).
@@ -33,8 +33,8 @@ GRAPH = ('paper000_control.yaml', 'paper001_mpi.yaml',
          pytest.param('paper003_slew.yaml', marks=pytest.mark.long),
          pytest.param('paper004_yaw.yaml', marks=pytest.mark.long))
 #: The scenario whose plain bag comes from ``adcs run --engine plain`` (a process, the command
-#: line); the others' from :func:`sim_node.engine.run_plain` in this process (the same code
-#: under the command, without an interpreter start each).
+#: line); the others' from :func:`adcs_nodes.tools.run.plain.run_plain` in this process (the same
+#: code under the command, without an interpreter start each).
 PLAIN_CLI = 'paper000_control.yaml'
 #: Composed runs paced with ``--rate`` (at most F x real time): the pace changes the wall time
 #: of the frames, never a number (paper001_mpi: 0.2 s frames, 50 ms of wall time each).
@@ -56,7 +56,7 @@ def short_duration(path):
 @pytest.fixture(scope='module')
 def plain_bags(tmp_path_factory):
     """Each shipped scenario's plain-engine bag: :data:`PLAIN_CLI`'s by the real command (a
-    subprocess), the others' by :func:`sim_node.engine.run_plain` in this process."""
+    subprocess), the others' by :func:`adcs_nodes.tools.run.plain.run_plain` in this process."""
     out = {}
     root = tmp_path_factory.mktemp('plain')
     for name in SHIPPED:

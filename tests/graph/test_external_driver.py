@@ -14,7 +14,7 @@ environment the launcher prints.
   per node, beside two CPU burners) and reliable (composed).
 
 The estimate is judged against the recorded truth interpolated at its stamp
-(:func:`adcs_nodes.tools.metrics.estimate_errors_deg`). Waits are deadlines, never sleeps.
+(:func:`adcs_nodes.tools.analyse.metrics.estimate_errors_deg`). Waits are deadlines, never sleeps.
 """
 import multiprocessing
 import os
@@ -32,7 +32,7 @@ import yaml
 
 from adcs_launch import ROOT, RUNS, SCENARIOS, adcs
 from adcs_nodes.bag import header_stamp_ns, read_messages
-from adcs_nodes.tools.metrics import estimate_errors_deg
+from adcs_nodes.tools.analyse.metrics import estimate_errors_deg
 
 DRIVER = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'mag_driver.py')
 TOPIC = '/sensors/magnetometer'

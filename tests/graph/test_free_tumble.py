@@ -86,7 +86,7 @@ def _probe_clock(domain):
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
-    from adcs_nodes.tools.launcher import DDS_ENV_KEYS, child_env, use_dds_env
+    from adcs_nodes.tools.run.launcher import DDS_ENV_KEYS, child_env, use_dds_env
     saved = {k: os.environ.get(k) for k in DDS_ENV_KEYS}
     use_dds_env(child_env(domain))                         # as the launched nodes
     try:

@@ -16,7 +16,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from adcs_nodes.tools.launcher import Launcher
+from adcs_nodes.tools.run.launcher import Launcher
 
 pytestmark = pytest.mark.parallel
 

@@ -1,7 +1,7 @@
 """``adcs montecarlo`` as a command: parallel run processes, every dispersion reaching its run,
 resume, refusal, a Dask scheduler, Ctrl-C.
 
-Campaigns go through the real command (``python -m adcs_nodes.tools.montecarlo``, the same
+Campaigns go through the real command (``python -m adcs_nodes.tools.campaigns``, the same
 code as ``adcs montecarlo``) on ``paper000_control`` shortened to 60 s (30 frames). In ``make
 test`` the runs are on the plain engine: each run is a process running the FrameLoop, its
 data the per-frame series (``series.npz``) instead of a bag; the checks read every run's
@@ -27,7 +27,7 @@ import yaml
 
 from adcs_launch import ROOT, SCENARIOS
 
-from adcs_nodes.tools import montecarlo as mc
+from adcs_nodes.tools import campaigns as mc
 from adcs_nodes.bag import read_messages
 
 pytestmark = pytest.mark.parallel
@@ -46,7 +46,7 @@ def campaign_cmd(out, *args, duration=DURATION, engine='plain'):
     (the default ``auto``: plain for this scenario, or a resumed campaign's engine)."""
     if engine is not None and '--engine' not in args:
         args = (*args, '--engine', engine)
-    return [sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
+    return [sys.executable, '-m', 'adcs_nodes.tools.campaigns', SCENARIO,
             '--duration', f'{duration:g}', '--out', str(out), *SENSOR_DISPERSION, *args]
 
 
@@ -243,7 +243,7 @@ def test_restart_with_other_arguments_is_refused(three_runs, capsys):
     """Refused before anything runs: the command's own function, in this process (the
     ``python -m`` entry point is ``raise SystemExit(main())``; a new interpreter per refusal
     cost seconds each)."""
-    from adcs_nodes.tools.montecarlo.cli import main
+    from adcs_nodes.tools.campaigns.cli import main
     out, _ = three_runs
     with open(out / 'campaign.json', 'rb') as fh:
         identity = fh.read()

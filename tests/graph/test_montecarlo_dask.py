@@ -14,8 +14,8 @@ import time
 
 import pytest
 
-from adcs_nodes.tools import montecarlo as mc
-from adcs_nodes.tools.montecarlo import runner
+from adcs_nodes.tools import campaigns as mc
+from adcs_nodes.tools.campaigns import runner
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENARIO = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
@@ -72,7 +72,7 @@ def test_bad_local_cluster_size_is_refused():
 
 def campaign(out, *args, timeout=180):
     """Run the command to its end; returns ``(exit code, stdout, stderr, pid)``."""
-    with subprocess.Popen([sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
+    with subprocess.Popen([sys.executable, '-m', 'adcs_nodes.tools.campaigns', SCENARIO,
                            '--duration', '20', '--engine', 'plain', '--out', str(out), *args],
                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                           text=True) as proc:
@@ -124,7 +124,7 @@ def test_plain_run_process_loads_the_compiled_kernels_from_the_cache(tmp_path):
     on-disk cache (``NUMBA_DEBUG_CACHE``), none saved (a save follows a compilation)."""
     env = {**os.environ, 'NUMBA_DEBUG_CACHE': '1'}
     for name in ('first', 'second'):      # the first one may fill a stale cache
-        proc = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
+        proc = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.campaigns', SCENARIO,
                                '--duration', '2', '--engine', 'plain', '--runs', '1',
                                '--out', str(tmp_path / name)], cwd=ROOT, env=env,
                               capture_output=True, text=True, timeout=120)
@@ -152,7 +152,7 @@ def test_ctrl_c_on_a_dask_local_campaign_stops_runs_and_cluster(tmp_path):
     through the stop file, the cluster's workers do not die under the runs."""
     pytest.importorskip('distributed')
     out = tmp_path / 'ctrlc'
-    proc = subprocess.Popen([sys.executable, '-m', 'adcs_nodes.tools.montecarlo', SCENARIO,
+    proc = subprocess.Popen([sys.executable, '-m', 'adcs_nodes.tools.campaigns', SCENARIO,
                              '--engine', 'plain', '--runs', '4', '--jobs', '2', '--dask-local',
                              '--out', str(out)], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, start_new_session=True,

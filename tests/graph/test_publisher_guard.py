@@ -57,8 +57,8 @@ def clean(scenario, tmp_path_factory):
     """The run without the forger, on the plain engine (in this process, 1-2 s instead of a
     20-25 s launched run): its data topics are bit for bit a launched run's
     (``test_engine_parity``)."""
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.engine import run_plain
+    from adcs_nodes.scenario import load_scenario
+    from adcs_nodes.tools.run.plain import run_plain
     bag = str(tmp_path_factory.mktemp('guard') / 'clean')
     res = run_plain(load_scenario(scenario), float(DURATION), bag, progress=False)
     assert res.exit_code == 0, res.message
@@ -124,10 +124,12 @@ def _last_diagnostics(bag, node):
                          ids=['process_per_node', 'composed_same_name'])
 def test_forged_commands_are_dropped_counted_and_recorded(scenario, clean, tmp_path, compose,
                                                           name):
-    from adcs_nodes.tools.launcher import child_env
+    from adcs_nodes.tools.run.launcher import child_env
     bag = str(tmp_path / 'forged')
+    # paced (the same series): unpaced, the composed run ended within 5 s of wall time,
+    # sometimes before the forger had matched its readers (ticks 0)
     proc = start_adcs('run', scenario, '--record', bag, '--duration', DURATION, '--quiet',
-                      *(['--compose'] if compose else []))
+                      '--rate', '300', *(['--compose'] if compose else []))
     forger = None
     try:
         manifest = wait_manifest(proc, timeout=60.0)

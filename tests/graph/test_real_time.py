@@ -14,7 +14,7 @@ at rate 1, one process per node, beside a soak (load about 8): settled in 29.2 s
 26.8 s, exit 0; at rate 20 composed (near idle) 29.3 s, with 0-2 frames now and then
 degraded (a command or a sample after its 5 ms frame: exit 3). One process per node keeps
 about 3.7 x real time there, not 20 x. The estimate is judged against the truth interpolated
-at its stamp (:func:`adcs_nodes.tools.metrics.estimate_errors_deg`).
+at its stamp (:func:`adcs_nodes.tools.analyse.metrics.estimate_errors_deg`).
 """
 import os
 import re
@@ -24,8 +24,8 @@ import pytest
 
 from adcs_launch import SCENARIOS, adcs
 from adcs_nodes.bag import header_stamp_ns, read_messages
-from adcs_nodes.tools.metrics import estimate_errors_deg
-from adcs_nodes.tools.papers import rows_for_bag
+from adcs_nodes.tools.analyse.metrics import estimate_errors_deg
+from adcs_nodes.tools.analyse.papers import rows_for_bag
 
 pytestmark = pytest.mark.long
 

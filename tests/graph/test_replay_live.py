@@ -25,9 +25,9 @@ from adcs_msgs.msg import AttitudeState  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 
 from adcs_nodes.bag import header_stamp_ns, read_messages  # noqa: E402
-from adcs_nodes.tools.graph import build_graph, params_file_text  # noqa: E402
-from adcs_nodes.tools.launcher import child_env, use_dds_env  # noqa: E402
-from adcs_nodes.tools.scenario import load_scenario  # noqa: E402
+from adcs_nodes.graph import build_graph, params_file_text  # noqa: E402
+from adcs_nodes.tools.run.launcher import child_env, use_dds_env  # noqa: E402
+from adcs_nodes.scenario import load_scenario  # noqa: E402
 from domains import worker_domain  # noqa: E402
 
 SCENARIO = os.path.join(SCENARIOS, 'paper000_estimation.yaml')

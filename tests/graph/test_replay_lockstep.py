@@ -28,7 +28,7 @@ from adcs_msgs.msg import AttitudeState  # noqa: E402
 
 from adcs_nodes.tools import replay  # noqa: E402
 from adcs_nodes.bag import open_bag, read_messages  # noqa: E402
-from adcs_nodes.tools.launcher import child_env, use_dds_env  # noqa: E402
+from adcs_nodes.tools.run.launcher import child_env, use_dds_env  # noqa: E402
 from domains import worker_domain  # noqa: E402
 
 SCENARIO = os.path.join(SCENARIOS, 'paper000_control.yaml')

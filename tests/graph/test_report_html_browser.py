@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 import yaml
 
-from adcs_nodes.tools.report_html import KNOWN_COLOURS, write_report_html
-from adcs_nodes.tools.scenario import load_scenario
-from sim_node.engine import run_plain
+from adcs_nodes.tools.analyse.report_html import KNOWN_COLOURS, write_report_html
+from adcs_nodes.scenario import load_scenario
+from adcs_nodes.tools.run.plain import run_plain
 
 pytestmark = pytest.mark.parallel
 

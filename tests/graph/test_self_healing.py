@@ -17,8 +17,8 @@ NOWHERE = '-r /clock:=/adcs_test/nowhere'
 
 
 def _run(monkeypatch, node_args, **kw):
-    from adcs_nodes.tools import launcher
-    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.tools.run import launcher
+    from adcs_nodes.scenario import load_scenario
     monkeypatch.setattr(launcher, 'HEAL_WAIT_S', 10.0)    # the first 'still waiting' line
     monkeypatch.setenv(launcher.TEST_NODE_ARGS_ENV, node_args)
     lines = []

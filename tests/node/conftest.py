@@ -7,7 +7,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 
 from domains import worker_domain  # noqa: E402
-from adcs_nodes.tools.launcher import child_env, use_dds_env  # noqa: E402
+from adcs_nodes.tools.run.launcher import child_env, use_dds_env  # noqa: E402
 
 #: One domain per test (150-199, outside the launcher's run domains): a participant of an
 #: earlier test that DDS still lists (its lease not expired) is not discovered by the next.

@@ -18,7 +18,7 @@ pytest.importorskip('threadpoolctl')
 pytest.importorskip('rclpy')
 
 from domains import worker_domain  # noqa: E402
-from adcs_nodes.tools.launcher import child_env  # noqa: E402
+from adcs_nodes.tools.run.launcher import child_env  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'BLIS_NUM_THREADS',
@@ -28,7 +28,7 @@ THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'BLI
 WRAPPER = r'''
 import json, runpy, sys
 from adcs_nodes.nodes import runtime
-import adcs_nodes.tools.compose as compose
+import adcs_nodes.tools.run.compose as compose
 
 def report(nodes, *args, **kwargs):
     import scipy.linalg  # noqa: F401  (loaded after the node start: must get one thread too)
@@ -52,9 +52,9 @@ def _env(domain: int) -> dict:
 
 
 def _commands(tmp_path):
-    from adcs_nodes.tools.launcher import Launcher
-    from adcs_nodes.tools.graph import params_file_text
-    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.tools.run.launcher import Launcher
+    from adcs_nodes.graph import params_file_text
+    from adcs_nodes.scenario import load_scenario
 
     sc = load_scenario(os.path.join(ROOT, 'scenarios', 'paper000_control.yaml'))
     cmds = {}

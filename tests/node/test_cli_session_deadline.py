@@ -7,7 +7,7 @@ import time
 
 CHILD = r'''
 import threading, time
-from adcs_nodes.tools import live
+from adcs_nodes.tools.run import live
 live.SESSION_DEADLINE_S = 1.0
 print(f'SESSION {time.monotonic()!r}', flush=True)   # the deadline runs from here
 session = live._Session({'domain': 229})

@@ -16,7 +16,7 @@ import pytest
 pytest.importorskip('rclpy')
 
 from domains import worker_domain  # noqa: E402
-from adcs_nodes.tools.launcher import child_env  # noqa: E402
+from adcs_nodes.tools.run.launcher import child_env  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -24,9 +24,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 def _compose_cmd(tmp_path):
     import copy
 
-    from adcs_nodes.tools.graph import params_file_text
-    from adcs_nodes.tools.launcher import Launcher
-    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.graph import params_file_text
+    from adcs_nodes.tools.run.launcher import Launcher
+    from adcs_nodes.scenario import load_scenario
 
     sc = copy.deepcopy(load_scenario(os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')))
     sc['timing']['frame_s'], sc['timing']['substeps'] = 1.0, 10
@@ -61,7 +61,7 @@ def test_inproc_path_gives_the_same_final_state(tmp_path):
 
 
 def test_inproc_is_the_default_and_dds_turns_it_off(monkeypatch):
-    from adcs_nodes.tools.compose import inproc_enabled
+    from adcs_nodes.tools.run.compose import inproc_enabled
 
     monkeypatch.delenv('ADCS_COMPOSE_INPROC', raising=False)
     assert inproc_enabled(False) and inproc_enabled(True)

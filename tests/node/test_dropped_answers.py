@@ -52,7 +52,7 @@ def test_adcs_switch_call_survives_a_dropped_answer(ros_context):
     import os
 
     from adcs_msgs.srv import SwitchController
-    from adcs_nodes.tools.live import _Session
+    from adcs_nodes.tools.run.live import _Session
     server = rclpy.create_node('controller_manager', context=ros_context)
     requests, dropped = [], []
 
@@ -100,7 +100,7 @@ def test_adcs_slew_survives_dropped_goal_and_result_answers(ros_context, monkeyp
     """The client never hears the first goal answer and/or the first result answer: it sends
     the same goal id again (the server refuses the duplicate, so one slew runs) and asks for
     the result again; the call succeeds."""
-    from adcs_nodes.tools.slew import make_goal, run_goal
+    from adcs_nodes.tools.run.slew import make_goal, run_goal
     dropped = []
     execute = ActionClient.execute
 
@@ -134,7 +134,7 @@ def test_adcs_slew_survives_dropped_goal_and_result_answers(ros_context, monkeyp
 def test_a_refused_goal_is_still_refused(ros_context):
     from rclpy.action import GoalResponse
 
-    from adcs_nodes.tools.slew import make_goal, run_goal
+    from adcs_nodes.tools.run.slew import make_goal, run_goal
     server_node = rclpy.create_node('guidance', context=ros_context)
     server = ActionServer(server_node, Slew, 'adcs/slew', lambda h: Slew.Result(),
                           goal_callback=lambda g: GoalResponse.REJECT)
@@ -160,7 +160,7 @@ def test_launcher_lifecycle_driver_survives_a_dropped_answer(ros_context):
     from lifecycle_msgs.msg import State, Transition
     from lifecycle_msgs.srv import ChangeState, GetState
 
-    from adcs_nodes.tools.launcher import _Transitions
+    from adcs_nodes.tools.run.launcher import _Transitions
     node = rclpy.create_node('estimator', context=ros_context)
     state = {'id': State.PRIMARY_STATE_UNCONFIGURED}
     done, dropped = [], []

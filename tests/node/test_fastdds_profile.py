@@ -17,7 +17,7 @@ import pytest
 pytest.importorskip('rclpy')
 
 from domains import worker_domain  # noqa: E402
-from adcs_nodes.tools.launcher import FASTDDS_PROFILES, child_env, profile_env  # noqa: E402
+from adcs_nodes.tools.run.launcher import FASTDDS_PROFILES, child_env, profile_env  # noqa: E402
 
 PROFILE_BUFFER_B = 4 * 1024 * 1024
 

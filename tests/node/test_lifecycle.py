@@ -182,9 +182,9 @@ def test_inactive_guidance_is_not_ready_and_publishes_nothing(ros_context, spin)
 
 
 def test_the_graph_lists_the_managed_classes():
-    from adcs_nodes.tools.graph import build_graph
-    from adcs_nodes.tools.launch_graph import MANAGED_CLASSES, is_managed
-    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.graph import build_graph
+    from adcs_nodes.tools.run.launch_graph import MANAGED_CLASSES, is_managed
+    from adcs_nodes.scenario import load_scenario
 
     import importlib
     sc = load_scenario(os.path.join(ROOT, 'scenarios', 'paper000_control.yaml'))
@@ -196,7 +196,7 @@ def test_the_graph_lists_the_managed_classes():
 
 
 def test_composed_runner_drives_the_transitions_and_reports_a_refusal(ros_context):
-    from adcs_nodes.tools.compose import drive_lifecycle
+    from adcs_nodes.tools.run.compose import drive_lifecycle
 
     good = ControllerNode(controller='bdot', context=ros_context, parameter_overrides=[
         Parameter('autostart', value=False)])
@@ -235,8 +235,8 @@ def test_recorder_records_the_transition_events(ros_context, spin, tmp_path):
 def test_launcher_reports_a_node_refusing_configure(tmp_path):
     """``adcs run``: a managed node whose configure fails stops the run with exit code 2 and
     the node's reason (the launcher drives the transitions through the services)."""
-    from adcs_nodes.tools.launcher import Launcher
-    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.tools.run.launcher import Launcher
+    from adcs_nodes.scenario import load_scenario
 
     sc = load_scenario(os.path.join(ROOT, 'scenarios', 'paper000_control.yaml'))
     launcher = Launcher(sc, duration_s=20.0, progress=False, run_dir=str(tmp_path / 'run'),

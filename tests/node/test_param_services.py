@@ -391,7 +391,7 @@ def _undocumented(desc):
 def _graph_overrides(scenario, tmp_path):
     """``{node name: [Parameter]}`` of a scenario's graph, as the launcher passes them."""
     import os
-    from adcs_nodes.tools.launch_graph import launch_graph
+    from adcs_nodes.tools.run.launch_graph import launch_graph
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     nodes, text = launch_graph(os.path.join(root, 'scenarios', scenario), 10.0,
                                str(tmp_path / 'bag'))

@@ -41,7 +41,7 @@ LATCHED = ControllerStatus
 @pytest.fixture(scope='module')
 def context():
     """Isolated rclpy context on a per-process domain, localhost discovery only."""
-    from adcs_nodes.tools.launcher import DDS_ENV_KEYS, child_env, use_dds_env
+    from adcs_nodes.tools.run.launcher import DDS_ENV_KEYS, child_env, use_dds_env
     saved = {k: os.environ.get(k) for k in DDS_ENV_KEYS}
     use_dds_env(child_env(worker_domain(200, 15)))   # its own range: no other test
     ctx = rclpy.Context()

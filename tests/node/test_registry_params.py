@@ -11,7 +11,7 @@ from rclpy.parameter import Parameter
 from adcs_nodes import registry
 from adcs_nodes.nodes.controller import ControllerNode
 from adcs_nodes.nodes.estimator import EstimatorNode
-from adcs_nodes.tools.scenario import schema, schema_markdown
+from adcs_nodes.scenario import schema, schema_markdown
 
 
 def _describe(node):

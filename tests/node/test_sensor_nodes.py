@@ -20,7 +20,7 @@ from adcs_msgs.msg import AttitudeState, Environment, HorizonSensor
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import derive_seed
 from domains import worker_domain
-from adcs_nodes.tools.launcher import child_env
+from adcs_nodes.tools.run.launcher import child_env
 from adcs_nodes.nodes.convert import quat, stamp_ns, to_quat, to_stamp, to_vec3, vec3
 from sim_node.models.sensors import StarTracker
 from sim_node.nodes.gyro import GyroNode

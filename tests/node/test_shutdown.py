@@ -20,8 +20,8 @@ import time
 import pytest
 
 from domains import worker_domain
-from adcs_nodes.tools.launch_graph import launch_graph
-from adcs_nodes.tools.launcher import child_env
+from adcs_nodes.tools.run.launch_graph import launch_graph
+from adcs_nodes.tools.run.launcher import child_env
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 #: What a node may take from SIGINT to its exit.

@@ -1,9 +1,10 @@
 """Paper 003's study on the FrameLoop (``make reproduce``; marker ``slow``): both readings of
 Table 1, the smooth set, no compensation and the reference slew, from
-``scenarios/paper003_slew.yaml`` with overrides (``python -m adcs_nodes.tools.study table1``).
+``scenarios/paper003_slew.yaml`` with overrides (``python -m adcs_nodes.tools.analyse.study
+table1``).
 
 Tolerances (relative to the paper's values), fixed before any tuning and not changed after:
-settling time 15 %, energy 20 % (:data:`adcs_nodes.tools.papers.paper003.TOLERANCE`). Each
+settling time 15 %, energy 20 % (:data:`adcs_nodes.tools.analyse.papers.paper003.TOLERANCE`). Each
 paper number is its own test. The paper's ratios to its reference slew are not comparable (the
 paper does not describe that controller): the test checks that the row says so and shows the
 ratios against ours. The structural claims (which Table 1 reading settles, the torque limit)
@@ -14,9 +15,9 @@ import os
 
 import pytest
 
-from adcs_nodes.tools.papers import NotComparable, paper003
-from adcs_nodes.tools.scenario import load_scenario
-from adcs_nodes.tools.study import table1
+from adcs_nodes.tools.analyse.papers import NotComparable, paper003
+from adcs_nodes.scenario import load_scenario
+from adcs_nodes.tools.analyse.study import table1
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 _RESULT = {}

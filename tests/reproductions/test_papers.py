@@ -1,19 +1,20 @@
 """Full paper reproductions (``make reproduce``): run each paper scenario through the node graph,
 print its table (the rows ``adcs report`` prints for the same bag:
-:mod:`adcs_nodes.tools.reproductions`), fail on a row that compares with a paper value and
+:mod:`adcs_nodes.tools.analyse.reproductions`), fail on a row that compares with a paper value and
 misses. Information rows and claims the run cannot check ("not comparable", with the reason)
 are printed and never fail. The paper-like figures of papers 001 and 003 go to
 ``out/<scenario>/``. Long: excluded from ``make test``.
 
 Tolerances are the papers' own bounds, stated in each paper module
-(:mod:`adcs_nodes.tools.papers`); paper 003's settling time and energy within 15 % and 20 %,
+(:mod:`adcs_nodes.tools.analyse.papers`); paper 003's settling time and energy within 15 % and 20
+%,
 fixed before any tuning.
 """
 import os
 
 import pytest
 
-from adcs_nodes.tools.reproductions import failed, reproduce
+from adcs_nodes.tools.analyse.reproductions import failed, reproduce
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 pytest.importorskip('rclpy')

@@ -9,7 +9,7 @@ import numpy as np
 import yaml
 
 from adcs_nodes.nodes.convert import stamp_ns
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.scenario import load_scenario
 from sim_node.engine import FrameLoop
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

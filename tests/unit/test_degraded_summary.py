@@ -2,7 +2,7 @@
 for part of the time says so and ends with exit code 3, not "done"."""
 from types import SimpleNamespace
 
-from adcs_nodes.tools.launcher import EXIT_DEGRADED, Launcher, _Monitor
+from adcs_nodes.tools.run.launcher import EXIT_DEGRADED, Launcher, _Monitor
 
 
 def _degraded(lost=(), lost_at=None, status=None):

@@ -19,8 +19,8 @@ from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
 
 from adcs_nodes.bag import (content_digest, make_typestore, read_messages,  # noqa: E402
                             topic_summary)
-from adcs_nodes.tools.export import export_csv, topic_file_name  # noqa: E402
-from adcs_nodes.tools.report import make_report  # noqa: E402
+from adcs_nodes.tools.analyse.export import export_csv, topic_file_name  # noqa: E402
+from adcs_nodes.tools.analyse.report import make_report  # noqa: E402
 
 EPOCH_S = 1_704_067_200  # 2024-01-01T00:00:00Z
 N = 100
@@ -230,7 +230,7 @@ def test_report_metrics_plots_and_summary(bag, tmp_path):
     assert only_info['all_pass'] is None
 
     # a paper claim the run cannot check: printed with its reason, never counted as a pass
-    from adcs_nodes.tools.papers import NotComparable
+    from adcs_nodes.tools.analyse.papers import NotComparable
     nc = make_report(bag, tmp_path / 'report5', expectations=[
         ('final pointing error', '< 60 deg', 59.5, True),
         ('ratio to the reference', '1.5x', '0.66x', NotComparable('reference undescribed'))])
@@ -271,7 +271,7 @@ def test_tools_import_without_rclpy():
     from pathlib import Path
     root = Path(__file__).resolve().parents[2]
     code = ("import sys; sys.modules['rclpy'] = None; sys.path.insert(0, 'adcs_nodes'); "
-            "import adcs_nodes.tools.report, adcs_nodes.tools.export; "
+            "import adcs_nodes.tools.analyse.report, adcs_nodes.tools.analyse.export; "
             "print(len(adcs_nodes.bag.make_typestore().fielddefs))")
     out = subprocess.run([sys.executable, '-c', code], cwd=root, capture_output=True,
                          text=True, timeout=60)

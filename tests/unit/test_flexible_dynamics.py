@@ -215,8 +215,8 @@ def test_config_builds_the_paper001_world():
 
 def test_graph_gives_the_dynamics_node_the_flexible_world():
     import os
-    from adcs_nodes.tools.graph import build_graph, orbital_period_s, topic_type
-    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.graph import build_graph, orbital_period_s, topic_type
+    from adcs_nodes.scenario import load_scenario
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     sc = load_scenario(os.path.join(root, 'scenarios', 'paper001_mpi_two_wings.yaml'))
     nodes = build_graph(sc, 10.0, record=True)

@@ -56,8 +56,8 @@ def test_paper004_yaw_reproduction(tmp_path, reproductions_without_rclpy):
 
     The bag is the plain engine's (``adcs run --engine plain``), read as a recorded one."""
     from adcs_nodes.bag import header_stamp_ns, read_messages
-    from adcs_nodes.tools.reproductions import expectations_for, yaw_errors_paper004
-    from sim_node.engine import run_plain
+    from adcs_nodes.tools.analyse.reproductions import expectations_for, yaw_errors_paper004
+    from adcs_nodes.tools.run.plain import run_plain
     bag = str(tmp_path / 'paper004')
     res = run_plain(validated(tmp_path, raw('paper004_yaw')), None, bag, progress=False)
     assert res.exit_code == 0, res.message

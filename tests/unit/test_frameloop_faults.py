@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from adcs_nodes.nodes.convert import quat, vec3
-from adcs_nodes.tools.scenario import ScenarioError, load_scenario
+from adcs_nodes.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

@@ -16,8 +16,8 @@ import os
 import numpy as np
 import pytest
 
-from adcs_nodes.tools import montecarlo as mc
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.tools import campaigns as mc
+from adcs_nodes.scenario import load_scenario
 from frameloop_run import SCENARIOS, q, run, v
 
 SCENARIO = os.path.join(SCENARIOS, 'paper000_control.yaml')
@@ -70,7 +70,7 @@ def test_dispersions_are_deterministic_bounded_and_uniform_on_so3():
 
 
 def test_apply_dispersion_replaces_the_initial_state_and_sensor_errors():
-    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.scenario import load_scenario
     base = load_scenario(SCENARIO)
     cfg = mc.CampaignConfig(SCENARIO, 'h', runs=1, seed=1, duration_s=DURATION,
                             mag_bias_nT=120.0, misalignment_deg=1.0)
@@ -188,7 +188,7 @@ class _RacingBackend:
 
 
 def test_an_interrupt_keeps_a_finished_run_that_was_not_delivered_yet(tmp_path, monkeypatch):
-    from adcs_nodes.tools.montecarlo import campaign as campaign_mod
+    from adcs_nodes.tools.campaigns import campaign as campaign_mod
     base = load_scenario(SCENARIO)
     cfg = mc.CampaignConfig(SCENARIO, 'h', runs=2, seed=1, duration_s=DURATION)
     out = str(tmp_path / 'c')

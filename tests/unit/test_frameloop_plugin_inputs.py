@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from adcs_nodes.nodes.convert import vec3
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PLUGIN = os.path.join(ROOT, 'tests', 'plugins', 'gyro_damper.py')
@@ -78,7 +78,7 @@ def test_a_gyro_and_star_tracker_plugin_controller_runs_on_the_frameloop(tmp_pat
 def test_without_the_star_tracker_the_plugin_commands_nothing(tmp_path):
     """The same run with the star tracker's input removed from the graph is refused at
     validation (the plugin needs sensors.star_tracker): the wiring comes from the records."""
-    from adcs_nodes.tools.scenario import ScenarioError
+    from adcs_nodes.scenario import ScenarioError
     sc = damper_scenario(tmp_path)
     raw = {k: v for k, v in sc.items() if not k.startswith('_')}
     del raw['sensors']['star_tracker']

@@ -294,9 +294,9 @@ def test_slews_to_any_inertial_target_including_180_deg(angle_deg):
     import os
 
     from adcs_nodes import registry
-    from adcs_nodes.tools.papers import paper003
-    from adcs_nodes.tools.scenario import load_scenario
-    from adcs_nodes.tools.study import run_topics
+    from adcs_nodes.tools.analyse.papers import paper003
+    from adcs_nodes.scenario import load_scenario
+    from adcs_nodes.tools.analyse.study import run_topics
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     sc = load_scenario(os.path.join(root, 'scenarios', 'paper003_slew.yaml'))
     axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])

@@ -13,10 +13,10 @@ import types
 import pytest
 import yaml
 
-from adcs_nodes.tools.graph import params_file_text
-from adcs_nodes.tools.launch_graph import scenario_path
-from adcs_nodes.tools.launcher import Launcher, child_env
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.graph import params_file_text
+from adcs_nodes.tools.run.launch_graph import scenario_path
+from adcs_nodes.tools.run.launcher import Launcher, child_env
+from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 LAUNCH_FILE = os.path.join(ROOT, 'adcs_nodes', 'launch', 'adcs.launch.py')
@@ -212,7 +212,7 @@ def test_every_node_gets_the_time_it_needs_to_stop(launch_stubs, tmp_path):
     """``sigterm_timeout`` of each node: launch escalates to SIGTERM only past it. A node
     exits within 2 s of SIGINT (tests/node/test_shutdown.py); it may wait for its last
     samples to be acknowledged and for rclpy's teardown, the recorder closes its bag."""
-    from adcs_nodes.tools import launch_graph as lg
+    from adcs_nodes.tools.run import launch_graph as lg
     runtime = _constants(os.path.join(ROOT, 'adcs_nodes', 'adcs_nodes', 'nodes', 'runtime.py'))
     assert lg.NODE_SIGTERM_TIMEOUT_S >= \
         runtime['FLUSH_BUDGET_S'] + runtime['TEARDOWN_BUDGET_S'] + runtime['HANG_S']

@@ -4,8 +4,8 @@ import os
 
 import pytest
 
-from adcs_nodes.tools.launcher import DDS_ENV_KEYS, LaunchError, Launcher, child_env
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.tools.run.launcher import DDS_ENV_KEYS, LaunchError, Launcher, child_env
+from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -30,7 +30,7 @@ def test_the_project_profile_keeps_its_discovery_also_when_inherited(monkeypatch
     """A process that already runs with the project's profile (the launcher after taking its
     run's settings, a test worker) gives its children the same settings; a user's own profile
     keeps LOCALHOST discovery."""
-    from adcs_nodes.tools.launcher import FASTDDS_PROFILES
+    from adcs_nodes.tools.run.launcher import FASTDDS_PROFILES
     monkeypatch.setenv('FASTDDS_DEFAULT_PROFILES_FILE', FASTDDS_PROFILES)
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     assert child_env(7)['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'SYSTEM_DEFAULT'

@@ -8,9 +8,9 @@ import stat
 
 import pytest
 
-from adcs_nodes.tools import launcher
-from adcs_nodes.tools.launcher import LaunchError, Launcher, acquire_domain, prune_runs
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.tools.run import launcher
+from adcs_nodes.tools.run.launcher import LaunchError, Launcher, acquire_domain, prune_runs
+from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 FREE_TUMBLE = os.path.join(ROOT, 'scenarios', 'free_tumble.yaml')
@@ -124,7 +124,7 @@ def test_launcher_refuses_non_finite_durations(duration):
 
 
 def test_a_100_kB_controller_name_is_refused_unsent_and_not_echoed():
-    from adcs_nodes.tools.live import LiveError, switch
+    from adcs_nodes.tools.run.live import LiveError, switch
     with pytest.raises(LiveError) as info:
         switch('x' * 100_000, pid=1)
     assert len(str(info.value)) < 300

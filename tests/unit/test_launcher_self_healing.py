@@ -5,7 +5,7 @@ The launched version (a node that never matches, restarted once): tests/graph/
 test_self_healing.py."""
 import time
 
-from adcs_nodes.tools.launcher import _Transitions, heal_decision, restart_plan
+from adcs_nodes.tools.run.launcher import _Transitions, heal_decision, restart_plan
 
 NODES = ['environment', 'dynamics', 'magnetometer', 'estimator', 'guidance',
          'magnetic_controller', 'controller_manager', 'recorder']
@@ -101,7 +101,7 @@ def test_an_unanswered_node_that_uses_cpu_is_waited_for_an_idle_one_restarted(mo
     nothing: it is given more time. One that used no CPU in the window is restarted."""
     from types import SimpleNamespace
 
-    from adcs_nodes.tools import launcher
+    from adcs_nodes.tools.run import launcher
     cpu = {'t': 10.0}
     monkeypatch.setattr(launcher, '_cpu_seconds', lambda pid: cpu['t'])
     run = launcher.Launcher.__new__(launcher.Launcher)
@@ -127,7 +127,7 @@ def test_an_unanswered_node_that_uses_cpu_is_waited_for_an_idle_one_restarted(mo
 def test_cpu_seconds_of_this_process():
     import os
 
-    from adcs_nodes.tools.launcher import _cpu_seconds
+    from adcs_nodes.tools.run.launcher import _cpu_seconds
     t0 = _cpu_seconds(os.getpid())
     end = time.process_time() + 0.2
     while time.process_time() < end:

@@ -90,7 +90,7 @@ def test_the_scenario_validator_refuses_a_bad_fallback_with_the_key(tmp_path):
 
     import yaml
 
-    from adcs_nodes.tools.scenario import ScenarioError, load_scenario
+    from adcs_nodes.scenario import ScenarioError, load_scenario
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     with open(os.path.join(root, 'scenarios', 'demo_mission.yaml')) as fh:
         sc = yaml.safe_load(fh)

@@ -1,11 +1,12 @@
-"""Run metrics (adcs_nodes.tools.metrics) on synthetic signals whose answers are known by hand."""
+"""Run metrics (adcs_nodes.tools.analyse.metrics) on synthetic signals whose answers are known by
+hand."""
 import math
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from adcs_nodes.tools import metrics as m
+from adcs_nodes.tools.analyse import metrics as m
 
 
 def test_capture_is_entry_into_the_band_then_staying_in_the_hold_band():

@@ -1,4 +1,4 @@
-"""``adcs montecarlo``'s capture test per scenario (:mod:`adcs_nodes.tools.montecarlo.capture`):
+"""``adcs montecarlo``'s capture test per scenario (:mod:`adcs_nodes.tools.campaigns.capture`):
 the angle between the body and the attitude the scenario's guidance commands.
 
 paper001_mpi: a 3-run campaign of 400 s on the plain engine (real run processes), judged
@@ -22,9 +22,9 @@ import shutil
 import numpy as np
 import pytest
 
-from adcs_nodes.tools import montecarlo as mc
-from adcs_nodes.tools.montecarlo.cli import config_from_args, main
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.tools import campaigns as mc
+from adcs_nodes.tools.campaigns.cli import config_from_args, main
+from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 P000 = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
@@ -132,7 +132,7 @@ def test_the_worker_records_the_published_target(campaign001, tmp_path):
     is the target the worker recorded in ``series.npz``, bit for bit, and the bag's metrics
     (the graph engine's reading) are the plain result's."""
     from adcs_nodes.bag import read_messages
-    from sim_node.engine import run_plain
+    from adcs_nodes.tools.run.plain import run_plain
     out, results = campaign001
     run_dir = mc.run_dir_of(str(out), 0)
     sc = load_scenario(os.path.join(run_dir, 'scenario.yaml'))
@@ -267,7 +267,7 @@ def test_an_eci_profile_is_judged_on_the_plain_engine(tmp_path):
     truth) is the angle the graph engine reads from a bag of the same run, in the ECI frame."""
     import yaml
 
-    from sim_node.engine import run_plain
+    from adcs_nodes.tools.run.plain import run_plain
     with open(os.path.join(ROOT, 'scenarios', 'paper003_slew.yaml'), encoding='utf-8') as fh:
         sc = yaml.safe_load(fh)
     sc['guidance'].update(frame='eci', period_s=0.5)

@@ -6,9 +6,9 @@ import os
 
 import pytest
 
-from adcs_nodes.tools.montecarlo.cli import main
-from adcs_nodes.tools.montecarlo.engine import plain_engine_problem, resolve_engine
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.tools.campaigns.cli import main
+from adcs_nodes.tools.campaigns.engine import plain_engine_problem, resolve_engine
+from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

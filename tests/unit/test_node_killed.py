@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from adcs_nodes.nodes.convert import stamp_ns, vec3
-from adcs_nodes.tools.scenario import ScenarioError, load_scenario
+from adcs_nodes.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 KILL_S = 20.0
@@ -101,7 +101,7 @@ def test_a_killed_sensor_is_silent_and_the_estimator_counts_it(tmp_path):
 
 
 def test_the_plain_run_ends_degraded_and_names_the_killed_node(tmp_path):
-    from sim_node.engine import run_plain
+    from adcs_nodes.tools.run.plain import run_plain
     res = run_plain(kill(tmp_path, 'magnetic_controller'), DURATION_S, progress=False)
     assert res.exit_code == 3, res.message
     assert res.message.startswith('done, DEGRADED: lost magnetic_controller (killed at sim t '
@@ -152,5 +152,5 @@ def test_node_kill_is_refused_live_and_listed_in_the_docs():
     from sim_node.faults import check
     with pytest.raises(ValueError, match='scripted fault only'):
         check('node_killed', 'estimator', {}, ['gyro'], [], True)
-    from adcs_nodes.tools.scenario import schema_markdown
+    from adcs_nodes.scenario import schema_markdown
     assert '| `node_killed` | node | none |' in schema_markdown()

@@ -1,12 +1,12 @@
-"""Scenario overrides (``--set KEY=VALUE``, adcs_nodes.tools.scenario.apply_overrides): a dotted
+"""Scenario overrides (``--set KEY=VALUE``, adcs_nodes.scenario.apply_overrides): a dotted
 key set in a copy, validated again as the file is; an unknown key or a bad value is refused
 with a message naming the key (exit 2 from ``adcs run``)."""
 import os
 
 import pytest
 
-from adcs_nodes.tools.scenario import (ScenarioError, apply_overrides, load_scenario,
-                                       parse_overrides)
+from adcs_nodes.scenario import (ScenarioError, apply_overrides, load_scenario,
+                                 parse_overrides)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PAPER003 = os.path.join(ROOT, 'scenarios', 'paper003_slew.yaml')

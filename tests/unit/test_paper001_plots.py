@@ -1,8 +1,9 @@
-"""Paper 001's figures from a series (adcs_nodes.tools.papers.paper001.plots): one PNG per panel,
+"""Paper 001's figures from a series (adcs_nodes.tools.analyse.papers.paper001.plots): one PNG per
+panel,
 a real image each (PNG signature), from a synthetic two-frame series."""
 import numpy as np
 
-from adcs_nodes.tools.papers.paper001 import plots
+from adcs_nodes.tools.analyse.papers.paper001 import plots
 
 
 def test_plots_write_one_png_per_panel(tmp_path):

@@ -1,4 +1,4 @@
-"""Paper 000's table (adcs_nodes.tools.papers.paper000): metrics on synthetic series whose
+"""Paper 000's table (adcs_nodes.tools.analyse.papers.paper000): metrics on synthetic series whose
 answers are computed by hand, the not-comparable rows of a short run, and ``adcs report`` of a
 short plain-engine bag printing the table (the rows ``make reproduce`` prints)."""
 import math
@@ -7,8 +7,8 @@ import os
 import numpy as np
 import pytest
 
-from adcs_nodes.tools import metrics
-from adcs_nodes.tools.papers import INFO, NotComparable, paper000, table_lines
+from adcs_nodes.tools.analyse import metrics
+from adcs_nodes.tools.analyse.papers import INFO, NotComparable, paper000, table_lines
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 T = 6000.0          # orbit period of the synthetic runs [s]
@@ -87,9 +87,9 @@ def test_misalignment_vector_has_the_asked_magnitude():
 def _report(tmp_path, name, duration_s, capsys):
     """``adcs report`` of a short plain-engine bag: (printed text, rows)."""
     from adcs_nodes.tools.cli import main
-    from adcs_nodes.tools.reproductions import expectations_for
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.engine import run_plain
+    from adcs_nodes.tools.analyse.reproductions import expectations_for
+    from adcs_nodes.scenario import load_scenario
+    from adcs_nodes.tools.run.plain import run_plain
     bag = str(tmp_path / name)
     sc = load_scenario(os.path.join(ROOT, 'scenarios', f'{name}.yaml'))
     assert run_plain(sc, duration_s, bag, progress=False).exit_code == 0

@@ -1,4 +1,5 @@
-"""Paper 001's table (adcs_nodes.tools.papers.paper001): metrics of a synthetic 5000 s series
+"""Paper 001's table (adcs_nodes.tools.analyse.papers.paper001): metrics of a synthetic 5000 s
+series
 whose answers are computed by hand, the not-comparable rows of a short run, and ``adcs report``
 of a short plain-engine bag printing the table."""
 import math
@@ -7,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from adcs_nodes.tools.papers import NotComparable, paper001, table_lines
+from adcs_nodes.tools.analyse.papers import NotComparable, paper001, table_lines
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 DT = 0.2
@@ -172,9 +173,9 @@ def test_departures_name_the_options_that_leave_the_paper():
 
 def _report(tmp_path, name, duration_s, capsys):
     from adcs_nodes.tools.cli import main
-    from adcs_nodes.tools.reproductions import expectations_for
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.engine import run_plain
+    from adcs_nodes.tools.analyse.reproductions import expectations_for
+    from adcs_nodes.scenario import load_scenario
+    from adcs_nodes.tools.run.plain import run_plain
     bag = str(tmp_path / name)
     sc = load_scenario(os.path.join(ROOT, 'scenarios', f'{name}.yaml'))
     assert run_plain(sc, duration_s, bag, progress=False).exit_code == 0

@@ -1,4 +1,5 @@
-"""Paper 003's table (adcs_nodes.tools.papers.paper003): settling time and energy of synthetic
+"""Paper 003's table (adcs_nodes.tools.analyse.papers.paper003): settling time and energy of
+synthetic
 slews computed by hand, the ratio rows "not comparable" (the paper's reference controller is
 not described), and ``adcs report`` of a short plain-engine bag printing the table."""
 import math
@@ -7,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from adcs_nodes.tools.papers import INFO, NotComparable, counts, paper003, table_lines
+from adcs_nodes.tools.analyse.papers import INFO, NotComparable, counts, paper003, table_lines
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -84,7 +85,7 @@ def test_a_run_flown_by_another_controller_is_not_comparable():
 
 
 def test_the_study_cases_are_valid_overrides():
-    from adcs_nodes.tools.scenario import apply_overrides, load_scenario
+    from adcs_nodes.scenario import apply_overrides, load_scenario
     sc = load_scenario(os.path.join(ROOT, 'scenarios', 'paper003_slew.yaml'))
     cases = paper003.cases()
     assert list(cases) == ['fuzzy (Table 1 reversed)', 'fuzzy (Table 1 as printed)',
@@ -96,9 +97,9 @@ def test_the_study_cases_are_valid_overrides():
 
 def test_adcs_report_prints_paper003_table(tmp_path, capsys):
     from adcs_nodes.tools.cli import main
-    from adcs_nodes.tools.reproductions import expectations_for
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.engine import run_plain
+    from adcs_nodes.tools.analyse.reproductions import expectations_for
+    from adcs_nodes.scenario import load_scenario
+    from adcs_nodes.tools.run.plain import run_plain
     bag = str(tmp_path / 'paper003_slew')
     sc = load_scenario(os.path.join(ROOT, 'scenarios', 'paper003_slew.yaml'))
     assert run_plain(sc, 30.0, bag, progress=False).exit_code == 0

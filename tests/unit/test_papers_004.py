@@ -1,4 +1,5 @@
-"""Paper 004's table (adcs_nodes.tools.papers.paper004): formula (3) against TRIAD on synthetic
+"""Paper 004's table (adcs_nodes.tools.analyse.papers.paper004): formula (3) against TRIAD on
+synthetic
 errors computed by hand, a run that covers one region only, and ``adcs report`` of a short
 plain-engine bag printing the table."""
 import math
@@ -7,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from adcs_nodes.tools.papers import NotComparable, paper004, table_lines
+from adcs_nodes.tools.analyse.papers import NotComparable, paper004, table_lines
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 U = np.array([0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0])
@@ -48,9 +49,9 @@ def test_one_region_only_is_not_comparable():
 def test_adcs_report_prints_paper004_table(tmp_path, capsys):
     """2000 s: the argument of latitude runs from 0 to about 122 deg, both regions."""
     from adcs_nodes.tools.cli import main
-    from adcs_nodes.tools.reproductions import expectations_for
-    from adcs_nodes.tools.scenario import load_scenario
-    from sim_node.engine import run_plain
+    from adcs_nodes.tools.analyse.reproductions import expectations_for
+    from adcs_nodes.scenario import load_scenario
+    from adcs_nodes.tools.run.plain import run_plain
     bag = str(tmp_path / 'paper004_yaw')
     sc = load_scenario(os.path.join(ROOT, 'scenarios', 'paper004_yaw.yaml'))
     assert run_plain(sc, 2000.0, bag, progress=False).exit_code == 0

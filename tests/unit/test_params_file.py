@@ -9,8 +9,8 @@ import os
 import pytest
 import yaml
 
-from adcs_nodes.tools.graph import build_graph, params_file_text
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.graph import build_graph, params_file_text
+from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENARIOS = sorted(glob.glob(os.path.join(ROOT, 'scenarios', '*.yaml')))

@@ -114,8 +114,8 @@ def test_graph_names_the_producer_of_each_guarded_input():
     topic names the one node of the graph that publishes it; their events are recorded."""
     import os
 
-    from adcs_nodes.tools.graph import build_graph
-    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.graph import build_graph
+    from adcs_nodes.scenario import load_scenario
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     sc = load_scenario(os.path.join(root, 'scenarios', 'paper000_control.yaml'))
     nodes = {n.name: n for n in build_graph(sc, 100.0, record=True)}

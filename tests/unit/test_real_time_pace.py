@@ -4,7 +4,9 @@ import os
 
 import pytest
 
-from adcs_nodes.tools import cli, launcher
+from adcs_nodes.tools import cli
+
+from adcs_nodes.tools.run import launcher
 
 SCENARIO = os.path.join(os.path.dirname(__file__), '..', '..', 'scenarios',
                         'paper003_slew.yaml')

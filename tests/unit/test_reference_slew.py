@@ -11,9 +11,9 @@ import pytest
 from adcs_nodes.core import attitude
 from adcs_nodes.core.control import ControlInputs, Estimate, Target
 from adcs_nodes.core.control.reference_slew import ReferenceSlewController
-from adcs_nodes.tools.papers import paper003
-from adcs_nodes.tools.scenario import load_scenario
-from adcs_nodes.tools.study import run_topics
+from adcs_nodes.tools.analyse.papers import paper003
+from adcs_nodes.scenario import load_scenario
+from adcs_nodes.tools.analyse.study import run_topics
 
 J = np.diag([250.0, 200.0, 180.0])
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

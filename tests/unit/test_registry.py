@@ -11,9 +11,9 @@ import yaml
 
 from adcs_nodes import registry
 from adcs_nodes.registry import Param
-from adcs_nodes.tools.graph import build_graph
-from adcs_nodes.tools.launcher import external_devices
-from adcs_nodes.tools.scenario import ScenarioError, load_scenario, schema
+from adcs_nodes.graph import build_graph
+from adcs_nodes.tools.run.launcher import external_devices
+from adcs_nodes.scenario import ScenarioError, load_scenario, schema
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCEN = os.path.join(ROOT, 'scenarios')

@@ -1,4 +1,5 @@
-"""report.html (adcs_nodes/tools/report_html.py) of short plain-engine bags (written in process by
+"""report.html (adcs_nodes/tools/analyse/report_html.py) of short plain-engine bags (written in
+process by
 the FrameLoop's BagSink: no ROS, no process): one self-contained page (inline PNGs, no
 network, no script) with the timeline, the switches and fallbacks with their reasons, the
 faults, the wheels, the dipole, the estimator against the truth with its 3-sigma bound, and
@@ -13,9 +14,9 @@ import numpy as np
 import pytest
 
 from adcs_nodes.core import attitude as att
-from adcs_nodes.tools.report_html import slerp_at, write_report_html
+from adcs_nodes.tools.analyse.report_html import slerp_at, write_report_html
 from frameloop_run import raw, validated
-from sim_node.engine import run_plain
+from adcs_nodes.tools.run.plain import run_plain
 
 PNG = b'\x89PNG\r\n\x1a\n'
 

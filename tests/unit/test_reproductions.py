@@ -1,13 +1,15 @@
-"""Paper 000's closed-loop rows (adcs_nodes.tools.papers.paper000, printed by `adcs report` and
-`make reproduce` through adcs_nodes.tools.reproductions): verdicts only where the paper has a
-number; the metrics come from adcs_nodes.tools.metrics on a synthetic angle signal."""
+"""Paper 000's closed-loop rows (adcs_nodes.tools.analyse.papers.paper000, printed by `adcs
+report` and
+`make reproduce` through adcs_nodes.tools.analyse.reproductions): verdicts only where the paper
+has a
+number; the metrics come from adcs_nodes.tools.analyse.metrics on a synthetic angle signal."""
 import numpy as np
 
-from adcs_nodes.tools import metrics
-from adcs_nodes.tools.paper000_sensitivity import sensitivity_markdown
-from adcs_nodes.tools.papers import NotComparable, table_lines
-from adcs_nodes.tools.papers.paper000 import INFO, control_rows
-from adcs_nodes.tools.reproductions import failed, table_text
+from adcs_nodes.tools.analyse import metrics
+from adcs_nodes.tools.analyse.paper000_sensitivity import sensitivity_markdown
+from adcs_nodes.tools.analyse.papers import NotComparable, table_lines
+from adcs_nodes.tools.analyse.papers.paper000 import INFO, control_rows
+from adcs_nodes.tools.analyse.reproductions import failed, table_text
 
 PERIOD = 6000.0
 

@@ -9,9 +9,9 @@ import os
 import sys
 import tempfile
 
-from adcs_nodes.tools import launcher, live
-from adcs_nodes.tools.launcher import Launcher
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.tools.run import launcher, live
+from adcs_nodes.tools.run.launcher import Launcher
+from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 FREE_TUMBLE = os.path.join(ROOT, 'scenarios', 'free_tumble.yaml')

@@ -82,7 +82,7 @@ def test_a_negative_interval_is_refused():
 def test_paper000_estimation_with_a_sample_every_2_s_keeps_its_accuracy(tmp_path):
     from frameloop_run import raw, run, t_s, validated
 
-    from adcs_nodes.tools.metrics import estimate_errors_deg
+    from adcs_nodes.tools.analyse.metrics import estimate_errors_deg
     sc = raw('paper000_estimation')
     sc['sensors']['magnetometer']['period_s'] = 2.0
     out, _ = run(validated(tmp_path, sc))

@@ -5,8 +5,8 @@ import textwrap
 
 import pytest
 
-from adcs_nodes.tools.graph import build_graph, topic_type, params_file_text
-from adcs_nodes.tools.scenario import ScenarioError, load_scenario
+from adcs_nodes.graph import build_graph, topic_type, params_file_text
+from adcs_nodes.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCEN = os.path.join(ROOT, 'scenarios')
@@ -101,7 +101,7 @@ def test_free_tumble_graph_converts_paper_conventions():
 
 
 def test_docs_scenarios_md_is_generated_from_the_schema():
-    from adcs_nodes.tools.scenario import schema_markdown
+    from adcs_nodes.scenario import schema_markdown
     with open(os.path.join(ROOT, 'docs', 'scenarios.md')) as fh:
         assert fh.read() == schema_markdown(), \
             'regenerate: ros2_ws/run.sh adcs schema > docs/scenarios.md'

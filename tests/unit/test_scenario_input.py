@@ -146,8 +146,8 @@ def test_shipped_scenarios_pass(capsys):
 hypothesis = pytest.importorskip('hypothesis')
 from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
 
-from adcs_nodes.tools.graph import build_graph  # noqa: E402
-from adcs_nodes.tools.scenario import ScenarioError, load_scenario  # noqa: E402
+from adcs_nodes.graph import build_graph  # noqa: E402
+from adcs_nodes.scenario import ScenarioError, load_scenario  # noqa: E402
 
 PROPERTY = settings(max_examples=100, deadline=None, derandomize=True, database=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture,

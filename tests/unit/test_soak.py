@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from adcs_nodes.tools import soak
-from adcs_nodes.tools.soak import Soak, classify
+from perf import soak
+from perf.soak import Soak, classify
 
 
 def _run_dir(tmp_path, logs):
@@ -174,15 +174,15 @@ def test_burners_are_started_and_stopped():
 
 
 def test_cli_arguments_are_checked(tmp_path, capsys):
-    from adcs_nodes.tools.cli import main
-    assert main(['soak', '--launches', '0']) == 2
-    assert main(['soak', '--env', 'NOEQUALS', '--launches', '1']) == 2
-    assert main(['soak', '--scenarios', str(tmp_path / 'nope.yaml')]) == 2
+    main = soak.main
+    assert main(['--launches', '0']) == 2
+    assert main(['--env', 'NOEQUALS', '--launches', '1']) == 2
+    assert main(['--scenarios', str(tmp_path / 'nope.yaml')]) == 2
     script = tmp_path / 'fake_adcs.py'
     script.write_text(FAKE)
     scen = tmp_path / 's.yaml'
     scen.write_text('timing:\n  frame_s: 1.0\n')
-    code = main(['soak', '--launches', '2', '--burners', '0', '--scenarios', str(scen),
+    code = main(['--launches', '2', '--burners', '0', '--scenarios', str(scen),
                  '--out', str(tmp_path / 'o'), '--launcher-cmd',
                  f'{sys.executable} {script} ok {tmp_path}/r-{{mode}}'])
     assert code == 0

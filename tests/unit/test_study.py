@@ -1,4 +1,5 @@
-"""Studies on the FrameLoop (adcs_nodes.tools.study): a short run's series and paper table, a
+"""Studies on the FrameLoop (adcs_nodes.tools.analyse.study): a short run's series and paper
+table, a
 sweep through overrides, and the command line's exit codes."""
 import json
 import math
@@ -7,8 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from adcs_nodes.tools import study
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.tools.analyse import study
+from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PAPER000 = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
@@ -16,7 +17,8 @@ PAPER003 = os.path.join(ROOT, 'scenarios', 'paper003_slew.yaml')
 
 
 def test_short_run_starts_at_the_papers_initial_attitude():
-    from sim_node.engine import FrameLoop, run_series
+    from adcs_nodes.tools.campaigns.worker import run_series
+    from sim_node.engine import FrameLoop
     series = run_series(FrameLoop.from_scenario(load_scenario(PAPER000), 20.0))
     assert series['t_s'].tolist() == [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0,
                                       20.0]

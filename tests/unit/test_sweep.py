@@ -1,7 +1,8 @@
 """``adcs sweep`` without processes: the grid (values split at top-level commas, validated as
 ``adcs run --set`` validates them, exit 2 before any run), the metrics of a grid point from
 hand-made results and series, and a tiny sweep on the FrameLoop run in this process (the
-runs' process replaced by :func:`sim_node.engine.mc_worker` called here), interrupted by
+runs' process replaced by :func:`adcs_nodes.tools.campaigns.worker.mc_worker` called here),
+interrupted by
 Ctrl-C and resumed: the same table as a sweep that was never interrupted, and only the
 missing runs run again."""
 import csv
@@ -13,10 +14,10 @@ import pytest
 import yaml
 
 from adcs_nodes.tools import cli
-from adcs_nodes.tools.montecarlo import campaign as campaign_mod
-from adcs_nodes.tools.montecarlo import sweep
-from adcs_nodes.tools.montecarlo.files import SERIES_FILE, load_result, run_dir_of
-from adcs_nodes.tools.scenario import ScenarioError
+from adcs_nodes.tools.campaigns import campaign as campaign_mod
+from adcs_nodes.tools.campaigns import sweep
+from adcs_nodes.tools.campaigns.files import SERIES_FILE, load_result, run_dir_of
+from adcs_nodes.scenario import ScenarioError
 from frameloop_run import SCENARIOS
 
 SCENARIO = os.path.join(SCENARIOS, 'paper000_control.yaml')
@@ -162,7 +163,8 @@ def test_the_tables_put_each_point_on_its_own_line():
 # ---------------------------------------------------------------------- a sweep, in process
 class _InProcessBackend:
     """The local backend's interface, each run done here by the plain worker's body
-    (:func:`sim_node.engine.mc_worker`) instead of its process; ``interrupt_after`` results
+    (:func:`adcs_nodes.tools.campaigns.worker.mc_worker`) instead of its process;
+    ``interrupt_after`` results
     delivered, Ctrl-C arrives (the runs not done stay pending)."""
 
     def __init__(self, interrupt_after=None):
@@ -174,7 +176,7 @@ class _InProcessBackend:
         self.jobs.append(job)
 
     def results(self):
-        from sim_node.engine import mc_worker
+        from adcs_nodes.tools.campaigns.worker import mc_worker
         for n, job in enumerate(self.jobs):
             if self.interrupt_after is not None and n >= self.interrupt_after:
                 raise KeyboardInterrupt

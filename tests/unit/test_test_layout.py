@@ -26,7 +26,7 @@ import os
 
 TESTS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ROOT = os.path.dirname(TESTS)
-TIERS = {'unit', 'node', 'graph', 'reproductions', 'plugins'}
+TIERS = {'unit', 'node', 'graph', 'reproductions', 'plugins', 'perf'}
 #: Project packages: ``name -> source directory`` (followed through their module-level
 #: imports).
 PACKAGES = {'adcs_nodes': os.path.join(ROOT, 'adcs_nodes', 'adcs_nodes'),
@@ -170,7 +170,7 @@ def test_the_tiers_are_the_folders():
                and not d.startswith(('.', '__'))}
     assert folders == TIERS, f'tests/ folders {sorted(folders)}, tiers {sorted(TIERS)}'
     misplaced = [os.path.relpath(p, TESTS) for p in _test_files()
-                 if os.path.relpath(p, TESTS).split(os.sep)[0] not in TIERS - {'plugins'}]
+                 if os.path.relpath(p, TESTS).split(os.sep)[0] not in TIERS - {'plugins', 'perf'}]
     assert not misplaced, f'test files outside a tier folder: {misplaced}'
 
 

@@ -1,5 +1,5 @@
 """``adcs report`` judges an estimate against the truth interpolated at the estimate's own
-stamp (issue 23, defect 4): :func:`adcs_nodes.tools.metrics.estimate_errors_deg` against an
+stamp (issue 23, defect 4): :func:`adcs_nodes.tools.analyse.metrics.estimate_errors_deg` against an
 analytic rotation (a constant rate about a fixed axis, for which slerp between two samples is
 exact), with estimate stamps off the truth's grid."""
 import math
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from adcs_nodes.tools.metrics import angle_between_deg, estimate_errors_deg, slerp_at
+from adcs_nodes.tools.analyse.metrics import angle_between_deg, estimate_errors_deg, slerp_at
 
 AXIS = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
 RATE = math.radians(3.0)            # [rad/s]

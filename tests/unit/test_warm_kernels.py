@@ -23,7 +23,7 @@ SCENARIO = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
 # dynamics), then the numba dispatchers' counts: (kernels, signatures, compiled, loaded)
 NODE_WORK = """
 import json, sys
-from adcs_nodes.tools.scenario import load_scenario
+from adcs_nodes.scenario import load_scenario
 from sim_node.engine import FrameLoop
 from sim_node.tools.warm_kernels import kernel_counts
 sc = load_scenario(sys.argv[1])

@@ -39,7 +39,7 @@ as before, and a bad parameter still ends the process with exit code 2. With
     ros2 lifecycle set /estimator activate      #   /estimator/change_state ...
 
 ``adcs run`` starts these nodes with ``autostart: false`` and drives the transitions
-(:mod:`adcs_nodes.tools.launcher`; ``--compose`` does it in process).
+(:mod:`adcs_nodes.tools.run.launcher`; ``--compose`` does it in process).
 """
 from __future__ import annotations
 

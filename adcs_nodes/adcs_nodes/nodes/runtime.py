@@ -3,7 +3,7 @@
 ``EventsExecutor.spin()`` ignores SIGINT (DESIGN section 6), so nodes spin on a future with a
 short timeout and stop on SIGINT/SIGTERM or when a node asks to finish (``node.done``).
 The same node classes run one per process (``main`` of each node module) or several in one
-process with one executor (``adcs_nodes.tools.compose``).
+process with one executor (``adcs_nodes.tools.run.compose``).
 
 One BLAS thread per process: importing this module limits every loaded BLAS/OpenMP library to
 one thread (``threadpoolctl``) and sets ``OPENBLAS_NUM_THREADS=1`` and friends in the

@@ -36,10 +36,6 @@ Commands
     Metrics, PNG plots, ``summary.md`` and ``report.html`` (one self-contained page: timeline
     of controllers, modes and faults, pointing, wheels, dipole, estimator against the truth).
 
-``adcs soak [--launches N] [--burners N] [--time-budget S] [--scenarios ...] [--out DIR]``
-    Start-up soak: short runs of every scenario back to back (processes and composed) beside
-    CPU burners; a table of outcomes (finished, start or lifecycle timeout, crash, hang).
-
 ``adcs slew --to ROLL PITCH YAW [--frame inertial|orbit] [--controller NAME] [--run PID]``
     Slew a running graph (``adcs/slew`` action): feedback, then settling time, energy, error.
 
@@ -59,7 +55,7 @@ import sys
 from typing import List, Optional
 
 from adcs_nodes import registry
-from adcs_nodes.tools.scenario import ScenarioError, list_scenarios, load_scenario
+from adcs_nodes.scenario import ScenarioError, list_scenarios, load_scenario
 
 #: Nodes that are not registry components: (package, executable, role).
 CORE_NODES = [
@@ -106,12 +102,12 @@ REAL_TIME_KEPT = 0.9
 
 
 def cmd_run(args) -> int:
-    from adcs_nodes.tools.launcher import LaunchError, Launcher, pace
+    from adcs_nodes.tools.run.launcher import LaunchError, Launcher, pace
     engine = args.engine or ('composed' if args.compose else 'graph')
     try:
         sc = load_scenario(args.scenario)
         if args.set:
-            from adcs_nodes.tools.scenario import apply_overrides
+            from adcs_nodes.scenario import apply_overrides
             sc = apply_overrides(sc, args.set)
         if args.compose and engine != 'composed':
             raise LaunchError(f'--compose means --engine composed, not {engine}')
@@ -120,7 +116,8 @@ def cmd_run(args) -> int:
             if args.real_time or args.rate is not None:
                 raise LaunchError('the plain engine has no real-time mode and no pace (it runs '
                                   'as fast as it can): use --engine graph or composed')
-            from sim_node.engine import EngineError, run_plain
+            from sim_node.engine import EngineError
+            from adcs_nodes.tools.run.plain import run_plain
             try:
                 result = run_plain(sc, args.duration, args.record, progress=not args.quiet)
             except EngineError as exc:
@@ -185,7 +182,7 @@ def cmd_validate(args) -> int:
 
 
 def cmd_switch(args) -> int:
-    from adcs_nodes.tools.live import LiveError, finish, switch
+    from adcs_nodes.tools.run.live import LiveError, finish, switch
     try:
         print(switch(args.controller, args.run))
     except LiveError as exc:
@@ -195,8 +192,8 @@ def cmd_switch(args) -> int:
 
 
 def cmd_slew(args) -> int:
-    from adcs_nodes.tools.live import LiveError
-    from adcs_nodes.tools.slew import slew
+    from adcs_nodes.tools.run.live import LiveError
+    from adcs_nodes.tools.run.slew import slew
     if not all(math.isfinite(v) for v in args.to):
         print(f'adcs slew: --to needs three finite angles [deg], got {args.to}',
               file=sys.stderr)
@@ -211,7 +208,7 @@ def cmd_slew(args) -> int:
 
 
 def cmd_status(args) -> int:
-    from adcs_nodes.tools.live import LiveError, finish, status, watch
+    from adcs_nodes.tools.run.live import LiveError, finish, status, watch
     try:
         if args.watch:
             return finish(watch(args.run, count=args.count))
@@ -223,7 +220,7 @@ def cmd_status(args) -> int:
 
 
 def cmd_fault(args) -> int:
-    from adcs_nodes.tools.live import LiveError, fault, finish, parse_params
+    from adcs_nodes.tools.run.live import LiveError, fault, finish, parse_params
     try:
         print(fault(args.kind, args.target, args.at, parse_params(args.param), args.run))
     except LiveError as exc:
@@ -233,13 +230,13 @@ def cmd_fault(args) -> int:
 
 
 def cmd_schema(args) -> int:
-    from adcs_nodes.tools.scenario import schema_markdown
+    from adcs_nodes.scenario import schema_markdown
     print(schema_markdown(), end='')
     return 0
 
 
 def cmd_export(args) -> int:
-    from adcs_nodes.tools.export import export_csv
+    from adcs_nodes.tools.analyse.export import export_csv
     try:
         files = export_csv(args.bag, args.csv)
     except (FileNotFoundError, ValueError) as exc:
@@ -251,8 +248,8 @@ def cmd_export(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from adcs_nodes.tools.report import make_report
-    from adcs_nodes.tools.reproductions import expectations_for
+    from adcs_nodes.tools.analyse.report import make_report
+    from adcs_nodes.tools.analyse.reproductions import expectations_for
     out = args.out or os.path.normpath(args.bag.rstrip('/')) + '_report'
     try:
         _, rows = expectations_for(args.bag)
@@ -264,7 +261,7 @@ def cmd_report(args) -> int:
     if os.path.isfile(summary):
         with open(summary, encoding='utf-8') as fh:
             print(fh.read())
-    from adcs_nodes.tools.report_html import write_report_html
+    from adcs_nodes.tools.analyse.report_html import write_report_html
     try:     # the page for people, beside it (its paper table from metrics.json)
         page = write_report_html(args.bag, out)
     except (FileNotFoundError, ValueError) as exc:
@@ -357,12 +354,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_fault)
 
-    from adcs_nodes.tools import montecarlo
+    from adcs_nodes.tools import campaigns as montecarlo
     p = sub.add_parser('montecarlo', help='dispersed Monte Carlo campaign (parallel, resumable)')
     montecarlo.add_arguments(p)
     p.set_defaults(func=montecarlo.run_from_args)
 
-    from adcs_nodes.tools.montecarlo import sweep
+    from adcs_nodes.tools.campaigns import sweep
     p = sub.add_parser('sweep', help='a Monte Carlo campaign per point of a grid of scenario '
                        'values (plain engine, resumable): capture, hold, filter convergence')
     sweep.add_arguments(p)
@@ -372,12 +369,6 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('replay', help='publish recorded sensor topics as a driver would')
     replay.add_arguments(p)
     p.set_defaults(func=replay.run_from_args)
-
-    from adcs_nodes.tools import soak
-    p = sub.add_parser('soak', help='start-up soak: short runs of every scenario back to back '
-                       'beside CPU burners, outcomes counted by kind')
-    soak.add_arguments(p)
-    p.set_defaults(func=soak.run_from_args)
 
     p = sub.add_parser('schema', help='print every scenario key (Markdown table)')
     p.set_defaults(func=cmd_schema)

@@ -336,8 +336,8 @@ def _graph_nodes(bag: str, nodes: Sequence[str]):
             raise ReplayError(f'{bag}: not found')
         raise ReplayError(f'{bag}: no scenario.yaml beside the bag (adcs run --record writes '
                           'it): --lockstep needs it for the nodes\' inputs and parameters')
-    from adcs_nodes.tools.graph import build_graph
-    from adcs_nodes.tools.scenario import load_scenario
+    from adcs_nodes.graph import build_graph
+    from adcs_nodes.scenario import load_scenario
     try:
         sc = load_scenario(path)
         specs = {n.name: n for n in build_graph(sc, float(sc['duration_s']), record=True)}
@@ -465,7 +465,7 @@ def lockstep_plan(bag: str, nodes: Sequence[str] = ('estimator',),
 def write_params(bag: str, nodes: Sequence[str], path: str, log=print) -> None:
     """Write the parameter file of ``nodes`` for a lockstep replay of ``bag`` (see the module
     docstring)."""
-    from adcs_nodes.tools.graph import params_file_text
+    from adcs_nodes.graph import params_file_text
     specs = [dataclasses.replace(s, params=_lockstep_params(s))
              for s in _graph_nodes(bag, nodes)]
     try:

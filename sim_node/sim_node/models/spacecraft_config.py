@@ -2,7 +2,7 @@
 
 The dynamics node passes its ``spacecraft.*`` and ``initial.*`` parameters here (the launcher
 derives them from the scenario's ``spacecraft`` and ``initial`` sections, see
-``adcs_nodes.tools.graph``). Keys, all SI:
+``adcs_nodes.graph``). Keys, all SI:
 
 spacecraft: ``inertia_kgm2`` (9, row-major, or 3 diagonal), ``gravity_gradient``,
 ``max_dipole_Am2`` (3, optional: no magnetorquer without it), ``wheel_axes`` (3n),

@@ -70,7 +70,7 @@ def warm_scenario(path: str, frames: int = FRAMES) -> bool:
     Returns True when the scenario ran as it is, False when its external sensors had to be
     simulated for the plain engine (their drivers are outside; the nodes' kernels are the
     same)."""
-    from adcs_nodes.tools.scenario import apply_overrides, load_scenario
+    from adcs_nodes.scenario import apply_overrides, load_scenario
     from sim_node.engine import FrameLoop
 
     sc = load_scenario(path)
@@ -101,7 +101,7 @@ def kernel_counts() -> Tuple[int, int, int, int]:
 
 def scenario_dir() -> str:
     """The installed scenarios (``share/adcs_nodes/scenarios``), else the repository's."""
-    from adcs_nodes.tools.launch_graph import installed_scenario_dir
+    from adcs_nodes.tools.run.launch_graph import installed_scenario_dir
 
     return installed_scenario_dir() or os.path.abspath(
         os.path.join(os.path.dirname(__file__), '..', '..', '..', 'scenarios'))
@@ -118,7 +118,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if os.environ.get('NUMBA_DISABLE_JIT', '0') not in ('', '0'):
         print('warm_kernels: NUMBA_DISABLE_JIT is set, nothing to warm')
         return 0
-    from adcs_nodes.tools.scenario import ScenarioError
+    from adcs_nodes.scenario import ScenarioError
 
     directory = args.scenarios or scenario_dir()
     start = time.monotonic()

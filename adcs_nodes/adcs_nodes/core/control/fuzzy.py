@@ -37,7 +37,8 @@ table is a conventional rate-profile controller: (Н, Н) -> Н, rate damping at
 acceleration from rest at ОМ/М and braking when faster than a cruise rate that grows with φ.
 So the paper means the reversed reading (``table1_rows='reversed'``, the default); the
 literal one is kept as ``'as_printed'``. Table 2 is symmetric, so its order does not matter.
-On the paper's case (:mod:`adcs_nodes.tools.papers.paper003`, default breakpoints) the reversed
+On the paper's case (:mod:`adcs_nodes.tools.analyse.papers.paper003`, default breakpoints) the
+reversed
 reading settles (5 % band) in 26.7 s with 40.2 N m s (paper: 25.73 s, 42.91 N m s); the printed
 one swings +-14 deg through the target and has not settled after 80 s.
 
@@ -288,7 +289,8 @@ class Mamdani:
 
 # ---------------------------------------------------------------------- the controller
 #: Default breakpoints (ASSUMPTION: the paper gives them only in Figs. 4, 5). Units: deg,
-#: deg/s, deg/s^2, N m. Fitted on the paper's scenario (:mod:`adcs_nodes.tools.papers.paper003`):
+#: deg/s, deg/s^2, N m. Fitted on the paper's scenario
+#: (:mod:`adcs_nodes.tools.analyse.papers.paper003`):
 #: starting from the digest's set S1, a random search over scalings of the phi and phi_dot
 #: peaks, ``mk_gain`` and the compensation output, rounded, picked the clean set (no residual
 #: torque after settling) closest to the paper's 25.73 s and 42.91 N m s. It accelerates to

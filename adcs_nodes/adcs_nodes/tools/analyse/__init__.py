@@ -1,0 +1,1 @@
+"""Analysing runs: reports, exports, metrics, the papers' tables, studies."""

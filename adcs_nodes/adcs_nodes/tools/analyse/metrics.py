@@ -1,0 +1,323 @@
+"""End-of-run metrics of an attitude-error signal, as the papers word them (pure numpy).
+
+One definition for everything that judges a run: ``adcs report`` (the paper tables,
+:mod:`adcs_nodes.tools.analyse.papers`), the Monte Carlo campaigns
+(:mod:`adcs_nodes.tools.campaigns`)
+and the studies on the FrameLoop (:mod:`adcs_nodes.tools.analyse.study`).
+
+Definitions (``t`` [s] increasing, ``e`` error [deg] >= 0, same length n)
+---------------------------------------------------------------------------
+Paper 000, section 4: the satellite "reaches the required attitude within 3-4 orbits" and is
+then "held with accuracy of the order of 1 deg". In numbers:
+
+* **capture time** ``t_cap`` (:func:`capture_time`): the first time the error enters the
+  capture band ``e < band`` and after which it stays within the hold band ``e < hold_band``
+  to the end of the run::
+
+      j   = last index with e[j] >= hold_band           (-1 if none)
+      i   = first index > j with e[i] < band
+      t_cap = t[i]                                       (None if no such i)
+
+  ``band`` = 5 deg and ``hold_band`` = 10 deg by default (ASSUMPTION: the paper gives no band;
+  5 deg is "reached the attitude" for a 1 deg-class controller, and a hold band of twice the
+  capture band separates a captured satellite that wobbles from one that tumbles away).
+* **last exit** ``t_exit`` (:func:`last_exit_time`): the first time after which ``e < band``
+  to the end (the start of the final stay in the band). With ``hold_band = band`` the two
+  definitions coincide; ``t_exit >= t_cap`` always. It measures how well the attitude is held
+  rather than how fast it is reached, and is reported under its own name.
+* **first entry** (:func:`first_entry_time`): the first time ``e < band``.
+* **hold accuracy** (:func:`hold_stats`): over the hold window ``t >= t_hold`` (default 4
+  orbits, the end of the paper's 3-4 orbit capture) to the end of the run: RMS
+  ``sqrt(mean(e^2))``, median, 95th percentile (linear interpolation, numpy default) and max.
+
+Samples are taken as given (no time weighting): the runs sample at a fixed frame period.
+Non-finite errors count as outside every band and are left out of the hold statistics.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Dict, Optional
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+#: Capture band [deg] (ASSUMPTION, see the module docstring).
+CAPTURE_BAND_DEG = 5.0
+#: Hold band [deg] the error must stay within after capture (ASSUMPTION: 2 x the band).
+HOLD_BAND_DEG = 10.0
+#: Start of the hold window [orbits]: the end of the paper's "3-4 orbits".
+HOLD_FROM_ORBITS = 4.0
+
+
+def _arrays(t: ArrayLike, e: ArrayLike) -> tuple:
+    t = np.asarray(t, dtype=float).reshape(-1)
+    e = np.asarray(e, dtype=float).reshape(-1)
+    if t.shape != e.shape:
+        raise ValueError(f't and e must have the same length, got {t.size} and {e.size}')
+    return t, e
+
+
+def _outside(e: np.ndarray, limit: float) -> np.ndarray:
+    """``e >= limit`` with NaN counted as outside."""
+    return ~(e < limit)
+
+
+def capture_index(e: ArrayLike, band: float = CAPTURE_BAND_DEG,
+                  hold_band: Optional[float] = HOLD_BAND_DEG) -> Optional[int]:
+    """Index of the capture: first entry into ``band`` after which ``e < hold_band`` to the end.
+
+    Parameters
+    ----------
+    e : array_like, shape (n,)
+        Error per sample [deg] (any unit, as long as the bands use it).
+    band : float
+        Capture band (error strictly below it).
+    hold_band : float or None
+        Hold band (>= ``band``); ``None`` means ``band`` (then this is the last exit).
+
+    Returns
+    -------
+    int or None
+        The index, or ``None`` when the run never captures.
+
+    Examples
+    --------
+    >>> capture_index([50.0, 4.0, 6.0, 3.0, 2.0], 5.0, 10.0)
+    1
+    >>> capture_index([50.0, 4.0, 6.0, 3.0, 2.0], 5.0, None)
+    3
+    """
+    e = np.asarray(e, dtype=float).reshape(-1)
+    hold = band if hold_band is None else float(hold_band)
+    if hold < band:
+        raise ValueError(f'hold_band ({hold}) must be >= band ({band})')
+    out = np.flatnonzero(_outside(e, hold))
+    start = int(out[-1]) + 1 if out.size else 0
+    inside = np.flatnonzero(e[start:] < band)
+    return None if inside.size == 0 else start + int(inside[0])
+
+
+def capture_time(t: ArrayLike, e: ArrayLike, band: float = CAPTURE_BAND_DEG,
+                 hold_band: Optional[float] = HOLD_BAND_DEG) -> Optional[float]:
+    """Capture time [s of ``t``] (see :func:`capture_index`), or None."""
+    t, e = _arrays(t, e)
+    i = capture_index(e, band, hold_band)
+    return None if i is None else float(t[i])
+
+
+def last_exit_time(t: ArrayLike, e: ArrayLike, band: float = CAPTURE_BAND_DEG
+                   ) -> Optional[float]:
+    """Start of the final stay below ``band`` (after the last exit from it), or None.
+
+    Examples
+    --------
+    >>> last_exit_time([0.0, 1.0, 2.0, 3.0], [9.0, 1.0, 9.0, 1.0], 5.0)
+    3.0
+    """
+    return capture_time(t, e, band, None)
+
+
+def first_entry_time(t: ArrayLike, e: ArrayLike, band: float = CAPTURE_BAND_DEG
+                     ) -> Optional[float]:
+    """First time with ``e < band``, or None."""
+    t, e = _arrays(t, e)
+    inside = np.flatnonzero(e < band)
+    return None if inside.size == 0 else float(t[inside[0]])
+
+
+@dataclass(frozen=True)
+class HoldStats:
+    """Error statistics over the hold window [deg]; NaN when the window holds no sample.
+
+    Attributes
+    ----------
+    rms, median, p95, max : float
+        Root mean square, median, 95th percentile and maximum of the error.
+    samples : int
+        Finite samples in the window.
+    t_from_s : float
+        Start of the window [s].
+    """
+
+    rms: float
+    median: float
+    p95: float
+    max: float
+    samples: int
+    t_from_s: float
+
+
+def hold_stats(t: ArrayLike, e: ArrayLike, t_from: float) -> HoldStats:
+    """RMS, median, 95th percentile and max of ``e`` over ``t >= t_from`` to the end.
+
+    Examples
+    --------
+    >>> s = hold_stats([0., 1., 2., 3.], [10., 3., 4., 0.], 1.0)
+    >>> round(s.rms, 6), s.median, s.max, s.samples
+    (2.886751, 3.0, 4.0, 3)
+    """
+    t, e = _arrays(t, e)
+    w = e[(t >= t_from) & np.isfinite(e)]
+    if w.size == 0:
+        nan = float('nan')
+        return HoldStats(nan, nan, nan, nan, 0, float(t_from))
+    return HoldStats(float(np.sqrt(np.mean(w ** 2))), float(np.median(w)),
+                     float(np.percentile(w, 95)), float(np.max(w)), int(w.size), float(t_from))
+
+
+def run_metrics(t: ArrayLike, e: ArrayLike, period_s: Optional[float],
+                band: float = CAPTURE_BAND_DEG, hold_band: float = HOLD_BAND_DEG,
+                hold_from_orbits: float = HOLD_FROM_ORBITS,
+                capture_within_orbits: float = HOLD_FROM_ORBITS) -> Dict[str, Any]:
+    """All end-of-run metrics of one error signal, as a flat JSON-ready dict.
+
+    Parameters
+    ----------
+    t : array_like, shape (n,)
+        Time since the start of the run [s].
+    e : array_like, shape (n,)
+        Angle between body and target frame [deg].
+    period_s : float or None
+        Orbit period [s]; without it the orbit-based values are None (hold window = the
+        last half of the run).
+    band, hold_band : float
+        Capture and hold bands [deg] (see the module docstring).
+    hold_from_orbits : float
+        Start of the hold window [orbits].
+    capture_within_orbits : float
+        Deadline of ``captured_in_time`` [orbits].
+
+    Returns
+    -------
+    dict
+        ``capture_time_s``, ``capture_orbits``, ``captured_in_time`` (bool), ``last_exit_s``,
+        ``last_exit_orbits``, ``first_entry_s``, ``hold_rms_deg``, ``hold_median_deg``,
+        ``hold_p95_deg``, ``hold_max_deg``, ``hold_samples``, ``hold_from_s``,
+        ``hold_complete`` (the run reaches past the window start), ``final_deg``, ``band_deg``,
+        ``hold_band_deg``, ``period_s``; times are None when the event never happens.
+    """
+    t, e = _arrays(t, e)
+    if t.size == 0:
+        raise ValueError('run_metrics needs at least one sample')
+    t_cap = capture_time(t, e, band, hold_band)
+    t_exit = last_exit_time(t, e, band)
+    if period_s:
+        t_hold = t[0] + hold_from_orbits * period_s
+        deadline = t[0] + capture_within_orbits * period_s
+    else:
+        t_hold = t[0] + 0.5 * (t[-1] - t[0])
+        deadline = math.inf
+    hs = hold_stats(t, e, t_hold)
+
+    def orbits(x: Optional[float]) -> Optional[float]:
+        return None if x is None or not period_s else (x - t[0]) / period_s
+
+    return {
+        'capture_time_s': t_cap, 'capture_orbits': orbits(t_cap),
+        'captured_in_time': bool(t_cap is not None and t_cap <= deadline),
+        'last_exit_s': t_exit, 'last_exit_orbits': orbits(t_exit),
+        'first_entry_s': first_entry_time(t, e, band),
+        'hold_rms_deg': hs.rms, 'hold_median_deg': hs.median, 'hold_p95_deg': hs.p95,
+        'hold_max_deg': hs.max, 'hold_samples': hs.samples, 'hold_from_s': hs.t_from_s,
+        'hold_complete': bool(t[-1] > t_hold),
+        'final_deg': float(e[-1]), 'band_deg': float(band), 'hold_band_deg': float(hold_band),
+        'period_s': float(period_s) if period_s else None,
+    }
+
+
+def angle_to_identity_deg(q_xyzw: ArrayLike) -> np.ndarray:
+    """Rotation angle of each quaternion [deg], ``2 atan2(|v|, |w|)`` (sign-free), shape (n,).
+
+    Parameters
+    ----------
+    q_xyzw : array_like, shape (n, 4)
+        Quaternions, scalar last (need not be unit).
+    """
+    q = np.asarray(q_xyzw, dtype=float).reshape(-1, 4)
+    return np.degrees(2.0 * np.arctan2(np.linalg.norm(q[:, :3], axis=1), np.abs(q[:, 3])))
+
+
+def angle_between_deg(q_a: ArrayLike, q_b: ArrayLike) -> np.ndarray:
+    """Angle of the rotation ``q_a^* q_b`` between two quaternion series [deg], shape (n,)."""
+    a = np.asarray(q_a, dtype=float).reshape(-1, 4)
+    b = np.asarray(q_b, dtype=float).reshape(-1, 4)
+    ax, ay, az, aw = -a[:, 0], -a[:, 1], -a[:, 2], a[:, 3]      # conjugate of q_a
+    bx, by, bz, bw = b.T
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    w = aw * bw - ax * bx - ay * by - az * bz
+    return angle_to_identity_deg(np.stack([x, y, z, w], axis=1))
+
+
+def slerp_at(t_src: ArrayLike, q_src: ArrayLike, t: ArrayLike) -> np.ndarray:
+    """Quaternions ``q_src`` (n, 4) sampled at increasing times ``t_src`` (n,), at times ``t``
+    (m,): spherical linear interpolation between the two samples around each time,
+    ``q_i (q_i^* q_j)^u`` with ``u = (t - t_i) / (t_j - t_i)`` on the shorter arc; a time
+    equal to a sample's gives that sample exactly. Times outside ``[t_src[0], t_src[-1]]``
+    are clamped to the ends (use :func:`estimate_errors_deg` to leave them out). Scalar last,
+    shape (m, 4)."""
+    ts = np.asarray(t_src, dtype=float).reshape(-1)
+    qs = np.asarray(q_src, dtype=float).reshape(-1, 4)
+    t = np.asarray(t, dtype=float).reshape(-1)
+    if ts.size == 0 or ts.size != qs.shape[0]:
+        raise ValueError(f'need as many times as quaternions (> 0), got {ts.size} and '
+                         f'{qs.shape[0]}')
+    i = np.clip(np.searchsorted(ts, t, side='right') - 1, 0, ts.size - 1)
+    j = np.minimum(i + 1, ts.size - 1)
+    span = ts[j] - ts[i]
+    u = np.clip(np.where(span > 0.0, (t - ts[i]) / np.where(span > 0.0, span, 1.0), 0.0),
+                0.0, 1.0)
+    a, b = qs[i], qs[j].copy()
+    b[np.sum(a * b, axis=1) < 0.0] *= -1.0            # the shorter arc
+    dot = np.clip(np.sum(a * b, axis=1) / (np.linalg.norm(a, axis=1)
+                                           * np.linalg.norm(b, axis=1)), -1.0, 1.0)
+    omega = np.arccos(dot)                             # half the rotation angle a -> b
+    small = omega < 1e-9
+    s = np.sin(np.where(small, 1.0, omega))
+    wa = np.where(small, 1.0 - u, np.sin((1.0 - u) * omega) / s)
+    wb = np.where(small, u, np.sin(u * omega) / s)
+    out = wa[:, None] * a + wb[:, None] * b
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    exact = u == 0.0
+    out[exact] = qs[i[exact]]
+    return out
+
+
+def estimate_errors_deg(t_truth: ArrayLike, q_truth: ArrayLike, t_est: ArrayLike,
+                        q_est: ArrayLike) -> Dict[str, Any]:
+    """Attitude error of estimates against the truth interpolated at each estimate's own
+    stamp (:func:`slerp_at`), so an estimate stamped off the truth's grid (a live estimator,
+    an external driver's samples) is judged at its time, not dropped or matched to the
+    nearest truth sample.
+
+    Parameters
+    ----------
+    t_truth, q_truth : array_like, shapes (n,), (n, 4)
+        Truth stamps (increasing, any unit as long as ``t_est`` uses it) and quaternions
+        (scalar last, the same frames as the estimate's).
+    t_est, q_est : array_like, shapes (m,), (m, 4)
+        Estimate stamps and quaternions.
+
+    Returns
+    -------
+    dict
+        ``t`` (k,) the estimate stamps inside the truth's span (the others are left out:
+        no extrapolation), ``deg`` (k,) the angle of ``q_est^* q_truth(t)`` [deg],
+        ``on_grid`` the number of those stamps equal to a truth stamp, ``outside`` the number
+        left out.
+    """
+    tt = np.asarray(t_truth, dtype=float).reshape(-1)
+    te = np.asarray(t_est, dtype=float).reshape(-1)
+    qe = np.asarray(q_est, dtype=float).reshape(-1, 4)
+    if te.size != qe.shape[0]:
+        raise ValueError(f'need as many estimate stamps as quaternions, got {te.size} and '
+                         f'{qe.shape[0]}')
+    if tt.size == 0 or te.size == 0:
+        return {'t': np.zeros(0), 'deg': np.zeros(0), 'on_grid': 0, 'outside': int(te.size)}
+    inside = (te >= tt[0]) & (te <= tt[-1])
+    t_in = te[inside]
+    q_true = slerp_at(tt, q_truth, t_in)
+    return {'t': t_in, 'deg': angle_between_deg(qe[inside], q_true),
+            'on_grid': int(np.isin(t_in, tt).sum()), 'outside': int((~inside).sum())}

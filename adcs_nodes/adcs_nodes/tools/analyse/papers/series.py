@@ -1,0 +1,134 @@
+"""A run's stamped messages by topic, from a bag or from FrameLoop frames.
+
+``Topics`` = ``{topic: {header stamp [ns]: message}}`` with topic names as the FrameLoop
+publishes them (no leading ``/``: ``sim/state``, ``adcs/attitude_estimate``, ...). A bag's
+messages (``rosbags`` objects) and the FrameLoop's (generated message classes) have the same
+field names, so the paper modules read both alike. Stamps are the messages' header stamps:
+the scenario's epoch plus the sim time, whatever engine made the run.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any, Dict, Iterable, Optional, Sequence
+
+import numpy as np
+
+Topics = Dict[str, Dict[int, Any]]
+
+#: One bag read, kept for the next reader of the same bag (the report reads the paper's topics
+#: for its table and again for its figures): ``(path, mtime, topics) -> Topics``.
+_LAST: Dict[tuple, Topics] = {}
+
+
+def _stamp(msg: Any) -> Optional[int]:
+    from adcs_nodes.bag import header_stamp_ns
+    return header_stamp_ns(msg)
+
+
+def from_bag(bag: str, topics: Sequence[str]) -> Topics:
+    """The messages of ``topics`` in ``bag`` (any engine's), keyed by header stamp.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        No bag there, or not a readable one (:func:`adcs_nodes.bag.read_messages`).
+    """
+    from adcs_nodes.bag import read_messages
+    names = tuple(t.lstrip('/') for t in topics)
+    try:
+        mtime = max(os.stat(os.path.join(bag, f)).st_mtime_ns for f in os.listdir(bag)) \
+            if os.path.isdir(bag) else os.stat(bag).st_mtime_ns
+    except OSError:
+        mtime = None
+    key = (os.path.abspath(bag), mtime, names)
+    if mtime is not None and key in _LAST:
+        return _LAST[key]
+    out: Topics = {t: {} for t in names}
+    for topic, _, msg in read_messages(bag, ['/' + t for t in names]):
+        stamp = _stamp(msg)
+        if stamp is not None:
+            out[topic.lstrip('/')][stamp] = msg
+    _LAST.clear()
+    if mtime is not None:
+        _LAST[key] = out
+    return out
+
+
+def from_frames(frames: Iterable[Any], topics: Sequence[str]) -> Topics:
+    """The messages of ``topics`` in FrameLoop frames (:class:`sim_node.engine.Frame`)."""
+    names = tuple(t.lstrip('/') for t in topics)
+    out: Topics = {t: {} for t in names}
+    for frame in frames:
+        for topic, msg in frame.outputs:
+            got = out.get(topic)
+            if got is not None:
+                stamp = _stamp(msg)
+                if stamp is not None:
+                    got[stamp] = msg
+    return out
+
+
+def scenario_of(bag: str) -> Optional[Dict[str, Any]]:
+    """The effective scenario stored beside the bag (``scenario.yaml``), or None."""
+    import yaml
+    path = os.path.join(bag, 'scenario.yaml')
+    if not os.path.isfile(path):
+        return None
+    with open(path, encoding='utf-8') as fh:
+        return yaml.safe_load(fh)
+
+
+def epoch_ns(sc: Dict[str, Any]) -> int:
+    """The scenario's epoch (sim time 0) [ns since 1970]."""
+    from adcs_nodes.components.base import epoch_to_ns, parse_epoch
+    return epoch_to_ns(parse_epoch(str(sc['epoch'])))
+
+
+def orbit_period_s(sc: Dict[str, Any]) -> float:
+    """Period of the scenario's circular orbit (Kepler) [s]."""
+    import math
+
+    from adcs_nodes.core.orbit import MU_EARTH, R_EARTH
+    a = R_EARTH + 1e3 * float(sc['orbit']['altitude_km'])
+    return 2.0 * math.pi * math.sqrt(a ** 3 / MU_EARTH)
+
+
+def quat(q: Any) -> np.ndarray:
+    """``geometry_msgs/Quaternion`` -> ``[x, y, z, w]``."""
+    return np.array([q.x, q.y, q.z, q.w], dtype=float)
+
+
+def vec(v: Any) -> np.ndarray:
+    """``geometry_msgs/Vector3`` -> ``[x, y, z]``."""
+    return np.array([v.x, v.y, v.z], dtype=float)
+
+
+def sorted_items(topic: Dict[int, Any]) -> list:
+    """``[(stamp, message)]`` in stamp order."""
+    return sorted(topic.items(), key=lambda kv: kv[0])
+
+
+def scenario_dict(sc: Dict[str, Any]) -> Dict[str, Any]:
+    """A validated scenario: ``sc`` itself when it was loaded (it has ``_path``), else the
+    effective scenario of a bag (``scenario.yaml``) validated again."""
+    from adcs_nodes.scenario import apply_overrides
+    return sc if '_path' in sc else apply_overrides(sc, {})
+
+
+def run_topics(sc: Dict[str, Any], topics: Sequence[str], duration_s: Optional[float] = None,
+               overrides: Any = None, ideal: bool = False) -> Topics:
+    """Run scenario ``sc`` (validated) with ``overrides`` on the FrameLoop and return the
+    stamped messages of ``topics`` (:mod:`adcs_nodes.tools.analyse.papers.series`).
+
+    Raises
+    ------
+    ScenarioError
+        A bad override; ``sim_node.engine.EngineError`` for a scenario the plain engine
+        cannot run (both are ``ValueError``).
+    """
+    from adcs_nodes.scenario import apply_overrides
+    from sim_node.engine import FrameLoop
+    if overrides:
+        sc = apply_overrides(sc, overrides)
+    loop = FrameLoop.from_scenario(sc, duration_s, ideal_estimate=ideal)
+    return from_frames(loop.run(), topics)

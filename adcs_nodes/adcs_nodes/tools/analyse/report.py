@@ -1,0 +1,569 @@
+"""Bag to report: metrics, PNG plots (matplotlib, Agg) and ``summary.md``.
+
+What is computed (all times from ``header.stamp``, the simulated time, never bag log times, so
+two runs of the same simulation give the same report):
+
+* topics: message count and rate ``(n - 1) / (t_last - t_first)`` [Hz] from header stamps
+  (log times only for types without a header);
+* attitude (``/sim/state``): angle between body and orbit frame
+  ``theta = angle(q_orbit_body, identity)`` [deg] over time, quaternion components;
+* body rate: ``|omega_body_eci_body|`` and ``|omega_body_orbit_body|`` [deg/s];
+* field: ``/sim/environment`` ``b_eci`` and, if recorded, ``/sensors/magnetometer`` [uT];
+* wheels (``/sim/wheels``, if any): momentum per wheel [N m s];
+* estimate error (``/adcs/attitude_estimate``, if any): ``angle(q_eci_body_est, q_eci_body_true)``
+  [deg] and ``|omega_est - omega_true|`` [deg/s], the truth interpolated at each estimate's
+  own stamp (slerp of the attitude, linear rate; :func:`adcs_nodes.tools.analyse.metrics.
+  estimate_errors_deg`), so a live bag's off-grid estimates are judged too;
+* paper comparison: a table filled from ``expectations`` (empty by default), so scenarios that
+  reproduce a paper add their rows ``(name, paper value, measured value, verdict)``
+  (:mod:`adcs_nodes.tools.analyse.papers`, the same table ``make reproduce`` prints); verdict
+  True/False prints PASS/FAIL (a comparison with a paper number), ``None`` prints ``info`` (no
+  paper value), :class:`~adcs_nodes.tools.analyse.papers.NotComparable` prints ``not comparable:
+  <reason>`` (a paper claim this run cannot check); only PASS/FAIL count in ``all_pass``;
+* the paper's own figures (papers 001 and 003) and extra sections (e.g. paper 000's
+  sensitivity table) from :func:`adcs_nodes.tools.analyse.reproductions.sections_for`.
+
+Time axes are in orbits when the run lasts at least half an orbit (orbit rate from
+``/sim/environment``), else in seconds, counted from the first ``/sim/state`` stamp.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from adcs_nodes.tools.analyse import papers
+from adcs_nodes.bag import cdr_stamp_ns, open_bag, stamp_kind
+from adcs_nodes.tools.analyse.metrics import (angle_to_identity_deg, estimate_errors_deg,
+                                              run_metrics)
+
+STATE_TOPIC = '/sim/state'
+ENV_TOPIC = '/sim/environment'
+MAG_TOPIC = '/sensors/magnetometer'
+WHEELS_TOPIC = '/sim/wheels'
+ESTIMATE_TOPIC = '/adcs/attitude_estimate'
+
+Expectation = Tuple[str, str, Any, Any]   # verdict: True, False, None (info), NotComparable
+
+_RAD2DEG = 180.0 / math.pi
+_T2UT = 1e6
+
+
+@dataclass
+class _TopicStats:
+    msgtype: str
+    count: int = 0
+    first_ns: Optional[int] = None
+    last_ns: Optional[int] = None
+    from_header: bool = True
+
+    def add(self, t_ns: int) -> None:
+        self.count += 1
+        self.first_ns = t_ns if self.first_ns is None else min(self.first_ns, t_ns)
+        self.last_ns = t_ns if self.last_ns is None else max(self.last_ns, t_ns)
+
+    def rate_hz(self) -> Optional[float]:
+        if self.count < 2 or self.last_ns is None or self.last_ns <= self.first_ns:
+            return None
+        return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
+
+
+@dataclass
+class _Data:
+    """Time series pulled from the bag (stamps in ns)."""
+
+    stats: Dict[str, _TopicStats] = field(default_factory=dict)
+    state: Dict[str, list] = field(default_factory=lambda: {
+        't': [], 'q_orbit_body': [], 'q_eci_body': [], 'w_eci': [], 'w_orbit': []})
+    env: Dict[str, list] = field(default_factory=lambda: {'t': [], 'b_eci': [], 'n': []})
+    mag: Dict[str, list] = field(default_factory=lambda: {'t': [], 'b': []})
+    wheels: Dict[str, list] = field(default_factory=lambda: {'t': [], 'h': [], 'names': []})
+    est: Dict[str, list] = field(default_factory=lambda: {'t': [], 'q_eci_body': [], 'w_eci': []})
+
+
+def _quat(q) -> List[float]:
+    return [q.x, q.y, q.z, q.w]
+
+
+def _vec(v) -> List[float]:
+    return [v.x, v.y, v.z]
+
+
+def _stamp(msg) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+def _collect(bag_path) -> _Data:
+    data = _Data()
+    interest = {STATE_TOPIC, ENV_TOPIC, MAG_TOPIC, WHEELS_TOPIC, ESTIMATE_TOPIC}
+    with open_bag(bag_path) as reader:
+        kinds = {}
+        for conn in reader.connections:
+            kinds[conn.topic] = stamp_kind(reader.typestore, conn.msgtype)
+            data.stats.setdefault(conn.topic, _TopicStats(conn.msgtype,
+                                                          from_header=bool(kinds[conn.topic])))
+        try:
+            for conn, t_log, raw in reader.messages():
+                stamp = cdr_stamp_ns(raw) if kinds[conn.topic] else None
+                data.stats[conn.topic].add(stamp if stamp is not None else t_log)
+                if conn.topic in interest:
+                    _store(data, conn.topic, reader.deserialize(raw, conn.msgtype))
+        except Exception as exc:
+            raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
+    return data
+
+
+def _store(data: _Data, topic: str, msg) -> None:
+    if topic == STATE_TOPIC:
+        s = data.state
+        s['t'].append(_stamp(msg))
+        s['q_orbit_body'].append(_quat(msg.q_orbit_body))
+        s['q_eci_body'].append(_quat(msg.q_eci_body))
+        s['w_eci'].append(_vec(msg.omega_body_eci_body))
+        s['w_orbit'].append(_vec(msg.omega_body_orbit_body))
+    elif topic == ENV_TOPIC:
+        data.env['t'].append(_stamp(msg))
+        data.env['b_eci'].append(_vec(msg.b_eci))
+        data.env['n'].append(float(msg.orbit_rate))
+    elif topic == MAG_TOPIC:
+        data.mag['t'].append(_stamp(msg))
+        data.mag['b'].append(_vec(msg.magnetic_field))
+    elif topic == WHEELS_TOPIC:
+        data.wheels['t'].append(_stamp(msg))
+        data.wheels['h'].append([float(x) for x in msg.momentum])
+        if not data.wheels['names']:
+            data.wheels['names'] = list(msg.names)
+    elif topic == ESTIMATE_TOPIC:
+        data.est['t'].append(_stamp(msg))
+        data.est['q_eci_body'].append(_quat(msg.q_eci_body))
+        data.est['w_eci'].append(_vec(msg.omega_body_eci_body))
+
+
+class _TimeAxis:
+    """Relative time in seconds or orbits, from a reference stamp."""
+
+    def __init__(self, t0_ns: int, duration_s: float, orbit_period_s: Optional[float]) -> None:
+        self.t0_ns = t0_ns
+        self.use_orbits = bool(orbit_period_s) and duration_s >= 0.5 * orbit_period_s
+        self.scale = orbit_period_s if self.use_orbits else 1.0
+        self.label = 'time [orbits]' if self.use_orbits else 'time [s]'
+
+    def __call__(self, t_ns: Sequence[int]) -> np.ndarray:
+        return (np.asarray(t_ns, dtype=np.int64) - self.t0_ns) * 1e-9 / self.scale
+
+
+def _angle_to_identity(quats: np.ndarray) -> np.ndarray:
+    """Rotation angle of each quaternion [rad] (:func:`metrics.angle_to_identity_deg`)."""
+    return np.radians(angle_to_identity_deg(quats))
+
+
+def _save(fig: Figure, out: Path, name: str, plots: List[str]) -> None:
+    fig.tight_layout()
+    fig.savefig(out / name, dpi=110)
+    plots.append(name)
+
+
+def _plot_attitude(data, axis, out, plots) -> None:
+    s = data.state
+    t = axis(s['t'])
+    fig = Figure(figsize=(8, 6))
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    ax1.plot(t, _angle_to_identity(np.array(s['q_orbit_body'])) * _RAD2DEG)
+    ax1.set_ylabel('angle body to orbit frame [deg]')
+    ax1.grid(True)
+    q = np.array(s['q_orbit_body'])
+    for i, name in enumerate('xyzw'):
+        ax2.plot(t, q[:, i], label=f'q_{name}')
+    ax2.set_ylabel('q_orbit_body [-]')
+    ax2.set_xlabel(axis.label)
+    ax2.legend(loc='best', ncol=4)
+    ax2.grid(True)
+    _save(fig, out, 'attitude.png', plots)
+
+
+def _plot_rates(data, axis, out, plots) -> None:
+    s = data.state
+    t = axis(s['t'])
+    w = np.array(s['w_eci']) * _RAD2DEG
+    fig = Figure(figsize=(8, 6))
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    for i, name in enumerate('xyz'):
+        ax1.plot(t, w[:, i], label=f'omega_{name}')
+    ax1.set_ylabel('omega_body_eci_body [deg/s]')
+    ax1.legend(loc='best', ncol=3)
+    ax1.grid(True)
+    ax2.plot(t, np.linalg.norm(w, axis=1), label='|omega_body_eci_body|')
+    ax2.plot(t, np.linalg.norm(np.array(s['w_orbit']), axis=1) * _RAD2DEG,
+             label='|omega_body_orbit_body|')
+    ax2.set_ylabel('rate norm [deg/s]')
+    ax2.set_xlabel(axis.label)
+    ax2.legend(loc='best')
+    ax2.grid(True)
+    _save(fig, out, 'rates.png', plots)
+
+
+def _plot_field(data, axis, out, plots) -> None:
+    panels = []
+    if data.env['t']:
+        panels.append((data.env, 'b_eci', 'b_eci [uT] (ECI)'))
+    if data.mag['t']:
+        panels.append((data.mag, 'b', 'magnetometer [uT] (sensor frame)'))
+    fig = Figure(figsize=(8, 3 * len(panels) + 1))
+    axes = np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))
+    for ax, (series, key, label) in zip(axes, panels):
+        t = axis(series['t'])
+        b = np.array(series[key]) * _T2UT
+        for i, name in enumerate('xyz'):
+            ax.plot(t, b[:, i], label=name)
+        ax.plot(t, np.linalg.norm(b, axis=1), 'k--', label='norm')
+        ax.set_ylabel(label)
+        ax.legend(loc='best', ncol=4)
+        ax.grid(True)
+    axes[-1].set_xlabel(axis.label)
+    _save(fig, out, 'field.png', plots)
+
+
+def _wheel_matrix(data) -> np.ndarray:
+    width = max((len(h) for h in data.wheels['h']), default=0)
+    h = np.full((len(data.wheels['h']), width), np.nan)
+    for i, row in enumerate(data.wheels['h']):
+        h[i, :len(row)] = row
+    return h
+
+
+def _plot_wheels(data, axis, out, plots) -> None:
+    h = _wheel_matrix(data)
+    t = axis(data.wheels['t'])
+    fig = Figure(figsize=(8, 4))
+    ax = fig.subplots()
+    names = data.wheels['names']
+    for i in range(h.shape[1]):
+        ax.plot(t, h[:, i], label=names[i] if i < len(names) else f'wheel {i}')
+    ax.set_ylabel('wheel momentum [N m s]')
+    ax.set_xlabel(axis.label)
+    ax.legend(loc='best')
+    ax.grid(True)
+    _save(fig, out, 'wheels.png', plots)
+
+
+def _estimate_errors(data) -> Optional[Tuple[List[int], np.ndarray, np.ndarray]]:
+    """Estimate errors against the truth interpolated at each estimate's own stamp
+    (attitude: slerp of ``q_eci_body``; rate: linear), estimates outside the truth's span
+    left out: ``(stamps [ns], angle [rad], rate error [rad/s])`` and, on ``data``,
+    ``est_on_grid`` (stamps equal to a truth stamp)."""
+    ts = np.asarray(data.state['t'], dtype=np.int64)
+    te = np.asarray(data.est['t'], dtype=np.int64)
+    t0 = ts[0]
+    err = estimate_errors_deg((ts - t0) * 1e-9, data.state['q_eci_body'], (te - t0) * 1e-9,
+                              data.est['q_eci_body'])
+    if not err['t'].size:
+        return None
+    inside = (te >= ts[0]) & (te <= ts[-1])
+    stamps = te[inside]
+    w_true = np.asarray(data.state['w_eci'], dtype=float)
+    w_at = np.stack([np.interp(err['t'], (ts - t0) * 1e-9, w_true[:, k]) for k in range(3)],
+                    axis=1)
+    rate_err = np.linalg.norm(np.asarray(data.est['w_eci'], dtype=float)[inside] - w_at, axis=1)
+    data.est_on_grid = err['on_grid']
+    return [int(t) for t in stamps], np.radians(err['deg']), rate_err
+
+
+def _plot_estimate(errors, axis, out, plots) -> None:
+    stamps, angles, rate_err = errors
+    t = axis(stamps)
+    fig = Figure(figsize=(8, 6))
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    ax1.plot(t, angles * _RAD2DEG)
+    ax1.set_ylabel('attitude estimate error [deg]')
+    ax1.grid(True)
+    ax2.plot(t, rate_err * _RAD2DEG)
+    ax2.set_ylabel('rate estimate error [deg/s]')
+    ax2.set_xlabel(axis.label)
+    ax2.grid(True)
+    _save(fig, out, 'estimate_error.png', plots)
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'yes' if value else 'no'
+    if isinstance(value, (float, np.floating)):
+        return f'{float(value):.4g}'
+    return str(value)
+
+
+def _utc(t_ns: int) -> str:
+    return datetime.fromtimestamp(t_ns * 1e-9, tz=timezone.utc).strftime(
+        '%Y-%m-%d %H:%M:%S.%f UTC')
+
+
+def verdict_text(ok: Any) -> str:
+    """``PASS`` / ``FAIL`` for a comparison with the paper, ``info`` for ``None``, ``not
+    comparable: <reason>`` (:func:`adcs_nodes.tools.analyse.papers.verdict_text`)."""
+    return papers.verdict_text(ok)
+
+
+def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expectation],
+                sections: Sequence[Tuple[str, str]] = ()) -> str:
+    lines = [
+        '# ADCS run report', '',
+        f'* bag: `{bag_path}`',
+    ]
+    if metrics.get('start_utc'):
+        lines.append(f"* start (sim time): {metrics['start_utc']}")
+    duration = f"{metrics['duration_s']:.6g} s"
+    if metrics.get('orbit_period_s'):
+        duration += f" ({metrics['duration_s'] / metrics['orbit_period_s']:.4g} orbits of " \
+                    f"{metrics['orbit_period_s']:.6g} s)"
+    lines += [f'* duration: {duration}',
+              '* times are header stamps (simulated time), not bag log times', '',
+              '## Topics', '',
+              '| topic | type | messages | rate [Hz] |', '|---|---|---:|---:|']
+    for topic, info in metrics['topics'].items():
+        rate = '-' if info['rate_hz'] is None else f"{info['rate_hz']:.4g}"
+        if info['rate_hz'] is not None and info['rate_source'] != 'header':
+            rate += ' (log time)'
+        lines.append(f"| `{topic}` | `{info['type']}` | {info['count']} | {rate} |")
+    lines += ['', '## Attitude and rates', '']
+    rows = [
+        ('final angle body to orbit frame', 'final_angle_orbit_deg', 'deg'),
+        ('max angle body to orbit frame', 'max_angle_orbit_deg', 'deg'),
+        ('final \\|omega_body_eci_body\\|', 'final_rate_deg_s', 'deg/s'),
+        ('max \\|omega_body_eci_body\\|', 'max_rate_deg_s', 'deg/s'),
+        ('final \\|omega_body_orbit_body\\|', 'final_rate_orbit_deg_s', 'deg/s'),
+        ('final attitude estimate error', 'estimate_final_error_deg', 'deg'),
+        ('max attitude estimate error', 'estimate_max_error_deg', 'deg'),
+        ('rms attitude estimate error', 'estimate_rms_error_deg', 'deg'),
+        ('estimates judged (against the truth slerped to each estimate stamp)',
+         'estimate_matched', ''),
+        ('... of them stamped on a truth sample', 'estimate_on_truth_grid', ''),
+        ('capture: enters 5 deg, stays within 10 deg', 'capture_orbits', 'orbits'),
+        ('last exit from 5 deg', 'last_exit_orbits', 'orbits'),
+        ('hold RMS (4 orbits to the end)', 'hold_rms_deg', 'deg'),
+        ('hold median', 'hold_median_deg', 'deg'),
+        ('hold 95th percentile', 'hold_p95_deg', 'deg'),
+        ('max \\|wheel momentum\\|', 'wheel_max_abs_momentum_Nms', 'N m s'),
+        ('mean \\|b_eci\\|', 'field_mean_norm_uT', 'uT'),
+        ('mean \\|magnetometer\\|', 'magnetometer_mean_norm_uT', 'uT'),
+    ]
+    present = [(label, key, unit) for label, key, unit in rows if key in metrics]
+    if present:
+        lines += ['| quantity | value | unit |', '|---|---:|---|']
+        lines += [f'| {label} | {_fmt(metrics[key])} | {unit} |' for label, key, unit in present]
+    else:
+        lines.append(f'No `{STATE_TOPIC}` in the bag.')
+    lines += ['', '## Paper comparison', '']
+    if not expectations:
+        lines += ['| quantity | paper | measured | verdict |', '|---|---|---|---|', '',
+                  '_No paper comparison for this run._']
+    else:
+        lines += papers.table_lines(expectations)
+    for title, text in sections:
+        lines += ['', f'## {title}', '', text.rstrip()]
+    lines += ['', '## Plots', '']
+    lines += [f'![{Path(p).stem}]({p})' for p in metrics['plots']]
+    return '\n'.join(lines) + '\n'
+
+
+def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
+                expectations: Optional[Sequence[Expectation]] = None,
+                sections: Optional[Sequence[Tuple[str, str]]] = None) -> Dict[str, Any]:
+    """Analyse a bag: write PNG plots, ``summary.md`` and ``metrics.json`` into ``out_dir``.
+
+    Parameters
+    ----------
+    bag_path : path-like
+        rosbag2 bag directory or ``.mcap`` file.
+    out_dir : path-like
+        Output directory (created if needed; files of the same names are replaced).
+    expectations : sequence of (str, str, object, bool or None), optional
+        Paper comparison rows ``(name, paper_value_str, measured_value, verdict)``; verdict
+        ``None`` is an information row (not counted). The table in ``summary.md`` is empty
+        without them.
+    sections : sequence of (str, str), optional
+        Extra markdown sections ``(title, text)``; default: those of the bag's scenario
+        (:func:`adcs_nodes.tools.analyse.reproductions.sections_for`).
+
+    Returns
+    -------
+    dict
+        ``duration_s`` [s], ``start_utc``, ``orbit_period_s`` [s] (if known), ``topics``
+        (per topic ``type``, ``count``, ``rate_hz``, ``rate_source``); with ``/sim/state``:
+        ``final_angle_orbit_deg``, ``max_angle_orbit_deg``, ``final_q_orbit_body`` (x, y, z, w),
+        ``final_rate_deg_s``, ``max_rate_deg_s``, ``final_rate_orbit_deg_s``; with an estimate:
+        ``estimate_final_error_deg``, ``estimate_max_error_deg``, ``estimate_rms_error_deg``,
+        ``estimate_matched``; ``wheel_max_abs_momentum_Nms``, ``field_mean_norm_uT``,
+        ``magnetometer_mean_norm_uT`` when those topics exist; with a known orbit period the
+        run metrics of :func:`adcs_nodes.tools.analyse.metrics.run_metrics` on the angle to the
+        orbit
+        frame (``capture_orbits``, ``last_exit_orbits``, ``hold_rms_deg``, ...);
+        ``expectations`` (list of dicts, ``pass`` None for information rows), ``all_pass``
+        (over the rows with a verdict; ``None`` without any), ``plots`` (file names),
+        ``summary`` and ``metrics_file`` (paths).
+
+    Raises
+    ------
+    FileNotFoundError
+        If the bag does not exist.
+    ValueError
+        If it is not a readable bag.
+    """
+    expectations = list(expectations or [])
+    if sections is None:
+        from adcs_nodes.tools.analyse.reproductions import sections_for
+        try:
+            sections = sections_for(str(bag_path))
+        except (OSError, ValueError, ImportError):
+            sections = []
+    data = _collect(bag_path)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    metrics, axis, errors = _bag_metrics(data, bag_path)
+    plots = _draw_plots(data, axis, errors, out, wheels='wheel_final_momentum_Nms' in metrics)
+    if expectations:
+        try:
+            drawn = papers.figures_for_bag(str(bag_path), str(out))
+            plots += [os.path.relpath(p, out) for p in drawn]
+        except (OSError, ValueError, KeyError) as exc:   # a bag without the paper's topics
+            metrics['paper_figures_error'] = str(exc)
+    metrics['expectations'] = [
+        {'name': name, 'paper': paper, 'measured': _json_value(measured),
+         'pass': bool(ok) if papers.is_counted(ok) else None,
+         'verdict': papers.verdict_text(ok)}
+        for name, paper, measured, ok in expectations]
+    counted = [bool(e[3]) for e in expectations if papers.is_counted(e[3])]
+    metrics['all_pass'] = all(counted) if counted else None
+    metrics['plots'] = plots
+    summary = out / 'summary.md'
+    summary.write_text(_summary_md(bag_path, metrics, expectations, sections),
+                       encoding='utf-8')
+    metrics['summary'] = str(summary)
+    metrics_file = out / 'metrics.json'
+    metrics['metrics_file'] = str(metrics_file)
+    metrics_file.write_text(json.dumps(metrics, indent=2, default=_json_value) + '\n',
+                            encoding='utf-8')
+    return metrics
+
+
+def _bag_metrics(data: _Data, bag_path) -> Tuple[Dict[str, Any], '_TimeAxis', Any]:
+    """The numbers of :func:`make_report` (no files): per-topic counts and rates, the time
+    span and orbit period, the truth's angle and rates, field, wheel and estimate metrics.
+    Returns ``(metrics, time axis of the plots, estimate errors or None)``."""
+    metrics: Dict[str, Any] = {'bag': str(bag_path), 'topics': {}}
+    for topic in sorted(data.stats):
+        st = data.stats[topic]
+        metrics['topics'][topic] = {
+            'type': st.msgtype, 'count': st.count, 'rate_hz': st.rate_hz(),
+            'rate_source': 'header' if st.from_header else 'log_time'}
+    stamped = [st for st in data.stats.values() if st.from_header and st.count]
+    if data.state['t']:
+        t0, t1 = data.state['t'][0], data.state['t'][-1]
+    elif stamped:
+        t0 = min(st.first_ns for st in stamped)
+        t1 = max(st.last_ns for st in stamped)
+    else:
+        t0 = t1 = 0
+    metrics['duration_s'] = (t1 - t0) * 1e-9
+    metrics['start_utc'] = _utc(t0) if t0 else None
+    rates = [n for n in data.env['n'] if n > 0.0]
+    period = 2.0 * math.pi / rates[-1] if rates else None
+    if period:
+        metrics['orbit_period_s'] = period
+    if data.state['t']:
+        metrics.update(_truth_metrics(data, t0, period))
+    if data.env['t']:
+        metrics['field_mean_norm_uT'] = float(
+            np.linalg.norm(np.array(data.env['b_eci']), axis=1).mean() * _T2UT)
+    if data.mag['t']:
+        metrics['magnetometer_mean_norm_uT'] = float(
+            np.linalg.norm(np.array(data.mag['b']), axis=1).mean() * _T2UT)
+    if data.wheels['t']:
+        h = _wheel_matrix(data)
+        if h.size:
+            metrics['wheel_max_abs_momentum_Nms'] = float(np.nanmax(np.abs(h)))
+            metrics['wheel_final_momentum_Nms'] = [float(x) for x in h[-1]]
+    errors = _estimate_errors(data) if data.est['t'] and data.state['t'] else None
+    if errors is not None:
+        deg = errors[1] * _RAD2DEG
+        metrics.update({
+            'estimate_final_error_deg': float(deg[-1]),
+            'estimate_max_error_deg': float(deg.max()),
+            'estimate_rms_error_deg': float(np.sqrt(np.mean(deg ** 2))),
+            'estimate_matched': len(deg),
+            'estimate_on_truth_grid': int(getattr(data, 'est_on_grid', 0)),
+            'estimate_truth': 'interpolated at each estimate stamp (slerp)',
+        })
+    return metrics, _TimeAxis(t0, metrics['duration_s'], period), errors
+
+
+def _truth_metrics(data: _Data, t0: int, period: Optional[float]) -> Dict[str, Any]:
+    """Angle to the orbit frame and rates of the truth (``/sim/state``), and with a known
+    orbit period the run metrics of :func:`adcs_nodes.tools.analyse.metrics.run_metrics`."""
+    angles = _angle_to_identity(np.array(data.state['q_orbit_body'])) * _RAD2DEG
+    w = np.linalg.norm(np.array(data.state['w_eci']), axis=1) * _RAD2DEG
+    w_orb = np.linalg.norm(np.array(data.state['w_orbit']), axis=1) * _RAD2DEG
+    out = {'final_angle_orbit_deg': float(angles[-1]), 'max_angle_orbit_deg': float(angles.max()),
+           'final_q_orbit_body': [float(x) for x in data.state['q_orbit_body'][-1]],
+           'final_rate_deg_s': float(w[-1]), 'max_rate_deg_s': float(w.max()),
+           'final_rate_orbit_deg_s': float(w_orb[-1])}
+    if period:
+        t_s = (np.asarray(data.state['t'], dtype=np.int64) - t0) * 1e-9
+        run = run_metrics(t_s, angles, period)
+        out.update({k: run[k] for k in (
+            'capture_orbits', 'last_exit_orbits', 'hold_rms_deg', 'hold_median_deg',
+            'hold_p95_deg', 'hold_max_deg', 'hold_samples')
+            if run[k] is not None and math.isfinite(run[k])})
+    return out
+
+
+def _draw_plots(data: _Data, axis: '_TimeAxis', errors, out: Path,
+                wheels: bool) -> List[str]:
+    """The PNG plots of the series the bag has (``wheels``: wheel momenta were found);
+    their file names."""
+    plots: List[str] = []
+    if data.state['t']:
+        _plot_attitude(data, axis, out, plots)
+        _plot_rates(data, axis, out, plots)
+    if data.env['t'] or data.mag['t']:
+        _plot_field(data, axis, out, plots)
+    if wheels:
+        _plot_wheels(data, axis, out, plots)
+    if errors is not None:
+        _plot_estimate(errors, axis, out, plots)
+    return plots
+
+
+def _json_value(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    return str(value)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """``python -m adcs_nodes.tools.analyse.report BAG OUT_DIR``: write the report, print the
+    summary."""
+    parser = argparse.ArgumentParser(description='Metrics, plots and summary of an ADCS bag.')
+    parser.add_argument('bag', help='bag directory or .mcap file')
+    parser.add_argument('out_dir', help='directory for plots, summary.md and metrics.json')
+    args = parser.parse_args(argv)
+    try:
+        metrics = make_report(args.bag, args.out_dir)
+    except (FileNotFoundError, ValueError) as exc:
+        parser.exit(2, f'error: {exc}\n')
+    print(Path(metrics['summary']).read_text(encoding='utf-8'))
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

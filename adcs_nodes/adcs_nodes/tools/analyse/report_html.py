@@ -1,0 +1,666 @@
+"""``report.html``: one self-contained page of a run for people (``adcs report`` writes it).
+
+The page needs no network and no script: the plots are PNG images inline (base64, matplotlib
+Agg), the tables plain HTML. It reads any engine's bag (plain, composed, graph), whatever of
+these topics it holds (a section without its topics is left out, saying so):
+
+* timeline: shaded bands of the controller whose command was forwarded
+  (``adcs/actuator_command`` ``source``, so a fallback shows), the active controller and the
+  manager's mode (``adcs/controller_status``), fault markers (``sim/faults``), with the
+  attitude error against the target (``adcs/attitude_target``, truth ``sim/state`` at the
+  target's stamp) and the body rates under it. The same figure is written as
+  ``overview.png`` beside the page (the README's picture);
+* wheels (``sim/wheels``): speed and momentum per wheel;
+* magnetorquer dipole (``adcs/actuator_command``);
+* the estimator's error against the truth (``adcs/attitude_estimate``; the truth interpolated
+  at the estimate's stamp: slerp of the attitude between the two nearest truth samples) per
+  body axis, ``rotvec(q_est^-1 q_true)``, with its 3-sigma bound from the estimate's
+  covariance (attitude block, body axes; none when element 0 is -1, "unknown"), and the
+  estimator's rejections (``adcs/estimator/diagnostics``);
+* switches and fallbacks with their reasons, faults;
+* the paper table, when the report of :mod:`adcs_nodes.tools.analyse.report` in the same directory
+  (``metrics.json``) has one.
+
+Times are sim seconds from the first ``sim/state`` (else the first stamped message), shown in
+minutes for runs longer than 20 minutes.
+"""
+from __future__ import annotations
+
+import argparse
+import base64
+import html
+import io
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from adcs_nodes.bag import header_stamp_ns, read_messages
+
+TOPICS = ('/sim/state', '/sim/wheels', '/sim/faults', '/adcs/attitude_estimate',
+          '/adcs/estimator/diagnostics', '/adcs/attitude_target', '/adcs/actuator_command',
+          '/adcs/controller_status')
+#: One colour per controller (others get the next free one); 'zero' and '' are grey.
+PALETTE = ('#4c72b0', '#dd8452', '#55a868', '#c44e52', '#8172b3', '#937860', '#da8bc3',
+           '#8c8c8c', '#ccb974', '#64b5cd')
+KNOWN_COLOURS = {'bdot': '#c44e52', 'magnetic': '#dd8452', 'mpi': '#4c72b0',
+                 'fuzzy': '#55a868', 'reference_slew': '#8172b3', 'zero': '#bbbbbb',
+                 '': '#eeeeee', '-': '#eeeeee', 'detumble': '#f4b6b6', 'acquire': '#f8d3b0',
+                 'point': '#b6cbe8'}
+_DEG = 180.0 / math.pi
+
+
+@dataclass
+class _Series:
+    """What the page draws, pulled from the bag (times [s] from ``t0``)."""
+
+    t0: Optional[int] = None
+    state: Dict[str, list] = field(default_factory=lambda: {
+        't': [], 'q_eci': [], 'q_orbit': [], 'w_eci': [], 'w_orbit': []})
+    target: Dict[str, list] = field(default_factory=lambda: {'t': [], 'q': [], 'frame': []})
+    est: Dict[str, list] = field(default_factory=lambda: {'t': [], 'q_eci': [], 'cov': []})
+    diag: Dict[str, list] = field(default_factory=lambda: {'t': [], 'rejected': [],
+                                                           'last': []})
+    wheels: Dict[str, list] = field(default_factory=lambda: {'t': [], 'speed': [],
+                                                             'momentum': [], 'names': []})
+    cmd: Dict[str, list] = field(default_factory=lambda: {'t': [], 'source': [],
+                                                          'dipole': []})
+    status: List[Dict[str, Any]] = field(default_factory=list)
+    faults: List[Dict[str, Any]] = field(default_factory=list)
+    topics: Dict[str, int] = field(default_factory=dict)
+
+
+def _q(m) -> List[float]:
+    return [m.x, m.y, m.z, m.w]
+
+
+def _v(m) -> List[float]:
+    return [m.x, m.y, m.z]
+
+
+def _collect(bag_path) -> _Series:
+    raw: List[Tuple[str, int, Any]] = []
+    s = _Series()
+    for topic, _, msg in read_messages(bag_path, TOPICS):
+        stamp = header_stamp_ns(msg)
+        if stamp is None:
+            continue
+        raw.append((topic, stamp, msg))
+        s.topics[topic] = s.topics.get(topic, 0) + 1
+    states = [st for tp, st, _ in raw if tp == '/sim/state']
+    stamps = states or [st for _, st, _ in raw]
+    s.t0 = min(stamps) if stamps else 0
+    for topic, stamp, m in raw:
+        t = (stamp - s.t0) * 1e-9
+        if topic == '/sim/state':
+            d = s.state
+            d['t'].append(t)
+            d['q_eci'].append(_q(m.q_eci_body))
+            d['q_orbit'].append(_q(m.q_orbit_body))
+            d['w_eci'].append(_v(m.omega_body_eci_body))
+            d['w_orbit'].append(_v(m.omega_body_orbit_body))
+        elif topic == '/adcs/attitude_target':
+            s.target['t'].append(t)
+            s.target['q'].append(_q(m.q_ref_body))
+            s.target['frame'].append(m.header.frame_id or 'orbit')
+        elif topic == '/adcs/attitude_estimate':
+            s.est['t'].append(t)
+            s.est['q_eci'].append(_q(m.q_eci_body))
+            s.est['cov'].append(list(m.covariance))
+        elif topic == '/adcs/estimator/diagnostics':
+            s.diag['t'].append(t)
+            s.diag['rejected'].append(int(m.rejected_count))
+            s.diag['last'].append(str(m.last_rejection))
+        elif topic == '/sim/wheels':
+            if len(m.speed) and len(m.speed) == len(m.momentum):
+                s.wheels['t'].append(t)
+                s.wheels['speed'].append(list(m.speed))
+                s.wheels['momentum'].append(list(m.momentum))
+                s.wheels['names'] = list(m.names)
+        elif topic == '/adcs/actuator_command':
+            s.cmd['t'].append(t)
+            s.cmd['source'].append(str(m.source))
+            s.cmd['dipole'].append(_v(m.dipole_body))
+        elif topic == '/adcs/controller_status':
+            s.status.append({'t': t, 'active': m.active, 'mode': m.mode,
+                             'switch_count': int(m.switch_count),
+                             'missed_frames': int(m.missed_frames),
+                             'last_fault': m.last_fault})
+        elif topic == '/sim/faults':
+            for st in m.status:
+                values = {kv.key: kv.value for kv in st.values}
+                s.faults.append({'t': t, 'active': not str(st.message).startswith('cleared'),
+                                 'name': st.name, 'message': st.message,
+                                 'kind': values.get('kind', ''),
+                                 'target': values.get('target', st.hardware_id)})
+    s.status.sort(key=lambda e: e['t'])
+    s.faults.sort(key=lambda e: e['t'])
+    return s
+
+
+# ---------------------------------------------------------------------- quaternions (vector)
+def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Hamilton product of (n, 4) scalar-last quaternions."""
+    px, py, pz, pw = p.T
+    qx, qy, qz, qw = q.T
+    return np.stack([pw * qx + px * qw + py * qz - pz * qy,
+                     pw * qy - px * qz + py * qw + pz * qx,
+                     pw * qz + px * qy - py * qx + pz * qw,
+                     pw * qw - px * qx - py * qy - pz * qz], axis=1)
+
+
+def _qconj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def _angle(q: np.ndarray) -> np.ndarray:
+    """Rotation angle [rad] of (n, 4) quaternions."""
+    w = np.abs(q[:, 3]) / np.linalg.norm(q, axis=1)
+    return 2.0 * np.arccos(np.clip(w, 0.0, 1.0))
+
+
+def _rotvec(q: np.ndarray) -> np.ndarray:
+    """Rotation vectors [rad] of (n, 4) quaternions (shortest rotation)."""
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    q = np.where(q[:, 3:4] < 0.0, -q, q)
+    s = np.linalg.norm(q[:, :3], axis=1)
+    ang = 2.0 * np.arctan2(s, q[:, 3])
+    scale = np.where(s > 1e-12, ang / np.maximum(s, 1e-300), 2.0)
+    return q[:, :3] * scale[:, None]
+
+
+def slerp_at(t_src: np.ndarray, q_src: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The attitude ``q_src`` (sampled at increasing ``t_src``) at times ``t`` (slerp between
+    the two nearest samples; clamped at the ends)."""
+    i = np.clip(np.searchsorted(t_src, t, side='right') - 1, 0, len(t_src) - 1)
+    j = np.minimum(i + 1, len(t_src) - 1)
+    span = t_src[j] - t_src[i]
+    u = np.where(span > 0.0, (t - t_src[i]) / np.where(span > 0.0, span, 1.0), 0.0)
+    u = np.clip(u, 0.0, 1.0)
+    a, b = q_src[i], q_src[j].copy()
+    b[np.sum(a * b, axis=1) < 0.0] *= -1.0
+    d = _qmul(_qconj(a), b)
+    half = _rotvec(d) * u[:, None] / 2.0
+    n = np.linalg.norm(half, axis=1)
+    step = np.concatenate([half * np.where(n > 1e-12, np.sin(n) / np.maximum(n, 1e-300),
+                                           1.0)[:, None], np.cos(n)[:, None]], axis=1)
+    out = _qmul(a, step)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+# ---------------------------------------------------------------------- derived series
+def _runs(t: Sequence[float], labels: Sequence[str], t_end: float
+          ) -> List[Tuple[float, float, str]]:
+    """``[(start, end, label)]`` of consecutive equal labels."""
+    out: List[Tuple[float, float, str]] = []
+    for i, (ti, lab) in enumerate(zip(t, labels)):
+        if out and out[-1][2] == lab:
+            continue
+        if out:
+            out[-1] = (out[-1][0], ti, out[-1][2])
+        out.append((ti, t_end, lab))
+    return out
+
+
+def _colours(names: Sequence[str]) -> Dict[str, str]:
+    out = dict(KNOWN_COLOURS)
+    free = [c for c in PALETTE if c not in out.values()]
+    for n in names:
+        if n not in out:
+            out[n] = free.pop(0) if free else '#999999'
+    return out
+
+
+def _pointing_error(s: _Series) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+    """``(t, angle [deg])`` between the truth and the target, at the target's stamps."""
+    if not s.target['t'] or len(s.state['t']) < 1:
+        return None
+    t = np.asarray(s.target['t'])
+    ts = np.asarray(s.state['t'])
+    q_ref = np.asarray(s.target['q'], dtype=float)
+    frames = np.asarray(s.target['frame'])
+    q_orbit = slerp_at(ts, np.asarray(s.state['q_orbit'], dtype=float), t)
+    q_eci = slerp_at(ts, np.asarray(s.state['q_eci'], dtype=float), t)
+    q_true = np.where((frames == 'eci')[:, None], q_eci, q_orbit)
+    return t, _angle(_qmul(_qconj(q_ref), q_true)) * _DEG
+
+
+def _estimate_error(s: _Series) -> Optional[Dict[str, np.ndarray]]:
+    """Per-axis error [deg] (body axes) and 3-sigma [deg] at the estimate's stamps (within
+    the truth's time span)."""
+    if not s.est['t'] or len(s.state['t']) < 2:
+        return None
+    t = np.asarray(s.est['t'])
+    ts = np.asarray(s.state['t'])
+    keep = (t >= ts[0]) & (t <= ts[-1])
+    if not keep.any():
+        return None
+    t = t[keep]
+    q_est = np.asarray(s.est['q_eci'], dtype=float)[keep]
+    q_true = slerp_at(ts, np.asarray(s.state['q_eci'], dtype=float), t)
+    err = _rotvec(_qmul(_qconj(q_est), q_true)) * _DEG
+    cov = np.asarray(s.est['cov'], dtype=float)[keep]
+    sig = np.full(err.shape, np.nan)
+    if cov.ndim == 2 and cov.shape[1] == 36:
+        known = cov[:, 0] >= 0.0
+        diag = cov[:, [0, 7, 14]]
+        sig[known] = 3.0 * np.sqrt(np.clip(diag[known], 0.0, None)) * _DEG
+    return {'t': t, 'err': err, 'sigma3': sig}
+
+
+def _switches(s: _Series, schedule: Dict[float, str]) -> List[Dict[str, str]]:
+    """Each switch and fallback with its reason, in time order."""
+    rows: List[Dict[str, str]] = []
+    prev: Optional[Dict[str, Any]] = None
+    for e in s.status:
+        if prev is None:
+            rows.append({'t': e['t'], 'what': f'start: {e["active"]}'
+                         + (f' (mode {e["mode"]})' if e['mode'] else ''),
+                         'why': 'initial controller' + (', automatic sequence'
+                                                        if e['mode'] else '')})
+        else:
+            if e['switch_count'] != prev['switch_count'] or e['active'] != prev['active']:
+                if e['mode'] and e['mode'] != prev['mode']:
+                    why = f'automatic sequence: {prev["mode"] or "-"} -> {e["mode"]}'
+                elif any(abs(e['t'] - ts) < 1e-6 and n in (e['active'], 'auto')
+                         for ts, n in schedule.items()):
+                    why = 'scheduled (manager.schedule)'
+                elif prev['active'] != e['active'] and e['last_fault'] != prev['last_fault']:
+                    why = f'latched fallback: {e["last_fault"]}'
+                else:
+                    why = 'operator request (adcs switch / adcs slew) or schedule'
+                rows.append({'t': e['t'], 'what': f'switch {prev["active"]} -> {e["active"]}'
+                             + (f' (mode {e["mode"]})' if e['mode'] else ''), 'why': why})
+            if e['last_fault'] and e['last_fault'] != prev['last_fault']:
+                rows.append({'t': e['t'], 'what': f'fallback from {e["active"]}',
+                             'why': e['last_fault']})
+        prev = e
+    t_end = s.state['t'][-1] if s.state['t'] else (s.cmd['t'][-1] if s.cmd['t'] else 0.0)
+    times = [e['t'] for e in s.status]
+
+    def active_at(t: float) -> str:
+        i = int(np.searchsorted(times, t + 1e-6)) - 1
+        return s.status[i]['active'] if i >= 0 else ''
+    fell_back = False
+    for start, _, src in _runs(s.cmd['t'], s.cmd['source'], t_end)[1:]:
+        if src == 'zero':
+            continue
+        if times and src != active_at(start):
+            rows.append({'t': start, 'what': f'commands from {src} (not the active '
+                         f'{active_at(start)})', 'why': 'fallback to the safe controller '
+                         '(adcs/actuator_command source)'})
+            fell_back = True
+        elif fell_back:
+            rows.append({'t': start, 'what': f'commands from {src} again',
+                         'why': 'its command is valid again'})
+            fell_back = False
+    rows.sort(key=lambda r: r['t'])
+    return rows
+
+
+# ---------------------------------------------------------------------- figures
+@dataclass
+class _Axis:
+    scale: float
+    unit: str
+
+
+def _time_axis(t_end: float) -> _Axis:
+    return _Axis(60.0, 'min') if t_end > 1200.0 else _Axis(1.0, 's')
+
+
+def _png(fig: Figure) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format='png', dpi=90)
+    return buf.getvalue()
+
+
+def _mark_faults(ax, s: _Series, axis: _Axis, label: bool = False) -> None:
+    """Dashed lines at each fault (red: starts, green: ends); ``label``: their names above
+    the axes, staggered when close."""
+    span = max(ax.get_xlim()[1] - ax.get_xlim()[0], 1e-9) if label else 1.0
+    last_x, level = None, 0
+    for f in s.faults:
+        x = f['t'] / axis.scale
+        colour = '#d62728' if f['active'] else '#2ca02c'
+        ax.axvline(x, color=colour, lw=1.0, ls='--')
+        if label and f['active']:
+            level = level + 1 if last_x is not None and x - last_x < 0.12 * span else 0
+            last_x = x
+            ax.annotate(f'{f["kind"]} {f["target"]}', (x, 1.0 + 0.08 * level),
+                        xycoords=('data', 'axes fraction'), fontsize=7, va='bottom',
+                        ha='left', color=colour, annotation_clip=False)
+
+
+def _shade(ax, runs, colours, axis: _Axis, alpha: float = 0.12) -> None:
+    for a, b, lab in runs:
+        if lab not in ('zero', ''):
+            ax.axvspan(a / axis.scale, b / axis.scale, color=colours[lab], alpha=alpha, lw=0)
+
+
+def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
+              pointing) -> Figure:
+    fig = Figure(figsize=(11.0, 6.2))
+    gs = fig.add_gridspec(3, 1, height_ratios=[1.1, 2.0, 1.5], hspace=0.12)
+    band = fig.add_subplot(gs[0])
+    src_runs = _runs(s.cmd['t'], s.cmd['source'], t_end)
+    act_runs = _runs([e['t'] for e in s.status], [e['active'] for e in s.status], t_end)
+    mode_runs = _runs([e['t'] for e in s.status], [e['mode'] or '-' for e in s.status], t_end)
+    rows = [('commanding', src_runs), ('active', act_runs), ('mode', mode_runs)]
+    for k, (_, runs) in enumerate(rows):
+        y = len(rows) - 1 - k
+        for a, b, lab in runs:
+            band.broken_barh([(a / axis.scale, max(b - a, 1e-9) / axis.scale)], (y + 0.1, 0.8),
+                             color=colours.get(lab, '#999999'), lw=0)
+            if (b - a) / max(t_end, 1e-9) > 0.04 and lab:
+                band.text((a + b) / 2 / axis.scale, y + 0.5,
+                          'no sequence' if lab == '-' else lab, ha='center', va='center',
+                          fontsize=8)
+    band.set_yticks([len(rows) - 1 - k + 0.5 for k in range(len(rows))])
+    band.set_yticklabels([r[0] for r in rows], fontsize=8)
+    band.set_ylim(0, len(rows))
+    band.set_xlim(0, t_end / axis.scale)
+    band.tick_params(labelbottom=False)
+    _mark_faults(band, s, axis, label=True)
+    band.set_title('controllers: forwarded command, active, manager mode; faults dashed',
+                   fontsize=9, loc='left', pad=14)
+    err_ax = fig.add_subplot(gs[1], sharex=band)
+    _shade(err_ax, src_runs, colours, axis)
+    if pointing is not None:
+        t, ang = pointing
+        err_ax.semilogy(t / axis.scale, np.maximum(ang, 1e-4), color='k', lw=0.8)
+    else:
+        err_ax.text(0.5, 0.5, 'no attitude target recorded', transform=err_ax.transAxes,
+                    ha='center')
+    err_ax.set_ylabel('attitude error\nto target [deg]', fontsize=8)
+    err_ax.grid(True, which='major', alpha=0.3)
+    err_ax.tick_params(labelbottom=False)
+    _mark_faults(err_ax, s, axis)
+    rate_ax = fig.add_subplot(gs[2], sharex=band)
+    _shade(rate_ax, src_runs, colours, axis)
+    if s.state['t']:
+        t = np.asarray(s.state['t']) / axis.scale
+        rate_ax.semilogy(t, np.maximum(np.linalg.norm(s.state['w_eci'], axis=1) * _DEG, 1e-5),
+                         lw=0.8, label='|omega| w.r.t. ECI')
+        rate_ax.semilogy(t, np.maximum(np.linalg.norm(s.state['w_orbit'], axis=1) * _DEG,
+                                       1e-5), lw=0.8, label='|omega| w.r.t. the orbit frame')
+        rate_ax.legend(fontsize=7, loc='upper right')
+    rate_ax.set_ylabel('body rate\n[deg/s]', fontsize=8)
+    rate_ax.set_xlabel(f'sim time [{axis.unit}]')
+    rate_ax.grid(True, alpha=0.3)
+    _mark_faults(rate_ax, s, axis)
+    fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.08)
+    return fig
+
+
+def _wheels_fig(s: _Series, axis: _Axis) -> Figure:
+    fig = Figure(figsize=(11.0, 4.6))
+    t = np.asarray(s.wheels['t']) / axis.scale
+    names = s.wheels['names'] or [f'wheel{i}' for i in range(len(s.wheels['speed'][0]))]
+    ax1 = fig.add_subplot(2, 1, 1)
+    speed = np.asarray(s.wheels['speed']) * 60.0 / (2.0 * math.pi)
+    mom = np.asarray(s.wheels['momentum'])
+    for i, n in enumerate(names):
+        ax1.plot(t, speed[:, i], lw=0.8, label=n)
+    ax1.set_ylabel('speed [rpm]', fontsize=8)
+    ax1.legend(fontsize=7, loc='upper left')
+    ax1.grid(True, alpha=0.3)
+    ax1.tick_params(labelbottom=False)
+    ax1.set_xlim(t[0], t[-1])
+    _mark_faults(ax1, s, axis, label=True)
+    ax2 = fig.add_subplot(2, 1, 2, sharex=ax1)
+    for i, n in enumerate(names):
+        ax2.plot(t, mom[:, i], lw=0.8, label=n)
+    ax2.set_ylabel('momentum [N m s]', fontsize=8)
+    ax2.set_xlabel(f'sim time [{axis.unit}]')
+    ax2.grid(True, alpha=0.3)
+    _mark_faults(ax2, s, axis)
+    fig.subplots_adjust(left=0.1, right=0.98, top=0.9, bottom=0.12, hspace=0.1)
+    return fig
+
+
+def _dipole_fig(s: _Series, axis: _Axis) -> Figure:
+    fig = Figure(figsize=(11.0, 2.8))
+    ax = fig.add_subplot(1, 1, 1)
+    t = np.asarray(s.cmd['t']) / axis.scale
+    d = np.asarray(s.cmd['dipole'])
+    for i, n in enumerate('xyz'):
+        ax.plot(t, d[:, i], lw=0.6, label=f'm_{n}')
+    ax.set_ylabel('dipole [A m^2]', fontsize=8)
+    ax.set_xlabel(f'sim time [{axis.unit}]')
+    ax.legend(fontsize=7, loc='upper right', ncol=3)
+    ax.grid(True, alpha=0.3)
+    _mark_faults(ax, s, axis)
+    fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.18)
+    return fig
+
+
+def _estimate_fig(s: _Series, axis: _Axis, e: Dict[str, np.ndarray]) -> Figure:
+    with_diag = bool(s.diag['t'])
+    fig = Figure(figsize=(11.0, 6.2 if with_diag else 5.2))
+    n_rows = 4 if with_diag else 3
+    t = e['t'] / axis.scale
+    first = None
+    for i, n in enumerate('xyz'):
+        ax = fig.add_subplot(n_rows, 1, i + 1, sharex=first)
+        first = first or ax
+        sig = e['sigma3'][:, i]
+        if np.isfinite(sig).any():
+            ax.fill_between(t, -sig, sig, color='#4c72b0', alpha=0.2, lw=0,
+                            label='3-sigma (estimate covariance)')
+        ax.plot(t, e['err'][:, i], lw=0.6, color='k', label='error (truth at the stamp)')
+        ax.set_ylabel(f'{n} [deg]', fontsize=8)
+        ax.grid(True, alpha=0.3)
+        ax.set_xlim(t[0], t[-1])
+        _mark_faults(ax, s, axis, label=i == 0)
+        if i == 0:
+            ax.legend(fontsize=7, loc='upper right', ncol=2)
+        if i < n_rows - 1:
+            ax.tick_params(labelbottom=False)
+        finite = np.abs(e['err'][:, i])
+        finite = finite[np.isfinite(finite)]
+        if finite.size:      # the error sets the scale (a tumbling start's bound may not)
+            ax.set_ylim(-1.15 * max(float(finite.max()), 1e-6),
+                        1.15 * max(float(finite.max()), 1e-6))
+    if with_diag:
+        ax = fig.add_subplot(n_rows, 1, n_rows, sharex=first)
+        ax.step(np.asarray(s.diag['t']) / axis.scale, s.diag['rejected'], where='post',
+                lw=0.8, color='#c44e52')
+        ax.set_ylabel('rejected\nsamples', fontsize=8)
+        ax.grid(True, alpha=0.3)
+        _mark_faults(ax, s, axis)
+    fig.axes[-1].set_xlabel(f'sim time [{axis.unit}]')
+    fig.subplots_adjust(left=0.1, right=0.98, top=0.92, bottom=0.1, hspace=0.1)
+    return fig
+
+
+# ---------------------------------------------------------------------- page
+_CSS = """body{font-family:sans-serif;margin:1.5em auto;max-width:1050px;color:#222}
+h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
+table{border-collapse:collapse;font-size:0.85em;margin:0.5em 0}
+td,th{border:1px solid #ccc;padding:2px 6px;text-align:left;vertical-align:top}
+th{background:#f2f2f2}img{max-width:100%}.note{color:#666;font-size:0.85em}
+.pass{color:#1a7f37}.fail{color:#c00}"""
+
+
+def _table(head: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    out = ['<table><tr>' + ''.join(f'<th>{html.escape(str(h))}</th>' for h in head)
+           + '</tr>']
+    for r in rows:
+        out.append('<tr>' + ''.join(f'<td>{c}</td>' for c in r) + '</tr>')
+    return '\n'.join(out) + '</table>'
+
+
+def _img(png: bytes, alt: str) -> str:
+    return (f'<img class="plot" alt="{html.escape(alt)}" src="data:image/png;base64,'
+            f'{base64.b64encode(png).decode("ascii")}">')
+
+
+def _scenario(bag_path) -> Dict[str, Any]:
+    """The bag's ``scenario.yaml`` (``adcs run`` writes it beside the bag), or {}."""
+    p = Path(bag_path)
+    path = (p if p.is_dir() else p.parent) / 'scenario.yaml'
+    try:
+        import yaml
+        with open(path, encoding='utf-8') as fh:
+            data = yaml.safe_load(fh)
+        return data if isinstance(data, dict) else {}
+    except (OSError, ValueError, ImportError):
+        return {}
+    except Exception:          # a malformed file (yaml.YAMLError): the page goes on without
+        return {}
+
+
+def _paper_rows(out_dir: Path) -> Optional[List[Dict[str, Any]]]:
+    """The paper table of :mod:`adcs_nodes.tools.analyse.report` (its ``metrics.json``), or
+    None."""
+    try:
+        with open(out_dir / 'metrics.json', encoding='utf-8') as fh:
+            rows = json.load(fh).get('expectations')
+    except (OSError, ValueError, AttributeError):
+        return None
+    return rows if isinstance(rows, list) and rows else None
+
+
+def _fmt_t(t: float, axis: _Axis) -> str:
+    return f'{t:.0f} s' + (f' ({t / 60.0:.1f} min)' if axis.unit == 'min' else '')
+
+
+def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -> str:
+    """Write ``report.html`` (and ``overview.png``) of the bag into ``out_dir``.
+
+    Parameters
+    ----------
+    bag_path : path-like
+        rosbag2 bag directory or ``.mcap`` file of any engine.
+    out_dir : path-like
+        Output directory (created if needed); a ``metrics.json`` of
+        :func:`adcs_nodes.tools.analyse.report.make_report` already there gives the paper table.
+
+    Returns
+    -------
+    str
+        Path of ``report.html``.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        As :func:`adcs_nodes.bag.read_messages` (no bag, not a bag).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    s = _collect(bag_path)
+    sc = _scenario(bag_path)
+    ends = [s.state['t'][-1]] if s.state['t'] else []
+    ends += [s.cmd['t'][-1]] if s.cmd['t'] else []
+    t_end = max(ends + [1e-9])
+    axis = _time_axis(t_end)
+    names = sorted(set(s.cmd['source']) | {e['active'] for e in s.status}
+                   | {e['mode'] for e in s.status})
+    colours = _colours(names)
+    schedule = {float(e.get('t_s', -1.0)): str(e.get('controller', ''))
+                for e in (sc.get('manager') or {}).get('schedule') or [] if isinstance(e, dict)}
+    title = str(sc.get('name') or Path(str(bag_path).rstrip('/')).name)
+    parts = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+             f'<title>ADCS run {html.escape(title)}</title><style>{_CSS}</style></head><body>',
+             f'<h1>ADCS run: {html.escape(title)}</h1>']
+    if sc.get('description'):
+        parts.append(f'<p>{html.escape(str(sc["description"]))}</p>')
+    parts.append(f'<p class="note">bag {html.escape(str(bag_path))}; {_fmt_t(t_end, axis)} '
+                 'of sim time; topics: ' + ', '.join(
+                     f'{html.escape(k)} ({v})' for k, v in sorted(s.topics.items())) + '</p>')
+    missing: List[str] = []
+
+    parts.append('<h2>Timeline</h2>')
+    if s.cmd['t'] or s.status or s.state['t']:
+        fig = _overview(s, axis, t_end, colours, _pointing_error(s))
+        png = _png(fig)
+        (out / 'overview.png').write_bytes(png)
+        parts.append(_img(png, 'timeline: controllers, modes, faults, attitude error, rates'))
+    else:
+        missing.append('timeline (no sim/state, adcs/actuator_command or '
+                       'adcs/controller_status)')
+
+    parts.append('<h2>Switches and fallbacks</h2>')
+    rows = _switches(s, schedule)
+    if rows:
+        parts.append(_table(['t', 'what', 'why'], [
+            (_fmt_t(r['t'], axis), html.escape(r['what']), html.escape(r['why']))
+            for r in rows]))
+    else:
+        parts.append('<p class="note">no adcs/controller_status or adcs/actuator_command '
+                     'recorded</p>')
+
+    parts.append('<h2>Faults</h2>')
+    if s.faults:
+        parts.append(_table(['t', 'fault', 'state'], [
+            (_fmt_t(f['t'], axis), html.escape(f['message'].split(': ', 1)[-1]),
+             'active' if f['active'] else 'cleared') for f in s.faults]))
+    else:
+        parts.append('<p class="note">no fault announced on sim/faults</p>')
+
+    parts.append('<h2>Reaction wheels</h2>')
+    if s.wheels['t']:
+        parts.append(_img(_png(_wheels_fig(s, axis)), 'wheel speeds and momentum'))
+    else:
+        missing.append('reaction wheels (no sim/wheels with wheels)')
+    parts.append('<h2>Magnetorquer dipole</h2>')
+    if s.cmd['t']:
+        parts.append(_img(_png(_dipole_fig(s, axis)), 'magnetorquer dipole command'))
+    else:
+        missing.append('magnetorquer dipole (no adcs/actuator_command)')
+
+    parts.append('<h2>Estimator against the truth</h2>')
+    est = _estimate_error(s)
+    if est is not None:
+        parts.append(_img(_png(_estimate_fig(s, axis, est)),
+                          'estimator error per body axis with its 3-sigma bound'))
+        if s.diag['t']:
+            last = next((r for r in reversed(s.diag['last']) if r), '')
+            parts.append(f'<p class="note">rejected samples: {s.diag["rejected"][-1]}'
+                         + (f'; last: {html.escape(last)}' if last else '') + '</p>')
+    else:
+        missing.append('estimator (no adcs/attitude_estimate with sim/state)')
+
+    parts.append('<h2>Paper comparison</h2>')
+    paper = _paper_rows(out)
+    if paper:
+        css = {True: 'pass', False: 'fail', None: ''}
+        parts.append(_table(['quantity', 'paper', 'measured', 'verdict'], [
+            (html.escape(str(r.get('name', ''))), html.escape(str(r.get('paper', ''))),
+             html.escape(str(r.get('measured', ''))),
+             f'<span class="{css.get(r.get("pass"), "")}">'
+             f'{html.escape(str(r.get("verdict", "")))}</span>') for r in paper]))
+    else:
+        parts.append('<p class="note">no paper table for this run (the report\'s '
+                     'metrics.json has none: the scenario reproduces no paper, or the report '
+                     'was not written first)</p>')
+    if missing:
+        parts.append('<h2>Not shown</h2><ul>' + ''.join(
+            f'<li>{html.escape(m)}</li>' for m in missing) + '</ul>')
+    parts.append('</body></html>\n')
+    path = out / 'report.html'
+    path.write_text('\n'.join(parts), encoding='utf-8')
+    return str(path)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """``python -m adcs_nodes.tools.analyse.report_html BAG OUT_DIR``."""
+    parser = argparse.ArgumentParser(description='report.html of an ADCS bag.')
+    parser.add_argument('bag', help='bag directory or .mcap file')
+    parser.add_argument('out_dir', help='directory for report.html and overview.png')
+    args = parser.parse_args(argv)
+    try:
+        print(write_report_html(args.bag, args.out_dir))
+    except (FileNotFoundError, ValueError) as exc:
+        parser.exit(2, f'error: {exc}\n')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,179 @@
+"""``adcs montecarlo`` arguments and entry points."""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import Any, Dict, List, Optional
+
+from adcs_nodes.tools.campaigns.campaign import Campaign
+from adcs_nodes.tools.campaigns.capture import capture_reference
+from adcs_nodes.tools.campaigns.config import (ENGINES, CampaignConfig, CampaignError,
+                                               default_max_rate_deg_s, scenario_hash)
+from adcs_nodes.tools.campaigns.engine import plain_engine_problem, resolve_engine
+from adcs_nodes.tools.campaigns.runner import worker_main
+
+
+#: Printed by a multi-run campaign on the graph engine when the plain engine could run it.
+GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, recorded to a bag '
+              '(paper000_control, 6 orbits: 60-185 s CPU per run, by machine load). '
+              '--engine plain (the auto choice for this scenario) runs the same components '
+              'without ROS, gives the same series to the last bit and a few s CPU per run, '
+              'without bags.')
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``adcs montecarlo`` arguments to ``parser``."""
+    parser.add_argument('scenario', help='base scenario YAML (closed loop, e.g. '
+                        'scenarios/paper000_control.yaml)')
+    parser.add_argument('--runs', type=int, required=True, metavar='N', help='number of runs')
+    parser.add_argument('--jobs', type=int, default=1, metavar='J',
+                        help='runs at once on this machine, each in its own processes '
+                        '(default 1; with --dask-local: the number of Dask workers; ignored '
+                        'with --scheduler)')
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument('--scheduler', metavar='ADDRESS',
+                       help='submit the runs to this Dask distributed scheduler '
+                       '(e.g. tcp://host:8786); --out must be on a shared file system')
+    where.add_argument('--dask-local', action='store_true',
+                       help='start a Dask LocalCluster on this machine for the campaign '
+                       '(--jobs worker processes, one thread each) and stop it at the end')
+    parser.add_argument('--out', metavar='DIR', help='campaign directory (default '
+                        'montecarlo_<scenario name>); an existing campaign there is resumed')
+    add_dispersion_arguments(parser)
+    parser.add_argument('--auto-detumble', action='store_true',
+                        help='B-dot detumble first (below 0.5 deg/s), then the magnetic law '
+                        '(writes manager.auto into each run)')
+    parser.add_argument('--bdot-gain', type=float, default=None, metavar='K',
+                        help='B-dot gain of the detumble [A m^2 s/T] (default: the '
+                        'scenario\'s)')
+    parser.add_argument('--engine', choices=ENGINES + ('auto',), default='auto',
+                        help='auto (default): plain unless a sensor is external, else graph; '
+                        'a campaign being resumed keeps the engine in its campaign.json. '
+                        'graph: the ROS graph, one bag per run; plain: the FrameLoop without '
+                        'ROS (sim_node.engine: the graph\'s series to the last bit, no bag, '
+                        'far less CPU)')
+    parser.add_argument('--compose', action='store_true',
+                        help='each run composed in one process (faster, same trajectory)')
+
+
+def add_dispersion_arguments(parser: argparse.ArgumentParser) -> None:
+    """The run length, seed, capture threshold and dispersion options of a campaign (``adcs
+    montecarlo``; ``adcs sweep`` gives them to every grid point)."""
+    parser.add_argument('--duration', type=float, metavar='S',
+                        help='simulated seconds per run (default: the scenario duration_s)')
+    parser.add_argument('--seed', type=int, metavar='S',
+                        help='campaign seed (default: the scenario seed)')
+    parser.add_argument('--max-rate-deg-s', type=float, default=None, metavar='W',
+                        help='each initial rate component uniform in +-W deg/s (default: the '
+                        'scenario paper\'s: 3 for paper 000, 0.3 for paper 001, else 3)')
+    parser.add_argument('--capture-deg', type=float, default=5.0, metavar='A',
+                        help='captured when the angle between the body and the guidance '
+                        'target (the orbit frame without a guidance profile, as paper 000) '
+                        'enters A deg and then stays below 2 A to the end (default 5)')
+    parser.add_argument('--mag-bias-nT', type=float, default=None, metavar='B',
+                        help='disperse the magnetometer bias per axis uniform in +-B nT '
+                        '(default: the scenario\'s bias)')
+    parser.add_argument('--misalignment-deg', type=float, default=None, metavar='M',
+                        help='disperse the magnetometer misalignment rotation vector per '
+                        'component uniform in +-M deg (default: the scenario\'s)')
+
+
+def max_rate_deg_s(args: argparse.Namespace, base: Dict[str, Any]) -> float:
+    """``--max-rate-deg-s``, else the scenario's default
+    (:func:`~adcs_nodes.tools.campaigns.config.default_max_rate_deg_s`) [deg/s]."""
+    value = getattr(args, 'max_rate_deg_s', None)
+    return float(value) if value is not None else default_max_rate_deg_s(base)
+
+
+def config_from_args(args: argparse.Namespace) -> tuple:
+    """Validate the arguments; returns ``(CampaignConfig, base scenario, out dir)``.
+
+    The engine is resolved here (:func:`~adcs_nodes.tools.campaigns.engine.resolve_engine`);
+    the reason is in ``args.engine_reason`` afterwards.
+
+    Raises
+    ------
+    CampaignError, adcs_nodes.scenario.ScenarioError
+        On a bad value or scenario.
+    """
+    from adcs_nodes.scenario import load_scenario
+
+    base = load_scenario(args.scenario)
+    if args.runs < 1:
+        raise CampaignError(f'--runs must be >= 1, got {args.runs}')
+    if args.jobs < 1:
+        raise CampaignError(f'--jobs must be >= 1, got {args.jobs}')
+    for name in ('max_rate_deg_s', 'mag_bias_nT', 'misalignment_deg', 'bdot_gain'):
+        value = getattr(args, name, None)
+        if value is None:
+            continue
+        if not (math.isfinite(value) and value >= 0.0):
+            raise CampaignError(f'--{name.replace("_", "-")} must be >= 0, got {value}')
+    if not (math.isfinite(args.capture_deg) and 0.0 < args.capture_deg <= 180.0):
+        raise CampaignError(f'--capture-deg must be in (0, 180], got {args.capture_deg}')
+    duration = float(args.duration if args.duration is not None else base['duration_s'])
+    frames = duration / base['timing']['frame_s']
+    if not duration > 0 or abs(frames - round(frames)) > 1e-9:
+        raise CampaignError(f'--duration {duration:g} s is not a positive whole number of '
+                            f'{base["timing"]["frame_s"]:g} s frames')
+    out = args.out or f'montecarlo_{base["name"]}'
+    engine, args.engine_reason = resolve_engine(getattr(args, 'engine', None), base, out)
+    cfg = CampaignConfig(
+        scenario_path=base['_path'], scenario_sha256=scenario_hash(base), runs=args.runs,
+        seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
+        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
+        mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
+        auto_detumble=bool(getattr(args, 'auto_detumble', False)),
+        bdot_gain=getattr(args, 'bdot_gain', None),
+        engine=engine, compose=bool(args.compose), capture_reference=capture_reference(base))
+    if cfg.auto_detumble and not {'magnetic', 'bdot'} <= set(base.get('controllers', {})):
+        raise CampaignError('--auto-detumble needs the controllers magnetic and bdot in the '
+                            'scenario')
+    return cfg, base, out
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """``adcs montecarlo``: run or resume a campaign; returns the exit code."""
+    from adcs_nodes.scenario import ScenarioError
+
+    try:
+        cfg, base, out = config_from_args(args)
+        campaign = Campaign(cfg, base, out, log=lambda text: print(text, flush=True))
+        dask_local = bool(getattr(args, 'dask_local', False))
+        if args.scheduler:
+            mode = f'on the Dask scheduler {args.scheduler}'
+        elif dask_local:
+            mode = f'on a Dask LocalCluster of {args.jobs} worker process(es), 1 thread each'
+        else:
+            mode = f'{args.jobs} at a time'
+        print(f'[montecarlo] {cfg.runs} runs of {base["name"]} ({cfg.duration_s:g} s each, '
+              f'seed {cfg.seed}, engine {cfg.engine} [{args.engine_reason}]) {mode}, output in '
+              f'{campaign.out}', flush=True)
+        print(f'[montecarlo] initial rate components uniform in +-{cfg.max_rate_deg_s:g} deg/s; '
+              f'captured: the angle to the {cfg.capture_reference} enters '
+              f'{cfg.capture_deg:g} deg and stays below {2 * cfg.capture_deg:g} deg',
+              flush=True)
+        if cfg.engine == 'graph' and cfg.runs > 1 and plain_engine_problem(base) is None:
+            print(GRAPH_HINT, flush=True)
+        return campaign.run(jobs=args.jobs, scheduler=args.scheduler, dask_local=dask_local)
+    except (CampaignError, ScenarioError) as exc:
+        print(f'adcs montecarlo: {exc}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print('adcs montecarlo: interrupted (finished runs are kept)', file=sys.stderr)
+        return 130
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """``python -m adcs_nodes.tools.campaigns``: the campaign command, or one run's process.
+
+    ``_worker RUN_DIR`` is the internal per-run entry point used by :func:`execute_run`.
+    """
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ['_worker'] and len(argv) == 2:
+        return worker_main(argv[1])
+    parser = argparse.ArgumentParser(prog='adcs montecarlo',
+                                     description='Dispersed Monte Carlo campaign.')
+    add_arguments(parser)
+    return run_from_args(parser.parse_args(argv))

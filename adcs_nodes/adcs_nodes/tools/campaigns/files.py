@@ -1,0 +1,103 @@
+"""Campaign files: atomic writes, run directories, results, the campaign lock."""
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import threading
+import time
+from typing import Any, Dict, Optional
+
+from adcs_nodes.tools.campaigns.config import CampaignError
+
+RESULT_FILE = 'result.json'
+FAILED_FILE = 'failed.json'
+#: Per-frame series of a plain-engine run (numpy ``.npz``), its data instead of a bag.
+SERIES_FILE = 'series.npz'
+
+
+def write_json_atomic(path: str, data: Any) -> None:
+    """Write ``data`` as JSON to ``path`` atomically (temporary file + ``os.replace``)."""
+    tmp = f'{path}.tmp-{os.getpid()}-{threading.get_ident()}'
+    with open(tmp, 'w', encoding='utf-8') as fh:
+        json.dump(data, fh, indent=1)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def write_text_atomic(path: str, text: str) -> None:
+    tmp = f'{path}.tmp-{os.getpid()}'
+    with open(tmp, 'w', encoding='utf-8', newline='') as fh:
+        fh.write(text)
+    os.replace(tmp, path)
+
+
+def run_dir_of(out: str, index: int) -> str:
+    """``OUT/runs/run_<index>`` (zero-padded to 4 digits so listings sort)."""
+    return os.path.join(out, 'runs', f'run_{index:04d}')
+
+
+def load_result(run_dir: str) -> Optional[Dict[str, Any]]:
+    """The run's ``result.json`` when the run is done, else None.
+
+    Done: the result and its data are present (graph engine: the bag's ``metadata.yaml``;
+    plain engine: ``series.npz``). A plain result from before the worker recorded the
+    guidance target (:func:`~adcs_nodes.tools.campaigns.capture.label_old_result`) is
+    labelled ``capture_reference: orbit frame`` when that is its scenario's reference; for any
+    other scenario, and when its scenario cannot be read, the reason goes to ``failed.json``
+    and the run is not done (the campaign runs it again).
+    """
+    from adcs_nodes.tools.campaigns.capture import label_old_result
+
+    path = os.path.join(run_dir, RESULT_FILE)
+    metadata = os.path.join(run_dir, 'bag', 'metadata.yaml')
+    series = os.path.join(run_dir, SERIES_FILE)
+    if not (os.path.isfile(path) and (os.path.isfile(metadata) or os.path.isfile(series))):
+        return None
+    try:
+        with open(path, encoding='utf-8') as fh:
+            result = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    try:
+        return label_old_result(run_dir, result)
+    except (OSError, ValueError, KeyError) as exc:      # ScenarioError is a ValueError
+        write_json_atomic(os.path.join(run_dir, FAILED_FILE), {
+            'index': result.get('index'), 'status': 'error', 'exit_code': 1,
+            'message': f'cannot resume this run: {exc}'})
+        return None
+
+
+class campaign_lock:
+    """Exclusive lock on ``OUT/.lock``: two campaigns never share one directory at once."""
+
+    def __init__(self, out: str) -> None:
+        self.path = os.path.join(out, '.lock')
+        self.fh = None
+
+    def __enter__(self) -> 'campaign_lock':
+        self.fh = open(self.path, 'w')
+        try:
+            fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            self.fh.close()
+            raise CampaignError(f'another campaign is running in {os.path.dirname(self.path)}')
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.fh.close()
+
+
+def touch(path: str) -> None:
+    with open(path, 'w'):
+        pass
+
+
+def clean_old_stop_files(out: str, age_s: float = 3600.0) -> None:
+    """Remove stop files of sessions interrupted more than ``age_s`` ago."""
+    now = time.time()
+    for name in os.listdir(out):
+        path = os.path.join(out, name)
+        if name.startswith('.stop-') and now - os.path.getmtime(path) > age_s:
+            os.unlink(path)

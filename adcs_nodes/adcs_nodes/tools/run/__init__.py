@@ -1,0 +1,1 @@
+"""Running a scenario: the launcher, composed and live runs, the launch file."""

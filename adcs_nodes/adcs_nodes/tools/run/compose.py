@@ -1,0 +1,308 @@
+"""Composed deployment: several ADCS nodes in one process on one ``EventsExecutor``.
+
+Like a ROS 2 component container: the same node classes and parameters as the one process
+per node deployment, so both give the same trajectory (tested), but messages skip the
+process boundaries. Used by ``adcs run --compose``::
+
+    python -m adcs_nodes.tools.run.compose --params-file params.yaml \\
+        --nodes environment=sim_node.nodes.environment:EnvironmentNode \\
+                dynamics=sim_node.nodes.dynamics:DynamicsNode
+
+The process ends when the clock master (the node named ``dynamics``) is done, after a short
+drain so the last messages reach the recorder; or on SIGINT/SIGTERM.
+
+Lifecycle: the managed nodes (:mod:`adcs_nodes.nodes.managed`) of the parameter file that are
+still unconfigured (``autostart: false``, as ``adcs run --compose`` writes it) are configured,
+all of them, then activated, in process (``trigger_configure``/``trigger_activate``), before
+the executor spins; a node refusing its configuration ends the process with exit code 2 and
+its reason, as a configuration error while building a node does.
+
+In-process path (on by default since issue 13; ``--dds`` or ``ADCS_COMPOSE_INPROC=0`` in the
+environment sends every message over DDS as in the graph; ``--inproc`` and
+``ADCS_COMPOSE_INPROC=1`` are kept and mean the default): for a volatile topic with a
+publisher and subscriptions in this process (:class:`InProcessBus`), a message goes straight
+to the local subscriptions' callbacks when no subscription outside the process is matched
+(its ``get_subscription_count()`` is not above the local count); when one is (recorder, live
+view, ``ros2 topic echo``, the launcher's monitor on ``/clock``), it is published over DDS
+as before and every subscriber, local ones included, gets it from DDS. Each message goes one
+way only, so nothing is lost or doubled. The local deliveries run after the publishing
+callback has returned, first in first out, one callback at a time, never inside another
+callback. The lockstep fires on stamps, not arrival order, so the trajectory is the same
+(tested).
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import importlib
+import json
+import os
+import sys
+import time
+from typing import Any, Callable, Deque, Dict, List, Tuple
+
+import rclpy
+import yaml
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
+
+from adcs_nodes.nodes.runtime import limit_blas_threads, spin_nodes, stop_handler_from_start
+from adcs_nodes.graph import flatten
+
+
+def overrides_for(params_doc: Dict[str, Any], name: str) -> List[Parameter]:
+    """Parameter overrides of node ``name`` from a ROS 2 parameter-file document."""
+    section = params_doc.get(f'/{name}', params_doc.get(name, {})).get('ros__parameters', {})
+    flat: Dict[str, Any] = {}
+    flatten('', section, flat)
+    return [Parameter(k, value=v) for k, v in flat.items()]
+
+
+def parse_node_spec(text: str) -> Tuple[str, str, str]:
+    """``name=package.module:Class`` -> (name, module, class)."""
+    try:
+        name, target = text.split('=', 1)
+        module, cls = target.split(':', 1)
+    except ValueError:
+        raise SystemExit(f'compose: bad node spec {text!r} (want name=module:Class)') from None
+    return name, module, cls
+
+
+def build_nodes(specs: List[str], params_doc: Dict[str, Any]):
+    """Instantiate each node class with its overrides (same as --params-file would give)."""
+    nodes = []
+    for text in specs:
+        name, module, cls = parse_node_spec(text)
+        node_cls = getattr(importlib.import_module(module), cls)
+        nodes.append(node_cls(name, parameter_overrides=overrides_for(params_doc, name)))
+    return nodes
+
+
+class InProcessBus:
+    """Direct delivery between the nodes of this process (see module docstring).
+
+    Local deliveries are queued and run, first in first out, when the executor callback that
+    published them (a subscription callback of a composed node, wrapped here) has returned,
+    so no callback ever runs inside another. A publish from anywhere else (a timer, a
+    service) is delivered by a zero-period one-shot timer (next turn of the executor, after
+    the events already queued; a 1 ms timer here made the running graph wait 1 ms every
+    ``max_batch`` deliveries, issue 13); so is the rest of a long chain after
+    ``max_batch`` deliveries, so signals and timers keep running.
+
+    Parameters
+    ----------
+    nodes : list of rclpy.node.Node
+        The composed nodes (their publishers and subscriptions existing now are linked).
+    max_batch : int
+        Deliveries in one go before the executor gets control back.
+    """
+
+    def __init__(self, nodes, max_batch: int = 500) -> None:
+        self.queue: Deque[Tuple[List[Callable], Any]] = collections.deque()
+        self.busy = False
+        self.max_batch = int(max_batch)
+        self.local = 0        # messages delivered in process
+        self.dds = 0          # messages of linked publishers sent over DDS
+        self.timer_drains = 0  # deliveries started by the fallback timer
+        self.topics: List[str] = []
+        subs: Dict[Tuple[str, Any], List[Subscription]] = collections.defaultdict(list)
+        originals: Dict[int, Callable] = {}
+        skip = set()
+        for node in nodes:
+            for sub in node.subscriptions:
+                key = (sub.topic_name, sub.msg_type)
+                # a callback taking the message info (publisher_guard) gets None in process
+                info = sub._callback_type != Subscription.CallbackType.MessageOnly
+                if sub.qos_profile.durability != DurabilityPolicy.VOLATILE:
+                    skip.add(key)
+                subs[key].append(sub)
+                cb = sub.callback
+                if sub.raw and getattr(cb, 'raw_codec', None) is None:
+                    # (a node's raw CDR input, nodes/cdr.py, also takes message objects)
+                    # a raw subscription (a composed recorder) records the bytes DDS gives;
+                    # serialize_message pads empty float64 sequences differently (rosbags
+                    # then refuses the message), so such a topic stays on DDS
+                    skip.add(key)
+                originals[id(sub)] = (lambda m, cb=cb: cb(m, None)) if info else cb
+                sub.callback = self._wrap(cb, info)
+        self._timer = nodes[0].create_timer(0.0, self._on_timer)
+        self._timer.cancel()
+        for node in nodes:
+            for pub in list(node.publishers):
+                key = (pub.topic_name, pub.msg_type)
+                if key in skip or not subs.get(key) \
+                        or pub.qos_profile.durability != DurabilityPolicy.VOLATILE:
+                    continue
+                self._link(pub, [originals[id(sub)] for sub in subs[key]])
+                if pub.topic_name not in self.topics:
+                    self.topics.append(pub.topic_name)
+
+    def _wrap(self, callback: Callable, info: bool = False) -> Callable:
+        def wrapped(msg, *rest) -> None:
+            if self.busy:     # cannot happen from the executor; keep the order anyway
+                callback(msg, *rest)
+                return
+            self.busy = True
+            try:
+                callback(msg, *rest)
+            finally:
+                self.busy = False
+            if self.queue:
+                self._drain()
+        if info:     # still given the message info by rclpy, from any executor
+            from adcs_nodes.nodes.publisher_guard import WithInfo
+            return WithInfo(wrapped)
+        return wrapped
+
+    def _link(self, pub, callbacks: List[Callable]) -> None:
+        dds_publish = pub.publish
+        n_local = len(callbacks)
+        # the rcl call itself: rclpy's get_subscription_count() wraps it in a `with handle`
+        # guard against destruction from another thread (0.47 us against 0.09 us; this
+        # executor is the only thread; a destroyed publisher raises RCLError either way)
+        subscription_count = pub.handle.get_subscription_count
+
+        def publish(msg) -> None:
+            if not getattr(pub, 'is_activated', True):   # an inactive lifecycle publisher
+                return
+            if subscription_count() > n_local:   # someone outside listens: DDS
+                self.dds += 1
+                dds_publish(msg)
+                return
+            self.local += 1
+            self.queue.append((callbacks, msg))
+            if not self.busy:
+                self._timer.reset()   # published outside a wrapped callback: deliver soon
+
+        pub.publish = publish
+
+    def _on_timer(self) -> None:
+        self._timer.cancel()
+        if not self.busy:
+            self.timer_drains += 1
+            self._drain()
+
+    def _drain(self) -> None:
+        self.busy = True
+        try:
+            for _ in range(self.max_batch):
+                if not self.queue:
+                    return
+                callbacks, msg = self.queue.popleft()
+                for cb in callbacks:
+                    cb(msg)
+        finally:
+            self.busy = False
+            if self.queue:
+                self._timer.reset()   # more to deliver: after the executor's other work
+
+
+def drive_lifecycle(nodes) -> str:
+    """Configure, then activate, every managed node that is unconfigured (in process).
+
+    Returns ``''``, or why a node refused (``<node>: <reason>``)."""
+    from rclpy.lifecycle import TransitionCallbackReturn
+
+    managed = [n for n in nodes if getattr(n, 'lifecycle_state', '') == 'unconfigured']
+    for node in managed:
+        if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+            return f'{node.get_name()}: {node.configure_error or "configure failed"}'
+    for node in managed:
+        if node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+            return f'{node.get_name()}: activate failed'
+    return ''
+
+
+def write_state(state: Any, path: str) -> None:
+    """The fields of a state object as exact hex floats in JSON (for bit-exact comparisons)."""
+    import numpy as np
+
+    out: Dict[str, Any] = {}
+    for name, value in (vars(state).items() if state is not None else ()):
+        try:
+            arr = np.asarray(value, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            continue
+        out[name] = [float(x).hex() for x in arr]
+    with open(path, 'w') as fh:
+        json.dump(out, fh)
+
+
+def inproc_enabled(flag: bool, dds: bool = False) -> bool:
+    """The in-process path: on unless ``--dds`` is given or ``ADCS_COMPOSE_INPROC`` is
+    0/false/no/off (``--inproc`` wins over the environment)."""
+    if dds:
+        return False
+    env = os.environ.get('ADCS_COMPOSE_INPROC', '').strip().lower()
+    return flag or env not in ('0', 'false', 'no', 'off')
+
+
+def main(argv=None) -> int:
+    """Entry point of the composed runner."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--params-file', required=True)
+    ap.add_argument('--nodes', nargs='+', required=True)
+    ap.add_argument('--drain-s', type=float, default=0.5)
+    ap.add_argument('--inproc', action='store_true',
+                    help='in-process path between the composed nodes (DDS only for outside '
+                         'subscribers): the default; also ADCS_COMPOSE_INPROC=1')
+    ap.add_argument('--dds', action='store_true',
+                    help='every message over DDS, as in the graph; also ADCS_COMPOSE_INPROC=0')
+    ap.add_argument('--state-out', default='',
+                    help='write the clock master\'s final state here (JSON, exact hex floats)')
+    args = ap.parse_args(argv)
+    with open(args.params_file) as fh:
+        doc = yaml.safe_load(fh) or {}
+    stop_handler_from_start()        # a stop during the start-up ends the spin at its start
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        try:
+            nodes = build_nodes(args.nodes, doc)
+        except ValueError as exc:
+            print(f'[compose] configuration error: {exc}', file=sys.stderr)
+            return 2
+        refused = drive_lifecycle(nodes)
+        if refused:
+            print(f'[compose] configuration error: {refused}', file=sys.stderr)
+            return 2
+        limit_blas_threads()   # again after the node modules' imports (idempotent)
+        bus = InProcessBus(nodes) if inproc_enabled(args.inproc, args.dds) and nodes else None
+        if bus is not None:
+            print(f'[compose] in-process path on {len(bus.topics)} topics: '
+                  f'{", ".join(sorted(bus.topics))}', file=sys.stderr)
+        master = next((n for n in nodes if n.get_name() == 'dynamics'), None)
+        drain = {'until': None}
+
+        def finished() -> bool:
+            if master is None or not master.done:
+                return False
+            if drain['until'] is None:
+                drain['until'] = time.monotonic() + args.drain_s
+            return time.monotonic() >= drain['until']
+
+        prof_path = os.environ.get('ADCS_COMPOSE_PROFILE', '')
+        if prof_path:     # developer aid (docs/bench.md): cProfile of the spin, pstats file
+            import cProfile
+            # ADCS_COMPOSE_PROFILE_CLOCK=cpu: CPU time (shares of the work, waits left out)
+            cpu = os.environ.get('ADCS_COMPOSE_PROFILE_CLOCK', '') == 'cpu'
+            prof = cProfile.Profile(time.process_time) if cpu else cProfile.Profile()
+            prof.runcall(spin_nodes, nodes, until=finished, poll_s=0.05)
+            prof.dump_stats(prof_path)
+        else:
+            spin_nodes(nodes, until=finished, poll_s=0.05)
+        if bus is not None:
+            print(f'[compose] in-process deliveries {bus.local}, DDS publishes of linked '
+                  f'publishers {bus.dds}, timer-started deliveries {bus.timer_drains}',
+                  file=sys.stderr)
+        if args.state_out and master is not None:
+            write_state(getattr(master, 'state', None), args.state_out)
+        return 0
+    finally:
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

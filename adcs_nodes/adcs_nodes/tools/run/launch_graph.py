@@ -1,0 +1,111 @@
+"""The graph of ``adcs run`` for the standard ROS 2 launch file (``adcs.launch.py``).
+
+``ros2 launch adcs_nodes adcs.launch.py scenario:=NAME [duration:=S] [record:=BAG]`` starts
+the nodes :func:`adcs_nodes.graph.build_graph` returns, each with its parameters from
+:func:`adcs_nodes.graph.params_file_text`: the same description ``adcs run`` starts. This
+module holds the part that needs no ``launch`` package (not on PyPI), so it is tested here.
+
+What ``ros2 launch`` does not do that ``adcs run`` does: a private ``ROS_DOMAIN_ID`` with
+localhost discovery, the progress bar, the run manifest for ``adcs switch``/``adcs status``,
+stopping the run when a world node dies, the dynamics result file, and driving the lifecycle
+of the managed nodes (:data:`MANAGED_CLASSES`): ``adcs run`` starts them with ``autostart:
+false`` and calls configure and activate; the launch file gives no ``autostart``, so they
+configure and activate themselves (the default ``autostart: true``), as there is no
+lifecycle manager here. The launch ends when the clock master (``dynamics``) exits at the
+end of the scenario.
+
+Stopping (:func:`stop_timeouts`): ``ros2 launch`` sends SIGINT to every node at the end or on
+Ctrl-C, SIGTERM ``sigterm_timeout`` later, SIGKILL ``sigkill_timeout`` after that. A node
+exits within 2 s of SIGINT (``tests/node/test_shutdown.py``); the launch file gives the
+longer stops their time, so nothing is escalated to SIGTERM and no process is left behind.
+
+Pure Python; no rclpy.
+"""
+from __future__ import annotations
+
+import os
+from typing import List, Optional, Tuple
+
+from adcs_nodes.graph import NodeSpec, build_graph, params_file_text
+from adcs_nodes.scenario import load_scenario
+
+PACKAGE = 'adcs_nodes'
+CLOCK_MASTER = 'dynamics'
+#: Node classes of the graph that are managed (lifecycle) nodes
+#: (:class:`adcs_nodes.nodes.managed.ManagedLockstepNode`); the world nodes and the recorder
+#: are plain nodes.
+MANAGED_CLASSES = ('EstimatorNode', 'ControllerNode', 'ControllerManagerNode', 'GuidanceNode')
+#: ``sigterm_timeout`` [s] of a lockstep node: it exits within 2 s of SIGINT, but a node whose
+#: reader lags (a stalled recorder) waits up to ``runtime.FLUSH_BUDGET_S`` (4 s) for its last
+#: samples to be acknowledged, then up to ``runtime.TEARDOWN_BUDGET_S`` (1 s) for rclpy.
+NODE_SIGTERM_TIMEOUT_S = 6.0
+#: ``sigterm_timeout`` [s] of the recorder: it closes its bag (last chunk, summary,
+#: ``metadata.yaml``) after SIGINT; 0.6-3 s of wall time beside a CPU burner here (load
+#: 15-18), more for a long bag on a slow disk.
+RECORDER_SIGTERM_TIMEOUT_S = 10.0
+#: ``sigkill_timeout`` [s] after SIGTERM (launch's default).
+SIGKILL_TIMEOUT_S = 5.0
+
+
+def is_managed(node: NodeSpec) -> bool:
+    """True for a managed (lifecycle) node of the graph."""
+    return node.cls in MANAGED_CLASSES
+
+
+def stop_timeouts(node: NodeSpec) -> Tuple[float, float]:
+    """``(sigterm_timeout, sigkill_timeout)`` [s] of ``node`` in the launch file."""
+    term = RECORDER_SIGTERM_TIMEOUT_S if node.name == 'recorder' else NODE_SIGTERM_TIMEOUT_S
+    return term, SIGKILL_TIMEOUT_S
+
+
+def installed_scenario_dir() -> Optional[str]:
+    """``share/adcs_nodes/scenarios`` of the installed package, or ``None``."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        path = os.path.join(get_package_share_directory(PACKAGE), 'scenarios')
+    except (ImportError, LookupError, ValueError, OSError):
+        return None
+    return path if os.path.isdir(path) else None
+
+
+def scenario_path(name: str) -> str:
+    """A scenario file: ``name`` itself when it exists, else ``<name>`` or ``<name>.yaml`` in
+    the installed scenarios (``share/adcs_nodes/scenarios``).
+
+    Raises
+    ------
+    ValueError
+        When neither exists (the message lists the installed scenarios).
+    """
+    if os.path.isfile(name):
+        return os.path.abspath(name)
+    share = installed_scenario_dir()
+    if share is not None:
+        for cand in (name, f'{name}.yaml'):
+            path = os.path.join(share, os.path.basename(cand))
+            if os.path.isfile(path):
+                return path
+    known = sorted(os.listdir(share)) if share else []
+    raise ValueError(f'scenario {name!r} not found (installed: {", ".join(known) or "none"})')
+
+
+def launch_graph(scenario: str, duration_s: Optional[float] = None,
+                 record: Optional[str] = None) -> Tuple[List[NodeSpec], str]:
+    """Nodes and parameter-file text of ``scenario``, as ``adcs run`` builds them.
+
+    Parameters
+    ----------
+    scenario : str
+        Path or installed scenario name (see :func:`scenario_path`).
+    duration_s : float, optional
+        Simulated seconds (default: the scenario's ``duration_s``).
+    record : str, optional
+        Bag directory to record to (adds the recorder, as ``adcs run --record``).
+    """
+    sc = load_scenario(scenario_path(scenario))
+    duration = float(duration_s) if duration_s is not None else float(sc['duration_s'])
+    nodes = build_graph(sc, duration, record=bool(record))
+    if record:
+        next(n for n in nodes if n.name == 'recorder').params['output'] = \
+            os.path.abspath(record)
+    return nodes, params_file_text(nodes)

@@ -1,0 +1,606 @@
+"""Talk to a running graph started by ``adcs run``: ``adcs switch``, ``adcs status [--watch]``
+and ``adcs fault``.
+
+A run announces itself in ``~/.cache/adcs/runs/active-<launcher pid>.json`` (domain id,
+scenario, bag, node PIDs). These commands join that ROS domain with a short-lived node, call
+the controller manager's services, read the latched status or publish a live fault, and
+leave; ``adcs status --watch`` stays, refreshing its view once a second until the run ends.
+"""
+from __future__ import annotations
+
+import glob
+import json
+import math
+import os
+import re
+import sys
+import threading
+import time
+from typing import Dict, List, Optional
+
+from adcs_nodes.tools.run.launcher import RUNS_DIR
+
+MANAGER = 'controller_manager'
+#: What a controller name can be (the registry's names); anything else is refused unsent.
+CONTROLLER_NAME = re.compile(r'[A-Za-z0-9_.-]{1,100}')
+
+
+class LiveError(RuntimeError):
+    """No run to talk to, or it did not answer; the message says what to do."""
+
+
+def active_runs() -> List[Dict]:
+    """Manifests of the runs whose launcher process is alive (stale files are removed)."""
+    runs = []
+    for path in sorted(glob.glob(os.path.join(RUNS_DIR, 'active-*.json'))):
+        try:
+            with open(path) as fh:
+                data = json.load(fh)
+            os.kill(int(data['pid']), 0)
+        except (OSError, ValueError, KeyError):
+            try:
+                os.unlink(path)     # launcher gone (killed): forget the run
+            except OSError:
+                pass
+            continue
+        runs.append(data)
+    return runs
+
+
+def pick_run(pid: Optional[int]) -> Dict:
+    """The run to talk to: the one with launcher ``pid``, or the only active one."""
+    runs = active_runs()
+    if pid is not None:
+        for run in runs:
+            if int(run['pid']) == pid:
+                return run
+        raise LiveError(f'no active adcs run with launcher pid {pid}')
+    if not runs:
+        raise LiveError('no active adcs run (start one with `adcs run SCENARIO`)')
+    if len(runs) > 1:
+        listing = ', '.join(f'{r["pid"]} ({os.path.basename(r["scenario"])})' for r in runs)
+        raise LiveError(f'{len(runs)} runs are active: {listing}; choose one with --run PID')
+    return runs[0]
+
+
+#: Wall seconds a command on a running graph (status, switch, ...) may take in all: a process
+#: that joined a busy domain was once seen never to return (``adcs status`` beside a graph
+#: running flat out after a controller was killed); it then exits 1 with a message.
+SESSION_DEADLINE_S = 60.0
+#: Wall seconds a command waits for a service or action server, then as long for its answer:
+#: discovery of a new process on a domain took 10-13 s at load 18; both fit in the session
+#: deadline.
+SERVER_WAIT_S = 25.0
+
+
+def _give_up() -> None:
+    sys.stderr.write(f'adcs: no answer from ROS within {SESSION_DEADLINE_S:g} s (the run\'s '
+                     'domain may be overloaded); giving up\n')
+    sys.stderr.flush()
+    os._exit(1)
+
+
+class _Session:
+    """A short-lived rclpy context on the run's domain (the process exits 1 if the whole
+    command takes longer than :data:`SESSION_DEADLINE_S`)."""
+
+    def __init__(self, run: Dict, deadline: bool = True) -> None:
+        if deadline:       # (not for a long action: adcs slew has its own timeout)
+            watchdog = threading.Timer(SESSION_DEADLINE_S, _give_up)
+            watchdog.daemon = True
+            watchdog.start()
+        from adcs_nodes.tools.run.launcher import child_env, use_dds_env
+        use_dds_env(child_env(int(run['domain'])))
+        import rclpy
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('adcs_cli', context=self.context,
+                                      start_parameter_services=False)
+        from rclpy.executors import SingleThreadedExecutor
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def call(self, srv_type, name: str, request, timeout_s: float = SERVER_WAIT_S):
+        client = self.node.create_client(srv_type, name)
+        if not client.wait_for_service(timeout_sec=timeout_s):
+            raise LiveError(f'service {name} not available within {timeout_s:g} s '
+                            '(does this scenario run a controller manager?)')
+        # wait_for_service sees the graph, not the DDS match: a request sent before the server's
+        # reader matched ours is lost. Requests here are idempotent, so resend until answered.
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            future = client.call_async(request)
+            self.executor.spin_until_future_complete(future, timeout_sec=1.0)
+            if future.done():
+                return future.result()
+            client.remove_pending_request(future)
+        raise LiveError(f'service {name} did not answer within {timeout_s:g} s')
+
+    def spin(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self, wait_s: float = 5.0) -> None:
+        """Shut the session down, waiting at most ``wait_s``; a shutdown still blocked then
+        (a flooded domain) is left to the process's end: :func:`finish` exits at once."""
+        def _close() -> None:
+            self.executor.shutdown()
+            self.node.destroy_node()
+            self.rclpy.shutdown(context=self.context)
+        closer = threading.Thread(target=_close, daemon=True)
+        closer.start()
+        closer.join(wait_s)
+        global _STUCK
+        _STUCK = _STUCK or closer.is_alive()
+
+
+#: True when a session's shutdown did not finish (see :meth:`_Session.close`).
+_STUCK = False
+
+
+def finish(code: int) -> int:
+    """Exit code of a command that used a session; exits the process at once (output
+    flushed) when a session's shutdown is stuck, instead of hanging at interpreter exit."""
+    if _STUCK:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+def switch(name: str, pid: Optional[int] = None) -> str:
+    """Switch the active controller of a running graph; returns the manager's answer.
+
+    Raises
+    ------
+    LiveError
+        No run, no manager, or the manager refused (unknown name: the message lists the
+        known controllers).
+    """
+    from adcs_nodes.scenario import shorten_message
+    if not CONTROLLER_NAME.fullmatch(name):
+        raise LiveError(shorten_message(
+            f'{name!r} is not a controller name ({len(name)} characters; names are 1 to 100 '
+            'letters, digits, "_", "." or "-"; `adcs status` lists them)'))
+    from adcs_msgs.srv import SwitchController
+    session = _Session(pick_run(pid))
+    try:
+        res = session.call(SwitchController, '/adcs/switch_controller',
+                           SwitchController.Request(name=name))
+    finally:
+        session.close()
+    if not res.success:
+        raise LiveError(shorten_message(res.message))
+    return shorten_message(f'{res.message} (active: {res.active})')
+
+
+def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
+    """Human-readable status of a running graph: controllers and lockstep health.
+
+    Listens ``wait_s`` (discovery of a new participant takes up to ~3 s).
+    """
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from adcs_msgs.msg import ControllerStatus, LockstepStatus
+    run = pick_run(pid)
+    session = _Session(run)
+    ctrl: List = []
+    nodes: Dict[str, LockstepStatus] = {}
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    try:
+        session.node.create_subscription(ControllerStatus, 'adcs/controller_status',
+                                         ctrl.append, latched)
+        session.node.create_subscription(LockstepStatus, 'lockstep/status',
+                                         lambda m: nodes.__setitem__(m.node, m), 50)
+        session.spin(wait_s)
+    finally:
+        session.close()
+    lines = [f'run {run["pid"]}: {run["scenario"]} (ROS_DOMAIN_ID={run["domain"]}, '
+             f'bag {run.get("bag") or "none"})']
+    if ctrl:
+        c = ctrl[-1]
+        if run.get('epoch'):
+            from adcs_nodes.nodes.convert import stamp_ns
+            from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
+            t = (stamp_ns(c.header.stamp) - epoch_to_ns(parse_epoch(run['epoch']))) / 1e9
+            lines.append(f'sim time: {t:.1f} s (last controller frame)')
+        lines.append(f'controller: {c.active}  mode: {c.mode or "-"}  available: '
+                     f'{", ".join(c.available)}  switches: {c.switch_count}  missed frames: '
+                     f'{c.missed_frames}  last fault: {c.last_fault or "-"}')
+    else:
+        lines.append('controller: no controller manager in this run')
+    for name in sorted(nodes):
+        s = nodes[name]
+        lines.append(f'  {name:22s} frames {s.frames:8d}  missed {s.missed_frames}'
+                     + (f' (last: {s.last_missed_input})' if s.last_missed_input else ''))
+    return '\n'.join(lines)
+
+
+# ---------------------------------------------------------------------- adcs fault
+#: Where a running graph takes live faults (``sim_node.faults.INJECT_TOPIC``; the tools do not
+#: import the simulator).
+INJECT_TOPIC = 'sim/inject_fault'
+#: Wall seconds ``adcs fault`` waits for the fault's announcement on ``sim/faults``.
+ANNOUNCE_WAIT_S = 15.0
+#: Without ``--at`` a live fault starts at the first frame this much wall time ahead (at the
+#: run's measured pace): every node has the message by then, so the sensors and the dynamics
+#: agree on the frame (with "each node's next frame" they did not: in a composed run the
+#: dynamics announced a magnetometer fault 25 frames before the magnetometer applied it).
+LEAD_WALL_S = 1.0
+
+
+def _run_scenario(run: Dict) -> Dict:
+    """The run's scenario as YAML gives it: the bag's ``scenario.yaml`` (the effective one)
+    when the run records, else the scenario file ({} when neither reads)."""
+    import yaml
+    paths = ([os.path.join(run['bag'], 'scenario.yaml')] if run.get('bag') else []) \
+        + [run.get('scenario') or '']
+    for path in paths:
+        try:
+            with open(path, encoding='utf-8') as fh:
+                data = yaml.safe_load(fh)
+        except (OSError, ValueError):
+            continue
+        except Exception:                 # yaml.YAMLError: try the next one
+            continue
+        if isinstance(data, dict):
+            return data
+    return {}
+
+
+def parse_params(items: List[str]) -> Dict:
+    """``KEY=VALUE`` (YAML value) pairs of ``--param``; LiveError for a malformed one."""
+    import yaml
+    out: Dict = {}
+    for item in items:
+        key, sep, text = item.partition('=')
+        if not sep or not key:
+            raise LiveError(f'--param {item!r}: expected KEY=VALUE (e.g. duration_s=60)')
+        try:
+            out[key] = yaml.safe_load(text)
+        except Exception as exc:          # yaml.YAMLError
+            raise LiveError(f'--param {item!r}: not a YAML value ({exc})') from None
+    return out
+
+
+def check_fault(kind: str, target: str, params: Dict, at_s: Optional[float],
+                sc: Dict) -> Dict:
+    """The fault's parameters validated with its registry specs, its target against the
+    run's scenario (``sc``: sensors, wheels, magnetorquer), ``at_s`` inside the run; LiveError
+    with the reason (``adcs fault`` exits 2), as the scenario validator checks a scripted one
+    (``sim_node.faults.check`` is the receivers' same check)."""
+    from adcs_nodes import registry
+    try:
+        entry = registry.get('fault', kind)
+    except ValueError as exc:
+        raise LiveError(str(exc)) from None
+    craft = sc.get('spacecraft') or {}
+    if 'node' in entry.targets:
+        raise LiveError(f'{kind} is a scripted fault only (a scenario\'s faults:); to kill a '
+                        'node of a running graph, kill its process (adcs status shows the pids)')
+    if 'sensor' in entry.targets:
+        known = [k for k, cfg in (sc.get('sensors') or {}).items()
+                 if not (isinstance(cfg, dict) and cfg.get('external'))]
+        what = 'simulated sensors'
+    elif 'wheel' in entry.targets:
+        known = [w.get('name') for w in craft.get('wheels') or [] if isinstance(w, dict)]
+        what = 'wheels'
+    else:
+        known = ['x', 'y', 'z'] if 'magnetorquer' in craft else []
+        what = 'magnetorquer axes'
+    if sc and target not in known:
+        raise LiveError(f'{kind} cannot strike {target!r}: the run\'s {what} are '
+                        f'{", ".join(known) or "none"}')
+    try:
+        params = entry.validate(params)
+    except ValueError as exc:
+        raise LiveError(f'{kind} parameters: {exc}') from None
+    if at_s is not None:
+        duration = float(sc.get('duration_s') or math.inf)
+        if not (math.isfinite(at_s) and 0.0 <= at_s <= duration):
+            raise LiveError(f'--at {at_s:g} s is outside the run [0, {duration:g}] s')
+    return params
+
+
+def fault(kind: str, target: str, at_s: Optional[float] = None,
+          params: Optional[Dict] = None, pid: Optional[int] = None,
+          wait_s: float = ANNOUNCE_WAIT_S) -> str:
+    """Inject one fault into a running graph (``adcs fault``); returns what happened.
+
+    The fault goes as JSON on ``sim/inject_fault`` (reliable) to the sensor nodes and the
+    dynamics, once they all listen; the one it strikes applies it from ``at_s`` (default: the
+    first frame :data:`LEAD_WALL_S` of wall time ahead at the run's pace, measured on
+    ``/clock``; a node that gets it late starts it at its next frame), the dynamics announces
+    it on ``sim/faults``, which this waits for. Not deterministic: the frame depends on wall
+    time.
+
+    Raises
+    ------
+    LiveError
+        No run, a fault the run cannot take (kind, target, parameters, a time already past or
+        outside the run), or nobody listening.
+    """
+    from rclpy.duration import Duration
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+    run = pick_run(pid)
+    sc = _run_scenario(run)
+    params = check_fault(kind, target, dict(params or {}), at_s, sc)
+    listeners = 1 + len([k for k, cfg in (sc.get('sensors') or {}).items()
+                         if not (isinstance(cfg, dict) and cfg.get('external'))])
+    item = {'index': 1000 + int(time.time() * 1000) % 10**6, 'kind': kind, 'target': target,
+            'at_s': at_s, 'params': params}
+    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    session = _Session(run)
+    from adcs_nodes.nodes.convert import stamp_ns
+    from adcs_nodes.nodes.lockstep_node import QOS_DATA, epoch_to_ns, parse_epoch
+    epoch_ns = epoch_to_ns(parse_epoch(run['epoch']))
+    clock: List = []          # (wall s, sim s): the first and the latest /clock
+    seen: List = []
+
+    def on_clock(m) -> None:
+        sample = (time.monotonic(), (stamp_ns(m.clock) - epoch_ns) / 1e9)
+        clock[1:] = [sample] if clock else []
+        if not clock:
+            clock.append(sample)
+    try:
+        session.node.create_subscription(Clock, '/clock', on_clock, QOS_DATA)
+        session.node.create_subscription(DiagnosticArray, 'sim/faults', seen.append, QOS_DATA)
+        pub = session.node.create_publisher(String, INJECT_TOPIC, reliable)
+        deadline = time.monotonic() + SERVER_WAIT_S
+        while (pub.get_subscription_count() < listeners or len(clock) < 2
+               or clock[-1][0] - clock[0][0] < 0.3) and time.monotonic() < deadline:
+            session.spin(0.05)
+        if pub.get_subscription_count() == 0:
+            raise LiveError(f'nobody listens on {INJECT_TOPIC} after {SERVER_WAIT_S:g} s (is '
+                            'the run a graph with simulated sensors and dynamics?)')
+        now = clock[-1][1] if clock else None
+        if at_s is not None and now is not None and at_s < now:
+            raise LiveError(f'--at {at_s:g} s has passed: the run is at t = {now:.1f} s')
+        if at_s is None and now is not None:       # the frame LEAD_WALL_S ahead
+            pace = 1.0
+            if len(clock) > 1 and clock[-1][0] > clock[0][0]:
+                pace = max(pace, (clock[-1][1] - clock[0][1]) / (clock[-1][0] - clock[0][0]))
+            frame = float((sc.get('timing') or {}).get('frame_s') or 1.0)
+            ahead = now + pace * (time.monotonic() - clock[-1][0] + LEAD_WALL_S)
+            item['at_s'] = math.ceil(ahead / frame - 1e-9) * frame
+            if sc.get('duration_s') and item['at_s'] > float(sc['duration_s']):
+                raise LiveError(f'the run ends (t = {float(sc["duration_s"]):g} s) before a '
+                                f'fault could start (t = {item["at_s"]:g} s)')
+        pub.publish(String(data=json.dumps(item, sort_keys=True)))
+        pub.wait_for_all_acked(Duration(seconds=5.0))
+        deadline = time.monotonic() + wait_s
+        found = None
+        while found is None and time.monotonic() < deadline:
+            session.spin(0.05)
+            for msg in seen:
+                for st in msg.status:
+                    if st.name == f'fault/{item["index"]}' and st.message.startswith('active'):
+                        found = (stamp_ns(msg.header.stamp) - epoch_ns) / 1e9, st.message
+    finally:
+        session.close()
+    when = f'at t = {at_s:g} s' if at_s is not None else (
+        f'from t = {item["at_s"]:g} s, about {LEAD_WALL_S:g} s of wall time ahead'
+        if item['at_s'] is not None else 'at the next frame')
+    sent = (f'fault {kind} {target} {params} sent to run {run["pid"]} ({when}'
+            + (f'; the run was at t = {now:.1f} s' if now is not None else '') + ')')
+    if found is None:
+        raise LiveError(f'{sent}, but no announcement on sim/faults within {wait_s:g} s (the '
+                        'run may have ended, or a node refused it: see the node logs in '
+                        f'{run.get("run_dir", "the run directory")})')
+    return (f'{sent}; announced on sim/faults at t = {found[0]:g} s: {found[1]} '
+            '(a live fault is not deterministic: its frame depends on wall time)')
+
+
+# ---------------------------------------------------------------------- adcs status --watch
+def _sc_faults(sc: Dict) -> List[Dict]:
+    """The scenario's faults as ``{name, text, start, end}`` (times [s]; end None: to the end
+    of the run), to show those that started before the watch did."""
+    out = []
+    for i, f in enumerate(sc.get('faults') or []):
+        if not isinstance(f, dict):
+            continue
+        try:
+            start = float(f.get('at_s', 0.0))
+            duration = float((f.get('params') or {}).get('duration_s', 0.0) or 0.0)
+        except (TypeError, ValueError):
+            continue
+        out.append({'name': f'fault/{f.get("index", i)}',
+                    'text': f'{f.get("kind")} {f.get("target")}', 'start': start,
+                    'end': start + duration if duration > 0 else None})
+    return out
+
+
+class _Watch:
+    """What ``adcs status --watch`` shows, from the run's topics (the flight software's view:
+    the estimate against the target, the tachometer; the world's fault announcements)."""
+
+    def __init__(self, run: Dict, sc: Dict) -> None:
+        from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
+        self.run = run
+        self.epoch_ns = epoch_to_ns(parse_epoch(run['epoch']))
+        self.ctrl = None
+        self.source = ''
+        self.estimate = None
+        self.target = None
+        self.wheels = None
+        self.nodes: Dict = {}
+        self.t = None
+        self.seen_faults: Dict[str, Dict] = {}
+        self.sc_faults = _sc_faults(sc)
+        craft = sc.get('spacecraft') or {}
+        self.wheel_inertia = [float(w.get('inertia_kgm2', 0.001)) for w in
+                              craft.get('wheels') or [] if isinstance(w, dict)]
+
+    def _time(self, stamp) -> float:
+        from adcs_nodes.nodes.convert import stamp_ns
+        return (stamp_ns(stamp) - self.epoch_ns) / 1e9
+
+    def on_estimate(self, msg) -> None:
+        self.estimate = msg
+        self.t = self._time(msg.header.stamp)
+
+    def on_command(self, msg) -> None:
+        self.source = msg.source
+        self.t = max(self.t or 0.0, self._time(msg.header.stamp))
+
+    def on_fault(self, msg) -> None:
+        t = self._time(msg.header.stamp)
+        for st in msg.status:
+            what = ' '.join(st.message.split(': ', 1)[-1].split()[:2])    # kind target
+            self.seen_faults[st.name] = {'text': what, 'time': t,
+                                         'active': st.message.startswith('active')}
+
+    def faults(self) -> List[str]:
+        """Faults active now: the scenario's at this sim time and the announced ones."""
+        t = self.t or 0.0
+        active: Dict[str, str] = {}
+        for f in self.sc_faults:
+            if f['start'] <= t and (f['end'] is None or t < f['end']):
+                active[f['name']] = f'{f["text"]} (since {f["start"]:g} s)'
+        for name, f in self.seen_faults.items():
+            if f['active']:
+                active[name] = f'{f["text"]} (since {f["time"]:g} s)'
+            else:
+                active.pop(name, None)
+        return list(active.values())
+
+    def lines(self) -> List[str]:
+        import numpy as np
+
+        from adcs_nodes.core import attitude as att
+        run = self.run
+        out = [f'adcs status --watch: run {run["pid"]} {os.path.basename(run["scenario"])} '
+               f'(ROS_DOMAIN_ID={run["domain"]}), {time.strftime("%H:%M:%S")}; Ctrl-C ends']
+        out.append(f'sim time:        {self.t:.1f} s' if self.t is not None
+                   else 'sim time:        (no estimate or command yet)')
+        c = self.ctrl
+        if c is not None:
+            out.append(f'controller:      {c.active}   mode: {c.mode or "-"}   commanding: '
+                       f'{self.source or "-"}   switches: {c.switch_count}')
+        else:
+            out.append('controller:      (no adcs/controller_status yet)')
+        est, tgt = self.estimate, self.target
+        if est is not None:
+            q_o = [est.q_orbit_body.x, est.q_orbit_body.y, est.q_orbit_body.z,
+                   est.q_orbit_body.w]
+            q_i = [est.q_eci_body.x, est.q_eci_body.y, est.q_eci_body.z, est.q_eci_body.w]
+            if tgt is not None:
+                q_ref = [tgt.q_ref_body.x, tgt.q_ref_body.y, tgt.q_ref_body.z,
+                         tgt.q_ref_body.w]
+                frame = tgt.header.frame_id or 'orbit'
+                try:
+                    err = math.degrees(att.angle_between(q_i if frame == 'eci' else q_o,
+                                                         q_ref))
+                    out.append(f'attitude error:  {err:.3f} deg (estimate to the target, '
+                               f'{frame} frame)')
+                except ValueError:
+                    out.append('attitude error:  (estimate or target not finite)')
+            else:
+                out.append('attitude error:  (no adcs/attitude_target)')
+            w_i = np.array([est.omega_body_eci_body.x, est.omega_body_eci_body.y,
+                            est.omega_body_eci_body.z])
+            w_o = np.array([est.omega_body_orbit_body.x, est.omega_body_orbit_body.y,
+                            est.omega_body_orbit_body.z])
+            out.append(f'rates:           {math.degrees(np.linalg.norm(w_i)):.4f} deg/s '
+                       f'inertial, {math.degrees(np.linalg.norm(w_o)):.4f} deg/s to the '
+                       f'orbit frame (estimate)')
+        else:
+            out.append('attitude error:  (no adcs/attitude_estimate)')
+        w = self.wheels
+        if w is not None and len(w.velocity) == len(self.wheel_inertia) and w.velocity:
+            h = [v * j for v, j in zip(w.velocity, self.wheel_inertia)]
+            names = list(w.name) or [f'wheel{i}' for i in range(len(h))]
+            out.append('wheel momentum:  ' + '  '.join(f'{n} {v:+.4f}' for n, v in
+                                                       zip(names, h)) + ' N m s (tachometer)')
+        elif self.wheel_inertia:
+            out.append('wheel momentum:  (no sensors/wheels yet)')
+        else:
+            out.append('wheel momentum:  (no wheels)')
+        active = self.faults()
+        out.append('faults:          ' + ('; '.join(active) if active else 'none active'))
+        if c is not None and c.last_fault:
+            out.append(f'last fallback:   {c.last_fault}')
+        missed = sum(int(s.missed_frames) for s in self.nodes.values())
+        worst = ', '.join(f'{n} {int(s.missed_frames)}' for n, s in sorted(self.nodes.items())
+                          if s.missed_frames)
+        out.append(f'missed frames:   {missed} in {len(self.nodes)} nodes'
+                   + (f' ({worst})' if worst else '')
+                   + (f'; manager fallback frames {c.missed_frames}' if c is not None else ''))
+        return out
+
+
+def _alive(run: Dict) -> bool:
+    """The run's launcher is running: its manifest is there (it removes it at the end) and
+    its process exists."""
+    if not os.path.exists(os.path.join(RUNS_DIR, f'active-{run["pid"]}.json')):
+        return False
+    try:
+        os.kill(int(run['pid']), 0)
+    except OSError:
+        return False
+    return True
+
+
+def watch(pid: Optional[int] = None, interval_s: float = 1.0, out=None,
+          count: Optional[int] = None) -> int:
+    """``adcs status --watch``: the run's view refreshed every ``interval_s`` of wall time
+    until the run ends (or ``count`` refreshes, or Ctrl-C); returns 0.
+
+    On a terminal each refresh redraws the screen; otherwise the views follow each other,
+    separated by a blank line. It subscribes to the run's estimate, target, command,
+    tachometer, status and fault topics for as long as it watches (in a composed run this
+    sends them over DDS while it does: a little slower).
+    """
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    from adcs_msgs.msg import (ActuatorCommand, AttitudeState, AttitudeTarget,
+                               ControllerStatus, LockstepStatus)
+    from diagnostic_msgs.msg import DiagnosticArray
+    out = out or sys.stdout
+    run = pick_run(pid)
+    view = _Watch(run, _run_scenario(run))
+    session = _Session(run, deadline=False)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    latest = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)   # newest only
+    n = session.node
+    n.create_subscription(ControllerStatus, 'adcs/controller_status',
+                          lambda m: setattr(view, 'ctrl', m), latched)
+    n.create_subscription(AttitudeState, 'adcs/attitude_estimate', view.on_estimate, latest)
+    n.create_subscription(AttitudeTarget, 'adcs/attitude_target',
+                          lambda m: setattr(view, 'target', m), latest)
+    n.create_subscription(ActuatorCommand, 'adcs/actuator_command', view.on_command, latest)
+    n.create_subscription(JointState, 'sensors/wheels', lambda m: setattr(view, 'wheels', m),
+                          latest)
+    n.create_subscription(LockstepStatus, 'lockstep/status',
+                          lambda m: view.nodes.__setitem__(m.node, m), 50)
+    n.create_subscription(DiagnosticArray, 'sim/faults', view.on_fault, 50)
+    tty = hasattr(out, 'isatty') and out.isatty()
+    shown = 0
+    try:
+        while count is None or shown < count:
+            session.spin(interval_s)
+            text = '\n'.join(view.lines())
+            out.write(('\x1b[H\x1b[2J' + text + '\n') if tty else (text + '\n\n'))
+            out.flush()
+            shown += 1
+            if not _alive(run):
+                out.write(f'run {run["pid"]} ended\n')
+                out.flush()
+                break
+    except KeyboardInterrupt:
+        pass
+    except Exception as exc:         # rclpy's ExternalShutdownException: Ctrl-C in a spin
+        if type(exc).__name__ != 'ExternalShutdownException':
+            raise
+    finally:
+        session.close()
+    return 0
