@@ -246,6 +246,10 @@ class MagneticFilterBias(MagneticFilter):
         out.update({'bias': self.bias_body_T, 'bias_updated': updated})
         return out
 
+    def residual(self, b_meas_body: ArrayLike, b_ref_orbit: ArrayLike) -> np.ndarray:
+        """``z`` (3,) [T] of a reading before the update, bias and misalignment removed."""
+        return super().residual(np.asarray(b_meas_body, dtype=float) - self._b, b_ref_orbit)
+
     def _paper_update(self, b_meas_body, b_ref_orbit, theta_axes) -> dict:
         """The paper's update (36)-(39) (``theta_axes`` passed only when given)."""
         if theta_axes is None:
@@ -265,10 +269,11 @@ class MagneticFilterBiasEstimator(MagneticFilterEstimator):
         super().__init__(inertia, max_rate_rad_s=max_rate_rad_s,
                          **{k: v for k, v in filter_args.items()
                             if k not in _BIAS_KEYS})
-        filter_args.pop('use_sensor_covariance', None)     # the wrapper's options
-        filter_args.pop('theta_interval_s', None)
+        for key in _WRAPPER_KEYS:                          # the wrapper's options
+            filter_args.pop(key, None)
         self.filter = MagneticFilterBias(inertia, max_rate_rad_s=max_rate_rad_s, **filter_args)
 
 
 _BIAS_KEYS = ('bias0_T', 'bias_std0_T', 'magnitude_std_T', 'bias_walk_T_sqrt_s', 'max_bias_T',
               'bias_gate_sigma')
+_WRAPPER_KEYS = ('use_sensor_covariance', 'theta_interval_s', 'hypotheses', 'hypothesis_window_s')
