@@ -18,7 +18,6 @@ Command``), then add one ``register(Entry(...))`` here (or in a plugin module): 
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any, Dict
 
@@ -284,36 +283,24 @@ def _build_magnetic_filter_bias(p: Dict[str, Any], ctx: Dict[str, Any]):
         bias_gate_sigma=p['bias_gate_sigma'])
 
 
-BIAS_PARAMS = MAGNETIC_FILTER_PARAMS + (
-    Param('bias0_T', 'float[]', [0.0, 0.0, 0.0], 'T', 'initial bias estimate, body axes',
-          length=3, min=-1e-4, max=1e-4),
-    Param('bias_std0_T', 'float', 2e-7, 'T', 'initial bias std per axis', positive=True,
-          max=1e-4),
-    Param('magnitude_std_T', 'float', 3e-7, 'T', 'std of a field-magnitude residual',
-          positive=True, max=1e-4),
-    Param('bias_walk_T_sqrt_s', 'float', 0.0, 'T/sqrt(s)', 'bias random walk (0: '
-          'constant bias)', min=0.0),
-    Param('max_bias_T', 'float', 5e-6, 'T', 'largest accepted bias estimate per axis',
-          positive=True),
-    Param('bias_gate_sigma', 'float', 5.0, '-', 'magnitude residuals beyond this many '
-          'sigma are not used for the bias', positive=True))
-
 register(Entry(
     'estimator', 'magnetic_filter_bias',
     "beyond paper 000: the paper's filter plus a constant magnetometer bias estimated from "
     'field-magnitude residuals',
     'adcs_nodes.core.estimation.magnetic_filter_bias:MagneticFilterBiasEstimator',
-    BIAS_PARAMS, _build_magnetic_filter_bias, inputs=('magnetometer', 'actuator_command')))
-
-#: The flight defaults (docs/decisions.md, "The filter's blind axis"; ASSUMPTION each).
-_FLIGHT = {'hypotheses': 4, 'misalignment_std0_deg': 2.0, 'max_rate_rad_s': 0.1}
-register(Entry(
-    'estimator', 'magnetic_filter_flight',
-    "beyond paper 000: magnetic_filter_bias with 4 hypotheses about the field's blind axis "
-    'and misalignment states (a filter that does not stay on the mirror branch)',
-    'adcs_nodes.core.estimation.magnetic_filter_bias:MagneticFilterBiasEstimator',
-    tuple(dataclasses.replace(p, default=_FLIGHT[p.name]) if p.name in _FLIGHT else p
-          for p in BIAS_PARAMS),
+    MAGNETIC_FILTER_PARAMS + (
+        Param('bias0_T', 'float[]', [0.0, 0.0, 0.0], 'T', 'initial bias estimate, body axes',
+              length=3, min=-1e-4, max=1e-4),
+        Param('bias_std0_T', 'float', 2e-7, 'T', 'initial bias std per axis', positive=True,
+              max=1e-4),
+        Param('magnitude_std_T', 'float', 3e-7, 'T', 'std of a field-magnitude residual',
+              positive=True, max=1e-4),
+        Param('bias_walk_T_sqrt_s', 'float', 0.0, 'T/sqrt(s)', 'bias random walk (0: '
+              'constant bias)', min=0.0),
+        Param('max_bias_T', 'float', 5e-6, 'T', 'largest accepted bias estimate per axis',
+              positive=True),
+        Param('bias_gate_sigma', 'float', 5.0, '-', 'magnitude residuals beyond this many '
+              'sigma are not used for the bias', positive=True)),
     _build_magnetic_filter_bias, inputs=('magnetometer', 'actuator_command')))
 
 

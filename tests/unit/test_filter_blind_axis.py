@@ -4,7 +4,7 @@
 * (M2) against finite differences of the reading model ``n = R(delta) C B*``.
 * The misalignment directions an axisymmetric inertia cannot see (analytic).
 * On the FrameLoop (no process), a campaign draw where the paper's filter locks onto the
-  mirror: it stays there; the flight filter (``magnetic_filter_flight``: hypotheses, bias and
+  mirror: it stays there; the flight filter (``magnetic_filter_bias`` with 4 hypotheses and
   misalignment states) is within 2 deg from half an orbit on, by the 180 deg hypothesis, and
   finds the scenario's sensor misalignment.
 """
@@ -73,16 +73,18 @@ RUN_57 = {'seed': 934973697,
           'q_orbit_body_xyzw': [-0.873481, -0.474011, -0.016985, 0.109798],
           'omega_body_eci_body_deg_s': [2.817335, -0.591565, 1.532697]}
 HALF_ORBIT_S = 2957.0     # T/2 at 690 km
+#: The flight filter: the paper's plus bias, 4 hypotheses and misalignment states.
+FLIGHT = {'algorithm': 'magnetic_filter_bias', 'hypotheses': 4, 'misalignment_std0_deg': 2.0}
 
 
-def _run_57(tmp_path, algorithm):
+def _run_57(tmp_path, name, **options):
     """One orbit of paper000_estimation (the paper's tumble, noise, bias, 1 deg misalignment)
     from run 57's draw: ``(t [s], estimation error [deg], loop)``."""
     sc = raw('paper000_estimation')
     sc['seed'] = RUN_57['seed']
     sc['initial'] = {k: RUN_57[k] for k in ('q_orbit_body_xyzw', 'omega_body_eci_body_deg_s')}
-    sc['estimator']['algorithm'] = algorithm
-    out, loop = run(validated(tmp_path, sc, algorithm))
+    sc['estimator'].update(options)
+    out, loop = run(validated(tmp_path, sc, name))
     truth = {t_s(m): q(m.q_orbit_body) for m in out['sim/state']}
     t = np.array([t_s(m) for m in out['adcs/attitude_estimate']])
     err = np.array([math.degrees(att.angle_between(q(m.q_orbit_body), truth[t_s(m)]))
@@ -91,12 +93,12 @@ def _run_57(tmp_path, algorithm):
 
 
 def test_the_papers_filter_stays_on_the_mirror(tmp_path):
-    t, err, _ = _run_57(tmp_path, 'magnetic_filter')
+    t, err, _ = _run_57(tmp_path, 'paper')
     assert np.median(err[t >= HALF_ORBIT_S]) > 150.0
 
 
 def test_the_flight_filter_leaves_the_mirror_within_half_an_orbit(tmp_path):
-    t, err, loop = _run_57(tmp_path, 'magnetic_filter_flight')
+    t, err, loop = _run_57(tmp_path, 'flight', **FLIGHT)
     assert np.max(err[t >= HALF_ORBIT_S]) < 2.0
     assert loop.estimator.core.bank.chosen == 2        # the 180 deg turn about the field won
     # the scenario's sensor: R(exp(m))^T, m = (0.6, -0.6, 0.5) deg (sim_node.models.sensors),
