@@ -38,7 +38,7 @@ def _build_magnetic(p: Dict[str, Any], ctx: Dict[str, Any]):
         mode=p['mode'], alpha=p['alpha_per_s'], k=p['k_Nms'],
         max_dipole_Am2=ctx['max_dipole_Am2'], beta=p['beta'] if p['beta'] > 0 else None,
         switch_angle_deg=p['switch_angle_deg'], switch_rate_deg_s=p['switch_rate_deg_s'],
-        n_wheels=_n_wheels(ctx))
+        n_wheels=_n_wheels(ctx), inertia=ctx['inertia_kgm2'] if p['feedforward'] else None)
 
 
 register(Entry(
@@ -55,7 +55,9 @@ register(Entry(
      Param('switch_angle_deg', 'float', 15.0, 'deg', 'two_stage: switch below this angle',
            positive=True, max=180.0),
      Param('switch_rate_deg_s', 'float', 0.2, 'deg/s', 'two_stage: and below this rate',
-           positive=True)),
+           positive=True),
+     Param('feedforward', 'bool', False, '-', 'beyond paper 000: add the gyroscopic and '
+           'gravity-gradient torques of the estimate to M* (F1); false: the paper\'s law')),
     _build_magnetic, inputs=('estimate', 'target', 'magnetometer'),
     actuators=('magnetorquer',)))
 
