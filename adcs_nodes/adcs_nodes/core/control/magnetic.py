@@ -74,16 +74,19 @@ Assumptions (not in the paper)
 * ``|B| < b_min_T`` (default 1e-9 T): zero dipole with a reason (guarded pseudo-inverse,
   pitfall 8). ``B`` is the measured field (digest 3.6).
 
-Compiled law (issue 13)
------------------------
-:meth:`MagneticController.law` checks its inputs in Python and computes (7), (10), (16) /
-(21), (29) / (32), (30), (31) in one call of :func:`law_kernel`, compiled by numba
-(``cache=True``, no fastmath: IEEE arithmetic in the order written). The kernel repeats the
-operations of the helper functions above (:func:`relative_rate`, :func:`target_rate_three_axis`,
-...) in the same order, so it gives their bits; a unit test compares them, and the kernel run
-uncompiled (``NUMBA_DISABLE_JIT=1``). The one-axis direction ``s = R(q_err)^T xi`` is summed in
-index order (it was a BLAS matrix-vector product, whose summation order depends on the CPU's
-BLAS kernel): the same bits for ``xi`` on a body axis (the default ``z``).
+Beyond the paper: feed-forward (``inertia`` given; DEPARTURE, off by default)
+------------------------------------------------------------------------------
+The paper's Lyapunov argument leaves out the gyroscopic and gravity-gradient torques (they
+vanish at the orbital frame for its I_x = I_y). On another inertia, or off the orbital frame,
+they are added to the demand from the estimate::
+
+    M* <- M* + omega x I omega - 3 omega0^2 e_R x I e_R                                      (F1)
+
+Compiled law
+------------
+:func:`law_kernel` (numba, ``cache=True``, no fastmath) repeats the helper functions'
+operations in their order, so it gives their bits (a unit test compares them, and the kernel
+run uncompiled).
 """
 from __future__ import annotations
 

@@ -125,12 +125,10 @@ rejected (state and ``P`` unchanged, reason returned, nothing raised); so is a c
 is not finite or gives ``|omega'|`` > 1 rad/s or ``|m'|`` > 1e-4 rad/s^2 (limits configurable).
 The quaternion is renormalised after every RK4 step and correction; ``P`` is symmetrised.
 
-Behaviour measured in ``tests/unit/test_magnetic_filter.py`` (paper example: 690 km, 98 deg,
-aligned dipole, I = diag(118, 118, 19.6), tumbling at (-3, 3, 3) deg/s, updates every 10 s,
-predictions every 2 s, defaults below): from ``N = {1, 0, 0, 0}`` (138 deg off) the error is
-under 2 deg for good after ~850 s (0.14 orbit). ``P`` is an ellipsoid matrix, not a Kalman
-covariance: with the paper's noise it is conservative (mean NEES ~4 for 6 dof); without noise
-``sigma_j ~ 1`` and it becomes overconfident. The literal (38) diverges from that start.
+Measured (``tests/unit/test_magnetic_filter.py``, the paper's example tumble, defaults below):
+from ``N = {1, 0, 0, 0}`` (138 deg off) the error is under 2 deg for good after ~850 s. ``P`` is
+an ellipsoid matrix, not a covariance (mean NEES ~4 for 6 dof with the paper's noise). The
+literal (38) diverges from that start.
 """
 from __future__ import annotations
 
@@ -158,10 +156,7 @@ B_MAX_T = 1e-3
 MAX_RATE_DEFAULT = 1.0
 """Default largest accepted ``|omega'|`` [rad/s] after a correction (sanity guard, not paper)."""
 MAX_DISTURBANCE_DEFAULT = 1e-2
-"""Default largest accepted ``|m'|`` [rad/s^2] after a correction (sanity guard, not paper).
-
-A divergence guard only: 1e-4 rejected every reading during the transient of paper 000's
-case (the launched graph never converged with it)."""
+"""Default largest accepted ``|m'|`` [rad/s^2] after a correction (divergence guard only)."""
 MAX_MISALIGNMENT_RAD = math.radians(15.0)
 """Largest accepted misalignment estimate and prior std [rad] (paper 000: up to 10 deg)."""
 MU_CLAMP = 0.999
@@ -435,32 +430,10 @@ def _rates_k(q, omega, m, inertia, inertia_inv, omega0, dipole, field, field_mod
 @jit
 def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, field_mode,
                    h, substeps):
-    """``substeps`` RK4 steps of (33) of ``h`` seconds and ``P <- F P F^T`` (34).
-
-    Parameters
-    ----------
-    q, omega, m : numpy.ndarray
-        ``N`` (4,), ``omega'`` (3,) [rad/s], ``m'`` (3,) [rad/s^2].
-    p : numpy.ndarray
-        ``P`` (9, 9).
-    inertia, inertia_inv : numpy.ndarray
-        ``I`` and ``I^-1`` (3, 3).
-    omega0 : float
-        Orbit rate [rad/s].
-    dipole, field : numpy.ndarray
-        ``L`` (3,) [A m^2]; field (3,) [T] in body (``field_mode`` 1) or orbit (2) axes.
-    field_mode : int
-        0: no magnetic torque; 1: ``L x field``; 2: ``L x C(N) field``.
-    h : float
-        Substep [s].
-    substeps : int
-        Number of substeps.
-
-    Returns
-    -------
-    tuple of numpy.ndarray
-        ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (9, 9) (symmetrised); may be non-finite.
-    """
+    """``substeps`` RK4 steps of (33) of ``h`` [s] and ``P <- F P F^T`` (34); the arguments
+    are :meth:`MagneticFilter.predict`'s on arrays (``field_mode`` 0: no magnetic torque, 1:
+    ``L x field`` with ``field`` in body axes, 2: ``L x C(N) field``, orbit axes). Returns
+    ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (symmetrised); may be non-finite."""
     f = np.eye(9)
     for _ in range(substeps):
         a = error_matrix_kernel(inertia, inertia_inv, omega0, q, omega)  # (34), frozen
@@ -489,29 +462,10 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
 @jit
 def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_innovation,
                   form_phi):
-    """(36)/(37), the sequential update (38) and the correction (39) on arrays.
-
-    Parameters
-    ----------
-    q, omega, m, p : numpy.ndarray
-        ``N`` (4,), ``omega'`` (3,), ``m'`` (3,), ``P`` (9, 9).
-    n : numpy.ndarray
-        Measured field (3,) [T], body axes.
-    b_ref : numpy.ndarray
-        Model field ``B*`` (3,) [T], orbit axes.
-    theta : numpy.ndarray
-        ``theta_j`` of (38) per body axis (3,) [T^2].
-    tau : float
-        ``tau`` of (38).
-    literal, sigma_from_innovation, form_phi : bool
-        As :class:`MagneticFilter`'s options (``form_phi``: (36), else (37)).
-
-    Returns
-    -------
-    tuple
-        ``N+`` (4,) (not normalised when degenerate), ``omega'+`` (3,), ``m'+`` (3,),
-        ``P+`` (9, 9), ``z`` (3,), ``w`` (9,), ``sigma`` (3,); may be non-finite.
-    """
+    """(36)/(37) (and (M2)), the sequential update (38) and the correction (39) on arrays:
+    the arguments of :meth:`MagneticFilter.update` (``theta`` (3,) [T^2] per body axis,
+    ``form_phi``: (36)). Returns ``N+`` (4,), ``omega'+`` (3,), ``m'+`` (3,), ``P+``, ``z``
+    (3,), ``w`` and ``sigma`` (3,); may be non-finite."""
     r = dcm(q)
     n_star = np.empty(3)
     for i in range(3):   # n* = C(N) B* = R(N)^T B*

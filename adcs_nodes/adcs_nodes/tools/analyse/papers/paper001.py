@@ -13,19 +13,12 @@ within 55 N m s, torque within 1 N m. A window the run does not reach is
 
 Tracking error: the maximum, not the 3-sigma
 --------------------------------------------
-The paper (Sec. 6, after Figs. 2-4) writes "the attitude tracking error grows with the maximum
-attitude rate; at most it reaches about 0.02 deg (3-sigma)" (最大达到约 0.02°(3σ)). Fig. 3
-("deviation of attitude angle, enlarged") is an image the extracted text does not carry, so
-the number cannot be read off the figure here; the sentence itself says *maximum*, and ties it
-to the maximum rate. The error is not noise: with the desired state taken at ``t0`` (digest
-P15) the attitude lags the reference by one control period, ``e(t) = -tau * rate_d(t)`` with
-``tau = 0.2 s`` (measured here: a least-squares slope of -0.199 to -0.200 s on each axis,
-correlation -0.999). For the sine references that is a sine of peak ``tau * max rate`` = 0.019
-/ 0.018 / 0.014 deg, the paper's "about 0.02 deg, growing with the maximum rate"; the 3-sigma
-of a sine of peak ``A`` is ``3 A / sqrt(2) = 2.1 A``, about 0.04 deg. So the row compares the
-per-axis maximum ``|e|`` over the tracking window with "about 0.02 deg", checked as < 0.025
-deg (ASSUMPTION: "about 0.02" is 0.02 to one significant figure); the 3-sigma is printed as
-an information row, with the fitted lag.
+The paper: "the tracking error grows with the maximum attitude rate; at most it reaches about
+0.02 deg (3-sigma)". The error is the one-period lag ``e(t) = -tau * rate_d(t)`` (digest
+P15), a sine of peak ``tau * max rate`` = 0.019 / 0.018 / 0.014 deg whose 3-sigma is 2.1x its
+peak; the row compares the per-axis maximum ``|e|`` with < 0.025 deg (ASSUMPTION: "about
+0.02" to one significant figure), the 3-sigma and the fitted lag are information
+(``docs/paper001.md``). The 3700 s row is :class:`NotComparable` (:data:`END_ERROR_REASON`).
 
 Robustness case and variant
 ---------------------------
