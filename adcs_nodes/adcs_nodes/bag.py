@@ -32,6 +32,8 @@ from typing import Any, Dict, Iterable, Iterator, List, Optional, Sequence, Tupl
 
 import numpy as np
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
+                                QosTime)
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -48,6 +50,23 @@ _STAMP_FIELD_TYPES = {
     'std_msgs/msg/Header': True,          # stamp inside the header
     'builtin_interfaces/msg/Time': False,  # the field itself is the stamp (rosgraph_msgs/Clock)
 }
+
+#: Topics the graph publishes latched (transient local): tf2's static broadcaster, the
+#: manager's status and the lockstep handshake. Every other topic is reliable and volatile.
+LATCHED_TOPICS = ('/tf_static', '/adcs/controller_status', '/lockstep/ready')
+_INFINITE = QosTime(9223372036, 854775807)      # rmw's "infinite", as the graph reports it
+
+
+def offered_qos(topic: str) -> List[Qos]:
+    """``offered_qos_profiles`` of a topic in a bag written without a graph (plain engine):
+    the graph's publisher QoS as the recorder stores it (``ros2 bag play`` replays a latched
+    topic latched). ``topic``: resolved name."""
+    latched = topic in LATCHED_TOPICS
+    return [Qos(history=QosHistory.UNKNOWN, depth=0, reliability=QosReliability.RELIABLE,
+                durability=QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
+                deadline=_INFINITE, lifespan=_INFINITE, liveliness=QosLiveliness.AUTOMATIC,
+                liveliness_lease_duration=_INFINITE, avoid_ros_namespace_conventions=False)]
+
 
 _PREFERRED_STORES = ('ros2_kilted', 'ros2_jazzy')
 
@@ -184,16 +203,40 @@ def stamp_kind(store: Typestore, msgtype: str) -> Optional[str]:
     return None
 
 
-def cdr_stamp_ns(raw: bytes) -> Optional[int]:
-    """Time stamp [ns] at the start of a serialised CDR message, or ``None`` if unreadable.
+def stamp_offset(store: Typestore, msgtype: str) -> Optional[int]:
+    """Byte offset of the stamp a CDR message of ``msgtype`` is logged at in a bag.
 
-    Valid for types where :func:`stamp_kind` is not ``None``: the payload after the 4-byte
-    encapsulation header starts with ``int32 sec, uint32 nanosec``.
+    Returns
+    -------
+    int or None
+        4 when :func:`stamp_kind` is not ``None`` (the stamp opens the payload); 8 when the
+        first field is a sequence of messages that open with a ``std_msgs/Header``
+        (``tf2_msgs/TFMessage``: the first element's ``header.stamp``, after the sequence
+        length); ``None`` otherwise.
     """
-    if len(raw) < 12:
+    if stamp_kind(store, msgtype) is not None:
+        return 4
+    fields = (store.fielddefs.get(msgtype) or (None, ()))[1]
+    if not fields:
         return None
-    fmt = '<iI' if raw[1] & 0x01 else '>iI'
-    sec, nanosec = struct.unpack_from(fmt, raw, 4)
+    node, arg = fields[0][1]
+    if getattr(node, 'name', '') != 'SEQUENCE' or getattr(arg[0][0], 'name', '') != 'NAME':
+        return None
+    return 8 if stamp_kind(store, arg[0][1]) == 'header' else None
+
+
+def cdr_stamp_ns(raw: bytes, offset: int = 4) -> Optional[int]:
+    """Time stamp [ns] at ``offset`` (:func:`stamp_offset`) of a serialised CDR message.
+
+    ``None`` if the message is too short, or (offset 8) its sequence is empty. The payload
+    after the 4-byte encapsulation header holds ``int32 sec, uint32 nanosec`` there.
+    """
+    if len(raw) < offset + 8:
+        return None
+    order = '<' if raw[1] & 0x01 else '>'
+    if offset == 8 and struct.unpack_from(order + 'I', raw, 4)[0] == 0:
+        return None
+    sec, nanosec = struct.unpack_from(order + 'iI', raw, offset)
     return sec * 1_000_000_000 + nanosec
 
 

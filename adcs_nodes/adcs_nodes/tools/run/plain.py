@@ -44,13 +44,15 @@ class BagSink:
         got = self._conns.get(topic)
         if got is None:
             from adcs_nodes.nodes.cdr import codec
+            from adcs_nodes.bag import offered_qos
             from adcs_nodes.graph import topic_type
             msgtype = topic_type(topic)
             if not self._ensure_type(self._store, msgtype):
                 raise EngineError(f'no .msg definition found for {msgtype}')
             name = topic if topic.startswith('/') else '/' + topic    # resolved, as recorded
             got = self._conns[topic] = (
-                self._writer.add_connection(name, msgtype, typestore=self._store),
+                self._writer.add_connection(name, msgtype, typestore=self._store,
+                                            offered_qos_profiles=offered_qos(name)),
                 codec(type(msg)))
         return got
 
@@ -79,7 +81,8 @@ class BagSink:
     def close(self) -> None:
         """Finish the bag (index, metadata)."""
         if self._writer is not None:
-            self._writer.close()
+            from adcs_nodes.distro import close_writer
+            close_writer(self._writer)      # the real ROS distro in the metadata
             self._writer = None
 
 
