@@ -13,10 +13,9 @@ here add what the analysis tools need:
 * :func:`flatten_message`, :func:`header_stamp_ns`, :func:`content_digest` -- the flat view used
   by the CSV export, the report and determinism checks.
 
-Time: the bag's log time of a message is its receive time in the recorder's clock and differs
-between runs of the same simulation. Every analysis tool uses the message's ``header.stamp``
-(the simulated time the value belongs to) and falls back to the log time only for types
-without a header.
+Time: a message's log time is its own stamp (:func:`stamp_offset`), an unstamped one's the
+latest ``/clock`` (recorder and plain engine alike). The analysis tools use ``header.stamp``
+and fall back to the log time only for types without a header.
 
 The module imports neither ``rclpy`` nor any generated message package.
 """
