@@ -97,16 +97,8 @@ def _share_msg_dir(package: str) -> Optional[Path]:
 
 
 def adcs_msg_dir() -> Path:
-    """Directory with the ``adcs_msgs`` ``.msg`` files.
-
-    The installed share directory (ament index) wins; without an install the source tree next
-    to this package (``<repo>/adcs_msgs/msg``) is used.
-
-    Raises
-    ------
-    FileNotFoundError
-        If neither location holds ``.msg`` files.
-    """
+    """Directory of the ``adcs_msgs`` ``.msg`` files: the installed share directory, else the
+    source tree (``<repo>/adcs_msgs/msg``); ``FileNotFoundError`` if neither has them."""
     share = _share_msg_dir(ADCS_PACKAGE)
     if share is not None and any(share.glob('*.msg')):
         return share
@@ -118,17 +110,9 @@ def adcs_msg_dir() -> Path:
 
 
 def make_typestore() -> Typestore:
-    """Return a new rosbags typestore: standard ROS 2 types plus every ``adcs_msgs`` message.
-
-    The standard store is the one of ``$ROS_DISTRO`` when rosbags ships it, else Kilted (the
-    distribution of the PyPI wheels), else Jazzy. Its type hashes (RIHS01) equal those of the
-    installed interfaces, so bags written with it carry the same hashes as ``ros2 bag`` would.
-
-    Returns
-    -------
-    rosbags.typesys.store.Typestore
-        A fresh store; callers may register more types in it.
-    """
+    """A new rosbags typestore: the standard types of ``$ROS_DISTRO`` when rosbags ships it,
+    else Kilted (the PyPI wheels'), else Jazzy, plus every ``adcs_msgs`` message. Its RIHS01
+    hashes are the installed interfaces', as ``ros2 bag`` would write them."""
     store = get_typestore(_store_for_distro())
     types: Dict[str, Any] = {}
     for path in sorted(adcs_msg_dir().glob('*.msg')):
@@ -297,28 +281,13 @@ MCAP_MAGIC = b'\x89MCAP0\r\n'
 
 
 def flush_writer(writer: Any, fsync: bool = False) -> bool:
-    """Write the pending MCAP chunk of an open rosbags ``Writer`` to the file now.
+    """Write the pending MCAP chunk of an open rosbags ``Writer`` (up to 1 MiB kept in memory)
+    and flush the file: in the page cache, it survives a killed process; ``fsync=True``: on
+    the disk, a machine crash. :func:`recover_mcap` reads a file cut after any complete record.
 
-    The rosbags MCAP writer keeps up to 1 MiB of messages in memory before it writes a chunk,
-    so a process killed with SIGKILL left a bag without any data. Closing the pending chunk
-    and flushing the file object puts every message written so far in the kernel's page cache
-    (it survives the death of the process); ``fsync=True`` also forces it to the disk (it then
-    survives a machine crash). A file cut after any complete record is read back by
-    :func:`recover_mcap` (``open_bag`` does it by itself).
-
-    Relies on the MCAP storage of rosbags 0.11 (``writer.storage.chunk``, ``close_chunk``,
-    ``bio``); with another storage it does nothing and returns ``False``.
-
-    Returns
-    -------
-    bool
-        Whether a chunk was written.
-
-    Raises
-    ------
-    OSError
-        From the file system, e.g. ``ENOSPC`` when the disk is full.
-    """
+    Relies on rosbags 0.11's MCAP storage (``storage.chunk``, ``close_chunk``, ``bio``); with
+    another storage a no-op. Returns whether a chunk was written; raises ``OSError`` from the
+    file system (``ENOSPC``: disk full)."""
     storage = getattr(writer, 'storage', None)
     chunk = getattr(storage, 'chunk', None)
     bio = getattr(storage, 'bio', None)

@@ -137,17 +137,13 @@ def import_message_class(msgtype: str):
 
 
 def _qos_time(duration) -> QosTime:
-    sec, nsec = divmod(int(duration.nanoseconds), 1_000_000_000)
-    return QosTime(sec, nsec)
+    return QosTime(*divmod(int(duration.nanoseconds), 1_000_000_000))
 
 
 def _to_bag_qos(profile: QoSProfile) -> Qos:
     """rosbags ``Qos`` of an rclpy ``QoSProfile`` (enum members are matched by name)."""
     def conv(enum_cls, policy):
-        name = getattr(policy, 'name', None)
-        if name is None:
-            return enum_cls(int(policy))
-        return enum_cls[name] if name in enum_cls.__members__ else enum_cls.UNKNOWN
+        return enum_cls.__members__.get(policy.name, enum_cls.UNKNOWN)
 
     return Qos(
         history=conv(QosHistory, profile.history),
@@ -190,25 +186,12 @@ class _Topic:
 
 
 class RecorderNode(node_params.SpecParameters, Node):
-    """Record topics raw into a rosbag2 MCAP bag (parameters and QoS: module docstring).
-
-    Parameters
-    ----------
-    node_name : str
-        ROS node name, default ``'recorder'``.
-    **kwargs
-        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ...).
-
-    Raises
-    ------
-    OutputExistsError
-        If ``output`` exists (a ``ValueError``: the runtime reports it as a configuration
-        error).
-    """
+    """Record topics raw into a rosbag2 MCAP bag (module docstring). ``**kwargs`` go to
+    :class:`rclpy.node.Node`. Raises :class:`OutputExistsError` (a ``ValueError``: the runtime
+    reports a configuration error) if ``output`` exists."""
 
     def __init__(self, node_name: str = 'recorder', **kwargs) -> None:
-        # what is given is declared at once (unknown names refused with a did-you-mean), and
-        # nothing undeclared can be set at run time
+        # given names declared at once (unknown ones refused with a did-you-mean)
         kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
         super().__init__(node_name, **kwargs)
         self._writer: Optional[Writer] = None
@@ -244,10 +227,8 @@ class RecorderNode(node_params.SpecParameters, Node):
         self._wanted: Optional[Set[str]] = wanted or None
         self._exclude = [self._resolve(t) for t in p['exclude']]
         self._expected = self._parse_expected(p['expected_matches'])
-        discovery_s, status_s = p['discovery_period_s'], p['status_period_s']
-        flush_sim_s, flush_s = p['flush_sim_s'], p['flush_period_s']
         self._fsync_s = p['fsync_period_s']
-        self._flush_sim_ns = int(flush_sim_s * 1e9)
+        self._flush_sim_ns = int(p['flush_sim_s'] * 1e9)
         self._chunk_t0_ns: Optional[int] = None   # log time of the first pending message
         self._last_fsync = time.monotonic()
         self.write_error = ''
@@ -288,11 +269,11 @@ class RecorderNode(node_params.SpecParameters, Node):
                 depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._last_discovery = 0.0
-        self._discovery_timer = self.create_timer(discovery_s, self.discover, clock=steady)
-        self._status_timer = self.create_timer(status_s, self.publish_status, clock=steady)
-        self._handshake_timer = self.create_timer(HANDSHAKE_PERIOD_S, self._check_ready,
-                                                  clock=steady)
-        self._flush_timer = self.create_timer(flush_s, self.flush, clock=steady)
+        self._discovery_timer, self._status_timer, self._handshake_timer, self._flush_timer = (
+            self.create_timer(period, callback, clock=steady) for period, callback in (
+                (p['discovery_period_s'], self.discover),
+                (p['status_period_s'], self.publish_status),
+                (HANDSHAKE_PERIOD_S, self._check_ready), (p['flush_period_s'], self.flush)))
         what = 'every topic' if self._wanted is None else ', '.join(sorted(self._wanted))
         self.get_logger().info(f'recording {what} into {self.output} '
                                f'(excluding {", ".join(self._exclude) or "nothing"})')
