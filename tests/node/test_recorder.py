@@ -294,6 +294,29 @@ def test_log_time_is_the_stamp_unstamped_at_the_clock(context, executor, tmp_pat
     assert chatter == {'before the first clock': T0_NS, 'after the first clock': T0_NS}
 
 
+def test_a_clock_from_zero_is_a_clock(context, executor, tmp_path):
+    """A simulator whose ``/clock`` starts at 0 (Gazebo): that /clock is logged at 0 and an
+    unstamped message after it at 0, not held for a later clock."""
+    talker, clock_pub, chat_pub, _ = _talker(context, executor, 'zero')
+    bag = tmp_path / 'zero'
+    recorder = RecorderNode(context=context, parameter_overrides=[
+        Parameter('output', value=str(bag)), Parameter('discovery_period_s', value=0.1),
+        Parameter('topics', value=['/clock', 'zero_chatter'])])
+    executor.add_node(recorder)
+    try:
+        spin_until(executor, lambda: (clock_pub.get_subscription_count() > 0
+                                      and chat_pub.get_subscription_count() > 0),
+                   what='recorder subscriptions')
+        clock_pub.publish(_clock(0))
+        spin_until(executor, lambda: recorder.counts.get('/clock') == 1, what='clock 0')
+        chat_pub.publish(String(data='at zero'))
+        spin_until(executor, lambda: recorder.counts.get('/zero_chatter') == 1, what='chatter')
+    finally:
+        _remove(executor, recorder, talker)
+    got = sorted((topic, t) for topic, t, _ in read_messages(bag))
+    assert got == [('/clock', 0), ('/zero_chatter', 0)]
+
+
 def test_existing_output_is_an_error(context, tmp_path):
     out = tmp_path / 'exists'
     out.mkdir()

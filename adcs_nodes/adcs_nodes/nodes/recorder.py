@@ -250,7 +250,7 @@ class RecorderNode(node_params.SpecParameters, Node):
         self.messages_written = 0
         self.messages_lost = 0
         self._last_lost_topic = ''
-        self._latest_clock_ns = 0
+        self._latest_clock_ns, self._clock_seen = 0, False
         self._held: List[tuple] = []   # (topic, raw, receive time) before the first /clock
         self._clocks_written = 0
         self._clock_in_graph = False
@@ -418,9 +418,9 @@ class RecorderNode(node_params.SpecParameters, Node):
         """Log time of a message (module docstring); ``None``: hold it until the first /clock."""
         if rec.stamp_offset is not None:
             stamp = cdr_stamp_ns(raw, rec.stamp_offset)
-            if stamp is not None and stamp > 0:
+            if stamp is not None and (stamp > 0 or rec.msgtype == CLOCK_TYPE):
                 return stamp
-        if self._latest_clock_ns > 0:
+        if self._clock_seen:
             return self._latest_clock_ns
         if not self._clock_in_graph:   # discovery may not have seen it yet
             self._clock_in_graph = self.count_publishers('/clock') > 0
@@ -434,7 +434,7 @@ class RecorderNode(node_params.SpecParameters, Node):
             stamp = cdr_stamp_ns(raw)
             if stamp is not None:
                 self._latest_clock_ns = max(self._latest_clock_ns, stamp)
-                clock_tick = True
+                self._clock_seen = clock_tick = True
         t_ns = self._log_time_ns(rec, raw)
         if t_ns is None and len(self._held) < MAX_HELD:
             self._held.append((rec, raw, time.time_ns()))
@@ -519,6 +519,7 @@ class RecorderNode(node_params.SpecParameters, Node):
     def _on_clock(self, msg: ClockMsg) -> None:
         stamp = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
         self._latest_clock_ns = max(self._latest_clock_ns, stamp)
+        self._clock_seen = True
         self._clock_ticked()
 
     def publish_status(self) -> None:
