@@ -1,4 +1,5 @@
-"""``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) of any ADCS node.
+"""``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) of any ADCS node, and the
+``lockstep/status`` and ``lockstep/progress`` of a lockstep node (:class:`StatusTopics`).
 
 What ``rqt_robot_monitor``, Foxglove's diagnostics panel and ``diagnostic_aggregator`` read.
 Every lockstep node owns one :class:`Diagnostics` and calls :meth:`Diagnostics.frame` once per
@@ -29,10 +30,15 @@ status (with a reader from the start: during the last period) or a ``fallback`` 
 """
 from __future__ import annotations
 
+import time
 from typing import Any, Dict, List, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from adcs_msgs.msg import LockstepStatus
+from adcs_nodes.core.run_status import StatusPacer
+from adcs_nodes.nodes import cdr
 
 TOPIC = '/diagnostics'
 HARDWARE_ID = 'adcs'
@@ -149,4 +155,75 @@ class Diagnostics:
         msg = DiagnosticArray()
         msg.header.stamp = self.node.stamp(t_ns)
         msg.status = [self.status()]
+        self.pub.publish(msg)
+
+
+class StatusTopics:
+    """``lockstep/status`` and ``lockstep/progress`` of a lockstep node, and its
+    ``/diagnostics`` (:attr:`diagnostics`); when each is due is
+    :class:`~adcs_nodes.core.run_status.StatusPacer`'s decision.
+
+    Progress (every ``PROGRESS_EVERY`` frames of sim time seen, and at the last frame) is the
+    clock master's flow control; status (frames, missed frames, wall time; once per
+    ``status_period_ns`` of sim time, at the last frame, and once a wall second while the
+    node is stalled) is what the launcher and a user read. After the final status, or once
+    :meth:`stop` (a ``node_killed`` fault), nothing more is published.
+    """
+
+    def __init__(self, node: Any, status_period_ns: int) -> None:
+        self.node, self.wall0 = node, time.monotonic()
+        self.pacer = StatusPacer(node.get_name(), node.frame_ns, status_period_ns, self.wall0)
+        self.stopped = False
+        self.pub = cdr.raw_publisher(
+            node.create_publisher(LockstepStatus, 'lockstep/status', QOS_DIAGNOSTICS))
+        self.progress_pub = cdr.raw_publisher(
+            node.create_publisher(LockstepStatus, 'lockstep/progress', QOS_DIAGNOSTICS))
+        self.diagnostics = Diagnostics(node)     # once per sim second (frame_done)
+        node.create_timer(1.0, self._watchdog)
+
+    def _msg(self, t_ns: int, final: bool) -> LockstepStatus:
+        n = self.node
+        msg = LockstepStatus(node=n.get_name(), frames=int(n.frames),
+                             missed_frames=int(n.missed_frames), final=bool(final))
+        msg.header.stamp = n.stamp(t_ns)
+        return msg
+
+    def stop(self) -> None:
+        """Publish nothing more (a crashed process)."""
+        self.stopped = self.pacer.final_sent = True
+
+    def progress(self, seen_ns: int, final: bool = False) -> None:
+        """``lockstep/progress`` for sim time ``seen_ns`` when due."""
+        if not self.stopped and self.pacer.progress_due(seen_ns, final):
+            self.progress_pub.publish(self._msg(seen_ns, final))
+
+    def frame_done(self, t_ns: int, final: bool = False) -> None:
+        """After frame ``t_ns``: ``/diagnostics`` and ``lockstep/status`` when due."""
+        self.diagnostics.frame(t_ns)
+        if self.pacer.status_due(t_ns, final, self.node.missed_frames,
+                                 self.pub.get_subscription_count, time.monotonic()):
+            self.publish(final)
+
+    def _watchdog(self) -> None:
+        if self.pacer.stalled(time.monotonic()):
+            self.publish()
+
+    def wanted(self) -> bool:
+        """Whether a status now would reach a reader (:meth:`StatusPacer.wanted`)."""
+        return self.pacer.wanted(
+            self.pub.get_subscription_count(), lambda: [
+                i.node_name for i in self.node.get_subscriptions_info_by_topic(
+                    self.pub.topic_name)], self.node.missed_frames, time.monotonic())
+
+    def publish(self, final: bool = False) -> None:
+        """``lockstep/status`` stamped with the sim time of the node's last frame."""
+        if self.pacer.final_sent:
+            return
+        self.pacer.final_sent = bool(final)
+        self.pacer.last_wall = time.monotonic()
+        if not self.wanted():
+            return
+        msg = self._msg(self.node.sim_t_ns, final)
+        msg.last_missed_input = self.node.last_missed_input
+        msg.wall_time = time.monotonic() - self.wall0
         self.pub.publish(msg)
