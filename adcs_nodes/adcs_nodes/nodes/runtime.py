@@ -11,20 +11,19 @@ environment, so a library loaded later in this process and every child process s
 thread too. The models make only tiny (3x3 to 9x9) LAPACK calls: with the default threads on 2
 cores a 9x9 ``expm`` cost 400-930 us CPU instead of 31 us (issue 13), with identical results.
 
-Exit within 2 s of SIGINT, also on a loaded machine (issue 22): on SIGINT/SIGTERM the spin
-loop ends within ``poll_s``, the nodes close (the recorder finalises its bag), a launched
-node waits for its samples to be acknowledged (bounded by :data:`FLUSH_BUDGET_S`; at once
-when its readers have them or are gone), the executor is shut down and the nodes destroyed
-(their endpoints leave the graph, so their peers stop waiting for them;
-:data:`TEARDOWN_BUDGET_S`), and the process ends (:func:`exit_now`) without rclpy's shutdown
-and the interpreter's teardown: the first hung now and then (holding the GIL), the second
-took 0.4-1.5 s of wall time per process here (load 15), for nothing that is not already on
-disk. A graph stopped beside a CPU burner (load 7-20 here) took 2.5-4.4 s per node before
-(one dynamics never ended in 15 s); 0.2-0.6 s after, a node whose teardown hung 1.5-1.9 s
-(``tests/node/test_shutdown.py``).
+Exit within 2 s of SIGINT, also on a loaded machine: on SIGINT/SIGTERM the spin loop ends
+within ``poll_s``, the nodes close (the recorder finalises its bag), a launched node waits for
+its samples to be acknowledged (:data:`FLUSH_BUDGET_S`), the executor is shut down and the
+nodes destroyed (their endpoints leave the graph, so their peers stop waiting for them), and
+the process ends (:func:`exit_now`) without rclpy's shutdown and the interpreter's teardown.
+Destroying a Fast DDS entity now and then hangs for good holding the GIL on a loaded machine:
+then a watchdog that needs no Python (:func:`native_exit_watchdog`) says so in one line and
+ends the process with its exit code (0: nothing was left to save). ``docs/reliability.md``
+has the measurements.
 """
 from __future__ import annotations
 
+import ctypes
 import faulthandler
 import logging
 import os
@@ -42,21 +41,15 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
-#: Environment variables that set the thread count of BLAS/OpenMP libraries at load time.
-#: Wall seconds a closing process waits, in all, for its samples to be acknowledged (a
-#: recorder resumed from a stall 40 frames behind took more than 1.5 s at load 5; the
-#: launcher's grace before SIGKILL is 10 s).
+#: Wall seconds a closing process waits, in all, for its samples to be acknowledged.
 FLUSH_BUDGET_S = 4.0
 #: Wall seconds a node process gives rclpy to shut its executor down and destroy its nodes
-#: once they are closed and flushed; past it the process ends with its exit code all the same
-#: (nothing is left to save). Destroying a Fast DDS entity (publisher, subscription, service,
-#: event handler) hangs for good now and then on a loaded machine, holding the GIL (in about 1
-#: graph stop in 5 beside a CPU burner at load 8-20 here, one to three nodes of the graph): no
-#: Python thread runs then, so faulthandler's own thread ends such a process :data:`HANG_S`
-#: later (every thread's stack to the log, exit code 1), within 2 s of the SIGINT.
-#: rclpy.shutdown() is skipped (its logging finalisation hung the same way).
+#: once they are closed and flushed; then it ends with its exit code all the same (nothing is
+#: left to save), from Python, or :data:`HANG_S` later from a native thread when the hang
+#: holds the GIL. rclpy.shutdown() is skipped (its logging finalisation hung the same way).
 TEARDOWN_BUDGET_S = 1.0
 HANG_S = 0.5
+#: Environment variables that set the thread count of BLAS/OpenMP libraries at load time.
 BLAS_THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS',
                    'BLIS_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS')
 
@@ -172,19 +165,17 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
     def _handler(signum, frame):
         stop['flag'] = True
 
-    old_int = signal.signal(signal.SIGINT, _handler)
-    old_term = signal.signal(signal.SIGTERM, _handler)
-    # An executor that always has work (a composed graph running as fast as it can, a
-    # recorder under a steady stream) never lets spin_until_future_complete time out, so the
-    # loop below would never see SIGTERM, until() or done: a steady-clock timer inside the
-    # executor checks them and ends the spin by completing its future.
+    old = (signal.signal(signal.SIGINT, _handler), signal.signal(signal.SIGTERM, _handler))
+    # An executor that always has work never lets spin_until_future_complete time out, so the
+    # loop would never see SIGTERM, until() or done: a steady-clock timer inside the executor
+    # checks them and ends the spin by completing its future.
     wake = {'future': Future()}
     steady = Clock(clock_type=ClockType.STEADY_TIME)
+    all_done = (lambda: nodes and all(getattr(n, 'done', False) for n in nodes))
 
     def _check() -> None:
         if not wake['future'].done() and (
-                stop['flag'] or (until is not None and until())
-                or (nodes and all(getattr(n, 'done', False) for n in nodes))):
+                stop['flag'] or (until is not None and until()) or all_done()):
             wake['future'].set_result(True)
 
     timers = [nodes[0].create_timer(poll_s, _check, clock=steady)] if nodes else []
@@ -195,7 +186,7 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
             executor.spin_until_future_complete(wake['future'], timeout_sec=poll_s)
             if until is not None and until():
                 break
-            if nodes and all(getattr(n, 'done', False) for n in nodes):
+            if all_done():
                 lingered = Future()
                 timers.append(nodes[0].create_timer(
                     linger_s, lambda: lingered.done() or lingered.set_result(True),
@@ -208,38 +199,95 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
         # the handlers stay while the nodes close: a parent-death signal arrives once per
         # thread of the dying launcher, and a second SIGTERM must not kill a closing recorder
         try:
-            for timer in timers:
-                timer.cancel()
-            for node in nodes:
-                close = getattr(node, 'close', None)
-                if close is not None:
-                    close()
-            # a launched node (start handshake expectations) waits for its samples to be
-            # acknowledged, in a thread joined with a deadline: shutting down never hangs
-            launched = [n for n in nodes if any(getattr(n, '_expected_raw', None) or [])]
-            if launched:
-                flusher = threading.Thread(target=flush_publishers, args=(launched,),
-                                           daemon=True)
-                flusher.start()
-                flusher.join(FLUSH_BUDGET_S + 0.5)
-            if teardown_s is not None:     # nothing left to save: never hang in rclpy
-                code = max([int(getattr(n, 'exit_code', 0) or 0) for n in nodes] or [0])
-                watchdog = threading.Timer(teardown_s, exit_now, args=(code,))
-                watchdog.daemon = True
-                watchdog.start()
-                faulthandler.dump_traceback_later(teardown_s + HANG_S, exit=True)
-            # the executor lets go of the nodes' entities before they are destroyed: an
-            # entity destroyed while the executor held it was destroyed inside the
-            # executor's shutdown, which then hung for good now and then (holding the GIL,
-            # in an event handler's __exit__)
-            for node in nodes:
-                executor.remove_node(node)
-            executor.shutdown()
-            for node in nodes:
-                node.destroy_node()
+            _close(executor, nodes, timers, teardown_s)
         finally:
-            signal.signal(signal.SIGINT, old_int)
-            signal.signal(signal.SIGTERM, old_term)
+            signal.signal(signal.SIGINT, old[0])
+            signal.signal(signal.SIGTERM, old[1])
+
+
+def _close(executor, nodes: List[Node], timers: List, teardown_s: Optional[float]) -> None:
+    """Close the nodes, flush a launched node's samples, then shut the executor down and
+    destroy the nodes, under the teardown watchdogs when the process ends after this."""
+    for timer in timers:
+        timer.cancel()
+    for node in nodes:
+        close = getattr(node, 'close', None)
+        if close is not None:
+            close()
+    # a launched node (start handshake expectations) waits for its samples to be
+    # acknowledged, in a thread joined with a deadline: shutting down never hangs
+    launched = [n for n in nodes if any(getattr(n, '_expected_raw', None) or [])]
+    if launched:
+        flusher = threading.Thread(target=flush_publishers, args=(launched,), daemon=True)
+        flusher.start()
+        flusher.join(FLUSH_BUDGET_S + 0.5)
+    if teardown_s is not None:     # nothing left to save: never hang in rclpy
+        code = max([int(getattr(n, 'exit_code', 0) or 0) for n in nodes] or [0])
+        name = nodes[0].get_name() if nodes else 'node'
+        line = (f'[{name}] shutdown: the middleware did not let go of the node within '
+                f'{{:g}} s; ending the process now (exit code {code}: nothing was left to '
+                'save)')
+        watchdog = threading.Timer(teardown_s, _exit_saying, args=(line.format(teardown_s),
+                                                                   code))
+        watchdog.daemon = True
+        watchdog.start()
+        if not native_exit_watchdog(teardown_s + HANG_S, code,
+                                    line.format(teardown_s + HANG_S)):
+            faulthandler.dump_traceback_later(teardown_s + HANG_S, exit=True)
+    # the executor lets go of the nodes' entities before they are destroyed: an entity
+    # destroyed while the executor held it was destroyed inside the executor's shutdown,
+    # which then hung for good now and then (holding the GIL, in an event handler's __exit__)
+    for node in nodes:
+        executor.remove_node(node)
+    executor.shutdown()
+    for node in nodes:
+        node.destroy_node()
+
+
+def _exit_saying(line: str, code: int) -> None:
+    print(line, file=sys.stderr, flush=True)
+    exit_now(code)
+
+
+class _Sigevent(ctypes.Structure):
+    """glibc's ``struct sigevent`` (x86-64 and aarch64: 64 bytes)."""
+    _fields_ = [('value', ctypes.c_void_p), ('signo', ctypes.c_int), ('notify', ctypes.c_int),
+                ('function', ctypes.c_void_p), ('attribute', ctypes.c_void_p),
+                ('_pad', ctypes.c_int * 8)]
+
+
+class _Timespec(ctypes.Structure):
+    _fields_ = [('sec', ctypes.c_long), ('nsec', ctypes.c_long)]
+
+
+#: What the native watchdog writes and calls, kept alive for the process's lifetime.
+_NATIVE: List = []
+
+
+def native_exit_watchdog(after_s: float, code: int, line: str) -> bool:
+    """In ``after_s`` s, from threads of the C library's POSIX timers (``SIGEV_THREAD``:
+    ``puts(line)``, ``fflush(NULL)``, then ``_exit(code)``), which need no Python and so no
+    GIL: the end of a process whose teardown hung holding it. False when the C library has
+    no such timers (the caller then uses faulthandler's watchdog: a stack dump, exit 1)."""
+    try:
+        libc = ctypes.CDLL(None)
+        create, settime = libc.timer_create, libc.timer_settime
+    except (OSError, AttributeError):
+        return False
+    text = ctypes.create_string_buffer(line.encode())
+    _NATIVE.append(text)
+    for i, (fn, value) in enumerate(((libc.puts, ctypes.addressof(text)), (libc.fflush, None),
+                                     (libc._exit, int(code)))):
+        event = _Sigevent(value=value, notify=2,           # SIGEV_THREAD
+                          function=ctypes.cast(fn, ctypes.c_void_p).value)
+        timer = ctypes.c_void_p()
+        at = after_s + 0.02 * i
+        spec = (_Timespec * 2)(_Timespec(0, 0), _Timespec(int(at), int((at % 1) * 1e9)))
+        if create(1, ctypes.byref(event), ctypes.byref(timer)) != 0 or \
+                settime(timer, 0, ctypes.byref(spec), None) != 0:   # CLOCK_MONOTONIC
+            return False
+        _NATIVE.append(timer)
+    return True
 
 
 def _node_name(args, factory) -> str:
