@@ -57,6 +57,8 @@ setup(
             'controller = adcs_nodes.nodes.controller:main',
             'guidance = adcs_nodes.nodes.guidance:main',
             'controller_manager = adcs_nodes.nodes.controller_manager:main',
+            'static_mount = adcs_nodes.nodes.tf:main',
+            'slew_action = adcs_nodes.nodes.slew_action:main',
             'compose = adcs_nodes.tools.run.compose:main',
         ],
     },

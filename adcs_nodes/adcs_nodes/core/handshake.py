@@ -92,3 +92,22 @@ class DriverWait:
                       'start it on this run\'s ROS_DOMAIN_ID; any QoS) for '
                       f'{waited:.0f} s; the run starts when it is matched, or without it '
                       f'after {EXTERNAL_WAIT_S:g} s')
+
+
+def first_line(mode: str, waits: List[str], publishes: List[str], alone: bool,
+               period_s: float = 0.0, sim_time: bool = False, world: bool = False) -> str:
+    """The line a node logs when it starts: its timing, what it waits for, what it publishes,
+    and (``alone``: no launcher expectations) what makes it go."""
+    outs = ', '.join(publishes) or 'nothing'
+    if mode == 'live':
+        return (f'live: fires every {period_s:g} s of the ROS clock ('
+                f'{"/clock" if sim_time else "wall time"}) with the newest samples of '
+                f'{", ".join(waits) or "no input"}; publishes {outs} (timing_mode:=lockstep '
+                'runs it with the simulator)')
+    line = (f'lockstep: fires each frame of /clock once its inputs of that frame are in; '
+            f'waits for {", ".join(["/clock"] + waits)}; publishes {outs}')
+    if alone:
+        line += ('; started alone, it stays idle until a simulator publishes /clock (`adcs '
+                 'run` starts one)' + ('' if world else '; timing_mode:=live runs it on '
+                                       'the ROS clock with real drivers'))
+    return line

@@ -37,14 +37,22 @@ from adcs_nodes.nodes.managed import ManagedLockstepNode
 from adcs_nodes.nodes.tf import MountTable
 
 
+#: The controller of a generic ``controller`` node given none (``CONTEXT_PARAMS``).
+DEFAULT = next(p.default for p in CONTEXT_PARAMS if p.name == 'controller')
+
+
 class ControllerNode(ManagedLockstepNode):
     """A registered controller core wrapped as a lockstep node (see module docstring); a
     managed node (:mod:`adcs_nodes.nodes.managed`)."""
 
     def __init__(self, name: Optional[str] = None, controller: Optional[str] = None,
                  **kwargs: Any) -> None:
+        """Named ``<controller>_controller`` after the controller it runs (``controller``,
+        else the ``controller`` parameter given, else the default); ``-r __node:=`` wins."""
         self._fixed_controller = controller   # (configure runs inside super().__init__)
-        super().__init__(name or f'{controller or "magnetic"}_controller', **kwargs)
+        given = {p.name: p.value for p in kwargs.get('parameter_overrides') or []}
+        super().__init__(name or f'{controller or given.get("controller") or DEFAULT}_controller',
+                         **kwargs)
 
     def configure(self) -> None:
         """Parameters, controller core and endpoints (lifecycle configure)."""
@@ -81,8 +89,10 @@ class ControllerNode(ManagedLockstepNode):
 
 
 def main(args=None) -> int:
-    """``ros2 run adcs_nodes controller --ros-args -p controller:=NAME``."""
-    return runtime.run(ControllerNode, args)
+    """``ros2 run adcs_nodes controller --ros-args -p controller:=NAME``: the node is named
+    ``NAME_controller`` (two generic controllers never share a name)."""
+    name = f'{runtime.given_parameter("controller", args) or DEFAULT}_controller'
+    return runtime.run(lambda: ControllerNode(name), args)
 
 
 def main_magnetic(args=None) -> int:

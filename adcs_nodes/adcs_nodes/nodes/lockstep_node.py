@@ -34,6 +34,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 
 from adcs_nodes.components.base import DEFAULT_EPOCH, epoch_to_ns, parse_epoch  # noqa: F401
 from adcs_nodes.core.frame_schedule import LIVE, LOCKSTEP, FrameSchedule, timing_mode  # noqa
+from adcs_nodes.core.handshake import first_line
 from adcs_nodes.core.lockstep import MAX_LAG_FRAMES, NS_PER_S, seconds_to_ns  # noqa: F401
 from adcs_nodes.core.run_status import (  # noqa: F401 (MONITOR_*: re-exported)
     MONITOR_NODE, MONITOR_STATUS_OF, MONITOR_STATUS_WALL_S, SampleCounts, run_summary,
@@ -286,7 +287,14 @@ class LockstepNode(node_params.SpecParameters, Node):
         return self.handshake.unmatched(graph_view)
 
     def start_handshake(self, on_ready: Optional[Callable[[], None]] = None) -> None:
-        """Say ``lockstep/ready`` once matched, then call ``on_ready`` (:class:`Handshake`)."""
+        """Say what the node waits for and publishes (its first line), then ``lockstep/ready``
+        once matched, then call ``on_ready`` (:class:`Handshake`)."""
+        timing = getattr(self, 'timing', None)
+        self.get_logger().info(first_line(
+            self.timing_mode, sorted(set(self._topics_of.values())),
+            sorted(t for t in self._pubs if t not in ('/diagnostics', '/adcs/security_events')),
+            not self.handshake.expected, 0.0 if timing is None else timing.period_ns / NS_PER_S,
+            bool(self.get_parameter('use_sim_time').value), self.SIMULATED_WORLD))
         self.handshake.start(on_ready)
 
     def handshake_done(self) -> None:

@@ -31,7 +31,7 @@ import signal
 import sys
 import threading
 import time
-from typing import Callable, Iterable, List, Optional
+from typing import Callable, Dict, Iterable, List, Optional
 
 import rclpy
 from rclpy.clock import Clock, ClockType
@@ -288,6 +288,27 @@ def native_exit_watchdog(after_s: float, code: int, line: str) -> bool:
             return False
         _NATIVE.append(timer)
     return True
+
+
+def given_parameter(name: str, args=None) -> Optional[str]:
+    """The value given to parameter ``name`` in the ROS arguments, as text, before a node
+    exists: ``-p name:=value`` (or ``--param``; the last wins over a file), else a
+    ``--params-file`` whose ``/**`` section sets it; None if not given."""
+    import yaml
+    argv = list(args) if args is not None else sys.argv
+    found: Dict[str, Optional[str]] = {'p': None, 'file': None}
+    for flag, value in zip(argv, argv[1:]):
+        if flag in ('-p', '--param') and value.startswith(name + ':='):
+            found['p'] = value.split(':=', 1)[1]
+        elif flag == '--params-file':
+            try:
+                with open(value) as fh:
+                    doc = yaml.safe_load(fh) or {}
+                got = doc.get('/**', {}).get('ros__parameters', {}).get(name)
+            except (OSError, AttributeError, yaml.YAMLError):
+                continue             # (rcl says what is wrong with the file)
+            found['file'] = found['file'] if got is None else str(got)
+    return found['p'] if found['p'] is not None else found['file']
 
 
 def _node_name(args, factory) -> str:
