@@ -49,7 +49,8 @@ ROS_BUILTIN = ('use_sim_time', 'start_type_description_service')
 ROS_BUILTIN_PREFIXES = ('qos_overrides.',)
 #: Why a read-only parameter is read-only (the refusal of a run-time set says it).
 READ_ONLY_WHY = ('the node reads it once, at start-up (a managed node: at configure); '
-                 'restart the node (or cleanup and configure it) to change it')
+                 'cleanup and configure a managed node to change it (in a lockstep run it '
+                 "rejoins at the world's frame), or set it for the next run")
 
 
 # ---------------------------------------------------------------------- descriptions

@@ -20,7 +20,10 @@ graph) checks who sent each message of those topics:
     lockstep topic before every consumer is ready, so only a stranger can).
 
   A publisher appearing on a guarded topic after the lock is reported once
-  (``second_publisher``, from the graph, even before it publishes).
+  (``second_publisher``, from the graph, even before it publishes), except a new publisher of
+  the expected node itself once none of the locked ones is left (the node re-created it: a
+  lifecycle cleanup and configure): the topic is locked to it (``relocks`` on
+  ``/diagnostics``, ``last_relock`` says when and why).
 * Every event is logged (throttled), counted (``/diagnostics``: ``security_events``, one
   counter per reason, ``last_security_event``) and published on ``adcs/security_events``
   (``diagnostic_msgs/DiagnosticArray``, one WARN status per event; reliable, recorded by the
@@ -110,6 +113,7 @@ class PublisherGuard:
         self.counts: Dict[str, int] = {r: 0 for r in REASONS}
         self.by_topic: Dict[Tuple[str, str], int] = collections.Counter()
         self.last_event = ''
+        self.relocks, self.last_relock = 0, ''
 
     @property
     def topics(self) -> List[str]:
@@ -143,6 +147,18 @@ class PublisherGuard:
             raise ValueError(f'{topic}: no publisher of {self.expected[topic]} to lock to')
         self.allowed[topic] = allowed
         self.known[topic] |= allowed
+
+    def relock(self, topic: str, mine: Iterable[bytes], present: Iterable[bytes]) -> bool:
+        """Lock ``topic`` to the expected node's publishers ``mine`` now when none of the
+        locked ones is ``present`` any more (the node re-created its publisher); True if so."""
+        mine = {bytes(g) for g in mine}
+        if topic not in self.allowed or not mine or mine <= self.allowed[topic] or \
+                self.allowed[topic] & {bytes(g) for g in present}:
+            return False
+        self.allowed[topic] = mine
+        self.known[topic] |= mine
+        self.relocks += 1
+        return True
 
     def new_publishers(self, topic: str, gids: Iterable[bytes]) -> List[bytes]:
         """Publishers of a locked ``topic`` seen for the first time (each reported once)."""
@@ -190,6 +206,7 @@ class PublisherGuard:
         out = {'security_events': str(self.total)}
         out.update({f'security_{r}': str(n) for r, n in self.counts.items()})
         out['last_security_event'] = self.last_event
+        out.update(relocks=str(self.relocks), last_relock=self.last_relock)
         return out
 
 
@@ -215,6 +232,7 @@ class NodeGuard:
         self.suppressed = 0
         node.add_ready_check(self.missing)
         self._graph_timer = None
+        self._relock_after: Dict[str, float] = {}
 
     # ------------------------------------------------------------------ handshake
     def _publishers(self, topic: str) -> Tuple[List[bytes], List[Tuple[str, bytes]]]:
@@ -251,10 +269,30 @@ class NodeGuard:
                            f'({gid_hex(gid)}): not trusted')
         self._graph_timer = self.node.create_timer(1.0, self.check_graph)
 
+    def relock(self, topic: str) -> bool:
+        """Lock ``topic`` to its expected node's new publisher if that node re-created it
+        (:meth:`PublisherGuard.relock`); logged, and said on ``/diagnostics``."""
+        now = time.monotonic()
+        if now < self._relock_after.get(topic, 0.0):
+            return False                      # (a stranger's flood: the graph asked 10/s)
+        mine, others = self._publishers(topic)
+        if not self.core.relock(topic, mine, mine + [g for _, g in others]):
+            self._relock_after[topic] = now + 0.1
+            return False
+        self.core.last_relock = (
+            f'{topic}: {self.core.expected[topic]} re-created its publisher (a lifecycle '
+            f'cleanup and configure?) at t={self.node.sim_t_ns / 1e9:g} s; its old one is '
+            f'gone: accepted from now on ({", ".join(map(gid_hex, mine))})')
+        self.node.get_logger().info(self.core.last_relock)
+        return True
+
     def check_graph(self) -> None:
-        """Report a publisher that joined a guarded topic after the lock (once each)."""
+        """Report a publisher that joined a guarded topic after the lock (once each), or
+        lock to it when it is the expected node's own new one (:meth:`relock`)."""
         for topic in self.core.topics:
             if self.node.count_publishers(topic) <= len(self.core.known[topic]):
+                continue
+            if self.relock(topic):
                 continue
             infos = {bytes(i.endpoint_gid): i for i in
                      self.node.get_publishers_info_by_topic(topic)}
@@ -281,6 +319,8 @@ class NodeGuard:
             stamp = self.node.elapsed_ns(
                 msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
             reason = core.check(topic, gid, stamp)
+            if reason == 'foreign_publisher' and self.relock(topic):
+                reason = core.check(topic, gid, stamp)     # the expected node's new one
             if reason is None:
                 callback(msg)
                 return
