@@ -82,9 +82,9 @@ class DriverWait:
         waited, topics = now_s - self.t0, ', '.join(missing)
         if waited > EXTERNAL_WAIT_S:
             self.gave_up = True
-            return False, ('error', f'no publisher on {topics} after {EXTERNAL_WAIT_S:g} s: '
-                           'starting without it (this node will be starved and the run '
-                           'degraded)')
+            return False, ('warning', f'no publisher on {topics} after {EXTERNAL_WAIT_S:g} '
+                           's: starting without it (if nothing usable comes, this node is '
+                           'starved and the run degraded)')
         if self.logged is not None and now_s - self.logged < EXTERNAL_WAIT_LOG_S:
             return True, None
         self.logged = now_s

@@ -75,9 +75,11 @@ class FrameTiming:
         self.sync = node.sync = FrameSync(specs, dead_after=node.dead_after,
                                           revive_hold_ns=REVIVE_HOLD_FRAMES * frame_ns)
         future_ns, age_ns = seconds_to_ns(node.max_future_s), seconds_to_ns(node.max_sample_age_s)
+        # a driver stamps with the world's /clock, which may lead this node's view by up to
+        # the clock master's lag window (REVIVE_HOLD_FRAMES frames): not "from the future"
         self.external = node.external = ExternalInputs(
-            ext_periods, self.topics, self.period_ns, node.dead_after, node.epoch_ns, future_ns,
-            age_ns, node.counts)
+            ext_periods, self.topics, self.period_ns, node.dead_after, node.epoch_ns,
+            future_ns + REVIVE_HOLD_FRAMES * frame_ns, age_ns, node.counts)
         self.frame_inputs = [n for n in specs if n not in self.external]
         if live:
             self.live_samples = LiveSamples(

@@ -6,12 +6,18 @@ publisher guard) and the publishers of its external drivers' topics; when all ho
 its guarded inputs, arms its frame schedule, publishes its name on ``lockstep/ready``
 (latched) and calls ``on_ready``. A wait longer than 10 s says what is missing, with what
 discovery knows (the launcher's self-healing reads that line).
+
+While it waits for an external driver, the node publishes ``/clock`` at the epoch minus 1 ns
+once a second: a driver on sim time (``ros2 topic pub -s``, ``use_sim_time``) that waits for a
+clock before it publishes can then start, instead of both waiting for the other until the wait
+ends (60 s). Lockstep nodes ignore a time before frame 0.
 """
 from __future__ import annotations
 
 import time
 from typing import Any, Callable, List, Optional
 
+from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
 from adcs_nodes.core import handshake
@@ -30,6 +36,7 @@ class Handshake:
         self.pub = node.create_publisher(String, 'lockstep/ready', qos)
         self.on_ready: Optional[Callable[[], None]] = None
         self.timer = None
+        self.clock_pub, self.clock_at = None, 0.0
 
     def unmatched(self, graph_view: bool = False) -> List[str]:
         """What is not matched yet, as readable strings (``graph_view``: with what discovery
@@ -52,9 +59,17 @@ class Handshake:
         node = self.node
         missing = sorted(node._topics_of[n] for n in node.external
                          if node._subs[node._topics_of[n]].get_publisher_count() < 1)
-        waiting, line = self.driver_wait.check(missing, time.monotonic())
+        now = time.monotonic()
+        waiting, line = self.driver_wait.check(missing, now)
         if line is not None:
             node_log(node)(*line)
+        if waiting and now >= self.clock_at:           # a clock a sim-time driver starts on
+            self.clock_at = now + 1.0
+            self.clock_pub = self.clock_pub or node.create_publisher(Clock, '/clock', 10)
+            self.clock_pub.publish(Clock(clock=node.stamp(-1)))
+        elif not waiting and self.clock_pub is not None:
+            node.destroy_publisher(self.clock_pub)
+            self.clock_pub = None
         return missing if waiting else []
 
     def start(self, on_ready: Optional[Callable[[], None]] = None) -> None:
