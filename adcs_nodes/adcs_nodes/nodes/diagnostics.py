@@ -1,32 +1,14 @@
 """``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) of any ADCS node, and the
 ``lockstep/status`` and ``lockstep/progress`` of a lockstep node (:class:`StatusTopics`).
 
-What ``rqt_robot_monitor``, Foxglove's diagnostics panel and ``diagnostic_aggregator`` read.
-Every lockstep node owns one :class:`Diagnostics` and calls :meth:`Diagnostics.frame` once per
-processed frame; a ``DiagnosticArray`` with one ``DiagnosticStatus`` (name = node name,
-hardware id ``adcs``) goes out once per ``period_s`` of sim time (default 1 s, the rate of
-``diagnostic_updater``), stamped with that sim time. Publishing from the frame path (not a
-wall timer) keeps the topic deterministic in lockstep, so it can be recorded and compared.
-
-Only when someone reads it: the status is built and published only while a subscription is
-matched to ``/diagnostics`` (a recorder recording it, ``rqt_robot_monitor``, ``ros2 topic
-echo``; :meth:`Diagnostics.wanted`, about 0.5 us). Building it was about 14 % of a composed
-paper000 frame with nobody listening (issue 13). A recorder that records the topic is matched
-before frame 0 (the launcher's start handshake), so a bag holds every status as before.
-
-Values (``KeyValue``, strings), in this order:
-
-* the node's ``timing_diagnostics()`` (every lockstep node: timing mode, frames, missed
-  frames, dead inputs, rejected samples by reason);
-* the node's attributes among :data:`ATTRIBUTES` when it has them (estimator:
-  ``rejected_count``, ``last_rejection``, ``update_count``, ``resets``; dynamics:
-  ``rejected_commands``; magnetometer: ``dropouts``);
-* the node's ``diagnostic_values()`` (controller manager: the active controller, mode,
-  forwarded source, ``fallback`` reason).
-
-Level: ``OK``; ``WARN`` when a counter of :data:`COUNTERS` grew since the last published
-status (with a reader from the start: during the last period) or a ``fallback`` is active
-(the message says which); ``ERROR`` when the node sets ``diagnostic_error`` (a text).
+``/diagnostics`` is what ``rqt_robot_monitor``, Foxglove and ``diagnostic_aggregator`` read:
+one ``DiagnosticStatus`` (name = node name, hardware id ``adcs``) once per ``period_s`` of sim
+time, published from the frame path (deterministic in lockstep, so recorded and compared) and
+only while someone reads the topic (:meth:`Diagnostics.wanted`). Values (strings), in order:
+the node's ``timing_diagnostics()``, its attributes among :data:`ATTRIBUTES`, its
+``diagnostic_values()`` (the manager's active controller, ``fallback``, ...). Level ``WARN``
+when a counter of :data:`COUNTERS` grew since the last status or a ``fallback`` is active,
+``ERROR`` when the node sets ``diagnostic_error``, else ``OK``.
 """
 from __future__ import annotations
 

@@ -1,26 +1,12 @@
 """Base class of every lockstep node: the rclpy adapter over the pure timing pieces.
 
-What is decided where (each tested without rclpy):
-
-* timing mode and the frame schedule of a lockstep consumer (seen time, next frame, ready or
-  timed out, missed frames, dead and rejoining inputs): :mod:`adcs_nodes.core.frame_schedule`
-  over :class:`~adcs_nodes.core.lockstep.FrameSync`;
-* live mode (the tick's choice of samples) and the sample timing of external inputs
-  (each sample once at its stamp, starvation): :mod:`adcs_nodes.core.sample_timing`;
-* the start handshake (``expected_matches``, the wait for an external driver):
-  :mod:`adcs_nodes.core.handshake`;
-* counts, run summary, diagnostics and when status and progress are due:
-  :mod:`adcs_nodes.core.run_status`.
-
-Time: ``/clock`` carries ``epoch + elapsed``; stamps become elapsed integer nanoseconds at the
-edge (:meth:`LockstepNode.elapsed_ns`), so frame arithmetic is exact. Timing modes (DESIGN
-section 6): ``lockstep`` (with the simulator; what the launcher sets) or ``live`` (the default
-of a flight-software node started alone: fires every ``period_s`` of the ROS clock with the
-newest samples). Inputs are ``frame`` (awaited with the frame's stamp), ``previous`` (awaited
-with the producer's stamp before t) or ``latest`` (never awaited). QoS: every endpoint takes
-``qos_overrides.<topic>.*``; in live mode and sample timing ``sensors/*`` are subscribed
-best-effort (``SensorDataQoS``). At its last frame a flight-software node logs
-:data:`SUMMARY_PREFIX` and its run summary as JSON (``adcs run`` prints one line per node).
+Decided without rclpy (each tested so): the timing mode and the frame schedule
+(:mod:`adcs_nodes.core.frame_schedule` over ``FrameSync``), live and external sample timing
+(:mod:`adcs_nodes.core.sample_timing`), the start handshake (:mod:`adcs_nodes.core.handshake`),
+counts, summary and status pacing (:mod:`adcs_nodes.core.run_status`). Their rclpy glue:
+:class:`~adcs_nodes.nodes.frame_timing.FrameTiming`, :class:`~adcs_nodes.nodes.handshake.
+Handshake`, :class:`~adcs_nodes.nodes.diagnostics.StatusTopics`. DESIGN section 6 has the
+timing model; stamps become elapsed integer nanoseconds at the edge (:meth:`elapsed_ns`).
 """
 from __future__ import annotations
 

@@ -1,45 +1,28 @@
 """Managed (lifecycle) flight-software nodes: :class:`ManagedLockstepNode`.
 
 The estimator, the controllers, the controller manager and guidance are ROS 2 managed nodes
-(``rclpy.lifecycle``, the standard state machine and services); the simulated world and the
+(``rclpy.lifecycle``: the standard state machine and services); the simulated world and the
 recorder stay plain nodes.
 
-States and what the node has in each
-------------------------------------
-* ``unconfigured``: only the node, its parameters as given and the lifecycle interface
-  (``~/change_state``, ``~/get_state``, ``~/get_available_states``,
-  ``~/get_available_transitions``, ``~/get_transition_graph``, ``~/transition_event``).
-  No topic, no timer.
-* ``configure`` reads and validates every parameter and builds the core (a bad value: the
-  transition fails with the reason logged as ``configuration error: ...``, no traceback, and
-  the node stays ``unconfigured``), then creates every publisher, subscription, timer,
-  service and action. -> ``inactive``.
-* ``inactive``: frames are processed (the filter and the controllers keep their state, so an
-  activation is bumpless), but no output is published: the node's topics (estimate,
-  commands, targets, ``/tf``, controller status, ...) are lifecycle publishers and drop what
-  is published. The lockstep bookkeeping (``lockstep/status``, ``lockstep/progress``,
-  ``/diagnostics``) goes on, so a lockstep run never stalls on an inactive node.
-* ``activate`` enables the outputs; only now does the start handshake say ``lockstep/ready``
-  (the clock master starts frame 0 when every node is ready, so in a run no frame is
-  computed before the nodes are active). -> ``active``. ``deactivate`` -> ``inactive``.
-* ``cleanup`` destroys everything ``configure`` created (endpoints, timers, services, the
-  parameter declarations it made) -> ``unconfigured``; a new ``configure`` reads the
-  parameters again (their current values). ``shutdown`` (from any state) ends the process
-  (``done``, exit code 0).
+* ``unconfigured``: the node, its parameters as given and the lifecycle services; no topic.
+* ``configure`` reads and validates every parameter, builds the core and creates every
+  endpoint, timer, service and action (a bad value: the transition fails with the reason
+  logged as ``configuration error: ...``, the node stays ``unconfigured``). -> ``inactive``:
+  frames are processed (an activation is bumpless) but the outputs (lifecycle publishers)
+  drop what is published; ``lockstep/status``, ``progress`` and ``/diagnostics`` go on.
+* ``activate`` enables the outputs; only then does the handshake say ``lockstep/ready``.
+* ``cleanup`` destroys what ``configure`` created; a new ``configure`` reads the parameters
+  again and, during a lockstep run, rejoins it at the world's frame
+  (:mod:`adcs_nodes.core.frame_schedule`). ``shutdown`` ends the process (exit code 0).
 
-Autostart
----------
-Parameter ``autostart`` (bool, default ``true``): the node configures and activates itself
-in its constructor, as every node did before it was managed (nav2's lifecycle manager
-style), so ``ros2 run adcs_nodes estimator`` and ``python -m adcs_nodes.nodes.estimator`` work
-as before, and a bad parameter still ends the process with exit code 2. With
-``autostart:=false`` the node starts ``unconfigured`` and waits for the standard services::
+``autostart`` (default true) configures and activates in the constructor, so a node started
+alone runs at once (a bad parameter: exit code 2); ``adcs run`` starts them with
+``autostart: false`` and drives the transitions (``ros2 lifecycle set /estimator configure``
+does the same by hand).
 
-    ros2 lifecycle set /estimator configure     # or: ros2 service call
-    ros2 lifecycle set /estimator activate      #   /estimator/change_state ...
-
-``adcs run`` starts these nodes with ``autostart: false`` and drives the transitions
-(:mod:`adcs_nodes.tools.run.launcher`; ``--compose`` does it in process).
+Run-time parameter changes: only a registered controller's own parameters are writable
+(:data:`REBUILT_AT_RUN_TIME`): validated when set, applied at the next frame boundary by
+rebuilding the core (from its reset state); a value set to what it is changes nothing.
 """
 from __future__ import annotations
 

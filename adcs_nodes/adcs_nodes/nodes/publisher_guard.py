@@ -1,46 +1,25 @@
 """Publisher identity of lockstep inputs: only the launched node's publisher is used.
 
-DDS without its security plugins lets any process on the run's domain publish on any topic
-(``docs/security.md``). A consumer given ``expected_publishers`` (the launcher sets it for
-``dynamics`` and ``controller_manager``: ``"<topic>=<node name>"`` per guarded input, from the
-graph) checks who sent each message of those topics:
+Any process on the run's domain can publish on any topic (``docs/security.md``). A consumer
+given ``expected_publishers`` (``"<topic>=<node name>"`` per guarded input; the launcher sets
+it for ``dynamics`` and ``controller_manager``) checks who sent each message:
 
-* Start handshake: the node is not ready until a publisher of the named node is discovered
-  on every guarded topic; when the handshake completes, each guarded topic is **locked** to
-  the endpoint GID(s) of that node's publisher(s) there (``get_publishers_info_by_topic``).
-  Other publishers present then are reported (``second_publisher``), not trusted.
-* After the lock, a message is dropped (never stored, never used) when
+* it is not ready until the named node's publisher is discovered on every guarded topic; at
+  the end of the handshake each topic is **locked** to that publisher's GID(s); others present
+  are reported (``second_publisher``);
+* after the lock a message is dropped when its publisher GID is not a locked one
+  (``foreign_publisher``), its stamp was received already (``duplicate_stamp``) or is older
+  than the last :data:`HISTORY` (``old_stamp``), or it came before the lock
+  (``before_handshake``); a publisher joining later is reported once (``second_publisher``),
+  except the expected node's own new one once none of the locked ones is left (a lifecycle
+  cleanup and configure): the topic is locked to it (``relocks``, ``last_relock``);
+* every event is logged (throttled), counted on ``/diagnostics`` and published on
+  ``adcs/security_events`` (at most :data:`MAX_EVENTS_PER_S` a second, the rest counted).
 
-  - its publisher GID (``MessageInfo['publisher_gid']``) is not a locked one
-    (``foreign_publisher``);
-  - its stamp was already received on that topic (``duplicate_stamp``), or is older than
-    every stamp remembered (``old_stamp``; the last :data:`HISTORY` are remembered): the
-    launched producers stamp strictly increasing frames;
-  - it arrives before the lock (``before_handshake``; no launched producer publishes a
-    lockstep topic before every consumer is ready, so only a stranger can).
-
-  A publisher appearing on a guarded topic after the lock is reported once
-  (``second_publisher``, from the graph, even before it publishes), except a new publisher of
-  the expected node itself once none of the locked ones is left (the node re-created it: a
-  lifecycle cleanup and configure): the topic is locked to it (``relocks`` on
-  ``/diagnostics``, ``last_relock`` says when and why).
-* Every event is logged (throttled), counted (``/diagnostics``: ``security_events``, one
-  counter per reason, ``last_security_event``) and published on ``adcs/security_events``
-  (``diagnostic_msgs/DiagnosticArray``, one WARN status per event; reliable, recorded by the
-  recorder). Publishing is limited to :data:`MAX_EVENTS_PER_S` per wall second; the number
-  left out is carried in the next one (``suppressed``).
-
-Messages delivered in process by the composed runner's in-process path carry no message info
-(``info is None``): they come from a publisher of this process (a node the launcher built), so
-only their stamps are checked. A node started alone (no ``expected_publishers``) is unguarded:
-it accepts everything, as before.
-
-Not prevented (``docs/security.md``): a stranger that is on the domain *before* the handshake
-under the expected node name is locked in with the real node (its messages then pass the GID
-check, and only a duplicate stamp is caught, whichever of the two came second); forged
-``/clock``, services and any topic not guarded. DDS Security (SROS2) is the real answer.
-
-:class:`PublisherGuard` is the bookkeeping (pure Python); :class:`NodeGuard` the rclpy glue.
+In-process deliveries (composed runs) carry no message info: only their stamps are checked.
+Not prevented: a stranger under the expected name before the handshake, forged ``/clock``,
+services, unguarded topics (SROS2 is the real answer). :class:`PublisherGuard` is the pure
+bookkeeping; :class:`NodeGuard` the rclpy glue.
 """
 from __future__ import annotations
 
@@ -363,14 +342,9 @@ class NodeGuard:
 
 
 class WithInfo:
-    """A subscription callback that rclpy calls with the message info, from any executor.
-
-    rclpy gives a callback the ``MessageInfo`` when its signature takes two arguments. Its
-    ``SingleThreadedExecutor`` then calls ``cb(msg, info)``, but the ``EventsExecutor`` of
-    rclpy 9.1.2 (the wheels here, ``runtime.make_executor``) calls ``cb((msg, info))``: one
-    tuple (a plain two-argument function fails there with ``SystemError: null argument to
-    internal routine``). This wrapper declares two arguments and accepts both calls.
-    """
+    """A subscription callback that gets the message info from any executor: rclpy's
+    ``SingleThreadedExecutor`` calls ``cb(msg, info)``, the ``EventsExecutor`` of rclpy 9.1
+    ``cb((msg, info))`` (a plain two-argument function fails there)."""
 
     __signature__ = inspect.Signature([
         inspect.Parameter('msg', inspect.Parameter.POSITIONAL_ONLY),

@@ -5,21 +5,15 @@ short timeout and stop on SIGINT/SIGTERM or when a node asks to finish (``node.d
 The same node classes run one per process (``main`` of each node module) or several in one
 process with one executor (``adcs_nodes.tools.run.compose``).
 
-One BLAS thread per process: importing this module limits every loaded BLAS/OpenMP library to
-one thread (``threadpoolctl``) and sets ``OPENBLAS_NUM_THREADS=1`` and friends in the
-environment, so a library loaded later in this process and every child process start with one
-thread too. The models make only tiny (3x3 to 9x9) LAPACK calls: with the default threads on 2
-cores a 9x9 ``expm`` cost 400-930 us CPU instead of 31 us (issue 13), with identical results.
+One BLAS thread per process (DESIGN section 6): importing this module limits the loaded
+BLAS/OpenMP libraries (``threadpoolctl``) and the environment of later ones and children.
 
-Exit within 2 s of SIGINT, also on a loaded machine: on SIGINT/SIGTERM the spin loop ends
-within ``poll_s``, the nodes close (the recorder finalises its bag), a launched node waits for
-its samples to be acknowledged (:data:`FLUSH_BUDGET_S`), the executor is shut down and the
-nodes destroyed (their endpoints leave the graph, so their peers stop waiting for them), and
-the process ends (:func:`exit_now`) without rclpy's shutdown and the interpreter's teardown.
-Destroying a Fast DDS entity now and then hangs for good holding the GIL on a loaded machine:
-then a watchdog that needs no Python (:func:`native_exit_watchdog`) says so in one line and
-ends the process with its exit code (0: nothing was left to save). ``docs/reliability.md``
-has the measurements.
+Exit within 2 s of SIGINT, also under load: the nodes close, a launched node's samples are
+acknowledged (:data:`FLUSH_BUDGET_S`), the executor and nodes are destroyed (their endpoints
+leave the graph), and the process ends (:func:`exit_now`) without rclpy's shutdown. A
+teardown that hangs in Fast DDS holding the GIL is ended by a watchdog that needs no Python
+(:func:`native_exit_watchdog`): one line, the node's exit code. ``docs/reliability.md`` has
+the measurements.
 """
 from __future__ import annotations
 
@@ -55,12 +49,7 @@ BLAS_THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS',
 
 
 def limit_blas_threads() -> None:
-    """One BLAS thread: in the libraries already loaded, and (environment) in later ones.
-
-    Idempotent and cheap (a few ms); called when this module is imported, before a node is
-    built. Without ``threadpoolctl`` only the environment is set (effective for libraries
-    loaded afterwards and for child processes).
-    """
+    """One BLAS thread: in the libraries already loaded, and (environment) in later ones."""
     for key in BLAS_THREAD_ENV:
         os.environ[key] = '1'
     try:
@@ -74,12 +63,8 @@ limit_blas_threads()
 
 
 def make_executor(context=None):
-    """Return an ``EventsExecutor`` when rclpy has one, else a ``SingleThreadedExecutor``.
-
-    ``context``: the rclpy context to bind it to (default: the global one).
-    ``ADCS_EXECUTOR=single`` chooses the ``SingleThreadedExecutor`` (an A/B switch,
-    docs/reliability.md).
-    """
+    """An ``EventsExecutor`` on ``context`` (``ADCS_EXECUTOR=single`` or an older rclpy: a
+    ``SingleThreadedExecutor``)."""
     if os.environ.get('ADCS_EXECUTOR', '') != 'single':
         try:
             from rclpy.experimental import EventsExecutor
@@ -91,10 +76,8 @@ def make_executor(context=None):
 
 
 def flush_publishers(nodes: Iterable[Node], budget_s: float = FLUSH_BUDGET_S) -> List[str]:
-    """Wait (at most ``budget_s`` in all) until every reliable publisher's samples are
-    acknowledged by its matched subscribers, so a process that ends (Ctrl-C, end of run) does
-    not take samples a slower reader (the recorder) has not received yet with it. Returns the
-    topics still unacknowledged at the deadline."""
+    """Wait (at most ``budget_s`` in all) until every publisher's samples are acknowledged
+    by its readers (the recorder); the topics still unacknowledged at the deadline."""
     deadline = time.monotonic() + budget_s
     left = []
     for node in nodes:
@@ -119,20 +102,9 @@ def _request_stop(signum, frame) -> None:
 
 
 def stop_handler_from_start():
-    """SIGINT/SIGTERM, from the start of a node process, only ask it to stop.
-
-    If only the spin loop installed the handlers, a stop that came while the node was
-    starting (visible in the graph, the constructor not finished) met Python's own handling:
-    ``KeyboardInterrupt`` in whatever code ran, or nothing at all when the process had
-    inherited SIGINT ignored (bash starts the commands of a script's background job so, and
-    Python keeps an inherited "ignore"): the signal was lost and the node spun for good, the
-    likely cause of the one hang of the sensor-node test (start, wait until visible, SIGINT)
-    in a clean-clone CI run started in the background (``tests/node/test_shutdown.py``
-    reproduces it). With this handler the start-up runs to its end and the spin loop
-    (:func:`spin_nodes`) sees the request and ends at once.
-
-    Returns the previous handlers, for :func:`restore_handlers`.
-    """
+    """SIGINT/SIGTERM, from the start of a node process, only ask it to stop: the start-up
+    runs to its end and the spin loop ends at once (also with SIGINT inherited ignored, as
+    bash starts a script's background jobs). Returns the previous handlers."""
     STOP_REQUESTED.clear()
     return (signal.signal(signal.SIGINT, _request_stop),
             signal.signal(signal.SIGTERM, _request_stop))
@@ -147,15 +119,9 @@ def restore_handlers(old) -> None:
 def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None,
                poll_s: float = 0.1, linger_s: float = 0.3,
                teardown_s: Optional[float] = None) -> None:
-    """Spin ``nodes`` on one executor until SIGINT/SIGTERM, ``until()`` or every node is done.
-
-    A node signals it has finished its job by setting ``node.done = True`` (for example the
-    dynamics node at the end of the scenario); the executor then spins ``linger_s`` more so
-    reliable DDS can resend the last messages before the process exits. With ``teardown_s``
-    (a process that ends after this), the process ends (:func:`exit_now`) if shutting the
-    executor down and destroying the nodes take longer than that once the nodes are closed
-    and flushed (see :data:`TEARDOWN_BUDGET_S`).
-    """
+    """Spin ``nodes`` on one executor until SIGINT/SIGTERM, ``until()`` or every node is
+    ``done`` (then ``linger_s`` more, so reliable DDS can resend the last messages). With
+    ``teardown_s`` (the process ends after this) the teardown is bounded (:func:`_close`)."""
     nodes: List[Node] = list(nodes)
     executor = make_executor()
     for node in nodes:
@@ -166,9 +132,7 @@ def spin_nodes(nodes: Iterable[Node], until: Optional[Callable[[], bool]] = None
         stop['flag'] = True
 
     old = (signal.signal(signal.SIGINT, _handler), signal.signal(signal.SIGTERM, _handler))
-    # An executor that always has work never lets spin_until_future_complete time out, so the
-    # loop would never see SIGTERM, until() or done: a steady-clock timer inside the executor
-    # checks them and ends the spin by completing its future.
+    # a busy executor never times out: a steady timer inside it checks the stop conditions
     wake = {'future': Future()}
     steady = Clock(clock_type=ClockType.STEADY_TIME)
     all_done = (lambda: nodes and all(getattr(n, 'done', False) for n in nodes))
@@ -321,12 +285,8 @@ def _node_name(args, factory) -> str:
 
 
 def exit_now(code: int) -> None:
-    """End the process with ``code`` at once, without the interpreter's teardown.
-
-    Everything that matters is done by then (bag closed, nodes and context destroyed); what
-    is left is flushed here: the standard streams, the logging handlers, and the coverage
-    data of a measured subprocess (``COVERAGE_PROCESS_START``).
-    """
+    """End the process with ``code`` at once, without the interpreter's teardown, after
+    flushing the streams, the logging handlers and a measured subprocess's coverage data."""
     coverage = sys.modules.get('coverage')      # (never imported here: 0.1-0.5 s)
     try:
         cov = coverage.Coverage.current() if coverage is not None else None
@@ -346,14 +306,9 @@ def exit_now(code: int) -> None:
 
 def run(factory: Callable[[], Node], args=None, exit_process: bool = True) -> int:
     """Entry point body of a node executable: init rclpy, build the node, spin, shut down.
-
-    The process exit code: 0 on a normal end, 2 on a configuration error (a ``ValueError``
-    while building the node: one clear line naming the node, no traceback). With
-    ``exit_process`` (the executables) the process then ends at once (:func:`exit_now`),
-    else the code is returned. An exception while running propagates (traceback, exit code
-    1) so the launcher reports it. A crash in C (rclpy, Fast DDS, a compiled kernel) writes
-    the Python stack to stderr, i.e. to the node's log (``faulthandler``).
-    """
+    Exit code 0, or 2 on a configuration error (a ``ValueError`` while building: one line
+    naming the node); a bug propagates (traceback, 1). ``exit_process``: end the process
+    (:func:`exit_now`), else return the code. A crash in C dumps the stack (faulthandler)."""
     code = _run(factory, args, exit_process)
     if exit_process:
         exit_now(code)
@@ -394,9 +349,7 @@ def _run(factory: Callable[[], Node], args, exit_process: bool) -> int:
             rclpy.shutdown()
         raise
     finally:
-        # a process that ends now skips rclpy's shutdown: its nodes (and so their endpoints)
-        # are destroyed already, and the logging finalisation in rclpy.shutdown() hung for
-        # good, holding the GIL, in 1 of about 60 stops beside a CPU burner here
+        # a process that ends now skips rclpy's shutdown (its logging finalisation hung)
         if not exit_process and rclpy.ok():
             rclpy.shutdown()
         restore_handlers(old_handlers)
