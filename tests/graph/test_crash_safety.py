@@ -201,9 +201,10 @@ def test_sigkill_of_the_recorder_stops_the_run_and_export_and_report_read_the_ba
 def test_a_node_refusing_its_configuration_makes_the_run_exit_2(tmp_path, monkeypatch):
     """A node exiting with code 2 (configuration error) ends the run with exit code 2."""
     from adcs_nodes.tools.run import launcher
+    from adcs_nodes.tools.run.launcher import isolation
     from adcs_nodes.scenario import load_scenario
 
-    monkeypatch.setattr(launcher, 'RUNS_DIR', str(tmp_path / 'runs'))
+    monkeypatch.setattr(isolation, 'RUNS_DIR', str(tmp_path / 'runs'))
     run = launcher.Launcher(load_scenario(FREE_TUMBLE), duration_s=10.0, progress=False,
                             log=lambda *a: None)
     refuse = [sys.executable, '-c', 'import sys; print("bad parameter"); sys.exit(2)']
