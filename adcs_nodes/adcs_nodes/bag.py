@@ -535,6 +535,43 @@ def _iterate(stack: ExitStack, reader: AnyReader, wanted: Optional[set],
             raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
 
 
+def stamped_messages(bag_path: os.PathLike | str, topics: Iterable[str],
+                     untimed: Iterable[str] = (), decode: Iterable[str] = (),
+                     header_only: bool = False) -> Iterator[Tuple[str, int, bytes, Any]]:
+    """Yield ``(topic, stamp_ns, raw CDR bytes, message)`` of ``topics`` (those in the bag)
+    in recording order: ``stamp_ns`` the message's leading time stamp (``header.stamp``,
+    ``clock``; 0 for the ``untimed`` topics), ``message`` deserialised for the ``decode``
+    topics only (else None).
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        See :func:`open_bag`; ``ValueError`` also for a topic without a time stamp (not in
+        ``untimed``; ``header_only``: without a ``header.stamp``), an unreadable message or a
+        corrupt chunk.
+    """
+    untimed, decode = set(untimed), set(decode)
+    need = ('header',) if header_only else ('header', 'time')
+    with open_bag(bag_path) as reader:
+        conns = [c for c in reader.connections if c.topic in set(topics)]
+        for c in conns:
+            if c.topic not in untimed and stamp_kind(reader.typestore, c.msgtype) not in need:
+                raise ValueError(f'{c.topic} [{c.msgtype}] has no '
+                                 + ('header.stamp' if header_only else 'time stamp'))
+        try:
+            for conn, _, raw in reader.messages(connections=conns):
+                raw = bytes(raw)
+                stamp = 0 if conn.topic in untimed else cdr_stamp_ns(raw)
+                if stamp is None:
+                    raise ValueError(f'unreadable message on {conn.topic}')
+                yield conn.topic, stamp, raw, (reader.deserialize(raw, conn.msgtype)
+                                               if conn.topic in decode else None)
+        except ValueError:
+            raise
+        except Exception as exc:
+            raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
+
+
 def list_topics(bag_path: os.PathLike | str) -> Dict[str, str]:
     """``{topic: msgtype}`` of the bag's connections (no message is read)."""
     with open_bag(bag_path) as reader:

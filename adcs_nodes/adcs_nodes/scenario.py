@@ -761,8 +761,11 @@ def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, i
         checker.fail(lines.get('spacecraft'), 'spacecraft.inertia_kgm2', 'must be symmetric')
 
 
-def load_scenario(path: str) -> Dict[str, Any]:
+def load_scenario(path: str, plugins: Optional[List[str]] = None) -> Dict[str, Any]:
     """Read and validate a scenario file.
+
+    ``plugins``, when given, are imported instead of the file's own ``plugins:`` list, which
+    is then only data (a bag's ``scenario.yaml``: a bag is data, never code).
 
     Returns
     -------
@@ -778,7 +781,7 @@ def load_scenario(path: str) -> Dict[str, Any]:
         the line and the key, with long values cut (``MAX_SHOWN`` characters).
     """
     try:
-        return _load_scenario(path)
+        return _load_scenario(path, plugins)
     except ScenarioError as exc:
         text, name = str(exc), str(path)
         if text.startswith(name):      # the file's path is never cut, only what follows it
@@ -818,10 +821,13 @@ def _read_text(path: str) -> str:
                             f'offset {exc.start})') from None
 
 
-def _load_scenario(path: str) -> Dict[str, Any]:
+def read_yaml(path: str) -> Any:
+    """The YAML data of ``path`` through the scenario file's guards (size, UTF-8, alias
+    expansion, nesting, syntax: ``ScenarioError`` naming the file and line); nothing is
+    validated or imported."""
     text = _read_text(path)
     try:
-        data = yaml.load(text, Loader=_LineLoader)  # noqa: S506 - SafeLoader subclass
+        return yaml.load(text, Loader=_LineLoader)  # noqa: S506 - SafeLoader subclass
     except ScenarioError as exc:
         raise ScenarioError(f'{path}: {exc}') from None
     except yaml.YAMLError as exc:
@@ -831,9 +837,15 @@ def _load_scenario(path: str) -> Dict[str, Any]:
             from None
     except RecursionError:
         raise ScenarioError(f'{path}: YAML nested too deeply') from None
+
+
+def _load_scenario(path: str, trusted: Optional[List[str]] = None) -> Dict[str, Any]:
+    data = read_yaml(path)
     checker = _Checker(path)
     if not isinstance(data, dict):
         checker.fail(None, '<top>', 'a scenario must be a YAML mapping')
+    if trusted is not None:
+        data['plugins'] = list(trusted)
     plugins = data.get('plugins') or []
     if not isinstance(plugins, list) or not all(isinstance(x, str) for x in plugins):
         checker.fail(getattr(data, 'lines', {}).get('plugins'), 'plugins',
