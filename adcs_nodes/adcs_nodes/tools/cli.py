@@ -235,8 +235,24 @@ def cmd_schema(args) -> int:
     return 0
 
 
+def bag_checked(bag: str, command: str) -> bool:
+    """The bag's stored scenario is usable as data (a hostile one: one line, False); a note
+    names the plugins its run used, which are not imported."""
+    from adcs_nodes.tools.bagfile import BagError, bag_scenario, plugin_note
+    try:
+        note = plugin_note(bag, bag_scenario(bag))
+    except BagError as exc:
+        print(f'adcs {command}: {exc}', file=sys.stderr)
+        return False
+    if note:
+        print(f'adcs {command}: note: {note}', file=sys.stderr)
+    return True
+
+
 def cmd_export(args) -> int:
     from adcs_nodes.tools.analyse.export import export_csv
+    if not bag_checked(args.bag, 'export'):
+        return 2
     try:
         files = export_csv(args.bag, args.csv)
     except (FileNotFoundError, ValueError) as exc:
@@ -251,6 +267,8 @@ def cmd_report(args) -> int:
     from adcs_nodes.tools.analyse.report import make_report
     from adcs_nodes.tools.analyse.reproductions import expectations_for
     out = args.out or os.path.normpath(args.bag.rstrip('/')) + '_report'
+    if not bag_checked(args.bag, 'report'):
+        return 2
     try:
         _, rows = expectations_for(args.bag)
         make_report(args.bag, out, expectations=rows)

@@ -423,6 +423,8 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         except (OSError, ValueError, ImportError):
             sections = []
     data = _collect(bag_path)
+    if not any(st.count for st in data.stats.values()):
+        raise ValueError(f'{bag_path}: nothing to report: no message could be read from it')
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics, axis, errors = _bag_metrics(data, bag_path)

@@ -502,17 +502,11 @@ def _img(png: bytes, alt: str) -> str:
 
 
 def _scenario(bag_path) -> Dict[str, Any]:
-    """The bag's ``scenario.yaml`` (``adcs run`` writes it beside the bag), or {}."""
-    p = Path(bag_path)
-    path = (p if p.is_dir() else p.parent) / 'scenario.yaml'
+    """The bag's ``scenario.yaml`` as data (``adcs run`` writes it beside the bag), or {}."""
+    from adcs_nodes.tools.bagfile import BagError, bag_scenario
     try:
-        import yaml
-        with open(path, encoding='utf-8') as fh:
-            data = yaml.safe_load(fh)
-        return data if isinstance(data, dict) else {}
-    except (OSError, ValueError, ImportError):
-        return {}
-    except Exception:          # a malformed file (yaml.YAMLError): the page goes on without
+        return bag_scenario(str(bag_path)) or {}
+    except BagError:
         return {}
 
 

@@ -69,13 +69,10 @@ def from_frames(frames: Iterable[Any], topics: Sequence[str]) -> Topics:
 
 
 def scenario_of(bag: str) -> Optional[Dict[str, Any]]:
-    """The effective scenario stored beside the bag (``scenario.yaml``), or None."""
-    import yaml
-    path = os.path.join(bag, 'scenario.yaml')
-    if not os.path.isfile(path):
-        return None
-    with open(path, encoding='utf-8') as fh:
-        return yaml.safe_load(fh)
+    """The effective scenario stored beside the bag (``scenario.yaml``) as data, or None
+    (:func:`adcs_nodes.tools.bagfile.bag_scenario`: ``BagError`` for a hostile one)."""
+    from adcs_nodes.tools.bagfile import bag_scenario
+    return bag_scenario(bag)
 
 
 def epoch_ns(sc: Dict[str, Any]) -> int:
@@ -110,9 +107,10 @@ def sorted_items(topic: Dict[int, Any]) -> list:
 
 def scenario_dict(sc: Dict[str, Any]) -> Dict[str, Any]:
     """A validated scenario: ``sc`` itself when it was loaded (it has ``_path``), else the
-    effective scenario of a bag (``scenario.yaml``) validated again."""
+    effective scenario of a bag (``scenario.yaml``) validated again, without its plugins (a
+    bag is data)."""
     from adcs_nodes.scenario import apply_overrides
-    return sc if '_path' in sc else apply_overrides(sc, {})
+    return sc if '_path' in sc else apply_overrides({**sc, 'plugins': []}, {})
 
 
 def run_topics(sc: Dict[str, Any], topics: Sequence[str], duration_s: Optional[float] = None,
