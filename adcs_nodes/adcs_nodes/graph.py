@@ -240,7 +240,7 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                   **_initial_params(sc)},
                  publishes=['/clock', 'sim/state', 'sim/wheels', '/tf']
                  + (['sim/appendages'] if 'flexible' in sc['spacecraft'] else [])
-                 + (['sim/faults'] if sc.get('faults') else []),
+                 + ['sim/faults'],     # also live faults (adcs fault): always recorded
                  subscribes=['sim/environment', 'adcs/actuator_command']),
     ]
     if sc.get('faults'):      # the world announces every fault; the actuators' are its own

@@ -306,7 +306,8 @@ def injected(text: str, earliest_ns: int, sensors: Optional[Sequence[str]] = (),
     ``sensors`` (None: any sensor, the dynamics, which announces them all), ``wheels`` and
     (``magnetorquer``) the coils.
 
-    Returns None when the fault is not this node's (another sensor's); raises ``ValueError``
+    Returns None when the fault is not this node's (another sensor's; an actuator's for a
+    sensor node, which strikes no wheel and no coil); raises ``ValueError``
     with the reason for a malformed or invalid one. It starts at ``at_s``, but no earlier than
     ``earliest_ns`` (the receiver's next frame; also when ``at_s`` is null), and lasts
     ``params.duration_s`` from its start (0: to the end of the run).
@@ -322,6 +323,8 @@ def injected(text: str, earliest_ns: int, sensors: Optional[Sequence[str]] = (),
     entry = registry.get('fault', kind)
     if SENSOR in entry.targets and sensors is not None and target not in sensors:
         return None                                  # another sensor's
+    if SENSOR not in entry.targets and sensors and not wheels and not magnetorquer:
+        return None                                  # an actuator's: the dynamics'
     params = check(kind, target, item.get('params'), [target] if sensors is None else sensors,
                    wheels, magnetorquer)
     at = item.get('at_s')

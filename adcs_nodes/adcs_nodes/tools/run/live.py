@@ -235,16 +235,13 @@ LEAD_WALL_S = 1.0
 def _run_scenario(run: Dict) -> Dict:
     """The run's scenario as YAML gives it: the bag's ``scenario.yaml`` (the effective one)
     when the run records, else the scenario file ({} when neither reads)."""
-    import yaml
+    from adcs_nodes.scenario import read_yaml
     paths = ([os.path.join(run['bag'], 'scenario.yaml')] if run.get('bag') else []) \
         + [run.get('scenario') or '']
     for path in paths:
         try:
-            with open(path, encoding='utf-8') as fh:
-                data = yaml.safe_load(fh)
-        except (OSError, ValueError):
-            continue
-        except Exception:                 # yaml.YAMLError: try the next one
+            data = read_yaml(path)
+        except ValueError:                # (ScenarioError) try the next one
             continue
         if isinstance(data, dict):
             return data
@@ -313,21 +310,19 @@ def fault(kind: str, target: str, at_s: Optional[float] = None,
     The fault goes as JSON on ``sim/inject_fault`` (reliable) to the sensor nodes and the
     dynamics, once they all listen; the one it strikes applies it from ``at_s`` (default: the
     first frame :data:`LEAD_WALL_S` of wall time ahead at the run's pace, measured on
-    ``/clock``; a node that gets it late starts it at its next frame), the dynamics announces
-    it on ``sim/faults``, which this waits for. Not deterministic: the frame depends on wall
-    time.
+    ``/clock``; a node that gets it late starts it at its next frame). It returns once every
+    listener has acknowledged the message, with the time the fault is scheduled for; a fault
+    due within ``wait_s`` of wall time is also awaited on ``sim/faults``, where the dynamics
+    announces it when it starts. Not deterministic: the frame depends on wall time.
 
     Raises
     ------
     LiveError
         No run, a fault the run cannot take (kind, target, parameters, a time already past or
-        outside the run), or nobody listening.
+        outside the run), nobody listening, or a message not acknowledged.
     """
     from rclpy.duration import Duration
     from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rosgraph_msgs.msg import Clock
     from std_msgs.msg import String
     run = pick_run(pid)
     sc = _run_scenario(run)
@@ -336,66 +331,104 @@ def fault(kind: str, target: str, at_s: Optional[float] = None,
                          if not (isinstance(cfg, dict) and cfg.get('external'))])
     item = {'index': 1000 + int(time.time() * 1000) % 10**6, 'kind': kind, 'target': target,
             'at_s': at_s, 'params': params}
-    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
     session = _Session(run)
-    from adcs_nodes.nodes.convert import stamp_ns
-    from adcs_nodes.nodes.lockstep_node import QOS_DATA, epoch_to_ns, parse_epoch
-    epoch_ns = epoch_to_ns(parse_epoch(run['epoch']))
-    clock: List = []          # (wall s, sim s): the first and the latest /clock
-    seen: List = []
-
-    def on_clock(m) -> None:
-        sample = (time.monotonic(), (stamp_ns(m.clock) - epoch_ns) / 1e9)
-        clock[1:] = [sample] if clock else []
-        if not clock:
-            clock.append(sample)
     try:
-        session.node.create_subscription(Clock, '/clock', on_clock, QOS_DATA)
-        session.node.create_subscription(DiagnosticArray, 'sim/faults', seen.append, QOS_DATA)
-        pub = session.node.create_publisher(String, INJECT_TOPIC, reliable)
-        deadline = time.monotonic() + SERVER_WAIT_S
-        while (pub.get_subscription_count() < listeners or len(clock) < 2
-               or clock[-1][0] - clock[0][0] < 0.3) and time.monotonic() < deadline:
-            session.spin(0.05)
-        if pub.get_subscription_count() == 0:
-            raise LiveError(f'nobody listens on {INJECT_TOPIC} after {SERVER_WAIT_S:g} s (is '
-                            'the run a graph with simulated sensors and dynamics?)')
-        now = clock[-1][1] if clock else None
+        watch = _FaultWatch(session, run)
+        pub = session.node.create_publisher(
+            String, INJECT_TOPIC, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        now, pace = watch.wait_listeners(pub, listeners)
         if at_s is not None and now is not None and at_s < now:
             raise LiveError(f'--at {at_s:g} s has passed: the run is at t = {now:.1f} s')
         if at_s is None and now is not None:       # the frame LEAD_WALL_S ahead
-            pace = 1.0
-            if len(clock) > 1 and clock[-1][0] > clock[0][0]:
-                pace = max(pace, (clock[-1][1] - clock[0][1]) / (clock[-1][0] - clock[0][0]))
             frame = float((sc.get('timing') or {}).get('frame_s') or 1.0)
-            ahead = now + pace * (time.monotonic() - clock[-1][0] + LEAD_WALL_S)
+            ahead = now + pace * (time.monotonic() - watch.clock[-1][0] + LEAD_WALL_S)
             item['at_s'] = math.ceil(ahead / frame - 1e-9) * frame
             if sc.get('duration_s') and item['at_s'] > float(sc['duration_s']):
                 raise LiveError(f'the run ends (t = {float(sc["duration_s"]):g} s) before a '
                                 f'fault could start (t = {item["at_s"]:g} s)')
         pub.publish(String(data=json.dumps(item, sort_keys=True)))
-        pub.wait_for_all_acked(Duration(seconds=5.0))
-        deadline = time.monotonic() + wait_s
-        found = None
-        while found is None and time.monotonic() < deadline:
-            session.spin(0.05)
-            for msg in seen:
-                for st in msg.status:
-                    if st.name == f'fault/{item["index"]}' and st.message.startswith('active'):
-                        found = (stamp_ns(msg.header.stamp) - epoch_ns) / 1e9, st.message
+        acked = pub.wait_for_all_acked(Duration(seconds=5.0))
+        due_s = (item['at_s'] - now) / pace if None not in (now, item['at_s']) else 0.0
+        found = watch.announcement(item['index'], wait_s) if acked and due_s <= wait_s \
+            else None
     finally:
         session.close()
+    return _fault_text(kind, target, params, run, at_s, item['at_s'], now, acked, due_s,
+                       found, wait_s)
+
+
+class _FaultWatch:
+    """``/clock`` (the first and the latest sample: (wall s, sim s)) and ``sim/faults`` as
+    ``adcs fault`` sees them."""
+
+    def __init__(self, session: '_Session', run: Dict) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rosgraph_msgs.msg import Clock
+
+        from adcs_nodes.nodes.convert import stamp_ns
+        from adcs_nodes.nodes.lockstep_node import QOS_DATA, epoch_to_ns, parse_epoch
+        self.session, self.stamp_ns = session, stamp_ns
+        self.epoch_ns = epoch_to_ns(parse_epoch(run['epoch']))
+        self.clock: List = []
+        self.seen: List = []
+        session.node.create_subscription(Clock, '/clock', self._on_clock, QOS_DATA)
+        session.node.create_subscription(DiagnosticArray, 'sim/faults', self.seen.append,
+                                         QOS_DATA)
+
+    def _on_clock(self, m) -> None:
+        sample = (time.monotonic(), (self.stamp_ns(m.clock) - self.epoch_ns) / 1e9)
+        self.clock[1:] = [sample] if self.clock else []
+        if not self.clock:
+            self.clock.append(sample)
+
+    def wait_listeners(self, pub, listeners: int):
+        """Until ``listeners`` subscribe to ``pub`` and 0.3 s of ``/clock`` were seen; the
+        run's time [s] (None without a clock) and pace [sim s per wall s, at least 1]."""
+        clock = self.clock
+        deadline = time.monotonic() + SERVER_WAIT_S
+        while (pub.get_subscription_count() < listeners or len(clock) < 2
+               or clock[-1][0] - clock[0][0] < 0.3) and time.monotonic() < deadline:
+            self.session.spin(0.05)
+        if pub.get_subscription_count() == 0:
+            raise LiveError(f'nobody listens on {INJECT_TOPIC} after {SERVER_WAIT_S:g} s (is '
+                            'the run a graph with simulated sensors and dynamics?)')
+        pace = 1.0
+        if len(clock) > 1 and clock[-1][0] > clock[0][0]:
+            pace = max(pace, (clock[-1][1] - clock[0][1]) / (clock[-1][0] - clock[0][0]))
+        return (clock[-1][1] if clock else None), pace
+
+    def announcement(self, index: int, wait_s: float):
+        """``(t [s], text)`` of the fault's ``active`` announcement, None after ``wait_s``."""
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            self.session.spin(0.05)
+            for msg in self.seen:
+                for st in msg.status:
+                    if st.name == f'fault/{index}' and st.message.startswith('active'):
+                        return ((self.stamp_ns(msg.header.stamp) - self.epoch_ns) / 1e9,
+                                st.message)
+        return None
+
+
+def _fault_text(kind, target, params, run, at_s, start_s, now, acked, due_s, found,
+                wait_s) -> str:
     when = f'at t = {at_s:g} s' if at_s is not None else (
-        f'from t = {item["at_s"]:g} s, about {LEAD_WALL_S:g} s of wall time ahead'
-        if item['at_s'] is not None else 'at the next frame')
+        f'from t = {start_s:g} s, about {LEAD_WALL_S:g} s of wall time ahead'
+        if start_s is not None else 'at the next frame')
     sent = (f'fault {kind} {target} {params} sent to run {run["pid"]} ({when}'
             + (f'; the run was at t = {now:.1f} s' if now is not None else '') + ')')
-    if found is None:
-        raise LiveError(f'{sent}, but no announcement on sim/faults within {wait_s:g} s (the '
-                        'run may have ended, or a node refused it: see the node logs in '
-                        f'{run.get("run_dir", "the run directory")})')
-    return (f'{sent}; announced on sim/faults at t = {found[0]:g} s: {found[1]} '
-            '(a live fault is not deterministic: its frame depends on wall time)')
+    if not acked:
+        raise LiveError(f'{sent}, but not every listener acknowledged it within 5 s (see the '
+                        f'node logs in {run.get("run_dir", "the run directory")})')
+    if found is not None:
+        return (f'{sent}; announced on sim/faults at t = {found[0]:g} s: {found[1]} '
+                '(a live fault is not deterministic: its frame depends on wall time)')
+    if due_s > wait_s:
+        return (f'{sent}; scheduled from t = {start_s:g} s (the first frame at or after it, '
+                f'about {due_s:.0f} s of wall time from now); sim/faults announces it then')
+    raise LiveError(f'{sent}, but no announcement on sim/faults within {wait_s:g} s (the '
+                    'run may have ended, or a node refused it: see the node logs in '
+                    f'{run.get("run_dir", "the run directory")})')
 
 
 # ---------------------------------------------------------------------- adcs status --watch
