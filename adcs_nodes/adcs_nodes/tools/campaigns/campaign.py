@@ -1,7 +1,6 @@
 """A campaign in its output directory: check, prepare, execute, tabulate, resume."""
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import signal
@@ -17,10 +16,10 @@ from adcs_nodes.tools.campaigns.backends import DaskBackend, LocalBackend
 from adcs_nodes.tools.campaigns.capture import ORBIT_FRAME
 from adcs_nodes.tools.campaigns.config import (IDENTITY_KEYS, CampaignConfig, CampaignError,
                                                apply_dispersion, draw_dispersion)
-from adcs_nodes.tools.campaigns.files import (campaign_lock, clean_old_stop_files, load_result,
-                                              run_dir_of, touch, write_json_atomic,
-                                              write_text_atomic)
-from adcs_nodes.tools.campaigns.runner import STOP_GRACE_S
+from adcs_nodes.tools.campaigns.files import (campaign_lock, check_layout, clean_old_stop_files,
+                                              load_result, read_campaign_json, run_dir_of,
+                                              touch, write_json_atomic, write_text_atomic)
+from adcs_nodes.tools.campaigns.runner import STOP_GRACE_S, RunOwner
 from adcs_nodes.tools.campaigns.summary import (orbit_period_s, plot_capture_vs_rate,
                                                 summary_markdown)
 from adcs_nodes.tools.campaigns.table import write_table
@@ -60,8 +59,7 @@ class Campaign:
         """Create ``campaign.json``, or refuse a restart whose identity differs."""
         path = os.path.join(self.out, 'campaign.json')
         if os.path.isfile(path):
-            with open(path, encoding='utf-8') as fh:
-                old = json.load(fh)
+            old = read_campaign_json(path)
             new = self.cfg.identity()
             old.setdefault('engine', 'graph')   # written before the engines: the graph
             # written before the guidance target: every capture was measured to the orbit frame
@@ -84,8 +82,11 @@ class Campaign:
     def prepare(self, index: int) -> Dict[str, Any]:
         """Fresh run directory with ``scenario.yaml`` and ``job.json``; returns the job."""
         run_dir = run_dir_of(self.out, index)
-        if os.path.exists(run_dir):
+        RunOwner(run_dir).end_previous()        # a lost worker's run process, still writing
+        if os.path.isdir(run_dir) and not os.path.islink(run_dir):
             shutil.rmtree(run_dir)   # an incomplete run: half-written bag, logs
+        elif os.path.lexists(run_dir):
+            os.unlink(run_dir)
         os.makedirs(run_dir)
         disp = draw_dispersion(self.cfg, index)
         sc = apply_dispersion(self.base, disp, self.cfg.duration_s, self.cfg)
@@ -109,6 +110,7 @@ class Campaign:
         ``scheduler``; or, with ``dask_local``, to a Dask ``LocalCluster`` of ``jobs`` worker
         processes (one thread each) started here and stopped at the end.
         """
+        check_layout(self.out)
         os.makedirs(self.out, exist_ok=True)
         with campaign_lock(self.out):
             self.check_or_create()

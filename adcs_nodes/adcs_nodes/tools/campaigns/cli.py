@@ -9,11 +9,14 @@ from typing import Any, Dict, List, Optional
 from adcs_nodes.tools.campaigns.campaign import Campaign
 from adcs_nodes.tools.campaigns.capture import capture_reference
 from adcs_nodes.tools.campaigns.config import (ENGINES, CampaignConfig, CampaignError,
+                                               Dispersion, apply_dispersion,
                                                default_max_rate_deg_s, scenario_hash)
 from adcs_nodes.tools.campaigns.engine import plain_engine_problem, resolve_engine
 from adcs_nodes.tools.campaigns.runner import worker_main
 
-
+#: The most runs of one campaign (one directory each under ``runs/``) and runs at once.
+MAX_RUNS = 100_000
+MAX_JOBS = 256
 #: Printed by a multi-run campaign on the graph engine when the plain engine could run it.
 GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, recorded to a bag '
               '(paper000_control, 6 orbits: 60-185 s CPU per run, by machine load). '
@@ -100,10 +103,10 @@ def config_from_args(args: argparse.Namespace) -> tuple:
     from adcs_nodes.scenario import load_scenario
 
     base = load_scenario(args.scenario)
-    if args.runs < 1:
-        raise CampaignError(f'--runs must be >= 1, got {args.runs}')
-    if args.jobs < 1:
-        raise CampaignError(f'--jobs must be >= 1, got {args.jobs}')
+    if not 1 <= args.runs <= MAX_RUNS:
+        raise CampaignError(f'--runs must be in [1, {MAX_RUNS}], got {args.runs}')
+    if not 1 <= args.jobs <= MAX_JOBS:
+        raise CampaignError(f'--jobs must be in [1, {MAX_JOBS}], got {args.jobs}')
     for name in ('max_rate_deg_s', 'mag_bias_nT', 'misalignment_deg', 'bdot_gain'):
         value = getattr(args, name, None)
         if value is None:
@@ -130,7 +133,25 @@ def config_from_args(args: argparse.Namespace) -> tuple:
     if cfg.auto_detumble and not {'magnetic', 'bdot'} <= set(base.get('controllers', {})):
         raise CampaignError('--auto-detumble needs the controllers magnetic and bdot in the '
                             'scenario')
+    check_dispersion(cfg, base)
     return cfg, base, out
+
+
+def check_dispersion(cfg: CampaignConfig, base: Dict[str, Any]) -> None:
+    """The widest run ``cfg`` can draw (every rate component, bias and misalignment at its
+    bound) validated as each run's scenario is: CampaignError up front, not every run failed."""
+    from adcs_nodes.scenario import ScenarioError, apply_overrides
+    w, b, m = cfg.max_rate_deg_s, cfg.mag_bias_nT, cfg.misalignment_deg
+    worst = Dispersion(0, 0, [0.0, 0.0, 0.0, 1.0], [w] * 3,
+                       None if b is None else [b * 1e-9] * 3, None if m is None else [m] * 3)
+    try:
+        apply_overrides({**apply_dispersion(base, worst, cfg.duration_s, cfg),
+                         '_path': base['_path']}, {})
+    except ScenarioError as exc:
+        bounds = ', '.join(f'--{k} {v:g}' for k, v in (
+            ('max-rate-deg-s', w), ('mag-bias-nT', b), ('misalignment-deg', m)) if v is not None)
+        raise CampaignError(f'the dispersion bounds ({bounds}) give runs the scenario refuses: '
+                            f'{str(exc).split(": ", 1)[-1]}') from None
 
 
 def run_from_args(args: argparse.Namespace) -> int:

@@ -1,6 +1,7 @@
 """One run: the worker process that runs it, and the supervisor that starts and watches it."""
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import signal
@@ -11,6 +12,7 @@ import time
 from typing import Any, Dict, Optional
 
 from adcs_nodes.tools.campaigns.capture import capture_reference
+from adcs_nodes.tools.campaigns.config import CampaignError
 from adcs_nodes.tools.campaigns.files import (FAILED_FILE, RESULT_FILE, load_result,
                                               write_json_atomic)
 from adcs_nodes.tools.campaigns.results import bag_metrics
@@ -94,6 +96,71 @@ def fail(run_dir: str, job: Dict[str, Any], code: int, message: str, wall: float
     return code or 1
 
 
+class RunOwner:
+    """One run executed by one run process at a time: an exclusive ``flock`` on
+    ``RUN_DIR.owner`` (beside the run directory, which a new attempt recreates), taken by the
+    supervisor and handed to the run process (an inherited descriptor), which is named in the
+    file (host, pid): the lock lives exactly as long as the run process.
+
+    A run given to another worker while the run process of its lost worker still lives on
+    this host: that process group is ended (SIGTERM, SIGKILL after :data:`STOP_GRACE_S`)
+    before the run is taken; on another host the run is refused (CampaignError).
+    """
+
+    def __init__(self, run_dir: str) -> None:
+        self.path = run_dir.rstrip('/') + '.owner'
+        self.fd: Optional[int] = None
+
+    def acquire(self) -> 'RunOwner':
+        os.makedirs(os.path.dirname(self.path), exist_ok=True)
+        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        if self._wait_lock(0.0):
+            return self
+        try:
+            with open(self.path, encoding='utf-8') as fh:
+                owner = json.load(fh)
+            host, pid = owner['host'], int(owner['pid'])
+        except (OSError, ValueError, KeyError, TypeError):
+            host, pid = socket.gethostname(), 0    # not named yet: it is being started
+        if host != socket.gethostname():
+            self.release()
+            raise CampaignError(f'{self.path}: the run is held by process {pid} on {host}')
+        for sig in (signal.SIGTERM, signal.SIGKILL):
+            if pid:
+                _signal_group(pid, sig)
+            if self._wait_lock(STOP_GRACE_S):
+                return self
+        self.release()
+        raise CampaignError(f'{self.path}: the run is still held by its previous run process')
+
+    def _wait_lock(self, seconds: float) -> bool:
+        deadline = time.monotonic() + seconds
+        while True:
+            try:
+                fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                return True
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    return False
+                time.sleep(0.1)
+
+    def hand_to(self, pid: int) -> None:
+        """Name run process ``pid`` (which inherited the descriptor) the owner and let go of
+        this process's copy: the lock is the run process's alone."""
+        os.ftruncate(self.fd, 0)
+        os.pwrite(self.fd, json.dumps({'host': socket.gethostname(), 'pid': pid}).encode(), 0)
+        self.release()
+
+    def end_previous(self) -> None:
+        """Take the run (ending a previous owner still alive) and let it go again."""
+        self.acquire().release()
+
+    def release(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+
+
 def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
     """Run one prepared run directory in its own process and return its result dict.
 
@@ -120,13 +187,22 @@ def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
     if os.path.exists(job['stop_file']):
         return {'index': index, 'status': 'interrupted', 'message': 'not started'}
     t0 = time.monotonic()
-    cmd = WORKER_COMMANDS[job.get('engine', 'graph')] + [run_dir]
-    cmd = [sys.executable] + cmd
-    with open(os.path.join(run_dir, 'worker.log'), 'w') as log:
-        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, start_new_session=True,
-                                env=worker_env())
-        code = _supervise(proc, job['stop_file'])
+    from adcs_nodes.tools.run.launcher.processes import with_parent_death_signal
+    cmd = with_parent_death_signal([sys.executable] + WORKER_COMMANDS[job.get('engine', 'graph')]
+                                   + [run_dir])
+    owner = RunOwner(run_dir).acquire()
+    try:
+        _clean_attempt(run_dir)
+        with open(os.path.join(run_dir, 'worker.log'), 'w') as log:
+            # its own session (the stop file stops it); the parent-death signal ends it with
+            # this supervisor (a lost worker); it holds the run's owner lock
+            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
+                                    stdin=subprocess.DEVNULL, start_new_session=True,
+                                    env=worker_env(), pass_fds=(owner.fd,))
+            owner.hand_to(proc.pid)
+    finally:
+        owner.release()
+    code = _supervise(proc, job['stop_file'])
     wall = time.monotonic() - t0
     result = load_result(run_dir) if code == 0 else None
     if result is not None:
@@ -155,20 +231,37 @@ def _supervise(proc: subprocess.Popen, stop_file: str) -> int:
         now = time.monotonic()
         if stopped_at is None and os.path.exists(stop_file):
             stopped_at = last_int = now
-            _signal_group(proc, signal.SIGINT)
+            _signal_group(proc.pid, signal.SIGINT)
         elif stopped_at is not None and now - stopped_at > STOP_GRACE_S:
-            _signal_group(proc, signal.SIGKILL)
+            _signal_group(proc.pid, signal.SIGKILL)
             return proc.wait()
         elif stopped_at is not None and now - last_int >= SIGINT_REPEAT_S:
             last_int = now
-            _signal_group(proc, signal.SIGINT)
+            _signal_group(proc.pid, signal.SIGINT)
 
 
-def _signal_group(proc: subprocess.Popen, sig: int) -> None:
+def _signal_group(pid: int, sig: int) -> None:
     try:
-        os.killpg(proc.pid, sig)
-    except ProcessLookupError:
+        os.killpg(pid, sig)
+    except (ProcessLookupError, PermissionError):
         pass
+
+
+#: What a prepared run directory holds before its first attempt.
+PREPARED = ('job.json', 'scenario.yaml')
+
+
+def _clean_attempt(run_dir: str) -> None:
+    """Remove what an earlier attempt of this run left (bag, series, logs, results)."""
+    import shutil
+    for name in os.listdir(run_dir):
+        path = os.path.join(run_dir, name)
+        if name in PREPARED:
+            continue
+        if os.path.isdir(path) and not os.path.islink(path):
+            shutil.rmtree(path)
+        else:
+            os.unlink(path)
 
 
 def _failure_of(run_dir: str, index: int, code: int, wall: float) -> Dict[str, Any]:

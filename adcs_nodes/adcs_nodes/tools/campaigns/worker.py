@@ -89,6 +89,7 @@ def mc_worker(run_dir: str) -> int:
     """
     import json
     import time
+    import uuid
 
     import numpy as np
 
@@ -110,7 +111,7 @@ def mc_worker(run_dir: str) -> int:
         return 130
     except (ScenarioError, ValueError) as exc:
         return fail(run_dir, job, 2, str(exc), time.monotonic() - t0)
-    tmp = os.path.join(run_dir, 'series.tmp.npz')
+    tmp = os.path.join(run_dir, f'series.tmp-{uuid.uuid4().hex}.npz')   # unique per attempt
     np.savez_compressed(tmp, **{k: s[k] for k in ('t_s', 'q_orbit_body', 'angle_deg',
                                                   'est_err_deg', 'rate_err_deg_s', 'w_eci',
                                                   'w_orbit', 'q_orbit_target',
