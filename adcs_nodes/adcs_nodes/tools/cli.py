@@ -148,7 +148,7 @@ def cmd_run(args) -> int:
               'their frame were rejected (counted above)'
               + ('; all nodes in one process (--engine composed) keep a faster pace'
                  if engine == 'graph' else ''), file=sys.stderr)
-    if result.bag:
+    if result.bag and os.path.exists(result.bag):      # (only a bag that was written)
         print(f'[adcs] bag: {result.bag}')
     if result.exit_code in (0, 3) and args.report and result.bag:   # degraded: a whole bag
         return cmd_report(argparse.Namespace(bag=result.bag, out=None)) or result.exit_code

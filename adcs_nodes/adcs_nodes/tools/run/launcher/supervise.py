@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import signal
 import sys
 import time
@@ -259,6 +260,8 @@ class Launcher:
                                 f'{"disk full" if disk_full(exc) else exc.strerror or exc}')
         finally:
             self.processes.stop_all(monitor)
+            if code == 2 and not monitor.clock_seen and self.record:
+                shutil.rmtree(self.record, ignore_errors=True)   # refused: nothing recorded
             if self.progress:
                 sys.stderr.write('\n')
             code, message = closing_text(
