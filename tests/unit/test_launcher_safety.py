@@ -139,6 +139,23 @@ def test_a_fault_after_a_duration_override_is_refused_up_front():
     assert Launcher(sc, duration_s=60.0, progress=False).duration_s == 60.0
 
 
+@pytest.mark.parametrize('engine', ['plain', 'composed', 'graph'])
+def test_adcs_run_refuses_a_fault_after_a_duration_override(tmp_path, capsys, engine):
+    import yaml
+
+    from adcs_nodes.tools import cli
+    with open(os.path.join(ROOT, 'scenarios', 'paper000_estimation.yaml')) as fh:
+        sc = yaml.safe_load(fh)
+    sc['faults'] = [{'kind': 'dropout', 'target': 'magnetometer', 'at_s': 50.0}]
+    path = tmp_path / 'late_fault.yaml'
+    path.write_text(yaml.safe_dump(sc))
+    assert cli.main(['run', str(path), '--engine', engine, '--duration', '20', '--record',
+                     str(tmp_path / 'bag')]) == 2
+    err = capsys.readouterr().err
+    assert 'adcs run: --duration 20: faults[0].at_s: 50 s is outside the run' in err, err
+    assert not (tmp_path / 'bag').exists()
+
+
 def test_a_100_kB_controller_name_is_refused_unsent_and_not_echoed():
     from adcs_nodes.tools.run.live import LiveError, switch
     with pytest.raises(LiveError) as info:

@@ -103,12 +103,14 @@ REAL_TIME_KEPT = 0.9
 
 def cmd_run(args) -> int:
     from adcs_nodes.tools.run.launcher import LaunchError, Launcher, pace
+    from adcs_nodes.tools.run.launcher.supervise import with_duration
     engine = args.engine or ('composed' if args.compose else 'graph')
     try:
         sc = load_scenario(args.scenario)
         if args.set:
             from adcs_nodes.scenario import apply_overrides
             sc = apply_overrides(sc, args.set)
+        sc = with_duration(sc, args.duration)     # a fault after the end: refused up front
         if args.compose and engine != 'composed':
             raise LaunchError(f'--compose means --engine composed, not {engine}')
         rate_factor, max_rate = pace(args.rate, args.real_time)
@@ -119,11 +121,11 @@ def cmd_run(args) -> int:
             from sim_node.engine import EngineError
             from adcs_nodes.tools.run.plain import run_plain
             try:
-                result = run_plain(sc, args.duration, args.record, progress=not args.quiet)
+                result = run_plain(sc, None, args.record, progress=not args.quiet)
             except EngineError as exc:
                 raise LaunchError(str(exc)) from None
         else:
-            launcher = Launcher(sc, duration_s=args.duration, record=args.record,
+            launcher = Launcher(sc, record=args.record,
                                 real_time=args.real_time,
                                 rate_factor=rate_factor, max_rate=max_rate,
                                 compose=engine == 'composed', progress=not args.quiet,
