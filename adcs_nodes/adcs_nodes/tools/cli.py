@@ -256,7 +256,7 @@ def cmd_export(args) -> int:
     if not bag_checked(args.bag, 'export'):
         return 2
     try:
-        files = export_csv(args.bag, args.csv)
+        files = export_csv(args.bag, args.csv, getattr(args, 'topic', None))
     except (FileNotFoundError, ValueError) as exc:
         print(f'adcs export: {exc}', file=sys.stderr)
         return 2
@@ -296,6 +296,11 @@ def build_parser() -> argparse.ArgumentParser:
         prog='adcs', description='Run, record and analyse the satellite ADCS node graph.',
         formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split('Exit')[0])
     sub = ap.add_subparsers(dest='command', required=True)
+    # shared argument groups
+    run_pid = argparse.ArgumentParser(add_help=False)
+    run_pid.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
+    a_bag = argparse.ArgumentParser(add_help=False)
+    a_bag.add_argument('bag', help='rosbag2 bag directory (or .mcap file) recorded by adcs run')
 
     p = sub.add_parser('run', help='run a scenario')
     p.add_argument('scenario', help='scenario YAML file (see `adcs list`)')
@@ -333,13 +338,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('scenario')
     p.set_defaults(func=cmd_validate)
 
-    p = sub.add_parser('switch', help='switch the active controller of a running graph')
+    p = sub.add_parser('switch', help='switch the active controller of a running graph',
+                       parents=[run_pid])
     p.add_argument('controller', help='controller name (see `adcs status`)')
-    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_switch)
 
     p = sub.add_parser('slew', help='slew a running graph to an attitude (adcs/slew action) '
-                       'and wait for the result')
+                       'and wait for the result', parents=[run_pid])
     p.add_argument('--to', nargs=3, type=float, required=True, metavar=('ROLL', 'PITCH', 'YAW'),
                    help='target attitude, 3-2-1 Euler angles [deg]')
     p.add_argument('--frame', choices=('inertial', 'orbit'), default='inertial',
@@ -349,11 +354,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help='done below this angle (default: the server\'s, 0.1 deg)')
     p.add_argument('--timeout-s', type=float, default=0.0,
                    help='abort after this much sim time (default: the server\'s, 600 s)')
-    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_slew)
 
-    p = sub.add_parser('status', help='controllers and lockstep health of a running graph')
-    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
+    p = sub.add_parser('status', help='controllers and lockstep health of a running graph',
+                       parents=[run_pid])
     p.add_argument('--watch', action='store_true', help='refresh once a second until the run '
                    'ends (Ctrl-C stops): controller, mode, attitude error, rates, wheel '
                    'momentum, faults, missed frames')
@@ -361,7 +365,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_status)
 
     p = sub.add_parser('fault', help='inject one fault into a running graph (sim/faults '
-                       'announces it; not deterministic: its frame depends on wall time)')
+                       'announces it; not deterministic: its frame depends on wall time)',
+                       parents=[run_pid])
     p.add_argument('kind', help='fault kind (adcs list: dropout, nan, stuck, bias_step, '
                    'noise_burst, wheel_stuck, wheel_torque_lost, coil_open)')
     p.add_argument('target', help='what it strikes: a sensor (e.g. magnetometer), a wheel '
@@ -371,7 +376,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--param', action='append', default=[], metavar='KEY=VALUE',
                    help='a parameter of the kind (YAML value), e.g. duration_s=60 or '
                    'bias=[1e-6,0,0]; repeatable')
-    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_fault)
 
     from adcs_nodes.tools import campaigns as montecarlo
@@ -393,13 +397,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('schema', help='print every scenario key (Markdown table)')
     p.set_defaults(func=cmd_schema)
 
-    p = sub.add_parser('export', help='export a bag to CSV files')
-    p.add_argument('bag')
+    p = sub.add_parser('export', help='export a bag to CSV files', parents=[a_bag])
     p.add_argument('--csv', required=True, metavar='DIR', help='output directory')
+    p.add_argument('--topic', action='append', metavar='TOPIC',
+                   help='only this topic (repeatable; default: every topic)')
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser('report', help='metrics, plots and summary of a bag')
-    p.add_argument('bag')
+    p = sub.add_parser('report', help='metrics, plots and summary of a bag', parents=[a_bag])
     p.add_argument('--out', metavar='DIR', help='output directory (default BAG_report)')
     p.set_defaults(func=cmd_report)
     return ap

@@ -17,7 +17,6 @@ between runs (log times are not exported).
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import os
 from pathlib import Path
@@ -128,23 +127,3 @@ def export_csv(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         raise ValueError(f'cannot write {path}: {exc.strerror or exc} '
                          f'({len(written)} of {len(rows)} CSV files written)') from None
     return written
-
-
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.analyse.export BAG OUT_DIR [--topic T ...]``."""
-    parser = argparse.ArgumentParser(description='Export a rosbag2 bag to one CSV per topic.')
-    parser.add_argument('bag', help='bag directory or .mcap file')
-    parser.add_argument('out_dir', help='directory for the CSV files')
-    parser.add_argument('--topic', action='append', help='topic to export (repeatable)')
-    args = parser.parse_args(argv)
-    try:
-        files = export_csv(args.bag, args.out_dir, args.topic)
-    except (FileNotFoundError, ValueError) as exc:
-        parser.exit(2, f'error: {exc}\n')
-    for path in files:
-        print(path)
-    return 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())

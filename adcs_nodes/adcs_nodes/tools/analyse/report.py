@@ -28,7 +28,6 @@ Time axes are in orbits when the run lasts at least half an orbit (orbit rate fr
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -550,22 +549,3 @@ def _json_value(value: Any) -> Any:
     if isinstance(value, (str, int, float, bool)) or value is None:
         return value
     return str(value)
-
-
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.analyse.report BAG OUT_DIR``: write the report, print the
-    summary."""
-    parser = argparse.ArgumentParser(description='Metrics, plots and summary of an ADCS bag.')
-    parser.add_argument('bag', help='bag directory or .mcap file')
-    parser.add_argument('out_dir', help='directory for plots, summary.md and metrics.json')
-    args = parser.parse_args(argv)
-    try:
-        metrics = make_report(args.bag, args.out_dir)
-    except (FileNotFoundError, ValueError) as exc:
-        parser.exit(2, f'error: {exc}\n')
-    print(Path(metrics['summary']).read_text(encoding='utf-8'))
-    return 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())

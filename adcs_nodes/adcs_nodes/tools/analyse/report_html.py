@@ -26,7 +26,6 @@ minutes for runs longer than 20 minutes.
 """
 from __future__ import annotations
 
-import argparse
 import base64
 import html
 import io
@@ -641,20 +640,3 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
     path = out / 'report.html'
     path.write_text('\n'.join(parts), encoding='utf-8')
     return str(path)
-
-
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.analyse.report_html BAG OUT_DIR``."""
-    parser = argparse.ArgumentParser(description='report.html of an ADCS bag.')
-    parser.add_argument('bag', help='bag directory or .mcap file')
-    parser.add_argument('out_dir', help='directory for report.html and overview.png')
-    args = parser.parse_args(argv)
-    try:
-        print(write_report_html(args.bag, args.out_dir))
-    except (FileNotFoundError, ValueError) as exc:
-        parser.exit(2, f'error: {exc}\n')
-    return 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())

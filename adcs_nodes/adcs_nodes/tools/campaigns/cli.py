@@ -25,25 +25,35 @@ GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, reco
               'without bags.')
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the ``adcs montecarlo`` arguments to ``parser``."""
+def add_campaign_arguments(parser: argparse.ArgumentParser, what: str = 'campaign') -> None:
+    """What ``adcs montecarlo`` and ``adcs sweep`` share: the scenario, runs, where they run,
+    the output directory (``what``: a campaign or a sweep there is resumed)."""
     parser.add_argument('scenario', help='base scenario YAML (closed loop, e.g. '
                         'scenarios/paper000_control.yaml)')
-    parser.add_argument('--runs', type=int, required=True, metavar='N', help='number of runs')
+    parser.add_argument('--runs', type=int, required=True, metavar='N',
+                        help='number of runs' + (' per grid point' if what == 'sweep' else '')
+                        + f' (at most {MAX_RUNS})')
     parser.add_argument('--jobs', type=int, default=1, metavar='J',
                         help='runs at once on this machine, each in its own processes '
                         '(default 1; with --dask-local: the number of Dask workers; ignored '
-                        'with --scheduler)')
+                        f'with --scheduler; at most {MAX_JOBS})')
     where = parser.add_mutually_exclusive_group()
     where.add_argument('--scheduler', metavar='ADDRESS',
                        help='submit the runs to this Dask distributed scheduler '
                        '(e.g. tcp://host:8786); --out must be on a shared file system')
     where.add_argument('--dask-local', action='store_true',
-                       help='start a Dask LocalCluster on this machine for the campaign '
-                       '(--jobs worker processes, one thread each) and stop it at the end')
-    parser.add_argument('--out', metavar='DIR', help='campaign directory (default '
-                        'montecarlo_<scenario name>); an existing campaign there is resumed')
+                       help='start a Dask LocalCluster of --jobs worker processes (one thread '
+                       'each) on this machine' + (' per grid point' if what == 'sweep' else '')
+                       + ' and stop it at the end')
+    parser.add_argument('--out', metavar='DIR', help=f'{what} directory (default '
+                        f'{"montecarlo" if what == "campaign" else what}_<scenario name>); '
+                        f'a {what} there is resumed')
     add_dispersion_arguments(parser)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``adcs montecarlo`` arguments to ``parser``."""
+    add_campaign_arguments(parser)
     parser.add_argument('--auto-detumble', action='store_true',
                         help='B-dot detumble first (below 0.5 deg/s), then the magnetic law '
                         '(writes manager.auto into each run)')

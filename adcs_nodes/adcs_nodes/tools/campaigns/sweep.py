@@ -67,7 +67,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from adcs_nodes.tools.analyse import metrics
-from adcs_nodes.tools.campaigns.cli import add_dispersion_arguments
+from adcs_nodes.tools.campaigns.cli import add_campaign_arguments
 from adcs_nodes.tools.campaigns.config import CampaignConfig, CampaignError, scenario_hash
 from adcs_nodes.tools.campaigns.files import (SERIES_FILE, load_result, run_dir_of,
                                               write_json_atomic, write_text_atomic)
@@ -391,25 +391,11 @@ def plot_map(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> 
 # ---------------------------------------------------------------------- command
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``adcs sweep`` arguments to ``parser``."""
-    parser.add_argument('scenario', help='base scenario YAML (closed loop, e.g. '
-                        'scenarios/paper000_control.yaml)')
+    add_campaign_arguments(parser, 'sweep')   # the same as adcs montecarlo's
     parser.add_argument('--set', action='append', default=[], metavar='KEY=V1,V2,...',
                         help='a dotted scenario key and its values (YAML, separated by commas '
                         'outside brackets), e.g. --set controllers.magnetic.alpha_per_s='
                         '1.5e-3,2e-3; repeatable: the grid is the product; one value: fixed')
-    parser.add_argument('--runs', type=int, required=True, metavar='N',
-                        help='Monte Carlo runs per grid point')
-    parser.add_argument('--jobs', type=int, default=1, metavar='J',
-                        help='runs at once on this machine (default 1; with --dask-local: '
-                        'the number of Dask workers; ignored with --scheduler)')
-    where = parser.add_mutually_exclusive_group()
-    where.add_argument('--scheduler', metavar='ADDRESS',
-                       help='submit the runs to this Dask distributed scheduler')
-    where.add_argument('--dask-local', action='store_true',
-                       help='a Dask LocalCluster of --jobs workers per grid point')
-    parser.add_argument('--out', metavar='DIR', help='sweep directory (default '
-                        'sweep_<scenario name>); a sweep there is resumed')
-    add_dispersion_arguments(parser)   # the same draws' options as adcs montecarlo
     parser.add_argument('--table', action='store_true',
                         help='run nothing: the table of the finished runs in OUT as they are '
                         '(no identity check: after a code or scenario change, these are the '
@@ -565,14 +551,3 @@ def _command(args: argparse.Namespace) -> str:
     if args.capture_deg != 5.0:
         parts += ['--capture-deg', str(args.capture_deg)]
     return ' '.join(parts)
-
-
-def main(argv: Optional[List[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.campaigns.sweep`` (the same as ``adcs sweep``)."""
-    parser = argparse.ArgumentParser(prog='adcs sweep', description=__doc__.split('\n\n')[0])
-    add_arguments(parser)
-    return run_from_args(parser.parse_args(argv))
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())
