@@ -38,8 +38,10 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from matplotlib.figure import Figure
+from scipy.spatial.transform import Rotation
 
 from adcs_nodes.bag import header_stamp_ns, read_messages
+from adcs_nodes.tools.analyse.metrics import angle_between_deg, slerp_at
 
 TOPICS = ('/sim/state', '/sim/wheels', '/sim/faults', '/adcs/attitude_estimate',
           '/adcs/estimator/diagnostics', '/adcs/attitude_target', '/adcs/actuator_command',
@@ -142,56 +144,6 @@ def _collect(bag_path) -> _Series:
     return s
 
 
-# ---------------------------------------------------------------------- quaternions (vector)
-def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product of (n, 4) scalar-last quaternions."""
-    px, py, pz, pw = p.T
-    qx, qy, qz, qw = q.T
-    return np.stack([pw * qx + px * qw + py * qz - pz * qy,
-                     pw * qy - px * qz + py * qw + pz * qx,
-                     pw * qz + px * qy - py * qx + pz * qw,
-                     pw * qw - px * qx - py * qy - pz * qz], axis=1)
-
-
-def _qconj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([-1.0, -1.0, -1.0, 1.0])
-
-
-def _angle(q: np.ndarray) -> np.ndarray:
-    """Rotation angle [rad] of (n, 4) quaternions."""
-    w = np.abs(q[:, 3]) / np.linalg.norm(q, axis=1)
-    return 2.0 * np.arccos(np.clip(w, 0.0, 1.0))
-
-
-def _rotvec(q: np.ndarray) -> np.ndarray:
-    """Rotation vectors [rad] of (n, 4) quaternions (shortest rotation)."""
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    q = np.where(q[:, 3:4] < 0.0, -q, q)
-    s = np.linalg.norm(q[:, :3], axis=1)
-    ang = 2.0 * np.arctan2(s, q[:, 3])
-    scale = np.where(s > 1e-12, ang / np.maximum(s, 1e-300), 2.0)
-    return q[:, :3] * scale[:, None]
-
-
-def slerp_at(t_src: np.ndarray, q_src: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The attitude ``q_src`` (sampled at increasing ``t_src``) at times ``t`` (slerp between
-    the two nearest samples; clamped at the ends)."""
-    i = np.clip(np.searchsorted(t_src, t, side='right') - 1, 0, len(t_src) - 1)
-    j = np.minimum(i + 1, len(t_src) - 1)
-    span = t_src[j] - t_src[i]
-    u = np.where(span > 0.0, (t - t_src[i]) / np.where(span > 0.0, span, 1.0), 0.0)
-    u = np.clip(u, 0.0, 1.0)
-    a, b = q_src[i], q_src[j].copy()
-    b[np.sum(a * b, axis=1) < 0.0] *= -1.0
-    d = _qmul(_qconj(a), b)
-    half = _rotvec(d) * u[:, None] / 2.0
-    n = np.linalg.norm(half, axis=1)
-    step = np.concatenate([half * np.where(n > 1e-12, np.sin(n) / np.maximum(n, 1e-300),
-                                           1.0)[:, None], np.cos(n)[:, None]], axis=1)
-    out = _qmul(a, step)
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
-
-
 # ---------------------------------------------------------------------- derived series
 def _runs(t: Sequence[float], labels: Sequence[str], t_end: float
           ) -> List[Tuple[float, float, str]]:
@@ -226,7 +178,7 @@ def _pointing_error(s: _Series) -> Optional[Tuple[np.ndarray, np.ndarray]]:
     q_orbit = slerp_at(ts, np.asarray(s.state['q_orbit'], dtype=float), t)
     q_eci = slerp_at(ts, np.asarray(s.state['q_eci'], dtype=float), t)
     q_true = np.where((frames == 'eci')[:, None], q_eci, q_orbit)
-    return t, _angle(_qmul(_qconj(q_ref), q_true)) * _DEG
+    return t, angle_between_deg(q_ref, q_true)
 
 
 def _estimate_error(s: _Series) -> Optional[Dict[str, np.ndarray]]:
@@ -242,7 +194,7 @@ def _estimate_error(s: _Series) -> Optional[Dict[str, np.ndarray]]:
     t = t[keep]
     q_est = np.asarray(s.est['q_eci'], dtype=float)[keep]
     q_true = slerp_at(ts, np.asarray(s.state['q_eci'], dtype=float), t)
-    err = _rotvec(_qmul(_qconj(q_est), q_true)) * _DEG
+    err = (Rotation.from_quat(q_est).inv() * Rotation.from_quat(q_true)).as_rotvec() * _DEG
     cov = np.asarray(s.est['cov'], dtype=float)[keep]
     sig = np.full(err.shape, np.nan)
     if cov.ndim == 2 and cov.shape[1] == 36:

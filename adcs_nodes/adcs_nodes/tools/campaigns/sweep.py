@@ -1,54 +1,9 @@
 """``adcs sweep``: one Monte Carlo campaign per point of a parameter grid, on the plain engine.
 
-Usage::
-
-    adcs sweep SCENARIO --set KEY=V1,V2,... [--set KEY2=W1,W2 ...] --runs N [--jobs J]
-               [--scheduler ADDRESS | --dask-local] [--out DIR] [--duration S] [--seed S]
-               [--max-rate-deg-s W] [--capture-deg A] [--mag-bias-nT B] [--misalignment-deg M]
-
-Grid
-----
-Each ``--set`` is a dotted scenario key (the keys of ``adcs run --set`` and ``python -m
-adcs_nodes.tools.analyse.study``, :func:`adcs_nodes.scenario.apply_overrides`) with one or more
-YAML values separated by commas at the top level (a comma inside brackets or quotes belongs to
-the value: ``--set spacecraft.magnetorquer.max_dipole_Am2=[40,40,40],[60,60,60]`` is two
-values). A key with one value is fixed for every point. The grid is the Cartesian product of
-the keys' values, in the order given (the last key varies fastest). Every point is validated
-as a scenario file is before the first run: an unknown key, a value of the wrong type or out
-of its range, a key given twice, a value given twice: exit 2 with the message, nothing runs.
-
-Campaigns
----------
-Every point is an ``adcs montecarlo`` campaign (:class:`~.campaign.Campaign`, engine
-``plain``: the FrameLoop of :mod:`sim_node.engine`) of the edited scenario in
-``OUT/points/<point>/``, with the same seed, so every point sees the same draws (attitude,
-rate, sensor seeds: common random numbers, the grid compares gains and not luck). A second,
-independent set of draws is another ``--seed``. The runs of one point go to the local
-processes (``--jobs``) or to Dask as ``adcs montecarlo`` sends them; the points run one after
-the other.
-
-Resume: the same command again skips every finished run of every point (a point's directory
-name is its overrides, so a grid extended by a value reuses the points it already has; the
-campaign identity check refuses a point directory made with another seed, duration or
-dispersion). Ctrl-C stops the campaign in progress (its finished runs are kept) and prints the
-table of what is done: exit 130.
-
-Outputs (``OUT`` = ``--out``, default ``sweep_<scenario name>``)
-------------------------------------------------------------------
-``sweep.json``
-    The grid and the campaign arguments of the last invocation.
-``sweep.csv``, ``sweep.md``
-    One row per point (:data:`COLUMNS`): the overrides, runs done, captured within 4 orbits,
-    capture time median and 90th percentile [orbits], hold median of the run medians (and its
-    90th percentile), the filter converged within half an orbit in two readings (from each
-    run's ``series.npz``, :func:`run_convergence`), the median estimation error after ``T/2``,
-    and the median wall time
-    of a run (it depends on the machine's load). With two swept keys ``sweep.md`` adds the
-    captured-within-4-orbits map (first key down, second across), as the paper-000 digest's
-    gain map.
-``sweep.png``
-    Heat map of the fraction captured within 4 orbits over two swept keys (one key: the
-    fraction against the value; more than two: not drawn).
+The grid (dotted scenario keys of ``adcs run --set``, YAML values separated by the commas
+outside brackets; the product of the keys' values, every point validated before the first
+run), the same draws at every point (one campaign per point in ``OUT/points/``, resumable),
+the table and the heat map: ``docs/montecarlo.md``, "Parameter sweeps".
 """
 from __future__ import annotations
 

@@ -1,34 +1,21 @@
-"""Composed deployment: several ADCS nodes in one process on one ``EventsExecutor``.
-
-Like a ROS 2 component container: the same node classes and parameters as the one process
-per node deployment, so both give the same trajectory (tested), but messages skip the
-process boundaries. Used by ``adcs run --compose``::
+"""Composed deployment (``adcs run --engine composed``): several ADCS nodes in one process on
+one ``EventsExecutor``, like a ROS 2 component container: the same node classes and
+parameters as one process per node, the same trajectory (tested)::
 
     python -m adcs_nodes.tools.run.compose --params-file params.yaml \\
-        --nodes environment=sim_node.nodes.environment:EnvironmentNode \\
-                dynamics=sim_node.nodes.dynamics:DynamicsNode
+        --nodes environment=sim_node.nodes.environment:EnvironmentNode ...
 
-The process ends when the clock master (the node named ``dynamics``) is done, after a short
-drain so the last messages reach the recorder; or on SIGINT/SIGTERM.
+It ends when the clock master (``dynamics``) is done, after a short drain for the recorder,
+or on SIGINT/SIGTERM. The managed nodes still unconfigured (``autostart: false``) are
+configured, then activated, in process before the executor spins; a refused configuration
+ends the process with exit code 2 and its reason.
 
-Lifecycle: the managed nodes (:mod:`adcs_nodes.nodes.managed`) of the parameter file that are
-still unconfigured (``autostart: false``, as ``adcs run --compose`` writes it) are configured,
-all of them, then activated, in process (``trigger_configure``/``trigger_activate``), before
-the executor spins; a node refusing its configuration ends the process with exit code 2 and
-its reason, as a configuration error while building a node does.
-
-In-process path (on by default since issue 13; ``--dds`` or ``ADCS_COMPOSE_INPROC=0`` in the
-environment sends every message over DDS as in the graph; ``--inproc`` and
-``ADCS_COMPOSE_INPROC=1`` are kept and mean the default): for a volatile topic with a
-publisher and subscriptions in this process (:class:`InProcessBus`), a message goes straight
-to the local subscriptions' callbacks when no subscription outside the process is matched
-(its ``get_subscription_count()`` is not above the local count); when one is (recorder, live
-view, ``ros2 topic echo``, the launcher's monitor on ``/clock``), it is published over DDS
-as before and every subscriber, local ones included, gets it from DDS. Each message goes one
-way only, so nothing is lost or doubled. The local deliveries run after the publishing
-callback has returned, first in first out, one callback at a time, never inside another
-callback. The lockstep fires on stamps, not arrival order, so the trajectory is the same
-(tested).
+In-process path (the default; ``--dds`` or ``ADCS_COMPOSE_INPROC=0``: every message over
+DDS): a volatile topic's message goes straight to the local subscriptions' callbacks while no
+subscription outside the process is matched, else over DDS to every subscriber; one way
+only, so nothing is lost or doubled (:class:`InProcessBus`). Local deliveries run after the
+publishing callback, first in first out; the lockstep fires on stamps, so the trajectory is
+the same (tested).
 """
 from __future__ import annotations
 

@@ -1,25 +1,12 @@
 """The graph of ``adcs run`` for the standard ROS 2 launch file (``adcs.launch.py``).
 
 ``ros2 launch adcs_nodes adcs.launch.py scenario:=NAME [duration:=S] [record:=BAG]`` starts
-the nodes :func:`adcs_nodes.graph.build_graph` returns, each with its parameters from
-:func:`adcs_nodes.graph.params_file_text`: the same description ``adcs run`` starts. This
-module holds the part that needs no ``launch`` package (not on PyPI), so it is tested here.
-
-What ``ros2 launch`` does not do that ``adcs run`` does: a private ``ROS_DOMAIN_ID`` with
-localhost discovery, the progress bar, the run manifest for ``adcs switch``/``adcs status``,
-stopping the run when a world node dies, the dynamics result file, and driving the lifecycle
-of the managed nodes (:data:`MANAGED_CLASSES`): ``adcs run`` starts them with ``autostart:
-false`` and calls configure and activate; the launch file gives no ``autostart``, so they
-configure and activate themselves (the default ``autostart: true``), as there is no
-lifecycle manager here. The launch ends when the clock master (``dynamics``) exits at the
-end of the scenario.
-
-Stopping (:func:`stop_timeouts`): ``ros2 launch`` sends SIGINT to every node at the end or on
-Ctrl-C, SIGTERM ``sigterm_timeout`` later, SIGKILL ``sigkill_timeout`` after that. A node
-exits within 2 s of SIGINT (``tests/node/test_shutdown.py``); the launch file gives the
-longer stops their time, so nothing is escalated to SIGTERM and no process is left behind.
-
-Pure Python; no rclpy.
+the nodes of :func:`adcs_nodes.graph.build_graph` with their parameters: the description
+``adcs run`` starts. What it does not do that ``adcs run`` does: a private domain, progress,
+the run manifest, stopping the run when a world node dies, the lifecycle (the managed nodes
+configure and activate themselves: no ``autostart: false``). Stopping
+(:func:`stop_timeouts`): SIGINT, SIGTERM ``sigterm_timeout`` later, SIGKILL after that; the
+timeouts leave each node its time. Pure Python (the ``launch`` package is not on PyPI).
 """
 from __future__ import annotations
 

@@ -9,10 +9,8 @@ import sys
 import time
 from typing import Dict, List, Optional
 
-#: Run via ``python -S -c``: sets the parent-death signal, checks the parent is still the
-#: launcher (it may have died between fork and prctl), then executes the node command. A
-#: separate tiny process image instead of ``preexec_fn``, which is unsafe in a launcher whose
-#: DDS threads run while it forks.
+#: Run via ``python -S -c``: sets the parent-death signal, checks the parent is still there,
+#: then executes the command (``preexec_fn`` is unsafe while DDS threads run).
 PDEATHSIG_SHIM = (
     'import ctypes, os, signal, sys\n'
     'libc = ctypes.CDLL(None, use_errno=True)\n'

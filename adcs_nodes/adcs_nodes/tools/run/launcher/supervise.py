@@ -136,22 +136,13 @@ class Launcher:
                              log)
         self.transitions: Optional[Transitions] = None
         from sim_node.faults import node_kills
-        #: node_killed faults {node: fault}: the launcher SIGKILLs the process (graph runs)
-        self.kills = node_kills(self.sc.get('faults') or [])
+        self.kills = node_kills(self.sc.get('faults') or [])   # node_killed faults by node
         self.killed: set = set()
         self.lost: Dict[str, float] = {}   # flight-software nodes that died: sim time [s]
         self._stop_requested = False
         self._manifest: Optional[dict] = None
         self._env: Dict[str, str] = {}
         self._params_path = ''
-
-    @property
-    def procs(self):
-        return self.processes.procs
-
-    @property
-    def restarts(self) -> Dict[str, int]:
-        return self.healer.restarts
 
     # ------------------------------------------------------------------ processes
     def _started_nodes(self) -> List[NodeSpec]:
@@ -185,7 +176,7 @@ class Launcher:
     def _write_manifest(self) -> None:
         if self._manifest is None:
             return
-        self._manifest['pids'] = {n: proc.pid for n, proc in self.procs.items()}
+        self._manifest['pids'] = {n: proc.pid for n, proc in self.processes.procs.items()}
         try:
             write_private(self._manifest_path, json.dumps(self._manifest))
         except OSError as exc:  # the first manifest stands; status/switch lack the pids
@@ -225,7 +216,7 @@ class Launcher:
                          int(round(sim_s / self.sc['timing']['frame_s'])),
                          monitor.missed_frames if monitor is not None else 0, bag,
                          self.run_dir, message, self._master_result('frames_per_s'),
-                         dict(self.restarts))
+                         dict(self.healer.restarts))
 
     def _run_in(self, domain: int, t0: float) -> RunResult:
         from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
@@ -300,7 +291,7 @@ class Launcher:
         (``LockstepNode._stops_at``), so the series do not depend on when the signal lands.
         Composed, the node only stops (one process for all)."""
         for name, f in self.kills.items():
-            proc = self.procs.get(name)
+            proc = self.processes.procs.get(name)
             if self.compose or proc is None or name in self.killed \
                     or monitor.sim_ns < round(float(f['at_s']) * 1e9):
                 continue
@@ -375,7 +366,7 @@ class Launcher:
 
     def _check_children(self, monitor: Monitor, total_ns: int):
         """``(exit code, message)`` when a child's exit ends the run, else None."""
-        for name, proc in self.procs.items():
+        for name, proc in self.processes.procs.items():
             rc = proc.poll()
             if rc is None or name in self.lost:
                 continue
@@ -411,7 +402,7 @@ class Launcher:
                  else '')
         return transition_failed_text(
             name, transition, self.processes.log_path(name), self.processes.tail(name), stack,
-            HEAL_UNANSWERED_S, self.restarts.get(name, 0), self.transitions.step.get(name),
+            HEAL_UNANSWERED_S, self.healer.restarts.get(name, 0), self.transitions.step.get(name),
             self.transitions.deadline_s)
 
     def _finish(self, monitor: Monitor, total_ns: int):
@@ -419,12 +410,12 @@ class Launcher:
         if self.record and not self.compose:
             deadline = time.monotonic() + 15.0
             while monitor.recorder_clock_ns < total_ns and time.monotonic() < deadline:
-                if self.procs['recorder'].poll() is not None:
+                if self.processes.procs['recorder'].poll() is not None:
                     break
                 monitor.spin(0.1)
             # every node has done its last frame (the master waited for them): the recorder
             # has everything once its message count stops growing
-            if self.procs['recorder'].poll() is None:
+            if self.processes.procs['recorder'].poll() is None:
                 monitor.wait_recorder_settled(deadline)
             if monitor.recorder_clock_ns < total_ns:
                 return 1, ('recorder did not receive the final frame within 15 s: '
