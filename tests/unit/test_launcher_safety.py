@@ -154,6 +154,10 @@ def test_adcs_run_refuses_a_fault_after_a_duration_override(tmp_path, capsys, en
     err = capsys.readouterr().err
     assert 'adcs run: --duration 20: faults[0].at_s: 50 s is outside the run' in err, err
     assert not (tmp_path / 'bag').exists()
+    from adcs_nodes.scenario import ScenarioError
+    from adcs_nodes.tools.run.launch_graph import launch_graph
+    with pytest.raises(ScenarioError, match='--duration 20: faults'):   # ros2 launch duration:=
+        launch_graph(str(path), duration_s=20.0)
 
 
 def test_a_100_kB_controller_name_is_refused_unsent_and_not_echoed():

@@ -103,7 +103,7 @@ REAL_TIME_KEPT = 0.9
 
 def cmd_run(args) -> int:
     from adcs_nodes.tools.run.launcher import LaunchError, Launcher, pace
-    from adcs_nodes.tools.run.launcher.supervise import with_duration
+    from adcs_nodes.tools.run.launch_graph import with_duration
     engine = args.engine or ('composed' if args.compose else 'graph')
     try:
         sc = load_scenario(args.scenario)

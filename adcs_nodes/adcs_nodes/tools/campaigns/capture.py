@@ -1,33 +1,14 @@
 """What a run's capture is measured against: the attitude the scenario's guidance commands.
 
-The capture test (:func:`~adcs_nodes.tools.campaigns.results.series_metrics`) judges the
-angle between the body and the guidance target, ``adcs/attitude_target``, the attitude the
-controllers track::
+The capture test (:func:`~adcs_nodes.tools.campaigns.results.series_metrics`) judges::
 
     angle(t_k) = 2 atan2(|v|, |w|),  [v, w] = q_orbit_target(t_k)^* (x) q_orbit_body(t_k)   [deg]
 
-with ``q_orbit_target(t_k)`` the target of the latest guidance frame at or before ``t_k``.
-
-* **Orbit frame** (:data:`ORBIT_FRAME`): a scenario whose guidance holds the identity in the
-  orbit frame for the whole run (no ``guidance`` section, as paper 000; paper 003's hold), or
-  has no guidance (no controller). The angle is the angle to the orbit frame, exactly as
-  before the guidance target was used (the same numbers, bit for bit).
-* **Guidance target** (:data:`GUIDANCE_TARGET`): any other profile (paper 001's maneuvers,
-  holds and tracking; the demo's slew; a profile in the ECI frame). Samples where the target
-  is a maneuver's end state are not judged: during a paper 001 ``maneuver`` segment
-  (``profile`` ``'maneuver'``, ``time_to_go_s > 0``) the guidance commands the attitude due at
-  the segment's end, which the MPI law reaches by then, not the attitude for now (judging them
-  would make every run's capture time the end of its last maneuver). A quaternion ``slew``
-  segment commands the attitude for now (the path) and is judged.
-
-Where the target comes from: the target the run published. The graph engine's bag records it
-(read by :func:`~adcs_nodes.tools.campaigns.results.read_truth`); the plain worker records it
-per frame in ``series.npz`` (``q_orbit_target``, an ECI target converted to the orbit frame
-with the frame's truth, and ``target_judged``:
-:func:`adcs_nodes.tools.campaigns.worker.run_series`) and judges
-capture itself (:func:`adcs_nodes.tools.campaigns.worker.mc_worker`). A plain result without
-``capture_reference`` is from before that (its ``series.npz`` has no target):
-:func:`label_old_result`.
+with ``q_orbit_target(t_k)`` the target the run published last at or before ``t_k``: the
+orbit frame (:data:`ORBIT_FRAME`) for a scenario whose guidance holds it, else the guidance
+target (:data:`GUIDANCE_TARGET`), a ``maneuver`` segment's samples not judged. Per scenario,
+where the target comes from, and results from before it was recorded:
+``docs/montecarlo.md``, "What captured means".
 """
 from __future__ import annotations
 

@@ -15,16 +15,9 @@ import numpy as np
 IDENTITY_KEYS = ('scenario_sha256', 'seed', 'duration_s', 'max_rate_deg_s', 'capture_deg',
                  'mag_bias_nT', 'misalignment_deg', 'auto_detumble', 'bdot_gain', 'engine',
                  'capture_reference')
-#: Default bound of each initial rate component [deg/s] by the scenario's paper (the first 3
-#: characters of its ``paper:`` key); :data:`DEFAULT_MAX_RATE_DEG_S` for any other scenario.
-#:
-#: * ``'000'``: 3 deg/s, paper 000's "initial rate components up to 3 deg/s" (its example
-#:   (-3, 3, 3) deg/s is a corner of the cube);
-#: * ``'001'``: 0.3 deg/s, ASSUMPTION (paper 001 gives one initial state, no dispersion): its
-#:   initial rates (0.3, -0.3, 0.3) deg/s are a corner of the cube, as paper 000's are of
-#:   its own; the three wheels (55 N m s, 1 N m each) absorb ``I omega`` of up to 17 N m s per
-#:   wheel at this bound (inertia (30)) beside the maneuvers' momentum, where 3 deg/s asks
-#:   up to 174 N m s per wheel: the runs would measure wheel saturation, not the law.
+#: Default bound of each initial rate component [deg/s] by the first 3 characters of the
+#: scenario's ``paper:`` key: paper 000's "up to 3 deg/s"; 0.3 deg/s for paper 001, an
+#: ASSUMPTION (its wheels would saturate at 3 deg/s): ``docs/montecarlo.md``.
 MAX_RATE_BY_PAPER_DEG_S = {'000': 3.0, '001': 0.3}
 #: Default bound for a scenario of another paper or of none [deg/s] (paper 000's).
 DEFAULT_MAX_RATE_DEG_S = 3.0

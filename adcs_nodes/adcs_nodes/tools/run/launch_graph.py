@@ -76,6 +76,19 @@ def scenario_path(name: str) -> str:
     raise ValueError(f'scenario {name!r} not found (installed: {", ".join(known) or "none"})')
 
 
+def with_duration(sc: dict, duration_s: Optional[float]) -> dict:
+    """Scenario ``sc`` (validated) with ``duration_s`` (``--duration``), validated again as
+    the file would be (a fault after the end, frames, the epoch; ScenarioError)."""
+    if duration_s is None or duration_s == sc['duration_s']:
+        return sc
+    from adcs_nodes.scenario import ScenarioError, apply_overrides
+    try:
+        return apply_overrides(sc, {'duration_s': float(duration_s)})
+    except ScenarioError as exc:
+        raise ScenarioError(str(exc).replace(f'--set duration_s={float(duration_s)!r}',
+                                             f'--duration {duration_s:g}', 1)) from None
+
+
 def launch_graph(scenario: str, duration_s: Optional[float] = None,
                  record: Optional[str] = None) -> Tuple[List[NodeSpec], str]:
     """Nodes and parameter-file text of ``scenario``, as ``adcs run`` builds them.
@@ -89,9 +102,8 @@ def launch_graph(scenario: str, duration_s: Optional[float] = None,
     record : str, optional
         Bag directory to record to (adds the recorder, as ``adcs run --record``).
     """
-    sc = load_scenario(scenario_path(scenario))
-    duration = float(duration_s) if duration_s is not None else float(sc['duration_s'])
-    nodes = build_graph(sc, duration, record=bool(record))
+    sc = with_duration(load_scenario(scenario_path(scenario)), duration_s)
+    nodes = build_graph(sc, float(sc['duration_s']), record=bool(record))
     if record:
         next(n for n in nodes if n.name == 'recorder').params['output'] = \
             os.path.abspath(record)

@@ -36,7 +36,7 @@ from dataclasses import replace
 from typing import Dict, List, Optional, Tuple
 
 from adcs_nodes.graph import NodeSpec, build_graph, params_file_text
-from adcs_nodes.tools.run.launch_graph import is_managed
+from adcs_nodes.tools.run.launch_graph import is_managed, with_duration
 import adcs_nodes.tools.run.launcher.isolation as isolation
 from adcs_nodes.tools.run.launcher.healing import HEAL_UNANSWERED_S, Healer
 from adcs_nodes.tools.run.launcher.isolation import (DDS_ENV_KEYS, RUN_DOMAINS, LaunchError,
@@ -83,19 +83,6 @@ def pace(rate: Optional[float], real_time: bool) -> Tuple[float, float]:
     return 1.0, (0.0 if rate is None else float(rate))
 
 
-def with_duration(sc: dict, duration_s: Optional[float]) -> dict:
-    """Scenario ``sc`` (validated) with ``duration_s`` (``--duration``), validated again as
-    the file would be (a fault after the end, frames, the epoch): LaunchError if refused."""
-    if duration_s is None or duration_s == sc['duration_s']:
-        return sc
-    from adcs_nodes.scenario import ScenarioError, apply_overrides
-    try:
-        return apply_overrides(sc, {'duration_s': float(duration_s)})
-    except ScenarioError as exc:
-        raise LaunchError(str(exc).replace(f'--set duration_s={float(duration_s)!r}',
-                                           f'--duration {duration_s:g}', 1)) from None
-
-
 class Launcher:
     """Start, watch and stop one scenario run (see module docstring)."""
 
@@ -109,7 +96,11 @@ class Launcher:
         check_rate(rate_factor)
         if max_rate != 0.0:                      # (0: no pace)
             check_rate(max_rate)
-        self.sc = with_duration(scenario, duration_s)
+        from adcs_nodes.scenario import ScenarioError
+        try:
+            self.sc = with_duration(scenario, duration_s)
+        except ScenarioError as exc:
+            raise LaunchError(str(exc)) from None
         self.duration_s = float(self.sc['duration_s'])
         self.domain = domain     # None: a free one drawn at random (RUN_DOMAINS)
         self.record = os.path.abspath(record) if record else None
