@@ -477,26 +477,10 @@ def _fmt_t(t: float, axis: _Axis) -> str:
 
 
 def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -> str:
-    """Write ``report.html`` (and ``overview.png``) of the bag into ``out_dir``.
-
-    Parameters
-    ----------
-    bag_path : path-like
-        rosbag2 bag directory or ``.mcap`` file of any engine.
-    out_dir : path-like
-        Output directory (created if needed); a ``metrics.json`` of
-        :func:`adcs_nodes.tools.analyse.report.make_report` already there gives the paper table.
-
-    Returns
-    -------
-    str
-        Path of ``report.html``.
-
-    Raises
-    ------
-    FileNotFoundError, ValueError
-        As :func:`adcs_nodes.bag.read_messages` (no bag, not a bag).
-    """
+    """Write ``report.html`` (and ``overview.png``) of the bag (any engine's) into ``out_dir``
+    (created if needed; a :func:`adcs_nodes.tools.analyse.report.make_report` ``metrics.json``
+    there gives the paper table). Returns its path; FileNotFoundError or ValueError as
+    :func:`adcs_nodes.bag.read_messages` (no bag, not a bag)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     s = _collect(bag_path)
@@ -505,11 +489,6 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
     ends += [s.cmd['t'][-1]] if s.cmd['t'] else []
     t_end = max(ends + [1e-9])
     axis = _time_axis(t_end)
-    names = sorted(set(s.cmd['source']) | {e['active'] for e in s.status}
-                   | {e['mode'] for e in s.status})
-    colours = _colours(names)
-    schedule = {float(e.get('t_s', -1.0)): str(e.get('controller', ''))
-                for e in (sc.get('manager') or {}).get('schedule') or [] if isinstance(e, dict)}
     title = str(sc.get('name') or Path(str(bag_path).rstrip('/')).name)
     parts = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
              f'<title>ADCS run {html.escape(title)}</title><style>{_CSS}</style></head><body>',
@@ -520,36 +499,49 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
                  'of sim time; topics: ' + ', '.join(
                      f'{html.escape(k)} ({v})' for k, v in sorted(s.topics.items())) + '</p>')
     missing: List[str] = []
+    parts += _timeline_sections(s, sc, axis, t_end, out, missing)
+    parts += _plot_sections(s, axis, missing) + _paper_section(out)
+    if missing:
+        parts.append('<h2>Not shown</h2><ul>' + ''.join(
+            f'<li>{html.escape(m)}</li>' for m in missing) + '</ul>')
+    parts.append('</body></html>\n')
+    path = out / 'report.html'
+    path.write_text('\n'.join(parts), encoding='utf-8')
+    return str(path)
 
-    parts.append('<h2>Timeline</h2>')
+
+def _timeline_sections(s: _Series, sc: Dict[str, Any], axis: _Axis, t_end: float, out: Path,
+                       missing: List[str]) -> List[str]:
+    """The timeline figure (also ``overview.png``), the switches and the faults."""
+    parts = ['<h2>Timeline</h2>']
     if s.cmd['t'] or s.status or s.state['t']:
-        fig = _overview(s, axis, t_end, colours, _pointing_error(s))
-        png = _png(fig)
+        colours = _colours(sorted(set(s.cmd['source']) | {e['active'] for e in s.status}
+                                  | {e['mode'] for e in s.status}))
+        png = _png(_overview(s, axis, t_end, colours, _pointing_error(s)))
         (out / 'overview.png').write_bytes(png)
         parts.append(_img(png, 'timeline: controllers, modes, faults, attitude error, rates'))
     else:
         missing.append('timeline (no sim/state, adcs/actuator_command or '
                        'adcs/controller_status)')
-
     parts.append('<h2>Switches and fallbacks</h2>')
+    schedule = {float(e.get('t_s', -1.0)): str(e.get('controller', ''))
+                for e in (sc.get('manager') or {}).get('schedule') or [] if isinstance(e, dict)}
     rows = _switches(s, schedule)
-    if rows:
-        parts.append(_table(['t', 'what', 'why'], [
-            (_fmt_t(r['t'], axis), html.escape(r['what']), html.escape(r['why']))
-            for r in rows]))
-    else:
-        parts.append('<p class="note">no adcs/controller_status or adcs/actuator_command '
-                     'recorded</p>')
-
+    parts.append(_table(['t', 'what', 'why'], [
+        (_fmt_t(r['t'], axis), html.escape(r['what']), html.escape(r['why'])) for r in rows])
+        if rows else '<p class="note">no adcs/controller_status or adcs/actuator_command '
+        'recorded</p>')
     parts.append('<h2>Faults</h2>')
-    if s.faults:
-        parts.append(_table(['t', 'fault', 'state'], [
-            (_fmt_t(f['t'], axis), html.escape(f['message'].split(': ', 1)[-1]),
-             'active' if f['active'] else 'cleared') for f in s.faults]))
-    else:
-        parts.append('<p class="note">no fault announced on sim/faults</p>')
+    parts.append(_table(['t', 'fault', 'state'], [
+        (_fmt_t(f['t'], axis), html.escape(f['message'].split(': ', 1)[-1]),
+         'active' if f['active'] else 'cleared') for f in s.faults])
+        if s.faults else '<p class="note">no fault announced on sim/faults</p>')
+    return parts
 
-    parts.append('<h2>Reaction wheels</h2>')
+
+def _plot_sections(s: _Series, axis: _Axis, missing: List[str]) -> List[str]:
+    """Wheels, dipole, and the estimator against the truth."""
+    parts = ['<h2>Reaction wheels</h2>']
     if s.wheels['t']:
         parts.append(_img(_png(_wheels_fig(s, axis)), 'wheel speeds and momentum'))
     else:
@@ -559,36 +551,29 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
         parts.append(_img(_png(_dipole_fig(s, axis)), 'magnetorquer dipole command'))
     else:
         missing.append('magnetorquer dipole (no adcs/actuator_command)')
-
     parts.append('<h2>Estimator against the truth</h2>')
     est = _estimate_error(s)
-    if est is not None:
-        parts.append(_img(_png(_estimate_fig(s, axis, est)),
-                          'estimator error per body axis with its 3-sigma bound'))
-        if s.diag['t']:
-            last = next((r for r in reversed(s.diag['last']) if r), '')
-            parts.append(f'<p class="note">rejected samples: {s.diag["rejected"][-1]}'
-                         + (f'; last: {html.escape(last)}' if last else '') + '</p>')
-    else:
+    if est is None:
         missing.append('estimator (no adcs/attitude_estimate with sim/state)')
+        return parts
+    parts.append(_img(_png(_estimate_fig(s, axis, est)),
+                      'estimator error per body axis with its 3-sigma bound'))
+    if s.diag['t']:
+        last = next((r for r in reversed(s.diag['last']) if r), '')
+        parts.append(f'<p class="note">rejected samples: {s.diag["rejected"][-1]}'
+                     + (f'; last: {html.escape(last)}' if last else '') + '</p>')
+    return parts
 
-    parts.append('<h2>Paper comparison</h2>')
+
+def _paper_section(out: Path) -> List[str]:
     paper = _paper_rows(out)
-    if paper:
-        css = {True: 'pass', False: 'fail', None: ''}
-        parts.append(_table(['quantity', 'paper', 'measured', 'verdict'], [
-            (html.escape(str(r.get('name', ''))), html.escape(str(r.get('paper', ''))),
-             html.escape(str(r.get('measured', ''))),
-             f'<span class="{css.get(r.get("pass"), "")}">'
-             f'{html.escape(str(r.get("verdict", "")))}</span>') for r in paper]))
-    else:
-        parts.append('<p class="note">no paper table for this run (the report\'s '
-                     'metrics.json has none: the scenario reproduces no paper, or the report '
-                     'was not written first)</p>')
-    if missing:
-        parts.append('<h2>Not shown</h2><ul>' + ''.join(
-            f'<li>{html.escape(m)}</li>' for m in missing) + '</ul>')
-    parts.append('</body></html>\n')
-    path = out / 'report.html'
-    path.write_text('\n'.join(parts), encoding='utf-8')
-    return str(path)
+    if not paper:
+        return ['<h2>Paper comparison</h2>', '<p class="note">no paper table for this run '
+                '(the report\'s metrics.json has none: the scenario reproduces no paper, or '
+                'the report was not written first)</p>']
+    css = {True: 'pass', False: 'fail', None: ''}
+    return ['<h2>Paper comparison</h2>', _table(['quantity', 'paper', 'measured', 'verdict'], [
+        (html.escape(str(r.get('name', ''))), html.escape(str(r.get('paper', ''))),
+         html.escape(str(r.get('measured', ''))),
+         f'<span class="{css.get(r.get("pass"), "")}">'
+         f'{html.escape(str(r.get("verdict", "")))}</span>') for r in paper])]
