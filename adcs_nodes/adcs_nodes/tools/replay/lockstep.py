@@ -1,18 +1,10 @@
-"""Lockstep replay: flight-software nodes started alone in ``timing_mode: lockstep`` get
-exactly what they received in the recorded run, frame by frame, and publish the recorded
-outputs again, bit for bit.
-
-* The inputs each node awaited in the run (the ``sub:`` entries of its handshake in the graph
-  of the bag's scenario: ``/clock``, ``/tf_static``, sensors, the previous frame's actuator
-  command, ...), reliable with depth 100 (``/tf_static`` latched), their recorded bytes.
-* Frame by frame: every message stamped up to a recorded ``/clock`` tick, then that tick.
-* Paced by the nodes: it waits for their ``lockstep/ready`` and never runs more than
-  ``MAX_LAG_FRAMES`` frames ahead of what each reports read (``lockstep/progress``) or
-  processed (``lockstep/status``); it ends when each has processed the last frame it
-  processed in the recording (or sent its final progress).
-
-The nodes run with the launcher's parameters (:func:`write_params`). The bag's scenario is
-data: the plugins its run used are imported only when given (``plugins``).
+"""Lockstep replay: nodes started alone in ``timing_mode: lockstep`` (with the launcher's
+parameters, :func:`write_params`) get exactly what they received in the recorded run and
+publish the recorded outputs again, bit for bit: the inputs each awaited (the ``sub:``
+entries of its handshake in the bag's graph), reliable, depth 100 (``/tf_static`` latched),
+frame by frame (every message stamped up to a recorded ``/clock`` tick, then the tick), paced
+by the nodes (their ``lockstep/ready``; at most ``MAX_LAG_FRAMES`` ahead of what each read or
+processed), until each has processed the last frame it processed in the recording.
 """
 from __future__ import annotations
 
