@@ -140,7 +140,7 @@ def _run_processes(out):
     found = []
     for p in psutil.process_iter(['cmdline']):
         cmd = p.info['cmdline'] or []
-        if '_mc_worker' in cmd and any(str(out) in c for c in cmd):
+        if runner.WORKER_COMMANDS['plain'][1] in cmd and any(str(out) in c for c in cmd):
             found.append(p)
     return found
 
