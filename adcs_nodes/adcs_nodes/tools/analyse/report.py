@@ -1,30 +1,14 @@
 """Bag to report: metrics, PNG plots (matplotlib, Agg) and ``summary.md``.
 
-What is computed (all times from ``header.stamp``, the simulated time, never bag log times, so
-two runs of the same simulation give the same report):
-
-* topics: message count and rate ``(n - 1) / (t_last - t_first)`` [Hz] from header stamps
-  (log times only for types without a header);
-* attitude (``/sim/state``): angle between body and orbit frame
-  ``theta = angle(q_orbit_body, identity)`` [deg] over time, quaternion components;
-* body rate: ``|omega_body_eci_body|`` and ``|omega_body_orbit_body|`` [deg/s];
-* field: ``/sim/environment`` ``b_eci`` and, if recorded, ``/sensors/magnetometer`` [uT];
-* wheels (``/sim/wheels``, if any): momentum per wheel [N m s];
-* estimate error (``/adcs/attitude_estimate``, if any): ``angle(q_eci_body_est, q_eci_body_true)``
-  [deg] and ``|omega_est - omega_true|`` [deg/s], the truth interpolated at each estimate's
-  own stamp (slerp of the attitude, linear rate; :func:`adcs_nodes.tools.analyse.metrics.
-  estimate_errors_deg`), so a live bag's off-grid estimates are judged too;
-* paper comparison: a table filled from ``expectations`` (empty by default), so scenarios that
-  reproduce a paper add their rows ``(name, paper value, measured value, verdict)``
-  (:mod:`adcs_nodes.tools.analyse.papers`, the same table ``make reproduce`` prints); verdict
-  True/False prints PASS/FAIL (a comparison with a paper number), ``None`` prints ``info`` (no
-  paper value), :class:`~adcs_nodes.tools.analyse.papers.NotComparable` prints ``not comparable:
-  <reason>`` (a paper claim this run cannot check); only PASS/FAIL count in ``all_pass``;
-* the paper's own figures (papers 001 and 003) and extra sections (e.g. paper 000's
-  sensitivity table) from :func:`adcs_nodes.tools.analyse.reproductions.sections_for`.
-
-Time axes are in orbits when the run lasts at least half an orbit (orbit rate from
-``/sim/environment``), else in seconds, counted from the first ``/sim/state`` stamp.
+All times come from ``header.stamp`` (the simulated time; log times only for types without a
+header), so two runs of the same simulation give the same report: per topic the count and
+rate; from ``/sim/state`` the angle between body and orbit frame and the body rates; the
+field (``/sim/environment``, ``/sensors/magnetometer``) [uT]; wheel momentum; the estimate's
+error against the truth interpolated at its own stamp
+(:func:`adcs_nodes.tools.analyse.metrics.estimate_errors_deg`); the paper comparison table
+from ``expectations`` (PASS/FAIL count in ``all_pass``, ``info`` and ``not comparable: ...``
+do not; :mod:`adcs_nodes.tools.analyse.papers`), the paper's figures and extra sections.
+Time axes are in orbits for a run of at least half an orbit, else in seconds.
 """
 from __future__ import annotations
 

@@ -1,28 +1,12 @@
-"""``report.html``: one self-contained page of a run for people (``adcs report`` writes it).
-
-The page needs no network and no script: the plots are PNG images inline (base64, matplotlib
-Agg), the tables plain HTML. It reads any engine's bag (plain, composed, graph), whatever of
-these topics it holds (a section without its topics is left out, saying so):
-
-* timeline: shaded bands of the controller whose command was forwarded
-  (``adcs/actuator_command`` ``source``, so a fallback shows), the active controller and the
-  manager's mode (``adcs/controller_status``), fault markers (``sim/faults``), with the
-  attitude error against the target (``adcs/attitude_target``, truth ``sim/state`` at the
-  target's stamp) and the body rates under it. The same figure is written as
-  ``overview.png`` beside the page (the README's picture);
-* wheels (``sim/wheels``): speed and momentum per wheel;
-* magnetorquer dipole (``adcs/actuator_command``);
-* the estimator's error against the truth (``adcs/attitude_estimate``; the truth interpolated
-  at the estimate's stamp: slerp of the attitude between the two nearest truth samples) per
-  body axis, ``rotvec(q_est^-1 q_true)``, with its 3-sigma bound from the estimate's
-  covariance (attitude block, body axes; none when element 0 is -1, "unknown"), and the
-  estimator's rejections (``adcs/estimator/diagnostics``);
-* switches and fallbacks with their reasons, faults;
-* the paper table, when the report of :mod:`adcs_nodes.tools.analyse.report` in the same directory
-  (``metrics.json``) has one.
-
-Times are sim seconds from the first ``sim/state`` (else the first stamped message), shown in
-minutes for runs longer than 20 minutes.
+"""``report.html``: one self-contained page of a run for people (``adcs report`` writes it):
+no network, no script, PNG plots inline, plain HTML tables, from any engine's bag (a section
+whose topics are missing is left out, saying so). Sections: the timeline (the forwarded
+controller, the active one and the manager's mode as bands, fault markers, the attitude error
+against the target and the body rates; also written as ``overview.png``), wheels, dipole,
+the estimator's error per body axis against the interpolated truth with its 3-sigma bound
+and rejections, switches and fallbacks with their reasons, faults, and the paper table of
+the report's ``metrics.json``. Times are sim seconds from the first ``sim/state``, in
+minutes beyond 20 minutes.
 """
 from __future__ import annotations
 

@@ -91,11 +91,8 @@ class Healer:
 
     def __init__(self, nodes, procs: processes.Processes, master: str,
                  respawn: Callable[[str, str], None], log=print) -> None:
-        self.nodes = nodes
-        self.procs = procs
-        self.master = master
-        self.respawn = respawn
-        self.log = log
+        self.nodes, self.procs, self.master, self.respawn, self.log = (nodes, procs, master,
+                                                                       respawn, log)
         self.restarts: Dict[str, int] = {}
         self.notes: List[str] = []
         self.cpu_seen: Dict[str, float] = {}

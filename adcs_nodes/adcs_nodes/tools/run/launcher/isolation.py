@@ -18,10 +18,8 @@ from typing import Dict, Iterable, List
 #: its own temporary directory), else ``~/.cache/adcs/runs``.
 RUNS_DIR = os.environ.get('ADCS_RUNS_DIR') or os.path.join(os.path.expanduser('~'), '.cache',
                                                            'adcs', 'runs')
-#: ``ROS_DOMAIN_ID`` values a run draws from (at random among the free ones). Fast DDS over
-#: UDP accepts 0..232; 0 is everybody's default; 100..199 belong to the node tests and the
-#: bench rings; 102..214 put the DDS ports inside Linux's ephemeral port range. Left: 1..99
-#: and 215..232 (117 ids).
+#: ``ROS_DOMAIN_ID`` values a run draws from, at random among the free ones (docs/security.md,
+#: "Domain ids": 0 is everybody's, 100..214 the tests' or in the ephemeral port range).
 RUN_DOMAINS = tuple(range(1, 100)) + tuple(range(215, 233))
 #: Run directories kept in ``RUNS_DIR`` (older ones are removed when a run starts).
 KEEP_RUNS = 50

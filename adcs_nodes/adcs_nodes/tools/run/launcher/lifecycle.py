@@ -14,15 +14,11 @@ class Transitions:
     """Drives ``configure`` then ``activate`` of the managed nodes through their standard
     ``/<node>/change_state`` services (``lifecycle_msgs/srv/ChangeState``).
 
-    Non-blocking: :meth:`poll` (called by the launcher's watch loop) sends ``configure`` to
-    each node whose service has appeared; the answer's callback sends ``activate`` at once.
-
-    A service answer can be lost: under load Fast DDS may not have matched the server's
-    reply writer to the client's reply reader yet, and the node logs "failed to send
-    response (timeout)" after doing the transition. So a request unanswered for
-    :data:`RESEND_S` is followed by ``/<node>/get_state``, and the node's actual state says
-    what to send next (a transition is never sent twice to a node that did it). Late or
-    superseded answers are ignored.
+    Non-blocking: :meth:`poll` (the watch loop) sends ``configure`` to each node whose service
+    has appeared; the answer's callback sends ``activate``. An answer can be lost (a reply
+    writer not matched yet under load): a request unanswered for :data:`RESEND_S` is followed
+    by ``/<node>/get_state``, whose state says what to send next (a transition is never sent
+    twice); late or superseded answers are ignored.
     """
 
     #: seconds without an answer before the node's state is asked
