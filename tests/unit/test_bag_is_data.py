@@ -91,8 +91,9 @@ def test_the_plugins_of_a_bag_are_named_never_imported(tmp_path, capsys, marker)
         assert code == 0, (argv, err)
         assert f'the run used the plugins {plugin}; not imported (a bag is data' in err
     assert (tmp_path / 'rep' / 'summary.md').is_file() and (tmp_path / 'csv').is_dir()
-    from adcs_nodes.tools.analyse.papers.series import scenario_dict, scenario_of
-    assert scenario_dict(scenario_of(bag))['plugins'] == []   # validated again, without
+    from adcs_nodes.tools.analyse.papers.series import scenario_dict
+    from adcs_nodes.tools.bagfile import bag_scenario
+    assert scenario_dict(bag_scenario(bag))['plugins'] == []   # validated again, without
     assert not marker.exists()
     # given by the user, it is theirs to trust: imported, the parameters written
     code, err, _ = _adcs(capsys, 'replay', bag, '--plugin', str(plugin), '--write-params',

@@ -32,8 +32,8 @@ def expectations_for(bag: str) -> Tuple[Optional[str], List[Row]]:
 def sections_for(bag: str) -> List[Tuple[str, str]]:
     """Extra report sections for the scenario of ``bag``: paper 000's sensitivity study for
     its closed-loop scenarios (empty otherwise)."""
-    from adcs_nodes.tools.analyse.papers.series import scenario_of
-    if (scenario_of(bag) or {}).get('name') not in SECTIONS:
+    from adcs_nodes.tools.bagfile import bag_scenario
+    if (bag_scenario(bag) or {}).get('name') not in SECTIONS:
         return []
     from adcs_nodes.tools.analyse.paper000_sensitivity import sensitivity_markdown
     return [('Sensitivity of the hold accuracy', sensitivity_markdown())]

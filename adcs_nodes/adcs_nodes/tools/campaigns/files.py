@@ -17,19 +17,19 @@ SERIES_FILE = 'series.npz'
 
 
 def write_json_atomic(path: str, data: Any) -> None:
-    """Write ``data`` as JSON to ``path`` atomically (temporary file + ``os.replace``)."""
-    tmp = f'{path}.tmp-{uuid.uuid4().hex}'      # unique per writer and attempt
-    with open(tmp, 'w', encoding='utf-8') as fh:
-        json.dump(data, fh, indent=1)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    """Write ``data`` as JSON to ``path`` atomically (fsynced; :func:`write_text_atomic`)."""
+    write_text_atomic(path, json.dumps(data, indent=1), fsync=True)
 
 
-def write_text_atomic(path: str, text: str) -> None:
+def write_text_atomic(path: str, text: str, fsync: bool = False) -> None:
+    """Write ``text`` to ``path`` atomically: a temporary file unique per writer and attempt,
+    then ``os.replace``."""
     tmp = f'{path}.tmp-{uuid.uuid4().hex}'
     with open(tmp, 'w', encoding='utf-8', newline='') as fh:
         fh.write(text)
+        if fsync:
+            fh.flush()
+            os.fsync(fh.fileno())
     os.replace(tmp, path)
 
 

@@ -84,8 +84,9 @@ def rows_for(sc: Dict[str, Any], topics: Dict[str, Dict[int, Any]]) -> List[Row]
 
 def rows_for_bag(bag: str) -> Tuple[Optional[str], List[Row]]:
     """``(scenario name, rows)`` of a bag, the paper picked from its ``scenario.yaml``."""
-    from adcs_nodes.tools.analyse.papers.series import from_bag, scenario_of
-    sc = scenario_of(bag)
+    from adcs_nodes.tools.analyse.papers.series import from_bag
+    from adcs_nodes.tools.bagfile import bag_scenario
+    sc = bag_scenario(bag)
     if sc is None:
         return None, []
     name = sc.get('name')
@@ -97,8 +98,9 @@ def rows_for_bag(bag: str) -> Tuple[Optional[str], List[Row]]:
 def figures_for_bag(bag: str, out_dir: str) -> List[str]:
     """The paper's figures of a bag's run written into ``out_dir`` (file paths; empty when the
     paper module draws none)."""
-    from adcs_nodes.tools.analyse.papers.series import from_bag, scenario_of
-    sc = scenario_of(bag)
+    from adcs_nodes.tools.analyse.papers.series import from_bag
+    from adcs_nodes.tools.bagfile import bag_scenario
+    sc = bag_scenario(bag)
     module = module_for((sc or {}).get('name'))
     if module is None or not hasattr(module, 'figures_of'):
         return []

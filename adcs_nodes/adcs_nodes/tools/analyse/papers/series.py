@@ -68,13 +68,6 @@ def from_frames(frames: Iterable[Any], topics: Sequence[str]) -> Topics:
     return out
 
 
-def scenario_of(bag: str) -> Optional[Dict[str, Any]]:
-    """The effective scenario stored beside the bag (``scenario.yaml``) as data, or None
-    (:func:`adcs_nodes.tools.bagfile.bag_scenario`: ``BagError`` for a hostile one)."""
-    from adcs_nodes.tools.bagfile import bag_scenario
-    return bag_scenario(bag)
-
-
 def epoch_ns(sc: Dict[str, Any]) -> int:
     """The scenario's epoch (sim time 0) [ns since 1970]."""
     from adcs_nodes.components.base import epoch_to_ns, parse_epoch

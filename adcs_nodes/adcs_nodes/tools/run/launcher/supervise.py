@@ -1,27 +1,17 @@
 """The launcher behind ``adcs run``: start the scenario's graph, watch it, stop it cleanly.
 
-* One process per node (``python -m <module> --ros-args -r __node:=<name> --params-file ...``)
-  or all nodes in one process (``--compose``, :mod:`adcs_nodes.tools.run.compose`), isolated
-  in a private domain (:mod:`.isolation`).
-* Lifecycle: the managed nodes start with ``autostart: false``; the launcher calls
-  ``configure`` then ``activate`` on each (:mod:`.lifecycle`), each as soon as its service is
-  there. A refused configure stops the run with exit code 2 and the node's reason.
-* Progress (sim time, real-time factor, missed frames) from a small monitor node
-  (:mod:`.monitor`).
-* End: the clock master (dynamics) exits 0 after the last frame; the launcher waits until the
-  recorder has everything, then stops every child with SIGINT (SIGKILL after a grace
-  period). An essential child (world, recorder) that dies stops the run naming it with the
-  tail of its log; a flight-software node that dies is reported and the run goes on (its
-  consumers time out and fall back). A node's configuration error (exit 2) stops the run.
-  Ctrl-C stops every child the same way; the bag is closed and valid.
-* Crash safety: every child gets a parent-death signal (:mod:`.processes`). A full disk
-  stops the run with a message saying so; what was written is kept.
-* Self-healing before frame 0 (:mod:`.healing`).
-* While a run is active, ``RUNS_DIR/active-<pid>.json`` (owner-only) names its domain, run
-  directory, bag and node PIDs (for ``adcs switch``/``adcs status`` and the tests).
-
-The scenario is taken as validated (:func:`adcs_nodes.scenario.load_scenario`); a
-``duration_s`` other than the scenario's is validated as the file's would be.
+One process per node (``python -m <module> --ros-args -r __node:=<name> --params-file ...``)
+or all in one (``--compose``), in a private domain (:mod:`.isolation`); the managed nodes
+configured and activated through their lifecycle services (:mod:`.lifecycle`; a refused
+configure: exit 2 with the node's reason); progress from :mod:`.monitor`; self-healing
+before frame 0 (:mod:`.healing`). The run ends when the clock master exits 0 after the last
+frame and the recorder has everything, then every child gets SIGINT (SIGKILL after a grace
+period); Ctrl-C does the same, the bag closed and valid. An essential child (world,
+recorder) that dies stops the run naming it with its log's tail; a flight-software node that
+dies is reported and the run goes on (its consumers fall back). Every child dies with the
+launcher (:mod:`.processes`). While a run is active, ``RUNS_DIR/active-<pid>.json``
+(owner-only) names its domain, run directory, bag and node PIDs (``adcs switch``/``status``).
+The scenario is taken as validated; another ``duration_s`` is validated as the file's would be.
 """
 from __future__ import annotations
 
