@@ -48,21 +48,26 @@ from adcs_nodes import inputs as input_records
 from adcs_nodes import registry
 from adcs_nodes.components import controller as ccomp
 from adcs_nodes.components import estimator as ecomp
-from adcs_nodes.components.base import (DEFAULT_EPOCH, FrameClock, Mounts, epoch_to_ns,
-                                        param_values, parse_epoch, section)
+from adcs_nodes.components.base import FrameClock, Mounts, epoch_to_ns, param_values, parse_epoch
 from adcs_nodes.components.guidance import PARAMS as GUIDANCE_PARAMS
 from adcs_nodes.components.guidance import GuidanceComponent
 from adcs_nodes.components.manager import MANAGER_PARAMS, ManagerComponent, manager_core
+from adcs_nodes.core.geomag import FIELD
 from adcs_nodes.core.lockstep import REVIVE_HOLD_FRAMES, ZERO, derive_seed, seconds_to_ns
 from adcs_nodes.nodes.actuator_topics import MAGNETORQUER_TOPIC, WHEELS_TOPIC, wheel_names_for
 from adcs_nodes.nodes.convert import stamp_ns
 from adcs_nodes.nodes.messages import make
+from adcs_nodes.core.manager import AUTO_SEQUENCE
+from adcs_nodes.core.orbit import ORBIT
 from adcs_nodes.graph import NodeSpec, build_graph
+from adcs_nodes.scenario import check_scenario
+from adcs_nodes.spec import COMMON
 from sim_node.components.dynamics import DynamicsComponent
-from sim_node.components.environment import DEFAULT_FIELD, DEFAULT_ORBIT, EnvironmentComponent
+from sim_node.components.environment import EnvironmentComponent
 from sim_node.components.sensors import SENSOR_COMPONENTS, sensor_faults
 from sim_node.faults import parse as parse_faults
-from sim_node.models.spacecraft_config import DEFAULT_INITIAL, DEFAULT_SPACECRAFT
+from sim_node.entries import DYNAMICS_PARAMS
+from sim_node.models.spacecraft_config import INITIAL, SPACECRAFT
 
 #: ``(topic, message)`` published in a frame.
 Output = Tuple[str, Any]
@@ -125,30 +130,29 @@ class FrameLoop:
         for s in specs:
             registry.load_plugins(s.params.get('plugins', []) or [])
         self.warnings: List[Tuple[str, str, str]] = []
-        env_p = by_name['environment'].params
-        self.epoch = parse_epoch(env_p.get('epoch', DEFAULT_EPOCH))
+        env_p, dyn_p = by_name['environment'].params, by_name['dynamics'].params
+        common = param_values(COMMON.values(), env_p)     # validated as the nodes declare them
+        dyn = param_values(DYNAMICS_PARAMS, dyn_p)
+        self.epoch = parse_epoch(common['epoch'])
         self.clock = FrameClock(epoch_to_ns(self.epoch))
-        self.seed = int(env_p.get('seed', 0))
-        self.frame_ns = seconds_to_ns(env_p.get('frame_period_s', 1.0))
+        self.seed = common['seed']
+        self.frame_ns = seconds_to_ns(common['frame_period_s'])
         self.duration_ns = seconds_to_ns(duration_s)
         if self.frame_ns <= 0 or self.duration_ns % self.frame_ns:
             raise EngineError(f'duration {duration_s} s is not a multiple of the frame '
                               f'{self.frame_ns / 1e9:g} s')
         self.environment = EnvironmentComponent(
-            section(env_p, 'orbit', DEFAULT_ORBIT, merge=False),
-            section(env_p, 'field', DEFAULT_FIELD, merge=False), self.epoch, self.clock)
-        dyn_p = by_name['dynamics'].params
+            ORBIT.read(env_p, 'orbit'), FIELD.read(env_p, 'field'), self.epoch, self.clock)
         self.dynamics = DynamicsComponent(
-            section(dyn_p, 'spacecraft', DEFAULT_SPACECRAFT),
-            section(dyn_p, 'initial', DEFAULT_INITIAL), self.seed, self.frame_ns,
-            int(dyn_p.get('substeps', 10)), self.clock, _log_into(self.warnings, 'dynamics'),
+            SPACECRAFT.read(dyn_p, 'spacecraft'), INITIAL.read(dyn_p, 'initial'), self.seed,
+            self.frame_ns, dyn['substeps'], self.clock, _log_into(self.warnings, 'dynamics'),
             parse_faults(str(dyn_p.get('faults', ''))))
         #: a due input missing this many frames in a row is dead (not awaited), as in a node
-        self.dead_after = int(env_p.get('dead_after_frames', 3))
+        self.dead_after = common['dead_after_frames']
         #: after a revival, an input is dropped and not awaited for this long (FrameSync)
         self.revive_hold_ns = REVIVE_HOLD_FRAMES * self.frame_ns
-        cmd_s = float(dyn_p.get('command_period_s', 0.0))
-        self.command_ns = seconds_to_ns(cmd_s) if cmd_s > 0 else 0
+        cmd_s = dyn['command_period_s']
+        self.command_ns = seconds_to_ns(cmd_s) if cmd_s else 0
         self.mounts = Mounts()
         #: node name -> its ``node_killed`` time [ns]: it fires no frame from then on
         self.killed_ns = {s.name: seconds_to_ns(float(s.params['killed_at_s'])) for s in specs
@@ -188,6 +192,7 @@ class FrameLoop:
         :class:`EngineError` for what the plain engine cannot run (external sensors).
         ``ideal_estimate``: the controllers get the true state as the estimate (a study's
         perfect-knowledge reference; not a graph mode)."""
+        check_scenario(sc)     # the validator's refusal and message (a ScenarioError)
         external = [k for k, cfg in sc.get('sensors', {}).items() if cfg.get('external')]
         if external:
             raise EngineError(f'the plain engine has no drivers: sensors {", ".join(external)} '
@@ -225,8 +230,8 @@ class FrameLoop:
         entry = registry.get('estimator', p['algorithm'])
         own = param_values(entry.params, spec.params)
         comp = ecomp.build_estimator(
-            entry, p, own, section(spec.params, 'onboard_orbit', ccomp.DEFAULT_ORBIT, False),
-            section(spec.params, 'onboard_field', ccomp.DEFAULT_FIELD, False), self.epoch,
+            entry, p, own, ORBIT.read(spec.params, 'onboard_orbit'),
+            FIELD.read(spec.params, 'onboard_field'), self.epoch,
             self.seed, self.mounts, self.clock, _log_into(self.warnings, spec.name))
         inputs = self._input_specs(entry.inputs, p)
         period = self._period(p['period_s'], 'estimator period_s')
@@ -263,8 +268,7 @@ class FrameLoop:
         own = param_values(entry.params, spec.params)
         ctx = ccomp.controller_context(
             entry, ctx_p, self.epoch, self.seed,
-            section(spec.params, 'onboard_orbit', ccomp.DEFAULT_ORBIT, False),
-            section(spec.params, 'onboard_field', ccomp.DEFAULT_FIELD, False))
+            ORBIT.read(spec.params, 'onboard_orbit'), FIELD.read(spec.params, 'onboard_field'))
         comp = ccomp.ControllerComponent(entry.build(own, ctx), entry.name, ctx, self.mounts,
                                          self.clock)
         inputs = self._input_specs(entry.inputs, ctx_p)
@@ -276,9 +280,9 @@ class FrameLoop:
 
     def _add_manager(self, spec: NodeSpec) -> None:
         p = param_values(MANAGER_PARAMS, spec.params)
-        comp = ManagerComponent(manager_core(p, section(spec.params, 'auto', {}, False),
-                                             live=False),
-                                self.clock, _log_into(self.warnings, spec.name))
+        auto = AUTO_SEQUENCE.read(spec.params, 'auto')
+        comp = ManagerComponent(manager_core(p, auto, live=False), self.clock,
+                                _log_into(self.warnings, spec.name))
         period = self._period(p['period_s'], 'manager period_s')
         ctrl_ns = seconds_to_ns(float(p['controller_period_s']) or p['period_s'])
         inputs = {n: (f'adcs/controllers/{n}/command', 'frame', ctrl_ns) for n in comp.names}

@@ -161,11 +161,6 @@ def parse(text: str) -> List[Fault]:
     return out
 
 
-def to_text(faults: Sequence[Dict[str, Any]]) -> str:
-    """JSON text of validated scenario faults (with their index) for a node parameter."""
-    return json.dumps(list(faults), sort_keys=True)
-
-
 # ---------------------------------------------------------------------- sensors
 class SensorFaults:
     """The faults striking one sensor, applied to its samples.
@@ -278,26 +273,13 @@ INJECT_TOPIC = 'sim/inject_fault'
 
 def check(kind: str, target: str, params: Optional[Dict[str, Any]], sensors: Sequence[str],
           wheels: Sequence[str], magnetorquer: bool) -> Dict[str, Any]:
-    """The parameters of fault ``kind`` striking ``target``, validated with the kind's
-    registry specs and filled with their defaults, as a scenario's ``faults:`` entry is
-    (``ValueError`` with the reason: unknown kind, a target it cannot strike among
-    ``sensors``, ``wheels`` and the magnetorquer axes, a parameter out of range)."""
-    from adcs_nodes import registry
-    entry = registry.get('fault', kind)
-    if NODE in entry.targets:
-        raise ValueError(f'{kind} is a scripted fault only (a scenario\'s faults:); to kill a '
-                         'node of a running graph, kill its process (adcs status shows the '
-                         'pids)')
-    if SENSOR in entry.targets:
-        known = list(sensors)
-    elif WHEEL in entry.targets:
-        known = list(wheels)
-    else:
-        known = list(AXES) if magnetorquer else []
-    if target not in known:
-        raise ValueError(f'{kind} cannot strike {target!r}; it strikes '
-                         f'{", ".join(entry.targets)}: {", ".join(known) or "none here"}')
-    return entry.validate(dict(params or {}))
+    """The parameters of live fault ``kind`` striking ``target`` among ``sensors``,
+    ``wheels`` and the magnetorquer axes, validated and filled as a scenario's fault is
+    (:func:`adcs_nodes.scenario.check_fault`: ``ValueError`` with the reason)."""
+    from adcs_nodes.scenario import check_fault
+    return check_fault(kind, target, params, {
+        SENSOR: list(sensors), WHEEL: list(wheels),
+        MAGNETORQUER: list(AXES) if magnetorquer else []}, scripted=False)
 
 
 def injected(text: str, earliest_ns: int, sensors: Optional[Sequence[str]] = (),

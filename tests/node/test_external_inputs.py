@@ -22,7 +22,9 @@ from sensor_msgs.msg import MagneticField
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core import handshake
 from adcs_nodes.nodes.convert import to_stamp, to_vec3
-from adcs_nodes.nodes.estimator import DEFAULT_FIELD, DEFAULT_ORBIT, EstimatorNode
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
+from adcs_nodes.nodes.estimator import EstimatorNode
 
 S = 10**9
 
@@ -51,7 +53,7 @@ def test_external_samples_are_used_once_at_their_own_stamps(ros_context):
     assert set(node.external) == {'mag'}
     sub = node._subs['/sensors/magnetometer']
     assert sub.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
     cb = node.timing.external_cb('mag')
     _clock(node, 0)                                         # frame 0: initialisation
     stamps = [int(1.3 * S), int(2.9 * S), int(3.4 * S), int(7.3 * S)]   # off the 2 s grid
@@ -87,7 +89,7 @@ def test_bad_external_samples_are_rejected_by_reason(ros_context):
     node = EstimatorNode(context=ros_context, parameter_overrides=[
         Parameter('timing_mode', value='lockstep'), Parameter('period_s', value=2.0),
         Parameter('external_inputs', value=['mag'])])
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
     cb = node.timing.external_cb('mag')
     _clock(node, 100 * S)
     cb(_sample(ref, 0, 0))                                  # zero stamp
@@ -107,7 +109,7 @@ def test_a_starved_external_input_is_named_and_recovers(ros_context):
         Parameter('timing_mode', value='lockstep'), Parameter('period_s', value=2.0),
         Parameter('magnetometer_period_s', value=10.0),
         Parameter('external_inputs', value=['mag'])])
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
     cb = node.timing.external_cb('mag')
     for k in range(16):                                     # 0 .. 30 s: not yet
         _clock(node, 2 * k * S)
@@ -166,7 +168,7 @@ def test_a_live_sample_replaced_before_a_tick_is_superseded(ros_context):
         Parameter('period_s', value=1.0), Parameter('max_sample_age_s', value=1e9),
         Parameter('max_future_s', value=1e9)])
     assert node.timing_mode == 'live'
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
     cb = node.timing.live_cb('mag')
     now = node.get_clock().now().nanoseconds
     cb(_sample(ref, node.epoch_ns, now - 3 * S - node.epoch_ns))

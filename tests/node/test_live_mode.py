@@ -19,7 +19,9 @@ from adcs_msgs.msg import AttitudeState, FilterDiagnostics
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.nodes.convert import stamp_ns, to_stamp, to_vec3
-from adcs_nodes.nodes.estimator import DEFAULT_FIELD, DEFAULT_ORBIT, EstimatorNode
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
+from adcs_nodes.nodes.estimator import EstimatorNode
 
 S = 10**9
 
@@ -54,7 +56,7 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
     sub = node._subs['/sensors/magnetometer']
     assert spin([node, driver], lambda: mag.get_subscription_count() > 0
                 and sub.get_publisher_count() > 0, timeout=30.0)
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
     sent = []
     for k in range(8):
         s = time.time_ns() - 1_234_567 - 97_531 * k       # off-grid wall-clock stamp
@@ -103,7 +105,7 @@ def test_same_node_in_lockstep_mode_gives_exact_frames(ros_context, spin):
     driver.create_subscription(AttitudeState, 'adcs/attitude_estimate', est.append, 100)
     mag = driver.create_publisher(MagneticField, 'sensors/magnetometer', 100)
     assert spin([node, driver], lambda: mag.get_subscription_count() > 0, timeout=30.0)
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
     for k in range(4):
         mag.publish(_sample(ref, node.epoch_ns, node.epoch_ns + 2 * k * S))
     assert spin([node, driver], lambda: len(est) >= 4, timeout=30.0)
@@ -176,7 +178,7 @@ def test_a_late_sample_is_counted_and_never_applied(ros_context):
     node = EstimatorNode(context=ros_context, parameter_overrides=[
         Parameter('period_s', value=0.2), Parameter('max_sample_age_s', value=30.0)])
     assert node.timing_mode == 'live'
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
     cb = node.timing.live_cb('mag')
     cb(_sample(ref, node.epoch_ns, time.time_ns() - 3 * S))       # a good sample ...
     node.timing.live_tick()                                             # ... used at its stamp

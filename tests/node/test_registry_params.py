@@ -44,8 +44,8 @@ def test_estimator_node_parameters_default_to_the_spec(ros_context):
         entry = registry.get('estimator', 'magnetic_filter')
         for p in entry.params:
             assert node.get_parameter(p.name).value == p.default
-            assert schema()['estimator'].variants['magnetic_filter'][p.name].default == \
-                p.default
+            keys = schema()['estimator'].keys({'algorithm': 'magnetic_filter'})
+            assert keys[p.name].default == p.default
         assert all(d.description for n, d in _describe(node).items() if n != 'use_sim_time')
     finally:
         node.destroy_node()

@@ -186,7 +186,7 @@ def test_coil_open_zeroes_one_magnetorquer_axis_and_magnetometer_faults(tmp_path
     ({'at_s': 1.0, 'kind': 'noise_burst', 'target': 'gyro',
       'params': {'std': [5.0, 0.0, 0.0]}}, 'std'),
     ({'at_s': 1.0, 'kind': 'coil_open', 'target': 'z'}, 'none in this scenario'),
-    ({'at_s': 1.0, 'kind': 'dropout'}, 'needs at_s, kind, target'),
+    ({'at_s': 1.0, 'kind': 'dropout'}, 'faults[0].target: missing required key'),
 ])
 def test_bad_faults_are_refused_with_the_key(tmp_path, fault, why):
     with pytest.raises(ScenarioError, match='faults') as exc:

@@ -116,31 +116,13 @@ def _covariance_to_body(c: np.ndarray, q_body_sensor: np.ndarray) -> Optional[np
 
 # ---------------------------------------------------------------------- flat parameters
 def param_value(spec: Any, params: Dict[str, Any]) -> Any:
-    """The value of registry parameter ``spec`` in the flat node parameters ``params``, as the
-    node declares it (:func:`adcs_nodes.nodes.params.declare`): the given value, integers
-    promoted to floats where a float is due, validated; else the default."""
+    """The value of parameter ``spec`` in the flat node parameters ``params``, validated as
+    the node declares it (:meth:`adcs_nodes.core.spec.Param.from_ros`); else the default."""
     if spec.name not in params or params[spec.name] is None:
-        return list(spec.default) if spec.type.endswith('[]') else spec.default
-    given = params[spec.name]
-    if spec.type == 'float' and isinstance(given, int) and not isinstance(given, bool):
-        given = float(given)
-    if spec.type == 'float[]' and isinstance(given, (list, tuple)):
-        given = [float(v) if isinstance(v, int) and not isinstance(v, bool) else v
-                 for v in given]
-    return spec.validate(list(given) if isinstance(given, tuple) else given)
+        return spec.default if spec.default is None else spec.validate(spec.default)
+    return spec.from_ros(params[spec.name])
 
 
 def param_values(specs: Sequence[Any], params: Dict[str, Any]) -> Dict[str, Any]:
     """``{name: value}`` of every spec (:func:`param_value`)."""
     return {s.name: param_value(s, params) for s in specs}
-
-
-def section(params: Dict[str, Any], prefix: str, defaults: Dict[str, Any],
-            merge: bool = True) -> Dict[str, Any]:
-    """The ``prefix.*`` keys of the flat parameters as a dict, as a node's ``section`` reads
-    them: merged over ``defaults``, or (``merge=False``) ``defaults`` only when none is given."""
-    n = len(prefix) + 1
-    given = {k[n:]: v for k, v in params.items() if k.startswith(prefix + '.')}
-    if merge:
-        return {**defaults, **given}
-    return given if given else dict(defaults)

@@ -40,13 +40,15 @@ from adcs_nodes.core.wheel_health import WheelHealth
 from adcs_nodes.entries import wheel_momentum
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_vec3, vec3
 from adcs_nodes.nodes.messages import make
+from adcs_nodes.core.spec import all_or_none
 from adcs_nodes.registry import Param
 
 
-#: Onboard models of a node started alone (paper 000's orbit, a dipole field).
-DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
-                 'raan_deg': 0.0, 'arg_latitude0_deg': 0.0}
-DEFAULT_FIELD = {'model': 'dipole'}
+def _triples(values):
+    if len(values) % 3:
+        raise ValueError(f'expected 3 values per wheel, got {len(values)}')
+    return values
+
 
 #: The spacecraft context every controller node knows (defaults: paper 000's satellite).
 CONTEXT_PARAMS = (
@@ -55,14 +57,13 @@ CONTEXT_PARAMS = (
     Param('controller', 'str', 'magnetic', '-', 'registered controller this node runs',
           read_only=True),
     Param('period_s', 'float', 2.0, 's', 'control period', positive=True, read_only=True),
-    Param('inertia_kgm2', 'float[]', [118.0, 118.0, 19.6], 'kg m^2',
-          "the controller's own inertia: 3 diagonal values or 9 (row-major)",
-          read_only=True),
+    Param('inertia_kgm2', 'matrix3', [118.0, 118.0, 19.6], 'kg m^2',
+          "the controller's own inertia", read_only=True),
     Param('max_dipole_Am2', 'float[]', [40.0, 40.0, 40.0], 'A m^2',
           'magnetorquer limits per body axis (all zero: no magnetorquer)', length=3, min=0.0,
-          read_only=True),
+          read_only=True, check=all_or_none),
     Param('wheel_axes_body', 'float[]', [], '-', 'wheel spin axes, body axes, 3 per wheel',
-          read_only=True),
+          read_only=True, check=_triples),
     Param('wheel_max_torque_Nm', 'float[]', [], 'N m', 'wheel motor torque limits',
           positive=True, read_only=True),
     Param('wheel_max_momentum_Nms', 'float[]', [], 'N m s', 'wheel momentum limits',

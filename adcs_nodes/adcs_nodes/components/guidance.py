@@ -8,6 +8,7 @@ its LVLH 3-1-2 Euler angles (:mod:`adcs_nodes.core.guidance_profiles`).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from typing import Any, Dict, Optional
 
 import numpy as np
@@ -15,31 +16,19 @@ from std_msgs.msg import Header
 
 from adcs_msgs.msg import AttitudeTarget
 from adcs_nodes.components.base import FrameClock
-from adcs_nodes.core.guidance import FRAMES, SEGMENT_TYPES, TargetSample, guidance_from_params
+from adcs_nodes.core.guidance import FRAMES, TargetSample, guidance_from_params
 from adcs_nodes.core.guidance_profiles import profile_from_dicts
 from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.nodes.convert import to_quat, to_vec3
 from adcs_nodes.nodes.messages import make
 from adcs_nodes.registry import Param
+from adcs_nodes.spec import HOLD, PROFILE
 
 PARAMS = (
     Param('period_s', 'float', 2.0, 's', 'publication period', positive=True, read_only=True),
     Param('frame', 'str', 'orbit', '-', 'frame of the profile attitudes', choices=FRAMES,
           read_only=True),
-    Param('profile_t_s', 'float[]', [0.0], 's', 'start time of each segment', min=0.0,
-          read_only=True),
-    Param('profile_type', 'str[]', ['hold'], '-', 'type of each segment: '
-          + ', '.join(SEGMENT_TYPES), read_only=True),
-    Param('profile_q_xyzw', 'float[]', [0.0, 0.0, 0.0, 1.0], '-', 'attitude of each segment '
-          '(4 values each, scalar last)', min=-1.0, max=1.0, read_only=True),
-    Param('profile_duration_s', 'float[]', [0.0], 's', 'slew duration of each segment',
-          min=0.0, read_only=True),
-    Param('profile_axis_body', 'float[]', [0.0, 0.0, 1.0], '-', 'tracking axis of each '
-          'segment (3 values each)', read_only=True),
-    Param('profile_amplitude_deg', 'float[]', [0.0], 'deg', 'tracking amplitude of each '
-          'segment', min=0.0, max=180.0, read_only=True),
-    Param('profile_period_s', 'float[]', [0.0], 's', 'tracking period of each segment',
-          min=0.0, read_only=True),
+    *replace(PROFILE, read_only=True).columns('profile_', HOLD),
     Param('controllers', 'str[]', [''], '-', 'controllers a slew goal may name (the run\'s)',
           read_only=True),
     Param('euler312_profile', 'str', '', '-', "paper 001 profile as JSON: a list of "

@@ -7,6 +7,7 @@ The switching, schedule, automatic sequence and fallback rules are the core's
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any, Dict, List, Optional, Tuple
 
 from adcs_msgs.msg import ActuatorCommand
@@ -16,10 +17,12 @@ from adcs_nodes.core.control import Command
 from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.core.manager import AutoSequence, ControllerManagerCore
 from adcs_nodes.nodes.convert import stamp_ns
+from adcs_nodes.core.spec import all_or_none
 from adcs_nodes.registry import Param
+from adcs_nodes.spec import SCHEDULE
 
-#: The manager's parameters (list defaults with one placeholder element: an empty list has no
-#: type in a ROS parameter file).
+#: The manager's parameters (some list defaults with one placeholder element, from when an
+#: empty list could not be given in a ROS parameter file).
 MANAGER_PARAMS = (
     Param('controllers', 'str[]', ['bdot'], '-', 'controllers whose commands are forwarded '
           '(registered names; adcs/controllers/<name>/command)', read_only=True),
@@ -32,16 +35,13 @@ MANAGER_PARAMS = (
           '(0: period_s)', min=0.0, read_only=True),
     Param('estimator_period_s', 'float', 0.0, 's', 'period of the watched estimate '
           '(0: not watched)', min=0.0, read_only=True),
-    Param('schedule_t_s', 'float[]', [-1.0], 's', 'scripted switch times ([-1]: none)',
-          read_only=True),
-    Param('schedule_controller', 'str[]', [''], '-', 'scripted switch targets, one per time',
-          read_only=True),
-    Param('max_wheel_torque_Nm', 'float[]', [-1.0], 'N m', 'wheel torque limits '
-          '([-1]: no wheels)', read_only=True),
+    *replace(SCHEDULE, read_only=True).columns('schedule_'),
+    Param('max_wheel_torque_Nm', 'float[]', [], 'N m', 'wheel torque limits (none: no '
+          'wheels)', positive=True, read_only=True),
     Param('estimate_users', 'str[]', ['*'], '-', "controllers that need the estimate "
           "('*': all)", read_only=True),
     Param('max_dipole_Am2', 'float[]', [40.0, 40.0, 40.0], 'A m^2', 'magnetorquer limits per '
-          'body axis', length=3, min=0.0, read_only=True),
+          'body axis', length=3, min=0.0, read_only=True, check=all_or_none),
     Param('max_torque_Nm', 'float[]', [0.0, 0.0, 0.0], 'N m', 'ideal body-torque limits per '
           'body axis', length=3, min=0.0, read_only=True),
     Param('stale_after_s', 'float', -1.0, 's', 'a command older than this is stale (-1: '

@@ -85,6 +85,7 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core.kernels import jit
 from adcs_nodes.core.orbit import OrbitModel, _finite, _utc, gmst
+from adcs_nodes.core.spec import Param, Section
 
 R_REF_M = 6371200.0
 """Geomagnetic reference radius [m] (IGRF)."""
@@ -459,11 +460,24 @@ def _igrf_table(max_degree: int) -> _IgrfTable:
 
 
 # ----------------------------------------------------------------------------- factory
-_FIELD_KEYS = {
-    'dipole': {'b0_T', 'r_ref_m', 'pole_colatitude_deg', 'pole_longitude_deg'},
-    'igrf_dipole': {'coefficient_date'},
-    'igrf': {'max_degree'},
-}
+#: The ``field`` section (a scenario's, a node's ``field.*`` and ``onboard_field.*``).
+FIELD = Section('field', (
+    Param('model', 'str', 'dipole', '-', 'geomagnetic model',
+          choices=('dipole', 'igrf_dipole', 'igrf')),
+), 'the geomagnetic field', selector='model', variants={
+    'dipole': (
+        Param('b0_T', 'float', None, 'T', 'dipole strength at the reference radius',
+              positive=True, max=1e-3),
+        Param('r_ref_m', 'float', None, 'm', 'reference radius of b0_T', positive=True,
+              max=1e9),
+        Param('pole_colatitude_deg', 'float', None, 'deg', 'geographic colatitude of the '
+              'dipole axis', min=0.0, max=180.0),
+        Param('pole_longitude_deg', 'float', None, 'deg', 'geographic east longitude of the '
+              'axis', min=-360.0, max=360.0)),
+    'igrf_dipole': (Param('coefficient_date', 'time', None, '-', 'date of the IGRF degree-1 '
+                          'coefficients (ISO 8601; default: the epoch)'),),
+    'igrf': (Param('max_degree', 'int', None, '-', 'truncation degree of the IGRF expansion',
+                   min=1, max=13),)})
 
 
 def make_field(cfg: Mapping, epoch: datetime) -> GeomagneticField:
@@ -486,12 +500,8 @@ def make_field(cfg: Mapping, epoch: datetime) -> GeomagneticField:
     """
     if not isinstance(cfg, Mapping) or 'model' not in cfg:
         raise ValueError("field config must be a mapping with a 'model' key")
+    cfg = FIELD.validate(cfg)
     model = cfg['model']
-    if model not in _FIELD_KEYS:
-        raise ValueError(f'unknown field model {model!r}; expected one of {sorted(_FIELD_KEYS)}')
-    unknown = sorted(set(cfg) - _FIELD_KEYS[model] - {'model'})
-    if unknown:
-        raise ValueError(f'field config of model {model!r} has unknown key(s) {unknown}')
     if model == 'igrf':
         return IgrfField(epoch, max_degree=cfg.get('max_degree', 13))
     if model == 'igrf_dipole':
@@ -505,5 +515,5 @@ def make_field(cfg: Mapping, epoch: datetime) -> GeomagneticField:
     kwargs = {k: cfg[k] for k in ('b0_T', 'r_ref_m') if k in cfg}
     for key in ('pole_colatitude_deg', 'pole_longitude_deg'):
         if key in cfg:
-            kwargs[key.replace('_deg', '_rad')] = math.radians(_finite(cfg[key], key))
+            kwargs[key.replace('_deg', '_rad')] = math.radians(cfg[key])
     return DipoleField(epoch, **kwargs)

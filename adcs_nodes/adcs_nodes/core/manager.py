@@ -78,6 +78,7 @@ from numpy.typing import ArrayLike
 from adcs_nodes.core import attitude
 from adcs_nodes.core.control import Command, Estimate, Target, limits_vector, positive
 from adcs_nodes.core.kernels import jit
+from adcs_nodes.core.spec import Param, Section
 
 AUTO = 'auto'
 """Pseudo-controller name that (re)starts the automatic mode sequence."""
@@ -134,6 +135,29 @@ def _count(value, name: str) -> int:
     if isinstance(value, bool) or int(value) != value or value < 1:
         raise ValueError(f'{name} must be an integer >= 1, got {value!r}')
     return int(value)
+
+
+#: The ``manager.auto`` section (a node's ``auto.*``): the automatic mode sequence.
+AUTO_SEQUENCE = Section('auto', (
+    Param('detumble', 'str', 'bdot', '-', 'controller of the detumble mode'),
+    Param('acquire', 'str', 'magnetic', '-', 'controller of the acquire mode'),
+    Param('rate_enter_deg_s', 'float', 0.5, 'deg/s', 'detumble -> acquire below this rate',
+          positive=True),
+    Param('rate_exit_deg_s', 'float', 1.0, 'deg/s', 'acquire -> detumble above this rate',
+          positive=True),
+    Param('confirm_frames', 'int', 10, '-', 'frames the forward condition must hold', min=1,
+          max=1000000),
+    Param('exit_confirm_frames', 'int', 1, '-', 'frames the back condition must hold', min=1,
+          max=1000000),
+    Param('rate_frame', 'str', 'eci', '-', 'rate compared: w.r.t. ECI or the orbit frame',
+          choices=('eci', 'orbit')),
+    Param('point', 'str', None, '-', 'controller of the optional point mode (after acquire, '
+          'once the attitude error is below angle_enter_deg)'),
+    Param('angle_enter_deg', 'float', None, 'deg', 'acquire -> point below this attitude '
+          'error to the orbital frame', positive=True, max=180.0),
+    Param('angle_exit_deg', 'float', None, 'deg', 'point -> acquire above this error '
+          '(> angle_enter_deg)', positive=True, max=180.0),
+), 'automatic mode sequence detumble -> acquire [-> point]', optional=True)
 
 
 @dataclass(frozen=True)
@@ -204,18 +228,9 @@ class AutoSequence:
 
     @classmethod
     def from_dict(cls, config: Mapping) -> 'AutoSequence':
-        """Build from a scenario mapping with degree units.
-
-        Keys: ``detumble``, ``acquire``, ``point``, ``rate_enter_deg_s``, ``rate_exit_deg_s``,
-        ``confirm_frames``, ``exit_confirm_frames``, ``angle_enter_deg``, ``angle_exit_deg``,
-        ``rate_frame``; all optional. Unknown keys raise ``ValueError``.
-        """
-        known = {'detumble', 'acquire', 'point', 'rate_enter_deg_s', 'rate_exit_deg_s',
-                 'confirm_frames', 'exit_confirm_frames', 'angle_enter_deg', 'angle_exit_deg',
-                 'rate_frame'}
-        unknown = sorted(set(config) - known)
-        if unknown:
-            raise ValueError(f'auto sequence: unknown keys {unknown}; known: {sorted(known)}')
+        """Build from a scenario mapping with degree units (:data:`AUTO_SEQUENCE`; ValueError
+        naming an unknown key or a value out of range)."""
+        config = AUTO_SEQUENCE.validate(config)
         kw = {k: config[k] for k in ('detumble', 'acquire', 'point', 'confirm_frames',
                                      'exit_confirm_frames', 'rate_frame') if k in config}
         for key, field_name in (('rate_enter_deg_s', 'rate_enter_rad_s'),

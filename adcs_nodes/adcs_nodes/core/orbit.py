@@ -60,6 +60,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.spec import REQUIRED, Param, Section
 
 MU_EARTH = 3.986004418e14
 """Earth gravitational parameter [m^3/s^2] (WGS 84 / EGM96)."""
@@ -435,10 +436,22 @@ def _check_tle_line(line: str, number: int) -> str:
 
 
 # ----------------------------------------------------------------------------- factory
-_ORBIT_KEYS = {
-    'circular': ({'type', 'altitude_km', 'inclination_deg'}, {'raan_deg', 'arg_latitude0_deg'}),
-    'tle': ({'type', 'line1', 'line2'}, set()),
-}
+#: The ``orbit`` section (a scenario's, a node's ``orbit.*`` and ``onboard_orbit.*``).
+ORBIT = Section('orbit', (
+    Param('type', 'str', 'circular', '-', 'orbit model', choices=('circular', 'tle')),
+), 'the orbit', selector='type', variants={
+    'circular': (
+        Param('altitude_km', 'float', REQUIRED, 'km', 'altitude above the reference radius '
+              '(100 km: the Karman line; 400,000 km: about the Moon)', min=100.0,
+              max=400_000.0),
+        Param('inclination_deg', 'float', REQUIRED, 'deg', 'inclination', min=0.0, max=180.0),
+        Param('raan_deg', 'float', 0.0, 'deg', 'right ascension of the ascending node',
+              min=-360.0, max=360.0),
+        Param('arg_latitude0_deg', 'float', 0.0, 'deg', 'argument of latitude at the epoch',
+              min=-360.0, max=360.0)),
+    'tle': (Param('line1', 'str', REQUIRED, '-', 'TLE line 1'),
+            Param('line2', 'str', REQUIRED, '-', 'TLE line 2'))},
+    standalone={'altitude_km': 690.0, 'inclination_deg': 98.0})   # paper 000's orbit
 
 
 def make_orbit(cfg: Mapping, epoch: datetime) -> CircularOrbit | Sgp4Orbit:
@@ -455,25 +468,14 @@ def make_orbit(cfg: Mapping, epoch: datetime) -> CircularOrbit | Sgp4Orbit:
     Raises
     ------
     ValueError
-        On an unknown type, a missing or unknown key (named in the message), or a bad value.
+        On an unknown type, a missing or unknown key, or a value outside :data:`ORBIT`
+        (named in the message).
     """
     if not isinstance(cfg, Mapping) or 'type' not in cfg:
         raise ValueError("orbit config must be a mapping with a 'type' key")
-    kind = cfg['type']
-    if kind not in _ORBIT_KEYS:
-        raise ValueError(f'unknown orbit type {kind!r}; expected one of {sorted(_ORBIT_KEYS)}')
-    required, optional = _ORBIT_KEYS[kind]
-    missing = sorted(required - set(cfg))
-    if missing:
-        raise ValueError(f'orbit config of type {kind!r} is missing key(s) {missing}')
-    unknown = sorted(set(cfg) - required - optional)
-    if unknown:
-        raise ValueError(f'orbit config of type {kind!r} has unknown key(s) {unknown}')
-    if kind == 'tle':
+    cfg = ORBIT.validate(cfg)
+    if cfg['type'] == 'tle':
         return Sgp4Orbit(cfg['line1'], cfg['line2'], epoch=epoch)
-    return CircularOrbit(_finite(cfg['altitude_km'], 'altitude_km') * 1e3,
-                         math.radians(_finite(cfg['inclination_deg'], 'inclination_deg')),
-                         math.radians(_finite(cfg.get('raan_deg', 0.0), 'raan_deg')),
-                         math.radians(_finite(cfg.get('arg_latitude0_deg', 0.0),
-                                              'arg_latitude0_deg')),
+    return CircularOrbit(cfg['altitude_km'] * 1e3, math.radians(cfg['inclination_deg']),
+                         math.radians(cfg['raan_deg']), math.radians(cfg['arg_latitude0_deg']),
                          epoch=epoch)

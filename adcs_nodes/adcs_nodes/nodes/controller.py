@@ -28,8 +28,10 @@ from adcs_msgs.msg import ActuatorCommand
 from adcs_nodes import registry
 from adcs_nodes.inputs import lockstep_inputs as node_inputs
 from adcs_nodes.components.base import FrameClock
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
 from adcs_nodes.components.controller import (  # noqa: F401 (the node's names, re-exported)
-    CONTEXT_PARAMS, DEFAULT_FIELD, DEFAULT_ORBIT, ControllerComponent, command_msg,
+    CONTEXT_PARAMS, ControllerComponent, command_msg,
     controller_context, estimate_from_msg, inertia_matrix, target_from_msg)
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
@@ -69,8 +71,7 @@ class ControllerNode(ManagedLockstepNode):
         self.add_ready_check(lambda: self.mounts.missing(ctx_p['expected_mounts']))
         self.ctx = controller_context(
             self.entry, ctx_p, self.epoch, self.seed,
-            self.section('onboard_orbit', DEFAULT_ORBIT, merge=False),
-            self.section('onboard_field', DEFAULT_FIELD, merge=False))
+            self.section('onboard_orbit', ORBIT), self.section('onboard_field', FIELD))
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
         self.core = self.entry.build(own, self.ctx)

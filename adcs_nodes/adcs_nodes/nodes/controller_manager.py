@@ -33,6 +33,7 @@ from adcs_msgs.msg import ActuatorCommand, AttitudeState, ControllerStatus
 from adcs_msgs.srv import ListControllers, SwitchController
 from adcs_nodes.components.base import FrameClock
 from adcs_nodes.components.manager import MANAGER_PARAMS, ManagerComponent, manager_core
+from adcs_nodes.core.manager import AUTO_SEQUENCE
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.actuator_topics import ActuatorTopics, wheel_names_for
@@ -55,7 +56,7 @@ class ControllerManagerNode(ManagedLockstepNode):
     def configure(self) -> None:
         """Parameters, manager core, endpoints and services (lifecycle configure)."""
         p = node_params.declare_all(self, MANAGER_PARAMS)
-        auto = self.section('auto', {}, merge=False)     # (specs: params.AUTO_PARAMS)
+        auto = self.section('auto', AUTO_SEQUENCE)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
         self.core = manager_core(p, auto, self.live, sample_timing=self.live or self.real_time)

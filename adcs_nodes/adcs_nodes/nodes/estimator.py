@@ -28,12 +28,13 @@ from adcs_msgs.msg import AttitudeState, FilterDiagnostics
 from adcs_nodes import registry
 from adcs_nodes.inputs import lockstep_inputs as node_inputs
 from adcs_nodes.components.base import FrameClock
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
 from adcs_nodes.components.estimator import (  # noqa: F401 (the node's names, re-exported)
     CONTEXT_PARAMS, build_estimator)
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.adapter import node_log
-from adcs_nodes.nodes.controller import DEFAULT_FIELD, DEFAULT_ORBIT
 from adcs_nodes.nodes.convert import quat
 from adcs_nodes.nodes.managed import ManagedLockstepNode
 from adcs_nodes.nodes.tf import MountTable, TfPublisher, estimate_transforms
@@ -55,8 +56,8 @@ class EstimatorNode(ManagedLockstepNode):
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
         self.add_ready_check(lambda: self.mounts.missing(p['expected_mounts']))
         self.tf_pub = TfPublisher(self)   # /tf: eci -> body_estimate
-        orbit = self.section('onboard_orbit', DEFAULT_ORBIT, merge=False)
-        field = self.section('onboard_field', DEFAULT_FIELD, merge=False)
+        orbit = self.section('onboard_orbit', ORBIT)
+        field = self.section('onboard_field', FIELD)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
         self.component = build_estimator(self.entry, p, own, orbit, field, self.epoch,

@@ -77,7 +77,7 @@ class LockstepNode(node_params.SpecParameters, Node):
         self.epoch = parse_epoch(self.param('epoch', DEFAULT_EPOCH))
         self.epoch_ns = epoch_to_ns(self.epoch)
         self.frame_ns = seconds_to_ns(self.param('frame_period_s', 1.0))
-        self.timeout_s = float(self.param('timeout_s', 5.0))
+        self.timeout_s = float(self.param('timeout_s', 5.0)) * self.param('timeout_factor', 1.0)
         self.seed = int(self.param('seed', 0))
         self.real_time = bool(self.param('real_time', False))
         self.dead_after = self.param('dead_after_frames', 3)
@@ -132,21 +132,18 @@ class LockstepNode(node_params.SpecParameters, Node):
         doc = doc or getattr(self, 'PARAM_DOCS', {}).get(name, '')
         if spec is None:    # (a plugin's parameter: typed from its default)
             spec = node_params.infer(name, default, doc or name.replace('_', ' '))
-        if name in getattr(self, '_adcs_specs', {}):
-            value = self.get_parameter(name).value
-            return list(value) if spec.type.endswith('[]') else value
-        return node_params.declare(self, spec)
+        if name in getattr(self, '_adcs_specs', {}):       # (a second read)
+            value = self._parameters[name].value
+        else:
+            value = node_params.declare(self, spec)
+        if value is None:                                  # (an optional one not given)
+            return default
+        return list(value) if spec.type.endswith('[]') else value
 
-    def section(self, prefix: str, defaults: Dict[str, Any], merge: bool = True,
-                docs: Optional[Dict[str, str]] = None) -> Dict[str, Any]:
-        """Parameters ``prefix.*`` as a dict, each declared from its spec
-        (:func:`params.declare_section`). With ``merge`` the given keys override
-        ``defaults``; without it ``defaults`` are used only when no key is given (a section
-        that selects its own variant). ``docs`` is not used."""
-        given = node_params.declare_section(self, prefix)
-        if merge:
-            return {**defaults, **given}
-        return given if given else dict(defaults)
+    def section(self, prefix: str, spec: Any) -> Dict[str, Any]:
+        """Parameters ``prefix.*`` as the validated values of section ``spec`` (for model
+        factories; :func:`adcs_nodes.nodes.params.declare_section`)."""
+        return node_params.declare_section(self, prefix, spec)
 
     def apply_parameters(self) -> None:
         """At a frame boundary: apply run-time parameter changes (managed nodes)."""

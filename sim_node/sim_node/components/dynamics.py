@@ -52,9 +52,10 @@ class DynamicsComponent:
         self.spacecraft = spacecraft_from_config(
             spacecraft_cfg, seed=derive_seed(seed, 'dynamics/disturbance'))
         self.initial_cfg = initial_cfg
-        self.wheel_names = list(spacecraft_cfg.get('wheel_names', [])) or [
+        wheels = spacecraft_cfg.get('wheels') or []
+        self.wheel_names = [w['name'] for w in wheels] or [
             f'wheel{i}' for i in range(self.spacecraft.n_wheels)]
-        self.wheel_h0 = spacecraft_cfg.get('wheel_h0_Nms')
+        self.wheel_h0 = [w['h0_Nms'] for w in wheels] or None
         self.frame_ns = int(frame_ns)
         self.substeps = int(substeps)
         self.clock = clock

@@ -18,11 +18,6 @@ from adcs_nodes.core.orbit import make_orbit, q_eci_ecef
 from adcs_nodes.nodes.convert import to_quat, to_vec3
 from adcs_nodes.nodes.messages import make
 
-#: Defaults when run alone: paper 000's 690 km, 98 deg circular orbit and a tilted dipole.
-DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
-                 'raan_deg': 0.0, 'arg_latitude0_deg': 0.0}
-DEFAULT_FIELD = {'model': 'dipole'}
-
 
 class EnvironmentComponent:
     """Orbit and field of the simulated world (truth models)."""

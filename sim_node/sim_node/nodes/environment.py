@@ -18,28 +18,25 @@ from rosgraph_msgs.msg import Clock
 
 from adcs_msgs.msg import Environment
 from adcs_nodes.components.base import FrameClock
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.convert import quat, stamp_ns
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 from adcs_nodes.nodes.tf import TfPublisher, earth_transforms
-from sim_node.components.environment import (  # noqa: F401 (re-exported)
-    DEFAULT_FIELD, DEFAULT_ORBIT, EnvironmentComponent)
+from sim_node.components.environment import EnvironmentComponent
 
 
 class EnvironmentNode(LockstepNode):
     """Publishes the orbit and field at each ``/clock`` tick (see module docstring)."""
 
     SIMULATED_WORLD = True      # the simulator: lockstep only
-    #: This node's own parameters: the ``orbit.*`` and ``field.*`` sections (the common ones:
-    #: ``LockstepNode``); read-only, as the whole simulated world.
-    SECTION_PARAMS = {'orbit': node_params.ORBIT_PARAMS, 'field': node_params.FIELD_PARAMS}
 
     def __init__(self, name: str = 'environment', **kwargs) -> None:
         super().__init__(name, **kwargs)
         self.component = EnvironmentComponent(
-            self.section('orbit', DEFAULT_ORBIT, merge=False),
-            self.section('field', DEFAULT_FIELD, merge=False), self.epoch,
+            self.section('orbit', ORBIT), self.section('field', FIELD), self.epoch,
             FrameClock(self.epoch_ns))
         node_params.refuse_unknown(self)
         node_params.install_validator(self)

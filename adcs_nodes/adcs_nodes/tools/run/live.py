@@ -268,33 +268,13 @@ def check_fault(kind: str, target: str, params: Dict, at_s: Optional[float],
     """The fault's parameters validated with its registry specs, its target against the
     run's scenario (``sc``: sensors, wheels, magnetorquer), ``at_s`` inside the run; LiveError
     with the reason (``adcs fault`` exits 2), as the scenario validator checks a scripted one
-    (``sim_node.faults.check`` is the receivers' same check)."""
-    from adcs_nodes import registry
+    (:func:`adcs_nodes.scenario.check_fault`: the receivers' and the validator's check)."""
+    from adcs_nodes.scenario import check_fault, fault_targets
     try:
-        entry = registry.get('fault', kind)
+        params = check_fault(kind, target, params, fault_targets(sc) if sc else {
+            'sensor': [target], 'wheel': [target], 'magnetorquer': [target]}, scripted=False)
     except ValueError as exc:
-        raise LiveError(str(exc)) from None
-    craft = sc.get('spacecraft') or {}
-    if 'node' in entry.targets:
-        raise LiveError(f'{kind} is a scripted fault only (a scenario\'s faults:); to kill a '
-                        'node of a running graph, kill its process (adcs status shows the pids)')
-    if 'sensor' in entry.targets:
-        known = [k for k, cfg in (sc.get('sensors') or {}).items()
-                 if not (isinstance(cfg, dict) and cfg.get('external'))]
-        what = 'simulated sensors'
-    elif 'wheel' in entry.targets:
-        known = [w.get('name') for w in craft.get('wheels') or [] if isinstance(w, dict)]
-        what = 'wheels'
-    else:
-        known = ['x', 'y', 'z'] if 'magnetorquer' in craft else []
-        what = 'magnetorquer axes'
-    if sc and target not in known:
-        raise LiveError(f'{kind} cannot strike {target!r}: the run\'s {what} are '
-                        f'{", ".join(known) or "none"}')
-    try:
-        params = entry.validate(params)
-    except ValueError as exc:
-        raise LiveError(f'{kind} parameters: {exc}') from None
+        raise LiveError(getattr(exc, 'why', str(exc))) from None
     if at_s is not None:
         duration = float(sc.get('duration_s') or math.inf)
         if not (math.isfinite(at_s) and 0.0 <= at_s <= duration):
