@@ -162,43 +162,28 @@ class _Map(dict):
 
 
 def _check_expansion(root) -> None:
-    """Raise ``ScenarioError`` if the YAML node graph expands to more than ``MAX_NODES``.
-
-    Aliases make the composed graph a DAG: the expanded size of a node is computed once per
-    node (memoised, iterative: no recursion limit), so the check costs the size of the text.
-    """
+    """``ScenarioError`` if the YAML node graph (a DAG of aliases) expands to more than
+    ``MAX_NODES`` nodes or contains itself; each node's size is counted once."""
     size: Dict[int, int] = {}
-    open_nodes = set()
-    stack = [(root, False)]
-    while stack:
-        node, children_done = stack.pop()
+    inside = set()
+
+    def count(node) -> int:
         if id(node) in size:
-            continue
-        if isinstance(node, yaml.ScalarNode):
-            size[id(node)] = 1
-            continue
-        kids = ([n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode)
-                else list(node.value))
-        if children_done:
-            open_nodes.discard(id(node))
-            total = 1 + sum(size[id(k)] for k in kids)
-            if total > MAX_NODES:
-                raise ScenarioError(
-                    f'line {node.start_mark.line + 1}: this value expands to more than '
-                    f'{MAX_NODES} YAML nodes (aliases of aliases?)')
-            size[id(node)] = total
-            continue
-        if id(node) in open_nodes:
-            raise ScenarioError(f'line {node.start_mark.line + 1}: a value that contains '
-                                'itself (recursive alias)')
-        open_nodes.add(id(node))
-        stack.append((node, True))
-        for kid in kids:
-            if id(kid) in open_nodes:
-                raise ScenarioError(f'line {kid.start_mark.line + 1}: a value that contains '
-                                    'itself (recursive alias)')
-            if id(kid) not in size:
-                stack.append((kid, False))
+            return size[id(node)]
+        line = node.start_mark.line + 1
+        if id(node) in inside:
+            raise ScenarioError(f'line {line}: a value that contains itself (recursive alias)')
+        inside.add(id(node))
+        kids = [] if isinstance(node, yaml.ScalarNode) else (
+            [n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode)
+            else node.value)
+        size[id(node)] = total = 1 + sum(count(k) for k in kids)
+        inside.discard(id(node))
+        if total > MAX_NODES:
+            raise ScenarioError(f'line {line}: this value expands to more than {MAX_NODES} '
+                                'YAML nodes (aliases of aliases?)')
+        return total
+    count(root)
 
 
 def _construct_mapping(loader, node, deep=False):
