@@ -451,13 +451,8 @@ class _NoAliasDumper(yaml.SafeDumper):
 
 
 def params_file_text(nodes: List[NodeSpec]) -> str:
-    """ROS 2 parameter file (``--params-file``) for every node of the graph.
-
-    An empty list is left out: it has no type in a parameter file, and rclpy refuses to
-    declare a typed array from it (``PARAMETER_NOT_SET``: the mpi controller's unset
-    ``model_inertia_kgm2`` failed every one-process-per-node run of demo_mission). The node
-    then declares the parameter's default, which is the empty list wherever an empty list is
-    a valid value (the scenario checks refuse it elsewhere)."""
+    """ROS 2 parameter file (``--params-file``) for every node of the graph (an empty list,
+    untyped in a parameter file, is left out: the node's default applies)."""
     doc = {f'/{n.name}': {'ros__parameters': _nest({k: v for k, v in n.params.items()
                                                     if not (isinstance(v, list) and not v)})}
            for n in nodes}

@@ -1,23 +1,14 @@
-"""The registry: every controller, estimator algorithm and sensor model, declared once.
+"""The registry: every controller, estimator algorithm, sensor model and fault kind, declared
+once as an :class:`Entry` (name, core class, :class:`Param` specs, inputs, actuators), and the
+world's scenario sections (:func:`register_section`). The node declarations
+(:mod:`adcs_nodes.nodes.params`), the scenario schema (:mod:`adcs_nodes.scenario`), the graph
+(:mod:`adcs_nodes.graph`), ``adcs list`` and ``adcs schema`` are generated from them (compare
+ros2_controllers' generated parameters and pluginlib registration).
 
-An :class:`Entry` names a component, its core class, a typed parameter spec (:class:`Param`:
-type, default, unit, range or choices, description, read-only), the inputs it needs and the
-actuators it commands. Everything else is generated from it, with no per-name code anywhere
-else (compare ros2_controllers' generated parameters and pluginlib registration):
-
-* node parameter declarations with ``ParameterDescriptor``s, unknown-parameter refusal and the
-  run-time set-parameters validation (:mod:`adcs_nodes.nodes.params`);
-* the scenario schema, its validation and ``docs/scenarios.md`` (:mod:`adcs_nodes.scenario`);
-* the graph builder's nodes and topics (:mod:`adcs_nodes.graph`);
-* ``adcs list`` and ``adcs schema``.
-
-Built-in entries live in :mod:`adcs_nodes.entries` (controllers, estimators) and
-``sim_node.entries`` (sensor models; loaded when the simulator is installed, the flight
-software never imports it). More come from plugins: a module or ``.py`` file named in a
-scenario's ``plugins`` list (or the node parameter ``plugins``), or an installed package's
-entry point in group ``adcs.registry``. A plugin module calls :func:`register`.
-
-Pure Python; no rclpy.
+Built-in entries: :mod:`adcs_nodes.entries` and ``sim_node.entries`` (loaded when the simulator
+is installed; the flight software never imports it). Plugins: a module or ``.py`` file named
+in a scenario's ``plugins`` (or the node parameter ``plugins``), or an entry point in group
+``adcs.registry``; a plugin module calls :func:`register`. Pure Python; no rclpy.
 """
 from __future__ import annotations
 

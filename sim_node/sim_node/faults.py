@@ -1,55 +1,23 @@
-"""Faults of the simulated world: the registered kinds and how a component applies them.
+"""Faults of the simulated world: the registered kinds (``adcs list``, ``docs/scenarios.md``:
+each kind's description and parameters) and how a component applies them.
 
-A scenario's ``faults:`` list (``{at_s, kind, target, params}``) is validated against the
-kinds registered here (``adcs list`` shows them; ``docs/scenarios.md``). Each fault happens at
-exact sim time ``at_s`` and lasts ``params.duration_s`` (0: to the end of the run), is seeded
-(``derive_seed(seed, 'fault/<index>')``), and is announced on ``sim/faults``
-(``diagnostic_msgs/DiagnosticArray``: one status per fault starting or ending that frame, level
-WARN while active, OK when it ends). The components apply them, so the plain, composed and
-graph engines see the same faults:
+A scenario's ``faults:`` (``{at_s, kind, target, params}``, validated by
+:func:`adcs_nodes.scenario.check_fault`) happen at exact sim time ``at_s``, last
+``params.duration_s`` (0: to the end), are seeded (``derive_seed(seed, 'fault/<index>')``) and
+announced on ``sim/faults`` (one ``DiagnosticArray`` status per fault starting, WARN, or
+ending, OK). The components apply them, so the plain, composed and graph engines see the same
+faults: a sensor's to the sample it publishes (:class:`SensorFaults`; a star tracker's bias is
+a rotation vector applied to its attitude), an actuator's to the held command in the dynamics
+(:class:`ActuatorFaults`). ``node_killed`` stops the node for good at ``at_s`` in every engine
+(no frame, no message, as a crashed process; a graph run then SIGKILLs its process, after the
+node went silent at ``at_s``, so the series do not depend on when the signal lands): the graph
+reacts as to any crash and the run ends degraded naming the node (:func:`lost_text`). The
+simulated world and the recorder cannot be killed; it is a scripted fault only.
 
-* sensor faults, in the sensor's component (:class:`SensorFaults`) on the sample it publishes:
-
-  - ``dropout``: the sensor is silent (publishes nothing; a consumer in lockstep waits its
-    timeout, counts a missed frame, then no longer waits for a dead producer);
-  - ``nan``: samples with every value NaN (what a driver sends for "no data");
-  - ``stuck``: every sample repeats the values of the last sample before the fault;
-  - ``bias_step``: ``bias`` added to the values (sensor units: T, rad/s, rad; a star tracker's
-    bias is a rotation vector [rad] applied to its attitude);
-  - ``noise_burst``: white noise of ``std`` per axis added (seeded);
-
-* actuator faults, in the dynamics (:class:`ActuatorFaults`) on the held command:
-
-  - ``wheel_stuck``: the wheel's motor torque is zero (its speed relative to the body stays
-    where it was) and stays so;
-  - ``wheel_torque_lost``: the wheel's motor delivers ``fraction`` of its command (0: none);
-  - ``coil_open``: the magnetorquer axis (``x``, ``y``, ``z``) gives no dipole.
-
-* a node fault, in every engine:
-
-  - ``node_killed``: the node (``target``: its name in the graph, ``adcs list`` and the
-    validator name the scenario's) stops for good at ``at_s``: from that frame on it fires no
-    frame and publishes nothing (no data, no progress, no status), as a crashed process. In
-    a graph run (one process per node) the launcher then kills its process with SIGKILL as
-    soon as the run's clock has reached ``at_s``; the node went silent at exactly ``at_s``
-    first, so the series do not depend on when the signal lands and every engine gives the
-    same one. The rest of the graph reacts as to any crash: its consumers wait their
-    timeout, count the missed frames and stop waiting for a dead producer; the manager falls
-    back (a dead controller or estimator), the dynamics applies a zero command (a dead
-    manager); the run ends degraded (exit 3) and its reason names the node
-    (:func:`lost_text`). A scripted fault only: ``adcs fault`` refuses it (kill the process
-    of a running graph yourself: ``adcs status`` shows the pids). The simulated world
-    (``dynamics``, ``environment``) and the recorder cannot be killed this way.
-
-Live faults (``adcs fault KIND TARGET``): one fault as JSON text on :data:`INJECT_TOPIC`
-(``std_msgs/String``, reliable): ``{index, kind, target, at_s, params}``, ``at_s`` null for
-"the next frame". The sensor nodes and the dynamics take it (:func:`injected`, the same
-registry specs as a scenario's fault; a fault for another node is not theirs, a bad one is
-refused with the reason in the log), hand it to their component (:meth:`SensorFaults.add`,
-:meth:`ActuatorFaults.add`), and the dynamics announces it on ``sim/faults`` like a scripted
-one. It starts at ``at_s``, or at the receiver's next frame when that time has passed or is
-not given: when that is depends on wall time (how far each node got when the message came),
-so a live fault is not deterministic, unlike a scenario's.
+Live faults (``adcs fault KIND TARGET``): one fault as JSON on :data:`INJECT_TOPIC`
+(``{index, kind, target, at_s, params}``, ``at_s`` null: the next frame), checked as a
+scenario's (:func:`injected`), applied by the sensor nodes and the dynamics from ``at_s`` or
+their next frame: not deterministic, its frame depends on wall time.
 """
 from __future__ import annotations
 
