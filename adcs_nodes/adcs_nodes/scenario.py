@@ -701,30 +701,26 @@ def apply_overrides(sc: Dict[str, Any], overrides: Any) -> Dict[str, Any]:
 
 
 def _set_dotted(data: Dict[str, Any], key: str, value: Any) -> None:
+    """Set ``key`` (dotted; a list element by its index) to ``value`` (``None``: remove)."""
     node: Any = data
-    *path, leaf = key.split('.')
-    for i, part in enumerate(path + [leaf]):
-        where = '.'.join(path[:i]) or '<top>'
-        last = i == len(path)
+    parts = key.split('.')
+    for i, part in enumerate(parts):
+        where, last = '.'.join(parts[:i]) or '<top>', i == len(parts) - 1
         if isinstance(node, list):
             if not part.isdigit() or int(part) >= len(node):
                 raise ScenarioError(f'--set {key}: {where} is a list of {len(node)}: '
                                     f'{part!r} is not an index of it')
-            if last:
-                if value is None:
-                    raise ScenarioError(f'--set {key}: a list element cannot be removed')
-                node[int(part)] = value
-                return
-            node = node[int(part)]
-        elif isinstance(node, dict):
-            if last:
-                if value is None:
-                    node.pop(part, None)
-                else:
-                    node[part] = value
-                return
-            if node.get(part) is None:
-                node[part] = {}            # a new section (the validation names a bad one)
-            node = node[part]
-        else:
+            if last and value is None:
+                raise ScenarioError(f'--set {key}: a list element cannot be removed')
+            part = int(part)
+        elif not isinstance(node, dict):
             raise ScenarioError(f'--set {key}: {where} is a value ({node!r}), not a section')
+        elif last and value is None:
+            node.pop(part, None)
+            return
+        elif not last and node.get(part) is None:
+            node[part] = {}            # a new section (the validation names a bad one)
+        if last:
+            node[part] = value
+            return
+        node = node[part]
