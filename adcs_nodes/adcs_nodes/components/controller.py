@@ -36,11 +36,11 @@ from adcs_nodes.core import attitude as att
 from adcs_nodes.core.control import Command, ControlInputs, Estimate, Target
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.core.spec import all_or_none
 from adcs_nodes.core.wheel_health import WheelHealth
 from adcs_nodes.entries import wheel_momentum
 from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_vec3, vec3
 from adcs_nodes.nodes.messages import make
-from adcs_nodes.core.spec import all_or_none
 from adcs_nodes.registry import Param
 
 

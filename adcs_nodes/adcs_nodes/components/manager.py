@@ -16,13 +16,12 @@ from adcs_nodes.components.controller import command_from_msg, command_msg, esti
 from adcs_nodes.core.control import Command
 from adcs_nodes.core.lockstep import NS_PER_S
 from adcs_nodes.core.manager import AutoSequence, ControllerManagerCore
-from adcs_nodes.nodes.convert import stamp_ns
 from adcs_nodes.core.spec import all_or_none
+from adcs_nodes.nodes.convert import stamp_ns
 from adcs_nodes.registry import Param
 from adcs_nodes.spec import SCHEDULE
 
-#: The manager's parameters (some list defaults with one placeholder element, from when an
-#: empty list could not be given in a ROS parameter file).
+#: The manager's parameters (``['']``: a list default with one placeholder, none).
 MANAGER_PARAMS = (
     Param('controllers', 'str[]', ['bdot'], '-', 'controllers whose commands are forwarded '
           '(registered names; adcs/controllers/<name>/command)', read_only=True),
