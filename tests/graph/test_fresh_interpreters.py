@@ -36,11 +36,11 @@ def test_compiled_and_python_world_kernels_agree():
     """``tests/unit/test_kernels.py``'s ``scenario()`` (every world kernel path) compiled here
     and as plain Python there: identical, or within 1e-12 relative."""
     from sim_node.models import kernels
-    assert type(kernels.frame_step).__name__ == 'CPUDispatcher'      # compiled here
     compiled = runpy.run_path(WORLD)['scenario']()
+    assert type(kernels.frame_step).__name__ == 'CPUDispatcher'      # compiled here
     code = ('import json, runpy; from sim_node.models import kernels; '
-            f'm = runpy.run_path({WORLD!r}); '
-            'print(json.dumps([type(kernels.frame_step).__name__, m["scenario"]()]))')
+            f'm = runpy.run_path({WORLD!r}); out = m["scenario"](); '
+            'print(json.dumps([type(kernels.frame_step).__name__, out]))')
     kind, python = _run(code, {'NUMBA_DISABLE_JIT': '1'})
     assert kind == 'function'                                       # plain Python there
     a = np.array([float.fromhex(v) for v in compiled])
@@ -71,15 +71,23 @@ def test_compile_cache_serves_a_second_process(tmp_path):
 
 def test_compiled_and_uncompiled_control_kernels_give_the_same_bits():
     """``tests/unit/test_control_kernels.py``'s ``sample()`` (the magnetic law, the manager's
-    checks, the dipole field, the onboard reference) compiled here and uncompiled there."""
+    checks, the dipole field, the onboard reference, the shared kernels) compiled here,
+    uncompiled there (``NUMBA_DISABLE_JIT=1``), and as a node process that calls no kernel
+    which loads numba runs them: plain Python, numba never imported."""
     kinds, compiled = runpy.run_path(CONTROL)['sample']()
     assert set(kinds) == {'CPUDispatcher'}                      # numba-compiled here
-    code = ('import json, runpy; m = runpy.run_path(%r); print(json.dumps(m["sample"]()))'
-            % CONTROL)
-    kinds_py, python = _run(code, {'NUMBA_DISABLE_JIT': '1'}, timeout=300)
+    code = ('import json, runpy, sys; m = runpy.run_path(%r); '
+            'kinds, out = m["sample"](%s); print(json.dumps([kinds, "numba" in sys.modules, '
+            'out]))')
+    kinds_py, loaded, python = _run(code % (CONTROL, 'True'), {'NUMBA_DISABLE_JIT': '1'},
+                                    timeout=300)
     assert set(kinds_py) == {'function'}                        # plain Python there
-    assert len(compiled) == len(python) > 3000
+    kinds_lazy, loaded, lazy = _run(code % (CONTROL, 'False'), {'NUMBA_DISABLE_JIT': '0'},
+                                    timeout=300)
+    assert set(kinds_lazy) == {'Lazy'} and not loaded           # not compiled, no numba
+    assert len(compiled) == len(python) == len(lazy) > 3000
     assert compiled == python
+    assert compiled == lazy
 
 
 def test_run_sh_resolves_paths_against_the_callers_directory():

@@ -315,7 +315,21 @@ def run(factory: Callable[[], Node], args=None, exit_process: bool = True) -> in
     return code
 
 
+#: CPU seconds of this process when a node's ``main`` called :func:`run` (interpreter start
+#: and imports); None in a process started otherwise (the composed runner).
+CPU_AT_RUN_S: List[Optional[float]] = [None]
+
+
+def start_cost(t_ns: int) -> Dict[str, float]:
+    """CPU seconds of this process at its first frame ``t_ns`` [ns], and before :func:`run`."""
+    out = {'t_s': t_ns / 1e9, 'cpu_s': round(time.process_time(), 3)}
+    if CPU_AT_RUN_S[0] is not None:
+        out['import_cpu_s'] = round(CPU_AT_RUN_S[0], 3)
+    return out
+
+
 def _run(factory: Callable[[], Node], args, exit_process: bool) -> int:
+    CPU_AT_RUN_S[0] = time.process_time()
     old_handlers = stop_handler_from_start()
     try:
         faulthandler.enable()

@@ -45,12 +45,14 @@ PACKAGES = ('adcs_nodes.core', 'sim_node.models')
 
 
 def warm_entry_points() -> None:
-    """Step 1: the modules' ``warm_up()`` and the kernels called from plain Python."""
-    from adcs_nodes.core import geomag, manager
+    """Step 1: the modules' ``warm_up()`` and the kernels called from plain Python, every
+    kernel compiled (a node process compiles its small kernels once it loads numba)."""
+    from adcs_nodes.core import geomag, kernels, manager
     from adcs_nodes.core.control import cross3, magnetic
     from adcs_nodes.core.estimation import magnetic_filter, onboard
     from sim_node.models import disturbances, dynamics
 
+    kernels.compile_all()
     for module in (geomag, manager, magnetic, magnetic_filter):
         module.warm_up()
     z3, q = np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])
