@@ -266,8 +266,8 @@ def given_parameter(name: str, args=None) -> Optional[str]:
             found['p'] = value.split(':=', 1)[1]
         elif flag == '--params-file':
             try:
-                with open(value) as fh:
-                    doc = yaml.safe_load(fh) or {}
+                with open(value) as fh:       # (libyaml's parser when there: 4x less CPU)
+                    doc = yaml.load(fh, getattr(yaml, 'CSafeLoader', yaml.SafeLoader)) or {}
                 got = doc.get('/**', {}).get('ros__parameters', {}).get(name)
             except (OSError, AttributeError, yaml.YAMLError):
                 continue             # (rcl says what is wrong with the file)
