@@ -196,12 +196,12 @@ class LockstepNode(node_params.SpecParameters, Node):
     def external_samples(self, t_ns: int) -> List[Tuple[int, str, Any]]:
         """The samples in sample timing frame ``t_ns`` takes, in stamp order, each once:
         ``(elapsed stamp, input name, message)``."""
-        return self.external.queue.take(t_ns)
+        return self.external.take(t_ns)
 
     def last_usable_ns(self, name: str) -> Optional[int]:
         """Elapsed stamp of the last usable sample of an input in sample timing (one that
         passed the timing checks; a consumer that checks more overrides it), or None."""
-        return self.external.queue.last_usable(name)
+        return self.external.last_usable(name)
 
     def fresh(self, name: str, msg: Any, t_ns: int) -> bool:
         """True when ``msg``, the value of input ``name`` in frame ``t_ns``, is a new sample:

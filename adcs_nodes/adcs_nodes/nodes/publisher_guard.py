@@ -36,9 +36,7 @@ HISTORY = 4096
 #: Events published on the events topic per wall second at most (the rest are counted).
 MAX_EVENTS_PER_S = 100
 EVENTS_TOPIC = 'adcs/security_events'
-PARAM = 'expected_publishers'
-PARAM_DOC = ('lockstep inputs accepted only from the named node\'s publisher: '
-             '"<topic>=<node>" entries (empty: accept every publisher)')
+PARAM = 'expected_publishers'      # (its spec: ``nodes.params.COMMON``)
 
 
 def parse_expected(entries: Iterable[str]) -> Dict[str, str]:
@@ -362,6 +360,6 @@ def for_node(node: Any) -> Optional[NodeGuard]:
     parameter), or None when the parameter is empty (unguarded)."""
     if hasattr(node, '_publisher_guard'):
         return node._publisher_guard
-    expected = parse_expected(node.param(PARAM, [''], PARAM_DOC) or [])
+    expected = parse_expected(node.param(PARAM, ['']) or [])
     node._publisher_guard = NodeGuard(node, expected) if expected else None
     return node._publisher_guard
