@@ -196,15 +196,13 @@ class NodeGuard:
 
     def __init__(self, node: Any, expected: Dict[str, str]) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
-                               ReliabilityPolicy)
+
+        from adcs_nodes.nodes.adapter import QOS_DATA
         self.node = node
         self.core = PublisherGuard({node.resolve_topic_name(t): n
                                     for t, n in expected.items()})
         self._array = DiagnosticArray
-        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
-        self.pub = node.publisher(DiagnosticArray, EVENTS_TOPIC, qos)
+        self.pub = node.publisher(DiagnosticArray, EVENTS_TOPIC, QOS_DATA)
         self._window = (0.0, 0)        # (wall second, events published in it)
         self.suppressed = 0
         node.add_ready_check(self.missing)
