@@ -90,6 +90,29 @@ def test_compiled_and_uncompiled_control_kernels_give_the_same_bits():
     assert compiled == lazy
 
 
+#: Every node executable's module (``setup.py`` entry points) and the composed runner.
+NODE_MODULES = ('adcs_nodes.nodes.recorder', 'adcs_nodes.nodes.estimator',
+                'adcs_nodes.nodes.controller', 'adcs_nodes.nodes.guidance',
+                'adcs_nodes.nodes.controller_manager', 'adcs_nodes.nodes.tf',
+                'adcs_nodes.nodes.slew_action', 'sim_node.nodes.dynamics',
+                'sim_node.nodes.environment', 'sim_node.nodes.magnetometer',
+                'sim_node.nodes.horizon_sensor', 'sim_node.nodes.star_tracker',
+                'sim_node.nodes.gyro', 'sim_node.nodes.wheel_tachometer')
+
+
+def test_node_modules_import_no_numba_scipy_or_plotting():
+    """A node process pays for numba (~0.5 s CPU) only when it calls a kernel that loads it,
+    never for an import; scipy, plotting and analysis modules are not imported at all."""
+    heavy = ('numba', 'scipy', 'matplotlib', 'pandas', 'adcs_nodes.tools')
+    code = ('import importlib, json, sys; importlib.import_module(sys.argv[1]); '
+            f'print(json.dumps(sorted(m for m in {heavy!r} if m in sys.modules)))')
+    for module in NODE_MODULES:
+        proc = subprocess.run([sys.executable, '-c', code, module], capture_output=True,
+                              text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert json.loads(proc.stdout.strip().splitlines()[-1]) == [], module
+
+
 def test_run_sh_resolves_paths_against_the_callers_directory():
     """``ros2_ws/run.sh adcs validate free_tumble.yaml`` from inside scenarios/ finds it."""
     proc = subprocess.run([os.path.join(ROOT, 'ros2_ws', 'run.sh'), 'adcs', 'validate',
