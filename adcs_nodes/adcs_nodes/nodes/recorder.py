@@ -266,7 +266,7 @@ class RecorderNode(node_params.SpecParameters, Node):
             self.create_subscription(ClockMsg, '/clock', self._on_clock, QoSProfile(
                 depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._last_discovery = 0.0
+        self._last_discovery, self._t_start = 0.0, time.monotonic()
         self._discovery_timer, self._status_timer, self._handshake_timer, self._flush_timer = (
             self.create_timer(period, callback, clock=steady) for period, callback in (
                 (p['discovery_period_s'], self.discover),
@@ -375,6 +375,12 @@ class RecorderNode(node_params.SpecParameters, Node):
     def _check_ready(self) -> None:
         """Handshake timer: publish our name on ``lockstep/ready`` once every match holds."""
         missing = self.unmatched()
+        if missing and self._handshake_timer.timer_period_ns < 100_000_000 and \
+                time.monotonic() - self._t_start > 1.0:     # slower after a second
+            self._handshake_timer.cancel()
+            self.destroy_timer(self._handshake_timer)
+            self._handshake_timer = self.create_timer(0.1, self._check_ready, clock=Clock(
+                clock_type=ClockType.STEADY_TIME))
         if missing:
             # scan faster than discovery_period_s while topics we wait for are not subscribed
             if time.monotonic() - self._last_discovery > 0.1 and any(
