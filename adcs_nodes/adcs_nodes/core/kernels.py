@@ -17,6 +17,7 @@ cache load); until then the small kernels run as plain Python, the same bits.
 """
 from __future__ import annotations
 
+import functools
 import math
 import sys
 
@@ -25,53 +26,41 @@ from numpy.typing import ArrayLike
 
 #: The kernels not compiled yet (:class:`Lazy`).
 _LAZY: list = []
-#: ``[numba.njit]`` once a kernel loaded numba (``[False]``: numba is not installed).
+#: ``[numba.njit]`` (``[False]`` without numba) once a kernel loaded numba.
 _NJIT: list = []
 
 
 class Lazy:
-    """A kernel before numba is loaded (:func:`jit`). Called, it runs as plain Python, or
-    (``loads_numba``) loads numba and compiles every kernel (:func:`compile_all`) first."""
+    """A kernel before numba is loaded (:func:`jit`): called, it runs as plain Python or
+    (``loads_numba``) first loads numba and compiles every kernel (:func:`compile_all`)."""
 
     def __init__(self, fn, loads_numba: bool) -> None:
+        functools.update_wrapper(self, fn)
         self.py_func, self.dispatcher, self.loads_numba = fn, None, loads_numba
-        self.__name__, self.__qualname__ = fn.__name__, fn.__qualname__
-        self.__module__, self.__doc__ = fn.__module__, fn.__doc__
         _LAZY.append(self)
 
     def __call__(self, *args):
-        if self.dispatcher is None:
-            if not self.loads_numba:
-                return self.py_func(*args)
+        if self.dispatcher is None and self.loads_numba:
             compile_all()
-        return self.dispatcher(*args)
-
-    def __repr__(self) -> str:
-        return f'<kernel {self.__module__}.{self.__qualname__}, not compiled yet>'
+        return (self.py_func if self.dispatcher is None else self.dispatcher)(*args)
 
 
-def _njit():
+def compile_all() -> None:
+    """Load numba; every kernel becomes its ``njit(cache=True)`` dispatcher (compiled at its
+    first call, or loaded from numba's on-disk cache), also where a module imported it."""
     if not _NJIT:
         try:
             from numba import njit
         except ImportError:  # pragma: no cover - numba is pinned in ros2_ws/requirements.txt
             njit = False
         _NJIT.append(njit)
-    return _NJIT[0]
-
-
-def compile_all() -> None:
-    """Load numba; every kernel becomes its ``njit(cache=True)`` dispatcher (compiled at its
-    first call, or loaded from numba's on-disk cache), also where a module imported it."""
-    njit = _njit()
     done = {}
     for k in _LAZY:
-        k.dispatcher = njit(cache=True)(k.py_func) if njit else k.py_func
-        done[id(k)] = k.dispatcher
+        k.dispatcher = done[id(k)] = _NJIT[0](cache=True)(k.py_func) if _NJIT[0] else k.py_func
     _LAZY.clear()
     for module in list(sys.modules.values()):
-        names = getattr(module, '__dict__', None)
-        for key, value in list(names.items()) if names is not None else ():
+        names = getattr(module, '__dict__', None) or {}
+        for key, value in list(names.items()):
             if type(value) is Lazy and id(value) in done:
                 names[key] = done[id(value)]
 
