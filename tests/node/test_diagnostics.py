@@ -117,7 +117,7 @@ def test_the_first_frame_logs_the_process_cpu_once(ros_context, spin):
 
     from rcl_interfaces.msg import Log
 
-    from adcs_nodes.nodes.diagnostics import START_COST_PREFIX
+    from adcs_nodes.nodes.runtime import START_COST_PREFIX
     node = _Node(ros_context)
     diag = Diagnostics(node)
     probe = rclpy.create_node('probe', context=ros_context)

@@ -12,7 +12,6 @@ when a counter of :data:`COUNTERS` grew since the last status or a ``fallback`` 
 """
 from __future__ import annotations
 
-import json
 import time
 from typing import Any, Dict, List, Tuple
 
@@ -33,9 +32,6 @@ ATTRIBUTES = ('frames', 'missed_frames', 'last_missed_input', 'update_count', 'r
 COUNTERS = ('missed_frames', 'rejected_samples', 'rejected_count', 'resets',
             'rejected_commands', 'dropouts', 'security_events')
 NS_PER_S = 1_000_000_000
-#: The line every node logs at its first frame: its process CPU then, as JSON
-#: (:func:`runtime.start_cost`; the bench's start-up row reads it).
-START_COST_PREFIX = 'start cost '
 
 
 def _text(value: Any) -> str:
@@ -74,11 +70,11 @@ class Diagnostics:
     def frame(self, t_ns: int) -> bool:
         """Called once per processed frame (elapsed sim time ``t_ns``); publishes when a
         period boundary is reached and someone reads the topic. Returns True when a status
-        was published. The first frame logs the process CPU so far (:data:`START_COST_PREFIX`)."""
+        was published. The first frame logs the process CPU so far (:func:`runtime.start_cost`)."""
         if t_ns < self._next_ns:
             return False
         if self._next_ns < 0:
-            self.node.get_logger().info(START_COST_PREFIX + json.dumps(runtime.start_cost(t_ns)))
+            self.node.get_logger().info(runtime.start_cost(t_ns))
         self._next_ns = (t_ns // self.period_ns + 1) * self.period_ns
         if not self.wanted():
             return False

@@ -392,6 +392,7 @@ class RecorderNode(node_params.SpecParameters, Node):
         self.ready = True
         self._ready_pub.publish(String(data=self.get_name()))
         self.get_logger().info(f'ready: {len(self._expected)} expected match(es) hold')
+        self.get_logger().info(runtime.start_cost(0))
 
     # ------------------------------------------------------------------ callbacks
     def _log_time_ns(self, rec: _Topic, raw: bytes) -> Optional[int]:
