@@ -303,21 +303,19 @@ _COMPILED: list = []
 
 
 def _compiled() -> bool:
-    """True when the draw runs compiled (numba there, its JIT not disabled); the first call
-    imports numba and loads the ziggurat tables."""
+    """True when the draw runs compiled (numba there, its JIT not disabled)."""
     global _KI, _WI, _FI, _NOR_R, _NOR_INV_R
     if not _COMPILED:
         try:
             from numba import config
-            from numba.np.random import _constants as zig
+            from numba.np.random import _constants as z
         except ImportError:  # pragma: no cover - numba is pinned
-            _COMPILED.append(False)
-            return False
-        _KI = np.asarray(zig.ki_double, dtype=np.uint64)
-        _WI = np.asarray(zig.wi_double, dtype=np.float64)
-        _FI = np.asarray(zig.fi_double, dtype=np.float64)
-        _NOR_R, _NOR_INV_R = float(zig.ziggurat_nor_r), float(zig.ziggurat_nor_inv_r)
-        _COMPILED.append(not config.DISABLE_JIT)
+            config = None
+        else:
+            _KI, _WI, _FI = (np.asarray(z.ki_double, dtype=np.uint64),
+                             np.asarray(z.wi_double, dtype=float), np.asarray(z.fi_double))
+            _NOR_R, _NOR_INV_R = float(z.ziggurat_nor_r), float(z.ziggurat_nor_inv_r)
+        _COMPILED.append(config is not None and not config.DISABLE_JIT)
     return _COMPILED[0]
 
 

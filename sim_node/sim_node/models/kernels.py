@@ -55,11 +55,10 @@ arguments, outputs of a frame go to ``applied`` (``OUT_*``).
 The orbit (E6) is integrated with the attitude in the same RK4 stages, from the orbit model's
 ``r, v`` at ``t_k``: the position at every stage is the two-body orbit, not a straight line.
 
-One implementation: the functions here are plain Python on numpy arrays, compiled by
-``numba.njit(cache=True)`` at the first call (:func:`adcs_nodes.core.kernels.jit`; no
-fastmath, so IEEE semantics are kept); with
-``NUMBA_DISABLE_JIT=1`` (or without numba) the very same functions run as Python.
-``tests/unit/test_kernels.py`` compares the two.
+One implementation: plain Python on numpy arrays, compiled by ``numba.njit(cache=True)`` at
+the first call (:func:`adcs_nodes.core.kernels.jit`; no fastmath: IEEE semantics); with
+``NUMBA_DISABLE_JIT=1`` (or without numba) the very same functions run as Python
+(``tests/unit/test_kernels.py`` compares the two).
 """
 from __future__ import annotations
 
