@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from perf.bench import (Row, Sample, delivery_pattern, format_table, hop_pattern,
-                        verdict)
+                        start_costs, verdict)
 
 pytestmark = pytest.mark.parallel
 
@@ -46,6 +46,22 @@ def test_delivery_pattern_of_paper000_at_1s_frames():
     from perf.bench import bench_scenario
     sc = bench_scenario(load_scenario(os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')))
     assert delivery_pattern(sc, 1.0) == [22, 10, 19, 10, 19, 10, 19, 10, 19, 10]
+
+
+def test_start_costs_are_read_per_process_from_the_node_logs(tmp_path):
+    """Rows (7g)/(7c): each log file is one process; a composed process logs one line per
+    node (its CPU grows between them: the largest counts)."""
+    logs = tmp_path / 'logs'
+    logs.mkdir()
+    line = '[INFO] [1796679621.7] [{}]: start cost {{"t_s": 0.0, "cpu_s": {}{}}}\n'
+    (logs / 'estimator.log').write_text('[INFO] [1.0] [estimator]: lockstep: fires ...\n'
+                                        + line.format('estimator', 0.8, ', "import_cpu_s": 0.2'))
+    (logs / 'composed.log').write_text(line.format('dynamics', 1.0, '')
+                                       + line.format('ns.estimator', 1.1, ''))
+    (logs / 'recorder.log').write_text('[INFO] [1.0] [recorder]: recording every topic\n')
+    assert start_costs(str(tmp_path)) == {
+        'estimator': {'cpu_s': 0.8, 'import_cpu_s': 0.2, 'nodes': ['estimator']},
+        'composed': {'cpu_s': 1.1, 'import_cpu_s': 0.0, 'nodes': ['dynamics', 'estimator']}}
 
 
 @pytest.mark.long   # make bench runs the whole table
