@@ -68,17 +68,17 @@ def test_start_costs_are_read_per_process_from_the_node_logs(tmp_path):
 def test_bench_runs_at_tiny_size(tmp_path):
     out = tmp_path / 'bench.txt'
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [os.path.join(ROOT, 'adcs_nodes'), os.path.join(ROOT, 'sim_node'),
-         os.environ.get('PYTHONPATH', '')]))
+        [os.path.join(ROOT, 'tests'), os.path.join(ROOT, 'adcs_nodes'),
+         os.path.join(ROOT, 'sim_node'), os.environ.get('PYTHONPATH', '')]))
     # row (3) is row (3i)'s code with the in-process path off: left out (two launches less)
     proc = subprocess.run([sys.executable, '-m', 'perf.bench', '--frames', '25',
-                           '--repeats', '1', '--basilisk', 'skip', '--rows', '1,2,3i,4,5,6',
+                           '--repeats', '1', '--basilisk', 'skip', '--rows', '1,2,3i,4,5,6,7g,7c',
                            '--out', str(out)],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
     text = out.read_text()
     assert text == proc.stdout
-    for label in ('(1)', '(2)', '(3)', '(3i)', '(4)', '(5)', '(6)'):
+    for label in ('(1)', '(2)', '(3)', '(3i)', '(4)', '(5)', '(6)', '(7g)', '(7c)'):
         assert any(line.startswith(label) for line in text.splitlines()), label
     assert 'skipped (--basilisk skip)' in text and 'NOT MEASURED' in text
     assert 'not selected (--rows)' in [line for line in text.splitlines()
@@ -86,3 +86,4 @@ def test_bench_runs_at_tiny_size(tmp_path):
     # (a), (b) and (c) of row (3i) get a verdict; (3)'s and (d) (no Basilisk) are not measured
     assert text.count('MET') >= 3 and text.count('NOT MEASURED') >= 3   # MET or NOT MET
     assert 'nproc' in text and 'load average' in text
+    assert '(f) start-up CPU to frame 0' in text and 'dynamics' in text    # (7g)'s per node
