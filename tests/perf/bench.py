@@ -29,7 +29,11 @@ Every row is measured in the same run, on the same machine, at the same time (is
    ``GravityGradientEffector``, same inertia, same 0.1 s RK4 step; Basilisk also integrates
    the orbit with point-mass gravity). Bench-only dependency: installed on demand into its own
    virtual environment (``~/.cache/adcs/bsk-venv``, or ``$ADCS_BSK_VENV``) so its pins never
-   touch the workspace's; the row is skipped with the reason if that fails.
+   touch the workspace's; the row is skipped with the reason if that fails;
+7. ``start-up`` (issue 35): the CPU of all node processes from ``adcs run`` of the scenario as
+   shipped to their first frame (each lockstep node logs its process CPU then, and before its
+   ``main`` ran: the interpreter start and imports), one process per node (``7g``) and
+   composed (``7c``); below the table, each node process's figures.
 
 Each row gives frames (or RK4 steps) per wall second, sim seconds per wall second and per
 CPU second, the wall time and the CPU seconds of all its processes (``resource.getrusage``
@@ -47,21 +51,24 @@ Targets, as ratios of this run (a target not met prints NOT MET with its ratio):
 engine >= 10,000 x real time (rows 4 and 4p; issue 19), by wall time and by CPU time. Also
 printed: the plain engine (4) against Basilisk (6) in sim seconds per wall and per CPU
 second (Basilisk integrates the free body alone, the FrameLoop the whole closed loop).
+(f) start-up CPU to frame 0, one process per node <= 2.0 x composed (row 7; issue 35).
 
 Usage::
 
     PYTHONPATH=tests python -m perf.bench [--frames 2000] [--repeats 2] [--quick]
                                    [--basilisk auto|skip] [--out out/bench.txt]
-                                   [--rows 1,1h,2,3,3i,4,4p,5,6]
+                                   [--rows 1,1h,2,3,3i,4,4p,5,6,7g,7c]
 """
 from __future__ import annotations
 
 import argparse
 import copy
+import glob
 import json
 import math
 import os
 import platform
+import re
 import resource
 import shutil
 import statistics
@@ -87,6 +94,7 @@ TARGET_COMPOSED_VS_GRAPH = 3.0
 TARGET_REAL_TIME = 2000.0
 TARGET_LOOP_VS_BASILISK = 0.5
 TARGET_PLAIN_REAL_TIME = 10_000.0
+TARGET_START_GRAPH_VS_COMPOSED = 2.0
 BSK_VENV = os.environ.get('ADCS_BSK_VENV',
                           os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'bsk-venv'))
 
@@ -293,6 +301,77 @@ class GraphMeasure:
         return s
 
 
+# ---------------------------------------------------------------------- (7) start-up
+#: The line every lockstep node logs at its first frame (``LockstepNode.frame_done``).
+START_COST = re.compile(r'\[([A-Za-z0-9_./]+)\]: start cost (\{.*\})\s*$', re.M)
+#: Frames of a start-up run (the nodes log their CPU at the first).
+START_FRAMES = 2
+
+
+def start_costs(run_dir: str) -> Dict[str, dict]:
+    """Per node process (log file) of a finished run: CPU seconds at the first frame (the
+    largest of its nodes' lines: a composed process logs one per node), the CPU before its
+    ``main`` ran (interpreter start and imports; one process per node only) and its nodes."""
+    out: Dict[str, dict] = {}
+    for path in sorted(glob.glob(os.path.join(run_dir, 'logs', '*.log'))):
+        with open(path, encoding='utf-8', errors='replace') as fh:
+            lines = [(m.group(1).rsplit('.', 1)[-1], json.loads(m.group(2)))
+                     for m in START_COST.finditer(fh.read())]
+        if lines:
+            out[os.path.basename(path)[:-4]] = {
+                'cpu_s': max(c['cpu_s'] for _, c in lines),
+                'import_cpu_s': max(c.get('import_cpu_s', 0.0) for _, c in lines),
+                'nodes': sorted(n for n, _ in lines)}
+    return out
+
+
+class StartupMeasure:
+    """A run of :data:`START_FRAMES` frames; its sample's ``cpu_s``: the CPU of all node
+    processes from their start to their first frame (from their logs); ``rate``: not a rate
+    (NaN). ``details``: the per-process costs of each repeat."""
+
+    def __init__(self, sc: dict, compose: bool) -> None:
+        self.sc, self.compose = sc, compose
+        self.details: List[Dict[str, dict]] = []
+
+    def __call__(self) -> Sample:
+        from adcs_nodes.tools.run.launcher import Launcher
+
+        run_dir = tempfile.mkdtemp(prefix='adcs-bench-start-')
+        t0 = time.monotonic()
+        try:
+            res = Launcher(self.sc, duration_s=START_FRAMES * float(self.sc['timing']['frame_s']),
+                           compose=self.compose, progress=False, run_dir=run_dir,
+                           log=lambda *a, **k: None).run()
+            costs = start_costs(run_dir)
+        finally:
+            shutil.rmtree(run_dir, ignore_errors=True)
+        if res.exit_code != 0 or not costs:
+            raise BenchError(f'start-up run (compose={self.compose}) failed: exit '
+                             f'{res.exit_code}, {res.message}; start costs logged: {costs}')
+        self.details.append(costs)
+        return Sample(len(costs), math.nan, time.monotonic() - t0,
+                      sum(c['cpu_s'] for c in costs.values()))
+
+
+def startup_lines(graph: Row, comp: Row) -> List[str]:
+    """Row (7)'s target line and, per node process of the graph, its CPU to the first frame
+    and before ``main`` (imports), medians over the repeats."""
+    ratio = _ratio(graph.median('cpu_s'), comp.median('cpu_s'))
+    if ratio is None:
+        return ['  (f) start-up CPU graph / composed <= 2.0: NOT MEASURED']
+    ok = 'MET' if ratio <= TARGET_START_GRAPH_VS_COMPOSED else 'NOT MET'
+    out = [f'  {"(f) start-up CPU to frame 0, graph (7g) / composed (7c)":<50} {ratio:7.2f} x  '
+           f'(target <= {TARGET_START_GRAPH_VS_COMPOSED:g} x)  {ok:<7}  '
+           f'{_num(graph.median("cpu_s"))} vs {_num(comp.median("cpu_s"))} CPU s',
+           '  (7g) per node process, CPU s to its first frame (of it before main: imports):']
+    for name in sorted(graph.measure.details[0]):
+        runs = [d[name] for d in graph.measure.details if name in d]
+        out.append(f'       {name:<22} {statistics.median(r["cpu_s"] for r in runs):6.2f}  '
+                   f'({statistics.median(r["import_cpu_s"] for r in runs):.2f})')
+    return out
+
+
 # ---------------------------------------------------------------------- (4) plain engine
 def plain_sample(sc: dict, frames: int) -> Sample:
     """The plain engine (:class:`sim_node.engine.FrameLoop`), ``frames`` frames, no sink.
@@ -448,7 +527,7 @@ HEADER = ['', 'measurement', 'rate /wall s (min-max)', 'unit', 'sim s/wall s', '
 def _cells(r: Row) -> List[str]:
     if not r.samples:
         return [r.key, r.label, '-', r.unit, '-', '-', '-', '-', '-', '-', r.skipped or r.note]
-    rates = [s.rate for s in r.samples]
+    rates = [s.rate for s in r.samples if math.isfinite(s.rate)]
     rate = _num(r.rate) + (f' ({_num(min(rates))}-{_num(max(rates))})' if len(rates) > 1
                            else '')
     cpu_unit = r.median('cpu_per_unit_s')
@@ -514,6 +593,11 @@ def plan(sc: dict, frames: int, basilisk: Optional[str], bsk_why: str,
             Row('(5)', 'free body + GG, this RK4', unit='RK4 steps', step_s=0.1,
                 note='Spacecraft.step, 0.1 s step',
                 measure=lambda: free_body_sample(20 * frames))]
+    rows += [Row('(7g)', 'start-up to frame 0, 1 process/node', unit='processes',
+                 note=f'{START_FRAMES}-frame runs; CPU s: node processes to their first frame',
+                 measure=StartupMeasure(own, compose=False)),
+             Row('(7c)', 'start-up to frame 0, composed', unit='processes',
+                 note='the same, one process', measure=StartupMeasure(own, compose=True))]
     bsk = Row('(6)', 'free body + GG, Basilisk', unit='RK4 steps', step_s=0.1,
               note='bsk, 0.1 s step, + orbit')
     if basilisk:
@@ -613,6 +697,8 @@ def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
                                _ratio(rtf, 1.0), TARGET_PLAIN_REAL_TIME,
                                f'{_num(rtf)} sim s per {clock} s at {row.step_s:g} s frames'
                                f'{miss}'))
+    if _row(rows, '(7g)').samples:
+        out += startup_lines(_row(rows, '(7g)'), _row(rows, '(7c)'))
     if bsk.samples and plain.samples:
         out.append(f'  plain engine (4) vs Basilisk (6): '
                    f'{_num(_ratio(plain.rate * plain.step_s, bsk.rate * bsk.step_s))} x its sim '
@@ -637,7 +723,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help='comma-separated row keys to measure (e.g. 2,3,3i); default: all')
     args = ap.parse_args(argv)
     only = [k.strip() for k in args.rows.split(',') if k.strip()]
-    known = ('1', '1h', '2', '3', '3i', '4', '4p', '5', '6')
+    known = ('1', '1h', '2', '3', '3i', '4', '4p', '5', '6', '7g', '7c')
     if any(k not in known for k in only):
         ap.error(f'--rows: known keys are {", ".join(known)}')
     if args.quick:

@@ -2,7 +2,7 @@
 once on arrival, used once at its own stamp in stamp order by the first frame that covers it,
 refused and named otherwise. The node-level behaviour (a driver process, a launched run) is in
 tests/node/test_external_inputs.py and tests/graph/test_external_driver.py."""
-from adcs_nodes.core.sample_timing import REASONS, SampleQueue, admit
+from adcs_nodes.core.sample_timing import REASONS, ExternalInputs, admit
 
 S = 1_000_000_000
 EPOCH = 1_767_225_600 * S
@@ -25,11 +25,12 @@ def test_admit_names_each_refusal_and_accepts_at_the_limits():
 
 
 def _queue(period=S):
-    return SampleQueue(['mag', 'sun'], period, max_future_ns=S // 2, max_age_ns=5 * S)
+    return ExternalInputs({'mag': S, 'sun': S}, {}, period, 3, EPOCH, max_future_ns=S // 2,
+                          max_age_ns=5 * S, counts=_counts())
 
 
 def _offer(q, name, t, now_t, msg=None):
-    return q.offer(name, EPOCH + t, t, EPOCH + now_t, msg if msg is not None else (name, t))
+    return q.offer(name, EPOCH + t, now_t, msg if msg is not None else (name, t))
 
 
 def test_a_frame_takes_the_samples_one_period_before_it_in_stamp_order_once():
@@ -62,7 +63,7 @@ def test_the_future_limit_allows_one_own_period_of_clock_lag():
 
 def test_every_refusal_reason_is_one_of_the_counted_reasons():
     q = _queue()
-    seen = {q.offer('mag', 0, -EPOCH, EPOCH + S, None)[0]}     # stamped zero
+    seen = {q.offer('mag', 0, S, None)[0]}                     # stamped zero
     seen.add(_offer(q, 'mag', 100 * S, S)[0])
     seen.add(_offer(q, 'mag', S, 100 * S)[0])
     _offer(q, 'sun', 5 * S, 5 * S)

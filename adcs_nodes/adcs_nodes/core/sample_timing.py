@@ -3,8 +3,8 @@
 A real driver's samples (an ``external: true`` sensor), every sensor of a ``--real-time`` run
 and every input of a node in live mode arrive when they arrive, stamped off the frame grid.
 Each sample is checked once on arrival (:func:`admit`) and, in sample timing, kept by stamp
-until the frame that covers it takes it (:class:`SampleQueue`): used once, at its own stamp,
-in stamp order; refused and counted by reason otherwise (:data:`REASONS`), never used.
+until the frame that covers it takes it (:class:`ExternalInputs`): used once, at its own
+stamp, in stamp order; refused and counted by reason otherwise (:data:`REASONS`), never used.
 
 Pure Python, no ROS: the lockstep node (``nodes.lockstep_node``) feeds it stamps in
 nanoseconds; times here are absolute stamps (the ROS clock) where said, else elapsed sim
@@ -45,71 +45,6 @@ def admit(stamp_ns: int, now_ns: int, newest_ns: Optional[int], max_future_ns: i
         return 'out_of_order', ('not newer than the sample before '
                                 f'({(newest_ns - stamp_ns) / NS_PER_S:.3f} s older)')
     return None
-
-
-class SampleQueue:
-    """The samples of the sample-timing inputs of one node, kept by stamp until a frame
-    covers them.
-
-    Frame ``t`` takes the samples stamped up to one own period before it (``t - P``): a
-    sample on its way while its frame fires (a real-time clock tick comes before the samples
-    of that instant) is taken by the next frame, at its own stamp, instead of being late. A
-    sample that arrives after the frame that covered its stamp is late: refused, never used.
-
-    Parameters
-    ----------
-    names : iterable of str
-        The inputs in sample timing.
-    own_period_ns : int
-        The node's period [ns] (P above).
-    max_future_ns, max_age_ns : int
-        The arrival limits of :func:`admit` (the future limit is widened by one own period:
-        a producer may be one frame ahead of this node's view of the clock).
-    """
-
-    def __init__(self, names: Iterable[str], own_period_ns: int, max_future_ns: int,
-                 max_age_ns: int) -> None:
-        self.names = set(names)
-        self.own_period_ns = int(own_period_ns)
-        self.max_future_ns = int(max_future_ns) + self.own_period_ns
-        self.max_age_ns = int(max_age_ns)
-        self._queue: Dict[str, List[Tuple[int, Any]]] = {n: [] for n in self.names}
-        self._newest: Dict[str, int] = {}        # absolute stamp of the newest accepted
-        self._usable: Dict[str, int] = {}        # elapsed stamp of the last usable sample
-        self.done_t = -1                         # the last frame time [ns] samples were taken for
-
-    def offer(self, name: str, stamp_ns: int, t_ns: int, now_ns: int,
-              msg: Any) -> Optional[Refusal]:
-        """A sample of ``name`` stamped ``stamp_ns`` (absolute; ``t_ns`` the same as elapsed
-        sim time), arriving at clock time ``now_ns`` (absolute): kept for the frame that will
-        cover it, or the reason it is refused."""
-        why = admit(stamp_ns, now_ns, self._newest.get(name), self.max_future_ns,
-                    self.max_age_ns)
-        if why is not None:
-            return why
-        self._newest[name] = stamp_ns
-        if t_ns <= self.done_t:
-            return 'late', 'arrived after the frame that covers its stamp was processed'
-        self._queue[name].append((t_ns, msg))
-        self._usable[name] = t_ns
-        return None
-
-    def take(self, t_ns: int) -> List[Tuple[int, str, Any]]:
-        """The samples frame ``t_ns`` takes, in stamp order: ``(elapsed stamp, input name,
-        message)``, each returned once."""
-        cover = t_ns - self.own_period_ns
-        out = []
-        for name, queue in self._queue.items():
-            keep = []
-            for t, msg in queue:
-                (out if t <= cover else keep).append((t, name, msg))
-            self._queue[name] = [(t, m) for t, _, m in keep]
-        self.done_t = max(self.done_t, cover)
-        return sorted(out, key=lambda e: e[0])
-
-    def last_usable(self, name: str) -> Optional[int]:
-        """Elapsed stamp of the last sample of ``name`` that passed the checks, or None."""
-        return self._usable.get(name)
 
 
 class LiveSamples:
@@ -195,10 +130,15 @@ class LiveSamples:
 
 class ExternalInputs:
     """The sample-timing inputs of a lockstep node (an external driver's, or every sensor in
-    ``--real-time``): never awaited, each sample used once at its own stamp (a
-    :class:`SampleQueue`), and starvation: nothing usable for ``dead_after`` of an input's
-    periods (the larger of its producer's and the node's) starves the node, which is logged
-    once per episode and kept in :attr:`starved` for the run summary.
+    ``--real-time``): never awaited; each sample kept by stamp until a frame covers it, used
+    once at its own stamp; starvation: nothing usable for ``dead_after`` of an input's periods
+    (the larger of its producer's and the node's) starves the node, logged once per episode
+    and kept in :attr:`starved` for the run summary.
+
+    Frame ``t`` takes the samples stamped up to one own period before it (``t - P``): a sample
+    on its way while its frame fires (a real-time clock tick comes before the samples of that
+    instant) is taken by the next frame, at its own stamp, instead of being late. A sample
+    that arrives after the frame that covered its stamp is late: refused, never used.
 
     Parameters
     ----------
@@ -207,9 +147,10 @@ class ExternalInputs:
     topics : dict
         ``{name: topic}`` (for the log lines).
     own_period_ns, dead_after, epoch_ns : int
-        The node's period [ns], misses before starvation, the run's epoch [ns].
+        The node's period P [ns], misses before starvation, the run's epoch [ns].
     max_future_ns, max_age_ns : int
-        The arrival limits (:func:`admit`).
+        The arrival limits (:func:`admit`; the future limit is widened by one own period: a
+        producer may be one frame ahead of this node's view of the clock).
     counts : SampleCounts
         Where samples used and superseded are counted.
     """
@@ -220,7 +161,12 @@ class ExternalInputs:
         self.periods_ns, self.topics = dict(periods_ns), topics
         self.own_period_ns, self.dead_after = int(own_period_ns), int(dead_after)
         self.epoch_ns, self.counts = int(epoch_ns), counts
-        self.queue = SampleQueue(self.periods_ns, own_period_ns, max_future_ns, max_age_ns)
+        self.max_future_ns = int(max_future_ns) + self.own_period_ns
+        self.max_age_ns = int(max_age_ns)
+        self._queue: Dict[str, List[Tuple[int, Any]]] = {n: [] for n in self.periods_ns}
+        self._newest: Dict[str, int] = {}    # absolute stamp of the newest accepted
+        self._usable: Dict[str, int] = {}    # elapsed stamp of the last usable sample
+        self.done_t = -1                     # the last frame time [ns] samples were taken for
         self.used: Dict[str, int] = {}       # absolute stamp of the newest sample used
         #: ``{name: {'since_s': last usable stamp [s] (0: none), 'frames': starved frames,
         #: 'episodes': n, 'over': bool}}``
@@ -237,9 +183,33 @@ class ExternalInputs:
 
     def offer(self, name: str, stamp_ns: int, seen_ns: int, msg: Any) -> Optional[Refusal]:
         """A sample stamped ``stamp_ns`` (absolute), the node having seen sim time
-        ``seen_ns``: queued for the frame that covers it, or the reason it is refused."""
-        return self.queue.offer(name, stamp_ns, stamp_ns - self.epoch_ns,
-                                self.epoch_ns + max(seen_ns, 0), msg)
+        ``seen_ns``: kept for the frame that will cover it, or the reason it is refused."""
+        why = admit(stamp_ns, self.epoch_ns + max(seen_ns, 0), self._newest.get(name),
+                    self.max_future_ns, self.max_age_ns)
+        if why is not None:
+            return why
+        self._newest[name] = stamp_ns
+        t_ns = stamp_ns - self.epoch_ns
+        if t_ns <= self.done_t:
+            return 'late', 'arrived after the frame that covers its stamp was processed'
+        self._queue[name].append((t_ns, msg))
+        self._usable[name] = t_ns
+        return None
+
+    def take(self, t_ns: int) -> List[Tuple[int, str, Any]]:
+        """The samples frame ``t_ns`` takes, in stamp order: ``(elapsed stamp, input name,
+        message)``, each returned once."""
+        cover = t_ns - self.own_period_ns
+        out = []
+        for name, queue in self._queue.items():
+            out += [(t, name, msg) for t, msg in queue if t <= cover]
+            self._queue[name] = [(t, msg) for t, msg in queue if t > cover]
+        self.done_t = max(self.done_t, cover)
+        return sorted(out, key=lambda e: e[0])
+
+    def last_usable(self, name: str) -> Optional[int]:
+        """Elapsed stamp of the last sample of ``name`` that passed the checks, or None."""
+        return self._usable.get(name)
 
     def fresh(self, name: str, stamp_ns: int) -> bool:
         """True when a sample stamped ``stamp_ns`` (absolute) is newer than the last used."""
@@ -249,7 +219,7 @@ class ExternalInputs:
         """After frame ``t_ns``, whose sample-timing inputs had the absolute ``stamps``: the
         samples the frame did not take itself are covered now; the newest is used, the older
         ones never read are superseded (both counted)."""
-        left = self.queue.take(t_ns)
+        left = self.take(t_ns)
         prev = dict(self.used)
         for n, s in stamps.items():
             if s > prev.get(n, -1):
@@ -267,7 +237,7 @@ class ExternalInputs:
         out = []
         for n in sorted(self.periods_ns):
             period = max(self.own_period_ns, self.periods_ns[n])
-            since = (last_usable or self.queue.last_usable)(n) or 0
+            since = (last_usable or self.last_usable)(n) or 0
             ent, topic = self.starved.get(n), self.topics.get(n, n)
             if t_ns - since > self.dead_after * period:
                 if ent is None or ent['over']:

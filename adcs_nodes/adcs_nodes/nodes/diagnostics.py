@@ -16,20 +16,14 @@ import time
 from typing import Any, Dict, List, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from adcs_msgs.msg import LockstepStatus
 from adcs_nodes.core.run_status import StatusPacer
-from adcs_nodes.nodes import cdr
+from adcs_nodes.nodes import cdr, runtime
+from adcs_nodes.nodes.adapter import QOS_DATA
 
 TOPIC = '/diagnostics'
 HARDWARE_ID = 'adcs'
-#: ``diagnostic_updater``'s publisher QoS (reliable, volatile), but keep last 100 as every
-#: lockstep topic: the clock master lets a recorder lag 40 frames, and with 10 a lagging
-#: recorder lost ``/diagnostics`` messages (seen in a clean-clone run under load).
-QOS_DIAGNOSTICS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                             history=HistoryPolicy.KEEP_LAST,
-                             durability=DurabilityPolicy.VOLATILE)
 
 #: Node attributes reported when present (and not already in ``timing_diagnostics()``).
 ATTRIBUTES = ('frames', 'missed_frames', 'last_missed_input', 'update_count', 'rejected_count',
@@ -65,9 +59,9 @@ class Diagnostics:
         self.node = node
         self.period_ns = int(round(period_s * NS_PER_S))
         make = getattr(node, 'publisher', None)
-        self.pub = (make(DiagnosticArray, TOPIC, QOS_DIAGNOSTICS) if make is not None
-                    else node.create_publisher(DiagnosticArray, TOPIC, QOS_DIAGNOSTICS))
-        self._next_ns = 0
+        self.pub = (make(DiagnosticArray, TOPIC, QOS_DATA) if make is not None
+                    else node.create_publisher(DiagnosticArray, TOPIC, QOS_DATA))
+        self._next_ns = -1
         self._last: Dict[str, int] = {}
         # the rcl call, without rclpy's `with handle` guard (0.09 us against 0.47 us; called
         # by every node every sim second; a destroyed publisher raises RCLError either way)
@@ -76,9 +70,11 @@ class Diagnostics:
     def frame(self, t_ns: int) -> bool:
         """Called once per processed frame (elapsed sim time ``t_ns``); publishes when a
         period boundary is reached and someone reads the topic. Returns True when a status
-        was published."""
+        was published. The first frame logs the process CPU so far (:func:`runtime.start_cost`)."""
         if t_ns < self._next_ns:
             return False
+        if self._next_ns < 0:
+            self.node.get_logger().info(runtime.start_cost(t_ns))
         self._next_ns = (t_ns // self.period_ns + 1) * self.period_ns
         if not self.wanted():
             return False
@@ -157,9 +153,9 @@ class StatusTopics:
         self.pacer = StatusPacer(node.get_name(), node.frame_ns, status_period_ns, self.wall0)
         self.stopped = False
         self.pub = cdr.raw_publisher(
-            node.create_publisher(LockstepStatus, 'lockstep/status', QOS_DIAGNOSTICS))
+            node.create_publisher(LockstepStatus, 'lockstep/status', QOS_DATA))
         self.progress_pub = cdr.raw_publisher(
-            node.create_publisher(LockstepStatus, 'lockstep/progress', QOS_DIAGNOSTICS))
+            node.create_publisher(LockstepStatus, 'lockstep/progress', QOS_DATA))
         self.diagnostics = Diagnostics(node)     # once per sim second (frame_done)
         node.create_timer(1.0, self._watchdog)
 

@@ -17,8 +17,7 @@ import json
 import time
 from typing import Any, Callable, Dict, List, Tuple
 
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
-                       qos_profile_sensor_data)
+from rclpy.qos import qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 
 from adcs_nodes.core.frame_schedule import FrameSchedule
@@ -26,12 +25,9 @@ from adcs_nodes.core.lockstep import (NS_PER_S, REVIVE_HOLD_FRAMES, FrameSync, I
                                       input_kind, seconds_to_ns)
 from adcs_nodes.core.sample_timing import ExternalInputs, LiveSamples
 from adcs_nodes.nodes import publisher_guard
-from adcs_nodes.nodes.adapter import node_log
+from adcs_nodes.nodes.adapter import QOS_DATA, node_log
 from adcs_nodes.nodes.convert import stamp_ns
 
-#: Reliable, keep-last QoS deep enough that no frame is lost in lockstep.
-QOS_DATA = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                      history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
 #: Topic prefixes subscribed best-effort (SensorDataQoS) in live mode and sample timing.
 SENSOR_PREFIXES = ('sensors/', '/sensors/')
 #: The line a flight-software node logs at its last frame, followed by its summary as JSON.

@@ -1,11 +1,11 @@
 """The start handshake of a lockstep node: the rclpy glue of :mod:`adcs_nodes.core.handshake`.
 
-Every 20 ms the node checks its expectations (``expected_matches`` against the matched
-counts of its endpoints), its own ready checks (sensor mounts, the lifecycle state, the
-publisher guard) and the publishers of its external drivers' topics; when all hold it locks
-its guarded inputs, arms its frame schedule, publishes its name on ``lockstep/ready``
-(latched) and calls ``on_ready``. A wait longer than 10 s says what is missing, with what
-discovery knows (the launcher's self-healing reads that line).
+Every 20 ms (0.1 s after the first second) the node checks its expectations
+(``expected_matches`` against the matched counts of its endpoints), then its own ready checks
+(sensor mounts, the lifecycle state, the publisher guard) and the publishers of its external
+drivers' topics; when all hold it locks its guarded inputs, arms its frame schedule, publishes
+its name on ``lockstep/ready`` (latched) and calls ``on_ready``. A wait longer than 10 s says
+what is missing, with what discovery knows (the launcher's self-healing reads that line).
 
 While it waits for an external driver, the node publishes ``/clock`` at the epoch minus 1 ns
 once a second: a driver on sim time (``ros2 topic pub -s``, ``use_sim_time``) that waits for a
@@ -38,9 +38,10 @@ class Handshake:
         self.timer = None
         self.clock_pub, self.clock_at = None, 0.0
 
-    def unmatched(self, graph_view: bool = False) -> List[str]:
+    def unmatched(self, graph_view: bool = False, quick: bool = False) -> List[str]:
         """What is not matched yet, as readable strings (``graph_view``: with what discovery
-        knows of each topic)."""
+        knows of each topic; ``quick``: only the expectations while one is unmet, the ready
+        checks, which query the graph, after)."""
         node = self.node
 
         def matched(kind: str, topic: str) -> Optional[int]:
@@ -49,8 +50,10 @@ class Handshake:
                                              else ent.get_publisher_count())
         known = (lambda kind, topic: node.count_subscribers(topic) if kind == 'pub'
                  else node.count_publishers(topic)) if graph_view else None
-        return [m for check in self.checks for m in check()] + handshake.unmet(
-            self.expected, matched, node.get_name(), known)
+        unmet = handshake.unmet(self.expected, matched, node.get_name(), known)
+        if quick and unmet:
+            return unmet
+        return [m for check in self.checks for m in check()] + unmet
 
     def external_unmatched(self) -> List[str]:
         """Topics of sample-timing inputs with no publisher matched yet, for at most
@@ -73,14 +76,19 @@ class Handshake:
         return missing if waiting else []
 
     def start(self, on_ready: Optional[Callable[[], None]] = None) -> None:
-        """Check every 20 ms until ready."""
+        """Check every 20 ms until ready, every 0.1 s after the first second (a node that waits
+        for slower ones to start costs less CPU)."""
         self.on_ready, self.t0, self.warned = on_ready, time.monotonic(), 0.0
         self.timer = self.node.create_timer(0.02, self._check)
 
     def _check(self) -> None:
         node = self.node
-        if self.unmatched():
-            waited = time.monotonic() - self.t0
+        waited = time.monotonic() - self.t0
+        if waited > 1.0 and self.timer.timer_period_ns < 100_000_000:
+            self.timer.cancel()
+            node.destroy_timer(self.timer)
+            self.timer = node.create_timer(0.1, self._check)
+        if self.unmatched(quick=True):
             if waited - self.warned > handshake.ENDPOINT_WAIT_LOG_S:
                 self.warned = waited
                 node.get_logger().warning(f'still waiting for endpoints after {waited:.0f} s: '

@@ -15,7 +15,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
 from adcs_nodes.components.base import DEFAULT_EPOCH, epoch_to_ns, parse_epoch  # noqa: F401
@@ -28,19 +28,13 @@ from adcs_nodes.core.run_status import (  # noqa: F401 (MONITOR_*: re-exported)
 from adcs_nodes.core.sample_timing import REASONS, ExternalInputs
 from adcs_nodes.nodes import cdr
 from adcs_nodes.nodes import params as node_params
+from adcs_nodes.nodes.adapter import QOS_LATCHED, QOS_READY  # noqa: F401 (re-exported)
 from adcs_nodes.nodes.convert import stamp_ns, to_stamp
 from adcs_nodes.nodes.diagnostics import StatusTopics
 from adcs_nodes.nodes.frame_timing import (  # noqa: F401 (re-exported)
     QOS_DATA, SENSOR_PREFIXES, SUMMARY_PREFIX, FrameTiming)
 from adcs_nodes.nodes.handshake import Handshake
 
-#: Latched (transient local) QoS for status-like topics.
-QOS_LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                       history=HistoryPolicy.KEEP_LAST,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: Parameters only the launcher (or a lockstep test) gives: any of them means lockstep.
 LAUNCH_PARAMS = ('expected_matches', 'duration_s', 'frame_period_s')
 #: Why a sample is rejected: the timing reasons, and ``undecodable`` (raw CDR bytes that do
@@ -196,12 +190,12 @@ class LockstepNode(node_params.SpecParameters, Node):
     def external_samples(self, t_ns: int) -> List[Tuple[int, str, Any]]:
         """The samples in sample timing frame ``t_ns`` takes, in stamp order, each once:
         ``(elapsed stamp, input name, message)``."""
-        return self.external.queue.take(t_ns)
+        return self.external.take(t_ns)
 
     def last_usable_ns(self, name: str) -> Optional[int]:
         """Elapsed stamp of the last usable sample of an input in sample timing (one that
         passed the timing checks; a consumer that checks more overrides it), or None."""
-        return self.external.queue.last_usable(name)
+        return self.external.last_usable(name)
 
     def fresh(self, name: str, msg: Any, t_ns: int) -> bool:
         """True when ``msg``, the value of input ``name`` in frame ``t_ns``, is a new sample:

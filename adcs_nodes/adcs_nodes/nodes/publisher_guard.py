@@ -36,9 +36,7 @@ HISTORY = 4096
 #: Events published on the events topic per wall second at most (the rest are counted).
 MAX_EVENTS_PER_S = 100
 EVENTS_TOPIC = 'adcs/security_events'
-PARAM = 'expected_publishers'
-PARAM_DOC = ('lockstep inputs accepted only from the named node\'s publisher: '
-             '"<topic>=<node>" entries (empty: accept every publisher)')
+PARAM = 'expected_publishers'      # (its spec: ``nodes.params.COMMON``)
 
 
 def parse_expected(entries: Iterable[str]) -> Dict[str, str]:
@@ -198,15 +196,13 @@ class NodeGuard:
 
     def __init__(self, node: Any, expected: Dict[str, str]) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
-                               ReliabilityPolicy)
+
+        from adcs_nodes.nodes.adapter import QOS_DATA
         self.node = node
         self.core = PublisherGuard({node.resolve_topic_name(t): n
                                     for t, n in expected.items()})
         self._array = DiagnosticArray
-        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
-        self.pub = node.publisher(DiagnosticArray, EVENTS_TOPIC, qos)
+        self.pub = node.publisher(DiagnosticArray, EVENTS_TOPIC, QOS_DATA)
         self._window = (0.0, 0)        # (wall second, events published in it)
         self.suppressed = 0
         node.add_ready_check(self.missing)
@@ -362,6 +358,6 @@ def for_node(node: Any) -> Optional[NodeGuard]:
     parameter), or None when the parameter is empty (unguarded)."""
     if hasattr(node, '_publisher_guard'):
         return node._publisher_guard
-    expected = parse_expected(node.param(PARAM, [''], PARAM_DOC) or [])
+    expected = parse_expected(node.param(PARAM, ['']) or [])
     node._publisher_guard = NodeGuard(node, expected) if expected else None
     return node._publisher_guard

@@ -58,8 +58,10 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import String
 
+from adcs_nodes.core import handshake
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.adapter import QOS_READY
 from adcs_nodes.registry import Param
 from adcs_nodes.bag import (BAG_VERSION, cdr_stamp_ns, ensure_type, flush_writer,
                             make_typestore, stamp_offset)
@@ -69,10 +71,6 @@ DEFAULT_EXCLUDE = ['/rosout', '/parameter_events']
 QUEUE_DEPTH = 1000
 STATUS_TOPIC = 'recorder/status'
 READY_TOPIC = 'lockstep/ready'
-#: Same QoS as the lockstep nodes' ready topic: reliable, transient local.
-QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                       history=HistoryPolicy.KEEP_LAST,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 HANDSHAKE_PERIOD_S = 0.02
 #: ``recorder/status`` is also published every this many ``/clock`` messages written (as the
 #: lockstep nodes report progress every 10 frames), so the clock master's flow control sees
@@ -226,7 +224,7 @@ class RecorderNode(node_params.SpecParameters, Node):
                 self._declared_types[topic] = msgtype.strip()
         self._wanted: Optional[Set[str]] = wanted or None
         self._exclude = [self._resolve(t) for t in p['exclude']]
-        self._expected = self._parse_expected(p['expected_matches'])
+        self._expected = handshake.parse_expectations(p['expected_matches'], self._resolve)
         self._fsync_s = p['fsync_period_s']
         self._flush_sim_ns = int(p['flush_sim_s'] * 1e9)
         self._chunk_t0_ns: Optional[int] = None   # log time of the first pending message
@@ -268,7 +266,7 @@ class RecorderNode(node_params.SpecParameters, Node):
             self.create_subscription(ClockMsg, '/clock', self._on_clock, QoSProfile(
                 depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._last_discovery = 0.0
+        self._last_discovery, self._t_start = 0.0, time.monotonic()
         self._discovery_timer, self._status_timer, self._handshake_timer, self._flush_timer = (
             self.create_timer(period, callback, clock=steady) for period, callback in (
                 (p['discovery_period_s'], self.discover),
@@ -362,45 +360,27 @@ class RecorderNode(node_params.SpecParameters, Node):
             f'{qos.durability.name.lower()}, {len(publishers)} publisher(s))')
 
     # ------------------------------------------------------------------ handshake
-    def _parse_expected(self, items: List[str]) -> List[tuple]:
-        out = []
-        for item in items:
-            if not item:
-                continue
-            try:
-                kind, rest = str(item).split(':', 1)
-                topic, n = rest.rsplit('=', 1)
-                if kind not in ('sub', 'pub'):
-                    raise ValueError(kind)
-                out.append((kind, self._resolve(topic.strip()), int(n)))
-            except ValueError as exc:
-                raise ValueError(f'bad expected_matches entry {item!r} '
-                                 '(want "sub:<topic>=<n>" or "pub:<topic>=<n>")') from exc
-        return out
-
     def unmatched(self) -> List[str]:
-        """Start-handshake expectations not met yet, as readable strings.
-
-        ``sub:<topic>=<n>``: the recording subscription of ``topic`` has at least ``n`` matched
-        publishers; ``pub:<topic>=<n>``: the recorder's publisher (``recorder/status``) has at
-        least ``n`` matched subscriptions.
-        """
-        missing = []
-        pubs = {self._status_topic: self._status_pub}
-        for kind, topic, n in self._expected:
+        """Start-handshake expectations not met yet (:func:`handshake.unmet`): ``sub``: the
+        recording subscription of the topic has that many matched publishers; ``pub``: the
+        recorder's publisher (``recorder/status``) that many matched subscriptions."""
+        def matched(kind: str, topic: str) -> int:
             if kind == 'sub':
                 rec = self._topics.get(topic)
-                have = rec.subscription.get_publisher_count() if rec is not None else 0
-            else:
-                pub = pubs.get(topic)
-                have = pub.get_subscription_count() if pub is not None else 0
-            if have < n:
-                missing.append(f'{kind}:{topic} {have}/{n}')
-        return missing
+                return rec.subscription.get_publisher_count() if rec is not None else 0
+            return self._status_pub.get_subscription_count() if topic == self._status_topic \
+                else 0
+        return handshake.unmet(self._expected, matched, self.get_name())
 
     def _check_ready(self) -> None:
         """Handshake timer: publish our name on ``lockstep/ready`` once every match holds."""
         missing = self.unmatched()
+        if missing and self._handshake_timer.timer_period_ns < 100_000_000 and \
+                time.monotonic() - self._t_start > 1.0:     # slower after a second
+            self._handshake_timer.cancel()
+            self.destroy_timer(self._handshake_timer)
+            self._handshake_timer = self.create_timer(0.1, self._check_ready, clock=Clock(
+                clock_type=ClockType.STEADY_TIME))
         if missing:
             # scan faster than discovery_period_s while topics we wait for are not subscribed
             if time.monotonic() - self._last_discovery > 0.1 and any(
@@ -412,6 +392,7 @@ class RecorderNode(node_params.SpecParameters, Node):
         self.ready = True
         self._ready_pub.publish(String(data=self.get_name()))
         self.get_logger().info(f'ready: {len(self._expected)} expected match(es) hold')
+        self.get_logger().info(runtime.start_cost(0))
 
     # ------------------------------------------------------------------ callbacks
     def _log_time_ns(self, rec: _Topic, raw: bytes) -> Optional[int]:

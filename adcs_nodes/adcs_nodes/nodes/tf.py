@@ -30,26 +30,15 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence
 
 import numpy as np
 from geometry_msgs.msg import TransformStamped
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
 from adcs_nodes.components.base import covariance_to_body  # noqa: F401 (re-export)
 from adcs_nodes.core import attitude as att
+from adcs_nodes.nodes.adapter import QOS_DATA, QOS_LATCHED, QOS_READY
 from adcs_nodes.nodes.convert import quat, to_quat, to_vec3
 
-#: tf2_ros ``DynamicBroadcasterQoS`` / ``DynamicListenerQoS``.
-QOS_TF = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                    history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
-#: tf2_ros ``StaticBroadcasterQoS`` / ``StaticListenerQoS`` (latched).
-QOS_TF_STATIC = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                           history=HistoryPolicy.KEEP_LAST,
-                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: A /tf_static reader keeps many messages (tf2's static listener: depth 100): TFMessage has
-#: no key, so with depth 1 the latched mounts of two sensors arriving together overwrote each
-#: other and one mount was never seen (the estimator then waited for it forever).
-QOS_TF_STATIC_READER = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                                  history=HistoryPolicy.KEEP_LAST,
-                                  durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: tf2_ros's QoS: ``/tf``, ``/tf_static`` (latched) and a ``/tf_static`` reader (depth 100)
+QOS_TF, QOS_TF_STATIC, QOS_TF_STATIC_READER = QOS_DATA, QOS_LATCHED, QOS_READY
 
 BODY = 'body'
 BODY_ESTIMATE = 'body_estimate'

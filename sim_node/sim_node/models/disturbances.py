@@ -48,8 +48,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.kernels import jit
 from adcs_nodes.core.orbit import MU_EARTH  # one value for the whole project
-from sim_node.models.kernels import njit
 
 _INDEX_TOL = 1e-9   # [periods]: t = j T minus a rounding error still belongs to period j
 _NO_INDEX = -2**62  # no period drawn yet
@@ -200,7 +200,7 @@ class RandomTorque:
     def add_to(self, table: np.ndarray, t: float, h: float) -> None:
         """Add the torque at each substep midpoint ``t + i h + h/2`` to row ``i`` of ``table``
         (substeps, 3) [N m]: ``table[i] += torque(t + i h + 0.5 h)``, the same bits."""
-        if _COMPILED and self.seed < 2**64:
+        if self.seed < 2**64 and _compiled():
             last = _NO_INDEX if self._last_index is None else self._last_index
             self._last_index = random_torque_rows(_U(self.seed), self.std_Nm, self.period_s,
                                                   float(t), float(h), last, self._last_value,
@@ -215,7 +215,7 @@ _PCG64_MULT = (2549297995355413924 << 64) + 4865540595714422341   # PCG_DEFAULT_
 _LOCAL = threading.local()            # one reseeded PCG64 per thread (module docstring)
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_seed_words(ent, n):
     """``SeedSequence(entropy).generate_state(4, np.uint64)`` as eight 32-bit words.
 
@@ -268,7 +268,7 @@ def standard_normal3(seed: int, key: int) -> np.ndarray:
     """``numpy.random.default_rng([seed, key]).standard_normal(3)``, bit for bit, shape (3,)."""
     if not 0 <= seed < 2**64 or not 0 <= key < 2**64:
         return np.random.default_rng([seed, key]).standard_normal(3)
-    if _COMPILED:
+    if _compiled():
         return pcg64_normal3(np.uint64(seed), np.uint64(key))
     ent = np.zeros(4, np.int64)
     n = 0
@@ -295,19 +295,31 @@ def standard_normal3(seed: int, key: int) -> np.ndarray:
 # uint64 words throughout (numba types a mix of signed and unsigned integers as float)
 _U = np.uint64
 _MULT_HI, _MULT_LO = _U(_PCG64_MULT >> 64), _U(_PCG64_MULT & (2**64 - 1))
-try:                     # numpy's ziggurat tables (ziggurat_constants.h), as numba carries them
-    from numba.np.random import _constants as _zig
-    _KI = np.asarray(_zig.ki_double, dtype=np.uint64)
-    _WI = np.asarray(_zig.wi_double, dtype=np.float64)
-    _FI = np.asarray(_zig.fi_double, dtype=np.float64)
-    _NOR_R, _NOR_INV_R = float(_zig.ziggurat_nor_r), float(_zig.ziggurat_nor_inv_r)
-    from numba import config as _numba_config
-    _COMPILED = not _numba_config.DISABLE_JIT
-except ImportError:  # pragma: no cover - numba is pinned
-    _COMPILED = False
+#: numpy's ziggurat tables (ziggurat_constants.h) as numba carries them, loaded with numba by
+#: :func:`_compiled` (the kernels below read them when they compile)
+_KI = _WI = _FI = None
+_NOR_R = _NOR_INV_R = 0.0
+_COMPILED: list = []
 
 
-@njit(cache=True)
+def _compiled() -> bool:
+    """True when the draw runs compiled (numba there, its JIT not disabled)."""
+    global _KI, _WI, _FI, _NOR_R, _NOR_INV_R
+    if not _COMPILED:
+        try:
+            from numba import config
+            from numba.np.random import _constants as z
+        except ImportError:  # pragma: no cover - numba is pinned
+            config = None
+        else:
+            _KI, _WI, _FI = (np.asarray(z.ki_double, dtype=np.uint64),
+                             np.asarray(z.wi_double, dtype=float), np.asarray(z.fi_double))
+            _NOR_R, _NOR_INV_R = float(z.ziggurat_nor_r), float(z.ziggurat_nor_inv_r)
+        _COMPILED.append(config is not None and not config.DISABLE_JIT)
+    return _COMPILED[0]
+
+
+@jit(loads_numba=True)
 def _mulhi64(a, b):
     """High 64 bits of the 128-bit product of two uint64."""
     m32, s32 = _U(0xFFFFFFFF), _U(32)
@@ -318,7 +330,7 @@ def _mulhi64(a, b):
     return (hi_lo >> s32) + (cross >> s32) + a_hi * b_hi
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def _pcg64_step(st):
     """``state = state a + inc`` mod 2^128; ``st = [state_hi, state_lo, inc_hi, inc_lo]``."""
     hi, lo = st[0], st[1]
@@ -329,7 +341,7 @@ def _pcg64_step(st):
     st[1] = n_lo
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_seeded(seed, key):
     """PCG64 state ``[state_hi, state_lo, inc_hi, inc_lo]`` (uint64) of ``default_rng([seed,
     key])``, ``seed``, ``key`` uint64."""
@@ -354,7 +366,7 @@ def pcg64_seeded(seed, key):
     return st
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_next64(st):
     """PCG64's next uint64 (``pcg_setseq_128_xsl_rr_64_random_r``: step, then XSL-RR)."""
     _pcg64_step(st)
@@ -363,12 +375,12 @@ def pcg64_next64(st):
     return (v >> rot) | (v << ((_U(64) - rot) & _U(63)))
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def _next_double(st):
     return float(pcg64_next64(st) >> _U(11)) * (1.0 / 9007199254740992.0)
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_normal(st):
     """numpy's ``random_standard_normal`` (ziggurat, 256 layers) on the PCG64 state ``st``."""
     while True:
@@ -391,7 +403,7 @@ def pcg64_normal(st):
             return x
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_normal3(seed, key):
     """``default_rng([seed, key]).standard_normal(3)`` (``seed``, ``key`` uint64)."""
     st = pcg64_seeded(seed, key)
@@ -401,7 +413,7 @@ def pcg64_normal3(seed, key):
     return out
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def random_torque_rows(seed, std, period, t, h, last, value, table):
     """(D3) at the substep midpoints added to ``table`` (substeps, 3), as
     :meth:`RandomTorque.torque` gives it: ``j = floor(t_mid / T + tol)``, ``value = std n_j``

@@ -55,10 +55,10 @@ arguments, outputs of a frame go to ``applied`` (``OUT_*``).
 The orbit (E6) is integrated with the attitude in the same RK4 stages, from the orbit model's
 ``r, v`` at ``t_k``: the position at every stage is the two-body orbit, not a straight line.
 
-One implementation: the functions here are plain Python on numpy arrays, compiled by
-``numba.njit(cache=True)`` (no fastmath, so IEEE semantics are kept); with
-``NUMBA_DISABLE_JIT=1`` (or without numba) the very same functions run as Python.
-``tests/unit/test_kernels.py`` compares the two.
+One implementation: plain Python on numpy arrays, compiled by ``numba.njit(cache=True)`` at
+the first call (:func:`adcs_nodes.core.kernels.jit`; no fastmath: IEEE semantics); with
+``NUMBA_DISABLE_JIT=1`` (or without numba) the very same functions run as Python
+(``tests/unit/test_kernels.py`` compares the two).
 """
 from __future__ import annotations
 
@@ -66,14 +66,7 @@ import math
 
 import numpy as np
 
-try:
-    from numba import njit
-except ImportError:  # pragma: no cover - numba is pinned; this keeps the model importable
-    def njit(*args, **kwargs):
-        """Stand-in for ``numba.njit``: returns the function unchanged."""
-        if args and callable(args[0]):
-            return args[0]
-        return lambda f: f
+from adcs_nodes.core.kernels import jit
 
 #: Slices of the kernel state (see module docstring).
 Q = slice(0, 4)
@@ -96,7 +89,7 @@ def modal_slices(n_wheels: int, n_modes: int) -> tuple[slice, slice]:
     return slice(e0, e0 + m), slice(e0 + m, e0 + 2 * m)
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def external_torques(s, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, out):
     """Gravity-gradient (D1) and magnetic (A1) torques at ``t_k + s``, body axes [N m].
 
@@ -158,7 +151,7 @@ def external_torques(s, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, out):
         out[5] = dipole[0] * by - dipole[1] * bx
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def rhs(s, x, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu, use_gg, use_mtq, dipole,
         b_coef, tau_held, tau_w, work, xdot):
     """Right-hand side (E1)-(E3), (E2f), (E6), (E9) at ``t_k + s``; writes ``xdot`` (N,).
@@ -223,7 +216,7 @@ def rhs(s, x, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu, use_gg, u
     xdot[12] = ko * rz
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def saturate(dt, dipole_cmd, dipole_max, wheel_cmd, wheel_max_torque, wheel_max_momentum,
              h_wheels):
     """Applied dipole (A2) [A m^2] (3,) and wheel torque (W4) [N m] (n,) of a command held
@@ -244,7 +237,7 @@ def saturate(dt, dipole_cmd, dipole_max, wheel_cmd, wheel_max_torque, wheel_max_
     return dipole, tau_w
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def hermite_terms(b_prev, b_dot_prev, b, b_dot, tau, out):
     """Coefficients ``c2``, ``c3`` of (E7) from the cubic Hermite polynomial (E8) through
     ``(b_prev, b_dot_prev)`` at ``-tau`` and ``(b, b_dot)`` at 0 (ECI, (3,) each, [T], [T/s]),
@@ -267,7 +260,7 @@ OUT_WHEELS_BODY = slice(9, 12)
 OUT_TAU_W = 12
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def frame_step(x, dt, substeps, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu,
                use_gg, dipole_max, wheel_max_torque, wheel_max_momentum, u, wheel_extra,
                tau_dist, b_coef, b_prev, tau_prev, applied):
@@ -386,7 +379,7 @@ def frame_step(x, dt, substeps, inertia, mass_inv, axes, coupling, modal_c, moda
             x[c] /= norm
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def propagate_two_body(r0, v0, dt, mu, steps):
     """Two-body orbit (E6) from ``r0`` [m], ``v0`` [m/s] (3,), ECI, over ``dt`` [s] (any
     sign) in ``steps`` RK4 steps; returns ``(r, v)``."""
