@@ -246,7 +246,7 @@ def native_exit_watchdog(after_s: float, code: int, line: str) -> bool:
         event = _Sigevent(value=value, notify=2,           # SIGEV_THREAD
                           function=ctypes.cast(fn, ctypes.c_void_p).value)
         timer = ctypes.c_void_p()
-        at = after_s + 0.02 * i
+        at = after_s + 0.2 * i     # each timer has its own thread: well apart, in order
         spec = (_Timespec * 2)(_Timespec(0, 0), _Timespec(int(at), int((at % 1) * 1e9)))
         if create(1, ctypes.byref(event), ctypes.byref(timer)) != 0 or \
                 settime(timer, 0, ctypes.byref(spec), None) != 0:   # CLOCK_MONOTONIC
