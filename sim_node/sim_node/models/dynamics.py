@@ -75,7 +75,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -212,49 +212,6 @@ class ActuatorCommand:
     dipole_body: np.ndarray = field(default_factory=_zeros3)
     wheel_torque: np.ndarray = field(default_factory=lambda: np.zeros(0))
     torque_body: np.ndarray = field(default_factory=_zeros3)
-
-
-def rk4_step(f: Callable[[float, np.ndarray], np.ndarray], t: float, x: np.ndarray,
-             h: float) -> np.ndarray:
-    """One classical Runge-Kutta step of ``dx/dt = f(t, x)`` (the scheme of the kernel).
-
-    Parameters
-    ----------
-    f : callable
-        ``f(t, x) -> dx/dt``, flat arrays of the shape of ``x``.
-    t : float
-        Time at the start of the step [s].
-    x : numpy.ndarray, shape (m,)
-        State at ``t``.
-    h : float
-        Step [s].
-
-    Returns
-    -------
-    numpy.ndarray, shape (m,)
-        State at ``t + h``.
-    """
-    half = 0.5 * h
-    k1 = f(t, x)
-    k2 = f(t + half, x + half * k1)
-    k3 = f(t + half, x + half * k2)
-    k4 = f(t + h, x + h * k3)
-    return x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
-
-
-def pack_state(state: SpacecraftState) -> np.ndarray:
-    """Flat state ``[q (4), omega (3), h_wheels (n), eta (m), eta_dot (m)]``,
-    shape (7 + n + 2 m,)."""
-    return np.concatenate((state.q_eci_body, state.omega_body_eci_body, state.h_wheels,
-                           state.eta, state.eta_dot))
-
-
-def unpack_state(x: np.ndarray, n_modes: int = 0) -> SpacecraftState:
-    """Inverse of :func:`pack_state` (copies) for ``n_modes`` flexible modes."""
-    m = int(n_modes)
-    end = len(x) - 2 * m
-    return SpacecraftState(x[0:4].copy(), x[4:7].copy(), x[7:end].copy(),
-                           x[end:end + m].copy(), x[end + m:].copy())
 
 
 def hermite_field_derivatives(b_prev, b_dot_prev, b, b_dot, tau: float
