@@ -145,7 +145,7 @@ def test_momentum_error_is_seeded_bounded_and_sized():
     err = WheelMomentumError(0.01 / 3, 0.2, 3, seed=7)
     wheels = WheelCluster(np.eye(3), 1.0, 55.0, 0.1)
     sc = FlexibleSpacecraft(fx.PAPER001_INERTIA, np.zeros((3, 0)), [], wheels=wheels,
-                               wheel_error=err)
+                            wheel_error=err)
     x = sc.pack([0, 0, 0, 1], np.zeros(3))
     hs = []
     for k in range(3000):
