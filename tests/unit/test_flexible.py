@@ -17,8 +17,7 @@ sys.modules.setdefault('rclpy', None)
 from reference_dynamics import FlexibleSpacecraft  # noqa: E402
 from sim_node.models import flexible as fx  # noqa: E402
 from sim_node.models.actuators import WheelCluster, WheelMomentumError  # noqa: E402
-from sim_node.models.disturbances import (ConstantTorque, HarmonicTorque,  # noqa: E402
-                                          PeriodicPulseTorque, paper001_disturbances)
+from sim_node.models.disturbances import HarmonicTorque, PeriodicPulseTorque  # noqa: E402
 
 W0 = 1.0831e-3
 
@@ -177,10 +176,6 @@ def test_disturbance_models():
         PeriodicPulseTorque(1e-3, 10.0, 20.0)
     with pytest.raises(ValueError):
         HarmonicTorque(-1.0, W0)
-    ds = paper001_disturbances(W0, seed=1)
-    mags = sorted(max(np.abs(d.torque(s)).max() for s in np.linspace(0, 6000, 601)) for d in ds)
-    assert any(isinstance(d, ConstantTorque) for d in ds)
-    np.testing.assert_allclose(mags, [1e-8, 1e-6, 1e-5, 1e-5, 1e-3], rtol=2e-2)
 
 
 def test_bad_configuration():
