@@ -1,7 +1,7 @@
 """Flexible appendages in the world integrator (sim_node.models.dynamics + kernels, issue 9).
 
 Truth used here:
-* ``sim_node.models.flexible.FlexibleSpacecraft``: an independent implementation of the same
+* ``reference_dynamics.FlexibleSpacecraft`` (tests/unit): an independent implementation of the same
   hybrid equations (numpy, its own RK4 loop) must give the same trajectory to round-off;
 * conservation laws: without damping and torques the energy
   ``1/2 [w; eta_dot]^T M [w; eta_dot] + 1/2 eta^T Lambda^2 eta`` and the inertial angular
@@ -19,8 +19,9 @@ from adcs_nodes.core import attitude
 from sim_node.models.actuators import WheelCluster, WheelMomentumError
 from sim_node.models.disturbances import ConstantTorque, HarmonicTorque
 from sim_node.models.dynamics import (ActuatorCommand, FlexibleModes, FrameEnvironment,
-                                      Spacecraft, SpacecraftState, pack_state, unpack_state)
-from sim_node.models.flexible import FlexibleSpacecraft, PAPER001_INERTIA, paper001_modes
+                                      Spacecraft, SpacecraftState)
+from reference_dynamics import FlexibleSpacecraft, pack_state, unpack_state
+from sim_node.models.flexible import PAPER001_INERTIA, paper001_modes
 from sim_node.models.spacecraft_config import SPACECRAFT, spacecraft_from_config
 
 Q0 = attitude.normalize([0.1, -0.2, 0.3, 0.9])

@@ -382,37 +382,26 @@ class ClockMaster:
 
     Parameters
     ----------
-    frame_ns : int
-        Base frame [ns] (> 0).
-    duration_ns : int
-        Run length [ns]; 0 = endless.
-    command_period_ns : int
-        Period of ``adcs/actuator_command`` [ns]; 0 = no command (free body).
+    frame_ns, duration_ns, command_period_ns : int
+        Base frame [ns] (> 0); run length [ns] (0: endless); period of
+        ``adcs/actuator_command`` [ns] (0: no command, free body).
     wait_for_nodes : iterable of str
-        Nodes whose progress gates the clock (flow control) and whose final frame ends the run.
+        Nodes whose progress gates the clock and whose final frame ends the run.
     timeout_s : float
         Wall-clock wait [s] for a missing input before going on (> 0).
-    max_lag_frames : int
-        A node may lag this many frames behind the clock.
-    lag_frames : mapping str -> int, optional
-        Per-node override of ``max_lag_frames``.
+    max_lag_frames : int, lag_frames : mapping str -> int
+        How many frames a node may lag behind the clock (per-node overrides).
     dead_after : int
-        Command frames missed in a row after which the command producer is dead: a zero
-        command is applied without waiting until it publishes again (>= 1).
+        Command frames missed in a row after which a zero command is applied without waiting
+        until the producer publishes again (>= 1).
     no_final : iterable of str
-        Nodes not waited for at the end (they report no final frame, e.g. the recorder).
-    always_wait : iterable of str
-        Nodes waited for ``patience`` timeouts in a row, not one (the recorder: going on
-        without it loses messages the publishers no longer keep; a dead recorder ends the run
-        in the launcher). A warning is logged every ``timeout_s`` while the clock waits; after
-        ``patience`` timeouts the clock goes on with an error saying that the bag misses
-        messages (a recorder stuck for good must not hang the run).
-    patience : int
-        See ``always_wait`` (>= 1).
+        Nodes not waited for at the end (no final frame, e.g. the recorder).
+    always_wait : iterable of str, patience : int
+        Nodes waited for ``patience`` (>= 1) timeouts in a row, not one (the recorder), with a
+        warning every ``timeout_s``, then an error saying the bag misses messages.
     pace_s : float
-        Wall seconds per frame at the least (0: as fast as the chain goes). Frame k starts no
-        earlier than ``k * pace_s`` after frame 0 (a schedule, so a frame that started late is
-        caught up); waiting for it changes no number of the run, only its wall time.
+        Frame k starts no earlier than ``k * pace_s`` wall seconds after frame 0 (0: as fast as
+        the chain goes); it changes no number of the run.
     """
 
     def __init__(self, frame_ns: int, duration_ns: int = 0, command_period_ns: int = 0,

@@ -2,15 +2,11 @@
 
 Equations
 ---------
-Gravity gradient of a central Newtonian field (paper 000, eq. (3), written for any orbit
-instead of ``3 w0^2 e_R x I e_R``, which is its circular-orbit form since
-``w0^2 = mu / |r|^3``)::
+Gravity gradient of a central field (paper 000 eq. (3), ``3 w0^2 e_R x I e_R`` on a circular
+orbit, written for any orbit)::
 
     r_hat_body = R(q_eci_body)^T r_eci / |r_eci|
     tau_gg_body = 3 mu / |r_eci|^3  r_hat_body x (I r_hat_body)                          (D1)
-
-It vanishes when a principal axis of ``I`` points along ``r`` (the gravity-gradient
-equilibria, paper 000 section 2).
 
 Residual torques, body axes (paper 000 section 4: constant ``M_r`` and a Gaussian torque of
 std up to 1e-5 N m)::
@@ -18,26 +14,13 @@ std up to 1e-5 N m)::
     tau_const_body(t) = M_r                                                              (D2)
     tau_rand_body(t)  = sigma * n_j,  j = floor(t / T),  n_j ~ N(0, I3)                  (D3)
 
-(D3) is a zero-order hold redrawn every period ``T``. ``n_j`` comes from
-``numpy.random.default_rng([seed, j])``: it depends only on ``(seed, j)``, never on how often
-or in which order the torque is queried, so a trajectory does not depend on the number of
-integrator substeps. The spacecraft model samples every disturbance once per RK4 substep, at
-the substep midpoint, and holds it over the substep; with ``T`` a multiple of the substep this
-is exact for (D3).
-
-Drawing ``n_j`` with ``default_rng([seed, key])`` costs about 8 us (most of it building the
-``SeedSequence`` and ``PCG64``), 20 times per frame at the paper's 0.1 s period. The same bits
-come from a compiled PCG64: :func:`pcg64_seed_words` is numpy's ``SeedSequence`` hash
-(``mix_entropy`` with pool size 4, then ``generate_state(4, uint64)`` as eight 32-bit words;
-numpy ``bit_generator.pyx``), :func:`pcg64_seeded` applies PCG64's seeding
-(``pcg_setseq_128_srandom_r``: ``inc = 2 initseq + 1``, ``s = (inc + initstate) a + inc`` mod
-2^128, in two 64-bit words), :func:`pcg64_next64` is PCG64's step and XSL-RR output, and
-:func:`pcg64_normal` numpy's ziggurat ``random_standard_normal`` (``distributions.c``, with its
-tables as numba carries them for its own ``Generator``). :meth:`RandomTorque.add_to` fills a
-frame's substeps in one compiled call (about 1 us a draw instead of 8).
-``tests/unit/test_random_draw.py`` checks every bit against ``default_rng`` (both ziggurat
-rejection paths included); without numba the draw sets the state of one reused numpy
-``PCG64`` instead (same bits, slower).
+(D3) is a zero-order hold redrawn every period ``T``; ``n_j`` is
+``default_rng([seed, j]).standard_normal(3)``, a function of ``(seed, j)`` only, so a
+trajectory does not depend on the number of substeps. The draw is a compiled copy of numpy's
+``SeedSequence`` hash (:func:`pcg64_seed_words`, ``bit_generator.pyx``), PCG64 seeding and
+XSL-RR output (:func:`pcg64_seeded`, :func:`pcg64_next64`) and ziggurat
+``random_standard_normal`` (:func:`pcg64_normal`, ``distributions.c``): the same bits as
+``default_rng`` (``tests/unit/test_random_draw.py``), about 1 us a draw instead of 8.
 """
 from __future__ import annotations
 
@@ -64,19 +47,8 @@ class Disturbance(Protocol):
 
 
 def check_inertia(inertia, name: str = 'inertia') -> np.ndarray:
-    """Validate a rigid-body inertia matrix and return it as a (3, 3) float array.
-
-    Parameters
-    ----------
-    inertia : array_like, shape (3, 3)
-        Inertia about the centre of mass, body axes [kg m^2].
-
-    Raises
-    ------
-    ValueError
-        If it is not finite, not symmetric (relative 1e-9), not positive definite, or its
-        principal moments break the triangle inequality ``I1 + I2 >= I3`` of a real body.
-    """
+    """The inertia (3, 3) [kg m^2], body axes, as a float array; ``ValueError`` unless finite,
+    symmetric (relative 1e-9), positive definite, with ``I1 + I2 >= I3``."""
     m = np.array(inertia, dtype=float)
     if m.shape != (3, 3):
         raise ValueError(f'{name} must have shape (3, 3), got {m.shape}')
@@ -96,24 +68,8 @@ def check_inertia(inertia, name: str = 'inertia') -> np.ndarray:
 
 
 def gravity_gradient_torque(q_eci_body, r_eci, inertia, mu: float = MU_EARTH) -> np.ndarray:
-    """Gravity-gradient torque (D1) [N m], body axes.
-
-    Parameters
-    ----------
-    q_eci_body : array_like, shape (4,)
-        Attitude, scalar last; rotates body components into ECI.
-    r_eci : array_like, shape (3,)
-        Position of the centre of mass, ECI [m]; non-zero.
-    inertia : array_like, shape (3, 3)
-        Inertia, body axes [kg m^2].
-    mu : float
-        Gravitational parameter [m^3/s^2].
-
-    Returns
-    -------
-    numpy.ndarray, shape (3,)
-        ``tau_gg_body`` [N m].
-    """
+    """``tau_gg_body`` (3,) [N m], (D1), of ``q_eci_body`` (4,), the non-zero position
+    ``r_eci`` (3,) [m], ECI, the inertia (3, 3) [kg m^2], body axes, and ``mu`` [m^3/s^2]."""
     inertia = check_inertia(inertia)
     r = np.array(r_eci, dtype=float)
     if r.shape != (3,) or not np.all(np.isfinite(r)):
@@ -128,13 +84,7 @@ def gravity_gradient_torque(q_eci_body, r_eci, inertia, mu: float = MU_EARTH) ->
 
 
 class ConstantTorque:
-    """Constant body-fixed disturbance torque (D2).
-
-    Parameters
-    ----------
-    torque_body : array_like, shape (3,)
-        Torque [N m], body axes; finite.
-    """
+    """Constant body-fixed disturbance torque (D2), ``torque_body`` (3,) [N m]."""
 
     def __init__(self, torque_body) -> None:
         tau = np.array(torque_body, dtype=float)
@@ -148,17 +98,8 @@ class ConstantTorque:
 
 
 class RandomTorque:
-    """Gaussian body-fixed disturbance torque, zero-order hold redrawn every period (D3).
-
-    Parameters
-    ----------
-    std_Nm : float or array_like, shape (3,)
-        Standard deviation per body axis [N m], ``>= 0``.
-    period_s : float
-        Hold period ``T`` [s], ``> 0``.
-    seed : int
-        Non-negative seed; with the period index it fully determines every draw.
-    """
+    """Gaussian body-fixed torque held over each period (D3): ``std_Nm`` (float or (3,))
+    [N m] >= 0, ``period_s`` ``T`` [s] > 0, ``seed`` >= 0."""
 
     def __init__(self, std_Nm, period_s: float, seed: int) -> None:
         std = np.array(std_Nm, dtype=float)
@@ -180,12 +121,8 @@ class RandomTorque:
         return math.floor(t / self.period_s + _INDEX_TOL)
 
     def draw(self, j: int) -> np.ndarray:
-        """Torque of period ``j`` [N m], body axes, shape (3,); a pure function of (seed, j).
-
-        ``std_Nm * default_rng([seed, key]).standard_normal(3)`` with ``key = 2 j`` (``j >=
-        0``) or ``-2 j - 1``, computed on one reused ``PCG64`` (module docstring).
-        """
-        # SeedSequence entropy must be non-negative: map ..., -2, -1, 0, 1, ... one-to-one.
+        """Torque (3,) [N m] of period ``j``: ``std default_rng([seed, key]).standard_normal(3)``,
+        ``key = 2 j`` for ``j >= 0``, else ``-2 j - 1`` (the entropy must be >= 0)."""
         key = 2 * j if j >= 0 else -2 * j - 1
         return self.std_Nm * standard_normal3(self.seed, key)
 
@@ -217,21 +154,9 @@ _LOCAL = threading.local()            # one reseeded PCG64 per thread (module do
 
 @jit(loads_numba=True)
 def pcg64_seed_words(ent, n):
-    """``SeedSequence(entropy).generate_state(4, np.uint64)`` as eight 32-bit words.
-
-    Parameters
-    ----------
-    ent : numpy.ndarray, shape (4,), int64
-        The entropy as 32-bit words (``_coerce_to_uint32_array``: each integer of the entropy
-        list split into words, low first; ``0`` is one word), zero padded.
-    n : int
-        Number of entropy words, 1 to 4.
-
-    Returns
-    -------
-    numpy.ndarray, shape (8,), int64
-        Words ``w``: 64-bit word ``k`` is ``w[2k] + 2**32 w[2k + 1]``.
-    """
+    """``SeedSequence(entropy).generate_state(4, np.uint64)`` as eight 32-bit words (int64
+    (8,); 64-bit word ``k`` is ``w[2k] + 2**32 w[2k + 1]``) of the ``n`` (1 to 4) entropy
+    words ``ent`` (4,) (each integer split into 32-bit words, low first, zero padded)."""
     m32 = 0xFFFFFFFF
     pool = np.zeros(4, np.int64)
     h = 0x43b0d7e5                       # INIT_A
@@ -447,21 +372,8 @@ class HarmonicTorque:
 
         tau_i(t) = a_i sin(w t + phi_i),   phi_i ~ U[0, 2 pi) from default_rng(seed)        (D4)
 
-    Paper 001 (Sec. 6) gives only magnitudes: gravity gradient 1e-5, aerodynamic 1e-6, solar
-    pressure 1e-5 N m. ASSUMPTION (digest section 6): gravity gradient at ``2 w0``, aero and
-    solar at ``w0`` (see :func:`paper001_disturbances`). ``w = 0`` gives a constant
-    ``a_i sin(phi_i)``.
-
-    Parameters
-    ----------
-    amplitude_Nm : float or array_like, shape (3,)
-        ``a`` per body axis [N m], ``>= 0``.
-    omega_rad_s : float
-        Angular frequency ``w`` [rad/s], ``>= 0``.
-    seed : int
-        Non-negative seed of the phases.
-    phase_rad : array_like, shape (3,), optional
-        Fixed phases instead of seeded ones [rad].
+    ``amplitude_Nm`` ``a`` (float or (3,)) [N m] >= 0, ``omega_rad_s`` ``w`` >= 0, ``seed``
+    >= 0, or fixed ``phase_rad`` (3,) [rad].
     """
 
     def __init__(self, amplitude_Nm, omega_rad_s: float, seed: int = 0,
@@ -490,20 +402,9 @@ class PeriodicPulseTorque:
 
         tau(t) = s o a  if (t - t_start) mod T < d  and t >= t_start, else 0               (D5)
 
-    ``s`` in {-1, +1}^3: per-axis signs drawn from ``default_rng(seed)`` unless given.
-
-    Parameters
-    ----------
-    amplitude_Nm : float or array_like, shape (3,)
-        ``a`` per body axis [N m], ``>= 0``.
-    period_s, duration_s : float
-        ``T > 0`` and ``0 <= d <= T`` [s]; ``d = T`` is a constant torque.
-    start_s : float
-        First switch-on [s].
-    seed : int
-        Non-negative seed of the signs.
-    signs : array_like, shape (3,), optional
-        Fixed signs (+-1) instead of seeded ones.
+    ``amplitude_Nm`` ``a`` (float or (3,)) [N m] >= 0, ``period_s`` ``T > 0``, ``duration_s``
+    ``0 <= d <= T``, ``start_s`` [s]; per-axis signs ``s`` in {-1, +1}^3 from
+    ``default_rng(seed)`` or fixed ``signs`` (3,).
     """
 
     def __init__(self, amplitude_Nm, period_s: float, duration_s: float, start_s: float = 0.0,
@@ -533,25 +434,3 @@ class PeriodicPulseTorque:
         phase = (t - self.start_s) % self.period_s
         on = phase < self.duration_s or self.duration_s >= self.period_s
         return self.signs * self.amplitude_Nm if on else np.zeros(3)
-
-
-def paper001_disturbances(omega0: float, seed: int, unloading: bool = True,
-                          unloading_period_s: float = 600.0,
-                          unloading_duration_s: float = 60.0) -> list:
-    """Paper 001's disturbance set at its magnitudes (Sec. 6), each seeded from ``seed``.
-
-    ASSUMPTION (waveforms not in the paper, digest section 6): gravity gradient 1e-5 N m at
-    ``2 w0``; aerodynamic 1e-6 N m at ``w0``; solar pressure 1e-5 N m at ``w0``; residual
-    magnetic 1e-8 N m constant; unloading 1e-3 N m per axis, on ``unloading_duration_s``
-    every ``unloading_period_s``. The synthetic gravity gradient replaces the physical one
-    (D1), which is 10-300x larger for inertia (30) (digest P12).
-    """
-    w0 = float(omega0)
-    out = [HarmonicTorque(1e-5, 2.0 * w0, seed=seed * 8 + 1),
-           HarmonicTorque(1e-6, w0, seed=seed * 8 + 2),
-           HarmonicTorque(1e-5, w0, seed=seed * 8 + 3),
-           ConstantTorque([1e-8, 1e-8, 1e-8])]
-    if unloading:
-        out.append(PeriodicPulseTorque(1e-3, unloading_period_s, unloading_duration_s,
-                                       seed=seed * 8 + 4))
-    return out

@@ -1,12 +1,7 @@
 """The spacecraft and its initial state: their specs (:data:`SPACECRAFT`, :data:`INITIAL`:
 the scenario's ``spacecraft`` and ``initial`` sections, the dynamics node's ``spacecraft.*``
-and ``initial.*`` parameters) and the models built from their validated values.
-
-Paper 001's torque models (``disturbances`` (D4), (D5)) are the ``disturbance`` keys
-``aerodynamic_Nm``, ``solar_pressure_Nm``, ``synthetic_gravity_gradient_Nm`` (harmonic,
-period ``harmonic_period_s``; the synthetic gravity gradient at twice the frequency),
-``residual_magnetic_Nm`` and ``unloading_Nm`` (pulses). Each random model has its own seed
-derived from ``seed`` and its name.
+and ``initial.*`` parameters) and the models built from their validated values. Each random
+model has its own seed derived from ``seed`` and its name.
 """
 from __future__ import annotations
 
@@ -191,22 +186,10 @@ def _paper001_torques(dist: Dict[str, Any], seed: int) -> list:
 
 def initial_state(cfg: Dict[str, Any], q_eci_orbit, omega_orbit_eci_eci,
                   spacecraft: Spacecraft, wheel_h0=None) -> SpacecraftState:
-    """Initial :class:`SpacecraftState` from ``initial.*`` and the orbit frame at t0.
-
-    Parameters
-    ----------
-    cfg : dict
-        Validated :data:`INITIAL` values: ``q_orbit_body_xyzw`` or ``q_orbit_body_wxyz``
-        (default: identity), ``omega_body_eci_body_deg_s`` or ``omega_body_orbit_body_deg_s``
-        [deg/s, body axes] (default: at rest in the orbit frame).
-    q_eci_orbit : array_like, shape (4,)
-        Orbit frame at t0.
-    omega_orbit_eci_eci : array_like, shape (3,)
-        Rate of the orbit frame w.r.t. ECI, ECI axes [rad/s] (for a relative initial rate).
-    spacecraft : Spacecraft
-    wheel_h0 : array_like, shape (n_wheels,), optional
-        Initial wheel momenta [N m s]; zero by default.
-    """
+    """Initial :class:`SpacecraftState` from the validated :data:`INITIAL` values ``cfg``
+    (default: aligned with and at rest in the orbit frame), the orbit frame ``q_eci_orbit``
+    (4,) at t0 and its rate ``omega_orbit_eci_eci`` (3,) [rad/s], ECI, and the wheel momenta
+    ``wheel_h0`` (n_wheels,) [N m s] (default zero)."""
     if 'q_orbit_body_wxyz' in cfg:
         w, x, y, z = cfg['q_orbit_body_wxyz']
         q_orbit_body = [x, y, z, w]
