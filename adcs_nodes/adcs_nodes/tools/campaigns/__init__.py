@@ -23,7 +23,7 @@ from adcs_nodes.tools.campaigns.files import (  # noqa: F401
 from adcs_nodes.tools.campaigns.results import (  # noqa: F401
     STATE_TOPIC, angle_to_target_deg, bag_metrics, read_truth, series_metrics)
 from adcs_nodes.tools.campaigns.runner import (  # noqa: F401
-    ONE_THREAD_ENV, STOP_GRACE_S, execute_run, worker_env, worker_main)
+    ONE_THREAD_ENV, STOP_GRACE_S, close_servers, execute_run, worker_env, worker_main)
 from adcs_nodes.tools.campaigns.summary import (  # noqa: F401
     orbit_period_s, plot_capture_vs_rate, rate_bins, summary_markdown)
 from adcs_nodes.tools.campaigns.table import (  # noqa: F401

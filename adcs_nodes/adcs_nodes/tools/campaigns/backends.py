@@ -1,5 +1,6 @@
-"""Where the runs execute: a local thread pool of run processes, or a Dask cluster (an
-existing scheduler, or a ``LocalCluster`` started for the campaign)."""
+"""Where the runs execute: a local thread pool of supervisors, each feeding its worker process,
+or a Dask cluster (an existing scheduler, or a ``LocalCluster`` started for the campaign) whose
+workers do the same."""
 from __future__ import annotations
 
 import contextlib
@@ -10,17 +11,19 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from typing import Any, Dict, Iterator, List, Optional
 
 from adcs_nodes.tools.campaigns.config import CampaignError
-from adcs_nodes.tools.campaigns.runner import execute_run
+from adcs_nodes.tools.campaigns.runner import close_servers, execute_run
 
 
 class LocalBackend:
-    """J runs at once, each in its own process, supervised from a thread pool."""
+    """J runs at once: a pool of J threads, each feeding the runs to its worker process."""
 
     def __init__(self, jobs: int) -> None:
         self.pool = ThreadPoolExecutor(max_workers=jobs, thread_name_prefix='mc-run')
         self.futures: set = set()
+        self.stop_file = ''
 
     def submit(self, job: Dict[str, Any]) -> None:
+        self.stop_file = job['stop_file']
         self.futures.add(self.pool.submit(execute_run, job))
 
     def results(self) -> Iterator[Dict[str, Any]]:
@@ -37,6 +40,7 @@ class LocalBackend:
 
     def close(self) -> None:
         self.pool.shutdown(wait=False, cancel_futures=True)
+        close_servers(self.stop_file)
 
 
 class DaskBackend:
@@ -51,8 +55,8 @@ class DaskBackend:
         Campaign session id (part of the task keys).
     local_workers : int, optional
         Start a ``LocalCluster`` of this many worker processes with one thread each
-        (``--dask-local``): a worker supervises one run process at a time, like one slot of
-        the local thread pool.
+        (``--dask-local``): a Dask worker feeds one worker process, like one thread of the
+        local pool.
     """
 
     def __init__(self, address: Optional[str], session: str,
@@ -81,8 +85,10 @@ class DaskBackend:
         self.address = address
         self.session = session
         self.futures: list = []
+        self.stop_file = ''
 
     def submit(self, job: Dict[str, Any]) -> None:
+        self.stop_file = job['stop_file']
         key = f'adcs-montecarlo-{job["index"]}-{self.session}'
         self.futures.append(self.client.submit(execute_run, job, key=key, pure=False))
 
@@ -110,6 +116,11 @@ class DaskBackend:
         return done
 
     def close(self) -> None:
+        try:
+            if self.stop_file:     # the campaign's worker processes in every Dask worker
+                self.client.run(close_servers, self.stop_file)
+        except Exception:  # noqa: BLE001 - a lost Dask worker's workers ended with it
+            pass
         try:
             self.client.close()
         finally:

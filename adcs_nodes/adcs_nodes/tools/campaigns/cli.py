@@ -12,7 +12,7 @@ from adcs_nodes.tools.campaigns.config import (ENGINES, CampaignConfig, Campaign
                                                Dispersion, apply_dispersion,
                                                default_max_rate_deg_s, scenario_hash)
 from adcs_nodes.tools.campaigns.engine import plain_engine_problem, resolve_engine
-from adcs_nodes.tools.campaigns.runner import worker_main
+from adcs_nodes.tools.campaigns.runner import serve
 
 #: The most runs of one campaign (one directory each under ``runs/``) and runs at once.
 MAX_RUNS = 100_000
@@ -197,13 +197,11 @@ def run_from_args(args: argparse.Namespace) -> int:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.campaigns``: the campaign command, or one run's process.
-
-    ``_worker RUN_DIR`` is the internal per-run entry point used by :func:`execute_run`.
-    """
+    """``python -m adcs_nodes.tools.campaigns``: the campaign command, or (``_worker
+    STOP_FILE``, internal) a worker process of :func:`~.runner.execute_run`."""
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ['_worker'] and len(argv) == 2:
-        return worker_main(argv[1])
+        return serve(argv[1])
     parser = argparse.ArgumentParser(prog='adcs montecarlo',
                                      description='Dispersed Monte Carlo campaign.')
     add_arguments(parser)

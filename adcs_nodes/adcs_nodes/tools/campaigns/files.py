@@ -4,6 +4,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import socket
 import time
 import uuid
 from typing import Any, Dict, Optional
@@ -31,6 +32,23 @@ def write_text_atomic(path: str, text: str, fsync: bool = False) -> None:
             fh.flush()
             os.fsync(fh.fileno())
     os.replace(tmp, path)
+
+
+def result_head(job: Dict[str, Any]) -> Dict[str, Any]:
+    """The fields every ``result.json`` and ``failed.json`` of a run starts with."""
+    return {'index': job['index'], 'dispersion': job['dispersion'], 'bag': 'bag',
+            'host': socket.gethostname(), 'supervisor_pid': os.getppid(),
+            'worker_pid': os.getpid(),
+            'finished_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}
+
+
+def fail(run_dir: str, job: Dict[str, Any], code: int, message: str, wall: float) -> int:
+    """Write the run's ``failed.json``; the exit code (``code``, at least 1)."""
+    write_json_atomic(os.path.join(run_dir, FAILED_FILE),
+                      {**result_head(job), 'status': 'error', 'exit_code': code,
+                       'message': message, 'wall_time_s': wall})
+    print(f'[montecarlo] run failed: {message}', flush=True)
+    return code or 1
 
 
 def run_dir_of(out: str, index: int) -> str:
