@@ -131,7 +131,8 @@ def is_counted(ok: Any) -> bool:
     return ok is not None and not isinstance(ok, NotComparable)
 
 
-def _fmt(value: Any) -> str:
+def fmt(value: Any) -> str:
+    """A measured value as the tables print it (4 significant digits, yes/no)."""
     if isinstance(value, bool):
         return 'yes' if value else 'no'
     try:
@@ -151,7 +152,7 @@ def table_lines(rows: Sequence[Row]) -> List[str]:
     """The Markdown table of ``rows`` and its count line (what ``adcs report`` prints)."""
     lines = ['| quantity | paper | measured | verdict |', '|---|---|---|---|']
     for name, paper, measured, ok in rows:
-        lines.append('| ' + ' | '.join((_cell(name), _cell(paper), _cell(_fmt(measured)),
+        lines.append('| ' + ' | '.join((_cell(name), _cell(paper), _cell(fmt(measured)),
                                         _cell(verdict_text(ok)))) + ' |')
     lines += ['', summary_line(rows)]
     return lines
