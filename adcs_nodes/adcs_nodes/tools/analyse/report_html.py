@@ -60,12 +60,25 @@ class _Series:
     topics: Dict[str, int] = field(default_factory=dict)
 
 
-def _q(m) -> List[float]:
-    return [m.x, m.y, m.z, m.w]
+def _xyz(v) -> List[float]:
+    return [v.x, v.y, v.z] + ([v.w] if hasattr(v, 'w') else [])
 
 
-def _v(m) -> List[float]:
-    return [m.x, m.y, m.z]
+#: The series of :class:`_Series` each topic fills: ``{topic: (series, {key: getter})}``.
+_FIELDS = {
+    '/sim/state': ('state', {'q_eci': lambda m: _xyz(m.q_eci_body),
+                             'q_orbit': lambda m: _xyz(m.q_orbit_body),
+                             'w_eci': lambda m: _xyz(m.omega_body_eci_body),
+                             'w_orbit': lambda m: _xyz(m.omega_body_orbit_body)}),
+    '/adcs/attitude_target': ('target', {'q': lambda m: _xyz(m.q_ref_body),
+                                         'frame': lambda m: m.header.frame_id or 'orbit'}),
+    '/adcs/attitude_estimate': ('est', {'q_eci': lambda m: _xyz(m.q_eci_body),
+                                        'cov': lambda m: list(m.covariance)}),
+    '/adcs/estimator/diagnostics': ('diag', {'rejected': lambda m: int(m.rejected_count),
+                                             'last': lambda m: str(m.last_rejection)}),
+    '/adcs/actuator_command': ('cmd', {'source': lambda m: str(m.source),
+                                       'dipole': lambda m: _xyz(m.dipole_body)}),
+}
 
 
 def _collect(bag_path) -> _Series:
@@ -77,40 +90,22 @@ def _collect(bag_path) -> _Series:
             continue
         raw.append((topic, stamp, msg))
         s.topics[topic] = s.topics.get(topic, 0) + 1
-    states = [st for tp, st, _ in raw if tp == '/sim/state']
-    stamps = states or [st for _, st, _ in raw]
+    stamps = [st for tp, st, _ in raw if tp == '/sim/state'] or [st for _, st, _ in raw]
     s.t0 = min(stamps) if stamps else 0
     for topic, stamp, m in raw:
         t = (stamp - s.t0) * 1e-9
-        if topic == '/sim/state':
-            d = s.state
-            d['t'].append(t)
-            d['q_eci'].append(_q(m.q_eci_body))
-            d['q_orbit'].append(_q(m.q_orbit_body))
-            d['w_eci'].append(_v(m.omega_body_eci_body))
-            d['w_orbit'].append(_v(m.omega_body_orbit_body))
-        elif topic == '/adcs/attitude_target':
-            s.target['t'].append(t)
-            s.target['q'].append(_q(m.q_ref_body))
-            s.target['frame'].append(m.header.frame_id or 'orbit')
-        elif topic == '/adcs/attitude_estimate':
-            s.est['t'].append(t)
-            s.est['q_eci'].append(_q(m.q_eci_body))
-            s.est['cov'].append(list(m.covariance))
-        elif topic == '/adcs/estimator/diagnostics':
-            s.diag['t'].append(t)
-            s.diag['rejected'].append(int(m.rejected_count))
-            s.diag['last'].append(str(m.last_rejection))
+        if topic in _FIELDS:
+            name, fields = _FIELDS[topic]
+            series = getattr(s, name)
+            series['t'].append(t)
+            for key, get in fields.items():
+                series[key].append(get(m))
         elif topic == '/sim/wheels':
             if len(m.speed) and len(m.speed) == len(m.momentum):
                 s.wheels['t'].append(t)
                 s.wheels['speed'].append(list(m.speed))
                 s.wheels['momentum'].append(list(m.momentum))
                 s.wheels['names'] = list(m.names)
-        elif topic == '/adcs/actuator_command':
-            s.cmd['t'].append(t)
-            s.cmd['source'].append(str(m.source))
-            s.cmd['dipole'].append(_v(m.dipole_body))
         elif topic == '/adcs/controller_status':
             s.status.append({'t': t, 'active': m.active, 'mode': m.mode,
                              'switch_count': int(m.switch_count),

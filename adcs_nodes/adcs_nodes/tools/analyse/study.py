@@ -75,10 +75,8 @@ def summary(topics: Topics, sc: Dict[str, Any]) -> Dict[str, Any]:
     e0 = epoch_ns(sc)
     t = np.array([(k - e0) / 1e9 for k, _ in truth])
     angle = metrics.angle_to_identity_deg([quat(m.q_orbit_body) for _, m in truth])
-    period = None
-    if (sc.get('orbit') or {}).get('type', 'circular') == 'circular':
-        from adcs_nodes.tools.analyse.papers.series import orbit_period_s
-        period = orbit_period_s(sc)
+    from adcs_nodes.tools.analyse.papers.series import orbit_period_s
+    period = orbit_period_s(sc)
     out = metrics.run_metrics(t, angle, period)
     est = estimate_errors(topics, sc)
     if est['t_s'].size:

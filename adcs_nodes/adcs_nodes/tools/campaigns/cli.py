@@ -100,16 +100,8 @@ def max_rate_deg_s(args: argparse.Namespace, base: Dict[str, Any]) -> float:
 
 
 def config_from_args(args: argparse.Namespace) -> tuple:
-    """Validate the arguments; returns ``(CampaignConfig, base scenario, out dir)``.
-
-    The engine is resolved here (:func:`~adcs_nodes.tools.campaigns.engine.resolve_engine`);
-    the reason is in ``args.engine_reason`` afterwards.
-
-    Raises
-    ------
-    CampaignError, adcs_nodes.scenario.ScenarioError
-        On a bad value or scenario.
-    """
+    """Validate the arguments: ``(CampaignConfig, base scenario, out dir)``; the engine's
+    reason in ``args.engine_reason``; CampaignError or ScenarioError on a bad value."""
     from adcs_nodes.scenario import load_scenario
 
     base = load_scenario(args.scenario)
@@ -132,19 +124,25 @@ def config_from_args(args: argparse.Namespace) -> tuple:
                             f'{base["timing"]["frame_s"]:g} s frames')
     out = args.out or f'montecarlo_{base["name"]}'
     engine, args.engine_reason = resolve_engine(getattr(args, 'engine', None), base, out)
-    cfg = CampaignConfig(
-        scenario_path=base['_path'], scenario_sha256=scenario_hash(base), runs=args.runs,
-        seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
-        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
-        mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
-        auto_detumble=bool(getattr(args, 'auto_detumble', False)),
-        bdot_gain=getattr(args, 'bdot_gain', None),
-        engine=engine, compose=bool(args.compose), capture_reference=capture_reference(base))
+    cfg = campaign_config(args, base, base, duration, engine)
     if cfg.auto_detumble and not {'magnetic', 'bdot'} <= set(base.get('controllers', {})):
         raise CampaignError('--auto-detumble needs the controllers magnetic and bdot in the '
                             'scenario')
     check_dispersion(cfg, base)
     return cfg, base, out
+
+
+def campaign_config(args: argparse.Namespace, base: Dict[str, Any], sc: Dict[str, Any],
+                    duration: float, engine: str) -> CampaignConfig:
+    """The campaign of the arguments on scenario ``sc`` (``base``, or a sweep's point)."""
+    return CampaignConfig(
+        scenario_path=base['_path'], scenario_sha256=scenario_hash(sc), runs=args.runs,
+        seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
+        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
+        mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
+        auto_detumble=bool(getattr(args, 'auto_detumble', False)),
+        bdot_gain=getattr(args, 'bdot_gain', None), engine=engine,
+        compose=bool(getattr(args, 'compose', False)), capture_reference=capture_reference(sc))
 
 
 def check_dispersion(cfg: CampaignConfig, base: Dict[str, Any]) -> None:

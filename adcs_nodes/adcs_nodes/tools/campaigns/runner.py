@@ -49,12 +49,9 @@ def worker_env() -> Dict[str, str]:
 
 
 def worker_main(run_dir: str) -> int:
-    """Body of the per-run process: launch the dispersed scenario, record, write the result.
-
-    Writes ``result.json`` (atomically; capture judged against the recorded guidance target,
-    :mod:`.capture`) when the graph ran to its end, ``failed.json`` when it failed; writes
-    nothing when interrupted (exit code 130).
-    """
+    """A graph-engine run: launch the dispersed scenario, record it, write ``result.json``
+    (capture judged from the bag, :mod:`.capture`) or ``failed.json``; nothing when
+    interrupted (exit code 130)."""
     from adcs_nodes.tools.run.launcher import LaunchError, Launcher
     from adcs_nodes.scenario import ScenarioError, load_scenario
 
@@ -90,24 +87,22 @@ def worker_main(run_dir: str) -> int:
 
 
 class RunOwner:
-    """One run executed by one worker process at a time: an exclusive ``flock`` on
-    ``RUN_DIR.owner`` (beside the run directory, which a new attempt recreates), taken and
-    held by the worker process for the run, named in the file (host, pid).
-
-    A run given to another worker while the run process of its lost worker still lives on
-    this host: that process group is ended (SIGTERM, SIGKILL after :data:`STOP_GRACE_S`)
-    before the run is taken; on another host the run is refused (CampaignError).
-    """
+    """One run in one worker process at a time: an exclusive ``flock`` on ``RUN_DIR.owner``
+    (beside the run directory, which a new attempt recreates) held for the run by the process
+    named in it (host, pid). A previous holder still alive on this host is ended (its process
+    group: SIGTERM, SIGKILL after :data:`STOP_GRACE_S`) first; on another host the run is
+    refused (CampaignError)."""
 
     def __init__(self, run_dir: str) -> None:
         self.path = run_dir.rstrip('/') + '.owner'
         self.fd: Optional[int] = None
 
     def acquire(self) -> 'RunOwner':
+        """Take the run, naming this process its owner."""
         os.makedirs(os.path.dirname(self.path), exist_ok=True)
         self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
         if self._wait_lock(0.0):
-            return self
+            return self._named()
         try:
             with open(self.path, encoding='utf-8') as fh:
                 owner = json.load(fh)
@@ -121,7 +116,7 @@ class RunOwner:
             if pid:
                 _signal_group(pid, sig)
             if self._wait_lock(STOP_GRACE_S):
-                return self
+                return self._named()
         self.release()
         raise CampaignError(f'{self.path}: the run is still held by its previous run process')
 
@@ -136,10 +131,11 @@ class RunOwner:
                     return False
                 time.sleep(0.1)
 
-    def name(self, pid: int) -> None:
-        """Name process ``pid`` (the holder of the lock) the owner."""
+    def _named(self) -> 'RunOwner':
         os.ftruncate(self.fd, 0)
-        os.pwrite(self.fd, json.dumps({'host': socket.gethostname(), 'pid': pid}).encode(), 0)
+        os.pwrite(self.fd, json.dumps({'host': socket.gethostname(),
+                                       'pid': os.getpid()}).encode(), 0)
+        return self
 
     def end_previous(self) -> None:
         """Take the run (ending a previous owner still alive) and let it go again."""
@@ -152,13 +148,10 @@ class RunOwner:
 
 
 class RunServer:
-    """A worker process (:data:`SERVER_COMMAND`, :func:`serve`), seen from its supervisor:
-    a run is sent as its directory (a line on the worker's stdin), its exit code read back
-    (:data:`REPLY` and JSON, a line on the worker's stdout).
-
-    The worker has its own session (the stop file stops its run), a parent-death signal (it
-    ends with the thread that started it: a lost worker) and one BLAS thread.
-    """
+    """A worker process (:func:`serve`) seen from its supervisor: a run goes as its directory
+    (a line on the worker's stdin), its exit code comes back (a :data:`REPLY` line). The
+    worker has its own session, a parent-death signal (it ends with the thread that started
+    it) and one BLAS thread."""
 
     def __init__(self, stop_file: str) -> None:
         from adcs_nodes.tools.run.launcher.processes import with_parent_death_signal
@@ -245,25 +238,13 @@ def close_servers(stop_file: Optional[str] = None) -> int:
 
 
 def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
-    """Run one prepared run directory in a worker process and return its result dict.
+    """Run one prepared run directory (``job``: ``index``, ``run_dir``, ``stop_file``,
+    ``engine``) in this thread's worker process for the campaign and return its result
+    (``result.json``, or ``{'index', 'status': 'error' | 'interrupted', 'message', ...}``).
 
-    The unit of work submitted to the local thread pool or to Dask workers: the run goes to
-    this thread's worker for the campaign (:func:`_server_for`; a plain-engine worker whose
-    run ended well is kept for the next run), output to ``worker.log``.
-    While it runs, the supervisor watches ``job['stop_file']``: when that file appears
-    (Ctrl-C on the campaign) the run gets SIGINT and is reported ``interrupted``.
-
-    Parameters
-    ----------
-    job : dict
-        ``index``, ``run_dir`` (prepared: ``job.json`` and ``scenario.yaml``), ``stop_file``,
-        ``engine`` (default ``'graph'``).
-
-    Returns
-    -------
-    dict
-        ``result.json`` content, or ``{'index', 'status': 'error' | 'interrupted',
-        'message', ...}``.
+    The unit of work of the local thread pool and of Dask workers. A plain-engine worker whose
+    run ended well is kept for the thread's next run. When ``stop_file`` appears (Ctrl-C on
+    the campaign) the run gets SIGINT and is reported ``interrupted``.
     """
     run_dir, index = job['run_dir'], job['index']
     if os.path.exists(job['stop_file']):
@@ -287,15 +268,13 @@ def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def serve(stop_file: str, run: Optional[Callable[[str], int]] = None) -> int:
-    """Body of a worker process: run the directories read from stdin one at a time until end
-    of input, replying to each with :data:`REPLY` and ``{"code", "message"}``.
+    """Body of a worker process: the run directories read from stdin, one at a time until end
+    of input, each answered with :data:`REPLY` and ``{"code", "message"}``.
 
-    A run: its owner lock taken (:class:`RunOwner`: a previous run process still holding it
-    on this host is ended first) and held until the run ends, named with this pid; what an
-    earlier attempt left removed; stdout and stderr to ``worker.log``; ``run(run_dir)``
-    (default :func:`run_job`) gives the exit code (130: interrupted; an exception: 1, its
-    traceback in the log). A run of a campaign that is stopping (``stop_file``) is not
-    started.
+    A run holds its :class:`RunOwner` lock, starts clean, writes stdout and stderr to
+    ``worker.log``; ``run(run_dir)`` (default :func:`run_job`) gives the exit code (130:
+    interrupted; an exception: 1, its traceback in the log). Nothing starts once the
+    campaign's ``stop_file`` exists.
     """
     signal.signal(signal.SIGINT, signal.default_int_handler)   # inherited ignored (Dask)
     replies = os.fdopen(os.dup(1), 'w', buffering=1)
@@ -319,7 +298,6 @@ def _serve_one(run_dir: str, stop_file: str, run: Callable[[str], int],
     except CampaignError as exc:
         return 1, str(exc)
     try:
-        owner.name(os.getpid())
         clean_attempt(run_dir)
         log = os.open(os.path.join(run_dir, 'worker.log'), os.O_WRONLY | os.O_CREAT, 0o644)
         os.dup2(log, 1)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import csv
 import hashlib
+import io
 import itertools
 import json
 import math
@@ -22,8 +23,8 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from adcs_nodes.tools.analyse import metrics
-from adcs_nodes.tools.campaigns.cli import add_campaign_arguments
-from adcs_nodes.tools.campaigns.config import CampaignConfig, CampaignError, scenario_hash
+from adcs_nodes.tools.campaigns.cli import add_campaign_arguments, campaign_config
+from adcs_nodes.tools.campaigns.config import CampaignError
 from adcs_nodes.tools.campaigns.files import (SERIES_FILE, load_result, run_dir_of,
                                               write_json_atomic, write_text_atomic)
 from adcs_nodes.tools.campaigns.summary import orbit_period_s
@@ -290,15 +291,13 @@ def map_markdown(rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> str:
 
 def write_csv(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> None:
     """``sweep.csv`` (atomically): the point's values of every grid key, then :data:`COLUMNS`."""
-    tmp = f'{path}.tmp-{os.getpid()}'
-    with open(tmp, 'w', encoding='utf-8', newline='') as fh:
-        w = csv.writer(fh)
-        w.writerow(list(keys) + list(COLUMNS))
-        for r in rows:
-            w.writerow([_value_text(r['point'][k]) for k in keys]
-                       + ['' if r[c] is None else (repr(r[c]) if isinstance(r[c], float)
-                                                   else r[c]) for c in COLUMNS])
-    os.replace(tmp, path)
+    text = io.StringIO()
+    w = csv.writer(text)
+    w.writerow(list(keys) + list(COLUMNS))
+    w.writerows([_value_text(r['point'][k]) for k in keys]
+                + ['' if r[c] is None else (repr(r[c]) if isinstance(r[c], float) else r[c])
+                   for c in COLUMNS] for r in rows)
+    write_text_atomic(path, text.getvalue())
 
 
 def plot_map(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> bool:
@@ -357,19 +356,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         'runs of the earlier version)')
 
 
-def _config(args: argparse.Namespace, base: Dict[str, Any],
-            point_sc: Dict[str, Any]) -> CampaignConfig:
-    from adcs_nodes.tools.campaigns.capture import capture_reference
-    from adcs_nodes.tools.campaigns.cli import max_rate_deg_s
-    duration = float(args.duration if args.duration is not None else point_sc['duration_s'])
-    return CampaignConfig(
-        scenario_path=base['_path'], scenario_sha256=scenario_hash(point_sc), runs=args.runs,
-        seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
-        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
-        mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
-        engine='plain', compose=False, capture_reference=capture_reference(point_sc))
-
-
 Prepared = Tuple[Dict[str, Any], List[Tuple[str, List[Any]]], List[Dict[str, Any]], str]
 
 
@@ -398,7 +384,8 @@ def prepare(args: argparse.Namespace) -> Prepared:
     points = []
     for point in grid_points(grid):
         sc = apply_overrides(base, point)   # its message names the point's overrides
-        cfg = _config(args, base, sc)
+        cfg = campaign_config(args, base, sc, float(
+            args.duration if args.duration is not None else sc['duration_s']), 'plain')
         frames = cfg.duration_s / sc['timing']['frame_s']
         if abs(frames - round(frames)) > 1e-9:
             raise SweepError(f'grid point {_point_text(point)}: the duration '

@@ -74,11 +74,13 @@ def epoch_ns(sc: Dict[str, Any]) -> int:
     return epoch_to_ns(parse_epoch(str(sc['epoch'])))
 
 
-def orbit_period_s(sc: Dict[str, Any]) -> float:
-    """Period of the scenario's circular orbit (Kepler) [s]."""
+def orbit_period_s(sc: Dict[str, Any]) -> Optional[float]:
+    """Period of the scenario's circular orbit (Kepler) [s]; None for another orbit type."""
     import math
 
     from adcs_nodes.core.orbit import MU_EARTH, R_EARTH
+    if (sc.get('orbit') or {}).get('type', 'circular') != 'circular':
+        return None
     a = R_EARTH + 1e3 * float(sc['orbit']['altitude_km'])
     return 2.0 * math.pi * math.sqrt(a ** 3 / MU_EARTH)
 
