@@ -34,8 +34,9 @@ def add_campaign_arguments(parser: argparse.ArgumentParser, what: str = 'campaig
                         help='number of runs' + (' per grid point' if what == 'sweep' else '')
                         + f' (at most {MAX_RUNS})')
     parser.add_argument('--jobs', type=int, default=1, metavar='J',
-                        help='runs at once on this machine, each in its own processes '
-                        '(default 1; with --dask-local: the number of Dask workers; ignored '
+                        help='runs at once on this machine: J worker processes, started '
+                        'once and fed runs (default 1; with --dask-local: the number of Dask '
+                        'workers; ignored '
                         f'with --scheduler; at most {MAX_JOBS})')
     where = parser.add_mutually_exclusive_group()
     where.add_argument('--scheduler', metavar='ADDRESS',
