@@ -294,45 +294,18 @@ def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expect
 def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
                 expectations: Optional[Sequence[Expectation]] = None,
                 sections: Optional[Sequence[Tuple[str, str]]] = None) -> Dict[str, Any]:
-    """Analyse a bag: write PNG plots, ``summary.md`` and ``metrics.json`` into ``out_dir``.
+    """Analyse a bag (directory or ``.mcap``): PNG plots, ``summary.md`` and ``metrics.json``
+    in ``out_dir`` (created; files of the same names replaced).
 
-    Parameters
-    ----------
-    bag_path : path-like
-        rosbag2 bag directory or ``.mcap`` file.
-    out_dir : path-like
-        Output directory (created if needed; files of the same names are replaced).
-    expectations : sequence of (str, str, object, bool or None), optional
-        Paper comparison rows ``(name, paper_value_str, measured_value, verdict)``; verdict
-        ``None`` is an information row (not counted). The table in ``summary.md`` is empty
-        without them.
-    sections : sequence of (str, str), optional
-        Extra markdown sections ``(title, text)``; default: those of the bag's scenario
-        (:func:`adcs_nodes.tools.analyse.reproductions.sections_for`).
-
-    Returns
-    -------
-    dict
-        ``duration_s`` [s], ``start_utc``, ``orbit_period_s`` [s] (if known), ``topics``
-        (per topic ``type``, ``count``, ``rate_hz``, ``rate_source``); with ``/sim/state``:
-        ``final_angle_orbit_deg``, ``max_angle_orbit_deg``, ``final_q_orbit_body`` (x, y, z, w),
-        ``final_rate_deg_s``, ``max_rate_deg_s``, ``final_rate_orbit_deg_s``; with an estimate:
-        ``estimate_final_error_deg``, ``estimate_max_error_deg``, ``estimate_rms_error_deg``,
-        ``estimate_matched``; ``wheel_max_abs_momentum_Nms``, ``field_mean_norm_uT``,
-        ``magnetometer_mean_norm_uT`` when those topics exist; with a known orbit period the
-        run metrics of :func:`adcs_nodes.tools.analyse.metrics.run_metrics` on the angle to the
-        orbit
-        frame (``capture_orbits``, ``last_exit_orbits``, ``hold_rms_deg``, ...);
-        ``expectations`` (list of dicts, ``pass`` None for information rows), ``all_pass``
-        (over the rows with a verdict; ``None`` without any), ``plots`` (file names),
-        ``summary`` and ``metrics_file`` (paths).
-
-    Raises
-    ------
-    FileNotFoundError
-        If the bag does not exist.
-    ValueError
-        If it is not a readable bag.
+    ``expectations``: the paper rows ``(name, paper value, measured, verdict)`` (verdict None:
+    information, not counted); ``sections``: extra markdown ``(title, text)``, default the
+    bag's scenario's (:func:`adcs_nodes.tools.analyse.reproductions.sections_for`). Returns
+    the metrics: ``duration_s``, ``start_utc``, ``orbit_period_s``, ``topics`` (``type``,
+    ``count``, ``rate_hz``, ``rate_source``), the truth's angles and rates, the estimate's
+    errors, wheel and field figures when those topics exist, the run metrics of
+    :func:`~adcs_nodes.tools.analyse.metrics.run_metrics` with a known orbit period,
+    ``expectations``, ``all_pass`` (None without a counted row), ``plots``, ``summary`` and
+    ``metrics_file``. FileNotFoundError without a bag, ValueError for an unreadable one.
     """
     expectations = list(expectations or [])
     if sections is None:
