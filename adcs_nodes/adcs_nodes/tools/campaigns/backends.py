@@ -44,20 +44,9 @@ class LocalBackend:
 
 
 class DaskBackend:
-    """Runs submitted to a Dask distributed scheduler: an existing one (``address``), or a
-    ``LocalCluster`` this backend starts and stops (``local_workers``).
-
-    Parameters
-    ----------
-    address : str or None
-        Scheduler address (``--scheduler``); None with ``local_workers``.
-    session : str
-        Campaign session id (part of the task keys).
-    local_workers : int, optional
-        Start a ``LocalCluster`` of this many worker processes with one thread each
-        (``--dask-local``): a Dask worker feeds one worker process, like one thread of the
-        local pool.
-    """
+    """Runs submitted to a Dask scheduler: at ``address`` (``--scheduler``), or a
+    ``LocalCluster`` of ``local_workers`` single-thread processes this backend starts and stops
+    (``--dask-local``); ``session`` is part of the task keys."""
 
     def __init__(self, address: Optional[str], session: str,
                  local_workers: Optional[int] = None) -> None:

@@ -57,15 +57,10 @@ def run_dir_of(out: str, index: int) -> str:
 
 
 def load_result(run_dir: str) -> Optional[Dict[str, Any]]:
-    """The run's ``result.json`` when the run is done, else None.
-
-    Done: the result and its data are present (graph engine: the bag's ``metadata.yaml``;
-    plain engine: ``series.npz``). A plain result from before the worker recorded the
-    guidance target (:func:`~adcs_nodes.tools.campaigns.capture.label_old_result`) is
-    labelled ``capture_reference: orbit frame`` when that is its scenario's reference; for any
-    other scenario, and when its scenario cannot be read, the reason goes to ``failed.json``
-    and the run is not done (the campaign runs it again).
-    """
+    """The run's ``result.json`` when the run is done (its data there: the bag's
+    ``metadata.yaml`` or ``series.npz``), else None. An old plain result is labelled
+    (:func:`~adcs_nodes.tools.campaigns.capture.label_old_result`) or, when it cannot be, the
+    reason goes to ``failed.json`` and the run is run again."""
     from adcs_nodes.tools.campaigns.capture import label_old_result
 
     path = os.path.join(run_dir, RESULT_FILE)

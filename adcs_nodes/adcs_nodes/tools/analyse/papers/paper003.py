@@ -58,18 +58,10 @@ def initial_quaternion(euler_deg=EULER0_DEG) -> np.ndarray:
 
 # ---------------------------------------------------------------------- series
 def series(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
-    """Per frame with a state and a target.
-
-    Returns
-    -------
-    dict
-        ``t`` (n,) [s]; ``phi`` (n,) eigenangle of the error rotation ``q_target^* q_body``
-        [rad] (in the target's frame: ``orbit`` or ``eci``); ``e_phi`` (n, 3) its eigenaxis
-        (sign kept continuous); ``q`` (n, 4) the body attitude in that frame; ``omega`` (n, 3)
-        body rate w.r.t. that frame [rad/s]; ``torque`` (n, 3) the commanded body torque held
-        from that frame on [N m] (the last command until a new one); ``source`` (n,) the
-        controller that produced it.
-    """
+    """Per frame with a state and a target: ``t`` (n,) [s]; ``phi`` (n,) eigenangle of
+    ``q_target^* q_body`` [rad] in the target's frame and ``e_phi`` (n, 3) its eigenaxis (sign
+    kept continuous); ``q`` (n, 4) and ``omega`` (n, 3) [rad/s] the body in that frame;
+    ``torque`` (n, 3) the commanded torque held from that frame on [N m]; ``source`` (n,)."""
     from adcs_nodes.core import attitude
     from adcs_nodes.core.control.eigenaxis import eigen_from_quaternion
     e0 = epoch_ns(sc)
@@ -126,21 +118,11 @@ def settling_time(t: np.ndarray, phi: np.ndarray, threshold: float) -> float:
 
 def metrics(t: np.ndarray, phi: np.ndarray, torque: np.ndarray,
             band: float = BAND) -> Dict[str, float]:
-    """Settling time, energy, torque and overshoot of one slew (pure).
-
-    Parameters
-    ----------
-    t : (n,) [s], increasing; phi : (n,) eigenangle to the target [rad];
-    torque : (n, 3) torque held over ``[t_k, t_k+1)`` [N m]; band : settling band (of phi0).
-
-    Returns
-    -------
-    dict
-        ``settling_s`` (NaN: not settled); ``energy_Nms`` (to settling; NaN if not settled);
-        ``energy_total_Nms`` (to the end); ``max_abs_torque_Nm``; ``overshoot_deg`` (largest
-        phi after the first entry into the band; NaN if never in it); ``phi0_deg``;
-        ``final_deg``; ``t_end_s``.
-    """
+    """Settling time, energy, torque and overshoot of one slew (pure): ``t`` (n,) [s],
+    ``phi`` (n,) [rad], ``torque`` (n, 3) held over ``[t_k, t_k+1)`` [N m], ``band`` (of phi0).
+    Returns ``settling_s``, ``energy_Nms`` (to settling; NaN: not settled),
+    ``energy_total_Nms``, ``max_abs_torque_Nm``, ``overshoot_deg`` (largest phi after the first
+    entry into the band), ``phi0_deg``, ``final_deg``, ``t_end_s``."""
     t = np.asarray(t, float)
     phi = np.asarray(phi, float)
     m = np.abs(np.asarray(torque, float).reshape(-1, 3)).sum(axis=1)

@@ -69,16 +69,10 @@ def yaw_errors(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
 
 
 def metrics(u_deg: np.ndarray, eq3_deg: np.ndarray, triad_deg: np.ndarray) -> Dict[str, Any]:
-    """Max and RMS of both errors, where the largest formula-(3) error lies (pure).
-
-    Returns
-    -------
-    dict
-        ``eq3_max_deg``, ``eq3_rms_deg``, ``triad_max_deg``, ``triad_rms_deg``,
-        ``peak_u_deg`` (u of the largest formula-(3) error), ``near_max_deg`` / ``far_max_deg``
-        (largest formula-(3) error within 30 deg of u = 90/270, and elsewhere; NaN without a
-        sample there), ``samples``.
-    """
+    """Max and RMS of both errors and where the largest formula-(3) error lies (pure):
+    ``eq3_max_deg``, ``eq3_rms_deg``, ``triad_max_deg``, ``triad_rms_deg``, ``peak_u_deg``,
+    ``near_max_deg`` / ``far_max_deg`` (within 30 deg of u = 90/270, and elsewhere; NaN
+    without a sample there), ``samples``."""
     u = np.asarray(u_deg, float)
     e3 = np.asarray(eq3_deg, float)
     et = np.asarray(triad_deg, float)
