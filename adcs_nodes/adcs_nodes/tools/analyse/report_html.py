@@ -267,6 +267,17 @@ def _mark_faults(ax, s: _Series, axis: _Axis, label: bool = False) -> None:
                         ha='left', color=colour, annotation_clip=False)
 
 
+def _style(ax, s: _Series, axis: _Axis, ylabel: str, last: bool, label: bool = False) -> None:
+    """Y label, grid and fault marks of one panel; the time label on the ``last`` one."""
+    ax.set_ylabel(ylabel, fontsize=8)
+    ax.grid(True, alpha=0.3)
+    if last:
+        ax.set_xlabel(f'sim time [{axis.unit}]')
+    else:
+        ax.tick_params(labelbottom=False)
+    _mark_faults(ax, s, axis, label=label)
+
+
 def _shade(ax, runs, colours, axis: _Axis, alpha: float = 0.12) -> None:
     for a, b, lab in runs:
         if lab not in ('zero', ''):
@@ -307,10 +318,7 @@ def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
     else:
         err_ax.text(0.5, 0.5, 'no attitude target recorded', transform=err_ax.transAxes,
                     ha='center')
-    err_ax.set_ylabel('attitude error\nto target [deg]', fontsize=8)
-    err_ax.grid(True, which='major', alpha=0.3)
-    err_ax.tick_params(labelbottom=False)
-    _mark_faults(err_ax, s, axis)
+    _style(err_ax, s, axis, 'attitude error\nto target [deg]', last=False)
     rate_ax = fig.add_subplot(gs[2], sharex=band)
     _shade(rate_ax, src_runs, colours, axis)
     if s.state['t']:
@@ -320,10 +328,7 @@ def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
         rate_ax.semilogy(t, np.maximum(np.linalg.norm(s.state['w_orbit'], axis=1) * _DEG,
                                        1e-5), lw=0.8, label='|omega| w.r.t. the orbit frame')
         rate_ax.legend(fontsize=7, loc='upper right')
-    rate_ax.set_ylabel('body rate\n[deg/s]', fontsize=8)
-    rate_ax.set_xlabel(f'sim time [{axis.unit}]')
-    rate_ax.grid(True, alpha=0.3)
-    _mark_faults(rate_ax, s, axis)
+    _style(rate_ax, s, axis, 'body rate\n[deg/s]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.08)
     return fig
 
@@ -337,19 +342,13 @@ def _wheels_fig(s: _Series, axis: _Axis) -> Figure:
     mom = np.asarray(s.wheels['momentum'])
     for i, n in enumerate(names):
         ax1.plot(t, speed[:, i], lw=0.8, label=n)
-    ax1.set_ylabel('speed [rpm]', fontsize=8)
     ax1.legend(fontsize=7, loc='upper left')
-    ax1.grid(True, alpha=0.3)
-    ax1.tick_params(labelbottom=False)
     ax1.set_xlim(t[0], t[-1])
-    _mark_faults(ax1, s, axis, label=True)
+    _style(ax1, s, axis, 'speed [rpm]', last=False, label=True)
     ax2 = fig.add_subplot(2, 1, 2, sharex=ax1)
     for i, n in enumerate(names):
         ax2.plot(t, mom[:, i], lw=0.8, label=n)
-    ax2.set_ylabel('momentum [N m s]', fontsize=8)
-    ax2.set_xlabel(f'sim time [{axis.unit}]')
-    ax2.grid(True, alpha=0.3)
-    _mark_faults(ax2, s, axis)
+    _style(ax2, s, axis, 'momentum [N m s]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.9, bottom=0.12, hspace=0.1)
     return fig
 
@@ -361,11 +360,8 @@ def _dipole_fig(s: _Series, axis: _Axis) -> Figure:
     d = np.asarray(s.cmd['dipole'])
     for i, n in enumerate('xyz'):
         ax.plot(t, d[:, i], lw=0.6, label=f'm_{n}')
-    ax.set_ylabel('dipole [A m^2]', fontsize=8)
-    ax.set_xlabel(f'sim time [{axis.unit}]')
     ax.legend(fontsize=7, loc='upper right', ncol=3)
-    ax.grid(True, alpha=0.3)
-    _mark_faults(ax, s, axis)
+    _style(ax, s, axis, 'dipole [A m^2]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.18)
     return fig
 
@@ -384,14 +380,10 @@ def _estimate_fig(s: _Series, axis: _Axis, e: Dict[str, np.ndarray]) -> Figure:
             ax.fill_between(t, -sig, sig, color='#4c72b0', alpha=0.2, lw=0,
                             label='3-sigma (estimate covariance)')
         ax.plot(t, e['err'][:, i], lw=0.6, color='k', label='error (truth at the stamp)')
-        ax.set_ylabel(f'{n} [deg]', fontsize=8)
-        ax.grid(True, alpha=0.3)
         ax.set_xlim(t[0], t[-1])
-        _mark_faults(ax, s, axis, label=i == 0)
+        _style(ax, s, axis, f'{n} [deg]', last=i == n_rows - 1, label=i == 0)
         if i == 0:
             ax.legend(fontsize=7, loc='upper right', ncol=2)
-        if i < n_rows - 1:
-            ax.tick_params(labelbottom=False)
         finite = np.abs(e['err'][:, i])
         finite = finite[np.isfinite(finite)]
         if finite.size:      # the error sets the scale (a tumbling start's bound may not)
@@ -401,10 +393,7 @@ def _estimate_fig(s: _Series, axis: _Axis, e: Dict[str, np.ndarray]) -> Figure:
         ax = fig.add_subplot(n_rows, 1, n_rows, sharex=first)
         ax.step(np.asarray(s.diag['t']) / axis.scale, s.diag['rejected'], where='post',
                 lw=0.8, color='#c44e52')
-        ax.set_ylabel('rejected\nsamples', fontsize=8)
-        ax.grid(True, alpha=0.3)
-        _mark_faults(ax, s, axis)
-    fig.axes[-1].set_xlabel(f'sim time [{axis.unit}]')
+        _style(ax, s, axis, 'rejected\nsamples', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.92, bottom=0.1, hspace=0.1)
     return fig
 

@@ -1,11 +1,9 @@
-"""Lockstep replay: nodes started alone in ``timing_mode: lockstep`` (with the launcher's
-parameters, :func:`write_params`) get exactly what they received in the recorded run and
-publish the recorded outputs again, bit for bit: the inputs each awaited (the ``sub:``
-entries of its handshake in the bag's graph), reliable, depth 100 (``/tf_static`` latched),
-frame by frame (every message stamped up to a recorded ``/clock`` tick, then the tick), paced
-by the nodes (their ``lockstep/ready``; at most ``MAX_LAG_FRAMES`` ahead of what each read or
-processed), until each has processed the last frame it processed in the recording.
-"""
+"""Lockstep replay: nodes started alone in ``timing_mode: lockstep`` (the launcher's
+parameters, :func:`write_params`) get what they awaited in the recorded run (the ``sub:``
+entries of their handshake; reliable, depth 100, ``/tf_static`` latched), frame by frame
+(every message up to a recorded ``/clock`` tick, then the tick), paced by their
+``lockstep/ready`` (at most ``MAX_LAG_FRAMES`` ahead), until each processed its last
+recorded frame: they publish the recorded outputs again, bit for bit."""
 from __future__ import annotations
 
 import dataclasses
