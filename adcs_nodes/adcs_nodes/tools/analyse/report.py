@@ -1,15 +1,10 @@
 """Bag to report: metrics, PNG plots (matplotlib, Agg) and ``summary.md``.
 
-All times come from ``header.stamp`` (the simulated time; log times only for types without a
-header), so two runs of the same simulation give the same report: per topic the count and
-rate; from ``/sim/state`` the angle between body and orbit frame and the body rates; the
-field (``/sim/environment``, ``/sensors/magnetometer``) [uT]; wheel momentum; the estimate's
-error against the truth interpolated at its own stamp
-(:func:`adcs_nodes.tools.analyse.metrics.estimate_errors_deg`); the paper comparison table
-from ``expectations`` (PASS/FAIL count in ``all_pass``, ``info`` and ``not comparable: ...``
-do not; :mod:`adcs_nodes.tools.analyse.papers`), the paper's figures and extra sections.
-Time axes are in orbits for a run of at least half an orbit, else in seconds.
-"""
+Times are ``header.stamp`` (sim time; log times only for types without a header), so two runs
+of one simulation give one report: per topic the count and rate; from ``/sim/state`` the angle
+between body and orbit frame and the rates; the field [uT]; wheel momentum; the estimate's
+error against the truth at its own stamp; the paper table (:mod:`.papers`) with its figures
+and extra sections. Time axes in orbits for a run of at least half an orbit, else seconds."""
 from __future__ import annotations
 
 import json

@@ -1,13 +1,9 @@
-"""``report.html``: one self-contained page of a run for people (``adcs report`` writes it):
-no network, no script, PNG plots inline, plain HTML tables, from any engine's bag (a section
-whose topics are missing is left out, saying so). Sections: the timeline (the forwarded
-controller, the active one and the manager's mode as bands, fault markers, the attitude error
-against the target and the body rates; also written as ``overview.png``), wheels, dipole,
-the estimator's error per body axis against the interpolated truth with its 3-sigma bound
-and rejections, switches and fallbacks with their reasons, faults, and the paper table of
-the report's ``metrics.json``. Times are sim seconds from the first ``sim/state``, in
-minutes beyond 20 minutes.
-"""
+"""``report.html``: one self-contained page of a run for people (``adcs report``): no network,
+no script, inline PNG plots, plain tables, from any engine's bag (a section without its topics
+is left out, saying so): the timeline (forwarded, active controller and manager mode as
+bands, faults, attitude error to the target, body rates; also ``overview.png``), wheels,
+dipole, the estimator's per-axis error with its 3-sigma bound and rejections, switches and
+fallbacks with their reasons, faults, and the paper table of ``metrics.json``."""
 from __future__ import annotations
 
 import base64

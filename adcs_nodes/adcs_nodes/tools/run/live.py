@@ -1,11 +1,7 @@
-"""Talk to a running graph started by ``adcs run``: ``adcs switch``, ``adcs status [--watch]``
-and ``adcs fault``.
-
-A run announces itself in ``~/.cache/adcs/runs/active-<launcher pid>.json`` (domain id,
-scenario, bag, node PIDs). These commands join that ROS domain with a short-lived node, call
-the controller manager's services, read the latched status or publish a live fault, and
-leave; ``adcs status --watch`` stays, refreshing its view once a second until the run ends.
-"""
+"""Talk to a running graph started by ``adcs run``: ``adcs switch``, ``adcs status [--watch]``,
+``adcs fault``. A run announces itself in ``~/.cache/adcs/runs/active-<pid>.json`` (domain,
+scenario, bag, node PIDs); these commands join its domain with a short-lived node, call the
+manager's services, read the latched status or publish a live fault, and leave."""
 from __future__ import annotations
 
 import glob
@@ -148,14 +144,8 @@ def finish(code: int) -> int:
 
 
 def switch(name: str, pid: Optional[int] = None) -> str:
-    """Switch the active controller of a running graph; returns the manager's answer.
-
-    Raises
-    ------
-    LiveError
-        No run, no manager, or the manager refused (unknown name: the message lists the
-        known controllers).
-    """
+    """Switch the active controller of a running graph; the manager's answer. LiveError: no
+    run or manager, or refused (an unknown name: the message lists the known ones)."""
     from adcs_nodes.scenario import shorten_message
     if not CONTROLLER_NAME.fullmatch(name):
         raise LiveError(shorten_message(

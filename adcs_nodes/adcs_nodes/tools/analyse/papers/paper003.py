@@ -2,24 +2,15 @@
 to a reference slew.
 
 Case (digest ``papers/fuzzy-eigenaxis-slew.md`` section 9, ``scenarios/paper003_slew.yaml``):
-principal inertias (250, 200, 180) kg m^2, from psi 34, theta -7.5, gamma 16.5 deg (3-2-1,
-eq. (1) with row 3 corrected) to the reference axes, at rest at both ends, ``|M_i| <= 1 N m``.
-
-Metrics (the paper defines neither; ASSUMPTIONS of the digest, section 10), pure functions of
-the run's series (:func:`series`: eigenangle ``phi`` to the target, the commanded torque):
-
-* settling time: first time after which ``phi`` stays within ``band`` x ``phi0`` (5 %) until
-  the end of the run (:func:`settling_time`);
-* energy: ``E = int_0^T_s sum_i |M_i| dt`` [N m s] up to the settling time, the torque of a
-  frame held until the next (also reported to the end of the run).
-
-Rows: settling time and energy against 25.73 s and 42.91 N m s within the tolerances fixed
-before any tuning (:data:`TOLERANCE`: 15 %, 20 %). The paper's ratios (the fuzzy slew 1.5x
-faster and 1.37x cheaper than its reference) are **not comparable**: the paper does not
-describe its reference controller. Ours (``reference_slew``, near time-optimal: 17.5 s against
-a bang-bang bound of 17.6 s) is run on the FrameLoop from the same scenario
-(``manager.initial=reference_slew``) and the ratios against it are shown in the row.
-"""
+inertias (250, 200, 180) kg m^2, from psi 34, theta -7.5, gamma 16.5 deg (3-2-1, eq. (1) row 3
+corrected) to the reference axes, at rest at both ends, ``|M_i| <= 1 N m``. Metrics
+(ASSUMPTIONS of the digest, section 10; pure functions of :func:`series`): settling time, the
+first time after which ``phi`` stays within 5 % of ``phi0`` (:func:`settling_time`); energy
+``E = int_0^T_s sum_i |M_i| dt`` [N m s], each frame's torque held to the next. Rows: against
+25.73 s and 42.91 N m s within :data:`TOLERANCE` (15 %, 20 %, fixed before any tuning). The
+paper's ratios to its reference (1.5x faster, 1.37x cheaper) are **not comparable** (its
+reference controller is not described); ours (``reference_slew``, near time-optimal: 17.5 s
+against a bang-bang bound of 17.6 s) runs on the FrameLoop and the ratios are shown."""
 from __future__ import annotations
 
 import math
