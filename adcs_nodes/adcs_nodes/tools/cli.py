@@ -145,52 +145,47 @@ def cmd_validate(args) -> int:
     return 0
 
 
-def cmd_switch(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError, finish, switch
+def _live(command: str, action) -> int:
+    """Run ``action()`` on a running graph (``adcs switch``, ``status``, ``fault``): print its
+    text, or the LiveError (exit 2)."""
+    from adcs_nodes.tools.run.live import LiveError, finish
     try:
-        print(switch(args.controller, args.run))
+        text = action()
     except LiveError as exc:
-        print(f'adcs switch: {exc}', file=sys.stderr)
+        print(f'adcs {command}: {exc}', file=sys.stderr)
         return finish(2)
+    if isinstance(text, int):       # (status --watch: its exit code)
+        return finish(text)
+    print(text)
     return finish(0)
 
 
+def cmd_switch(args) -> int:
+    from adcs_nodes.tools.run.live import switch
+    return _live('switch', lambda: switch(args.controller, args.run))
+
+
 def cmd_slew(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError
     from adcs_nodes.tools.run.slew import slew
     if not all(math.isfinite(v) for v in args.to):
         print(f'adcs slew: --to needs three finite angles [deg], got {args.to}',
               file=sys.stderr)
         return 2
-    try:
-        print(slew(*args.to, frame=args.frame, controller=args.controller,
-                   tolerance_deg=args.tolerance_deg, timeout_s=args.timeout_s, pid=args.run))
-    except LiveError as exc:
-        print(f'adcs slew: {exc}', file=sys.stderr)
-        return 2
-    return 0
+    return _live('slew', lambda: slew(*args.to, frame=args.frame, controller=args.controller,
+                                      tolerance_deg=args.tolerance_deg,
+                                      timeout_s=args.timeout_s, pid=args.run))
 
 
 def cmd_status(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError, finish, status, watch
-    try:
-        if args.watch:
-            return finish(watch(args.run, count=args.count))
-        print(status(args.run))
-    except LiveError as exc:
-        print(f'adcs status: {exc}', file=sys.stderr)
-        return finish(2)
-    return finish(0)
+    from adcs_nodes.tools.run.live import status, watch
+    return _live('status', lambda: watch(args.run, count=args.count) if args.watch
+                 else status(args.run))
 
 
 def cmd_fault(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError, fault, finish, parse_params
-    try:
-        print(fault(args.kind, args.target, args.at, parse_params(args.param), args.run))
-    except LiveError as exc:
-        print(f'adcs fault: {exc}', file=sys.stderr)
-        return finish(2)
-    return finish(0)
+    from adcs_nodes.tools.run.live import fault, parse_params
+    return _live('fault', lambda: fault(args.kind, args.target, args.at,
+                                        parse_params(args.param), args.run))
 
 
 def cmd_schema(args) -> int:
