@@ -123,11 +123,9 @@ class DaskBackend:
 
 @contextlib.contextmanager
 def sigint_ignored() -> Iterator[None]:
-    """SIGINT ignored in this process meanwhile (main thread only), so that processes started
-    here inherit the ignored SIGINT: a Ctrl-C in the terminal reaches the whole foreground
-    process group, and the ``LocalCluster`` workers must keep supervising their runs while
-    the campaign stops them through its stop file (as with the local thread pool). The run
-    processes restore the default handler (:mod:`sim_node.engine`, the launcher)."""
+    """SIGINT ignored meanwhile (main thread only), inherited so by the processes started here:
+    a terminal's Ctrl-C reaches the whole process group, and the ``LocalCluster`` workers keep
+    supervising their runs while the campaign stops them through its stop file."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

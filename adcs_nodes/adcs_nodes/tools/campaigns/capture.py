@@ -38,13 +38,10 @@ def capture_reference(sc: Dict[str, Any]) -> str:
 
 
 def label_old_result(run_dir: str, result: Dict[str, Any]) -> Dict[str, Any]:
-    """A run's result as a resumed campaign reads it.
-
-    A plain run's ``result.json`` without ``capture_reference`` measured the angle to the
-    orbit frame: returned labelled so when that is the scenario's reference, else ValueError
-    (the campaign runs it again); OSError, KeyError or ScenarioError for an unreadable
-    scenario. Any other result is returned as it is.
-    """
+    """A run's result as a resumed campaign reads it: a plain ``result.json`` without
+    ``capture_reference`` (it measured to the orbit frame) labelled so when that is its
+    scenario's reference, else ValueError (run again); OSError, KeyError or ScenarioError for
+    an unreadable scenario."""
     from adcs_nodes.scenario import load_scenario
 
     if result.get('engine') != 'plain' or 'capture_reference' in result:

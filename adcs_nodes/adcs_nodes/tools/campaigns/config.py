@@ -124,14 +124,9 @@ def scenario_hash(scenario: Dict[str, Any]) -> str:
 
 
 def draw_dispersion(cfg: CampaignConfig, index: int) -> Dispersion:
-    """Draw the dispersion of run ``index`` (deterministic in ``cfg.seed`` and ``index``).
-
-    Returns
-    -------
-    Dispersion
-        Attitude uniform on SO(3), rate components uniform in ``+-max_rate_deg_s``,
-        magnetometer bias and misalignment uniform per axis, and the run's scenario seed.
-    """
+    """The dispersion of run ``index``, deterministic in ``cfg.seed`` and ``index``: attitude
+    uniform on SO(3), rate components uniform in ``+-max_rate_deg_s``, magnetometer bias and
+    misalignment uniform per axis, the run's scenario seed (``docs/montecarlo.md``)."""
     rng = np.random.default_rng([cfg.seed, index])
     q = rng.standard_normal(4)
     q /= np.linalg.norm(q)
@@ -149,14 +144,10 @@ def draw_dispersion(cfg: CampaignConfig, index: int) -> Dispersion:
 
 def apply_dispersion(base: Dict[str, Any], disp: Dispersion, duration_s: float,
                      cfg: Optional[CampaignConfig] = None) -> Dict[str, Any]:
-    """Deep copy of the validated scenario ``base`` with the run's dispersion written in.
-
-    The initial attitude and rate replace any of the alternative keys of ``initial``
-    (``q_orbit_body_wxyz``, ``omega_body_orbit_body_deg_s``); the magnetometer errors are
-    written only when dispersed and the scenario has a magnetometer. With
-    ``cfg.auto_detumble`` the manager gets the automatic sequence :data:`AUTO_DETUMBLE`
-    (and ``cfg.bdot_gain`` when given).
-    """
+    """Deep copy of the validated scenario ``base`` with the run's dispersion written in: the
+    initial attitude and rate (replacing ``initial``'s alternative keys), the magnetometer
+    errors when dispersed, with ``cfg.auto_detumble`` the manager's :data:`AUTO_DETUMBLE`
+    (and ``cfg.bdot_gain``)."""
     sc = copy.deepcopy({k: v for k, v in base.items() if not k.startswith('_')})
     sc['seed'] = disp.seed
     sc['duration_s'] = float(duration_s)

@@ -75,33 +75,14 @@ def series_metrics(t_s: np.ndarray, q_orbit_body: np.ndarray, w_eci: np.ndarray,
                    w_orbit: np.ndarray, capture_deg: float, period_s: Optional[float],
                    angle_deg: Optional[np.ndarray] = None,
                    judged: Optional[np.ndarray] = None) -> Dict[str, Any]:
-    """Run metrics and status from the truth series of one run.
-
-    Parameters
-    ----------
-    t_s : numpy.ndarray, shape (n,)
-        Sim time since the start [s].
-    q_orbit_body : numpy.ndarray, shape (n, 4)
-        Truth attitude, scalar last.
-    w_eci, w_orbit : numpy.ndarray, shape (n, 3)
-        ``omega_body_eci_body`` and ``omega_body_orbit_body`` [rad/s].
-    capture_deg : float
-        Capture band [deg]; the hold band is twice it.
-    period_s : float or None
-        Orbit period [s] (for "captured within 4 orbits" and the hold window).
-    angle_deg : numpy.ndarray, shape (n,), optional
-        Angle between the body and the guidance target [deg]; default the orbit frame's.
-    judged : numpy.ndarray of bool, shape (n,), optional
-        The samples judged (default all; none judged: not captured, no statistics).
-
-    Returns
-    -------
-    dict
-        ``status`` (``captured`` or ``not_captured``), the keys of
-        :func:`adcs_nodes.tools.analyse.metrics.run_metrics` over the judged samples,
-        ``final_angle_deg``, ``final_rate_deg_s`` (w.r.t. the orbit frame),
-        ``max_rate_deg_s`` (w.r.t. ECI), ``samples`` and ``bag_initial`` (the first sample).
-    """
+    """Run metrics and status from the truth series of one run: ``t_s`` (n,) [s since the
+    start], ``q_orbit_body`` (n, 4), ``w_eci`` and ``w_orbit`` (n, 3) [rad/s]; ``capture_deg``
+    the band [deg] (the hold band twice it); ``period_s`` [s] or None; ``angle_deg`` (n,) to the
+    guidance target (default the orbit frame's); ``judged`` (n,) the samples judged (default
+    all; none: not captured). Returns ``status`` (``captured``/``not_captured``), the keys of
+    :func:`~adcs_nodes.tools.analyse.metrics.run_metrics` over the judged samples,
+    ``final_angle_deg``, ``final_rate_deg_s`` (to the orbit frame), ``max_rate_deg_s`` (to ECI),
+    ``samples`` and ``bag_initial`` (the first sample); non-finite values None."""
     t = np.asarray(t_s, dtype=float)
     angle = (metrics.angle_to_identity_deg(q_orbit_body) if angle_deg is None
              else np.asarray(angle_deg, dtype=float))

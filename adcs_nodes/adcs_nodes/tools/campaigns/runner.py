@@ -1,10 +1,6 @@
-"""One run: the worker process that runs it, and the supervisor that feeds and watches it.
-
-A campaign starts its worker processes once and feeds them runs: each thread of the local pool
-(or of a Dask worker) keeps one worker process per campaign for the plain engine, so numpy,
-numba and the packages are imported once per worker, not once per run; a graph run (its nodes
-are processes anyway) gets a worker process of its own.
-"""
+"""One run: the worker process that runs it and the supervisor that feeds and watches it. A
+campaign starts its workers once and feeds them runs (numpy, numba and the packages imported
+once per worker); a graph run, whose nodes are processes anyway, gets a worker of its own."""
 from __future__ import annotations
 
 import fcntl
