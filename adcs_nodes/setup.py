@@ -33,7 +33,8 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={PACKAGE: ['config/*.xml']},     # the Fast DDS profile (tools/run/launcher.py)
+    # the Fast DDS profile (tools/run/launcher), a stored measurement (tools/analyse)
+    package_data={PACKAGE: ['config/*.xml', 'tools/analyse/*.json']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),

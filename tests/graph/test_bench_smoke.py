@@ -26,6 +26,8 @@ def test_table_and_verdicts_format():
     assert len({len(line) for line in text.splitlines()[:2]}) == 1   # header as wide as rule
     assert 'NOT MET' in verdict('x', 0.4, 0.5, '') and ' MET ' in verdict('x', 0.6, 0.5, '')
     assert 'NOT MEASURED' in verdict('x', None, 0.5, '')
+    assert ' MET ' in verdict('x', 1.02, 1.05, '', at_most=True)
+    assert 'NOT MET' in verdict('x', 1.2, 1.05, '', at_most=True)
 
 
 def test_hop_pattern_of_paper000_at_1s_frames():
@@ -70,15 +72,17 @@ def test_bench_runs_at_tiny_size(tmp_path):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [os.path.join(ROOT, 'tests'), os.path.join(ROOT, 'adcs_nodes'),
          os.path.join(ROOT, 'sim_node'), os.environ.get('PYTHONPATH', '')]))
-    # row (3) is row (3i)'s code with the in-process path off: left out (two launches less)
+    # row (3) is row (3i)'s code with the in-process path off: left out (two launches less);
+    # row (8): a 4-run campaign of 0.05 orbits (the whole command: no speed check at this size)
     proc = subprocess.run([sys.executable, '-m', 'perf.bench', '--frames', '25',
-                           '--repeats', '1', '--basilisk', 'skip', '--rows', '1,2,3i,4,5,6,7g,7c',
-                           '--out', str(out)],
+                           '--repeats', '1', '--basilisk', 'skip', '--rows',
+                           '1,2,3i,4,5,6,7g,7c,8', '--campaign-runs', '4',
+                           '--campaign-orbits', '0.05', '--out', str(out)],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
     text = out.read_text()
     assert text == proc.stdout
-    for label in ('(1)', '(2)', '(3)', '(3i)', '(4)', '(5)', '(6)', '(7g)', '(7c)'):
+    for label in ('(1)', '(2)', '(3)', '(3i)', '(4)', '(5)', '(6)', '(7g)', '(7c)', '(8)'):
         assert any(line.startswith(label) for line in text.splitlines()), label
     assert 'skipped (--basilisk skip)' in text and 'NOT MEASURED' in text
     assert 'not selected (--rows)' in [line for line in text.splitlines()
@@ -87,3 +91,7 @@ def test_bench_runs_at_tiny_size(tmp_path):
     assert text.count('MET') >= 3 and text.count('NOT MEASURED') >= 3   # MET or NOT MET
     assert 'nproc' in text and 'load average' in text
     assert '(f) start-up CPU to frame 0' in text and 'dynamics' in text    # (7g)'s per node
+    campaign = [line for line in text.splitlines() if '(g) campaign CPU' in line][0]
+    assert 'target <= 1.05 x' in campaign and 'CPU for 4 runs' in campaign, campaign
+    ratio = float(campaign.split('FrameLoop CPU')[1].split()[0])
+    assert ratio > 1.0, campaign    # the command's processes include every run's FrameLoop

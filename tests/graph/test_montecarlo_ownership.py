@@ -1,8 +1,8 @@
-"""A Monte Carlo run is owned by one worker (issue 38 item 6): the run process of a lost
-worker ends with it (the parent-death signal), and a run given to another worker while a
-previous run process of it still lives on this host ends that process before it starts
-again. Stand-in run processes (a sleeper that names its pid), no ROS: graph tier, marked
-``parallel``.
+"""A Monte Carlo run is owned by one worker (issue 38 item 6): the worker process of a lost
+supervisor ends with it (the parent-death signal), and a run given to another worker while a
+previous worker process still runs it on this host ends that process before it starts again.
+Stand-in runs in the real worker loop (a sleeper that names its pid), no ROS: graph tier,
+marked ``parallel``.
 """
 import json
 import os
@@ -17,25 +17,38 @@ from adcs_nodes.tools.campaigns import runner
 
 pytestmark = pytest.mark.parallel
 
-#: A run process that never ends by itself: writes its pid, then sleeps.
+#: A worker whose run never ends by itself: writes the worker's pid, then sleeps.
 SLEEPER = r'''
 import os, sys, time
-open(os.path.join(sys.argv[1], 'sleeper.pid'), 'w').write(str(os.getpid()))
-time.sleep(600)
+from adcs_nodes.tools.campaigns.runner import serve
+
+
+def run(run_dir):
+    open(os.path.join(run_dir, 'sleeper.pid'), 'w').write(str(os.getpid()))
+    time.sleep(600)
+
+
+raise SystemExit(serve(sys.argv[1], run))
 '''
-#: A run process that finishes: records whether the sleeper was still alive at its start.
+#: A worker whose run finishes: records whether the sleeper was still alive at its start.
 FINISHER = r'''
 import json, os, sys
-run_dir = sys.argv[1]
-pid = int(os.environ['SLEEPER_PID'])
-try:
-    os.kill(pid, 0)
-    alive = True
-except ProcessLookupError:
-    alive = False
-open(os.path.join(run_dir, 'series.npz'), 'wb').close()
-json.dump({'index': 0, 'status': 'captured', 'sleeper_alive': alive},
-          open(os.path.join(run_dir, 'result.json'), 'w'))
+from adcs_nodes.tools.campaigns.runner import serve
+
+
+def run(run_dir):
+    try:
+        os.kill(int(os.environ['SLEEPER_PID']), 0)
+        alive = True
+    except ProcessLookupError:
+        alive = False
+    open(os.path.join(run_dir, 'series.npz'), 'wb').close()
+    json.dump({'index': 0, 'status': 'captured', 'sleeper_alive': alive},
+              open(os.path.join(run_dir, 'result.json'), 'w'))
+    return 0
+
+
+raise SystemExit(serve(sys.argv[1], run))
 '''
 
 
@@ -69,7 +82,7 @@ def test_a_lost_workers_run_process_ends_with_it(tmp_path):
     run_dir = str(tmp_path / 'run_0000')
     job = _job(run_dir)
     code = ('import sys; from adcs_nodes.tools.campaigns import runner; '
-            f'runner.WORKER_COMMANDS["plain"] = ["-c", {SLEEPER!r}]; '
+            f'runner.SERVER_COMMAND = ["-c", {SLEEPER!r}]; '
             f'runner.execute_run({job!r})')
     worker = subprocess.Popen([sys.executable, '-c', code], env={**os.environ,
                               'PYTHONPATH': os.pathsep.join(sys.path)})
@@ -85,13 +98,13 @@ def test_a_lost_workers_run_process_ends_with_it(tmp_path):
 def test_a_run_given_to_another_worker_ends_the_previous_run_process(tmp_path, monkeypatch):
     run_dir = str(tmp_path / 'run_0000')
     job = _job(run_dir)
-    monkeypatch.setitem(runner.WORKER_COMMANDS, 'plain', ['-c', SLEEPER])
+    monkeypatch.setattr(runner, 'SERVER_COMMAND', ['-c', SLEEPER])
     first = {}
     lost = threading.Thread(target=lambda: first.update(runner.execute_run(job)))
     lost.start()                                       # a worker that no longer answers
     pid = _wait_pid(run_dir)
     monkeypatch.setenv('SLEEPER_PID', str(pid))
-    monkeypatch.setitem(runner.WORKER_COMMANDS, 'plain', ['-c', FINISHER])
+    monkeypatch.setattr(runner, 'SERVER_COMMAND', ['-c', FINISHER])
     t0 = time.monotonic()
     result = runner.execute_run(job)                   # the scheduler gave it to another
     assert result['status'] == 'captured', result
@@ -102,3 +115,4 @@ def test_a_run_given_to_another_worker_ends_the_previous_run_process(tmp_path, m
     assert sorted(os.listdir(run_dir)) == ['result.json', 'series.npz', 'worker.log']
     with open(run_dir + '.owner') as fh:
         assert json.load(fh)['pid'] != pid
+    assert runner.close_servers(job['stop_file']) == 1     # the finisher's worker, reused

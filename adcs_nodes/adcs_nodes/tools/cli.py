@@ -1,43 +1,5 @@
-"""``adcs``: the command-line launcher of the ADCS node graph.
-
-Commands
---------
-``adcs run SCENARIO [--record BAG] [--duration S] [--real-time] [--rate F]
-[--engine plain|composed|graph] [--set KEY=VALUE ...] [--report]``
-    Validate the scenario, start its nodes (one process each, all in one process, or the
-    plain FrameLoop without ROS), show progress, stop everything cleanly at the end, on
-    Ctrl-C or when a node dies. ``--rate F`` without ``--real-time``: lockstep paced to at
-    most F x real time (the same series).
-``adcs switch NAME [--run PID]`` / ``adcs status [--run PID] [--watch]``
-    Switch the active controller of a graph started by ``adcs run``, or show its controllers
-    and lockstep health (missed frames per node); ``--watch``: refreshed once a second.
-``adcs fault KIND TARGET [--at S] [--param KEY=VALUE ...] [--run PID]``
-    Inject one fault into a running graph (``sim/inject_fault``), announced on ``sim/faults``
-    like a scenario's; validated as a scenario's (exit 2 with the reason). Not deterministic.
-``adcs list [--dir scenarios]``
-    Scenarios (with their description) and the known nodes.
-``adcs validate SCENARIO``
-    Check a scenario file only (errors name the key and the line).
-``adcs schema``
-    Every scenario key with type, default and meaning (this is ``docs/scenarios.md``).
-``adcs montecarlo SCENARIO --runs N [--jobs J] [--scheduler ADDRESS] [--out DIR]``
-    Dispersed runs (attitude, rate, magnetometer errors, seeds) in parallel or on a Dask
-    cluster; resumable; ``campaign.csv``, ``summary.md``, ``capture_vs_rate.png``.
-``adcs sweep SCENARIO --set KEY=V1,V2,... [--set ...] --runs N [--jobs J] [--out DIR]``
-    One Monte Carlo campaign (plain engine) per point of a parameter grid of scenario keys;
-    resumable; the table of capture, hold and filter convergence per point (``sweep.md``,
-    ``sweep.csv``, ``sweep.png``).
-``adcs replay BAG [--topics T ...] [--rate F] [--time-offset S | --now]``
-    Publish a bag's recorded sensor topics (best effort, original stamps, ``/clock``) as
-    drivers would, to run the flight software without ``sim_node``.
-``adcs export BAG --csv DIR``
-    One CSV per topic, flattened fields, time column ``t`` in seconds.
-``adcs report BAG [--out DIR]``
-    Metrics, PNG plots, ``summary.md`` and ``report.html`` (one self-contained page: timeline
-    of controllers, modes and faults, pointing, wheels, dipole, estimator against the truth).
-
-``adcs slew --to ROLL PITCH YAW [--frame inertial|orbit] [--controller NAME] [--run PID]``
-    Slew a running graph (``adcs/slew`` action): feedback, then settling time, energy, error.
+"""``adcs``: the command-line launcher of the ADCS node graph (every command and option: the
+README, "Commands"; ``adcs COMMAND --help``).
 
 Exit codes: 0 success, 1 run failure (a world node or the recorder died, recorder lagged),
 2 bad input (scenario, arguments, bag, a node refusing its parameters), 3 degraded run (it
@@ -183,52 +145,47 @@ def cmd_validate(args) -> int:
     return 0
 
 
-def cmd_switch(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError, finish, switch
+def _live(command: str, action) -> int:
+    """Run ``action()`` on a running graph (``adcs switch``, ``status``, ``fault``): print its
+    text, or the LiveError (exit 2)."""
+    from adcs_nodes.tools.run.live import LiveError, finish
     try:
-        print(switch(args.controller, args.run))
+        text = action()
     except LiveError as exc:
-        print(f'adcs switch: {exc}', file=sys.stderr)
+        print(f'adcs {command}: {exc}', file=sys.stderr)
         return finish(2)
+    if isinstance(text, int):       # (status --watch: its exit code)
+        return finish(text)
+    print(text)
     return finish(0)
 
 
+def cmd_switch(args) -> int:
+    from adcs_nodes.tools.run.live import switch
+    return _live('switch', lambda: switch(args.controller, args.run))
+
+
 def cmd_slew(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError
     from adcs_nodes.tools.run.slew import slew
     if not all(math.isfinite(v) for v in args.to):
         print(f'adcs slew: --to needs three finite angles [deg], got {args.to}',
               file=sys.stderr)
         return 2
-    try:
-        print(slew(*args.to, frame=args.frame, controller=args.controller,
-                   tolerance_deg=args.tolerance_deg, timeout_s=args.timeout_s, pid=args.run))
-    except LiveError as exc:
-        print(f'adcs slew: {exc}', file=sys.stderr)
-        return 2
-    return 0
+    return _live('slew', lambda: slew(*args.to, frame=args.frame, controller=args.controller,
+                                      tolerance_deg=args.tolerance_deg,
+                                      timeout_s=args.timeout_s, pid=args.run))
 
 
 def cmd_status(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError, finish, status, watch
-    try:
-        if args.watch:
-            return finish(watch(args.run, count=args.count))
-        print(status(args.run))
-    except LiveError as exc:
-        print(f'adcs status: {exc}', file=sys.stderr)
-        return finish(2)
-    return finish(0)
+    from adcs_nodes.tools.run.live import status, watch
+    return _live('status', lambda: watch(args.run, count=args.count) if args.watch
+                 else status(args.run))
 
 
 def cmd_fault(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError, fault, finish, parse_params
-    try:
-        print(fault(args.kind, args.target, args.at, parse_params(args.param), args.run))
-    except LiveError as exc:
-        print(f'adcs fault: {exc}', file=sys.stderr)
-        return finish(2)
-    return finish(0)
+    from adcs_nodes.tools.run.live import fault, parse_params
+    return _live('fault', lambda: fault(args.kind, args.target, args.at,
+                                        parse_params(args.param), args.run))
 
 
 def cmd_schema(args) -> int:
@@ -294,7 +251,8 @@ def cmd_report(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog='adcs', description='Run, record and analyse the satellite ADCS node graph.',
-        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split('Exit')[0])
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog='Exit' + __doc__.split('Exit', 1)[1].rstrip('\n"'))
     sub = ap.add_subparsers(dest='command', required=True)
     # shared argument groups
     run_pid = argparse.ArgumentParser(add_help=False)
@@ -411,8 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``adcs`` console script."""
-    # a crash inside a C library (rclpy, Fast DDS) prints where Python was on stderr instead
-    # of ending the command without a word (seen once: `adcs switch` killed by SIGSEGV)
+    # a crash inside a C library (rclpy, Fast DDS) prints where Python was
     try:
         faulthandler.enable()
     except (OSError, ValueError):   # stderr without a file descriptor (captured in tests)
@@ -429,13 +386,9 @@ CTRL_C_COMMANDS = ('status', 'slew', 'switch', 'fault', 'replay')
 
 
 def ctrl_c_stops() -> None:
-    """Python's own SIGINT handling (``KeyboardInterrupt``) where SIGINT was inherited ignored.
-
-    Python keeps an inherited "ignore": bash starts the commands of a script's background job
-    so, and pytest-xdist its workers. ``adcs status --watch`` started so went on after
-    ``kill -INT`` until it was killed (30 s in the switch and slew tests of ``make test``);
-    the node processes already do the same (``nodes/runtime.stop_handler_from_start``).
-    """
+    """Python's own SIGINT handling (``KeyboardInterrupt``) where SIGINT was inherited ignored
+    (bash's background jobs, pytest-xdist workers), as the nodes do
+    (``nodes/runtime.stop_handler_from_start``)."""
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
 

@@ -1,13 +1,9 @@
-"""``report.html``: one self-contained page of a run for people (``adcs report`` writes it):
-no network, no script, PNG plots inline, plain HTML tables, from any engine's bag (a section
-whose topics are missing is left out, saying so). Sections: the timeline (the forwarded
-controller, the active one and the manager's mode as bands, fault markers, the attitude error
-against the target and the body rates; also written as ``overview.png``), wheels, dipole,
-the estimator's error per body axis against the interpolated truth with its 3-sigma bound
-and rejections, switches and fallbacks with their reasons, faults, and the paper table of
-the report's ``metrics.json``. Times are sim seconds from the first ``sim/state``, in
-minutes beyond 20 minutes.
-"""
+"""``report.html``: one self-contained page of a run for people (``adcs report``): no network,
+no script, inline PNG plots, plain tables, from any engine's bag (a section without its topics
+is left out, saying so): the timeline (forwarded, active controller and manager mode as
+bands, faults, attitude error to the target, body rates; also ``overview.png``), wheels,
+dipole, the estimator's per-axis error with its 3-sigma bound and rejections, switches and
+fallbacks with their reasons, faults, and the paper table of ``metrics.json``."""
 from __future__ import annotations
 
 import base64
@@ -60,12 +56,25 @@ class _Series:
     topics: Dict[str, int] = field(default_factory=dict)
 
 
-def _q(m) -> List[float]:
-    return [m.x, m.y, m.z, m.w]
+def _xyz(v) -> List[float]:
+    return [v.x, v.y, v.z] + ([v.w] if hasattr(v, 'w') else [])
 
 
-def _v(m) -> List[float]:
-    return [m.x, m.y, m.z]
+#: The series of :class:`_Series` each topic fills: ``{topic: (series, {key: getter})}``.
+_FIELDS = {
+    '/sim/state': ('state', {'q_eci': lambda m: _xyz(m.q_eci_body),
+                             'q_orbit': lambda m: _xyz(m.q_orbit_body),
+                             'w_eci': lambda m: _xyz(m.omega_body_eci_body),
+                             'w_orbit': lambda m: _xyz(m.omega_body_orbit_body)}),
+    '/adcs/attitude_target': ('target', {'q': lambda m: _xyz(m.q_ref_body),
+                                         'frame': lambda m: m.header.frame_id or 'orbit'}),
+    '/adcs/attitude_estimate': ('est', {'q_eci': lambda m: _xyz(m.q_eci_body),
+                                        'cov': lambda m: list(m.covariance)}),
+    '/adcs/estimator/diagnostics': ('diag', {'rejected': lambda m: int(m.rejected_count),
+                                             'last': lambda m: str(m.last_rejection)}),
+    '/adcs/actuator_command': ('cmd', {'source': lambda m: str(m.source),
+                                       'dipole': lambda m: _xyz(m.dipole_body)}),
+}
 
 
 def _collect(bag_path) -> _Series:
@@ -77,40 +86,22 @@ def _collect(bag_path) -> _Series:
             continue
         raw.append((topic, stamp, msg))
         s.topics[topic] = s.topics.get(topic, 0) + 1
-    states = [st for tp, st, _ in raw if tp == '/sim/state']
-    stamps = states or [st for _, st, _ in raw]
+    stamps = [st for tp, st, _ in raw if tp == '/sim/state'] or [st for _, st, _ in raw]
     s.t0 = min(stamps) if stamps else 0
     for topic, stamp, m in raw:
         t = (stamp - s.t0) * 1e-9
-        if topic == '/sim/state':
-            d = s.state
-            d['t'].append(t)
-            d['q_eci'].append(_q(m.q_eci_body))
-            d['q_orbit'].append(_q(m.q_orbit_body))
-            d['w_eci'].append(_v(m.omega_body_eci_body))
-            d['w_orbit'].append(_v(m.omega_body_orbit_body))
-        elif topic == '/adcs/attitude_target':
-            s.target['t'].append(t)
-            s.target['q'].append(_q(m.q_ref_body))
-            s.target['frame'].append(m.header.frame_id or 'orbit')
-        elif topic == '/adcs/attitude_estimate':
-            s.est['t'].append(t)
-            s.est['q_eci'].append(_q(m.q_eci_body))
-            s.est['cov'].append(list(m.covariance))
-        elif topic == '/adcs/estimator/diagnostics':
-            s.diag['t'].append(t)
-            s.diag['rejected'].append(int(m.rejected_count))
-            s.diag['last'].append(str(m.last_rejection))
+        if topic in _FIELDS:
+            name, fields = _FIELDS[topic]
+            series = getattr(s, name)
+            series['t'].append(t)
+            for key, get in fields.items():
+                series[key].append(get(m))
         elif topic == '/sim/wheels':
             if len(m.speed) and len(m.speed) == len(m.momentum):
                 s.wheels['t'].append(t)
                 s.wheels['speed'].append(list(m.speed))
                 s.wheels['momentum'].append(list(m.momentum))
                 s.wheels['names'] = list(m.names)
-        elif topic == '/adcs/actuator_command':
-            s.cmd['t'].append(t)
-            s.cmd['source'].append(str(m.source))
-            s.cmd['dipole'].append(_v(m.dipole_body))
         elif topic == '/adcs/controller_status':
             s.status.append({'t': t, 'active': m.active, 'mode': m.mode,
                              'switch_count': int(m.switch_count),
@@ -272,6 +263,17 @@ def _mark_faults(ax, s: _Series, axis: _Axis, label: bool = False) -> None:
                         ha='left', color=colour, annotation_clip=False)
 
 
+def _style(ax, s: _Series, axis: _Axis, ylabel: str, last: bool, label: bool = False) -> None:
+    """Y label, grid and fault marks of one panel; the time label on the ``last`` one."""
+    ax.set_ylabel(ylabel, fontsize=8)
+    ax.grid(True, alpha=0.3)
+    if last:
+        ax.set_xlabel(f'sim time [{axis.unit}]')
+    else:
+        ax.tick_params(labelbottom=False)
+    _mark_faults(ax, s, axis, label=label)
+
+
 def _shade(ax, runs, colours, axis: _Axis, alpha: float = 0.12) -> None:
     for a, b, lab in runs:
         if lab not in ('zero', ''):
@@ -312,10 +314,7 @@ def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
     else:
         err_ax.text(0.5, 0.5, 'no attitude target recorded', transform=err_ax.transAxes,
                     ha='center')
-    err_ax.set_ylabel('attitude error\nto target [deg]', fontsize=8)
-    err_ax.grid(True, which='major', alpha=0.3)
-    err_ax.tick_params(labelbottom=False)
-    _mark_faults(err_ax, s, axis)
+    _style(err_ax, s, axis, 'attitude error\nto target [deg]', last=False)
     rate_ax = fig.add_subplot(gs[2], sharex=band)
     _shade(rate_ax, src_runs, colours, axis)
     if s.state['t']:
@@ -325,10 +324,7 @@ def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
         rate_ax.semilogy(t, np.maximum(np.linalg.norm(s.state['w_orbit'], axis=1) * _DEG,
                                        1e-5), lw=0.8, label='|omega| w.r.t. the orbit frame')
         rate_ax.legend(fontsize=7, loc='upper right')
-    rate_ax.set_ylabel('body rate\n[deg/s]', fontsize=8)
-    rate_ax.set_xlabel(f'sim time [{axis.unit}]')
-    rate_ax.grid(True, alpha=0.3)
-    _mark_faults(rate_ax, s, axis)
+    _style(rate_ax, s, axis, 'body rate\n[deg/s]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.08)
     return fig
 
@@ -342,19 +338,13 @@ def _wheels_fig(s: _Series, axis: _Axis) -> Figure:
     mom = np.asarray(s.wheels['momentum'])
     for i, n in enumerate(names):
         ax1.plot(t, speed[:, i], lw=0.8, label=n)
-    ax1.set_ylabel('speed [rpm]', fontsize=8)
     ax1.legend(fontsize=7, loc='upper left')
-    ax1.grid(True, alpha=0.3)
-    ax1.tick_params(labelbottom=False)
     ax1.set_xlim(t[0], t[-1])
-    _mark_faults(ax1, s, axis, label=True)
+    _style(ax1, s, axis, 'speed [rpm]', last=False, label=True)
     ax2 = fig.add_subplot(2, 1, 2, sharex=ax1)
     for i, n in enumerate(names):
         ax2.plot(t, mom[:, i], lw=0.8, label=n)
-    ax2.set_ylabel('momentum [N m s]', fontsize=8)
-    ax2.set_xlabel(f'sim time [{axis.unit}]')
-    ax2.grid(True, alpha=0.3)
-    _mark_faults(ax2, s, axis)
+    _style(ax2, s, axis, 'momentum [N m s]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.9, bottom=0.12, hspace=0.1)
     return fig
 
@@ -366,11 +356,8 @@ def _dipole_fig(s: _Series, axis: _Axis) -> Figure:
     d = np.asarray(s.cmd['dipole'])
     for i, n in enumerate('xyz'):
         ax.plot(t, d[:, i], lw=0.6, label=f'm_{n}')
-    ax.set_ylabel('dipole [A m^2]', fontsize=8)
-    ax.set_xlabel(f'sim time [{axis.unit}]')
     ax.legend(fontsize=7, loc='upper right', ncol=3)
-    ax.grid(True, alpha=0.3)
-    _mark_faults(ax, s, axis)
+    _style(ax, s, axis, 'dipole [A m^2]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.18)
     return fig
 
@@ -389,14 +376,10 @@ def _estimate_fig(s: _Series, axis: _Axis, e: Dict[str, np.ndarray]) -> Figure:
             ax.fill_between(t, -sig, sig, color='#4c72b0', alpha=0.2, lw=0,
                             label='3-sigma (estimate covariance)')
         ax.plot(t, e['err'][:, i], lw=0.6, color='k', label='error (truth at the stamp)')
-        ax.set_ylabel(f'{n} [deg]', fontsize=8)
-        ax.grid(True, alpha=0.3)
         ax.set_xlim(t[0], t[-1])
-        _mark_faults(ax, s, axis, label=i == 0)
+        _style(ax, s, axis, f'{n} [deg]', last=i == n_rows - 1, label=i == 0)
         if i == 0:
             ax.legend(fontsize=7, loc='upper right', ncol=2)
-        if i < n_rows - 1:
-            ax.tick_params(labelbottom=False)
         finite = np.abs(e['err'][:, i])
         finite = finite[np.isfinite(finite)]
         if finite.size:      # the error sets the scale (a tumbling start's bound may not)
@@ -406,10 +389,7 @@ def _estimate_fig(s: _Series, axis: _Axis, e: Dict[str, np.ndarray]) -> Figure:
         ax = fig.add_subplot(n_rows, 1, n_rows, sharex=first)
         ax.step(np.asarray(s.diag['t']) / axis.scale, s.diag['rejected'], where='post',
                 lw=0.8, color='#c44e52')
-        ax.set_ylabel('rejected\nsamples', fontsize=8)
-        ax.grid(True, alpha=0.3)
-        _mark_faults(ax, s, axis)
-    fig.axes[-1].set_xlabel(f'sim time [{axis.unit}]')
+        _style(ax, s, axis, 'rejected\nsamples', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.92, bottom=0.1, hspace=0.1)
     return fig
 

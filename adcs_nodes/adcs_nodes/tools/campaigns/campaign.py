@@ -29,19 +29,8 @@ _FINISHED = ('captured', 'not_captured', 'error')
 
 
 class Campaign:
-    """One invocation of a campaign in ``out``: check, prepare, execute, tabulate.
-
-    Parameters
-    ----------
-    cfg : CampaignConfig
-        Campaign definition.
-    base : dict
-        The validated base scenario (:func:`~adcs_nodes.scenario.load_scenario`).
-    out : str
-        Output directory.
-    log : callable
-        Receives one progress line at a time.
-    """
+    """One invocation of a campaign (``cfg``, the validated ``base`` scenario) in ``out``:
+    check, prepare, execute, tabulate; ``log`` gets one progress line at a time."""
 
     def __init__(self, cfg: CampaignConfig, base: Dict[str, Any], out: str,
                  log: Callable[[str], None] = print) -> None:
@@ -104,12 +93,9 @@ class Campaign:
     # -------------------------------------------------------------- execution
     def run(self, jobs: int = 1, scheduler: Optional[str] = None,
             dask_local: bool = False) -> int:
-        """Execute every run not done yet; write the table, summary and plot. Exit code.
-
-        ``jobs`` runs at once from a local thread pool; or the runs go to the Dask scheduler
-        ``scheduler``; or, with ``dask_local``, to a Dask ``LocalCluster`` of ``jobs`` worker
-        processes (one thread each) started here and stopped at the end.
-        """
+        """Execute every run not done yet; write the table, summary and plot; the exit code.
+        ``jobs`` at once from a local thread pool, or on the Dask ``scheduler``, or
+        (``dask_local``) on a ``LocalCluster`` of ``jobs`` single-thread workers."""
         check_layout(self.out)
         os.makedirs(self.out, exist_ok=True)
         with campaign_lock(self.out):

@@ -1,15 +1,7 @@
-"""What a run's capture is measured against: the attitude the scenario's guidance commands.
-
-The capture test (:func:`~adcs_nodes.tools.campaigns.results.series_metrics`) judges::
-
-    angle(t_k) = 2 atan2(|v|, |w|),  [v, w] = q_orbit_target(t_k)^* (x) q_orbit_body(t_k)   [deg]
-
-with ``q_orbit_target(t_k)`` the target the run published last at or before ``t_k``: the
-orbit frame (:data:`ORBIT_FRAME`) for a scenario whose guidance holds it, else the guidance
-target (:data:`GUIDANCE_TARGET`), a ``maneuver`` segment's samples not judged. Per scenario,
-where the target comes from, and results from before it was recorded:
-``docs/montecarlo.md``, "What captured means".
-"""
+"""What a run's capture is measured against: the attitude the scenario's guidance commands,
+``angle(t_k) = 2 atan2(|v|, |w|)`` of ``q_orbit_target(t_k)^* (x) q_orbit_body(t_k)`` [deg]
+with the target published last at or before ``t_k`` (``docs/montecarlo.md``, "What captured
+means")."""
 from __future__ import annotations
 
 import os
@@ -46,22 +38,10 @@ def capture_reference(sc: Dict[str, Any]) -> str:
 
 
 def label_old_result(run_dir: str, result: Dict[str, Any]) -> Dict[str, Any]:
-    """A run's result as a resumed campaign reads it.
-
-    A plain run's ``result.json`` without ``capture_reference`` is from before the plain
-    worker recorded the guidance target (its ``series.npz`` has no ``q_orbit_target``): its
-    numbers are the angle to the orbit frame. For a scenario whose reference is the orbit
-    frame those are the capture test's numbers: returned with ``capture_reference`` added
-    (the file is left as it is). Any other result is returned as it is.
-
-    Raises
-    ------
-    ValueError
-        For such a result of a scenario judged against its guidance target (the run is not
-        done: the campaign runs it again).
-    OSError, KeyError, adcs_nodes.scenario.ScenarioError
-        When the run's scenario cannot be read.
-    """
+    """A run's result as a resumed campaign reads it: a plain ``result.json`` without
+    ``capture_reference`` (it measured to the orbit frame) labelled so when that is its
+    scenario's reference, else ValueError (run again); OSError, KeyError or ScenarioError for
+    an unreadable scenario."""
     from adcs_nodes.scenario import load_scenario
 
     if result.get('engine') != 'plain' or 'capture_reference' in result:

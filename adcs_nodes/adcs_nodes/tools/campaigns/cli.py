@@ -12,7 +12,7 @@ from adcs_nodes.tools.campaigns.config import (ENGINES, CampaignConfig, Campaign
                                                Dispersion, apply_dispersion,
                                                default_max_rate_deg_s, scenario_hash)
 from adcs_nodes.tools.campaigns.engine import plain_engine_problem, resolve_engine
-from adcs_nodes.tools.campaigns.runner import worker_main
+from adcs_nodes.tools.campaigns.runner import serve
 
 #: The most runs of one campaign (one directory each under ``runs/``) and runs at once.
 MAX_RUNS = 100_000
@@ -34,8 +34,9 @@ def add_campaign_arguments(parser: argparse.ArgumentParser, what: str = 'campaig
                         help='number of runs' + (' per grid point' if what == 'sweep' else '')
                         + f' (at most {MAX_RUNS})')
     parser.add_argument('--jobs', type=int, default=1, metavar='J',
-                        help='runs at once on this machine, each in its own processes '
-                        '(default 1; with --dask-local: the number of Dask workers; ignored '
+                        help='runs at once on this machine: J worker processes, started '
+                        'once and fed runs (default 1; with --dask-local: the number of Dask '
+                        'workers; ignored '
                         f'with --scheduler; at most {MAX_JOBS})')
     where = parser.add_mutually_exclusive_group()
     where.add_argument('--scheduler', metavar='ADDRESS',
@@ -100,16 +101,8 @@ def max_rate_deg_s(args: argparse.Namespace, base: Dict[str, Any]) -> float:
 
 
 def config_from_args(args: argparse.Namespace) -> tuple:
-    """Validate the arguments; returns ``(CampaignConfig, base scenario, out dir)``.
-
-    The engine is resolved here (:func:`~adcs_nodes.tools.campaigns.engine.resolve_engine`);
-    the reason is in ``args.engine_reason`` afterwards.
-
-    Raises
-    ------
-    CampaignError, adcs_nodes.scenario.ScenarioError
-        On a bad value or scenario.
-    """
+    """Validate the arguments: ``(CampaignConfig, base scenario, out dir)``; the engine's
+    reason in ``args.engine_reason``; CampaignError or ScenarioError on a bad value."""
     from adcs_nodes.scenario import load_scenario
 
     base = load_scenario(args.scenario)
@@ -132,19 +125,25 @@ def config_from_args(args: argparse.Namespace) -> tuple:
                             f'{base["timing"]["frame_s"]:g} s frames')
     out = args.out or f'montecarlo_{base["name"]}'
     engine, args.engine_reason = resolve_engine(getattr(args, 'engine', None), base, out)
-    cfg = CampaignConfig(
-        scenario_path=base['_path'], scenario_sha256=scenario_hash(base), runs=args.runs,
-        seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
-        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
-        mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
-        auto_detumble=bool(getattr(args, 'auto_detumble', False)),
-        bdot_gain=getattr(args, 'bdot_gain', None),
-        engine=engine, compose=bool(args.compose), capture_reference=capture_reference(base))
+    cfg = campaign_config(args, base, base, duration, engine)
     if cfg.auto_detumble and not {'magnetic', 'bdot'} <= set(base.get('controllers', {})):
         raise CampaignError('--auto-detumble needs the controllers magnetic and bdot in the '
                             'scenario')
     check_dispersion(cfg, base)
     return cfg, base, out
+
+
+def campaign_config(args: argparse.Namespace, base: Dict[str, Any], sc: Dict[str, Any],
+                    duration: float, engine: str) -> CampaignConfig:
+    """The campaign of the arguments on scenario ``sc`` (``base``, or a sweep's point)."""
+    return CampaignConfig(
+        scenario_path=base['_path'], scenario_sha256=scenario_hash(sc), runs=args.runs,
+        seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
+        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
+        mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
+        auto_detumble=bool(getattr(args, 'auto_detumble', False)),
+        bdot_gain=getattr(args, 'bdot_gain', None), engine=engine,
+        compose=bool(getattr(args, 'compose', False)), capture_reference=capture_reference(sc))
 
 
 def check_dispersion(cfg: CampaignConfig, base: Dict[str, Any]) -> None:
@@ -197,13 +196,11 @@ def run_from_args(args: argparse.Namespace) -> int:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.campaigns``: the campaign command, or one run's process.
-
-    ``_worker RUN_DIR`` is the internal per-run entry point used by :func:`execute_run`.
-    """
+    """``python -m adcs_nodes.tools.campaigns``: the campaign command, or (``_worker
+    STOP_FILE``, internal) a worker process of :func:`~.runner.execute_run`."""
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ['_worker'] and len(argv) == 2:
-        return worker_main(argv[1])
+        return serve(argv[1])
     parser = argparse.ArgumentParser(prog='adcs montecarlo',
                                      description='Dispersed Monte Carlo campaign.')
     add_arguments(parser)

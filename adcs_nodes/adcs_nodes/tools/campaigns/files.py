@@ -4,6 +4,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import socket
 import time
 import uuid
 from typing import Any, Dict, Optional
@@ -33,21 +34,33 @@ def write_text_atomic(path: str, text: str, fsync: bool = False) -> None:
     os.replace(tmp, path)
 
 
+def result_head(job: Dict[str, Any]) -> Dict[str, Any]:
+    """The fields every ``result.json`` and ``failed.json`` of a run starts with."""
+    return {'index': job['index'], 'dispersion': job['dispersion'], 'bag': 'bag',
+            'host': socket.gethostname(), 'supervisor_pid': os.getppid(),
+            'worker_pid': os.getpid(),
+            'finished_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}
+
+
+def fail(run_dir: str, job: Dict[str, Any], code: int, message: str, wall: float) -> int:
+    """Write the run's ``failed.json``; the exit code (``code``, at least 1)."""
+    write_json_atomic(os.path.join(run_dir, FAILED_FILE),
+                      {**result_head(job), 'status': 'error', 'exit_code': code,
+                       'message': message, 'wall_time_s': wall})
+    print(f'[montecarlo] run failed: {message}', flush=True)
+    return code or 1
+
+
 def run_dir_of(out: str, index: int) -> str:
     """``OUT/runs/run_<index>`` (zero-padded to 4 digits so listings sort)."""
     return os.path.join(out, 'runs', f'run_{index:04d}')
 
 
 def load_result(run_dir: str) -> Optional[Dict[str, Any]]:
-    """The run's ``result.json`` when the run is done, else None.
-
-    Done: the result and its data are present (graph engine: the bag's ``metadata.yaml``;
-    plain engine: ``series.npz``). A plain result from before the worker recorded the
-    guidance target (:func:`~adcs_nodes.tools.campaigns.capture.label_old_result`) is
-    labelled ``capture_reference: orbit frame`` when that is its scenario's reference; for any
-    other scenario, and when its scenario cannot be read, the reason goes to ``failed.json``
-    and the run is not done (the campaign runs it again).
-    """
+    """The run's ``result.json`` when the run is done (its data there: the bag's
+    ``metadata.yaml`` or ``series.npz``), else None. An old plain result is labelled
+    (:func:`~adcs_nodes.tools.campaigns.capture.label_old_result`) or, when it cannot be, the
+    reason goes to ``failed.json`` and the run is run again."""
     from adcs_nodes.tools.campaigns.capture import label_old_result
 
     path = os.path.join(run_dir, RESULT_FILE)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import csv
 import hashlib
+import io
 import itertools
 import json
 import math
@@ -22,8 +23,8 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from adcs_nodes.tools.analyse import metrics
-from adcs_nodes.tools.campaigns.cli import add_campaign_arguments
-from adcs_nodes.tools.campaigns.config import CampaignConfig, CampaignError, scenario_hash
+from adcs_nodes.tools.campaigns.cli import add_campaign_arguments, campaign_config
+from adcs_nodes.tools.campaigns.config import CampaignError
 from adcs_nodes.tools.campaigns.files import (SERIES_FILE, load_result, run_dir_of,
                                               write_json_atomic, write_text_atomic)
 from adcs_nodes.tools.campaigns.summary import orbit_period_s
@@ -43,13 +44,8 @@ class SweepError(CampaignError):
 
 # ---------------------------------------------------------------------- the grid
 def split_values(text: str) -> List[str]:
-    """Split ``V1,V2,...`` at the commas outside brackets, braces and quotes.
-
-    Raises
-    ------
-    SweepError
-        An empty value (``1,,2``, a trailing comma), unbalanced brackets or quotes.
-    """
+    """Split ``V1,V2,...`` at the commas outside brackets, braces and quotes; SweepError for an
+    empty value or unbalanced brackets or quotes."""
     parts, depth, quote, cur = [], 0, '', ''
     for ch in text:
         if quote:
@@ -81,16 +77,9 @@ def split_values(text: str) -> List[str]:
 
 
 def parse_grid(items: Sequence[str]) -> List[Tuple[str, List[Any]]]:
-    """``--set KEY=V1,V2`` items to ``[(key, [values])]`` (values read as YAML, as ``adcs run
-    --set`` reads them).
-
-    Raises
-    ------
-    SweepError
-        No ``--set``, a key given twice or a value given twice for one key.
-    adcs_nodes.scenario.ScenarioError
-        An item without ``=`` or a value that is not YAML (the message names the key).
-    """
+    """``--set KEY=V1,V2`` items to ``[(key, [values])]`` (YAML values, as ``adcs run --set``);
+    SweepError for no ``--set`` or a key or value given twice, ScenarioError for an item
+    without ``=`` or a value that is not YAML."""
     from adcs_nodes.scenario import parse_overrides
     if not items:
         raise SweepError('give at least one --set KEY=V1,V2,... (the grid)')
@@ -137,24 +126,12 @@ def _value_text(v: Any) -> str:
 
 # ---------------------------------------------------------------------- metrics of a point
 def run_convergence(run_dir: str, period_s: Optional[float]) -> Dict[str, Any]:
-    """Filter convergence of one finished plain-engine run from its ``series.npz``.
-
-    Two readings of the paper's "the estimates converge within half an orbit":
-
-    * ``converged_s``: the paper-000 table's criterion (the estimate's attitude error below
-      :data:`~adcs_nodes.tools.analyse.papers.paper000.CONVERGED_DEG` = 2 deg for good) over the
-      first orbit, the length of the paper's estimation run (``paper000_estimation``): in the
-      closed loop the error of a converged filter peaks at 2-4 deg during the capture
-      maneuvers of later orbits, which is its accuracy under maneuvers, not its convergence;
-    * ``converged_5deg_s``: below the capture band (5 deg) for good over the whole run: no
-      late convergence and no later divergence.
-
-    Returns
-    -------
-    dict
-        ``converged_s``, ``converged_5deg_s`` [s since the start] (None: never, or no
-        estimate); ``has_estimate``. Without a period the first reading uses the whole run.
-    """
+    """Filter convergence of one finished plain-engine run (its ``series.npz``), two readings
+    of the paper's "the estimates converge within half an orbit": ``converged_s``, the
+    paper-000 table's criterion (error below ``CONVERGED_DEG`` = 2 deg for good) over the
+    first orbit (the paper's estimation run; later capture maneuvers push a converged filter
+    to 2-4 deg), and ``converged_5deg_s``, below 5 deg for good over the whole run [s since the
+    start; None: never, or no estimate]; ``has_estimate``."""
     path = os.path.join(run_dir, SERIES_FILE)
     none = {'converged_s': None, 'converged_5deg_s': None, 'has_estimate': False}
     if not os.path.isfile(path):
@@ -171,24 +148,9 @@ def run_convergence(run_dir: str, period_s: Optional[float]) -> Dict[str, Any]:
 
 def point_metrics(results: Sequence[Dict[str, Any]], runs: int,
                   period_s: Optional[float]) -> Dict[str, Any]:
-    """The row of one grid point from its runs' results (pure).
-
-    Parameters
-    ----------
-    results : sequence of dict
-        ``result.json`` of each finished run, each with ``converged_s`` and ``has_estimate``
-        added (:func:`run_convergence`).
-    runs : int
-        Runs of the campaign (finished or not).
-    period_s : float or None
-        Orbit period [s].
-
-    Returns
-    -------
-    dict
-        The keys of :data:`COLUMNS` except ``out``; None where nothing can be said (no run
-        done, no capture, no estimate).
-    """
+    """The row of one grid point (pure): the keys of :data:`COLUMNS` but ``out`` from the
+    ``result.json`` of its finished runs (with :func:`run_convergence` added), ``runs`` in all
+    and the orbit period [s]; None where nothing can be said."""
     done = [r for r in results if r.get('status') in ('captured', 'not_captured')]
     cap = [r for r in done if r['status'] == 'captured']
     in_time = sum(1 for r in done if r.get('captured_in_time'))
@@ -290,15 +252,13 @@ def map_markdown(rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> str:
 
 def write_csv(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> None:
     """``sweep.csv`` (atomically): the point's values of every grid key, then :data:`COLUMNS`."""
-    tmp = f'{path}.tmp-{os.getpid()}'
-    with open(tmp, 'w', encoding='utf-8', newline='') as fh:
-        w = csv.writer(fh)
-        w.writerow(list(keys) + list(COLUMNS))
-        for r in rows:
-            w.writerow([_value_text(r['point'][k]) for k in keys]
-                       + ['' if r[c] is None else (repr(r[c]) if isinstance(r[c], float)
-                                                   else r[c]) for c in COLUMNS])
-    os.replace(tmp, path)
+    text = io.StringIO()
+    w = csv.writer(text)
+    w.writerow(list(keys) + list(COLUMNS))
+    w.writerows([_value_text(r['point'][k]) for k in keys]
+                + ['' if r[c] is None else (repr(r[c]) if isinstance(r[c], float) else r[c])
+                   for c in COLUMNS] for r in rows)
+    write_text_atomic(path, text.getvalue())
 
 
 def plot_map(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> bool:
@@ -357,31 +317,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         'runs of the earlier version)')
 
 
-def _config(args: argparse.Namespace, base: Dict[str, Any],
-            point_sc: Dict[str, Any]) -> CampaignConfig:
-    from adcs_nodes.tools.campaigns.capture import capture_reference
-    from adcs_nodes.tools.campaigns.cli import max_rate_deg_s
-    duration = float(args.duration if args.duration is not None else point_sc['duration_s'])
-    return CampaignConfig(
-        scenario_path=base['_path'], scenario_sha256=scenario_hash(point_sc), runs=args.runs,
-        seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
-        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
-        mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
-        engine='plain', compose=False, capture_reference=capture_reference(point_sc))
-
-
 Prepared = Tuple[Dict[str, Any], List[Tuple[str, List[Any]]], List[Dict[str, Any]], str]
 
 
 def prepare(args: argparse.Namespace) -> Prepared:
-    """Validate everything before a run: ``(base scenario, grid, points, out)``; each point
-    is ``{'point', 'scenario', 'cfg', 'out'}``.
-
-    Raises
-    ------
-    SweepError, CampaignError, adcs_nodes.scenario.ScenarioError
-        A bad argument, grid key or value (exit 2).
-    """
+    """Validate everything before a run: ``(base scenario, grid, points, out)``, each point
+    ``{'point', 'scenario', 'cfg', 'out'}``; SweepError, CampaignError or ScenarioError (exit
+    2)."""
     from adcs_nodes.tools.campaigns.cli import config_from_args
     from adcs_nodes.tools.campaigns.engine import plain_engine_problem
     from adcs_nodes.scenario import apply_overrides, load_scenario
@@ -398,7 +340,8 @@ def prepare(args: argparse.Namespace) -> Prepared:
     points = []
     for point in grid_points(grid):
         sc = apply_overrides(base, point)   # its message names the point's overrides
-        cfg = _config(args, base, sc)
+        cfg = campaign_config(args, base, sc, float(
+            args.duration if args.duration is not None else sc['duration_s']), 'plain')
         frames = cfg.duration_s / sc['timing']['frame_s']
         if abs(frames - round(frames)) > 1e-9:
             raise SweepError(f'grid point {_point_text(point)}: the duration '

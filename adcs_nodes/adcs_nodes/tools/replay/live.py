@@ -19,14 +19,8 @@ MATCH_SETTLE_S = 1.0
 
 def load_samples(bag: str, topics: Optional[Sequence[str]] = None
                  ) -> Tuple[Dict[str, str], List[Sample], List[Sample]]:
-    """Read the bag: ``(types, timed samples in stamp order, static samples)``.
-
-    Raises
-    ------
-    ReplayError
-        Missing or unreadable bag; a requested topic not in the bag; no sensor topic; a timed
-        topic without ``header.stamp``.
-    """
+    """Read the bag: ``(types, timed samples in stamp order, static samples)``; ReplayError
+    for a missing or unreadable bag, a topic not in it, no sensor topic, no ``header.stamp``."""
     available = bag_topics(bag)
     wanted = [topic_name(t) for t in topics] if topics else sorted(
         t for t in available if t.startswith(SENSOR_PREFIX))
@@ -71,24 +65,11 @@ def replay(bag: str, topics: Optional[Sequence[str]] = None, rate: float = 1.0,
            time_offset_s: float = 0.0, now: bool = False, clock: Optional[bool] = None,
            wait_s: float = 0.0, start_s: float = 0.0, duration_s: Optional[float] = None,
            log=print) -> int:
-    """Publish the bag's sensor topics (``adcs replay``). Returns the number of timed
-    messages published.
-
-    Parameters
-    ----------
-    rate : float
-        Sim seconds per wall second (> 0).
-    time_offset_s : float
-        Added to every stamp and to ``/clock`` [s].
-    now : bool
-        Shift stamps to the wall clock (overrides ``time_offset_s``; needs ``rate == 1``).
-    clock : bool, optional
-        Publish ``/clock`` (default: unless ``now``).
-    wait_s : float
-        Wait up to this long for a subscriber on every replayed topic before starting.
-    start_s, duration_s : float
-        Replay only stamps in ``[first + start_s, first + start_s + duration_s]``.
-    """
+    """Publish the bag's sensor topics (``adcs replay``); the number of timed messages
+    published. ``rate``: sim seconds per wall second; ``time_offset_s`` added to every stamp
+    and to ``/clock``; ``now``: stamps shifted to the wall clock (``rate`` 1); ``clock``:
+    publish ``/clock`` (default: unless ``now``); ``wait_s``: for a subscriber on every topic
+    first; only stamps in ``[first + start_s, first + start_s + duration_s]``."""
     _check(rate, time_offset_s, now, wait_s, start_s, duration_s)
     epoch = bag_epoch(bag)
     types, timed, static = load_samples(bag, topics)

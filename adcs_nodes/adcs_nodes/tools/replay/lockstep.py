@@ -1,11 +1,9 @@
-"""Lockstep replay: nodes started alone in ``timing_mode: lockstep`` (with the launcher's
-parameters, :func:`write_params`) get exactly what they received in the recorded run and
-publish the recorded outputs again, bit for bit: the inputs each awaited (the ``sub:``
-entries of its handshake in the bag's graph), reliable, depth 100 (``/tf_static`` latched),
-frame by frame (every message stamped up to a recorded ``/clock`` tick, then the tick), paced
-by the nodes (their ``lockstep/ready``; at most ``MAX_LAG_FRAMES`` ahead of what each read or
-processed), until each has processed the last frame it processed in the recording.
-"""
+"""Lockstep replay: nodes started alone in ``timing_mode: lockstep`` (the launcher's
+parameters, :func:`write_params`) get what they awaited in the recorded run (the ``sub:``
+entries of their handshake; reliable, depth 100, ``/tf_static`` latched), frame by frame
+(every message up to a recorded ``/clock`` tick, then the tick), paced by their
+``lockstep/ready`` (at most ``MAX_LAG_FRAMES`` ahead), until each processed its last
+recorded frame: they publish the recorded outputs again, bit for bit."""
 from __future__ import annotations
 
 import dataclasses
@@ -23,16 +21,12 @@ STATUS_TOPIC = '/lockstep/status'
 
 @dataclass
 class LockstepPlan:
-    """What a lockstep replay publishes and when it is done (see :func:`lockstep_plan`).
-
-    ``types``: replayed topic -> message type (``/clock``, ``/tf_static`` included);
-    ``subscribers``: replayed topic -> how many followed nodes subscribe to it; ``clocks``:
-    the recorded ``/clock`` ticks in stamp order (one frame each); ``timed``: the other
-    stamped inputs in stamp order; ``static``: ``/tf_static`` messages; ``frame_ns``: base
-    frame [ns] (smallest step between two ticks); ``last_done``: node -> stamp [ns] of the
-    last frame it processed in the recording (its last ``lockstep/status``; the last tick
-    without one); ``params``: node -> parameters for a lockstep run alone.
-    """
+    """What a lockstep replay publishes and when it is done (:func:`lockstep_plan`):
+    replayed topic -> ``types`` and number of ``subscribers`` among the followed nodes; the
+    recorded ``/clock`` ticks (``clocks``, one frame each), the other stamped inputs
+    (``timed``) and ``/tf_static`` (``static``); the base frame ``frame_ns``; node ->
+    ``last_done`` (stamp [ns] of the last frame it processed in the recording) and ``params``
+    (for a lockstep run alone)."""
 
     types: Dict[str, str]
     subscribers: Dict[str, int]
@@ -69,11 +63,8 @@ def graph_nodes(bag: str, nodes: Sequence[str], plugins: Sequence[str] = ()):
 
 def lockstep_params(spec) -> Dict:
     """The launcher's parameters of ``spec`` for a lockstep run alone: ``timing_mode:
-    lockstep`` and a handshake that waits only for its inputs (which the replay publishes).
-
-    Left out: ``expected_publishers`` (the replay, not the graph's producer, publishes the
-    inputs) and ``autostart`` (a managed node started alone configures and activates itself).
-    """
+    lockstep``, the handshake waiting only for its inputs, no ``expected_publishers`` (the
+    replay publishes) and no ``autostart`` (it activates itself)."""
     params = dict(spec.params, timing_mode='lockstep')
     for key in ('expected_publishers', 'autostart'):
         params.pop(key, None)
@@ -86,15 +77,9 @@ def lockstep_params(spec) -> Dict:
 def lockstep_plan(bag: str, nodes: Sequence[str] = ('estimator',),
                   topics: Optional[Sequence[str]] = None,
                   plugins: Sequence[str] = ()) -> LockstepPlan:
-    """Read what a lockstep replay for ``nodes`` needs from ``bag``: the inputs each node
-    awaited in the recorded run, or ``topics`` plus ``/clock`` and ``/tf_static``.
-
-    Raises
-    ------
-    ReplayError
-        Missing or unreadable bag or scenario, a node not in the graph, a needed topic not in
-        the bag, no ``/clock`` ticks, an input without a time stamp.
-    """
+    """What a lockstep replay for ``nodes`` needs from ``bag``: the inputs each awaited in the
+    recorded run, or ``topics`` plus ``/clock`` and ``/tf_static``. ReplayError for a missing or
+    unreadable bag or scenario, an unknown node, a missing topic, no ``/clock``, no stamp."""
     if not nodes:
         raise ReplayError('--nodes: name at least one node to follow')
     params = {s.name: lockstep_params(s) for s in graph_nodes(bag, nodes, plugins)}
@@ -226,16 +211,10 @@ class _Follower:
 def replay_lockstep(bag: str, nodes: Sequence[str] = ('estimator',),
                     topics: Optional[Sequence[str]] = None, wait_s: float = 60.0,
                     stall_s: float = 30.0, log=print, plugins: Sequence[str] = ()) -> int:
-    """Feed ``nodes`` (running alone in lockstep) frame by frame from ``bag``. Returns the
-    number of messages published (``/clock`` ticks included).
-
-    Raises
-    ------
-    ReplayError
-        See :func:`lockstep_plan`; bad ``wait_s`` or ``stall_s``.
-    LockstepStall
-        A node not ready within ``wait_s``, or no progress of a node for ``stall_s``.
-    """
+    """Feed ``nodes`` (running alone in lockstep) frame by frame from ``bag``; the number of
+    messages published (``/clock`` included). ReplayError as :func:`lockstep_plan` or for a bad
+    ``wait_s``/``stall_s``; LockstepStall for a node not ready within ``wait_s`` or without
+    progress for ``stall_s``."""
     if not (wait_s > 0 and stall_s > 0 and math.isfinite(wait_s) and math.isfinite(stall_s)):
         raise ReplayError('--wait and --stall-timeout must be positive')
     plan = lockstep_plan(bag, nodes, topics, plugins)

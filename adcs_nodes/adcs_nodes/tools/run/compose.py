@@ -1,22 +1,16 @@
-"""Composed deployment (``adcs run --engine composed``): several ADCS nodes in one process on
-one ``EventsExecutor``, like a ROS 2 component container: the same node classes and
-parameters as one process per node, the same trajectory (tested)::
+"""Composed deployment (``adcs run --engine composed``): the graph's node classes and
+parameters in one process on one ``EventsExecutor``, like a component container, the same
+trajectory (tested)::
 
     python -m adcs_nodes.tools.run.compose --params-file params.yaml \\
         --nodes environment=sim_node.nodes.environment:EnvironmentNode ...
 
-It ends when the clock master (``dynamics``) is done, after a short drain for the recorder,
-or on SIGINT/SIGTERM. The managed nodes still unconfigured (``autostart: false``) are
-configured, then activated, in process before the executor spins; a refused configuration
-ends the process with exit code 2 and its reason.
-
-In-process path (the default; ``--dds`` or ``ADCS_COMPOSE_INPROC=0``: every message over
-DDS): a volatile topic's message goes straight to the local subscriptions' callbacks while no
-subscription outside the process is matched, else over DDS to every subscriber; one way
-only, so nothing is lost or doubled (:class:`InProcessBus`). Local deliveries run after the
-publishing callback, first in first out; the lockstep fires on stamps, so the trajectory is
-the same (tested).
-"""
+It ends when the clock master is done (after a short drain for the recorder) or on
+SIGINT/SIGTERM; unconfigured managed nodes are configured and activated in process first (a
+refusal: exit 2 with its reason). The in-process path (default; ``--dds`` or
+``ADCS_COMPOSE_INPROC=0``: all over DDS) delivers a volatile topic's message straight to the
+local subscriptions while no outside subscription is matched, else over DDS only
+(:class:`InProcessBus`)."""
 from __future__ import annotations
 
 import argparse
@@ -68,23 +62,13 @@ def build_nodes(specs: List[str], params_doc: Dict[str, Any]):
 
 
 class InProcessBus:
-    """Direct delivery between the nodes of this process (see module docstring).
+    """Direct delivery between the nodes of this process (see the module docstring).
 
-    Local deliveries are queued and run, first in first out, when the executor callback that
-    published them (a subscription callback of a composed node, wrapped here) has returned,
-    so no callback ever runs inside another. A publish from anywhere else (a timer, a
-    service) is delivered by a zero-period one-shot timer (next turn of the executor, after
-    the events already queued; a 1 ms timer here made the running graph wait 1 ms every
-    ``max_batch`` deliveries, issue 13); so is the rest of a long chain after
-    ``max_batch`` deliveries, so signals and timers keep running.
-
-    Parameters
-    ----------
-    nodes : list of rclpy.node.Node
-        The composed nodes (their publishers and subscriptions existing now are linked).
-    max_batch : int
-        Deliveries in one go before the executor gets control back.
-    """
+    Deliveries are queued and run first in first out when the publishing executor callback (a
+    wrapped subscription callback) has returned, so no callback runs inside another; a publish
+    from elsewhere (timer, service), and a chain longer than ``max_batch``, is delivered by a
+    zero-period one-shot timer at the executor's next turn. ``nodes``: the composed nodes (their
+    current publishers and subscriptions are linked)."""
 
     def __init__(self, nodes, max_batch: int = 500) -> None:
         self.queue: Deque[Tuple[List[Callable], Any]] = collections.deque()

@@ -1,13 +1,9 @@
-"""The graph of ``adcs run`` for the standard ROS 2 launch file (``adcs.launch.py``).
-
-``ros2 launch adcs_nodes adcs.launch.py scenario:=NAME [duration:=S] [record:=BAG]`` starts
-the nodes of :func:`adcs_nodes.graph.build_graph` with their parameters: the description
-``adcs run`` starts. What it does not do that ``adcs run`` does: a private domain, progress,
-the run manifest, stopping the run when a world node dies, the lifecycle (the managed nodes
-configure and activate themselves: no ``autostart: false``). Stopping
-(:func:`stop_timeouts`): SIGINT, SIGTERM ``sigterm_timeout`` later, SIGKILL after that; the
-timeouts leave each node its time. Pure Python (the ``launch`` package is not on PyPI).
-"""
+"""The graph of ``adcs run`` for the standard ROS 2 launch file (``ros2 launch adcs_nodes
+adcs.launch.py scenario:=NAME [duration:=S] [record:=BAG]``): the nodes of
+:func:`adcs_nodes.graph.build_graph` and their parameters, without ``adcs run``'s private
+domain, progress, manifest, stop on a world node's death and lifecycle driving (the managed
+nodes activate themselves). Stopping (:func:`stop_timeouts`): SIGINT, SIGTERM, SIGKILL, each
+node its time."""
 from __future__ import annotations
 
 import os
@@ -56,14 +52,8 @@ def installed_scenario_dir() -> Optional[str]:
 
 
 def scenario_path(name: str) -> str:
-    """A scenario file: ``name`` itself when it exists, else ``<name>`` or ``<name>.yaml`` in
-    the installed scenarios (``share/adcs_nodes/scenarios``).
-
-    Raises
-    ------
-    ValueError
-        When neither exists (the message lists the installed scenarios).
-    """
+    """A scenario file: ``name`` when it exists, else ``<name>`` or ``<name>.yaml`` in the
+    installed scenarios; ValueError (listing them) when neither exists."""
     if os.path.isfile(name):
         return os.path.abspath(name)
     share = installed_scenario_dir()
@@ -91,17 +81,8 @@ def with_duration(sc: dict, duration_s: Optional[float]) -> dict:
 
 def launch_graph(scenario: str, duration_s: Optional[float] = None,
                  record: Optional[str] = None) -> Tuple[List[NodeSpec], str]:
-    """Nodes and parameter-file text of ``scenario``, as ``adcs run`` builds them.
-
-    Parameters
-    ----------
-    scenario : str
-        Path or installed scenario name (see :func:`scenario_path`).
-    duration_s : float, optional
-        Simulated seconds (default: the scenario's ``duration_s``).
-    record : str, optional
-        Bag directory to record to (adds the recorder, as ``adcs run --record``).
-    """
+    """Nodes and parameter-file text of ``scenario`` (a path or an installed name) as ``adcs
+    run`` builds them, for ``duration_s`` (default the scenario's), recording to ``record``."""
     sc = with_duration(load_scenario(scenario_path(scenario)), duration_s)
     nodes = build_graph(sc, float(sc['duration_s']), record=bool(record))
     if record:

@@ -1,11 +1,7 @@
-"""Talk to a running graph started by ``adcs run``: ``adcs switch``, ``adcs status [--watch]``
-and ``adcs fault``.
-
-A run announces itself in ``~/.cache/adcs/runs/active-<launcher pid>.json`` (domain id,
-scenario, bag, node PIDs). These commands join that ROS domain with a short-lived node, call
-the controller manager's services, read the latched status or publish a live fault, and
-leave; ``adcs status --watch`` stays, refreshing its view once a second until the run ends.
-"""
+"""Talk to a running graph started by ``adcs run``: ``adcs switch``, ``adcs status [--watch]``,
+``adcs fault``. A run announces itself in ``~/.cache/adcs/runs/active-<pid>.json`` (domain,
+scenario, bag, node PIDs); these commands join its domain with a short-lived node, call the
+manager's services, read the latched status or publish a live fault, and leave."""
 from __future__ import annotations
 
 import glob
@@ -63,13 +59,10 @@ def pick_run(pid: Optional[int]) -> Dict:
     return runs[0]
 
 
-#: Wall seconds a command on a running graph (status, switch, ...) may take in all: a process
-#: that joined a busy domain was once seen never to return (``adcs status`` beside a graph
-#: running flat out after a controller was killed); it then exits 1 with a message.
+#: Wall seconds a command on a running graph may take in all (then exit 1 with a message: a
+#: process that joined a busy domain may never return).
 SESSION_DEADLINE_S = 60.0
-#: Wall seconds a command waits for a service or action server, then as long for its answer:
-#: discovery of a new process on a domain took 10-13 s at load 18; both fit in the session
-#: deadline.
+#: Wall seconds a command waits for a service or action server, then as long for its answer.
 SERVER_WAIT_S = 25.0
 
 
@@ -151,14 +144,8 @@ def finish(code: int) -> int:
 
 
 def switch(name: str, pid: Optional[int] = None) -> str:
-    """Switch the active controller of a running graph; returns the manager's answer.
-
-    Raises
-    ------
-    LiveError
-        No run, no manager, or the manager refused (unknown name: the message lists the
-        known controllers).
-    """
+    """Switch the active controller of a running graph; the manager's answer. LiveError: no
+    run or manager, or refused (an unknown name: the message lists the known ones)."""
     from adcs_nodes.scenario import shorten_message
     if not CONTROLLER_NAME.fullmatch(name):
         raise LiveError(shorten_message(
@@ -220,15 +207,12 @@ def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
 
 
 # ---------------------------------------------------------------------- adcs fault
-#: Where a running graph takes live faults (``sim_node.faults.INJECT_TOPIC``; the tools do not
-#: import the simulator).
+#: Where a running graph takes live faults (``sim_node.faults.INJECT_TOPIC``).
 INJECT_TOPIC = 'sim/inject_fault'
 #: Wall seconds ``adcs fault`` waits for the fault's announcement on ``sim/faults``.
 ANNOUNCE_WAIT_S = 15.0
 #: Without ``--at`` a live fault starts at the first frame this much wall time ahead (at the
-#: run's measured pace): every node has the message by then, so the sensors and the dynamics
-#: agree on the frame (with "each node's next frame" they did not: in a composed run the
-#: dynamics announced a magnetometer fault 25 frames before the magnetometer applied it).
+#: run's pace): every node has the message by then and they agree on the frame.
 LEAD_WALL_S = 1.0
 
 
@@ -266,9 +250,8 @@ def parse_params(items: List[str]) -> Dict:
 def check_fault(kind: str, target: str, params: Dict, at_s: Optional[float],
                 sc: Dict) -> Dict:
     """The fault's parameters validated with its registry specs, its target against the
-    run's scenario (``sc``: sensors, wheels, magnetorquer), ``at_s`` inside the run; LiveError
-    with the reason (``adcs fault`` exits 2), as the scenario validator checks a scripted one
-    (:func:`adcs_nodes.scenario.check_fault`: the receivers' and the validator's check)."""
+    run's scenario ``sc``, ``at_s`` inside the run, as a scripted fault is
+    (:func:`adcs_nodes.scenario.check_fault`); LiveError with the reason (exit 2)."""
     from adcs_nodes.scenario import check_fault, fault_targets
     try:
         params = check_fault(kind, target, params, fault_targets(sc) if sc else {
@@ -287,19 +270,12 @@ def fault(kind: str, target: str, at_s: Optional[float] = None,
           wait_s: float = ANNOUNCE_WAIT_S) -> str:
     """Inject one fault into a running graph (``adcs fault``); returns what happened.
 
-    The fault goes as JSON on ``sim/inject_fault`` (reliable) to the sensor nodes and the
-    dynamics, once they all listen; the one it strikes applies it from ``at_s`` (default: the
-    first frame :data:`LEAD_WALL_S` of wall time ahead at the run's pace, measured on
-    ``/clock``; a node that gets it late starts it at its next frame). It returns once every
-    listener has acknowledged the message, with the time the fault is scheduled for; a fault
-    due within ``wait_s`` of wall time is also awaited on ``sim/faults``, where the dynamics
-    announces it when it starts. Not deterministic: the frame depends on wall time.
-
-    Raises
-    ------
-    LiveError
-        No run, a fault the run cannot take (kind, target, parameters, a time already past or
-        outside the run), nobody listening, or a message not acknowledged.
+    JSON on ``sim/inject_fault`` (reliable) to the sensor nodes and the dynamics once they all
+    listen; the one it strikes applies it from ``at_s`` (default: the first frame
+    :data:`LEAD_WALL_S` of wall time ahead at the run's pace on ``/clock``). Returns once every
+    listener acknowledged; a fault due within ``wait_s`` is awaited on ``sim/faults``. Not
+    deterministic (wall time). LiveError: no run, a fault the run cannot take, nobody
+    listening, not acknowledged.
     """
     from rclpy.duration import Duration
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -488,6 +464,7 @@ class _Watch:
         import numpy as np
 
         from adcs_nodes.core import attitude as att
+        from adcs_nodes.tools.analyse.papers.series import quat, vec
         run = self.run
         out = [f'adcs status --watch: run {run["pid"]} {os.path.basename(run["scenario"])} '
                f'(ROS_DOMAIN_ID={run["domain"]}), {time.strftime("%H:%M:%S")}; Ctrl-C ends']
@@ -501,26 +478,18 @@ class _Watch:
             out.append('controller:      (no adcs/controller_status yet)')
         est, tgt = self.estimate, self.target
         if est is not None:
-            q_o = [est.q_orbit_body.x, est.q_orbit_body.y, est.q_orbit_body.z,
-                   est.q_orbit_body.w]
-            q_i = [est.q_eci_body.x, est.q_eci_body.y, est.q_eci_body.z, est.q_eci_body.w]
             if tgt is not None:
-                q_ref = [tgt.q_ref_body.x, tgt.q_ref_body.y, tgt.q_ref_body.z,
-                         tgt.q_ref_body.w]
                 frame = tgt.header.frame_id or 'orbit'
                 try:
-                    err = math.degrees(att.angle_between(q_i if frame == 'eci' else q_o,
-                                                         q_ref))
+                    q_est = est.q_eci_body if frame == 'eci' else est.q_orbit_body
+                    err = math.degrees(att.angle_between(quat(q_est), quat(tgt.q_ref_body)))
                     out.append(f'attitude error:  {err:.3f} deg (estimate to the target, '
                                f'{frame} frame)')
                 except ValueError:
                     out.append('attitude error:  (estimate or target not finite)')
             else:
                 out.append('attitude error:  (no adcs/attitude_target)')
-            w_i = np.array([est.omega_body_eci_body.x, est.omega_body_eci_body.y,
-                            est.omega_body_eci_body.z])
-            w_o = np.array([est.omega_body_orbit_body.x, est.omega_body_orbit_body.y,
-                            est.omega_body_orbit_body.z])
+            w_i, w_o = vec(est.omega_body_eci_body), vec(est.omega_body_orbit_body)
             out.append(f'rates:           {math.degrees(np.linalg.norm(w_i)):.4f} deg/s '
                        f'inertial, {math.degrees(np.linalg.norm(w_o)):.4f} deg/s to the '
                        f'orbit frame (estimate)')
@@ -563,14 +532,9 @@ def _alive(run: Dict) -> bool:
 
 def watch(pid: Optional[int] = None, interval_s: float = 1.0, out=None,
           count: Optional[int] = None) -> int:
-    """``adcs status --watch``: the run's view refreshed every ``interval_s`` of wall time
-    until the run ends (or ``count`` refreshes, or Ctrl-C); returns 0.
-
-    On a terminal each refresh redraws the screen; otherwise the views follow each other,
-    separated by a blank line. It subscribes to the run's estimate, target, command,
-    tachometer, status and fault topics for as long as it watches (in a composed run this
-    sends them over DDS while it does: a little slower).
-    """
+    """``adcs status --watch``: the run's view every ``interval_s`` of wall time until the run
+    ends (or ``count`` views, or Ctrl-C); returns 0. A terminal is redrawn; otherwise the
+    views follow each other. (A composed run sends the watched topics over DDS meanwhile.)"""
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 

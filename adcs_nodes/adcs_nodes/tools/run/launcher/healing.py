@@ -29,22 +29,15 @@ _WAITING = re.compile(r'still waiting for endpoints after ([0-9.]+) s: (.*)')
 def heal_decision(expected: List[str], ready: Iterable[str], waiting: Dict[str, Tuple[float, str]],
                   master: str, restarts: Dict[str, int], guards: Dict[str, List[str]],
                   wait_s: float = HEAL_WAIT_S, max_restarts: int = MAX_RESTARTS):
-    """Which nodes to restart before frame 0, from the start handshake's state.
+    """Which nodes to restart before frame 0, from the start handshake's state: ``expected``
+    (the nodes that say ``lockstep/ready``), ``ready``, ``waiting`` (per node ``(seconds,
+    unmatched)`` of its last "still waiting for endpoints" line), ``restarts`` so far, ``guards``
+    (per node, those accepting its messages only from its identity).
 
-    ``expected``: the nodes that say ``lockstep/ready`` (the clock master among them);
-    ``ready``: those that did; ``waiting``: per node, ``(seconds, unmatched)`` of its last
-    ``still waiting for endpoints`` line; ``restarts``: restarts so far per node; ``guards``:
-    per node, the nodes that accept its messages only from its publisher identity.
-
-    Nothing is decided while a node that is not ready has not waited ``wait_s`` for its
-    endpoints (it is starting, or being configured): a node is restarted only when its
-    expected endpoints stay unmatched after all its peers matched. Of the nodes stuck, the
-    clock master is restarted only when it is the only one (its missing matches are
-    otherwise those of the others).
-
-    Returns None, ``('restart', [(node, reason), ...])``, or ``('fail', node, reason)`` for
-    a node stuck again after ``max_restarts`` restarts.
-    """
+    Nothing is decided while a node not ready has waited less than ``wait_s``; a node is
+    restarted when its endpoints stay unmatched after all its peers matched, the clock master
+    only when it is the only one stuck. Returns None, ``('restart', [(node, reason), ...])`` or
+    ``('fail', node, reason)`` after ``max_restarts``."""
     ready = set(ready)
     unready = [n for n in expected if n not in ready]
     if not unready or any(waiting.get(n, (0.0, ''))[0] < wait_s for n in unready):
@@ -81,13 +74,9 @@ def restart_plan(targets: List[Tuple[str, str]], ready: Iterable[str], master: s
 
 
 class Healer:
-    """The launcher's self-healing state: restarts per node, their notes, and the CPU-time
-    windows of unanswered managed nodes.
-
-    ``nodes``: the graph's :class:`~adcs_nodes.graph.NodeSpec` list; ``procs``: the run's
-    :class:`~.processes.Processes`; ``respawn(name, note)``: stop the node's process and start
-    it again with the same command.
-    """
+    """The launcher's self-healing state (restarts per node, their notes, the CPU-time windows
+    of unanswered managed nodes) over the graph's ``nodes``, the run's ``procs`` and
+    ``respawn(name, note)``."""
 
     def __init__(self, nodes, procs: processes.Processes, master: str,
                  respawn: Callable[[str, str], None], log=print) -> None:

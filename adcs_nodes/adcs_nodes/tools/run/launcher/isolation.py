@@ -66,12 +66,9 @@ def domain_lock_dir() -> str:
 
 
 def acquire_domain(domains: Iterable[int] = RUN_DOMAINS):
-    """Claim a free ROS_DOMAIN_ID of ``domains``, drawn at random, with an exclusive lock file.
-
-    The lock files live in :func:`domain_lock_dir` and are opened with ``O_NOFOLLOW`` and
-    without truncation: a symlink planted in their place is refused, never followed.
-    Returns ``(id, handle)``; the domain stays claimed until the handle is closed.
-    """
+    """Claim a free ROS_DOMAIN_ID of ``domains`` at random with an exclusive lock file
+    (``O_NOFOLLOW``, no truncation: a planted symlink is refused); ``(id, handle)``, claimed
+    until the handle is closed."""
     lock_dir = private_dir(domain_lock_dir())
     ids = list(domains)
     random.shuffle(ids)
@@ -93,12 +90,8 @@ def acquire_domain(domains: Iterable[int] = RUN_DOMAINS):
 
 def prune_runs(runs_dir: str = RUNS_DIR, keep: int = KEEP_RUNS,
                protect: Iterable[str] = ()) -> List[str]:
-    """Remove the oldest run directories of ``runs_dir`` beyond the newest ``keep``.
-
-    Only directories named like the launcher's (``<time>-<scenario>-<pid>``) are touched, and
-    never one in ``protect`` or one of a run whose launcher is alive (its manifest). Returns
-    the removed paths.
-    """
+    """Remove the oldest run directories (named ``<time>-<scenario>-<pid>``) beyond the newest
+    ``keep``, never one in ``protect`` or of a live launcher; the removed paths."""
     try:
         names = [n for n in os.listdir(runs_dir) if RUN_DIR_PATTERN.fullmatch(n)]
     except OSError:

@@ -11,15 +11,11 @@ LIFECYCLE_DEADLINE_S = 120.0
 
 
 class Transitions:
-    """Drives ``configure`` then ``activate`` of the managed nodes through their standard
-    ``/<node>/change_state`` services (``lifecycle_msgs/srv/ChangeState``).
-
-    Non-blocking: :meth:`poll` (the watch loop) sends ``configure`` to each node whose service
-    has appeared; the answer's callback sends ``activate``. An answer can be lost (a reply
-    writer not matched yet under load): a request unanswered for :data:`RESEND_S` is followed
-    by ``/<node>/get_state``, whose state says what to send next (a transition is never sent
-    twice); late or superseded answers are ignored.
-    """
+    """Drives ``configure`` then ``activate`` of the managed nodes through their
+    ``/<node>/change_state`` services, without blocking: :meth:`poll` sends ``configure`` once
+    a node's service appeared, the answer sends ``activate``. A request unanswered for
+    :data:`RESEND_S` is followed by ``/<node>/get_state``, whose state says what to send next (a
+    transition is never sent twice; late answers are ignored)."""
 
     #: seconds without an answer before the node's state is asked
     RESEND_S = 5.0

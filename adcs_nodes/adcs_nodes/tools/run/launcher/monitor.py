@@ -6,13 +6,9 @@ from typing import Dict
 
 
 class Monitor:
-    """Launcher-side rclpy node: progress from ``lockstep/status`` and ``recorder/status``.
-
-    It reads no topic that a node of the graph reads (a reader of ``/clock`` in another process
-    takes a composed run off its in-process path: docs/bench.md). A content filter keeps
-    ``lockstep/status`` to the clock master's and those reporting missed frames; the nodes
-    skip what it would drop (``nodes/lockstep_node.py``).
-    """
+    """Launcher-side rclpy node: progress from ``lockstep/status`` and ``recorder/status``,
+    reading no topic a node of the graph reads (a composed run stays on its in-process path); a
+    content filter keeps the clock master's status and those reporting missed frames."""
 
     def __init__(self, epoch_ns: int, watch_ready: bool = False) -> None:
         import rclpy
@@ -109,12 +105,9 @@ class Monitor:
         self.executor.spin_until_future_complete(Future(), timeout_sec=seconds)
 
     def wait_recorder_settled(self, deadline: float) -> bool:
-        """Spin until two recorder statuses in a row carry the same message count (the bag
-        has every message published so far), or until ``deadline`` (monotonic); True if
-        settled. Once the graph stops, the recorder's statuses come from its wall timer only
-        (``status_period_s``, 0.5 s): a count that did not grow between two of them means its
-        queues are empty. Waiting a fixed 0.3 s for the count to change could end between two
-        statuses while the recorder was still writing."""
+        """Spin until two recorder statuses in a row (its 0.5 s wall timer once the graph
+        stopped) carry the same message count, the bag then has everything, or until ``deadline``
+        (monotonic); True if settled."""
         seen, last = self.recorder_statuses, None
         while time.monotonic() < deadline:
             self.spin(0.1)

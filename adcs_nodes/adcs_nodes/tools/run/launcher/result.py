@@ -170,13 +170,8 @@ def transition_failed_text(name: str, transition: str, log: str, tail: str, stac
 
 
 def save_scenario(sc: Dict[str, Any], record: Optional[str], duration_s: float) -> str:
-    """Store the effective scenario (defaults filled in) beside the bag's files.
-
-    ``<bag>/scenario.yaml`` lets ``adcs report`` pick the paper comparison and lets a
-    campaign check what each run really used; rosbag2 readers ignore the extra file.
-    Returns ``''``, or a message when it could not be written (disk full): the bag itself
-    is kept.
-    """
+    """Store the effective scenario beside the bag's files (``<bag>/scenario.yaml``: the
+    report's paper table, a campaign's check); ``''``, or why it could not be written."""
     if not record or not os.path.isdir(record):
         return ''
     data = {k: v for k, v in sc.items() if not k.startswith('_')}

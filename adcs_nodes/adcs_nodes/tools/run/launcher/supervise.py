@@ -1,18 +1,13 @@
 """The launcher behind ``adcs run``: start the scenario's graph, watch it, stop it cleanly.
 
-One process per node (``python -m <module> --ros-args -r __node:=<name> --params-file ...``)
-or all in one (``--compose``), in a private domain (:mod:`.isolation`); the managed nodes
-configured and activated through their lifecycle services (:mod:`.lifecycle`; a refused
-configure: exit 2 with the node's reason); progress from :mod:`.monitor`; self-healing
-before frame 0 (:mod:`.healing`). The run ends when the clock master exits 0 after the last
-frame and the recorder has everything, then every child gets SIGINT (SIGKILL after a grace
-period); Ctrl-C does the same, the bag closed and valid. An essential child (world,
-recorder) that dies stops the run naming it with its log's tail; a flight-software node that
-dies is reported and the run goes on (its consumers fall back). Every child dies with the
-launcher (:mod:`.processes`). While a run is active, ``RUNS_DIR/active-<pid>.json``
-(owner-only) names its domain, run directory, bag and node PIDs (``adcs switch``/``status``).
-The scenario is taken as validated; another ``duration_s`` is validated as the file's would be.
-"""
+One process per node, or all in one (``--compose``), in a private domain (:mod:`.isolation`);
+managed nodes configured and activated through their lifecycle services (:mod:`.lifecycle`;
+a refusal: exit 2 with the node's reason); progress (:mod:`.monitor`); self-healing before
+frame 0 (:mod:`.healing`). The run ends when the clock master exits 0 after the last frame
+and the recorder has everything; then (or on Ctrl-C) every child gets SIGINT, SIGKILL after a
+grace period, the bag closed. An essential child (world, recorder) that dies stops the run
+with its log's tail; a flight-software node that dies is reported and the run goes on.
+``RUNS_DIR/active-<pid>.json`` (owner-only) names the run's domain, directory, bag and PIDs."""
 from __future__ import annotations
 
 import json
