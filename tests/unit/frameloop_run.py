@@ -8,7 +8,8 @@ import os
 import numpy as np
 import yaml
 
-from adcs_nodes.nodes.convert import stamp_ns
+from adcs_nodes.inputs import converter
+from adcs_nodes.msgs.fields import stamp_ns
 from adcs_nodes.scenario import load_scenario
 from sim_node.engine import FrameLoop
 
@@ -42,12 +43,13 @@ def control_scenario(tmp_path, **changes):
 
 
 def run(sc, duration_s=None):
-    """Run the validated scenario ``sc`` to its end: ``({topic: [message, ...]}, loop)``."""
+    """Run the validated scenario ``sc`` to its end: ``({topic: [message, ...]}, loop)``, the
+    core samples made messages by their converters (as the bag sink makes them)."""
     loop = FrameLoop.from_scenario(sc, duration_s)
     out = collections.defaultdict(list)
     for frame in loop.run():
-        for topic, msg in frame.outputs:
-            out[topic].append(msg)
+        for topic, x in frame.outputs:
+            out[topic].append(converter(topic).to_msg(x, loop.epoch_ns))
     return out, loop
 
 

@@ -1,6 +1,5 @@
-"""What every component shares: the frame clock (elapsed sim time <-> absolute stamps), a log
-callback, and the mount table of the sensors (``/tf_static`` in a graph, the scenario in the
-FrameLoop)."""
+"""What every component shares: the run's epoch, a log callback, the mount table of the
+sensors (``/tf_static`` in a graph, the scenario in the FrameLoop) and the flat parameters."""
 from __future__ import annotations
 
 from datetime import datetime, timezone
@@ -10,7 +9,6 @@ import numpy as np
 
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import NS_PER_S
-from adcs_nodes.nodes.convert import to_stamp
 
 #: Epoch of a node started without one (ISO-8601 UTC).
 DEFAULT_EPOCH = '2026-01-01T00:00:00Z'
@@ -38,21 +36,6 @@ def epoch_to_ns(epoch: datetime) -> int:
     """Aware datetime -> integer ns since the Unix epoch (exact to the microsecond)."""
     delta = epoch - datetime(1970, 1, 1, tzinfo=timezone.utc)
     return (delta.days * 86400 + delta.seconds) * NS_PER_S + delta.microseconds * 1000
-
-
-class FrameClock:
-    """Elapsed sim time [ns] <-> absolute ``builtin_interfaces/Time`` of the run's epoch."""
-
-    def __init__(self, epoch_ns: int) -> None:
-        self.epoch_ns = int(epoch_ns)
-
-    def stamp(self, elapsed_ns: int):
-        """Absolute stamp of an elapsed sim time."""
-        return to_stamp(self.epoch_ns + int(elapsed_ns))
-
-    def elapsed_ns(self, stamp_ns: int) -> int:
-        """Elapsed sim time of an absolute stamp [ns]."""
-        return int(stamp_ns) - self.epoch_ns
 
 
 class Mounts:
