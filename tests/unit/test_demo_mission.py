@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from adcs_nodes.core import attitude as att
-from adcs_nodes.nodes.convert import stamp_ns
+from adcs_nodes.msgs.fields import stamp_ns
 from frameloop_run import q, raw, v, validated
 from sim_node.engine import FrameLoop
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from adcs_nodes.nodes.convert import quat, vec3
+from adcs_nodes.msgs.fields import quat, vec3
 from adcs_nodes.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

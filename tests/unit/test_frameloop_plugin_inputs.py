@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import yaml
 
-from adcs_nodes.nodes.convert import vec3
+from adcs_nodes.msgs.fields import vec3
 from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

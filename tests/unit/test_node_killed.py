@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from adcs_nodes.nodes.convert import stamp_ns, vec3
+from adcs_nodes.msgs.fields import stamp_ns, vec3
 from adcs_nodes.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

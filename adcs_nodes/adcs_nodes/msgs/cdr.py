@@ -17,7 +17,7 @@ conversion and serialization):
   serializer (:mod:`adcs_nodes.nodes.cdr`).
 * decoding gives a real message of the class, filled through its slots with the field checks
   off (numeric sequences as ``array.array``, fixed arrays as ``numpy``); a payload that is
-  not little-endian CDR raises ``ValueError``.
+  not little-endian CDR goes to :data:`foreign_decoder` (``ValueError`` without one).
 
 A message the encoder cannot pack (a value out of its type's range, a fixed array of the
 wrong length) raises ``struct.error``/``ValueError``, as the typed path would refuse it. No
@@ -28,7 +28,7 @@ from __future__ import annotations
 import array
 import struct
 import sys
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import rosidl_parser.definition as rdef
@@ -339,7 +339,14 @@ def codec(msg_type: type) -> 'Codec':
     return got
 
 
+#: ``decode(data, msg_type)`` of a payload that is not little-endian CDR (the nodes set
+#: rclpy's deserializer: :mod:`adcs_nodes.nodes.cdr`); None: ``ValueError``.
+foreign_decoder: Optional[Callable[[bytes, type], Any]] = None
+
+
 def _not_le(data: bytes, msg_type: type) -> Any:
+    if foreign_decoder is not None:
+        return foreign_decoder(data, msg_type)
     raise ValueError(f'{msg_type.__name__}: not little-endian CDR (representation '
                      f'{bytes(data[:2]).hex()})')
 

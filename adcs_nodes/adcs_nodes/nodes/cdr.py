@@ -9,12 +9,21 @@ import os
 import struct
 from typing import Any, Callable, Optional
 
+from adcs_nodes.msgs import cdr as _cdr
 from adcs_nodes.msgs.cdr import Codec, Unsupported
 from adcs_nodes.msgs.cdr import codec as generated_codec
 
 #: Environment switch of the raw path: ``0``/``false``/``no``/``off`` turns it off (typed
 #: publishes and takes); anything else (or unset) leaves it on.
 ENV = 'ADCS_RAW_CDR'
+
+
+def _rclpy_decode(data: bytes, msg_type: type) -> Any:
+    from rclpy.serialization import deserialize_message
+    return deserialize_message(data, msg_type)
+
+
+_cdr.foreign_decoder = _rclpy_decode       # a big-endian payload: rclpy's deserializer
 
 
 class RclpyCodec:
@@ -90,7 +99,7 @@ DECODE_ERRORS = (struct.error, ValueError, IndexError, UnicodeDecodeError, TypeE
 def decoding(callback: Callable, c: Codec,
              on_error: Optional[Callable[[Exception], None]] = None) -> Callable:
     """A subscription callback for a ``raw=True`` subscription: bytes are decoded with ``c``
-    (big-endian CDR with rclpy's deserializer) and passed on as a message; a message object
+    and passed on as a message; a message object
     (the composed runner's in-process path) is passed on as it is. A callback that takes the
     message info (``publisher_guard.WithInfo``) gets it, from either executor's calling
     convention (``cb(msg, info)`` or ``cb((msg, info))``). A payload that does not decode is
@@ -101,9 +110,6 @@ def decoding(callback: Callable, c: Codec,
         if type(data) is not bytes:
             return data
         try:
-            if len(data) > 1 and data[1] != 1:
-                from rclpy.serialization import deserialize_message
-                return deserialize_message(data, c.msg_type)
             return decode(data)
         except DECODE_ERRORS as exc:
             if on_error is not None:

@@ -27,12 +27,13 @@ from typing import Any, Dict, List, Optional
 from adcs_msgs.msg import ActuatorCommand
 from adcs_nodes import registry
 from adcs_nodes.inputs import lockstep_inputs as node_inputs
-from adcs_nodes.components.base import FrameClock
 from adcs_nodes.components.controller import (  # noqa: F401 (the node's names, re-exported)
-    CONTEXT_PARAMS, DEFAULT_FIELD, DEFAULT_ORBIT, ControllerComponent, command_msg,
-    controller_context, estimate_from_msg, inertia_matrix, target_from_msg)
+    CONTEXT_PARAMS, DEFAULT_FIELD, DEFAULT_ORBIT, ControllerComponent, controller_context,
+    inertia_matrix, plugin_period_params)
+from adcs_nodes.msgs.convert import COMMAND
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.adapter import records_to_core
 from adcs_nodes.nodes.managed import ManagedLockstepNode
 from adcs_nodes.nodes.tf import MountTable
 
@@ -65,6 +66,7 @@ class ControllerNode(ManagedLockstepNode):
         self.entry = registry.get('controller', ctx_p['controller'])
         self.controller_name = self.entry.name
         own = node_params.declare_all(self, self.entry.params)
+        ctx_p.update(node_params.declare_all(self, plugin_period_params(self.entry)))
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
         self.add_ready_check(lambda: self.mounts.missing(ctx_p['expected_mounts']))
         self.ctx = controller_context(
@@ -78,14 +80,16 @@ class ControllerNode(ManagedLockstepNode):
         self.pub = self.publisher(ActuatorCommand,
                                   f'adcs/controllers/{self.controller_name}/command')
         self.component = ControllerComponent(self.core, self.controller_name, self.ctx,
-                                             self.mounts, FrameClock(self.epoch_ns))
+                                             self.mounts)
+        self.to_core = records_to_core(self.entry.inputs, self.epoch_ns)
         self.lockstep_inputs(inputs, ctx_p['period_s'], self.on_frame)
         self.start_handshake()
 
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Compute and publish this controller's command for frame ``t_ns``."""
-        self.pub.publish(self.component.step(t_ns, msgs,
-                                             lambda key, m: self.fresh(key, m, t_ns)))
+        fresh = {k for k, m in msgs.items() if self.fresh(k, m, t_ns)}
+        self.pub.publish(COMMAND.to_msg(self.component.step(
+            t_ns, self.to_core(msgs), fresh.__contains__), self.epoch_ns))
 
 
 def main(args=None) -> int:

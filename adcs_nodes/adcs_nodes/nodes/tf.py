@@ -35,7 +35,7 @@ from tf2_msgs.msg import TFMessage
 
 from adcs_nodes.components.base import covariance_to_body  # noqa: F401 (re-export)
 from adcs_nodes.core import attitude as att
-from adcs_nodes.nodes.convert import quat, to_quat, to_vec3
+from adcs_nodes.msgs.fields import quat, to_quat, to_vec3
 
 #: tf2_ros ``DynamicBroadcasterQoS`` / ``DynamicListenerQoS``.
 QOS_TF = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
