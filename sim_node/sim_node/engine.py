@@ -139,7 +139,8 @@ class FrameLoop:
         #: node name -> its ``node_killed`` time [ns]: it fires no frame from then on
         self.killed_ns = {s.name: seconds_to_ns(float(s.params['killed_at_s'])) for s in specs
                           if float(s.params.get('killed_at_s', -1.0)) >= 0}
-        self.sensors: List[Tuple[str, str, int, Any]] = []     # (node, topic, period, comp)
+        self.sensors: List[Tuple[str, int, Any]] = []          # (topic, period, component)
+        self._sensor_node: Dict[str, str] = {}                  # sensor topic -> node name
         self.consumers: List[_Consumer] = []
         self._subs: Dict[str, List[Tuple[FrameSync, str]]] = {}  # topic -> (sync, key)
         self._build(specs)
@@ -186,7 +187,8 @@ class FrameLoop:
             model, p['frame_id'], _log_into(self.warnings, spec.name),
             sensor_faults(entry.name, str(spec.params.get('faults', '')), self.seed))
         self.mounts.set(p['frame_id'], p.get('q_body_sensor_xyzw', [0.0, 0.0, 0.0, 1.0]))
-        self.sensors.append((spec.name, entry.node[3], seconds_to_ns(p['period_s']), comp))
+        self._sensor_node[entry.node[3]] = spec.name
+        self.sensors.append((entry.node[3], seconds_to_ns(p['period_s']), comp))
 
     def _period(self, seconds: float, what: str) -> int:
         ns = seconds_to_ns(seconds)
@@ -336,8 +338,8 @@ class FrameLoop:
         if appendages is not None:
             self._publish(frame, 'sim/appendages', appendages)
         truth = {'state': state, 'env': env, 'wheels': wheels}
-        for node, topic, period, comp in self.sensors:
-            if t % period == 0 and not self._stopped(node, t):
+        for topic, period, comp in self.sensors:
+            if t % period == 0 and not self._stopped(self._sensor_node[topic], t):
                 x = comp.step(t, truth)
                 if x is not None:
                     self._publish(frame, topic, x)

@@ -42,14 +42,20 @@ def control_scenario(tmp_path, **changes):
     return sc
 
 
+def messages(frame, loop):
+    """``[(topic, message)]`` of a frame: its core samples made messages by their topics'
+    converters (what the bag sink writes and the nodes publish)."""
+    return [(topic, converter(topic).to_msg(x, loop.epoch_ns)) for topic, x in frame.outputs]
+
+
 def run(sc, duration_s=None):
-    """Run the validated scenario ``sc`` to its end: ``({topic: [message, ...]}, loop)``, the
-    core samples made messages by their converters (as the bag sink makes them)."""
+    """Run the validated scenario ``sc`` to its end: ``({topic: [message, ...]}, loop)``
+    (:func:`messages`)."""
     loop = FrameLoop.from_scenario(sc, duration_s)
     out = collections.defaultdict(list)
     for frame in loop.run():
-        for topic, x in frame.outputs:
-            out[topic].append(converter(topic).to_msg(x, loop.epoch_ns))
+        for topic, msg in messages(frame, loop):
+            out[topic].append(msg)
     return out, loop
 
 

@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 from adcs_nodes.msgs.fields import quat, vec3
+from frameloop_run import messages
 from adcs_nodes.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -39,7 +40,7 @@ def run(sc, duration):
     loop = FrameLoop.from_scenario(sc, duration)
     out = {}
     for frame in loop.run():
-        for topic, msg in frame.outputs:
+        for topic, msg in messages(frame, loop):
             out.setdefault(topic, []).append((frame.t_ns / 1e9, msg))
     return out, loop
 
@@ -163,7 +164,7 @@ def test_coil_open_zeroes_one_magnetorquer_axis_and_magnetometer_faults(tmp_path
     loop = FrameLoop.from_scenario(sc, 200.0)
     commanded, applied = [], []
     for frame in loop.run():
-        cmd = [m for topic, m in frame.outputs if topic == 'adcs/actuator_command']
+        cmd = [m for topic, m in messages(frame, loop) if topic == 'adcs/actuator_command']
         if cmd and not loop.done:       # the dipole the world applied over this frame
             commanded.append(vec3(cmd[0].dipole_body))
             applied.append(np.array(loop.dynamics.applied['dipole_body']))

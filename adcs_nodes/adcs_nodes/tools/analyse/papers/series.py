@@ -2,9 +2,10 @@
 
 ``Topics`` = ``{topic: {header stamp [ns]: message}}`` with topic names as the FrameLoop
 publishes them (no leading ``/``: ``sim/state``, ``adcs/attitude_estimate``, ...). A bag's
-messages (``rosbags`` objects) and the FrameLoop's (generated message classes) have the same
-field names, so the paper modules read both alike. Stamps are the messages' header stamps:
-the scenario's epoch plus the sim time, whatever engine made the run.
+messages (``rosbags`` objects) and the FrameLoop's samples made messages by their topics'
+converters (what the bag sink writes) have the same field names, so the paper modules read
+both alike. Stamps are the messages' header stamps: the scenario's epoch plus the sim time,
+whatever engine made the run.
 """
 from __future__ import annotations
 
@@ -54,17 +55,17 @@ def from_bag(bag: str, topics: Sequence[str]) -> Topics:
     return out
 
 
-def from_frames(frames: Iterable[Any], topics: Sequence[str]) -> Topics:
-    """The messages of ``topics`` in FrameLoop frames (:class:`sim_node.engine.Frame`)."""
-    names = tuple(t.lstrip('/') for t in topics)
-    out: Topics = {t: {} for t in names}
+def from_frames(frames: Iterable[Any], topics: Sequence[str], epoch_ns: int) -> Topics:
+    """The messages of ``topics`` in FrameLoop frames (:class:`sim_node.engine.Frame`) of a
+    run with epoch ``epoch_ns`` (the samples' converters, :func:`adcs_nodes.inputs.converter`)."""
+    from adcs_nodes.inputs import converter
+    out: Topics = {t.lstrip('/'): {} for t in topics}
+    to_msg = {t: converter(t).to_msg for t in out}
     for frame in frames:
-        for topic, msg in frame.outputs:
+        for topic, x in frame.outputs:
             got = out.get(topic)
             if got is not None:
-                stamp = _stamp(msg)
-                if stamp is not None:
-                    got[stamp] = msg
+                got[epoch_ns + x.t_ns] = to_msg[topic](x, epoch_ns)
     return out
 
 
@@ -122,4 +123,4 @@ def run_topics(sc: Dict[str, Any], topics: Sequence[str], duration_s: Optional[f
     if overrides:
         sc = apply_overrides(sc, overrides)
     loop = FrameLoop.from_scenario(sc, duration_s, ideal_estimate=ideal)
-    return from_frames(loop.run(), topics)
+    return from_frames(loop.run(), topics, loop.epoch_ns)
