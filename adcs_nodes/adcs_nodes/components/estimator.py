@@ -31,8 +31,7 @@ from adcs_nodes.components.controller import inertia_matrix
 from adcs_nodes.core.estimation.algorithms import EstimatorInputs, omega_orbit_from_eci
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
-from adcs_nodes.core.samples import (AttitudeState, FilterDiagnostics, GyroSample,
-                                     HorizonSample, MagnetometerSample, StarTrackerSample)
+from adcs_nodes.core.samples import AttitudeState, FilterDiagnostics, MagnetometerSample
 from adcs_nodes.registry import Param
 
 #: ``fresh(key) -> bool``: is the sample of input ``key`` new in this frame (lockstep:
@@ -116,16 +115,6 @@ class EstimatorComponent:
         self.last_rejection = why
         self.log('warning', f'measurement rejected: {why}')
 
-    def _checked(self, result) -> Optional[Any]:
-        value, why = result
-        if why is not None:
-            self.reject(why)
-        return value
-
-    def field_body(self, x: MagnetometerSample) -> Optional[np.ndarray]:
-        """Magnetometer sample rotated into body axes, or None (rejected) if implausible."""
-        return self._checked(cond.field_body(x, self.mounts, self.field_range))
-
     def field_var(self, x: MagnetometerSample) -> Optional[np.ndarray]:
         """Per-body-axis variances [T^2] of a sample's covariance, or None when it gives none
         (all zeros, ``[0] = -1``) or its mount is unknown."""
@@ -134,33 +123,29 @@ class EstimatorComponent:
             x.covariance_T2, q_body_sensor)
         return None if cov is None else np.diag(cov).copy()
 
-    def horizon(self, x: HorizonSample) -> Optional[tuple]:
-        """(roll, pitch) [rad] of a valid horizon sample, or None (rejected)."""
-        return self._checked(cond.horizon_roll_pitch(x))
-
-    def gyro(self, x: GyroSample) -> Optional[np.ndarray]:
-        """Gyro rate in body axes [rad/s], or None (rejected)."""
-        return self._checked(cond.gyro_rate_body(x, self.mounts))
-
-    def star(self, x: StarTrackerSample) -> Optional[np.ndarray]:
-        """Star-tracker ``q_eci_body``, or None (rejected)."""
-        return self._checked(cond.star_q_eci_body(x))
-
     def inputs_for(self, t_ns: int, samples: Dict[str, Any], fresh: Fresh) -> EstimatorInputs:
-        """Fresh, checked samples of frame ``t_ns`` -> the core's :class:`EstimatorInputs`."""
-        def take(key, convert):
+        """Fresh samples of frame ``t_ns``, checked (a rejected one counted with its reason)
+        -> the core's :class:`EstimatorInputs`."""
+        def take(key, check):
             x = samples.get(key)
-            value = convert(x) if x is not None and fresh(key) else None
-            if value is not None and convert != self.field_var:
-                self.samples_used[key] = self.samples_used.get(key, 0) + 1
-                self.last_used_ns[key] = t_ns
+            if x is None or not fresh(key):
+                return None
+            value, why = check(x)
+            if why is not None:
+                self.reject(why)
+                return None
+            self.samples_used[key] = self.samples_used.get(key, 0) + 1
+            self.last_used_ns[key] = t_ns
             return value
+        mag = samples.get('mag')
         return EstimatorInputs(
-            self.reference.at(t_ns / NS_PER_S), b_body=take('mag', self.field_body),
-            horizon_roll_pitch=take('horizon', self.horizon),
+            self.reference.at(t_ns / NS_PER_S),
+            b_body=take('mag', lambda x: cond.field_body(x, self.mounts, self.field_range)),
+            horizon_roll_pitch=take('horizon', cond.horizon_roll_pitch),
             dipole_body=cond.applied_dipole(samples.get('cmd')),
-            gyro_rate_body=take('gyro', self.gyro), q_eci_body_meas=take('star', self.star),
-            b_body_var=take('mag', self.field_var))
+            gyro_rate_body=take('gyro', lambda x: cond.gyro_rate_body(x, self.mounts)),
+            q_eci_body_meas=take('star', cond.star_q_eci_body),
+            b_body_var=self.field_var(mag) if mag is not None and fresh('mag') else None)
 
     # ------------------------------------------------------------------ frame
     def step(self, t_ns: int, inputs: Dict[str, Any], fresh: Fresh,

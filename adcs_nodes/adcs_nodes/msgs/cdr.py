@@ -28,7 +28,7 @@ from __future__ import annotations
 import array
 import struct
 import sys
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 import rosidl_parser.definition as rdef
@@ -53,28 +53,15 @@ class Unsupported(TypeError):
     """A field type the generator does not cover (the nodes then use rclpy's serializer)."""
 
 
-class Codec:
-    """Generated codec of one message class (see the module docstring).
+class Codec(NamedTuple):
+    """The generated codec of a message class: ``encode(msg) -> bytes`` (CDR with the
+    encapsulation header), ``decode(data) -> msg``, and their Python ``source``."""
 
-    Attributes
-    ----------
-    msg_type : type
-        The message class.
-    encode : callable
-        ``encode(msg) -> bytes``: CDR with the encapsulation header.
-    decode : callable
-        ``decode(data) -> msg``: a message of ``msg_type`` from CDR bytes.
-    source : str
-        The generated Python source (for reading and debugging).
-    """
-
-    generated = True
-
-    def __init__(self, msg_type: type, encode, decode, source: str) -> None:
-        self.msg_type = msg_type
-        self.encode = encode
-        self.decode = decode
-        self.source = source
+    msg_type: type
+    encode: Callable[[Any], bytes]
+    decode: Callable[[bytes], Any]
+    source: str
+    generated: bool = True
 
 
 # ---------------------------------------------------------------------- plan

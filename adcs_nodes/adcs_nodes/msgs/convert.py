@@ -38,6 +38,7 @@ def _t(msg: Any, epoch_ns: int) -> int:
 
 
 def _f64(seq: Any) -> np.ndarray:
+    """A sequence field -> float64 array (copied)."""
     return np.array(seq, dtype=float)
 
 
@@ -50,19 +51,18 @@ CLOCK = Converter(lambda x, e: make(Clock, clock=to_stamp(e + x.t_ns)),
                   lambda msg, e: s.Tick(stamp_ns(msg.clock) - e))
 
 
-def _env_msg(x: s.EnvironmentSample, e: int) -> m.Environment:
-    return make(m.Environment, header=_header(x.t_ns, e, 'eci'), r_eci=to_vec3(x.r_eci_m),
-                v_eci=to_vec3(x.v_eci_m_s), q_eci_orbit=to_quat(x.q_eci_orbit),
-                omega_orbit_eci_eci=to_vec3(x.omega_orbit_eci_eci),
-                orbit_rate=float(x.orbit_rate_rad_s),
-                argument_of_latitude=float(x.arg_latitude_rad), b_eci=to_vec3(x.b_eci_T),
-                b_dot_eci=to_vec3(x.b_dot_eci_T_s), q_eci_ecef=to_quat(x.q_eci_ecef))
-
-
-ENVIRONMENT = Converter(_env_msg, lambda msg, e: s.EnvironmentSample(
-    _t(msg, e), vec3(msg.r_eci), vec3(msg.v_eci), quat(msg.q_eci_orbit),
-    vec3(msg.omega_orbit_eci_eci), msg.orbit_rate, msg.argument_of_latitude, vec3(msg.b_eci),
-    vec3(msg.b_dot_eci), quat(msg.q_eci_ecef)))
+ENVIRONMENT = Converter(
+    lambda x, e: make(m.Environment, header=_header(x.t_ns, e, 'eci'), r_eci=to_vec3(x.r_eci_m),
+                      v_eci=to_vec3(x.v_eci_m_s), q_eci_orbit=to_quat(x.q_eci_orbit),
+                      omega_orbit_eci_eci=to_vec3(x.omega_orbit_eci_eci),
+                      orbit_rate=float(x.orbit_rate_rad_s),
+                      argument_of_latitude=float(x.arg_latitude_rad),
+                      b_eci=to_vec3(x.b_eci_T), b_dot_eci=to_vec3(x.b_dot_eci_T_s),
+                      q_eci_ecef=to_quat(x.q_eci_ecef)),
+    lambda msg, e: s.EnvironmentSample(
+        _t(msg, e), vec3(msg.r_eci), vec3(msg.v_eci), quat(msg.q_eci_orbit),
+        vec3(msg.omega_orbit_eci_eci), msg.orbit_rate, msg.argument_of_latitude,
+        vec3(msg.b_eci), vec3(msg.b_dot_eci), quat(msg.q_eci_ecef)))
 
 ATTITUDE_STATE = Converter(
     lambda x, e: make(m.AttitudeState, header=_header(x.t_ns, e, 'body'),
@@ -77,18 +77,12 @@ ATTITUDE_STATE = Converter(
 
 
 def _faults_msg(x: s.FaultEvents, e: int) -> DiagnosticArray:
-    msg = DiagnosticArray()
-    msg.header.stamp = to_stamp(e + x.t_ns)
-    for ev in x.events:
-        st = DiagnosticStatus()
-        st.level = DiagnosticStatus.WARN if ev.active else DiagnosticStatus.OK
-        st.name = f'fault/{ev.index}'
-        st.hardware_id = ev.target
-        st.message = ('active: ' if ev.active else 'cleared: ') + ev.description
-        st.values = [KeyValue(key='kind', value=ev.kind), KeyValue(key='target', value=ev.target),
-                     *(KeyValue(key=k, value=v) for k, v in ev.params)]
-        msg.status.append(st)
-    return msg
+    return DiagnosticArray(header=_header(x.t_ns, e, ''), status=[DiagnosticStatus(
+        level=DiagnosticStatus.WARN if ev.active else DiagnosticStatus.OK,
+        name=f'fault/{ev.index}', hardware_id=ev.target,
+        message=('active: ' if ev.active else 'cleared: ') + ev.description,
+        values=[KeyValue(key='kind', value=ev.kind), KeyValue(key='target', value=ev.target),
+                *(KeyValue(key=k, value=v) for k, v in ev.params)]) for ev in x.events])
 
 
 def _faults_core(msg: DiagnosticArray, e: int) -> s.FaultEvents:
@@ -99,7 +93,7 @@ def _faults_core(msg: DiagnosticArray, e: int) -> s.FaultEvents:
             int(st.name.rpartition('/')[2]), active, st.values[0].value, st.values[1].value,
             st.message.partition(': ')[2],
             tuple((kv.key, kv.value) for kv in st.values[2:])))
-    return s.FaultEvents(stamp_ns(msg.header.stamp) - e, tuple(events))
+    return s.FaultEvents(_t(msg, e), tuple(events))
 
 
 FAULTS = Converter(_faults_msg, _faults_core)
@@ -119,73 +113,45 @@ APPENDAGES = Converter(
 
 
 # ---------------------------------------------------------------------- sensors
-def _imu(x: Any, e: int) -> Imu:
-    msg = Imu()
-    msg.header = _header(x.t_ns, e, x.frame_id)
-    return msg
+#: ``covariance[0] = -1``: not provided (REP 145).
+_NOT_PROVIDED = (-1.0,) + (0.0,) * 8
+_ZERO3, _UNIT_Q = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)
 
 
-def _mag_msg(x: s.MagnetometerSample, e: int) -> MagneticField:
-    msg = MagneticField()
-    msg.header = _header(x.t_ns, e, x.frame_id)
-    msg.magnetic_field = to_vec3(x.b_sensor_T)
-    msg.magnetic_field_covariance = x.covariance_T2
-    return msg
+def _imu(x: Any, e: int, q: Any, q_cov: Any, w: Any, w_cov: Any) -> Imu:
+    return make(Imu, header=_header(x.t_ns, e, x.frame_id), orientation=to_quat(q),
+                orientation_covariance=q_cov, angular_velocity=to_vec3(w),
+                angular_velocity_covariance=w_cov, linear_acceleration=to_vec3(_ZERO3),
+                linear_acceleration_covariance=_NOT_PROVIDED)
 
 
-MAGNETOMETER = Converter(_mag_msg, lambda msg, e: s.MagnetometerSample(
-    _t(msg, e), msg.header.frame_id, vec3(msg.magnetic_field),
-    _f64(msg.magnetic_field_covariance)))
-
-
-def _gyro_msg(x: s.GyroSample, e: int) -> Imu:
-    msg = _imu(x, e)
-    msg.angular_velocity = to_vec3(x.omega_sensor_rad_s)
-    msg.angular_velocity_covariance = x.covariance
-    msg.orientation_covariance[0] = -1.0            # not provided (REP 145)
-    msg.linear_acceleration_covariance[0] = -1.0
-    return msg
-
-
-GYRO = Converter(_gyro_msg, lambda msg, e: s.GyroSample(
-    _t(msg, e), msg.header.frame_id, vec3(msg.angular_velocity),
-    _f64(msg.angular_velocity_covariance)))
-
-
-def _star_msg(x: s.StarTrackerSample, e: int) -> Imu:
-    msg = _imu(x, e)
-    msg.orientation = to_quat(x.q_eci_body)
-    msg.orientation_covariance = x.covariance
-    msg.angular_velocity_covariance[0] = -1.0       # not provided
-    msg.linear_acceleration_covariance[0] = -1.0
-    return msg
-
-
-STAR_TRACKER = Converter(_star_msg, lambda msg, e: s.StarTrackerSample(
-    _t(msg, e), msg.header.frame_id, quat(msg.orientation), _f64(msg.orientation_covariance)))
-
-
-def _horizon_msg(x: s.HorizonSample, e: int) -> m.HorizonSensor:
-    return make(m.HorizonSensor, header=_header(x.t_ns, e, x.frame_id), roll=float(x.roll_rad),
-                pitch=float(x.pitch_rad), roll_variance=float(x.roll_variance_rad2),
-                pitch_variance=float(x.pitch_variance_rad2), valid=bool(x.valid))
-
-
-HORIZON = Converter(_horizon_msg, lambda msg, e: s.HorizonSample(
-    _t(msg, e), msg.header.frame_id, msg.roll, msg.pitch, msg.roll_variance,
-    msg.pitch_variance, msg.valid))
-
-
-def _speeds_msg(x: s.WheelSpeeds, e: int) -> JointState:
-    msg = JointState()
-    msg.header = _header(x.t_ns, e, x.frame_id)
-    msg.name = list(x.names)
-    msg.velocity = _list(x.speed_rad_s)
-    return msg
-
-
-WHEEL_SPEEDS = Converter(_speeds_msg, lambda msg, e: s.WheelSpeeds(
-    _t(msg, e), msg.header.frame_id, tuple(msg.name), _f64(msg.velocity)))
+MAGNETOMETER = Converter(
+    lambda x, e: make(MagneticField, header=_header(x.t_ns, e, x.frame_id),
+                      magnetic_field=to_vec3(x.b_sensor_T),
+                      magnetic_field_covariance=x.covariance_T2),
+    lambda msg, e: s.MagnetometerSample(_t(msg, e), msg.header.frame_id,
+                                        vec3(msg.magnetic_field),
+                                        _f64(msg.magnetic_field_covariance)))
+GYRO = Converter(
+    lambda x, e: _imu(x, e, _UNIT_Q, _NOT_PROVIDED, x.omega_sensor_rad_s, x.covariance),
+    lambda msg, e: s.GyroSample(_t(msg, e), msg.header.frame_id, vec3(msg.angular_velocity),
+                                _f64(msg.angular_velocity_covariance)))
+STAR_TRACKER = Converter(
+    lambda x, e: _imu(x, e, x.q_eci_body, x.covariance, _ZERO3, _NOT_PROVIDED),
+    lambda msg, e: s.StarTrackerSample(_t(msg, e), msg.header.frame_id, quat(msg.orientation),
+                                       _f64(msg.orientation_covariance)))
+HORIZON = Converter(
+    lambda x, e: make(m.HorizonSensor, header=_header(x.t_ns, e, x.frame_id),
+                      roll=float(x.roll_rad), pitch=float(x.pitch_rad),
+                      roll_variance=float(x.roll_variance_rad2),
+                      pitch_variance=float(x.pitch_variance_rad2), valid=bool(x.valid)),
+    lambda msg, e: s.HorizonSample(_t(msg, e), msg.header.frame_id, msg.roll, msg.pitch,
+                                   msg.roll_variance, msg.pitch_variance, msg.valid))
+WHEEL_SPEEDS = Converter(
+    lambda x, e: make(JointState, header=_header(x.t_ns, e, x.frame_id), name=list(x.names),
+                      position=[], velocity=_list(x.speed_rad_s), effort=[]),
+    lambda msg, e: s.WheelSpeeds(_t(msg, e), msg.header.frame_id, tuple(msg.name),
+                                 _f64(msg.velocity)))
 
 
 # ---------------------------------------------------------------------- flight software
@@ -225,33 +191,17 @@ MAGNETORQUER_COMMAND = Converter(
     lambda msg, e: s.MagnetorquerCommand(_t(msg, e), vec3(msg.vector)))
 
 
-def _wheel_cmd_msg(x: s.WheelCommand, e: int) -> JointState:
-    msg = JointState()
-    msg.header.stamp = to_stamp(e + x.t_ns)
-    msg.name = list(x.names)
-    msg.effort = [float(v) for v in x.torque_Nm]
-    return msg
-
-
-WHEEL_COMMAND = Converter(_wheel_cmd_msg, lambda msg, e: s.WheelCommand(
-    stamp_ns(msg.header.stamp) - e, tuple(msg.name), tuple(msg.effort)))
-
-
-def _status_msg(x: s.ControllerStatus, e: int) -> m.ControllerStatus:
-    msg = m.ControllerStatus()
-    msg.header.stamp = to_stamp(e + x.t_ns)
-    msg.active = x.active
-    msg.available = list(x.available)
-    msg.mode = x.mode
-    msg.switch_count = int(x.switch_count)
-    msg.missed_frames = int(x.missed_frames)
-    msg.last_fault = x.last_fault
-    return msg
-
-
-CONTROLLER_STATUS = Converter(_status_msg, lambda msg, e: s.ControllerStatus(
-    stamp_ns(msg.header.stamp) - e, msg.active, tuple(msg.available), msg.mode,
-    msg.switch_count, msg.missed_frames, msg.last_fault))
+WHEEL_COMMAND = Converter(
+    lambda x, e: make(JointState, header=_header(x.t_ns, e, ''), name=list(x.names),
+                      position=[], velocity=[], effort=[float(v) for v in x.torque_Nm]),
+    lambda msg, e: s.WheelCommand(_t(msg, e), tuple(msg.name), tuple(msg.effort)))
+CONTROLLER_STATUS = Converter(
+    lambda x, e: make(m.ControllerStatus, header=_header(x.t_ns, e, ''), active=x.active,
+                      available=list(x.available), mode=x.mode,
+                      switch_count=int(x.switch_count), missed_frames=int(x.missed_frames),
+                      last_fault=x.last_fault),
+    lambda msg, e: s.ControllerStatus(_t(msg, e), msg.active, tuple(msg.available), msg.mode,
+                                      msg.switch_count, msg.missed_frames, msg.last_fault))
 
 #: The converters of the topics that are not an input record's (:mod:`adcs_nodes.inputs`).
 TOPICS = {
