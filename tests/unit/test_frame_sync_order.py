@@ -53,8 +53,8 @@ PATTERN = st.lists(st.booleans(), min_size=1, max_size=12)
 
 @settings(max_examples=400, deadline=None)
 @given(a=PATTERN, b=PATTERN, cmd=PATTERN, dead_after=st.integers(1, 3),
-       hold=st.integers(0, 6), steps=st.lists(st.integers(0, 3), min_size=FRAMES,
-                                               max_size=FRAMES))
+       hold=st.integers(0, 6),
+       steps=st.lists(st.integers(0, 3), min_size=FRAMES, max_size=FRAMES))
 def test_frames_do_not_depend_on_how_far_ahead_the_world_is(a, b, cmd, dead_after, hold,
                                                             steps):
     messages = {'a': published(a, P), 'b': published(b, 2 * P), 'cmd': published(cmd, P)}
