@@ -122,11 +122,6 @@ def register(record: Input) -> Input:
     return record
 
 
-def names() -> Tuple[str, ...]:
-    """Every registered input name (built-ins first)."""
-    return tuple(BY_NAME)
-
-
 def converter(topic: str) -> Any:
     """The converter of ``topic``: its input record's, else the message layer's
     (:func:`adcs_nodes.msgs.convert.for_topic`); ``KeyError`` for an unknown topic."""

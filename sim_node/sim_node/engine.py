@@ -62,10 +62,6 @@ from sim_node.models.spacecraft_config import DEFAULT_INITIAL, DEFAULT_SPACECRAF
 #: ``(topic, sample)`` published in a frame.
 Output = Tuple[str, Any]
 
-#: Topics whose content depends on wall time in the graph (published on change and once per
-#: wall second there; on change only here): not part of the engine parity.
-WALL_TIMED_TOPICS = ('adcs/controller_status',)
-
 
 class EngineError(ValueError):
     """A scenario the plain engine cannot run (the message says why)."""

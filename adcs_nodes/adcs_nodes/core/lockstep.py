@@ -190,21 +190,6 @@ class FrameSync:
         """Kind of input ``name``."""
         return self._inputs[name].kind
 
-    def set_period(self, name: str, period_ns: int) -> None:
-        """Change the period of input ``name`` (0: stop waiting for it)."""
-        if int(period_ns) < 0:
-            raise ValueError(f'input {name!r}: period must be >= 0, got {period_ns}')
-        inp = self._inputs[name]
-        inp.period_ns = int(period_ns)
-        if inp.period_ns == 0:
-            inp.kind = InputKind.LATEST
-        elif inp.kind is InputKind.LATEST:
-            inp.kind = InputKind.FRAME
-
-    def period(self, name: str) -> int:
-        """Current period of input ``name`` [ns]."""
-        return self._inputs[name].period_ns
-
     def required_stamp(self, name: str, t_ns: int) -> Optional[int]:
         """Stamp input ``name`` must have for frame ``t_ns`` (None: nothing required then)."""
         inp = self._inputs[name]
