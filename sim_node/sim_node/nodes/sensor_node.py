@@ -119,7 +119,9 @@ class SensorNode(LockstepNode):
 
 
 def main(args=None, sensor: Optional[str] = None) -> int:
-    """``ros2 run sim_node sensor_node --ros-args -p sensor:=NAME`` (default: the node name)."""
+    """``ros2 run sim_node sensor_node --ros-args -p sensor:=NAME``: the node is named after
+    its sensor (``-r __node:=`` wins; then the sensor defaults to the node name)."""
+    sensor = sensor or runtime.given_parameter('sensor', args)
     return runtime.run(lambda: SensorNode(sensor=sensor), args)
 
 
