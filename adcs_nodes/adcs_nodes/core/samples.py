@@ -19,8 +19,8 @@ Array = np.ndarray
 
 
 def all_finite(*arrays) -> bool:
-    """True when every value of every array is finite (``math.isfinite`` on ``tolist()``:
-    several times faster than ``np.isfinite(a).all()`` for the 3- and 4-vectors here)."""
+    """True when every value of every array is finite (small ones value by value: several
+    times faster than ``np.isfinite(a).all()`` for the 3- and 4-vectors here)."""
     isfinite = math.isfinite
     for a in arrays:
         a = np.asarray(a)
@@ -35,14 +35,12 @@ def all_finite(*arrays) -> bool:
 @dataclass(frozen=True, slots=True)
 class Tick:
     """``/clock``: the frame's sim time."""
-
     t_ns: int
 
 
 @dataclass(frozen=True, slots=True)
 class EnvironmentSample:
     """``sim/environment``: orbit state and geomagnetic field (truth models), ECI axes."""
-
     t_ns: int
     r_eci_m: Array                      #: (3,) position [m]
     v_eci_m_s: Array                    #: (3,) velocity [m/s]
@@ -58,7 +56,6 @@ class EnvironmentSample:
 @dataclass(frozen=True, slots=True)
 class AttitudeState:
     """``sim/state`` (truth) and ``adcs/attitude_estimate``: attitude and rate of the body."""
-
     t_ns: int
     q_eci_body: Array                   #: (4,)
     q_orbit_body: Array                 #: (4,)
@@ -70,7 +67,6 @@ class AttitudeState:
 @dataclass(frozen=True, slots=True)
 class FaultEvent:
     """One fault starting (``active``) or ending in a frame."""
-
     index: int
     active: bool
     kind: str
@@ -82,7 +78,6 @@ class FaultEvent:
 @dataclass(frozen=True, slots=True)
 class FaultEvents:
     """``sim/faults``: the faults that start or end in frame ``t_ns``."""
-
     t_ns: int
     events: Tuple[FaultEvent, ...]
 
@@ -90,7 +85,6 @@ class FaultEvents:
 @dataclass(frozen=True, slots=True)
 class WheelState:
     """``sim/wheels``: the reaction wheels (truth)."""
-
     t_ns: int
     names: Tuple[str, ...]
     momentum_Nms: Array                 #: (n,) about each wheel axis
@@ -102,7 +96,6 @@ class WheelState:
 @dataclass(frozen=True, slots=True)
 class AppendageState:
     """``sim/appendages``: modal coordinates of the flexible appendages."""
-
     t_ns: int
     eta: Array
     eta_dot: Array
@@ -112,7 +105,6 @@ class AppendageState:
 @dataclass(frozen=True, slots=True)
 class MagnetometerSample:
     """``sensors/magnetometer``: the field in sensor axes (NaN: a lost sample)."""
-
     t_ns: int
     frame_id: str
     b_sensor_T: Array                   #: (3,)
@@ -122,7 +114,6 @@ class MagnetometerSample:
 @dataclass(frozen=True, slots=True)
 class GyroSample:
     """``sensors/gyro``: measured body rate w.r.t. ECI in sensor axes."""
-
     t_ns: int
     frame_id: str
     omega_sensor_rad_s: Array           #: (3,)
@@ -132,7 +123,6 @@ class GyroSample:
 @dataclass(frozen=True, slots=True)
 class StarTrackerSample:
     """``sensors/star_tracker``: measured inertial attitude."""
-
     t_ns: int
     frame_id: str
     q_eci_body: Array                   #: (4,)
@@ -142,7 +132,6 @@ class StarTrackerSample:
 @dataclass(frozen=True, slots=True)
 class HorizonSample:
     """``sensors/horizon``: roll and pitch of the body w.r.t. the orbit frame."""
-
     t_ns: int
     frame_id: str
     roll_rad: float
@@ -155,7 +144,6 @@ class HorizonSample:
 @dataclass(frozen=True, slots=True)
 class WheelSpeeds:
     """``sensors/wheels``: measured wheel speeds (a tachometer)."""
-
     t_ns: int
     frame_id: str
     names: Tuple[str, ...]
@@ -165,7 +153,6 @@ class WheelSpeeds:
 @dataclass(frozen=True, slots=True)
 class FilterDiagnostics:
     """``adcs/estimator/diagnostics`` of the estimate stamped ``t_ns``."""
-
     t_ns: int
     algorithm: str
     innovation: Tuple[float, ...]
@@ -178,7 +165,6 @@ class FilterDiagnostics:
 @dataclass(frozen=True, slots=True)
 class AttitudeTarget:
     """``adcs/attitude_target`` as guidance published it (a consumer checks it)."""
-
     t_ns: int
     frame: str                          #: ``orbit`` or ``eci``
     q_ref_body: Array                   #: (4,)
@@ -192,7 +178,6 @@ class AttitudeTarget:
 class ActuatorCommand:
     """``adcs/actuator_command`` and ``adcs/controllers/<name>/command``: a command as sent
     (``source``: the controller, ``'<name>: <why>'`` for an invalid one)."""
-
     t_ns: int
     dipole_body_Am2: Array              #: (3,)
     wheel_torque_Nm: Array              #: (n,) scenario order; (0,): none
@@ -203,7 +188,6 @@ class ActuatorCommand:
 @dataclass(frozen=True, slots=True)
 class MagnetorquerCommand:
     """``actuators/magnetorquer/command``: the commanded dipole, body axes."""
-
     t_ns: int
     dipole_body_Am2: Array
 
@@ -211,7 +195,6 @@ class MagnetorquerCommand:
 @dataclass(frozen=True, slots=True)
 class WheelCommand:
     """``actuators/wheels/command``: the commanded motor torques by wheel name."""
-
     t_ns: int
     names: Tuple[str, ...]
     torque_Nm: Tuple[float, ...]
@@ -220,7 +203,6 @@ class WheelCommand:
 @dataclass(frozen=True, slots=True)
 class ControllerStatus:
     """``adcs/controller_status``: what the manager forwards."""
-
     t_ns: int
     active: str
     available: Tuple[str, ...]

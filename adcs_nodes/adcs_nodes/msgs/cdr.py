@@ -1,27 +1,20 @@
 """CDR codecs of ROS 2 messages, generated once per type from the rosidl introspection.
 
 :func:`codec` builds, once per message class, ``encode(msg) -> bytes`` and ``decode(bytes)
--> msg`` from ``SLOT_TYPES`` and ``__slots__`` (a few ``struct`` calls instead of rclpy's
-conversion and serialization):
-
-* wire format: XCDR1 plain CDR, little endian, with the encapsulation header ``00 01 00 00``;
-  a primitive is aligned to its size (at most 8) from the end of that header; a string is
-  ``uint32 length`` (with the NUL) + UTF-8 + NUL; a sequence ``uint32 count`` + elements; a
-  nested message its fields in order; the elements of an empty sequence are not aligned (what
-  Fast CDR writes). These are the bytes a typed publish sends (``rmw_fastrtps_cpp``), padding
-  zeroed; ``serialize_message`` reports a length 4-16 bytes longer after an empty
-  ``float64[]`` (rosbags refuses those). Tested against ``serialize_message``, rosbags and
-  what DDS delivers (``tests/node/test_cdr.py``, ``tests/node/test_raw_cdr.py``).
-* not covered (:class:`Unsupported`): ``wchar``/``wstring``, ``bool`` and ``byte`` arrays, a
-  nested class that cannot be imported, a big-endian host. The nodes then use rclpy's
-  serializer (:mod:`adcs_nodes.nodes.cdr`).
-* decoding gives a real message of the class, filled through its slots with the field checks
-  off (numeric sequences as ``array.array``, fixed arrays as ``numpy``); a payload that is
-  not little-endian CDR goes to :data:`foreign_decoder` (``ValueError`` without one).
-
-A message the encoder cannot pack (a value out of its type's range, a fixed array of the
-wrong length) raises ``struct.error``/``ValueError``, as the typed path would refuse it. No
-rclpy here: the plain engine's bags are written without it.
+-> msg`` from ``SLOT_TYPES`` and ``__slots__``: a few ``struct`` calls instead of rclpy's
+conversion and serialization, no rclpy (the plain engine's bags). The bytes are XCDR1 plain
+CDR, little endian, with the encapsulation header ``00 01 00 00`` (primitives aligned to
+their size, at most 8, from the end of the header; strings ``uint32 length`` + UTF-8 + NUL;
+sequences ``uint32 count`` + elements, an empty one's elements not aligned, as Fast CDR
+writes): what a typed publish sends (``rmw_fastrtps_cpp``), padding zeroed.
+``serialize_message`` reports a length 4-16 bytes longer after an empty ``float64[]``, which
+rosbags refuses. Tested against ``serialize_message``, rosbags and what DDS delivers
+(``tests/node/test_cdr.py``, ``tests/node/test_raw_cdr.py``). Not covered
+(:class:`Unsupported`; the nodes then use rclpy, :mod:`adcs_nodes.nodes.cdr`): ``wstring``,
+``bool`` and ``byte`` arrays, a nested class that cannot be imported, a big-endian host.
+Decoding fills a real message's slots with the field checks off (numeric sequences as
+``array.array``, fixed arrays as ``numpy``); a value the encoder cannot pack raises
+``struct.error``/``ValueError``, as the typed path would.
 """
 from __future__ import annotations
 
