@@ -5,18 +5,10 @@ mode", so a switch is bumpless) and publishes ``adcs/controllers/<name>/command`
 (``adcs_msgs/ActuatorCommand``, stamped with the frame it was computed for); the controller
 manager forwards the active one.
 
-What the node subscribes to comes from the registry entry's ``inputs`` (nothing else):
-
-* ``estimate``: ``adcs/attitude_estimate`` (``adcs_msgs/AttitudeState``);
-* ``target``: ``adcs/attitude_target`` (``adcs_msgs/AttitudeTarget``, from ``guidance``);
-* ``magnetometer``: ``sensors/magnetometer`` (``sensor_msgs/MagneticField``, rotated from the
-  sensor frame into body axes with the mount from ``/tf_static``); with ``estimate`` too, the
-  onboard-model field ``n* = R(q_orbit_body)^T B*`` is offered between samples
-  (``ControlInputs.b_body_model``);
-* ``wheel_speeds``: ``sensors/wheels`` (``sensor_msgs/JointState`` velocities [rad/s]).
-
-So B-dot, whose entry declares only the magnetometer, keeps working when the estimator dies
-(the safe-mode rule). The parameters are the entry's own (``ros2 param describe`` shows each
+What the node subscribes to comes from the registry entry's ``inputs`` (their records in
+:mod:`adcs_nodes.inputs`: topic, type, converter), nothing else, so B-dot, whose entry declares
+only the magnetometer, keeps working when the estimator dies (the safe-mode rule); the
+conditioning is the component's (:mod:`adcs_nodes.components.controller`). The parameters are the entry's own (``ros2 param describe`` shows each
 with unit and range) plus the spacecraft context below, all declared from typed specs.
 """
 from __future__ import annotations

@@ -1,18 +1,11 @@
 """``estimator`` node: attitude and rate estimate from the sensors (flight software).
 
-The algorithm is a registered estimator (parameter ``algorithm``; ``adcs list`` shows them):
-the node converts messages to numpy, checks them, and calls the core's
-``step(EstimatorInputs, t, dt)`` (:mod:`adcs_nodes.core.estimation.algorithms`). What it
-subscribes to comes from the entry's ``inputs``:
-
-* ``magnetometer``: ``sensors/magnetometer`` (``sensor_msgs/MagneticField``, sensor frame;
-  rotated into body axes with the mount from ``/tf_static``);
-* ``horizon``: ``sensors/horizon`` (``adcs_msgs/HorizonSensor``);
-* ``star_tracker``, ``gyro``: ``sensors/star_tracker``, ``sensors/gyro`` (``sensor_msgs/Imu``);
-* ``actuator_command``: ``adcs/actuator_command`` (the applied dipole, for the prediction).
-
-Never ``sim/*``: the reference field and orbit are the flight software's own models
-(``onboard_orbit.*``, ``onboard_field.*``).
+The algorithm is a registered estimator (parameter ``algorithm``; ``adcs list`` shows them);
+the node subscribes to the topics of its entry's ``inputs`` (magnetometer, horizon sensor,
+star tracker, gyro, the applied command), converts each message to its core sample (the
+records' converters), and the component checks them and steps the core
+(:mod:`adcs_nodes.components.estimator`). Never ``sim/*``: the reference field and orbit are
+the flight software's own models (``onboard_orbit.*``, ``onboard_field.*``).
 
 Publishes ``adcs/attitude_estimate`` (``adcs_msgs/AttitudeState``: q to the orbit frame and to
 ECI, rates, 6x6 covariance), ``adcs/estimator/diagnostics`` (``adcs_msgs/FilterDiagnostics``)
