@@ -8,8 +8,9 @@ manager forwards the active one.
 What the node subscribes to comes from the registry entry's ``inputs`` (their records in
 :mod:`adcs_nodes.inputs`: topic, type, converter), nothing else, so B-dot, whose entry declares
 only the magnetometer, keeps working when the estimator dies (the safe-mode rule); the
-conditioning is the component's (:mod:`adcs_nodes.components.controller`). The parameters are the entry's own (``ros2 param describe`` shows each
-with unit and range) plus the spacecraft context below, all declared from typed specs.
+conditioning is the component's (:mod:`adcs_nodes.components.controller`). The parameters
+are the entry's own (``ros2 param describe`` shows each with unit and range) plus the
+spacecraft context, all declared from typed specs.
 """
 from __future__ import annotations
 
