@@ -74,7 +74,10 @@ def _resolve(ref: str) -> Any:
     got = _RESOLVED.get(ref)
     if got is None:
         module, _, name = ref.partition(':')
-        got = _RESOLVED[ref] = getattr(importlib.import_module(module), name)
+        try:
+            got = _RESOLVED[ref] = getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError, ValueError) as exc:
+            raise ValueError(f'converter {ref!r} cannot be loaded: {exc}') from None
     return got
 
 

@@ -116,3 +116,13 @@ def test_every_topic_of_the_graph_has_its_converter(data):
         pkg, _, cls = want.split('/')
         assert type(msg).__module__.startswith(pkg + '.msg') and type(msg).__name__ == cls, topic
     assert converter('/sim/state') is c.ATTITUDE_STATE      # a resolved name is the same topic
+
+
+def test_a_record_whose_converter_cannot_be_loaded_says_so():
+    import pytest
+
+    from adcs_nodes.inputs import Input
+    bad = Input('nowhere', 'nowhere', 'sensors/nowhere', 'std_msgs/msg/String', None,
+                'nowhere_period_s', 1.0, 'adcs_nodes.msgs.convert:NO_SUCH')
+    with pytest.raises(ValueError, match="converter 'adcs_nodes.msgs.convert:NO_SUCH' cannot"):
+        bad.converter()
