@@ -136,7 +136,9 @@ def check_parity(faults, ctx, spin, tmp_path, duration_s=DURATION_S):
 
 
 @pytest.mark.alone          # 0.3 s input timeouts in one process: not beside the parallel tests
-@pytest.mark.parametrize('examples', [20, pytest.param(200, marks=pytest.mark.long)])
+@pytest.mark.parametrize('examples', [
+    pytest.param(20, marks=pytest.mark.timeout(1200)),
+    pytest.param(200, marks=[pytest.mark.long, pytest.mark.timeout(10800)])])
 def test_plain_and_composed_agree_through_random_faults(examples, ros_context, spin,
                                                         tmp_path_factory):
     @settings(max_examples=examples, deadline=None, derandomize=examples == 20,
