@@ -39,7 +39,7 @@ def epoch_to_ns(epoch: datetime) -> int:
 
 
 class Mounts:
-    """Sensor mounts ``q_body_sensor`` (scalar last) by the samples' ``header.frame_id``.
+    """Sensor mounts ``q_body_sensor`` (scalar last) by the samples' ``frame_id``.
 
     The FrameLoop fills it from the sensors' parameters (what their nodes put on
     ``/tf_static``); a node wraps its ``MountTable``, which fills it from ``/tf_static``.
@@ -63,9 +63,9 @@ class Mounts:
 
 def covariance_to_body(covariance: Sequence[float],
                        q_body_sensor: Sequence[float]) -> Optional[np.ndarray]:
-    """A message's 3x3 covariance (row-major, sensor axes) in body axes, or ``None``.
+    """A sample's 3x3 covariance (row-major, sensor axes) in body axes, or ``None``.
 
-    ``C_body = R C_sensor R^T`` with ``R = R(q_body_sensor)``. ``None`` when the message
+    ``C_body = R C_sensor R^T`` with ``R = R(q_body_sensor)``. ``None`` when the sample
     gives none, by the ``sensor_msgs`` conventions: all zeros ("unknown"), ``covariance[0]
     = -1`` ("not provided"), or anything not finite, not symmetric or not positive
     semi-definite.

@@ -11,7 +11,8 @@ Conditioning (the same for the node and the FrameLoop):
   estimate, the onboard-model field ``n* = R(q_orbit_body)^T B*`` is offered too (between
   samples);
 * wheel speeds (``sensors/wheels``): the right count and finite, and the wheel momentum from
-  them (:func:`adcs_nodes.entries.wheel_momentum`).
+  them (:func:`adcs_nodes.entries.wheel_momentum`);
+* a plugin's input kinds (``inputs.register``): their fresh samples in ``ControlInputs.samples``.
 
 Wheel health: a controller that commands wheels and reads both the tachometer and the applied
 command (``actuator_command``, e.g. ``mpi``) checks that each wheel's measured speed follows

@@ -4,7 +4,7 @@ estimator's ``step`` -> ``adcs/attitude_estimate`` (+ ``adcs/estimator/diagnosti
 Conditioning (the same for the node and the FrameLoop):
 
 * magnetometer: finite, ``min_field_T <= |B| <= max_field_T``, rotated from its sensor frame
-  into body axes with the mount of its ``header.frame_id``; its covariance, when given, rotated
+  into body axes with the mount of its ``frame_id``; its covariance, when given, rotated
   the same way (per-axis variances);
 * horizon sensor: ``valid`` and finite roll, pitch;
 * gyro: finite, rotated by its mount; star tracker: finite unit quaternion;
