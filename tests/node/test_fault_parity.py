@@ -67,7 +67,7 @@ def issue_38_faults(t0):
             at(10.0, 'dropout', duration_s=5.0), at(11.0, 'stuck', duration_s=10.0)]
 
 
-def demo_scenario(tmp_path, faults, timeout_s=0.3):
+def demo_scenario(tmp_path, faults, timeout_s=0.4):
     """The demo mission with ``faults`` and a short input timeout, validated; its file."""
     with open(os.path.join(ROOT, 'scenarios', 'demo_mission.yaml')) as fh:
         sc = yaml.safe_load(fh)
@@ -79,10 +79,23 @@ def demo_scenario(tmp_path, faults, timeout_s=0.3):
     return load_scenario(str(path)), str(path)
 
 
-def plain_series(sc, duration_s):
-    """Every topic's CDR bytes in order of the plain engine's run (what its bag holds)."""
+def log_misses(sync, name, log):
+    """Record ``(node, frame, missing inputs)`` of every miss ``sync`` counts into ``log``."""
+    record = sync.record_misses
+
+    def recorded(t_ns):
+        log.add((name, int(t_ns), tuple(sorted(sync.missing(t_ns)))))
+        return record(t_ns)
+    sync.record_misses = recorded
+
+
+def plain_series(sc, duration_s, misses):
+    """Every topic's CDR bytes in order of the plain engine's run (what its bag holds); its
+    consumers' misses into ``misses``."""
     from sim_node.engine import FrameLoop
     loop = FrameLoop.from_scenario(sc, duration_s)
+    for c in loop.consumers:
+        log_misses(c.sync, c.name, misses)
     out = {}
     for frame in loop.run():
         for topic, x in frame.outputs:
@@ -91,8 +104,9 @@ def plain_series(sc, duration_s):
     return out
 
 
-def composed_series(sc, duration_s, ctx, spin, tmp_path):
-    """Every data topic's CDR bytes in order of a composed run in this process."""
+def composed_series(sc, duration_s, ctx, spin, tmp_path, misses):
+    """Every data topic's CDR bytes in order of a composed run in this process; every node's
+    misses (the world's too) into ``misses``."""
     from rclpy.node import Node
 
     from adcs_nodes.tools.run.launcher import Launcher
@@ -103,6 +117,9 @@ def composed_series(sc, duration_s, ctx, spin, tmp_path):
         n.name, context=ctx, parameter_overrides=overrides_for(doc, n.name))
         for n in launcher.nodes]
     assert drive_lifecycle(nodes) == ''
+    for node in nodes:
+        if getattr(node, 'sync', None) is not None:
+            log_misses(node.sync, node.get_name(), misses)
     collector = Node('collector', context=ctx)
     out = {}
     topics = sorted({t for n in launcher.nodes for t in n.publishes})
@@ -125,17 +142,37 @@ def composed_series(sc, duration_s, ctx, spin, tmp_path):
     return out
 
 
-def check_parity(faults, ctx, spin, tmp_path, duration_s=DURATION_S):
+def check_parity(faults, ctx, spin, tmp_path, duration_s=DURATION_S, attempts=3):
+    """The composed run's series equal the plain run's, and so do the inputs each consumer
+    missed. A composed run in which an input timed out that the plain run did not miss (its
+    producer was late by more than a timeout of wall time: the machine's load, not the rule)
+    is run again, up to ``attempts`` times."""
     sc, _ = demo_scenario(tmp_path, faults)
-    plain = plain_series(sc, duration_s)
-    composed = composed_series(sc, duration_s, ctx, spin, tmp_path)
-    plain = {t: v for t, v in plain.items() if t not in NOT_DATA}
+    killed = {f['target']: round(f['at_s'] * 1e9) for f in faults if f['kind'] == 'node_killed'}
+
+    def alive(log):            # (a killed node may count the miss of the frame it stops at)
+        return {m for m in log if m[1] < killed.get(m[0], 2 ** 62)}
+    expected = set()
+    plain = {t: v for t, v in plain_series(sc, duration_s, expected).items()
+             if t not in NOT_DATA}
+    expected = alive(expected)
+    for attempt in range(attempts):
+        misses, run_dir = set(), tmp_path / f'composed{attempt}'
+        run_dir.mkdir()
+        composed = composed_series(sc, duration_s, ctx, spin, run_dir, misses)
+        misses = alive(misses)
+        if misses <= expected:
+            break
+    else:
+        pytest.fail(f'in every composed run inputs timed out that the plain run did not miss '
+                    f'(the load, or a rule that differs): {sorted(misses - expected)[:5]}')
+    assert misses == expected
     assert sorted(composed) == sorted(plain)
     differ = [t for t in plain if plain[t] != composed[t]]
     assert not differ, {t: (len(plain[t]), len(composed[t])) for t in differ}
 
 
-@pytest.mark.alone          # 0.3 s input timeouts in one process: not beside the parallel tests
+@pytest.mark.alone          # 0.4 s input timeouts in one process: not beside the parallel tests
 @pytest.mark.parametrize('examples', [
     pytest.param(20, marks=pytest.mark.timeout(1200)),
     pytest.param(200, marks=[pytest.mark.long, pytest.mark.timeout(10800)])])
