@@ -220,7 +220,7 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         mine = [f for f in sc.get('faults', []) if f['target'] == key
                 and 'sensor' in registry.get('fault', f['kind']).targets]
         nodes.append(NodeSpec(key, package, module.rsplit('.', 1)[1], module, cls,
-                              {**common, **_sensor_params(cfg),
+                              {**common, **plugins, **_sensor_params(cfg),
                                'timeout_factor': CHAIN_TIMEOUT['sensor'],
                                **({'faults': json.dumps(mine, sort_keys=True)} if mine else {})},
                               publishes=[topic, '/tf_static'], subscribes=['/clock'] + inputs))

@@ -84,7 +84,7 @@ class Entry:
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f'entry {self.name}: kind must be one of {KINDS}')
-        bad = [i for i in self.inputs if i not in INPUTS]
+        bad = [i for i in self.inputs if i not in _inputs.BY_NAME]
         bad += [a for a in self.actuators if a not in ACTUATORS]
         if bad:
             raise ValueError(f'entry {self.name}: unknown inputs/actuators {bad}')

@@ -3,8 +3,8 @@
 Each entry's parameters are both the scenario keys ``sensors.<name>.*`` and the parameters of
 the sensor's node; ``build(params, ctx)`` converts them (degrees -> radians) into the model
 of :mod:`sim_node.models.sensors` with the node's random seed ``ctx['seed']``. A sensor node
-is ``(package, module, class, topic, message type)``; the flight software reads only the
-topic, so a real driver publishing it replaces the node.
+is ``(package, module, class, topic, message type)`` (the generic sensor node); the flight
+software reads only the topic, so a real driver publishing it replaces the node.
 """
 from __future__ import annotations
 
@@ -15,6 +15,8 @@ from adcs_nodes.registry import Entry, Param, register, register_section
 from adcs_nodes.spec import SUBSTEPS
 
 PERIOD_HELP = 'sample period'
+#: The generic sensor node (``-p sensor:=NAME``; the launcher names the node after the sensor).
+SENSOR_NODE = ('sim_node', 'sim_node.nodes.sensor_node', 'SensorNode')
 
 #: The dynamics node's own parameters (the common ones: ``adcs_nodes.spec.COMMON``); the
 #: simulated world is fixed by the scenario: every one is read-only (``nodes.params``).
@@ -84,8 +86,7 @@ register(Entry(
      Param('q_body_sensor_xyzw', 'float[]', [0.0, 0.0, 0.0, 1.0], '-', 'nominal mounting, '
            'sensor -> body, scalar last', length=4, min=-1.0, max=1.0, check=_unit)),
     _build_magnetometer, inputs=(),
-    node=('sim_node', 'sim_node.nodes.magnetometer', 'MagnetometerNode',
-          'sensors/magnetometer', 'sensor_msgs/msg/MagneticField')))
+    node=(*SENSOR_NODE, 'sensors/magnetometer', 'sensor_msgs/msg/MagneticField')))
 
 
 def _build_horizon(p: Dict[str, Any], ctx: Dict[str, Any]):
@@ -109,7 +110,7 @@ register(Entry(
      Param('fov_deg', 'float', 30.0, 'deg', 'largest |roll|, |pitch| with a valid output',
            positive=True, max=90.0)),
     _build_horizon,
-    node=('sim_node', 'sim_node.nodes.horizon_sensor', 'HorizonSensorNode',
+    node=(*SENSOR_NODE,
           'sensors/horizon', 'adcs_msgs/msg/HorizonSensor')))
 
 
@@ -125,7 +126,7 @@ register(Entry(
      Param('noise_std_deg', 'float[]', [0.02 / 3] * 3, 'deg', 'attitude noise std per body '
            'axis (paper 001: 0.02 deg 3-sigma)', length=3, min=0.0, max=90.0)),
     _build_star_tracker,
-    node=('sim_node', 'sim_node.nodes.star_tracker', 'StarTrackerNode',
+    node=(*SENSOR_NODE,
           'sensors/star_tracker', 'sensor_msgs/msg/Imu')))
 
 
@@ -150,8 +151,7 @@ register(Entry(
            'random walk density (paper 001: drift 0.01 deg/h 3-sigma)', length=3, min=0.0,
            max=3600.0)),
     _build_gyro,
-    node=('sim_node', 'sim_node.nodes.gyro', 'GyroNode', 'sensors/gyro',
-          'sensor_msgs/msg/Imu')))
+    node=(*SENSOR_NODE, 'sensors/gyro', 'sensor_msgs/msg/Imu')))
 
 
 def _build_tachometer(p: Dict[str, Any], ctx: Dict[str, Any]):
@@ -171,7 +171,7 @@ register(Entry(
            'resolution (ASSUMPTION: 4096 counts/rev over a 0.1 s gate); 0: none', min=0.0,
            max=100.0)),
     _build_tachometer,
-    node=('sim_node', 'sim_node.nodes.wheel_tachometer', 'WheelTachometerNode',
+    node=(*SENSOR_NODE,
           'sensors/wheels', 'sensor_msgs/msg/JointState')))
 
 # the fault kinds of the world register themselves (sim_node.faults); the spacecraft and its

@@ -6,7 +6,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 
-from adcs_nodes.nodes.convert import stamp_ns, to_stamp
+from adcs_nodes.msgs.fields import stamp_ns, to_stamp
 from adcs_nodes.nodes.diagnostics import Diagnostics
 
 EPOCH_NS = 1767225600 * 10**9

@@ -21,7 +21,7 @@ from sensor_msgs.msg import MagneticField
 
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core import handshake
-from adcs_nodes.nodes.convert import to_stamp, to_vec3
+from adcs_nodes.msgs.fields import to_stamp, to_vec3
 from adcs_nodes.core.geomag import FIELD
 from adcs_nodes.core.orbit import ORBIT
 from adcs_nodes.nodes.estimator import EstimatorNode

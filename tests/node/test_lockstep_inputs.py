@@ -7,7 +7,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
 from adcs_msgs.msg import LockstepStatus
-from adcs_nodes.nodes.convert import to_stamp
+from adcs_nodes.msgs.fields import to_stamp
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 
 EPOCH_NS = 1767225600 * 10**9

@@ -20,7 +20,7 @@ from sensor_msgs.msg import MagneticField
 
 from adcs_msgs.msg import ActuatorCommand
 from adcs_nodes.nodes.controller import ControllerNode
-from adcs_nodes.nodes.convert import to_stamp, to_vec3
+from adcs_nodes.msgs.fields import to_stamp, to_vec3
 
 S = 10**9
 GAIN = 1.0e5                                    # B-dot gain k [A m^2 s / T]

@@ -110,7 +110,8 @@ def test_started_alone_each_node_says_what_it_waits_for_and_publishes_and_is_nam
     env = child_env(worker_domain(152, 20))
     procs = []
     try:
-        mag, mag_out = _start(env, 'sim_node.nodes.magnetometer')
+        mag, mag_out = _start(env, 'sim_node.nodes.sensor_node', '--ros-args', '-p',
+                              'sensor:=magnetometer')
         ctl, ctl_out = _start(env, 'adcs_nodes.nodes.controller', '--ros-args', '-p',
                               'controller:=bdot')
         procs = [mag, ctl]

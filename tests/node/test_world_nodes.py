@@ -8,7 +8,7 @@ from rosgraph_msgs.msg import Clock
 
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, Environment
 from adcs_nodes.core import attitude as att
-from adcs_nodes.nodes.convert import quat, stamp_ns, to_stamp, vec3
+from adcs_nodes.msgs.fields import quat, stamp_ns, to_stamp, vec3
 from sim_node.nodes.dynamics import DynamicsNode
 from sim_node.nodes.environment import EnvironmentNode
 

@@ -12,15 +12,11 @@ from dataclasses import replace
 from typing import Any, Dict, Optional
 
 import numpy as np
-from std_msgs.msg import Header
 
-from adcs_msgs.msg import AttitudeTarget
-from adcs_nodes.components.base import FrameClock
 from adcs_nodes.core.guidance import FRAMES, TargetSample, guidance_from_params
 from adcs_nodes.core.guidance_profiles import profile_from_dicts
 from adcs_nodes.core.lockstep import NS_PER_S
-from adcs_nodes.nodes.convert import to_quat, to_vec3
-from adcs_nodes.nodes.messages import make
+from adcs_nodes.core.samples import AttitudeTarget
 from adcs_nodes.registry import Param
 from adcs_nodes.spec import HOLD, PROFILE
 
@@ -56,7 +52,7 @@ class _Euler312:
 class GuidanceComponent:
     """The target of each frame: the profile's, or a slew goal's hold (:meth:`hold`)."""
 
-    def __init__(self, p: Dict[str, Any], clock: FrameClock) -> None:
+    def __init__(self, p: Dict[str, Any]) -> None:
         if p['euler312_profile']:
             self.guidance = _Euler312(p['euler312_profile'])
         else:
@@ -64,7 +60,6 @@ class GuidanceComponent:
                 p['profile_t_s'], p['profile_type'], p['profile_q_xyzw'],
                 p['profile_duration_s'], p['profile_axis_body'], p['profile_amplitude_deg'],
                 p['profile_period_s'], p['frame'])
-        self.clock = clock
         self.override: Optional[TargetSample] = None     # a slew goal's hold target
 
     def hold(self, q_xyzw: np.ndarray, frame: str) -> None:
@@ -74,10 +69,9 @@ class GuidanceComponent:
                                      'slew_goal')
 
     def step(self, t_ns: int) -> AttitudeTarget:
-        """The target message of frame ``t_ns``."""
+        """The target of frame ``t_ns``."""
         s = self.override or self.guidance.at(t_ns / NS_PER_S)
-        return make(
-            AttitudeTarget, header=make(Header, stamp=self.clock.stamp(t_ns), frame_id=s.frame),
-            q_ref_body=to_quat(s.q_ref_body), omega_body_ref_body=to_vec3(s.omega_body_ref_body),
-            omega_dot_body_ref_body=to_vec3(s.omega_dot_body_ref_body),
-            time_to_go_s=float(s.time_to_go_s), profile=s.profile)
+        return AttitudeTarget(t_ns, s.frame, np.array(s.q_ref_body, dtype=float),
+                              np.array(s.omega_body_ref_body, dtype=float),
+                              np.array(s.omega_dot_body_ref_body, dtype=float),
+                              float(s.time_to_go_s), s.profile)

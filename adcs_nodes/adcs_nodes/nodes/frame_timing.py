@@ -26,7 +26,7 @@ from adcs_nodes.core.lockstep import (NS_PER_S, REVIVE_HOLD_FRAMES, FrameSync, I
 from adcs_nodes.core.sample_timing import ExternalInputs, LiveSamples
 from adcs_nodes.nodes import publisher_guard
 from adcs_nodes.nodes.adapter import QOS_DATA, node_log
-from adcs_nodes.nodes.convert import stamp_ns
+from adcs_nodes.msgs.fields import stamp_ns
 
 #: Topic prefixes subscribed best-effort (SensorDataQoS) in live mode and sample timing.
 SENSOR_PREFIXES = ('sensors/', '/sensors/')

@@ -29,7 +29,7 @@ from adcs_nodes.core.sample_timing import REASONS, ExternalInputs
 from adcs_nodes.nodes import cdr
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes.adapter import QOS_LATCHED, QOS_READY  # noqa: F401 (re-exported)
-from adcs_nodes.nodes.convert import stamp_ns, to_stamp
+from adcs_nodes.msgs.fields import stamp_ns, to_stamp
 from adcs_nodes.nodes.diagnostics import StatusTopics
 from adcs_nodes.nodes.frame_timing import (  # noqa: F401 (re-exported)
     QOS_DATA, SENSOR_PREFIXES, SUMMARY_PREFIX, FrameTiming)

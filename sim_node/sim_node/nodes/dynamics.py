@@ -37,21 +37,20 @@ from std_msgs.msg import String
 
 from adcs_msgs.msg import (ActuatorCommand, AppendageState, AttitudeState, Environment,
                            LockstepStatus, WheelState)
-from adcs_nodes.components.base import FrameClock
 from adcs_nodes.core.lockstep import Act, Action, ClockMaster, ns_to_seconds, seconds_to_ns
+from adcs_nodes.core.samples import all_finite
+from adcs_nodes.msgs import convert
+from adcs_nodes.msgs.fields import make, stamp_ns, to_stamp
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import publisher_guard, runtime
 from adcs_nodes.nodes.adapter import node_log
-from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, vec3
 from adcs_nodes.nodes.lockstep_node import (MAX_LAG_FRAMES, QOS_DATA, QOS_READY,
                                             LockstepNode)
-from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
 from sim_node.components.dynamics import DynamicsComponent
 from sim_node.entries import DYNAMICS_PARAMS
 from sim_node.faults import FAULTS_PARAM, INJECT_TOPIC, injected
 from sim_node.faults import parse as parse_faults
-from sim_node.models.dynamics import ActuatorCommand as Command
 from sim_node.models.spacecraft_config import INITIAL, SPACECRAFT
 
 QOS_CLOCK = QOS_DATA
@@ -81,9 +80,7 @@ class DynamicsNode(LockstepNode):
         self.result_file = p['result_file']
         self.component = DynamicsComponent(
             self.section('spacecraft', SPACECRAFT), self.section('initial', INITIAL),
-            self.seed, self.frame_ns, self.substeps,
-            FrameClock(self.epoch_ns), node_log(self),
-            parse_faults(p['faults']))
+            self.seed, self.frame_ns, self.substeps, node_log(self), parse_faults(p['faults']))
         self.spacecraft = self.component.spacecraft
         self.wheel_names = self.component.wheel_names
 
@@ -175,7 +172,7 @@ class DynamicsNode(LockstepNode):
         for a in actions:
             self._exec_t = a.t_ns
             if a.kind is Act.CLOCK:
-                self.clock_pub.publish(make(Clock, clock=self.stamp(a.t_ns)))
+                self.clock_pub.publish(make(Clock, clock=to_stamp(self.epoch_ns + a.t_ns)))
             elif a.kind is Act.STATE:
                 self.publish_state(a.value)
                 self.frame_done(a.t_ns)
@@ -203,19 +200,18 @@ class DynamicsNode(LockstepNode):
         self._run(self.master.on_progress('recorder', t, False, time.monotonic()))
 
     def on_environment(self, msg: Environment) -> None:
-        """Store an environment message (dropped with a warning if it holds NaN)."""
-        vals = (vec3(msg.r_eci), vec3(msg.v_eci), vec3(msg.b_eci), vec3(msg.b_dot_eci),
-                quat(msg.q_eci_orbit))
-        if not all_finite(*vals):
+        """Store an environment sample (dropped with a warning if it holds NaN)."""
+        x = convert.ENVIRONMENT.to_core(msg, self.epoch_ns)
+        if not all_finite(x.r_eci_m, x.v_eci_m_s, x.b_eci_T, x.b_dot_eci_T_s, x.q_eci_orbit):
             self.get_logger().warning('sim/environment with non-finite values ignored')
             return
-        t = self.elapsed_ns(stamp_ns(msg.header.stamp))
-        self._run(self.master.on_environment(t, msg, time.monotonic()))
+        self._run(self.master.on_environment(x.t_ns, x, time.monotonic()))
 
     def on_command(self, msg: ActuatorCommand) -> None:
         """Store an actuator command; a malformed one becomes a zero command (safe)."""
-        t_ns = self.elapsed_ns(stamp_ns(msg.header.stamp))
-        self._run(self.master.on_command(t_ns, self.to_command(msg), time.monotonic()))
+        x = convert.COMMAND.to_core(msg, self.epoch_ns)
+        self._run(self.master.on_command(x.t_ns, self.component.to_command(x),
+                                         time.monotonic()))
 
     def on_inject_fault(self, msg: String) -> None:
         """A live fault (``adcs fault``): applied if it strikes an actuator, announced on
@@ -232,13 +228,9 @@ class DynamicsNode(LockstepNode):
         self.get_logger().warning(f'live fault {fault.describe()} from t = '
                                   f'{fault.start_ns / 1e9:g} s (not deterministic)')
 
-    def to_command(self, msg: ActuatorCommand) -> Command:
-        """Message -> model command (the component's: a malformed one is a zero command)."""
-        return self.component.to_command(msg)
-
-    def step_frame(self, t: int, env_msg: Environment, cmd: Any) -> None:
+    def step_frame(self, t: int, env: Any, cmd: Any) -> None:
         """Zero-order-hold the command and integrate from t_k to t_k+1 (the component's)."""
-        self.component.step(t, env_msg, cmd)
+        self.component.step(t, env, cmd)
         self.frames += 1
 
     @property
@@ -280,21 +272,24 @@ class DynamicsNode(LockstepNode):
             self._run(self.master.free_running_frame())
 
     # ------------------------------------------------------------------ outputs
-    def publish_state(self, env_msg: Environment) -> None:
+    def publish_state(self, env: Any) -> None:
         """Phase B: publish truth state and wheels of frame k (initialises at frame 0)."""
-        self.sim_t_ns = self.t_ns
-        faults = self.component.faults_msg(self.t_ns)
+        t, e = self.t_ns, self.epoch_ns
+        self.sim_t_ns = t
+        faults = self.component.fault_events(t)
         if faults is not None:
-            self.faults_pub.publish(faults)
-        msg = self.component.state_msg(self.t_ns, env_msg)
+            self.faults_pub.publish(convert.FAULTS.to_msg(faults, e))
+        x = self.component.truth(t, env)
+        msg = convert.ATTITUDE_STATE.to_msg(x, e)
         self.state_pub.publish(msg)
         if self.tf_pub.wanted():     # /tf, sim/wheels, sim/appendages: built only when read
-            self.tf_pub.send(truth_transforms(msg.header.stamp, vec3(env_msg.r_eci),
-                                              quat(env_msg.q_eci_orbit), quat(msg.q_orbit_body)))
+            self.tf_pub.send(truth_transforms(msg.header.stamp, env.r_eci_m, env.q_eci_orbit,
+                                              x.q_orbit_body))
         if self.wheels_pub.get_subscription_count() > 0:
-            self.wheels_pub.publish(self.component.wheels_msg(msg.header))
+            self.wheels_pub.publish(convert.WHEEL_STATE.to_msg(self.component.wheels(t), e))
         if self.appendages_pub is not None and self.appendages_pub.get_subscription_count() > 0:
-            self.appendages_pub.publish(self.component.appendages_msg(msg.header))
+            self.appendages_pub.publish(convert.APPENDAGES.to_msg(self.component.appendages(t),
+                                                                  e))
 
     def finish(self) -> None:
         """End of the scenario: report and let the runtime stop the process."""

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional, Protocol
+from typing import Any, Mapping, Optional, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -241,6 +241,8 @@ class ControlInputs:
     q_eci_body_meas: Optional[np.ndarray] = None
     #: the dipole applied over the previous command frame [A m^2, body axes]
     applied_dipole_body: Optional[np.ndarray] = None
+    #: fresh samples of a plugin's input kinds, by input key (``adcs_nodes.inputs.register``)
+    samples: Mapping[str, Any] = field(default_factory=dict)
 
     def field_body(self) -> Optional[np.ndarray]:
         """The fresh measurement when there is one, else the onboard-model field."""

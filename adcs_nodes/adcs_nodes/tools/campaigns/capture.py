@@ -29,7 +29,7 @@ def capture_reference(sc: Dict[str, Any]) -> str:
     specs = [s for s in build_graph(sc, sc['duration_s']) if s.module == _GUIDANCE_MODULE]
     if not specs:
         return ORBIT_FRAME
-    g = GuidanceComponent(param_values(PARAMS, specs[0].params), clock=None).guidance
+    g = GuidanceComponent(param_values(PARAMS, specs[0].params)).guidance
     if isinstance(g, Guidance) and g.frame == 'orbit' and all(
             s.type == 'hold' and metrics.angle_to_identity_deg(s.q)[0] == 0.0
             for s in g.segments):

@@ -35,7 +35,6 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
     import numpy as np
 
     from adcs_nodes.core import attitude
-    from adcs_nodes.nodes.convert import quat, vec3
     from adcs_nodes.tools.analyse import metrics
     rows: Dict[str, List[Any]] = {k: [] for k in ('t_s', 'q_orbit_body', 'w_eci', 'w_orbit',
                                                   'q_est', 'w_est', 'active', 'q_orbit_target',
@@ -45,28 +44,28 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
     active, rate = 'zero', 0.0
     for frame in loop.run():
         state = None
-        for topic, msg in frame.outputs:
+        for topic, x in frame.outputs:                # core samples (adcs_nodes.core.samples)
             if topic == 'sim/state':
-                state = msg
+                state = x
             elif topic == 'adcs/attitude_estimate':
-                q_est, w_est = quat(msg.q_orbit_body), vec3(msg.omega_body_eci_body)
+                q_est, w_est = x.q_orbit_body, x.omega_body_eci_body
             elif topic == 'adcs/actuator_command':
-                active = msg.source
+                active = x.source
             elif topic == 'sim/environment':
-                rate = float(msg.orbit_rate)
+                rate = float(x.orbit_rate_rad_s)
             elif topic == 'adcs/attitude_target':
-                q_target, eci = quat(msg.q_ref_body), msg.header.frame_id == 'eci'
-                judged = msg.profile != 'maneuver'
-        q_body = quat(state.q_orbit_body)
+                q_target, eci = x.q_ref_body, x.frame == 'eci'
+                judged = x.profile != 'maneuver'
+        q_body = state.q_orbit_body
         rows['t_s'].append(frame.t_ns / 1e9)
         rows['q_orbit_body'].append(q_body)
-        rows['w_eci'].append(vec3(state.omega_body_eci_body))
-        rows['w_orbit'].append(vec3(state.omega_body_orbit_body))
+        rows['w_eci'].append(state.omega_body_eci_body)
+        rows['w_orbit'].append(state.omega_body_orbit_body)
         rows['q_est'].append(q_est)
         rows['w_est'].append(w_est)
         rows['active'].append(active)
         rows['q_orbit_target'].append(attitude.multiply(attitude.multiply(
-            q_body, attitude.conjugate(quat(state.q_eci_body))), q_target) if eci else q_target)
+            q_body, attitude.conjugate(state.q_eci_body)), q_target) if eci else q_target)
         rows['target_judged'].append(judged)
     out = {k: np.asarray(v) for k, v in rows.items()}
     out['angle_deg'] = metrics.angle_to_identity_deg(out['q_orbit_body'])

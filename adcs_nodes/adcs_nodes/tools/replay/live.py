@@ -134,7 +134,7 @@ def _publish_paced(timed: List[Sample], pubs: dict, clock_pub, first: int, last:
     """Each sample when its stamp comes due at ``rate``, ``/clock`` every tick."""
     from rosgraph_msgs.msg import Clock
 
-    from adcs_nodes.nodes.convert import to_stamp
+    from adcs_nodes.msgs.fields import to_stamp
     t0_wall = time.monotonic()
     i = 0
     while i < len(timed):

@@ -162,7 +162,7 @@ class _Follower:
             self.ready.add(msg.data)
 
     def _report(self, processed: bool):
-        from adcs_nodes.nodes.convert import stamp_ns
+        from adcs_nodes.msgs.fields import stamp_ns
 
         def cb(msg) -> None:
             if msg.node not in self.read:

@@ -190,7 +190,7 @@ def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
     if ctrl:
         c = ctrl[-1]
         if run.get('epoch'):
-            from adcs_nodes.nodes.convert import stamp_ns
+            from adcs_nodes.msgs.fields import stamp_ns
             from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
             t = (stamp_ns(c.header.stamp) - epoch_to_ns(parse_epoch(run['epoch']))) / 1e9
             lines.append(f'sim time: {t:.1f} s (last controller frame)')
@@ -321,7 +321,7 @@ class _FaultWatch:
         from diagnostic_msgs.msg import DiagnosticArray
         from rosgraph_msgs.msg import Clock
 
-        from adcs_nodes.nodes.convert import stamp_ns
+        from adcs_nodes.msgs.fields import stamp_ns
         from adcs_nodes.nodes.lockstep_node import QOS_DATA, epoch_to_ns, parse_epoch
         self.session, self.stamp_ns = session, stamp_ns
         self.epoch_ns = epoch_to_ns(parse_epoch(run['epoch']))
@@ -428,7 +428,7 @@ class _Watch:
                               craft.get('wheels') or [] if isinstance(w, dict)]
 
     def _time(self, stamp) -> float:
-        from adcs_nodes.nodes.convert import stamp_ns
+        from adcs_nodes.msgs.fields import stamp_ns
         return (stamp_ns(stamp) - self.epoch_ns) / 1e9
 
     def on_estimate(self, msg) -> None:

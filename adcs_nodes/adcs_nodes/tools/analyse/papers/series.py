@@ -1,6 +1,7 @@
 """A run's stamped messages by topic, ``Topics`` = ``{topic: {header stamp [ns]: message}}``
-(FrameLoop names: ``sim/state``, ...), from a bag or from FrameLoop frames: the same field
-names either way, so the paper modules read both alike."""
+(FrameLoop names: ``sim/state``, ...), from a bag or from FrameLoop frames (samples made
+messages by their topics' converters): the same field names either way, so the paper modules
+read both alike."""
 from __future__ import annotations
 
 import os
@@ -44,17 +45,17 @@ def from_bag(bag: str, topics: Sequence[str]) -> Topics:
     return out
 
 
-def from_frames(frames: Iterable[Any], topics: Sequence[str]) -> Topics:
-    """The messages of ``topics`` in FrameLoop frames (:class:`sim_node.engine.Frame`)."""
-    names = tuple(t.lstrip('/') for t in topics)
-    out: Topics = {t: {} for t in names}
+def from_frames(frames: Iterable[Any], topics: Sequence[str], epoch_ns: int) -> Topics:
+    """The messages of ``topics`` in FrameLoop frames (:class:`sim_node.engine.Frame`) of a
+    run with epoch ``epoch_ns`` (the samples' converters, :func:`adcs_nodes.inputs.converter`)."""
+    from adcs_nodes.inputs import converter
+    out: Topics = {t.lstrip('/'): {} for t in topics}
+    to_msg = {t: converter(t).to_msg for t in out}
     for frame in frames:
-        for topic, msg in frame.outputs:
+        for topic, x in frame.outputs:
             got = out.get(topic)
             if got is not None:
-                stamp = _stamp(msg)
-                if stamp is not None:
-                    got[stamp] = msg
+                got[epoch_ns + x.t_ns] = to_msg[topic](x, epoch_ns)
     return out
 
 
@@ -108,4 +109,4 @@ def run_topics(sc: Dict[str, Any], topics: Sequence[str], duration_s: Optional[f
     if overrides:
         sc = apply_overrides(sc, overrides)
     loop = FrameLoop.from_scenario(sc, duration_s, ideal_estimate=ideal)
-    return from_frames(loop.run(), topics)
+    return from_frames(loop.run(), topics, loop.epoch_ns)

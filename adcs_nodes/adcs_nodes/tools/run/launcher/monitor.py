@@ -15,7 +15,7 @@ class Monitor:
         from rclpy.qos import QoSProfile, ReliabilityPolicy
 
         from adcs_msgs.msg import LockstepStatus
-        from adcs_nodes.nodes.convert import stamp_ns
+        from adcs_nodes.msgs.fields import stamp_ns
         from adcs_nodes.nodes.lockstep_node import MONITOR_NODE, MONITOR_STATUS_OF
         from adcs_nodes.nodes.runtime import make_executor
 
