@@ -30,8 +30,8 @@ test-long:  ## long tests whose contract another make-test test holds (named bes
 lint:  ## flake8 at 99 columns on the packages and tests
 	$(RUN) python -m flake8 adcs_nodes sim_node tests
 
-bench:  ## fair throughput table of paper000_control: ring, graph, composed, FrameLoop, Basilisk (< 5 min)
-	$(RUN) env PYTHONPATH=tests python -m perf.bench
+bench:  ## fair throughput table of paper000_control: ring, graph, composed, FrameLoop, Basilisk, start-up, a 100-run campaign (~25 min)
+	$(RUN) sh -c 'PYTHONPATH="tests:$$PYTHONPATH" exec python -m perf.bench'
 
 reproduce:  ## long paper reproductions (papers 000, 001, 003, 004): the tables of adcs report, pass/fail
 	$(RUN) python -m pytest -m slow -s -p no:warnings tests/reproductions

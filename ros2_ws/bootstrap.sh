@@ -7,9 +7,10 @@
 #      the wheel builder's Python and numpy include paths; they are rewritten to this
 #      interpreter's sysconfig include dir and numpy.get_include(),
 #   3. `colcon build --symlink-install` of adcs_msgs, adcs_nodes and sim_node into
-#      ros2_ws/install, with -DPython3_EXECUTABLE set; plus the fallback interface package
-#      ros2_ws/extra/tf2_msgs (the upstream TFMessage definition, same type hash) only when
-#      the environment has no tf2_msgs (the PyPI wheels do not ship it; a ROS 2 install does),
+#      ros2_ws/install, with -DPython3_EXECUTABLE set; before it, the fallback interface
+#      package ros2_ws/extra/tf2_msgs (the upstream TFMessage definition, same type hash) into
+#      ros2_ws/.venv/underlay, only when the environment has no tf2_msgs (the PyPI wheels do
+#      not ship it; a ROS 2 install does),
 #   4. the `adcs` command in the venv,
 #   5. numba's kernel cache filled once, serially (sim_node.tools.warm_kernels; not with
 #      NUMBA_DISABLE_JIT=1),
@@ -17,8 +18,9 @@
 #      says PYTHONDONTWRITEBYTECODE.
 #
 # Each step is skipped when its inputs did not change (stamp files in .venv/), so a second run
-# takes about a second. On a machine with ROS 2 installed, you do not need this script:
-# source /opt/ros/<distro>/setup.bash, then `colcon build` in ros2_ws.
+# takes about a second. Then `source ros2_ws/setup.bash` gives a shell this environment. On a
+# machine with ROS 2 installed, you do not need this script: source
+# /opt/ros/<distro>/setup.bash, then `colcon build` in ros2_ws.
 set -euo pipefail
 
 WS="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -54,6 +56,8 @@ if [ ! -x "$VENV/bin/python" ]; then
     say "creating virtual environment $VENV"
     "$PYTHON_BIN" -m venv "$VENV"
 fi
+# the venv is the wheels' ROS 2 prefix (ros2_ws/setup.bash): colcon wants a local_setup there
+[ -f "$VENV/local_setup.sh" ] || echo '# the PyPI wheels: see ros2_ws/setup.bash' > "$VENV/local_setup.sh"
 req_hash="$(hash_of "$WS/requirements.txt")"
 if [ "$(cat "$VENV/.requirements.sha256" 2>/dev/null)" != "$req_hash" ]; then
     say "installing pinned requirements (first run: about a minute)"
@@ -95,37 +99,50 @@ fi
 export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
 export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
 cd "$WS"
-# fallback packages (ros2_ws/extra, COLCON_IGNOREd for a plain `colcon build`): built only when
-# no underlay (the venv, or a sourced ROS 2 install; never our own install/) provides them
+# fallback packages (ros2_ws/extra, COLCON_IGNOREd for a plain `colcon build`): built into the
+# underlay .venv/underlay (part of the environment ros2_ws/setup.bash gives), only when no
+# other prefix (the venv, or a sourced ROS 2 install) provides them
+UNDERLAY="$VENV/underlay"
 installed_pkg() {
     local prefix
     local IFS=:
     for prefix in $AMENT_PREFIX_PATH; do
-        case "$prefix" in "$WS/install"|"$WS/install/"*) continue ;; esac
+        case "$prefix" in "$WS/install"*|"$UNDERLAY"*) continue ;; esac
         [ -e "$prefix/share/ament_index/resource_index/packages/$1" ] && return 0
     done
     return 1
 }
-base_paths=(src)
+rm -rf install/tf2_msgs build/tf2_msgs       # where an older bootstrap built the fallback
 for pkg in tf2_msgs; do
     if installed_pkg "$pkg"; then
-        rm -rf "install/$pkg" "build/$pkg"     # a former fallback must not shadow the real one
-    else
-        base_paths+=("extra/$pkg")
+        rm -rf "${UNDERLAY:?}/$pkg"            # a former fallback must not shadow the real one
+    elif [ ! -f "$UNDERLAY/$pkg/share/$pkg/package.bash" ]; then
+        say "building the fallback $pkg into $UNDERLAY"
+        if ! ( source "$VENV/bin/activate"
+               colcon --log-base log build --base-paths "extra/$pkg" --build-base build/underlay \
+                   --install-base "$UNDERLAY" --event-handlers console_cohesion- status- \
+                   --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF
+             ) > "$WS/log/colcon-underlay.out" 2>&1 < /dev/null; then
+            cat "$WS/log/colcon-underlay.out" >&2
+            echo "bootstrap: building the fallback $pkg failed" >&2
+            exit 1
+        fi
     fi
 done
-build_inputs=$(find -L "${base_paths[@]}" -maxdepth 3 \( -name package.xml -o -name CMakeLists.txt \
+# shellcheck disable=SC1091
+[ -f "$UNDERLAY/local_setup.bash" ] && { set +u; source "$UNDERLAY/local_setup.bash"; set -u; }
+build_inputs=$(find -L src -maxdepth 3 \( -name package.xml -o -name CMakeLists.txt \
     -o -name setup.py -o -name setup.cfg -o -name '*.msg' -o -name '*.srv' -o -name '*.action' \) \
     | sort)
 # installed data files (symlinked one by one): a new or removed one needs a build, an edit does not
-data_names=$(find -L "${base_paths[@]}" -maxdepth 3 \( -name '*.launch.py' -o -path '*/scenarios/*.yaml' \) \
+data_names=$(find -L src -maxdepth 3 \( -name '*.launch.py' -o -path '*/scenarios/*.yaml' \) \
     | sort)
 build_hash="$( (echo "$build_inputs"; echo "$data_names"; hash_of $build_inputs) | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.build.sha256" 2>/dev/null)" != "$build_hash" ] || [ ! -f install/local_setup.bash ]; then
-    say "colcon build (${base_paths[*]})"
+    say "colcon build (src)"
     # shellcheck disable=SC1091
     source "$VENV/bin/activate"
-    if ! colcon --log-base log build --symlink-install --base-paths "${base_paths[@]}" \
+    if ! colcon --log-base log build --symlink-install --base-paths src \
             --event-handlers console_cohesion- summary+ status- \
             --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \
             > "$WS/log/colcon-build.out" 2>&1 < /dev/null; then
@@ -166,7 +183,7 @@ warm_stamp() {
 if [ "${NUMBA_DISABLE_JIT:-0}" = 0 ] && [ "$(cat "$VENV/.numba-warm.sha256" 2>/dev/null)" != "$(warm_stamp)" ]; then
     say "warming numba kernel cache"
     # shellcheck disable=SC1091
-    if ! ( set +u; source "$VENV/bin/activate"; source "$WS/install/local_setup.bash"
+    if ! ( set +u; source "$WS/setup.bash"; source "$WS/install/local_setup.bash"
            exec python -m sim_node.tools.warm_kernels ) > "$WS/log/warm-kernels.out" 2>&1 < /dev/null; then
         # not fatal: the nodes then compile what they need themselves (tried again next time)
         cat "$WS/log/warm-kernels.out" >&2

@@ -21,11 +21,12 @@ setup(
         'console_scripts': [
             'dynamics = sim_node.nodes.dynamics:main',
             'environment = sim_node.nodes.environment:main',
-            'magnetometer = sim_node.nodes.magnetometer:main',
-            'horizon_sensor = sim_node.nodes.horizon_sensor:main',
-            'star_tracker = sim_node.nodes.star_tracker:main',
-            'gyro = sim_node.nodes.gyro:main',
-            'wheel_tachometer = sim_node.nodes.wheel_tachometer:main',
+            'sensor_node = sim_node.nodes.sensor_node:main',
+            'magnetometer = sim_node.nodes.sensor_node:main_magnetometer',
+            'horizon_sensor = sim_node.nodes.sensor_node:main_horizon_sensor',
+            'star_tracker = sim_node.nodes.sensor_node:main_star_tracker',
+            'gyro = sim_node.nodes.sensor_node:main_gyro',
+            'wheel_tachometer = sim_node.nodes.sensor_node:main_wheel_tachometer',
         ],
     },
 )

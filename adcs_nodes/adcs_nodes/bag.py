@@ -13,10 +13,9 @@ here add what the analysis tools need:
 * :func:`flatten_message`, :func:`header_stamp_ns`, :func:`content_digest` -- the flat view used
   by the CSV export, the report and determinism checks.
 
-Time: the bag's log time of a message is its receive time in the recorder's clock and differs
-between runs of the same simulation. Every analysis tool uses the message's ``header.stamp``
-(the simulated time the value belongs to) and falls back to the log time only for types
-without a header.
+Time: a message's log time is its own stamp (:func:`stamp_offset`), an unstamped one's the
+latest ``/clock`` (recorder and plain engine alike). The analysis tools use ``header.stamp``
+and fall back to the log time only for types without a header.
 
 The module imports neither ``rclpy`` nor any generated message package.
 """
@@ -32,6 +31,8 @@ from typing import Any, Dict, Iterable, Iterator, List, Optional, Sequence, Tupl
 
 import numpy as np
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
+                                QosTime)
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -48,6 +49,23 @@ _STAMP_FIELD_TYPES = {
     'std_msgs/msg/Header': True,          # stamp inside the header
     'builtin_interfaces/msg/Time': False,  # the field itself is the stamp (rosgraph_msgs/Clock)
 }
+
+#: Topics the graph publishes latched (transient local): tf2's static broadcaster, the
+#: manager's status and the lockstep handshake. Every other topic is reliable and volatile.
+LATCHED_TOPICS = ('/tf_static', '/adcs/controller_status', '/lockstep/ready')
+_INFINITE = QosTime(9223372036, 854775807)      # rmw's "infinite", as the graph reports it
+
+
+def offered_qos(topic: str) -> List[Qos]:
+    """``offered_qos_profiles`` of a topic in a bag written without a graph (plain engine):
+    the graph's publisher QoS as the recorder stores it (``ros2 bag play`` replays a latched
+    topic latched). ``topic``: resolved name."""
+    latched = topic in LATCHED_TOPICS
+    return [Qos(history=QosHistory.UNKNOWN, depth=0, reliability=QosReliability.RELIABLE,
+                durability=QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
+                deadline=_INFINITE, lifespan=_INFINITE, liveliness=QosLiveliness.AUTOMATIC,
+                liveliness_lease_duration=_INFINITE, avoid_ros_namespace_conventions=False)]
+
 
 _PREFERRED_STORES = ('ros2_kilted', 'ros2_jazzy')
 
@@ -79,16 +97,8 @@ def _share_msg_dir(package: str) -> Optional[Path]:
 
 
 def adcs_msg_dir() -> Path:
-    """Directory with the ``adcs_msgs`` ``.msg`` files.
-
-    The installed share directory (ament index) wins; without an install the source tree next
-    to this package (``<repo>/adcs_msgs/msg``) is used.
-
-    Raises
-    ------
-    FileNotFoundError
-        If neither location holds ``.msg`` files.
-    """
+    """Directory of the ``adcs_msgs`` ``.msg`` files: the installed share directory, else the
+    source tree (``<repo>/adcs_msgs/msg``); ``FileNotFoundError`` if neither has them."""
     share = _share_msg_dir(ADCS_PACKAGE)
     if share is not None and any(share.glob('*.msg')):
         return share
@@ -100,17 +110,9 @@ def adcs_msg_dir() -> Path:
 
 
 def make_typestore() -> Typestore:
-    """Return a new rosbags typestore: standard ROS 2 types plus every ``adcs_msgs`` message.
-
-    The standard store is the one of ``$ROS_DISTRO`` when rosbags ships it, else Kilted (the
-    distribution of the PyPI wheels), else Jazzy. Its type hashes (RIHS01) equal those of the
-    installed interfaces, so bags written with it carry the same hashes as ``ros2 bag`` would.
-
-    Returns
-    -------
-    rosbags.typesys.store.Typestore
-        A fresh store; callers may register more types in it.
-    """
+    """A new rosbags typestore: the standard types of ``$ROS_DISTRO`` when rosbags ships it,
+    else Kilted (the PyPI wheels'), else Jazzy, plus every ``adcs_msgs`` message. Its RIHS01
+    hashes are the installed interfaces', as ``ros2 bag`` would write them."""
     store = get_typestore(_store_for_distro())
     types: Dict[str, Any] = {}
     for path in sorted(adcs_msg_dir().glob('*.msg')):
@@ -184,16 +186,40 @@ def stamp_kind(store: Typestore, msgtype: str) -> Optional[str]:
     return None
 
 
-def cdr_stamp_ns(raw: bytes) -> Optional[int]:
-    """Time stamp [ns] at the start of a serialised CDR message, or ``None`` if unreadable.
+def stamp_offset(store: Typestore, msgtype: str) -> Optional[int]:
+    """Byte offset of the stamp a CDR message of ``msgtype`` is logged at in a bag.
 
-    Valid for types where :func:`stamp_kind` is not ``None``: the payload after the 4-byte
-    encapsulation header starts with ``int32 sec, uint32 nanosec``.
+    Returns
+    -------
+    int or None
+        4 when :func:`stamp_kind` is not ``None`` (the stamp opens the payload); 8 when the
+        first field is a sequence of messages that open with a ``std_msgs/Header``
+        (``tf2_msgs/TFMessage``: the first element's ``header.stamp``, after the sequence
+        length); ``None`` otherwise.
     """
-    if len(raw) < 12:
+    if stamp_kind(store, msgtype) is not None:
+        return 4
+    fields = (store.fielddefs.get(msgtype) or (None, ()))[1]
+    if not fields:
         return None
-    fmt = '<iI' if raw[1] & 0x01 else '>iI'
-    sec, nanosec = struct.unpack_from(fmt, raw, 4)
+    node, arg = fields[0][1]
+    if getattr(node, 'name', '') != 'SEQUENCE' or getattr(arg[0][0], 'name', '') != 'NAME':
+        return None
+    return 8 if stamp_kind(store, arg[0][1]) == 'header' else None
+
+
+def cdr_stamp_ns(raw: bytes, offset: int = 4) -> Optional[int]:
+    """Time stamp [ns] at ``offset`` (:func:`stamp_offset`) of a serialised CDR message.
+
+    ``None`` if the message is too short, or (offset 8) its sequence is empty. The payload
+    after the 4-byte encapsulation header holds ``int32 sec, uint32 nanosec`` there.
+    """
+    if len(raw) < offset + 8:
+        return None
+    order = '<' if raw[1] & 0x01 else '>'
+    if offset == 8 and struct.unpack_from(order + 'I', raw, 4)[0] == 0:
+        return None
+    sec, nanosec = struct.unpack_from(order + 'iI', raw, offset)
     return sec * 1_000_000_000 + nanosec
 
 
@@ -255,28 +281,13 @@ MCAP_MAGIC = b'\x89MCAP0\r\n'
 
 
 def flush_writer(writer: Any, fsync: bool = False) -> bool:
-    """Write the pending MCAP chunk of an open rosbags ``Writer`` to the file now.
+    """Write the pending MCAP chunk of an open rosbags ``Writer`` (up to 1 MiB kept in memory)
+    and flush the file: in the page cache, it survives a killed process; ``fsync=True``: on
+    the disk, a machine crash. :func:`recover_mcap` reads a file cut after any complete record.
 
-    The rosbags MCAP writer keeps up to 1 MiB of messages in memory before it writes a chunk,
-    so a process killed with SIGKILL left a bag without any data. Closing the pending chunk
-    and flushing the file object puts every message written so far in the kernel's page cache
-    (it survives the death of the process); ``fsync=True`` also forces it to the disk (it then
-    survives a machine crash). A file cut after any complete record is read back by
-    :func:`recover_mcap` (``open_bag`` does it by itself).
-
-    Relies on the MCAP storage of rosbags 0.11 (``writer.storage.chunk``, ``close_chunk``,
-    ``bio``); with another storage it does nothing and returns ``False``.
-
-    Returns
-    -------
-    bool
-        Whether a chunk was written.
-
-    Raises
-    ------
-    OSError
-        From the file system, e.g. ``ENOSPC`` when the disk is full.
-    """
+    Relies on rosbags 0.11's MCAP storage (``storage.chunk``, ``close_chunk``, ``bio``); with
+    another storage a no-op. Returns whether a chunk was written; raises ``OSError`` from the
+    file system (``ENOSPC``: disk full)."""
     storage = getattr(writer, 'storage', None)
     chunk = getattr(storage, 'chunk', None)
     bio = getattr(storage, 'bio', None)
@@ -520,6 +531,43 @@ def _iterate(stack: ExitStack, reader: AnyReader, wanted: Optional[set],
         try:
             for conn, t_ns, raw in reader.messages(connections=conns):
                 yield conn.topic, t_ns, reader.deserialize(raw, conn.msgtype)
+        except Exception as exc:
+            raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
+
+
+def stamped_messages(bag_path: os.PathLike | str, topics: Iterable[str],
+                     untimed: Iterable[str] = (), decode: Iterable[str] = (),
+                     header_only: bool = False) -> Iterator[Tuple[str, int, bytes, Any]]:
+    """Yield ``(topic, stamp_ns, raw CDR bytes, message)`` of ``topics`` (those in the bag)
+    in recording order: ``stamp_ns`` the message's leading time stamp (``header.stamp``,
+    ``clock``; 0 for the ``untimed`` topics), ``message`` deserialised for the ``decode``
+    topics only (else None).
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        See :func:`open_bag`; ``ValueError`` also for a topic without a time stamp (not in
+        ``untimed``; ``header_only``: without a ``header.stamp``), an unreadable message or a
+        corrupt chunk.
+    """
+    untimed, decode = set(untimed), set(decode)
+    need = ('header',) if header_only else ('header', 'time')
+    with open_bag(bag_path) as reader:
+        conns = [c for c in reader.connections if c.topic in set(topics)]
+        for c in conns:
+            if c.topic not in untimed and stamp_kind(reader.typestore, c.msgtype) not in need:
+                raise ValueError(f'{c.topic} [{c.msgtype}] has no '
+                                 + ('header.stamp' if header_only else 'time stamp'))
+        try:
+            for conn, _, raw in reader.messages(connections=conns):
+                raw = bytes(raw)
+                stamp = 0 if conn.topic in untimed else cdr_stamp_ns(raw)
+                if stamp is None:
+                    raise ValueError(f'unreadable message on {conn.topic}')
+                yield conn.topic, stamp, raw, (reader.deserialize(raw, conn.msgtype)
+                                               if conn.topic in decode else None)
+        except ValueError:
+            raise
         except Exception as exc:
             raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
 

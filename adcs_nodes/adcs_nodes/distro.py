@@ -3,12 +3,9 @@
 ``ros_distro()``: ``$ROS_DISTRO`` when set (a sourced ROS 2 install sets it), else the
 distribution of the installed ``rclpy`` (the PyPI wheels set no ``ROS_DISTRO``): rclpy's major
 version is the distribution's (Humble 3, Iron 4, Jazzy 7, Kilted 9), ``'unknown'`` when
-neither is known.
-
-``stamp_distro(writer)``: the ``rosbags`` writer records ``ros_distro: rosbags`` in the bag's
-metadata (``metadata.yaml`` and the ``rosbag2`` metadata record inside the MCAP file, both
-written by ``Writer.close()``); called on an open writer just before ``close()``, it makes both
-carry the real distribution, as ``ros2 bag record`` does. Pure Python; no rclpy import.
+neither is known. ``close_writer(writer)``: the ``rosbags`` writer's ``close()``, which writes
+``ros_distro: rosbags`` in ``metadata.yaml`` and in the ``rosbag2`` metadata record of the MCAP
+file, with the real distribution in both, as ``ros2 bag record`` does. No rclpy import.
 """
 from __future__ import annotations
 
@@ -34,47 +31,22 @@ def ros_distro() -> str:
     return RCLPY_MAJOR_TO_DISTRO.get(major, 'unknown')
 
 
-def _replace(text: str, distro: str) -> str:
-    return _PATTERN.sub(lambda m: m.group(1) + distro, text)
-
-
-def stamp_distro(writer: Any, distro: str = '') -> None:
-    """Make ``writer.close()`` record ``distro`` (default :func:`ros_distro`) as the bag's
-    ``ros_distro``. Call once, right before ``close()``; a no-op on a closed writer."""
-    distro = distro or ros_distro()
-    storage = getattr(writer, 'storage', None)
-    if storage is None or not hasattr(storage, 'close'):
-        return
-    close_storage = storage.close
-
-    def close(version: int, text: str) -> None:
-        close_storage(version, _replace(text, distro))
-        meta = getattr(writer, 'metapath', None)
-        if meta is not None:      # written by Writer.close() after this returns
-            writer.__dict__.setdefault('_adcs_distro_fix', (meta, distro))
-
-    storage.close = close
-
-
-def fix_metadata_file(writer: Any) -> None:
-    """After ``close()``: rewrite ``metadata.yaml`` with the distribution chosen in
-    :func:`stamp_distro` (the writer writes it last, from the unpatched text)."""
-    meta, distro = writer.__dict__.pop('_adcs_distro_fix', (None, ''))
-    if meta is None or not os.path.isfile(meta):
-        return
-    with open(meta, encoding='utf-8') as fh:
-        text = fh.read()
-    new = _replace(text, distro)
-    if new != text:
-        tmp = f'{meta}.tmp'
-        with open(tmp, 'w', encoding='utf-8') as fh:
-            fh.write(new)
-        os.replace(tmp, meta)
-
-
 def close_writer(writer: Any, distro: str = '') -> None:
-    """``writer.close()`` with the real distribution in the bag's metadata (both copies).
-    Errors of ``close()`` propagate unchanged."""
-    stamp_distro(writer, distro)
+    """``writer.close()`` with ``distro`` (default :func:`ros_distro`) as the bag's
+    ``ros_distro`` in both copies of the metadata. Errors of ``close()`` propagate unchanged."""
+    distro = distro or ros_distro()
+
+    def fix(text: str) -> str:
+        return _PATTERN.sub(lambda m: m.group(1) + distro, text)
+
+    storage = writer.storage
+    close_storage = storage.close
+    storage.close = lambda version, text: close_storage(version, fix(text))  # the MCAP record
     writer.close()
-    fix_metadata_file(writer)
+    meta = str(writer.metapath)              # written by close() from the unpatched text
+    if os.path.isfile(meta):
+        with open(meta, encoding='utf-8') as fh:
+            text = fh.read()
+        with open(meta + '.tmp', 'w', encoding='utf-8') as fh:
+            fh.write(fix(text))
+        os.replace(meta + '.tmp', meta)

@@ -41,6 +41,11 @@ def _build_magnetic(p: Dict[str, Any], ctx: Dict[str, Any]):
         n_wheels=_n_wheels(ctx), inertia=ctx['inertia_kgm2'] if p['feedforward'] else None)
 
 
+def _magnetic_gains(p: Dict[str, Any]) -> None:
+    from adcs_nodes.core.control.magnetic import check_gains
+    check_gains(p['alpha_per_s'], p['k_Nms'], p['beta'] if p['beta'] > 0 else None)
+
+
 register(Entry(
     'controller', 'magnetic',
     'paper 000 magnetorquer laws to the orbital frame: three-axis (29)-(31), one-axis, '
@@ -59,7 +64,7 @@ register(Entry(
      Param('feedforward', 'bool', False, '-', 'beyond paper 000: add the gyroscopic and '
            'gravity-gradient torques of the estimate to M* (F1); false: the paper\'s law')),
     _build_magnetic, inputs=('estimate', 'target', 'magnetometer'),
-    actuators=('magnetorquer',)))
+    actuators=('magnetorquer',), check=_magnetic_gains))
 
 
 def _build_bdot(p: Dict[str, Any], ctx: Dict[str, Any]):
@@ -102,6 +107,14 @@ def _build_fuzzy(p: Dict[str, Any], ctx: Dict[str, Any]):
 
 
 _ASSUMED = 'ASSUMPTION (paper: figure only)'
+
+
+def _increasing(peaks):
+    if any(b <= a for a, b in zip(peaks, peaks[1:])):
+        raise ValueError(f'must be strictly increasing, got {peaks}')
+    return peaks
+
+
 register(Entry(
     'controller', 'fuzzy',
     'paper 003 fuzzy eigenaxis slew: Mamdani Table 1 (angle, rate) + Table 2 (gyroscopic '
@@ -119,21 +132,23 @@ register(Entry(
      Param('n_points', 'int', 501, '-', 'output grid points of the centroid', min=3,
            max=100001),
      Param('phi_peaks_deg', 'float[]', [0.0, 2.5, 10.0, 30.0, 90.0], 'deg',
-           f'term peaks of phi (Н, ОМ, М, С, Б); {_ASSUMED}', length=5, min=0.0, max=180.0),
+           f'term peaks of phi (Н, ОМ, М, С, Б); {_ASSUMED}', length=5, min=0.0, max=180.0,
+           check=_increasing),
      Param('dphi_peaks_deg_s', 'float[]', [-6.4, -4.8, -2.4, -0.8, 0.0, 0.8, 2.4, 4.8, 6.4],
-           'deg/s', f'term peaks of phi_dot (ОБ .. ПБ); {_ASSUMED}', length=9),
+           'deg/s', f'term peaks of phi_dot (ОБ .. ПБ); {_ASSUMED}', length=9, check=_increasing),
      Param('mk_peaks_Nm', 'float[]', [-1.0, -0.75, -0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0],
-           'N m', f'term peaks of M_k (ОБ .. ПБ); {_ASSUMED}', length=9),
+           'N m', f'term peaks of M_k (ОБ .. ПБ); {_ASSUMED}', length=9, check=_increasing),
      Param('mk_half_width_Nm', 'float', 0.25, 'N m', f'half width of the M_k triangles; '
            f'{_ASSUMED}', positive=True),
      Param('mk_gain', 'float', 3.7, '-', 'gain on the defuzzified M_k before the limit '
            '(ASSUMPTION: not in the paper)', positive=True),
      Param('g_peaks_deg_s', 'float[]', [-0.2, -0.1, 0.0, 0.1, 0.2], 'deg/s',
-           f'term peaks of |phidot_g| (ОБ, ОС, Н, ПС, ПБ); {_ASSUMED}', length=5),
+           f'term peaks of |phidot_g| (ОБ, ОС, Н, ПС, ПБ); {_ASSUMED}', length=5,
+           check=_increasing),
      Param('dg_peaks_deg_s2', 'float[]', [-0.2, -0.1, 0.0, 0.1, 0.2], 'deg/s^2',
-           f'term peaks of d|phidot_g|/dt (15); {_ASSUMED}', length=5),
+           f'term peaks of d|phidot_g|/dt (15); {_ASSUMED}', length=5, check=_increasing),
      Param('mgk_peaks_Nm', 'float[]', [-0.4, -0.2, 0.0, 0.2, 0.4], 'N m',
-           f'term peaks of M_gk; {_ASSUMED}', length=5),
+           f'term peaks of M_gk; {_ASSUMED}', length=5, check=_increasing),
      Param('mgk_half_width_Nm', 'float', 0.2, 'N m', f'half width of the M_gk triangles; '
            f'{_ASSUMED}', positive=True)),
     _build_fuzzy, inputs=('estimate', 'target'), actuators=('torque',)))
@@ -166,12 +181,15 @@ register(Entry(
     _build_reference_slew, inputs=('estimate', 'target'), actuators=('torque',)))
 
 
+def _nine_or_none(values):
+    if values and len(values) != 9:
+        raise ValueError(f'expected 9 values (row-major 3x3) or none, got {len(values)}')
+    return values
+
+
 def _build_mpi(p: Dict[str, Any], ctx: Dict[str, Any]):
     from adcs_nodes.core.control.mpi import MPIController
     inertia = p['model_inertia_kgm2']
-    if inertia and len(inertia) != 9:
-        raise ValueError(f'mpi model_inertia_kgm2: expected 9 values (row-major 3x3) or none, got '
-                         f'{len(inertia)}')
     inertia = np.reshape(inertia, (3, 3)) if inertia else ctx['inertia_kgm2']
     if not _n_wheels(ctx):
         raise ValueError('controller mpi needs reaction wheels (spacecraft.wheels)')
@@ -208,7 +226,7 @@ register(Entry(
            '(digest P6 study)'),
      Param('model_inertia_kgm2', 'float[]', [], 'kg m^2', "the controller's own inertia, 9 values "
            'row-major (paper 001: eq. (31), 5 % off the truth); empty: the onboard inertia of '
-           'the spacecraft')),
+           'the spacecraft', check=_nine_or_none)),
     # the applied command: the wheel check (components/controller.py, core/wheel_health.py)
     _build_mpi, inputs=('estimate', 'target', 'wheel_speeds', 'actuator_command'),
     actuators=('wheels',),

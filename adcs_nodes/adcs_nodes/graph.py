@@ -9,6 +9,7 @@ Pure Python; no rclpy.
 """
 from __future__ import annotations
 
+import copy
 import json
 import math
 from dataclasses import dataclass, field
@@ -18,8 +19,11 @@ import yaml
 
 from adcs_nodes import inputs as input_records
 from adcs_nodes import registry
-from adcs_nodes.core.orbit import MU_EARTH, R_EARTH
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.manager import AUTO_SEQUENCE
+from adcs_nodes.core.orbit import MU_EARTH, ORBIT, R_EARTH
 from adcs_nodes.scenario import default_safe
+from adcs_nodes.spec import CHAIN_TIMEOUT, HOLD, PROFILE, SCHEDULE
 
 
 @dataclass
@@ -94,8 +98,14 @@ def topic_type(topic: str) -> str:
     raise KeyError(topic)
 
 
+def _row_major(matrix) -> List[float]:
+    """A 3x3 matrix as 9 values, row-major (a ROS parameter has no nested lists)."""
+    return [v for row in matrix for v in (row if isinstance(row, list) else [row])]
+
+
 def _rad(values) -> List[float]:
-    return [math.radians(v) for v in values]
+    """Degrees to radians (what is not a number is passed on: the node refuses it)."""
+    return [math.radians(v) if type(v) in (int, float) else v for v in values]
 
 
 def _sensor_params(cfg: Dict[str, Any]) -> Dict[str, Any]:
@@ -106,28 +116,21 @@ def _sensor_params(cfg: Dict[str, Any]) -> Dict[str, Any]:
 def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
     est = sc['estimator']
     entry = registry.get('estimator', est['algorithm'])
-    inertia = [float(v) for row in sc['spacecraft']['inertia_kgm2'] for v in row]
+    inertia = _row_major(sc['spacecraft']['inertia_kgm2'])
     p: Dict[str, Any] = {
         'algorithm': est['algorithm'], 'period_s': est['period_s'], 'inertia_kgm2': inertia,
         'initial_q_orbit_body': est['initial_q_orbit_body_xyzw'],
         'initial_omega_body_orbit_body': _rad(est['initial_omega_body_orbit_body_deg_s']),
         **{prm.name: est[prm.name] for prm in entry.params}}
     p.update(_input_periods(sc, entry.inputs))
-    flatten('onboard_orbit', est['onboard_orbit'], p)
-    flatten('onboard_field', est['onboard_field'], p)
+    p.update(_onboard(est))
     return p
 
 
-#: Wall-clock wait for a missing input, in units of ``timing.timeout_s``, by depth in the
-#: frame's chain (estimator -> controllers -> manager -> dynamics): a node waits longer than
-#: its producers, so a missing input upstream times out there first and the consumers get
-#: the fallback instead of timing out themselves at the same moment.
-CHAIN_TIMEOUT = {'estimator': 1.0, 'controller': 2.0, 'manager': 3.0, 'dynamics': 4.0,
-                 # a sensor waits for the truth of the next frame, which comes only once the
-                 # world has stepped: after the clock master's own wait (a silent sensor made
-                 # the estimator, then the world, wait; a sensor that timed out first used an
-                 # old truth and broke determinism)
-                 'sensor': 5.0}
+def _onboard(est: Dict[str, Any]) -> Dict[str, Any]:
+    """``onboard_orbit.*`` and ``onboard_field.*``: the flight software's own models."""
+    return {**ORBIT.flatten(est['onboard_orbit'], 'onboard_orbit'),
+            **FIELD.flatten(est['onboard_field'], 'onboard_field')}
 
 
 def flatten(prefix: str, data: Dict[str, Any], out: Dict[str, Any]) -> None:
@@ -142,50 +145,23 @@ def flatten(prefix: str, data: Dict[str, Any], out: Dict[str, Any]) -> None:
 
 def _common(sc: Dict[str, Any]) -> Dict[str, Any]:
     t = sc['timing']
-    return {'epoch': sc['epoch'], 'seed': int(sc['seed']), 'frame_period_s': t['frame_s'],
+    return {'epoch': sc['epoch'], 'seed': sc['seed'], 'frame_period_s': t['frame_s'],
             'timeout_s': t['timeout_s']}
 
 
 def _spacecraft_params(sc: Dict[str, Any]) -> Dict[str, Any]:
-    s = sc['spacecraft']
-    p: Dict[str, Any] = {
-        'inertia_kgm2': [float(v) for row in s['inertia_kgm2'] for v in row],
-        'gravity_gradient': bool(s['gravity_gradient']),
-        'constant_torque_Nm': s['disturbance']['constant_torque_Nm'],
-        'random_std_Nm': s['disturbance']['random_std_Nm'],
-        'random_period_s': s['disturbance']['random_period_s'],
-    }
-    dist = s['disturbance']
-    for key in ('aerodynamic_Nm', 'solar_pressure_Nm', 'synthetic_gravity_gradient_Nm',
-                'residual_magnetic_Nm', 'unloading_Nm'):
-        if any(dist.get(key, [])):
-            p[key] = [float(v) for v in dist[key]]
-    if any(k in p for k in ('aerodynamic_Nm', 'solar_pressure_Nm',
-                            'synthetic_gravity_gradient_Nm')):
-        p['harmonic_period_s'] = float(dist.get('harmonic_period_s')
-                                       or orbital_period_s(sc['orbit']))
-    if 'unloading_Nm' in p:
-        for key in ('unloading_period_s', 'unloading_duration_s', 'unloading_start_s'):
-            p[key] = float(dist[key])
-    if s.get('wheel_error_std_Nms', 0.0) > 0.0:
-        p['wheel_error_std_Nms'] = float(s['wheel_error_std_Nms'])
-        p['wheel_error_period_s'] = float(
-            s.get('wheel_error_period_s') or sc.get('controllers', {}).get('period_s')
-            or sc['timing']['frame_s'])
-    if 'flexible' in s:
-        for key in ('model', 'wings', 'damping'):
-            p[f'flexible.{key}'] = s['flexible'][key]
-    if 'magnetorquer' in s:
-        p['max_dipole_Am2'] = s['magnetorquer']['max_dipole_Am2']
-    wheels = s.get('wheels') or []
-    if wheels:
-        p['wheel_names'] = [w['name'] for w in wheels]
-        p['wheel_axes'] = [float(c) for w in wheels for c in w['axis']]
-        p['wheel_max_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
-        p['wheel_max_momentum_Nms'] = [w['max_momentum_Nms'] for w in wheels]
-        p['wheel_inertia_kgm2'] = [w['inertia_kgm2'] for w in wheels]
-        p['wheel_h0_Nms'] = [w['h0_Nms'] for w in wheels]
-    return {f'spacecraft.{k}': v for k, v in p.items()}
+    """``spacecraft.*`` of the dynamics, with the defaults that depend on other sections
+    filled in (the harmonic torques' period: the orbit's; the wheel error's: the control
+    period, else the frame)."""
+    craft = copy.deepcopy(sc['spacecraft'])
+    dist = craft['disturbance']
+    if any(any(dist[k]) for k in ('aerodynamic_Nm', 'solar_pressure_Nm',
+                                  'synthetic_gravity_gradient_Nm')):
+        dist.setdefault('harmonic_period_s', orbital_period_s(sc['orbit']))
+    if craft['wheel_error_std_Nms'] > 0.0:
+        craft.setdefault('wheel_error_period_s', (sc.get('controllers') or {}).get(
+            'period_s') or sc['timing']['frame_s'])
+    return registry.section('spacecraft').flatten(craft, 'spacecraft')
 
 
 def orbital_period_s(orbit: Dict[str, Any]) -> float:
@@ -197,20 +173,28 @@ def orbital_period_s(orbit: Dict[str, Any]) -> float:
     return 86400.0 / float(orbit['line2'][52:63])        # mean motion [rev/day]
 
 
-def _initial_params(sc: Dict[str, Any]) -> Dict[str, Any]:
-    init = sc['initial']
-    p: Dict[str, Any] = {}
-    if 'q_orbit_body_wxyz' in init:
-        w, x, y, z = init['q_orbit_body_wxyz']
-        p['q_orbit_body'] = [x, y, z, w]
-    elif 'q_orbit_body_xyzw' in init:
-        p['q_orbit_body'] = list(init['q_orbit_body_xyzw'])
-    if 'omega_body_eci_body_deg_s' in init:
-        p['omega_body_eci_body'] = [math.radians(v) for v in init['omega_body_eci_body_deg_s']]
-    elif 'omega_body_orbit_body_deg_s' in init:
-        p['omega_body_orbit_body'] = [math.radians(v)
-                                      for v in init['omega_body_orbit_body_deg_s']]
-    return {f'initial.{k}': v for k, v in p.items()}
+def _world_nodes(sc: Dict[str, Any], common: Dict[str, Any], rate_factor: float,
+                 max_rate: float) -> List[NodeSpec]:
+    """The environment and the dynamics (the clock master; it announces every fault)."""
+    dynamics = {**common, 'substeps': sc['timing']['substeps'],
+                # the clock master waits longest, so a fallback upstream (manager -> safe
+                # controller after timeout_s) delivers its command before the master gives up
+                'timeout_factor': CHAIN_TIMEOUT['dynamics'],
+                'rate_factor': float(rate_factor), 'lockstep_max_rate': float(max_rate),
+                **_spacecraft_params(sc),
+                **registry.section('initial').flatten(sc['initial'], 'initial')}
+    if sc.get('faults'):
+        dynamics['faults'] = json.dumps(sc['faults'], sort_keys=True)
+    return [NodeSpec('environment', 'sim_node', 'environment', 'sim_node.nodes.environment',
+                     'EnvironmentNode', {**common, **ORBIT.flatten(sc['orbit'], 'orbit'),
+                                         **FIELD.flatten(sc['field'], 'field')},
+                     publishes=['sim/environment', '/tf'], subscribes=['/clock']),
+            NodeSpec('dynamics', 'sim_node', 'dynamics', 'sim_node.nodes.dynamics',
+                     'DynamicsNode', dynamics, publishes=['/clock', 'sim/state', 'sim/wheels',
+                                                          '/tf']
+                     + (['sim/appendages'] if 'flexible' in sc['spacecraft'] else [])
+                     + ['sim/faults'],     # also live faults (adcs fault): always recorded
+                     subscribes=['sim/environment', 'adcs/actuator_command'])]
 
 
 def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
@@ -221,34 +205,12 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
     unpaced)."""
     common = _common(sc)
     common['real_time'] = bool(real_time)
-    common['duration_s'] = float(duration_s)   # every node knows its last frame
-    env_params = dict(common)
-    flatten('orbit', sc['orbit'], env_params)
-    flatten('field', sc['field'], env_params)
-    nodes = [
-        NodeSpec('environment', 'sim_node', 'environment', 'sim_node.nodes.environment',
-                 'EnvironmentNode', env_params, publishes=['sim/environment', '/tf'],
-                 subscribes=['/clock']),
-        NodeSpec('dynamics', 'sim_node', 'dynamics', 'sim_node.nodes.dynamics', 'DynamicsNode',
-                 {**common, 'duration_s': float(duration_s),
-                  # the clock master waits longest, so a fallback upstream (manager -> safe
-                  # controller after timeout_s) delivers its command before the master gives up
-                  'timeout_s': CHAIN_TIMEOUT['dynamics'] * common['timeout_s'],
-                  'substeps': int(sc['timing']['substeps']),
-                  'rate_factor': float(rate_factor), 'lockstep_max_rate': float(max_rate),
-                  **_spacecraft_params(sc),
-                  **_initial_params(sc)},
-                 publishes=['/clock', 'sim/state', 'sim/wheels', '/tf']
-                 + (['sim/appendages'] if 'flexible' in sc['spacecraft'] else [])
-                 + (['sim/faults'] if sc.get('faults') else []),
-                 subscribes=['sim/environment', 'adcs/actuator_command']),
-    ]
-    if sc.get('faults'):      # the world announces every fault; the actuators' are its own
-        nodes[1].params['faults'] = json.dumps(sc['faults'], sort_keys=True)
+    common['duration_s'] = duration_s          # every node knows its last frame
+    nodes = _world_nodes(sc, common, rate_factor, max_rate)
     flight = {**common, 'timing_mode': 'lockstep'}
     # nodes that build registry components load the scenario's plugins too
     # (an empty list has no type in a ROS parameter file)
-    plugins = {'plugins': list(sc['plugins'])} if sc.get('plugins') else {}
+    plugins = {'plugins': sc['plugins']} if sc.get('plugins') else {}
     for key, cfg in sc['sensors'].items():
         if cfg.get('external'):
             continue       # a real driver publishes this topic (the launcher says so)
@@ -258,8 +220,8 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         mine = [f for f in sc.get('faults', []) if f['target'] == key
                 and 'sensor' in registry.get('fault', f['kind']).targets]
         nodes.append(NodeSpec(key, package, module.rsplit('.', 1)[1], module, cls,
-                              {**common, **_sensor_params(cfg),
-                               'timeout_s': CHAIN_TIMEOUT['sensor'] * common['timeout_s'],
+                              {**common, **plugins, **_sensor_params(cfg),
+                               'timeout_factor': CHAIN_TIMEOUT['sensor'],
                                **({'faults': json.dumps(mine, sort_keys=True)} if mine else {})},
                               publishes=[topic, '/tf_static'], subscribes=['/clock'] + inputs))
     if 'estimator' in sc:
@@ -346,11 +308,11 @@ def _spacecraft_context(sc: Dict[str, Any]) -> Dict[str, Any]:
     craft = sc['spacecraft']
     wheels = craft.get('wheels') or []
     p: Dict[str, Any] = {
-        'inertia_kgm2': [float(v) for row in craft['inertia_kgm2'] for v in row],
-        'max_dipole_Am2': list(craft['magnetorquer']['max_dipole_Am2'])
+        'inertia_kgm2': _row_major(craft['inertia_kgm2']),
+        'max_dipole_Am2': craft['magnetorquer']['max_dipole_Am2']
         if 'magnetorquer' in craft else [0.0, 0.0, 0.0]}    # zero: no magnetorquer
     if wheels:
-        p['wheel_axes_body'] = [float(c) for w in wheels for c in w['axis']]
+        p['wheel_axes_body'] = [c for w in wheels for c in w['axis']]
         p['wheel_max_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
         p['wheel_max_momentum_Nms'] = [w['max_momentum_Nms'] for w in wheels]
         p['wheel_inertia_kgm2'] = [w['inertia_kgm2'] for w in wheels]
@@ -360,19 +322,11 @@ def _spacecraft_context(sc: Dict[str, Any]) -> Dict[str, Any]:
 def _guidance_node(sc: Dict[str, Any], flight: Dict[str, Any]) -> NodeSpec:
     """The guidance node: the scenario's profile (default: hold the orbital frame)."""
     g = sc.get('guidance') or {}
-    prof = g.get('profile') or [{'t_s': 0.0, 'type': 'hold', 'q_xyzw': [0.0, 0.0, 0.0, 1.0],
-                                 'duration_s': 0.0, 'axis_body': [0.0, 0.0, 1.0],
-                                 'amplitude_deg': 0.0, 'period_s': 0.0}]
-    params = {**flight, 'period_s': g.get('period_s') or sc['controllers']['period_s'],
+    period = g.get('period_s')
+    params = {**flight, 'period_s': sc['controllers']['period_s'] if period is None else period,
               'frame': g.get('frame', 'orbit'),
               'controllers': [k for k in sc['controllers'] if k != 'period_s'],
-              'profile_t_s': [e['t_s'] for e in prof],
-              'profile_type': [e['type'] for e in prof],
-              'profile_q_xyzw': [c for e in prof for c in e['q_xyzw']],
-              'profile_duration_s': [e['duration_s'] for e in prof],
-              'profile_axis_body': [float(c) for e in prof for c in e['axis_body']],
-              'profile_amplitude_deg': [e['amplitude_deg'] for e in prof],
-              'profile_period_s': [e['period_s'] for e in prof]}
+              **PROFILE.to_columns(g.get('profile') or HOLD, 'profile_')}
     if g.get('euler312_profile'):
         params['euler312_profile'] = json.dumps(g['euler312_profile'])
     return NodeSpec('guidance', 'adcs_nodes', 'guidance', 'adcs_nodes.nodes.guidance',
@@ -398,11 +352,10 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
         params = {**shared, **plugins, 'controller': name, **ctrl[name],
                   **_mounts(sc, entry.inputs),
                   **_sample_timing(sc, entry.inputs, flight['real_time']),
-                  'timeout_s': CHAIN_TIMEOUT['controller'] * flight['timeout_s']}
+                  'timeout_factor': CHAIN_TIMEOUT['controller']}
         params.update(_input_periods(sc, entry.inputs))
         if {'estimate', 'magnetometer'} <= set(entry.inputs):
-            flatten('onboard_orbit', sc['estimator']['onboard_orbit'], params)
-            flatten('onboard_field', sc['estimator']['onboard_field'], params)
+            params.update(_onboard(sc['estimator']))
         subs = ['/clock'] + [input_records.get(i).topic for i in entry.inputs]
         if any(input_records.get(i).mounted for i in entry.inputs):
             subs.append('/tf_static')
@@ -415,7 +368,7 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     watch_estimate = est_period > 0 and (users or 'auto' in man)
     mparams: Dict[str, Any] = {
         **flight, 'controllers': names, 'safe': man['safe'], 'initial': man['initial'],
-        'timeout_s': CHAIN_TIMEOUT['manager'] * flight['timeout_s'],
+        'timeout_factor': CHAIN_TIMEOUT['manager'],
         'period_s': ctrl['period_s'], 'controller_period_s': ctrl['period_s'],
         # the manager watches the estimate: stale -> the safe controller (which needs none)
         'estimator_period_s': est_period if watch_estimate else 0.0,
@@ -424,18 +377,17 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
         'stale_after_s': man['stale_after_s'] or (1.5 * ctrl['period_s'] if flight['real_time']
                                                   else 0.0),
         'max_dipole_Am2': limits,
-        'max_torque_Nm': list(sc['spacecraft']['ideal_torque']['max_torque_Nm'])
+        'max_torque_Nm': sc['spacecraft']['ideal_torque']['max_torque_Nm']
         if 'ideal_torque' in sc['spacecraft'] else [0.0, 0.0, 0.0]}
     if wheels:
         mparams['max_wheel_torque_Nm'] = [w['max_torque_Nm'] for w in wheels]
         mparams['wheel_names'] = [w['name'] for w in wheels]
     if man.get('fallback'):
-        mparams['fallback'] = list(man['fallback'])
+        mparams['fallback'] = man['fallback']
     if man['schedule']:
-        mparams['schedule_t_s'] = [e['t_s'] for e in man['schedule']]
-        mparams['schedule_controller'] = [e['controller'] for e in man['schedule']]
+        mparams.update(SCHEDULE.to_columns(man['schedule'], 'schedule_'))
     if 'auto' in man:
-        flatten('auto', man['auto'], mparams)
+        mparams.update(AUTO_SEQUENCE.flatten(man['auto'], 'auto'))
     subs = ['/clock'] + [f'adcs/controllers/{n}/command' for n in names]
     if watch_estimate:
         subs.append('adcs/attitude_estimate')
@@ -499,13 +451,8 @@ class _NoAliasDumper(yaml.SafeDumper):
 
 
 def params_file_text(nodes: List[NodeSpec]) -> str:
-    """ROS 2 parameter file (``--params-file``) for every node of the graph.
-
-    An empty list is left out: it has no type in a parameter file, and rclpy refuses to
-    declare a typed array from it (``PARAMETER_NOT_SET``: the mpi controller's unset
-    ``model_inertia_kgm2`` failed every one-process-per-node run of demo_mission). The node
-    then declares the parameter's default, which is the empty list wherever an empty list is
-    a valid value (the scenario checks refuse it elsewhere)."""
+    """ROS 2 parameter file (``--params-file``) for every node of the graph (an empty list,
+    untyped in a parameter file, is left out: the node's default applies)."""
     doc = {f'/{n.name}': {'ros__parameters': _nest({k: v for k, v in n.params.items()
                                                     if not (isinstance(v, list) and not v)})}
            for n in nodes}

@@ -2,14 +2,14 @@
 as one record each (DESIGN section 6, "one engine").
 
 An :class:`Input` names the input (the registry's word, e.g. ``'gyro'``), the key under which
-a component finds its message in a frame, the topic and message type, the simulated sensor
-that provides it (its scenario section under ``sensors:``), the node parameter that holds the
-producer's period, whether it is awaited for the frame or taken from the previous producer
-frame, and whether its samples are rotated into body axes by the sensor mount from
-``/tf_static``. Everything that wires inputs iterates these records: the graph builder, the
-scenario validator, the estimator and controller nodes and components, and the FrameLoop.
-The converters from message to core types are the components' (they differ in what a
-rejection costs: the estimator counts it, a controller reads nothing).
+a component finds its sample in a frame, the topic and message type, the converter between
+the message and the core sample (:mod:`adcs_nodes.msgs.convert`; a dotted reference,
+resolved on first use), the simulated sensor that provides it (its scenario section under
+``sensors:``), the node parameter that holds the producer's period, whether it is awaited for
+the frame or taken from the previous producer frame, and whether its samples are rotated
+into body axes by the sensor mount from ``/tf_static``. Everything that wires inputs
+iterates these records: the graph builder, the scenario validator, the nodes, the components
+and the FrameLoop. A plugin adds a kind with :func:`register`.
 
 Pure Python: no rclpy, no message import.
 """
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
-from typing import Dict, Optional, Tuple
+from typing import Any, Dict, Optional, Tuple
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,8 @@ class Input:
         Node parameter with the producer's period [s].
     default_period_s : float
         That parameter's default (a node started alone).
+    convert : str
+        ``'module:NAME'`` of its :class:`adcs_nodes.msgs.convert.Converter`.
     kind : str
         ``'frame'`` (awaited with the frame's stamp when due) or ``'previous'`` (exactly the
         producer's message of its last frame before ``t``: the estimator's applied command).
@@ -54,6 +56,7 @@ class Input:
     sensor: Optional[str]
     period_param: str
     default_period_s: float
+    convert: str
     kind: str = 'frame'
     mounted: bool = False
 
@@ -62,30 +65,77 @@ class Input:
         pkg, _, name = self.msg_type.split('/')
         return getattr(importlib.import_module(f'{pkg}.msg'), name)
 
+    def converter(self) -> Any:
+        """Its converter (``to_msg(sample, epoch_ns)``, ``to_core(msg, epoch_ns)``)."""
+        return _resolve(self.convert)
+
+
+def _resolve(ref: str) -> Any:
+    got = _RESOLVED.get(ref)
+    if got is None:
+        module, _, name = ref.partition(':')
+        try:
+            got = _RESOLVED[ref] = getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError, ValueError) as exc:
+            raise ValueError(f'converter {ref!r} cannot be loaded: {exc}') from None
+    return got
+
+
+_RESOLVED: Dict[str, Any] = {}
+_CONVERT = 'adcs_nodes.msgs.convert:'
+
 
 INPUTS: Tuple[Input, ...] = (
     Input('estimate', 'est', 'adcs/attitude_estimate', 'adcs_msgs/msg/AttitudeState', None,
-          'estimator_period_s', 2.0),
+          'estimator_period_s', 2.0, _CONVERT + 'ATTITUDE_STATE'),
     Input('target', 'target', 'adcs/attitude_target', 'adcs_msgs/msg/AttitudeTarget', None,
-          'target_period_s', 2.0),
+          'target_period_s', 2.0, _CONVERT + 'TARGET'),
     Input('magnetometer', 'mag', 'sensors/magnetometer', 'sensor_msgs/msg/MagneticField',
-          'magnetometer', 'magnetometer_period_s', 10.0, mounted=True),
-    Input('wheel_speeds', 'wheels', 'sensors/wheels', 'sensor_msgs/msg/JointState',
-          'wheel_tachometer', 'tachometer_period_s', 1.0),
-    Input('horizon', 'horizon', 'sensors/horizon', 'adcs_msgs/msg/HorizonSensor',
-          'horizon_sensor', 'horizon_period_s', 1.0, mounted=True),
-    Input('star_tracker', 'star', 'sensors/star_tracker', 'sensor_msgs/msg/Imu',
-          'star_tracker', 'star_tracker_period_s', 1.0, mounted=True),
-    Input('gyro', 'gyro', 'sensors/gyro', 'sensor_msgs/msg/Imu', 'gyro', 'gyro_period_s', 1.0,
+          'magnetometer', 'magnetometer_period_s', 10.0, _CONVERT + 'MAGNETOMETER',
           mounted=True),
+    Input('wheel_speeds', 'wheels', 'sensors/wheels', 'sensor_msgs/msg/JointState',
+          'wheel_tachometer', 'tachometer_period_s', 1.0, _CONVERT + 'WHEEL_SPEEDS'),
+    Input('horizon', 'horizon', 'sensors/horizon', 'adcs_msgs/msg/HorizonSensor',
+          'horizon_sensor', 'horizon_period_s', 1.0, _CONVERT + 'HORIZON', mounted=True),
+    Input('star_tracker', 'star', 'sensors/star_tracker', 'sensor_msgs/msg/Imu',
+          'star_tracker', 'star_tracker_period_s', 1.0, _CONVERT + 'STAR_TRACKER',
+          mounted=True),
+    Input('gyro', 'gyro', 'sensors/gyro', 'sensor_msgs/msg/Imu', 'gyro', 'gyro_period_s', 1.0,
+          _CONVERT + 'GYRO', mounted=True),
     Input('actuator_command', 'cmd', 'adcs/actuator_command', 'adcs_msgs/msg/ActuatorCommand',
-          None, 'command_period_s', 0.0, kind='previous'),
+          None, 'command_period_s', 0.0, _CONVERT + 'COMMAND', kind='previous'),
 )
 
-#: The records by registry name.
+#: The records by registry name (built-ins, then the plugins' :func:`register`).
 BY_NAME: Dict[str, Input] = {i.name: i for i in INPUTS}
-#: Registry names, in order.
+#: Built-in registry names, in order.
 NAMES: Tuple[str, ...] = tuple(BY_NAME)
+
+
+def register(record: Input) -> Input:
+    """Add a plugin's input kind (the same name twice: an error unless identical)."""
+    have = BY_NAME.get(record.name)
+    if have is not None and have != record:
+        raise ValueError(f'input {record.name!r} is registered twice')
+    clash = [i.name for i in BY_NAME.values() if i.name != record.name
+             and (i.key == record.key or i.topic == record.topic)]
+    if clash:
+        raise ValueError(f'input {record.name!r}: key or topic of {clash[0]!r}')
+    BY_NAME[record.name] = record
+    return record
+
+
+def converter(topic: str) -> Any:
+    """The converter of ``topic``: its input record's, else the message layer's
+    (:func:`adcs_nodes.msgs.convert.for_topic`); ``KeyError`` for an unknown topic."""
+    name = topic.lstrip('/') if topic != '/clock' else topic
+    for rec in BY_NAME.values():
+        if rec.topic == name:
+            return rec.converter()
+    got = _resolve(_CONVERT + 'for_topic')(name)
+    if got is None:
+        raise KeyError(topic)
+    return got
 
 
 def get(name: str) -> Input:
@@ -93,7 +143,7 @@ def get(name: str) -> Input:
     try:
         return BY_NAME[name]
     except KeyError:
-        raise ValueError(f'unknown input {name!r}; known: {", ".join(NAMES)}') from None
+        raise ValueError(f'unknown input {name!r}; known: {", ".join(BY_NAME)}') from None
 
 
 def period_params(names) -> Tuple:

@@ -1,27 +1,17 @@
-"""The registry: every controller, estimator algorithm and sensor model, declared once.
+"""The registry: every controller, estimator algorithm, sensor model and fault kind, declared
+once as an :class:`Entry` (name, core class, :class:`Param` specs, inputs, actuators), and the
+world's scenario sections (:func:`register_section`). The node declarations
+(:mod:`adcs_nodes.nodes.params`), the scenario schema (:mod:`adcs_nodes.scenario`), the graph
+(:mod:`adcs_nodes.graph`), ``adcs list`` and ``adcs schema`` are generated from them (compare
+ros2_controllers' generated parameters and pluginlib registration).
 
-An :class:`Entry` names a component, its core class, a typed parameter spec (:class:`Param`:
-type, default, unit, range or choices, description, read-only), the inputs it needs and the
-actuators it commands. Everything else is generated from it, with no per-name code anywhere
-else (compare ros2_controllers' generated parameters and pluginlib registration):
-
-* node parameter declarations with ``ParameterDescriptor``s, unknown-parameter refusal and the
-  run-time set-parameters validation (:mod:`adcs_nodes.nodes.params`);
-* the scenario schema, its validation and ``docs/scenarios.md`` (:mod:`adcs_nodes.scenario`);
-* the graph builder's nodes and topics (:mod:`adcs_nodes.graph`);
-* ``adcs list`` and ``adcs schema``.
-
-Built-in entries live in :mod:`adcs_nodes.entries` (controllers, estimators) and
-``sim_node.entries`` (sensor models; loaded when the simulator is installed, the flight
-software never imports it). More come from plugins: a module or ``.py`` file named in a
-scenario's ``plugins`` list (or the node parameter ``plugins``), or an installed package's
-entry point in group ``adcs.registry``. A plugin module calls :func:`register`.
-
-Pure Python; no rclpy.
+Built-in entries: :mod:`adcs_nodes.entries` and ``sim_node.entries`` (loaded when the simulator
+is installed; the flight software never imports it). Plugins: a module or ``.py`` file named
+in a scenario's ``plugins`` (or the node parameter ``plugins``), or an entry point in group
+``adcs.registry``; a plugin module calls :func:`register`. Pure Python; no rclpy.
 """
 from __future__ import annotations
 
-import difflib
 import importlib
 import importlib.util
 import os
@@ -30,7 +20,8 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 
 from adcs_nodes import inputs as _inputs
-from adcs_nodes.spec import TYPES, Param, short, unknown_message  # noqa: F401 (plugins)
+from adcs_nodes.spec import (TYPES, Param, Section, SpecError, did_you_mean,  # noqa: F401
+                             short, unknown_message)
 
 KINDS = ('controller', 'estimator', 'sensor', 'fault')
 
@@ -71,6 +62,9 @@ class Entry:
         Scenario sections it needs besides its inputs, e.g. ``'spacecraft.wheels'``.
     targets : tuple of str
         Faults: what it may strike (``'sensor'``, ``'wheel'``, ``'magnetorquer'``).
+    check : callable or None
+        ``check(values)``: a rule across its own parameters (``ValueError``), checked
+        wherever they are validated (the scenario, the node, the plain engine's build).
     """
 
     kind: str
@@ -85,11 +79,12 @@ class Entry:
     requires: Tuple[str, ...] = ()
     targets: Tuple[str, ...] = ()
     origin: str = field(default='', compare=False)
+    check: Optional[Callable[[Dict[str, Any]], Any]] = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f'entry {self.name}: kind must be one of {KINDS}')
-        bad = [i for i in self.inputs if i not in INPUTS]
+        bad = [i for i in self.inputs if i not in _inputs.BY_NAME]
         bad += [a for a in self.actuators if a not in ACTUATORS]
         if bad:
             raise ValueError(f'entry {self.name}: unknown inputs/actuators {bad}')
@@ -118,11 +113,22 @@ class Entry:
         out = self.defaults()
         for key, value in given.items():
             out[key] = self.param(key).validate(value)
+        if self.check is not None:
+            self.check(out)
         return out
+
+    def section(self) -> Section:
+        """Its parameters as an optional scenario section (``controllers.<name>``, ...)."""
+        return Section(self.name, self.params, self.description, optional=True,
+                       check=self.check)
 
 
 # ---------------------------------------------------------------------- the registry
 _ENTRIES: Dict[str, Dict[str, Entry]] = {k: {} for k in KINDS}
+#: Scenario sections of the simulated world (``spacecraft``, ``initial``): registered by
+#: ``sim_node.entries``, so the scenario schema has them without the flight software
+#: importing the simulator.
+_SECTIONS: Dict[str, Section] = {}
 _LOADED: List[str] = []
 #: Modules with the built-in entries; a missing optional one (the simulator) is skipped.
 BUILTIN = ('adcs_nodes.entries', 'sim_node.entries')
@@ -137,6 +143,21 @@ def register(entry: Entry) -> Entry:
                          f'({have.origin or have.core} and {entry.origin or entry.core})')
     _ENTRIES[entry.kind][entry.name] = entry
     return entry
+
+
+def register_section(section: Section) -> Section:
+    """Add a world section to the scenario schema (the same name twice: the last one)."""
+    _SECTIONS[section.name] = section
+    return section
+
+
+def section(name: str) -> Section:
+    """The registered world section ``name`` (``ValueError`` if the simulator, which
+    registers it, is not installed)."""
+    _load_builtin()
+    if name not in _SECTIONS:
+        raise ValueError(f'no section {name!r} is registered (is sim_node installed?)')
+    return _SECTIONS[name]
 
 
 def _load_builtin() -> None:
@@ -201,8 +222,6 @@ def get(kind: str, name: str) -> Entry:
     """The entry ``kind``/``name``; ``ValueError`` with a did-you-mean if unknown."""
     known = entries(kind)
     if name not in known:
-        near = difflib.get_close_matches(str(name), list(known), n=1)
-        hint = f' (did you mean {near[0]!r}?)' if near else ''
-        raise ValueError(f'unknown {kind} {short(name, 60)}{hint}; known: '
+        raise ValueError(f'unknown {kind} {short(name, 60)}{did_you_mean(name, known)}; known: '
                          f'{", ".join(known)}')
     return known[name]

@@ -1,274 +1,148 @@
-"""Scenario files: load, validate (unknown keys rejected, errors name the key and line).
+"""Scenario files: read (YAML with line numbers, size and alias guards, ``--set`` overrides)
+and validate.
 
-A scenario is a YAML mapping. Its schema is :data:`SCHEMA` below: every key, its type, its
-default and a one-line meaning. ``adcs list`` prints the scenarios, ``docs/scenarios.md``
-documents the keys. Sections whose allowed keys depend on a selector (``orbit.type``,
-``field.model``) are checked against the keys of the selected variant.
+The schema (:func:`schema`) is generated from the specs of the values (:mod:`adcs_nodes.core.
+spec`), each declared beside its consumer: orbit (``core/orbit.py``), field
+(``core/geomag.py``), spacecraft and initial state (``sim_node/models/spacecraft_config.py``,
+registered by the simulator), timing, guidance and schedule (:mod:`adcs_nodes.spec`), the
+automatic sequence (``core/manager.py``), sensors, estimators, controllers and fault kinds (their
+registry entries). Written here are only the cross-field checks.
 
 Pure Python + PyYAML; no rclpy.
 """
 from __future__ import annotations
 
-import datetime
 import copy
-import difflib
-import math
+import datetime
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import replace
 from typing import Any, Dict, List, Optional, Tuple
 
+import numpy as np
 import yaml
 
 from adcs_nodes import inputs as _inputs
 from adcs_nodes import registry
-from adcs_nodes.registry import Param
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.guidance import FRAMES
+from adcs_nodes.core.lockstep import seconds_to_ns
+from adcs_nodes.core.manager import AUTO_SEQUENCE, AutoSequence
+from adcs_nodes.core.orbit import ORBIT
+from adcs_nodes.spec import (EPOCH, PROFILE, REQUIRED, SCHEDULE, SEED, TIMING, Param,
+                             Section, SpecError, iso_time, plain, short)
 
 
 class ScenarioError(ValueError):
     """A scenario file is malformed; the message names the file, line and key."""
 
 
-@dataclass(frozen=True)
-class F:
-    """Schema leaf: expected type, default (``REQUIRED`` if none) and meaning."""
-
-    kind: str
-    default: Any
-    doc: str
-    choices: Tuple[str, ...] = ()
-
-
-REQUIRED = object()
-OPTIONAL = None
+# ---------------------------------------------------------------------- the schema
+#: Scenario names: they name the run directory (no ``/``, no ``..`` escape).
+NAME_PATTERN = re.compile(r'[A-Za-z0-9_.-]{1,100}')
+#: ASSUMPTION: limits that catch typing errors, not design choices.
+MAX_FRAMES = 100_000_000        # frames in one run
+MAX_INERTIA_KGM2 = 1e10         # largest principal moment [kg m^2]
+#: WGS-84 a [m]; a TLE must put the satellite 100 km above it at the epoch.
+EARTH_RADIUS_M, MIN_ALTITUDE_KM = 6378137.0, 100.0
 
 
-class Opt(dict):
-    """A schema section that exists only when the scenario gives it (a sensor, a node)."""
+def _name(text: str) -> str:
+    if not NAME_PATTERN.fullmatch(text):
+        raise ValueError(f'{short(text)}: use 1 to 100 letters, digits, "_", "." or "-" (it '
+                         'names the run directory)')
+    return text
 
 
-_ORBIT_COMMON = {'type': F('str', 'circular', 'orbit model', ('circular', 'tle'))}
-ORBIT_VARIANTS = {
-    'circular': {
-        'altitude_km': F('float', REQUIRED, 'altitude above the reference radius [km]'),
-        'inclination_deg': F('float', REQUIRED, 'inclination [deg]'),
-        'raan_deg': F('float', 0.0, 'right ascension of the ascending node [deg]'),
-        'arg_latitude0_deg': F('float', 0.0, 'argument of latitude at the epoch [deg]'),
-    },
-    'tle': {
-        'line1': F('str', REQUIRED, 'TLE line 1'),
-        'line2': F('str', REQUIRED, 'TLE line 2'),
-    },
-}
-_FIELD_COMMON = {'model': F('str', 'dipole', 'geomagnetic model',
-                            ('dipole', 'igrf_dipole', 'igrf'))}
-FIELD_VARIANTS = {
-    'dipole': {
-        'b0_T': F('float', OPTIONAL, 'dipole strength at the reference radius [T]'),
-        'r_ref_m': F('float', OPTIONAL, 'reference radius of b0_T [m]'),
-        'pole_colatitude_deg': F('float', OPTIONAL,
-                                 'geographic colatitude of the dipole axis [deg]'),
-        'pole_longitude_deg': F('float', OPTIONAL, 'geographic east longitude of the axis [deg]'),
-    },
-    'igrf_dipole': {
-        'coefficient_date': F('str', OPTIONAL, 'date of the IGRF degree-1 coefficients '
-                              '(ISO 8601; default: the epoch)'),
-    },
-    'igrf': {
-        'max_degree': F('int', OPTIONAL, 'truncation degree of the IGRF expansion'),
-    },
-}
-
-SCHEMA: Dict[str, Any] = {
-    'name': F('str', REQUIRED, 'scenario name'),
-    'description': F('str', '', 'one-paragraph description'),
-    'paper': F('str', '', 'source paper (file in papers/original) this scenario reproduces'),
-    'epoch': F('str', '2026-01-01T00:00:00Z', 'UTC date-time of sim time 0 (ISO 8601)'),
-    'seed': F('int', 0, 'scenario seed; every node derives its own random stream from it'),
-    'plugins': F('strlist', [], 'registry plugin modules or .py files (relative to the '
-                 'scenario) that register more controllers, estimators or sensors'),
-    'duration_s': F('float', REQUIRED, 'simulated duration [s]'),
-    'timing': {
-        'frame_s': F('float', 1.0, 'base frame period [s]; every period is a multiple of it'),
-        'substeps': F('int', 10, 'RK4 substeps per frame in the dynamics'),
-        'timeout_s': F('float', 5.0, 'wall-clock wait for a missing input before going on [s]'),
-    },
-    'orbit': 'ORBIT',
-    'field': 'FIELD',
-    'spacecraft': {
-        'inertia_kgm2': F('matrix3', REQUIRED, 'inertia tensor about the centre of mass, '
-                          'body axes [kg m^2]: 3 diagonal values or a 3x3 matrix'),
-        'gravity_gradient': F('bool', True, 'apply the gravity-gradient torque'),
-        'magnetorquer': {
-            'max_dipole_Am2': F('vec3', REQUIRED, 'per-axis dipole limit [A m^2]'),
-        },
-        'ideal_torque': {
-            'max_torque_Nm': F('vec3', REQUIRED, 'per-axis limit of an ideal body-torque '
-                               'actuator (thrusters, or a stand-in for wheels) [N m]'),
-        },
-        'wheels': F('wheels', [], 'reaction wheels: list of {name, axis, max_torque_Nm, '
-                    'max_momentum_Nms, inertia_kgm2, h0_Nms}'),
-        'wheel_error_std_Nms': F('float', 0.0, 'momentum control error of every wheel, 1-sigma '
-                                 '[N m s], redrawn each wheel_error_period_s (paper 001: '
-                                 '0.01/3); 0: none'),
-        'wheel_error_period_s': F('float', OPTIONAL, 'period of the momentum error draws [s] '
-                                  '(default: controllers.period_s, else timing.frame_s)'),
-        'flexible': Opt({
-            'model': F('str', 'paper001', 'flexible appendage modes: paper 001\'s two solar '
-                       'wings (5 modes each, coupling (32))', ('paper001',)),
-            'wings': F('str', 'two', 'two: both wings (the -X wing mirrored, 10 modes); one: '
-                       'the +X wing only (5 modes)', ('one', 'two')),
-            'damping': F('float', 0.005, 'modal damping ratio of every mode (the paper gives '
-                         'none)'),
-        }),
-        'disturbance': {
-            'constant_torque_Nm': F('vec3', [0.0, 0.0, 0.0], 'constant body torque [N m]'),
-            'random_std_Nm': F('float', 0.0, 'std of the random body torque per axis [N m]'),
-            'random_period_s': F('float', 2.0, 'hold time of each random draw [s]'),
-            'aerodynamic_Nm': F('vec3', [0.0, 0.0, 0.0], 'aerodynamic torque amplitude per '
-                                'body axis, a sin(2 pi t / harmonic_period_s + seeded phase) '
-                                '[N m]'),
-            'solar_pressure_Nm': F('vec3', [0.0, 0.0, 0.0], 'solar pressure torque amplitude, '
-                                   'same waveform [N m]'),
-            'synthetic_gravity_gradient_Nm': F('vec3', [0.0, 0.0, 0.0], 'a harmonic stand-in '
-                                               'for the gravity gradient at twice that '
-                                               'frequency (paper 001 magnitudes) [N m]'),
-            'harmonic_period_s': F('float', OPTIONAL, 'period of the harmonic torques [s] '
-                                   '(default: the orbital period)'),
-            'residual_magnetic_Nm': F('vec3', [0.0, 0.0, 0.0], 'constant residual magnetic '
-                                      'torque [N m]'),
-            'unloading_Nm': F('vec3', [0.0, 0.0, 0.0], 'momentum unloading torque per axis, '
-                              'seeded signs, on unloading_duration_s every unloading_period_s '
-                              '[N m]'),
-            'unloading_period_s': F('float', 600.0, 'unloading period [s]'),
-            'unloading_duration_s': F('float', 60.0, 'unloading pulse length [s]'),
-            'unloading_start_s': F('float', 0.0, 'first unloading pulse [s]'),
-        },
-    },
-    'initial': {
-        'q_orbit_body_wxyz': F('quat', OPTIONAL, 'initial attitude body->orbit, scalar FIRST '
-                               "(paper 000's Lambda)"),
-        'q_orbit_body_xyzw': F('quat', OPTIONAL, 'initial attitude body->orbit, scalar last'),
-        'omega_body_eci_body_deg_s': F('vec3', OPTIONAL,
-                                       'initial rate w.r.t. ECI, body axes [deg/s]'),
-        'omega_body_orbit_body_deg_s': F('vec3', OPTIONAL,
-                                         'initial rate w.r.t. the orbit frame, body axes [deg/s]'),
-    },
-    'sensors': 'SENSORS',
-    'estimator': 'ESTIMATOR',
-    'controllers': 'CONTROLLERS',
-    'guidance': Opt({
-        'period_s': F('float', OPTIONAL, 'target period [s] (default: controllers.period_s)'),
-        'frame': F('str', 'orbit', 'frame of the profile attitudes', ('orbit', 'eci')),
-        'profile': F('profile', [], 'time-tagged segments: list of {t_s, type: hold|slew|'
-                     'track, q_xyzw, duration_s (slew), axis_body, amplitude_deg, period_s '
-                     '(track)}; empty: hold the orbital frame'),
-        'euler312_profile': F('euler312', [], "paper 001's profile instead: list of {type: "
-                              'maneuver|hold|sine, start_s, end_s, euler_deg | center_deg, '
-                              'amplitude_deg, period_s, phase_deg} in LVLH 3-1-2 Euler '
-                              'angles [deg] (orbit frame)'),
-    }),
-    'manager': Opt({
-        'safe': F('str', 'bdot', 'safe-mode controller (fallback)'),
-        'fallback': F('strlist', [], 'controllers tried in order before the safe one when the '
-                      "active command is unusable (e.g. [magnetic]: a failed wheel's "
-                      'controller hands over to the magnetorquers)'),
-        'initial': F('str', '', 'controller active at start (default: auto detumble or safe)'),
-        'stale_after_s': F('float', 0.0, 'a command older than this is stale [s] (0: the '
-                           'frame stamp only)'),
-        'schedule': F('schedule', [], 'scripted switches: list of {t_s, controller}'),
-        'auto': Opt({
-            'detumble': F('str', 'bdot', 'controller of the detumble mode'),
-            'acquire': F('str', 'magnetic', 'controller of the acquire mode'),
-            'rate_enter_deg_s': F('float', 0.5, 'detumble -> acquire below this rate [deg/s]'),
-            'rate_exit_deg_s': F('float', 1.0, 'acquire -> detumble above this rate [deg/s]'),
-            'confirm_frames': F('int', 10, 'frames the forward condition must hold'),
-            'exit_confirm_frames': F('int', 1, 'frames the back condition must hold'),
-            'rate_frame': F('str', 'eci', 'rate compared: w.r.t. ECI or the orbit frame',
-                            ('eci', 'orbit')),
-            'point': F('str', OPTIONAL, 'controller of the optional point mode (after '
-                       'acquire, once the attitude error is below angle_enter_deg)'),
-            'angle_enter_deg': F('float', OPTIONAL, 'acquire -> point below this attitude '
-                                 'error to the orbital frame [deg]'),
-            'angle_exit_deg': F('float', OPTIONAL, 'point -> acquire above this error [deg] '
-                                '(> angle_enter_deg)'),
-        }),
-    }),
-    'record': {
-        'topics': F('strlist', [], 'topics to record (empty: every topic of the graph)'),
-    },
-    'faults': F('faults', [], 'scripted faults of the world: list of {at_s, kind, target, '
-                'params}; kinds: `adcs list` (sensor: dropout, nan, stuck, bias_step, '
-                'noise_burst; wheel: wheel_stuck, wheel_torque_lost; magnetorquer axis x|y|z: '
-                'coil_open; node: node_killed); params.duration_s: how long (0: to the end); '
-                'the kinds: the table below'),
-}
-
-_WHEEL_KEYS = {
-    'name': F('str', REQUIRED, 'wheel name'),
-    'axis': F('vec3', REQUIRED, 'spin axis, body axes (normalised)'),
-    'max_torque_Nm': F('float', REQUIRED, 'motor torque limit [N m]'),
-    'max_momentum_Nms': F('float', REQUIRED, 'momentum limit [N m s]'),
-    'inertia_kgm2': F('float', 1e-3, 'wheel inertia about its axis [kg m^2]'),
-    'h0_Nms': F('float', 0.0, 'initial wheel momentum [N m s]'),
-}
-
-#: Keys of the estimator section that every algorithm has (the rest come from its entry).
-_ESTIMATOR_COMMON = {
-    'algorithm': F('str', 'magnetic_filter', 'attitude estimator (a registered estimator; '
-                   '`adcs list`)'),
-    'period_s': F('float', 2.0, 'estimator period [s] (paper 000: prediction every 2 s)'),
-    'initial_q_orbit_body_xyzw': F('quat', [0.0, 0.0, 0.0, 1.0],
-                                   'initial attitude estimate (paper 000: identity)'),
-    'initial_omega_body_orbit_body_deg_s': F('vec3', [0.0, 0.0, 0.0],
-                                             'initial relative rate estimate [deg/s] '
-                                             "(paper 000: omega' = (0, omega0, 0))"),
-    'onboard_orbit': 'ORBIT?',
-    'onboard_field': 'FIELD?',
-}
-_EXTERNAL = F('bool', False, 'a real driver publishes this topic: the launcher starts no '
-              'simulated node for it and says so')
+def _euler312(items: List[Any]) -> List[Any]:
+    from adcs_nodes.core.guidance_profiles import profile_from_dicts
+    if not all(isinstance(v, dict) for v in items):
+        raise ValueError(f'expected a list of segments, got {short(items)}')
+    if items:
+        profile_from_dicts(items)     # ValueError with the reason
+    return items
 
 
-def schema() -> Dict[str, Any]:
-    """The whole scenario schema, with the registry's sections filled in.
+_ESTIMATOR = (
+    Param('algorithm', 'str', 'magnetic_filter', '-', 'attitude estimator (a registered '
+          'estimator; `adcs list`)'),
+    Param('period_s', 'float', 2.0, 's', 'estimator period (paper 000: prediction every 2 s)',
+          positive=True),
+    Param('initial_q_orbit_body_xyzw', 'quat', [0.0, 0.0, 0.0, 1.0], '-', 'initial attitude '
+          'estimate (paper 000: identity)'),
+    Param('initial_omega_body_orbit_body_deg_s', 'vec3', [0.0, 0.0, 0.0], 'deg/s', 'initial '
+          "relative rate estimate (paper 000: omega' = (0, omega0, 0))"),
+    replace(ORBIT, name='onboard_orbit', optional=True,
+            description="the flight software's orbit model (default: the orbit)"),
+    replace(FIELD, name='onboard_field', optional=True,
+            description="the flight software's field model (default: the field)"))
+_EXTERNAL = Param('external', 'bool', False, '-', 'a real driver publishes this topic: the '
+                  'launcher starts no simulated node for it and says so')
+_GUIDANCE = Section('guidance', (
+    Param('period_s', 'float', None, 's', 'target period (default: controllers.period_s)',
+          positive=True),
+    Param('frame', 'str', 'orbit', '-', 'frame of the profile attitudes', choices=FRAMES),
+    PROFILE,
+    Param('euler312_profile', 'list', [], '-', "paper 001's profile instead: list of {type: "
+          'maneuver|hold|sine, start_s, end_s, euler_deg | center_deg, amplitude_deg, '
+          'period_s, phase_deg} in LVLH 3-1-2 Euler angles [deg] (orbit frame)',
+          check=_euler312)), optional=True)
+_MANAGER = Section('manager', (
+    Param('safe', 'str', 'bdot', '-', 'safe-mode controller (fallback)'),
+    Param('fallback', 'str[]', [], '-', 'controllers tried in order before the safe one when '
+          "the active command is unusable (e.g. [magnetic]: a failed wheel's controller hands "
+          'over to the magnetorquers)'),
+    Param('initial', 'str', '', '-', 'controller active at start (default: auto detumble or '
+          'safe)'),
+    Param('stale_after_s', 'float', 0.0, 's', 'a command older than this is stale (0: the '
+          'frame stamp only in lockstep; negative: automatic)', min=-1.0),
+    SCHEDULE, AUTO_SEQUENCE), optional=True)
+#: ``faults``: the scripted faults of the world (each kind's params: its registry entry).
+FAULTS = Param('faults', 'table', [], '-', 'scripted faults of the world; kinds: `adcs list` '
+               'and the table below; params.duration_s: how long (0: to the end)', fields=(
+                   Param('index', 'int', None, '-', 'position in the list (filled in)'),
+                   Param('at_s', 'float', REQUIRED, 's', 'start time'),
+                   Param('kind', 'str', REQUIRED, '-', 'a registered fault kind'),
+                   Param('target', 'str', REQUIRED, '-', 'what it strikes (a sensor, a wheel, '
+                         'a magnetorquer axis x|y|z, a node)'),
+                   Param('params', 'dict', {}, '-', "the kind's parameters")),
+               check=lambda faults: [{**f, 'index': i} for i, f in enumerate(faults)])
 
-    ``sensors.<name>``, ``estimator`` (per algorithm) and ``controllers.<name>`` come from the
-    registry entries' parameter specs (:mod:`adcs_nodes.registry`), so a plugin that registers
-    a controller gets its scenario keys with nothing else to write.
-    """
-    sensors = {name: Opt({**{p.name: p for p in e.params}, 'external': _EXTERNAL})
-               for name, e in registry.entries('sensor').items()}
-    estimator = Variant('algorithm', _ESTIMATOR_COMMON,
-                        {name: {p.name: p for p in e.params}
-                         for name, e in registry.entries('estimator').items()})
-    controllers = {'period_s': F('float', 2.0, 'control period of every controller [s] '
-                                 '(paper 000 assumption: 2 s, dipole held in between)')}
-    controllers.update({name: Opt({p.name: p for p in e.params})
-                        for name, e in registry.entries('controller').items()})
-    out = dict(SCHEMA)
-    out['sensors'] = sensors
-    out['estimator'] = estimator
-    out['controllers'] = Opt(controllers)
-    return out
 
-
-class Variant:
-    """A section whose keys depend on a selector key (``estimator.algorithm``)."""
-
-    def __init__(self, selector: str, common: Dict[str, Any], variants: Dict[str, Any]):
-        self.selector, self.common, self.variants = selector, common, variants
+def schema() -> Section:
+    """The whole scenario schema; ``sensors.<name>``, ``estimator`` (per algorithm) and
+    ``controllers.<name>`` come from the registry entries (a plugin's too)."""
+    sensors = Section('sensors', tuple(replace(e.section(), params=e.params + (_EXTERNAL,))
+                                       for e in registry.entries('sensor').values()))
+    estimators = registry.entries('estimator')
+    estimator = Section('estimator', _ESTIMATOR, optional=True, selector='algorithm',
+                        variants={n: e.params for n, e in estimators.items()},
+                        check=lambda v: (estimators[v['algorithm']].check or bool)(v))
+    controllers = Section('controllers', (
+        Param('period_s', 'float', 2.0, 's', 'control period of every controller (paper 000 '
+              'assumption: 2 s, dipole held in between)', positive=True),
+    ) + tuple(e.section() for e in registry.entries('controller').values()), optional=True)
+    return Section('', (
+        Param('name', 'str', REQUIRED, '-', 'scenario name', check=_name),
+        Param('description', 'str', '', '-', 'one-paragraph description'),
+        Param('paper', 'str', '', '-', 'source paper (file in papers/original) this scenario '
+              'reproduces'),
+        EPOCH, SEED,
+        Param('plugins', 'str[]', [], '-', 'registry plugin modules or .py files (relative to '
+              'the scenario) that register more controllers, estimators or sensors'),
+        Param('duration_s', 'float', REQUIRED, 's', 'simulated duration', positive=True),
+        TIMING, ORBIT, FIELD, registry.section('spacecraft'), registry.section('initial'),
+        sensors, estimator, controllers, _GUIDANCE, _MANAGER,
+        Section('record', (Param('topics', 'str[]', [], '-', 'topics to record (empty: every '
+                                 'topic of the graph)'),)),
+        FAULTS))
 
 
 # ---------------------------------------------------------------------- YAML with lines
-#: Largest scenario file read [bytes] (a real one is a few kB).
-MAX_FILE_BYTES = 1_000_000
-#: Largest number of YAML nodes after alias expansion (an alias bomb of a few hundred bytes
-#: expands to billions; a real scenario has a few hundred).
-MAX_NODES = 100_000
-#: Longest run of characters without a space echoed in an error message, and longest message.
-MAX_SHOWN = 80
-MAX_MESSAGE = 600
+#: Largest scenario file [bytes], number of YAML nodes after alias expansion (an alias bomb
+#: of a few hundred bytes expands to billions), run of characters without a space echoed in
+#: an error message, and message.
+MAX_FILE_BYTES, MAX_NODES, MAX_SHOWN, MAX_MESSAGE = 1_000_000, 100_000, 80, 600
 
 
 class _LineLoader(yaml.SafeLoader):
@@ -279,44 +153,37 @@ class _LineLoader(yaml.SafeLoader):
         return super().construct_document(node)
 
 
-def _check_expansion(root) -> None:
-    """Raise ``ScenarioError`` if the YAML node graph expands to more than ``MAX_NODES``.
+class _Map(dict):
+    """dict that carries ``lines``: key -> line number in the YAML file."""
 
-    Aliases make the composed graph a DAG: the expanded size of a node is computed once per
-    node (memoised, iterative: no recursion limit), so the check costs the size of the text.
-    """
+    def __init__(self, data, lines):
+        super().__init__(data)
+        self.lines = lines
+
+
+def _check_expansion(root) -> None:
+    """``ScenarioError`` if the YAML node graph (a DAG of aliases) expands to more than
+    ``MAX_NODES`` nodes or contains itself; each node's size is counted once."""
     size: Dict[int, int] = {}
-    open_nodes = set()
-    stack = [(root, False)]
-    while stack:
-        node, children_done = stack.pop()
+    inside = set()
+
+    def count(node) -> int:
         if id(node) in size:
-            continue
-        if isinstance(node, yaml.ScalarNode):
-            size[id(node)] = 1
-            continue
-        kids = ([n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode)
-                else list(node.value))
-        if children_done:
-            open_nodes.discard(id(node))
-            total = 1 + sum(size[id(k)] for k in kids)
-            if total > MAX_NODES:
-                raise ScenarioError(
-                    f'line {node.start_mark.line + 1}: this value expands to more than '
-                    f'{MAX_NODES} YAML nodes (aliases of aliases?)')
-            size[id(node)] = total
-            continue
-        if id(node) in open_nodes:
-            raise ScenarioError(f'line {node.start_mark.line + 1}: a value that contains '
-                                'itself (recursive alias)')
-        open_nodes.add(id(node))
-        stack.append((node, True))
-        for kid in kids:
-            if id(kid) in open_nodes:
-                raise ScenarioError(f'line {kid.start_mark.line + 1}: a value that contains '
-                                    'itself (recursive alias)')
-            if id(kid) not in size:
-                stack.append((kid, False))
+            return size[id(node)]
+        line = node.start_mark.line + 1
+        if id(node) in inside:
+            raise ScenarioError(f'line {line}: a value that contains itself (recursive alias)')
+        inside.add(id(node))
+        kids = [] if isinstance(node, yaml.ScalarNode) else (
+            [n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode)
+            else node.value)
+        size[id(node)] = total = 1 + sum(count(k) for k in kids)
+        inside.discard(id(node))
+        if total > MAX_NODES:
+            raise ScenarioError(f'line {line}: this value expands to more than {MAX_NODES} '
+                                'YAML nodes (aliases of aliases?)')
+        return total
+    count(root)
 
 
 def _construct_mapping(loader, node, deep=False):
@@ -339,14 +206,6 @@ def _construct_mapping(loader, node, deep=False):
     return _Map(mapping, lines)
 
 
-class _Map(dict):
-    """dict that carries ``lines``: key -> line number in the YAML file."""
-
-    def __init__(self, data, lines):
-        super().__init__(data)
-        self.lines = lines
-
-
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 # YAML 1.1 (PyYAML) reads 1e-5 and 2.0e6 as text; engineers write them: read them as floats
 _LineLoader.add_implicit_resolver(
@@ -355,236 +214,127 @@ _LineLoader.add_implicit_resolver(
     list('-+0123456789.'))
 
 
-# ---------------------------------------------------------------------- validation
-class _Checker:
-    def __init__(self, path: str) -> None:
-        self.path = path
-
-    def fail(self, line: Optional[int], key: str, msg: str) -> None:
-        where = f'{self.path}:{line}' if line else self.path
-        raise ScenarioError(f'{where}: {key}: {msg}')
-
-    def mapping(self, data: Any, schema: Dict[str, Any], prefix: str, line: Optional[int]):
-        if data is None:
-            data = _Map({}, {})
-        if not isinstance(data, dict):
-            self.fail(line, prefix or '<top>', f'expected a mapping, got {type(data).__name__}')
-        lines = getattr(data, 'lines', {})
-        out: Dict[str, Any] = {}
-        for key in data:
-            if key not in schema:
-                near = difflib.get_close_matches(str(key), list(schema), n=1)
-                hint = f' (did you mean {near[0]!r}?)' if near else ''
-                self.fail(lines.get(key), prefix + str(key),
-                          f'unknown key{hint}; allowed: {", ".join(sorted(schema))}')
-        for key, spec in schema.items():
-            full = prefix + key
-            kline = lines.get(key, line)
-            if isinstance(spec, dict):
-                if key not in data and (isinstance(spec, Opt) or _has_required(spec)):
-                    continue  # optional section, or one with required keys: absent as a whole
-                out[key] = self.mapping(data.get(key), spec, full + '.', kline)
-            elif isinstance(spec, Variant):
-                if key in data:   # an optional section whose keys depend on its selector
-                    out[key] = self.variant(data[key], spec.common, spec.selector,
-                                            spec.variants, full, kline)
-            elif isinstance(spec, Param):
-                out[key] = (self.leaf(data[key], spec, full, kline) if key in data
-                            else copy.deepcopy(spec.default))
-            elif spec in ('ORBIT?', 'FIELD?') and key not in data:
-                continue  # optional variant section (the caller supplies a default)
-            elif spec in ('ORBIT', 'ORBIT?'):
-                out[key] = self.variant(data.get(key), _ORBIT_COMMON, 'type', ORBIT_VARIANTS,
-                                        full, kline)
-            elif spec in ('FIELD', 'FIELD?'):
-                out[key] = self.variant(data.get(key), _FIELD_COMMON, 'model', FIELD_VARIANTS,
-                                        full, kline)
-            elif key in data:
-                out[key] = self.leaf(data[key], spec, full, kline)
-            elif spec.default is REQUIRED:
-                self.fail(line, full, f'missing required key ({spec.doc})')
-            elif spec.default is not OPTIONAL:
-                out[key] = spec.default
-        return out
-
-    def variant(self, data, common, selector, variants, full, line):
-        if data is None:
-            self.fail(line, full, 'missing required section')
-        if not isinstance(data, dict):
-            self.fail(line, full, 'expected a mapping')
-        sel = data.get(selector, common[selector].default)
-        if not isinstance(sel, str) or sel not in variants:
-            self.fail(getattr(data, 'lines', {}).get(selector, line), f'{full}.{selector}',
-                      f'unknown {selector} {sel!r}; allowed: {", ".join(variants)}')
-        return self.mapping(data, {**common, **variants[sel]}, full + '.', line)
-
-    def leaf(self, value: Any, spec: F, key: str, line: Optional[int]) -> Any:
-        if isinstance(spec, Param):   # a registry parameter: its own type and range check
-            try:
-                return spec.validate(value)
-            except ValueError as exc:
-                self.fail(line, key, str(exc).split(': ', 1)[-1] + f' ({spec.doc()})')
-        try:
-            return _convert(value, spec)
-        except (TypeError, ValueError) as exc:
-            self.fail(line, key, f'{exc} ({spec.doc})')
-        return None
+def _read_text(path: str) -> str:
+    """The file as text: size-limited, UTF-8 (``ScenarioError`` naming the problem)."""
+    if not os.path.isfile(path):
+        raise ScenarioError(f'{path}: no such scenario file')
+    try:
+        with open(path, 'rb') as fh:
+            raw = fh.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise ScenarioError(f'{path}: cannot read: {exc.strerror or exc}') from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise ScenarioError(f'{path}: larger than {MAX_FILE_BYTES} bytes: not a scenario file')
+    try:
+        return raw.decode('utf-8')
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b'\n') + 1
+        raise ScenarioError(f'{path}:{line}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at '
+                            f'offset {exc.start})') from None
 
 
-def _has_required(spec: Dict[str, Any]) -> bool:
-    return any(isinstance(v, F) and v.default is REQUIRED for v in spec.values())
+def read_yaml(path: str) -> Any:
+    """The YAML data of ``path`` through the guards (size, UTF-8, alias expansion, nesting,
+    syntax: ``ScenarioError`` naming the file and line); nothing is validated or imported."""
+    text = _read_text(path)
+    try:
+        return yaml.load(text, Loader=_LineLoader)  # noqa: S506 - SafeLoader subclass
+    except ScenarioError as exc:
+        raise ScenarioError(f'{path}: {exc}') from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f'{path}:{mark.line + 1}' if mark else path
+        raise ScenarioError(f'{where}: YAML syntax error: {getattr(exc, "problem", exc)}') \
+            from None
+    except RecursionError:
+        raise ScenarioError(f'{path}: YAML nested too deeply') from None
 
 
-def _finite(x: Any) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        raise ValueError(f'expected a number, got {x!r}')
-    if not math.isfinite(float(x)):
-        raise ValueError(f'expected a finite number, got {x!r}')
-    return float(x)
+def shorten_message(text: str, max_run: int = MAX_SHOWN, max_len: int = MAX_MESSAGE) -> str:
+    """``text`` with every run of more than ``max_run`` non-space characters cut in its middle,
+    and the whole cut to ``max_len`` characters (a rejected 100 kB value is not echoed)."""
+    def cut(match) -> str:
+        run = match.group(0)
+        return f'{run[:max_run // 2]}...<{len(run)} characters>...{run[-(max_run // 4):]}'
+
+    text = re.sub(r'\S{%d,}' % (max_run + 1), cut, text)
+    if len(text) > max_len:
+        text = f'{text[:max_len - 80]} ...<{len(text)} characters>... {text[-60:]}'
+    return text
 
 
-def _vector(value: Any, n: int) -> List[float]:
-    if not isinstance(value, list) or len(value) != n:
-        raise ValueError(f'expected a list of {n} numbers, got {value!r}')
-    return [_finite(v) for v in value]
+# ---------------------------------------------------------------------- loading
+def load_scenario(path: str, plugins: Optional[List[str]] = None) -> Dict[str, Any]:
+    """Read and validate a scenario file: its values with every default filled in, plus
+    ``_path`` (absolute). ``plugins``, when given, are imported instead of the file's own
+    ``plugins:`` (a bag's ``scenario.yaml``: a bag is data, never code).
 
-
-def _convert(value: Any, spec: F) -> Any:
-    kind = spec.kind
-    if kind == 'str':
-        if not isinstance(value, str):
-            raise ValueError(f'expected text, got {value!r}')
-        if spec.choices and value not in spec.choices:
-            raise ValueError(f'{value!r} is not one of {", ".join(spec.choices)}')
-        return value
-    if kind == 'float':
-        return _finite(value)
-    if kind == 'int':
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f'expected an integer, got {value!r}')
-        return value
-    if kind == 'bool':
-        if not isinstance(value, bool):
-            raise ValueError(f'expected true or false, got {value!r}')
-        return value
-    if kind == 'vec3':
-        return _vector(value, 3)
-    if kind == 'vec2':
-        return _vector(value, 2)
-    if kind == 'list9':
-        return _vector(value, 9)
-    if kind == 'quat':
-        q = _vector(value, 4)
-        norm = math.sqrt(sum(c * c for c in q))
-        if abs(norm - 1.0) > 1e-3:
-            raise ValueError(f'quaternion norm is {norm:.6f}, expected 1')
-        return [c / norm for c in q]
-    if kind == 'matrix3':
-        if isinstance(value, list) and len(value) == 3 and all(
-                not isinstance(v, list) for v in value):
-            d = _vector(value, 3)
-            return [[d[0], 0.0, 0.0], [0.0, d[1], 0.0], [0.0, 0.0, d[2]]]
-        if isinstance(value, list) and len(value) == 3:
-            return [_vector(row, 3) for row in value]
-        raise ValueError(f'expected 3 numbers or a 3x3 matrix, got {value!r}')
-    if kind == 'strlist':
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise ValueError(f'expected a list of text, got {value!r}')
-        return value
-    if kind == 'schedule':
-        if not isinstance(value, list):
-            raise ValueError(f'expected a list of {{t_s, controller}}, got {value!r}')
-        out = []
-        for item in value:
-            if not isinstance(item, dict) or set(item) != {'t_s', 'controller'}:
-                raise ValueError(f'schedule entries need exactly t_s and controller: {item!r}')
-            out.append({'t_s': _finite(item['t_s']), 'controller': str(item['controller'])})
-        return sorted(out, key=lambda e: e['t_s'])
-    if kind == 'profile':
-        return _profile(value)
-    if kind == 'euler312':
-        from adcs_nodes.core.guidance_profiles import profile_from_dicts
-        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
-            raise ValueError(f'expected a list of segments, got {registry.short(value)}')
-        value = [{k: (list(v) if isinstance(v, list) else v) for k, v in item.items()}
-                 for item in value]       # plain dicts and lists (no line-number maps)
-        if value:
-            profile_from_dicts(value)     # ValueError with the reason
-        return value
-    if kind == 'faults':
-        if not isinstance(value, list):
-            raise ValueError(f'expected a list of {{at_s, kind, target, params}}, got '
-                             f'{registry.short(value)}')
-        out = []
-        for i, item in enumerate(value):
-            if isinstance(item, dict):      # a loaded scenario's faults carry their index
-                item = {k: v for k, v in item.items() if k != 'index'}
-            if not isinstance(item, dict) or not {'at_s', 'kind', 'target'} <= set(item) \
-                    or not set(item) <= {'at_s', 'kind', 'target', 'params'}:
-                raise ValueError(f'fault {i} needs at_s, kind, target and optional params: '
-                                 f'{registry.short(item)}')
-            params = item.get('params') or {}
-            if not isinstance(params, dict):
-                raise ValueError(f'fault {i}: params must be a mapping, got '
-                                 f'{registry.short(params)}')
-            if not isinstance(item['kind'], str) or not isinstance(item['target'], str):
-                raise ValueError(f'fault {i}: kind and target are names (text)')
-            out.append({'index': i, 'at_s': _finite(item['at_s']), 'kind': item['kind'],
-                        'target': item['target'],
-                        'params': {k: (list(v) if isinstance(v, list) else v)
-                                   for k, v in params.items()}})
-        return out
-    if kind == 'wheels':
-        if not isinstance(value, list):
-            raise ValueError(f'expected a list of wheels, got {value!r}')
-        return value  # entries are checked by _check_wheels (with lines)
-    raise AssertionError(f'unknown schema kind {kind}')
-
-
-_SEGMENT_KEYS = {'t_s', 'type', 'q_xyzw', 'duration_s', 'axis_body', 'amplitude_deg',
-                 'period_s'}
-
-
-def _profile(value: Any) -> List[dict]:
-    """A guidance profile: checked segments with every key filled in, sorted by ``t_s``."""
-    if not isinstance(value, list):
-        raise ValueError(f'expected a list of segments, got {registry.short(value)}')
-    out = []
-    for item in value:
-        if not isinstance(item, dict) or not {'t_s', 'type'} <= set(item) or \
-                not set(item) <= _SEGMENT_KEYS:
-            raise ValueError(f'a segment needs t_s and type, and only the keys '
-                             f'{sorted(_SEGMENT_KEYS)}: {registry.short(item)}')
-        seg = {'t_s': _finite(item['t_s']), 'type': item['type'],
-               'q_xyzw': _convert(item.get('q_xyzw', [0.0, 0.0, 0.0, 1.0]),
-                                  F('quat', None, 'segment attitude')),
-               'duration_s': _finite(item.get('duration_s', 0.0)),
-               'axis_body': _vector(item.get('axis_body', [0.0, 0.0, 1.0]), 3),
-               'amplitude_deg': _finite(item.get('amplitude_deg', 0.0)),
-               'period_s': _finite(item.get('period_s', 0.0))}
-        if seg['type'] not in ('hold', 'slew', 'track'):
-            raise ValueError(f'segment type {registry.short(seg["type"])} is not one of hold, '
-                             'slew, track')
-        if seg['t_s'] < 0 or seg['duration_s'] < 0 or seg['period_s'] < 0:
-            raise ValueError(f'segment times must be >= 0: {registry.short(item)}')
-        if seg['type'] == 'slew' and not seg['duration_s'] > 0:
-            raise ValueError(f'a slew needs duration_s > 0: {registry.short(item)}')
-        if seg['type'] == 'track' and not seg['period_s'] > 0:
-            raise ValueError(f'a track needs period_s > 0: {registry.short(item)}')
-        out.append(seg)
-    return sorted(out, key=lambda e: e['t_s'])
-
-
-def _check_wheels(checker: _Checker, wheels: List[Any], line: Optional[int]) -> List[dict]:
-    out = []
-    for i, w in enumerate(wheels):
-        out.append(checker.mapping(w, _WHEEL_KEYS, f'spacecraft.wheels[{i}].', line))
-    names = [w['name'] for w in out]
-    if len(set(names)) != len(names):
-        checker.fail(line, 'spacecraft.wheels', f'duplicate wheel names {names}')
+    Raises
+    ------
+    ScenarioError
+        A missing, too large (``MAX_FILE_BYTES``) or non-UTF-8 file, a YAML syntax error, an
+        alias bomb (``MAX_NODES``), an unknown or missing key, a value its spec refuses or a
+        combination the cross-field checks refuse; the message names the file, the line and
+        the key, with long values cut (``MAX_SHOWN``).
+    """
+    try:
+        data = read_yaml(path)
+        if isinstance(data, dict) and plugins is not None:
+            data['plugins'] = list(plugins)
+        out = _validated(data, os.path.dirname(os.path.abspath(path)), str(path))
+    except ScenarioError as exc:
+        text, name = str(exc), str(path)
+        if text.startswith(name):      # the file's path is never cut, only what follows it
+            raise ScenarioError(name + shorten_message(text[len(name):])) from None
+        raise ScenarioError(shorten_message(text)) from None
+    out['_path'] = os.path.abspath(path)
     return out
 
 
+def check_scenario(sc: Dict[str, Any]) -> Dict[str, Any]:
+    """A scenario given as a dict (a loaded one, edited) validated as a file is: the same
+    checks and messages, without file and line (``ScenarioError``); ``_path`` is kept."""
+    data = plain({k: v for k, v in sc.items() if not str(k).startswith('_')})
+    base = os.path.dirname(sc.get('_path') or os.path.abspath('scenario.yaml'))
+    out = _validated(data, base, '')
+    out.update({k: v for k, v in sc.items() if str(k).startswith('_')})
+    return out
+
+
+def _validated(data: Any, base: str, path: str) -> Dict[str, Any]:
+    """``data`` validated: plugins loaded, the schema's values, the onboard models' defaults,
+    the cross-field checks (``ScenarioError``: ``path:line: key: why``)."""
+    def fail(line: Optional[int], key: str, why: str) -> None:
+        where = f'{path}:{line}' if path and line else path
+        raise ScenarioError(f'{where}: {key}: {why}' if where else f'{key}: {why}')
+
+    if not isinstance(data, dict):
+        fail(None, '<top>', 'a scenario must be a YAML mapping')
+    lines = getattr(data, 'lines', {})
+    plugins = data.get('plugins') or []
+    if not isinstance(plugins, list) or not all(isinstance(x, str) for x in plugins):
+        fail(lines.get('plugins'), 'plugins', 'expected a list of module names or .py paths')
+    try:   # plugins register their components before the schema is built from the registry
+        registry.load_plugins(plugins, base)
+        out = schema().validate(data)
+    except SpecError as exc:
+        fail(exc.line, exc.key or '<top>', exc.why + (f' ({exc.doc})' if exc.doc else ''))
+    except ValueError as exc:
+        fail(lines.get('plugins'), 'plugins', str(exc))
+    out['plugins'] = [os.path.join(base, x) if x.endswith('.py') and not os.path.isabs(x)
+                      else x for x in out['plugins']]   # plugin files: absolute for every node
+    if 'estimator' in out:   # the flight software's own models default to the truth's
+        out['estimator'].setdefault('onboard_orbit', dict(out['orbit']))
+        out['estimator'].setdefault('onboard_field', dict(out['field']))
+    for check in (_check_run, _check_flight, _check_spacecraft, _check_faults):
+        try:
+            check(out)
+        except SpecError as exc:
+            fail(lines.get(re.split(r'[.[]', exc.key)[0]), exc.key, exc.why)
+    return out
+
+
+# ---------------------------------------------------------------------- cross-field checks
 #: Registry input -> the sensor section that provides it (from the input records).
 SENSOR_OF_INPUT = {i.name: i.sensor for i in _inputs.INPUTS if i.sensor}
 
@@ -609,13 +359,20 @@ def controller_problems(sc: Dict[str, Any], name: str) -> List[str]:
             out.append(f'needs sensors.{sensor} (input {need})')
         if need == 'estimate' and 'estimator' not in sc:
             out.append('needs an estimator')
-    if 'magnetorquer' in entry.actuators and 'magnetorquer' not in craft:
-        out.append('commands magnetorquers: needs spacecraft.magnetorquer')
-    if 'wheels' in entry.actuators and not craft.get('wheels'):
+    if 'magnetorquer' in entry.actuators and not any(
+            craft.get('magnetorquer', {}).get('max_dipole_Am2', [])):
+        out.append('commands magnetorquers: needs spacecraft.magnetorquer (a non-zero '
+                   'max_dipole_Am2)')
+    wheels = craft.get('wheels') or []
+    if 'wheels' in entry.actuators and not wheels:
         out.append('commands reaction wheels: needs spacecraft.wheels')
-    if 'torque' in entry.actuators and 'ideal_torque' not in craft and not craft.get('wheels'):
+    if 'torque' in entry.actuators and 'ideal_torque' not in craft and not wheels:
         out.append('commands a body torque: needs spacecraft.ideal_torque or '
                    'spacecraft.wheels (torque allocation)')
+    if wheels and {'wheels', 'torque'} & set(entry.actuators) and \
+            np.linalg.matrix_rank(np.array([w['axis'] for w in wheels], float)) < 3:
+        out.append('allocates its torque to the wheels: the axes of spacecraft.wheels must '
+                   'span three dimensions')
     for section in entry.requires:
         head, _, tail = section.partition('.')
         if not (sc.get(head, {}).get(tail) if tail else sc.get(head)):
@@ -623,14 +380,173 @@ def controller_problems(sc: Dict[str, Any], name: str) -> List[str]:
     return out
 
 
+def _check_run(sc: Dict[str, Any]) -> None:
+    """Whole frames, periods that are multiples of the frame (in integer nanoseconds, as the
+    engines count), the epoch, one initial attitude and rate, a TLE SGP4 propagates."""
+    frame, duration = sc['timing']['frame_s'], sc['duration_s']
+    if seconds_to_ns(duration) % seconds_to_ns(frame):
+        raise SpecError('duration_s', f'{duration} s is not a whole number of {frame} s frames')
+    if duration / frame > MAX_FRAMES:
+        raise SpecError('duration_s', f'{duration:g} s is more than {MAX_FRAMES:g} frames of '
+                        f'{frame:g} s')
+    periods = [(f'{k}.period_s', sc.get(k, {}).get('period_s'))
+               for k in ('estimator', 'controllers', 'guidance')]
+    periods += [(f'sensors.{k}.period_s', v['period_s']) for k, v in sc['sensors'].items()]
+    for key, period in periods:
+        if period is not None and (seconds_to_ns(period) < seconds_to_ns(frame) or
+                                   seconds_to_ns(period) % seconds_to_ns(frame)):
+            raise SpecError(key, f'{period} s is not a positive multiple of the frame '
+                            f'{frame} s')
+    try:
+        epoch = epoch_range(sc['epoch'], duration)
+    except ValueError as exc:
+        raise SpecError('epoch', str(exc)) from None
+    for a, b in (('q_orbit_body_wxyz', 'q_orbit_body_xyzw'),
+                 ('omega_body_eci_body_deg_s', 'omega_body_orbit_body_deg_s')):
+        if a in sc['initial'] and b in sc['initial']:
+            raise SpecError('initial', f'give {a} or {b}, not both')
+    for key, orbit in (('orbit', sc['orbit']),
+                       ('estimator.onboard_orbit', sc.get('estimator', {}).get('onboard_orbit'))):
+        if orbit and orbit['type'] == 'tle':
+            _check_tle(orbit, key, epoch)
+
+
+def _check_tle(orbit: Dict[str, Any], key: str, epoch: datetime.datetime) -> None:
+    from sgp4.api import Satrec, jday
+    try:
+        sat = Satrec.twoline2rv(orbit['line1'], orbit['line2'])
+        err, r_km, _ = sat.sgp4(*jday(epoch.year, epoch.month, epoch.day, epoch.hour,
+                                      epoch.minute, epoch.second + epoch.microsecond * 1e-6))
+    except Exception as exc:  # noqa: BLE001 - sgp4 raises several types for bad text
+        raise SpecError(key, f'the TLE does not parse: {exc}') from None
+    if err != 0 or not np.all(np.isfinite(r_km)):
+        raise SpecError(key, f'SGP4 cannot propagate the TLE to the epoch {epoch} (error code '
+                        f'{err}: decayed or bad elements)')
+    altitude_km = np.linalg.norm(r_km) - EARTH_RADIUS_M / 1e3
+    if altitude_km < MIN_ALTITUDE_KM:
+        raise SpecError(key, f'the TLE puts the satellite at {altitude_km:.0f} km altitude at '
+                        'the epoch')
+
+
+def _check_flight(sc: Dict[str, Any]) -> None:
+    """A sensor for every input, controllers the spacecraft can run, a manager that names
+    configured controllers and a consistent automatic sequence."""
+    sensors = sc['sensors']
+    if 'estimator' in sc:
+        entry = registry.get('estimator', sc['estimator']['algorithm'])
+        for sensor in filter(None, map(SENSOR_OF_INPUT.get, entry.inputs)):
+            if sensor not in sensors:
+                raise SpecError('estimator.algorithm', f'{entry.name} needs sensors.{sensor}')
+    if 'wheel_tachometer' in sensors and not sc['spacecraft'].get('wheels'):
+        raise SpecError('sensors.wheel_tachometer', 'needs spacecraft.wheels')
+    if 'controllers' not in sc:
+        if 'manager' in sc:
+            raise SpecError('manager', 'needs a controllers section')
+        return
+    names = controller_names(sc)
+    if not names:
+        raise SpecError('controllers', 'no controller configured (registered: '
+                        f'{", ".join(registry.names("controller"))})')
+    for name in names:
+        for why in controller_problems(sc, name):
+            raise SpecError(f'controllers.{name}', why)
+    man = sc.get('manager', {'safe': default_safe(names), 'initial': '', 'schedule': []})
+    named = [('manager.safe', man['safe'])] + [('manager.initial', man['initial'])] * bool(
+        man['initial'])
+    named += [(f'manager.auto.{k}', v) for k, v in man.get('auto', {}).items()
+              if k in ('detumble', 'acquire', 'point')]
+    for key, name in named:
+        if name not in names:
+            raise SpecError(key, f'{name!r} is not a configured controller ({names})')
+    fallback = man.get('fallback') or []
+    for name in fallback:
+        if name not in names or name == man['safe']:
+            raise SpecError('manager.fallback', f'{name!r} is not a configured controller '
+                            f'other than the safe one ({names})')
+    if len(set(fallback)) != len(fallback):
+        raise SpecError('manager.fallback', 'names a controller twice')
+    if 'auto' in man:
+        try:
+            AutoSequence.from_dict(man['auto'])
+        except ValueError as exc:
+            raise SpecError('manager.auto', str(exc)) from None
+    allowed = names + (['auto'] if 'auto' in man else [])
+    for entry in man.get('schedule', []):
+        if entry['controller'] not in allowed:
+            raise SpecError('manager.schedule', f'{entry["controller"]!r} is not one of '
+                            f'{allowed}')
+
+
+def _check_spacecraft(sc: Dict[str, Any]) -> None:
+    """A rigid body's inertia (symmetric, positive definite, the triangle inequality), wheels
+    with a spin axis and an initial momentum within their capacity, unloading pulses inside
+    their period, a momentum error only with wheels."""
+    craft, key = sc['spacecraft'], 'spacecraft.inertia_kgm2'
+    inertia = np.array(craft['inertia_kgm2'])
+    if not np.allclose(inertia, inertia.T, rtol=1e-9, atol=1e-9):
+        raise SpecError(key, 'must be symmetric')
+    moments = np.linalg.eigvalsh(inertia)
+    text = ', '.join(f'{m:.6g}' for m in moments)
+    if moments[0] <= 0.0:
+        raise SpecError(key, f'not positive definite (principal moments {text} kg m^2)')
+    if moments[2] > MAX_INERTIA_KGM2:
+        raise SpecError(key, f'principal moment {moments[2]:.6g} kg m^2 is above '
+                        f'{MAX_INERTIA_KGM2:g}')
+    if moments[2] > (moments[0] + moments[1]) * (1.0 + 1e-9):
+        raise SpecError(key, f'principal moments {text} kg m^2 break the triangle inequality '
+                        '(largest <= sum of the others): no rigid body has them')
+    for i, wheel in enumerate(craft['wheels']):
+        if np.linalg.norm(wheel['axis']) < 1e-9:
+            raise SpecError(f'spacecraft.wheels[{i}].axis', 'a spin axis of zero length')
+        if abs(wheel['h0_Nms']) > wheel['max_momentum_Nms']:
+            raise SpecError(f'spacecraft.wheels[{i}].h0_Nms', f'|{wheel["h0_Nms"]:g}| N m s is '
+                            f'above max_momentum_Nms {wheel["max_momentum_Nms"]:g}')
+    dist = craft['disturbance']
+    if dist['unloading_duration_s'] > dist['unloading_period_s']:
+        raise SpecError('spacecraft.disturbance.unloading_duration_s',
+                        'must be in [0, unloading_period_s]')
+    if craft['wheel_error_std_Nms'] > 0 and not craft['wheels']:
+        raise SpecError('spacecraft.wheel_error_std_Nms', 'needs spacecraft.wheels')
+
+
+#: ROS time stamps are int32 seconds since 1970: a run must end by 2038-01-19T03:14:07Z.
+_ROS_TIME = (datetime.datetime(1970, 1, 1, tzinfo=datetime.timezone.utc),
+             datetime.datetime(2038, 1, 19, 3, 14, 7, tzinfo=datetime.timezone.utc))
+
+
+def epoch_range(epoch: Any, duration_s: float) -> datetime.datetime:
+    """The aware UTC ``epoch`` (ISO text; naive means UTC); ``ValueError`` unless it parses
+    and ``[epoch, epoch + duration_s]`` fits ROS time stamps (1970 to 2038-01-19T03:14:07Z)."""
+    start = datetime.datetime.fromisoformat(iso_time(epoch).strip().replace('Z', '+00:00'))
+    start = (start if start.tzinfo else start.replace(tzinfo=datetime.timezone.utc)
+             ).astimezone(datetime.timezone.utc)
+    if start < _ROS_TIME[0]:
+        raise ValueError(f'{epoch} is before 1970 (ROS time starts in 1970)')
+    try:
+        end = start + datetime.timedelta(seconds=float(duration_s))
+    except OverflowError:
+        end = datetime.datetime.max.replace(tzinfo=datetime.timezone.utc)
+    if end > _ROS_TIME[1]:
+        raise ValueError(f'the run ({epoch} + {duration_s:g} s) ends after '
+                         '2038-01-19T03:14:07Z, the last ROS time stamp (int32 seconds)')
+    return start
+
+
+def check_epoch(epoch: Any, duration_s: float, line: Optional[int] = None,
+                path: str = 'scenario') -> datetime.datetime:
+    """:func:`epoch_range`, a ``ScenarioError`` naming ``path``, ``line`` and ``epoch``."""
+    try:
+        return epoch_range(epoch, duration_s)
+    except ValueError as exc:
+        raise ScenarioError(f'{path}{f":{line}" if line else ""}: epoch: {exc}') from None
+
+
+# ---------------------------------------------------------------------- faults
 def node_targets(sc: Dict[str, Any]) -> List[str]:
-    """The names of the nodes of scenario ``sc`` (validated or raw) a ``node_killed``
-    fault may strike: its simulated sensors, the estimator, guidance, each controller
-    (``<name>_controller``) and the controller manager."""
-    out = [k for k, cfg in (sc.get('sensors') or {}).items()
-           if not (isinstance(cfg, dict) and cfg.get('external'))]
-    if sc.get('estimator'):
-        out.append('estimator')
+    """The nodes of scenario ``sc`` (validated or raw) a ``node_killed`` fault may strike:
+    its simulated sensors, the estimator, guidance, each ``<name>_controller`` and the
+    controller manager."""
+    out = fault_targets(sc, nodes=False)['sensor'] + ['estimator'] * bool(sc.get('estimator'))
     ctrl = sc.get('controllers')
     if isinstance(ctrl, dict):
         out += ['guidance'] + [f'{k}_controller' for k in ctrl if k != 'period_s']
@@ -638,485 +554,62 @@ def node_targets(sc: Dict[str, Any]) -> List[str]:
     return out
 
 
-def _check_faults(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, int]) -> None:
-    """Each fault: a registered kind, a target it can strike, a time inside the run, its
-    parameters in range (filled with their defaults)."""
-    line = lines.get('faults')
-    sensors = sc.get('sensors', {})
-    craft = sc['spacecraft']
-    wheels = [w['name'] for w in craft.get('wheels') or []]
-    for f in sc.get('faults', []):
+def fault_targets(sc: Dict[str, Any], nodes: bool = True) -> Dict[str, List[str]]:
+    """What a fault of scenario ``sc`` (validated or raw) may strike, by target kind: its
+    simulated sensors, wheels, magnetorquer axes and (``nodes``) nodes."""
+    craft = sc.get('spacecraft') or {}
+    out = {'sensor': [k for k, cfg in (sc.get('sensors') or {}).items()
+                      if not (isinstance(cfg, dict) and cfg.get('external'))],
+           'wheel': [w.get('name') for w in craft.get('wheels') or [] if isinstance(w, dict)],
+           'magnetorquer': ['x', 'y', 'z'] if 'magnetorquer' in craft else []}
+    return {**out, 'node': node_targets(sc)} if nodes else out
+
+
+def check_fault(kind: str, target: str, params: Any, targets: Dict[str, List[str]],
+                scripted: bool = True) -> Dict[str, Any]:
+    """The parameters of fault ``kind`` striking ``target`` (among ``targets``:
+    :func:`fault_targets`), validated with the kind's registry specs and filled with their
+    defaults: the one check of a scenario's fault, ``adcs fault`` and the nodes that apply a
+    live fault (``scripted`` false: no ``node_killed``). ``SpecError`` naming ``kind``,
+    ``target`` or ``params``."""
+    try:
+        entry = registry.get('fault', kind)
+    except ValueError as exc:
+        raise SpecError('kind', str(exc)) from None
+    if not scripted and 'node' in entry.targets:
+        raise SpecError('kind', f"{kind} is a scripted fault only (a scenario's faults:); to "
+                        'kill a node of a running graph, kill its process (adcs status shows '
+                        'the pids)')
+    known = [t for what in entry.targets for t in targets.get(what, [])]
+    if target not in known:
+        raise SpecError('target', f'{kind} cannot strike {target!r}; it strikes '
+                        f'{", ".join(entry.targets)}: '
+                        f'{", ".join(known) or "none in this scenario"}')
+    try:
+        return entry.validate(dict(params or {}))
+    except ValueError as exc:
+        raise SpecError('params', str(exc)) from None
+
+
+def _check_faults(sc: Dict[str, Any]) -> None:
+    """Each fault: a kind, a target it can strike, its parameters, a time inside the run."""
+    targets = fault_targets(sc)
+    for f in sc['faults']:
         key = f'faults[{f["index"]}]'
         try:
-            entry = registry.get('fault', f['kind'])
-        except ValueError as exc:
-            checker.fail(line, f'{key}.kind', str(exc))
-            continue
+            f['params'] = check_fault(f['kind'], f['target'], f['params'], targets)
+        except SpecError as exc:
+            raise exc.within(key) from None
         if not 0.0 <= f['at_s'] <= sc['duration_s']:
-            checker.fail(line, f'{key}.at_s', f'{f["at_s"]:g} s is outside the run '
-                         f'[0, {sc["duration_s"]:g}] s')
-        target = f['target']
-        if 'sensor' in entry.targets:
-            known = [k for k, cfg in sensors.items() if not cfg.get('external')]
-        elif 'wheel' in entry.targets:
-            known = wheels
-        elif 'node' in entry.targets:
-            known = node_targets(sc)
-        else:
-            known = ['x', 'y', 'z'] if 'magnetorquer' in craft else []
-        if target not in known:
-            checker.fail(line, f'{key}.target', f'{f["kind"]} cannot strike {target!r}; '
-                         f'it strikes {", ".join(entry.targets)}: '
-                         f'{", ".join(known) or "none in this scenario"}')
-        try:
-            f['params'] = entry.validate(f['params'])
-        except ValueError as exc:
-            checker.fail(line, f'{key}.params', str(exc))
+            raise SpecError(f'{key}.at_s', f'{f["at_s"]:g} s is outside the run '
+                            f'[0, {sc["duration_s"]:g}] s')
 
 
-def _check_consistency(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, int]) -> None:
-    if sc['duration_s'] <= 0:
-        checker.fail(lines.get('duration_s'), 'duration_s', 'must be positive')
-    timing = sc['timing']
-    if timing['frame_s'] <= 0:
-        checker.fail(lines.get('timing'), 'timing.frame_s', 'must be positive')
-    if timing['substeps'] < 1:
-        checker.fail(lines.get('timing'), 'timing.substeps', 'must be >= 1')
-    if timing['timeout_s'] <= 0:
-        checker.fail(lines.get('timing'), 'timing.timeout_s', 'must be positive')
-    frames = sc['duration_s'] / timing['frame_s']
-    if abs(frames - round(frames)) > 1e-9:
-        checker.fail(lines.get('duration_s'), 'duration_s',
-                     f'{sc["duration_s"]} s is not a whole number of {timing["frame_s"]} s frames')
-    init = sc['initial']
-    if 'q_orbit_body_wxyz' in init and 'q_orbit_body_xyzw' in init:
-        checker.fail(lines.get('initial'), 'initial',
-                     'give q_orbit_body_wxyz or q_orbit_body_xyzw, not both')
-    if 'omega_body_eci_body_deg_s' in init and 'omega_body_orbit_body_deg_s' in init:
-        checker.fail(lines.get('initial'), 'initial',
-                     'give omega_body_eci_body_deg_s or omega_body_orbit_body_deg_s, not both')
-    sensors = sc.get('sensors', {})
-    if 'estimator' in sc:
-        entry = registry.get('estimator', sc['estimator']['algorithm'])
-        for need in entry.inputs:
-            sensor = SENSOR_OF_INPUT.get(need)
-            if sensor and sensor not in sensors:
-                checker.fail(lines.get('estimator'), 'estimator.algorithm',
-                             f'{entry.name} needs sensors.{sensor}')
-    if 'wheel_tachometer' in sensors and not sc['spacecraft'].get('wheels'):
-        checker.fail(lines.get('sensors'), 'sensors.wheel_tachometer',
-                     'needs spacecraft.wheels')
-    if 'controllers' in sc:
-        names = controller_names(sc)
-        if not names:
-            checker.fail(lines.get('controllers'), 'controllers', 'no controller configured '
-                         f'(registered: {", ".join(registry.names("controller"))})')
-        for name in names:
-            for why in controller_problems(sc, name):
-                checker.fail(lines.get('controllers'), f'controllers.{name}', why)
-        man = sc.get('manager', {'safe': default_safe(names), 'initial': '', 'schedule': []})
-        allowed = names + (['auto'] if 'auto' in man else [])
-        for key in ('safe', 'initial'):
-            if man.get(key) and man[key] not in names:
-                checker.fail(lines.get('manager'), f'manager.{key}',
-                             f'{man[key]!r} is not a configured controller ({names})')
-        for name in man.get('fallback') or []:
-            if name not in names or name == man.get('safe'):
-                checker.fail(lines.get('manager'), 'manager.fallback',
-                             f'{name!r} is not a configured controller other than the safe '
-                             f'one ({names})')
-        if len(set(man.get('fallback') or [])) != len(man.get('fallback') or []):
-            checker.fail(lines.get('manager'), 'manager.fallback', 'names a controller twice')
-        for mode in ('detumble', 'acquire', 'point'):
-            name = man.get('auto', {}).get(mode)
-            if name and name not in names:
-                checker.fail(lines.get('manager'), f'manager.auto.{mode}',
-                             f'{name!r} is not a configured controller ({names})')
-        if 'auto' in man:
-            try:
-                from adcs_nodes.core.manager import AutoSequence
-                AutoSequence.from_dict(man['auto'])
-            except ValueError as exc:
-                checker.fail(lines.get('manager'), 'manager.auto', str(exc))
-        for entry in man.get('schedule', []):
-            if entry['controller'] not in allowed:
-                checker.fail(lines.get('manager'), 'manager.schedule',
-                             f'{entry["controller"]!r} is not one of {allowed}')
-    elif 'manager' in sc:
-        checker.fail(lines.get('manager'), 'manager', 'needs a controllers section')
-    frame = timing['frame_s']
-    periods = [('estimator.period_s', sc.get('estimator', {}).get('period_s')),
-               ('controllers.period_s', sc.get('controllers', {}).get('period_s'))]
-    periods += [(f'sensors.{k}.period_s', v['period_s']) for k, v in sc['sensors'].items()]
-    for key, period in periods:
-        if period is not None and (period <= 0 or abs(period / frame - round(period / frame))
-                                   > 1e-9):
-            checker.fail(lines.get(key.split('.')[0]), key,
-                         f'{period} s is not a positive multiple of the frame {frame} s')
-    _check_faults(checker, sc, lines)
-    inertia = sc['spacecraft']['inertia_kgm2']
-    sym = all(abs(inertia[i][j] - inertia[j][i]) <= 1e-9 * max(1.0, abs(inertia[i][j]))
-              for i in range(3) for j in range(3))
-    if not sym:
-        checker.fail(lines.get('spacecraft'), 'spacecraft.inertia_kgm2', 'must be symmetric')
-
-
-def load_scenario(path: str) -> Dict[str, Any]:
-    """Read and validate a scenario file.
-
-    Returns
-    -------
-    dict
-        The scenario with every default filled in, plus ``_path`` (absolute path).
-
-    Raises
-    ------
-    ScenarioError
-        On a missing, too large (> ``MAX_FILE_BYTES``) or non-UTF-8 file, YAML syntax error,
-        alias bomb (> ``MAX_NODES`` nodes once expanded), unknown or missing key, bad value,
-        or a physically impossible value (:func:`_check_physical`); the message names the file,
-        the line and the key, with long values cut (``MAX_SHOWN`` characters).
-    """
-    try:
-        return _load_scenario(path)
-    except ScenarioError as exc:
-        text, name = str(exc), str(path)
-        if text.startswith(name):      # the file's path is never cut, only what follows it
-            raise ScenarioError(name + shorten_message(text[len(name):])) from None
-        raise ScenarioError(shorten_message(text)) from None
-
-
-def shorten_message(text: str, max_run: int = MAX_SHOWN, max_len: int = MAX_MESSAGE) -> str:
-    """``text`` with every run of more than ``max_run`` non-space characters cut in its middle,
-    and the whole cut to ``max_len`` characters (a rejected 100 kB value is not echoed)."""
-    def cut(match) -> str:
-        run = match.group(0)
-        return f'{run[:max_run // 2]}...<{len(run)} characters>...{run[-(max_run // 4):]}'
-
-    text = re.sub(r'\S{%d,}' % (max_run + 1), cut, text)
-    if len(text) > max_len:
-        text = f'{text[:max_len - 80]} ...<{len(text)} characters>... {text[-60:]}'
-    return text
-
-
-def _read_text(path: str) -> str:
-    """The file as text: size-limited, UTF-8 (``ScenarioError`` naming the problem)."""
-    if not os.path.isfile(path):
-        raise ScenarioError(f'{path}: no such scenario file')
-    try:
-        with open(path, 'rb') as fh:
-            raw = fh.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise ScenarioError(f'{path}: cannot read: {exc.strerror or exc}') from None
-    if len(raw) > MAX_FILE_BYTES:
-        raise ScenarioError(f'{path}: larger than {MAX_FILE_BYTES} bytes: not a scenario file')
-    try:
-        return raw.decode('utf-8')
-    except UnicodeDecodeError as exc:
-        line = raw[:exc.start].count(b'\n') + 1
-        raise ScenarioError(f'{path}:{line}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at '
-                            f'offset {exc.start})') from None
-
-
-def _load_scenario(path: str) -> Dict[str, Any]:
-    text = _read_text(path)
-    try:
-        data = yaml.load(text, Loader=_LineLoader)  # noqa: S506 - SafeLoader subclass
-    except ScenarioError as exc:
-        raise ScenarioError(f'{path}: {exc}') from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f'{path}:{mark.line + 1}' if mark else path
-        raise ScenarioError(f'{where}: YAML syntax error: {getattr(exc, "problem", exc)}') \
-            from None
-    except RecursionError:
-        raise ScenarioError(f'{path}: YAML nested too deeply') from None
-    checker = _Checker(path)
-    if not isinstance(data, dict):
-        checker.fail(None, '<top>', 'a scenario must be a YAML mapping')
-    plugins = data.get('plugins') or []
-    if not isinstance(plugins, list) or not all(isinstance(x, str) for x in plugins):
-        checker.fail(getattr(data, 'lines', {}).get('plugins'), 'plugins',
-                     'expected a list of module names or .py paths')
-    try:   # plugins register their components before the schema is built from the registry
-        registry.load_plugins(plugins, os.path.dirname(os.path.abspath(path)))
-    except ValueError as exc:
-        checker.fail(getattr(data, 'lines', {}).get('plugins'), 'plugins', str(exc))
-    top = schema()
-    out = checker.mapping(data, top, '', None)
-    for key, spec in top.items():   # a section with required keys is skipped when absent
-        if isinstance(spec, dict) and not isinstance(spec, Opt) and key not in out:
-            checker.fail(None, key, 'missing required section')
-    base = os.path.dirname(os.path.abspath(path))   # plugin files: absolute for every node
-    out['plugins'] = [os.path.join(base, x) if x.endswith('.py') and not os.path.isabs(x)
-                      else x for x in out['plugins']]
-    sc_lines = getattr(data.get('spacecraft') or {}, 'lines', {})
-    out['spacecraft']['wheels'] = _check_wheels(
-        checker, out['spacecraft'].get('wheels', []), sc_lines.get('wheels'))
-    if 'estimator' in out:   # the flight software's own models default to the truth's
-        out['estimator'].setdefault('onboard_orbit', dict(out['orbit']))
-        out['estimator'].setdefault('onboard_field', dict(out['field']))
-    _check_consistency(checker, out, getattr(data, 'lines', {}))
-    _check_physical(checker, out, getattr(data, 'lines', {}))
-    out['_path'] = os.path.abspath(path)
-    return out
-
-
-# ---------------------------------------------------------------------- physical sanity
-#: Scenario names: they name the run directory (no ``/``, no ``..`` escape).
-NAME_PATTERN = re.compile(r'[A-Za-z0-9_.-]{1,100}')
-#: Mean equatorial radius [m] (WGS-84 a); a circular orbit must stay above the atmosphere.
-EARTH_RADIUS_M = 6378137.0
-#: ASSUMPTION: lowest circular-orbit altitude accepted [km] (the Karman line; below, an orbit
-#: decays within hours and the models have no drag) and highest [km] (beyond the Moon the
-#: two-body Earth orbit is meaningless).
-MIN_ALTITUDE_KM, MAX_ALTITUDE_KM = 100.0, 400_000.0
-#: ASSUMPTION: limits that catch typing errors, not design choices.
-MAX_RATE_DEG_S = 100.0          # initial body rate norm [deg/s]
-FRAME_S_RANGE = (1e-6, 86400.0)  # base frame period [s]
-MAX_SUBSTEPS = 10_000           # RK4 substeps per frame
-MAX_TIMEOUT_S = 3600.0          # wall-clock wait for an input [s]
-MAX_FRAMES = 100_000_000        # frames in one run
-MAX_INERTIA_KGM2 = 1e10         # largest principal moment [kg m^2]
-MAX_SEED = 2**63 - 1            # ROS integer parameters are int64
-#: ROS time stamps are int32 seconds since 1970: the run must end before 2038-01-19T03:14:07Z.
-_ROS_TIME_END = datetime.datetime(2038, 1, 19, 3, 14, 7, tzinfo=datetime.timezone.utc)
-_UNIX_EPOCH = datetime.datetime(1970, 1, 1, tzinfo=datetime.timezone.utc)
-
-
-def parse_epoch_text(text: Any) -> datetime.datetime:
-    """ISO-8601 text -> aware UTC ``datetime`` (naive means UTC); ``ValueError`` if not one."""
-    if not isinstance(text, str):
-        raise ValueError(f'expected ISO-8601 text, got {type(text).__name__}')
-    try:
-        dt = datetime.datetime.fromisoformat(text.strip().replace('Z', '+00:00'))
-    except ValueError:
-        raise ValueError(f'{text!r} is not an ISO-8601 date-time '
-                         '(e.g. 2026-01-01T00:00:00Z)') from None
-    if dt.tzinfo is None:
-        dt = dt.replace(tzinfo=datetime.timezone.utc)
-    return dt.astimezone(datetime.timezone.utc)
-
-
-def check_epoch(epoch: Any, duration_s: float, line: Optional[int] = None,
-                path: str = 'scenario') -> datetime.datetime:
-    """Parse ``epoch`` and check that ``[epoch, epoch + duration_s]`` fits ROS time stamps.
-
-    Raises
-    ------
-    ScenarioError
-        If the epoch does not parse, or the run starts before 1970 or ends after
-        2038-01-19T03:14:07Z (``builtin_interfaces/Time.sec`` is an int32).
-    """
-    checker = _Checker(path)
-    try:
-        start = parse_epoch_text(epoch)
-    except ValueError as exc:
-        checker.fail(line, 'epoch', str(exc))
-    if start < _UNIX_EPOCH:
-        checker.fail(line, 'epoch', f'{epoch} is before 1970 (ROS time starts in 1970)')
-    try:
-        end = start + datetime.timedelta(seconds=float(duration_s))
-    except OverflowError:
-        end = datetime.datetime.max.replace(tzinfo=datetime.timezone.utc)
-    if end > _ROS_TIME_END:
-        checker.fail(line, 'epoch', f'the run ({epoch} + {duration_s:g} s) ends after '
-                     '2038-01-19T03:14:07Z, the last ROS time stamp (int32 seconds)')
-    return start
-
-
-def _sym3_eigenvalues(m: List[List[float]]) -> List[float]:
-    """Eigenvalues (ascending) of a symmetric 3x3 matrix, closed form (Smith 1961)."""
-    p1 = m[0][1] ** 2 + m[0][2] ** 2 + m[1][2] ** 2
-    q = (m[0][0] + m[1][1] + m[2][2]) / 3.0
-    if p1 == 0.0:
-        return sorted([m[0][0], m[1][1], m[2][2]])
-    p2 = sum((m[i][i] - q) ** 2 for i in range(3)) + 2.0 * p1
-    p = math.sqrt(p2 / 6.0)
-    b = [[(m[i][j] - (q if i == j else 0.0)) / p for j in range(3)] for i in range(3)]
-    det_b = (b[0][0] * (b[1][1] * b[2][2] - b[1][2] * b[2][1])
-             - b[0][1] * (b[1][0] * b[2][2] - b[1][2] * b[2][0])
-             + b[0][2] * (b[1][0] * b[2][1] - b[1][1] * b[2][0]))
-    phi = math.acos(max(-1.0, min(1.0, det_b / 2.0))) / 3.0
-    e1 = q + 2.0 * p * math.cos(phi)
-    e3 = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
-    return sorted([e3, 3.0 * q - e1 - e3, e1])
-
-
-#: Naming conventions checked in every section (whatever the registry checks besides):
-#: a key matching the pattern must hold values in the range (each element of a list).
-_CONVENTIONS = (
-    (re.compile(r'(^|_)std(_|$)|noise_std'), 0.0, math.inf, 'standard deviation'),
-    (re.compile(r'probability'), 0.0, 1.0, 'probability'),
-    (re.compile(r'^max_|_max$|limit|saturation|lsb'), 0.0, math.inf, 'limit'),
-    (re.compile(r'p0_diag'), 0.0, math.inf, 'covariance diagonal'),
-)
-
-
-def _check_conventions(checker: _Checker, data: Any, prefix: str,
-                       lines: Dict[str, int]) -> None:
-    if isinstance(data, dict):
-        for key, value in data.items():
-            full = f'{prefix}{key}'
-            for pattern, low, high, what in _CONVENTIONS:
-                if not pattern.search(str(key)):
-                    continue
-                values = value if isinstance(value, list) else [value]
-                for v in values:
-                    if isinstance(v, (int, float)) and not isinstance(v, bool) and not (
-                            low <= v <= high):
-                        checker.fail(lines.get(full.split('.')[0]), full,
-                                     f'{v!r} is not a valid {what} (must be in '
-                                     f'[{low:g}, {high:g}])')
-            _check_conventions(checker, value, full + '.', lines)
-    elif isinstance(data, list):
-        for i, item in enumerate(data):
-            _check_conventions(checker, item, f'{prefix[:-1]}[{i}].', lines)
-
-
-def _check_orbit(checker: _Checker, orbit: Dict[str, Any], key: str, line: Optional[int],
-                 epoch: datetime.datetime) -> None:
-    if orbit.get('type') == 'circular':
-        alt = orbit['altitude_km']
-        if not MIN_ALTITUDE_KM <= alt <= MAX_ALTITUDE_KM:
-            where = 'below the Earth\'s surface' if alt <= 0 else (
-                'inside the atmosphere' if alt < MIN_ALTITUDE_KM else 'beyond the Moon')
-            checker.fail(line, f'{key}.altitude_km', f'{alt:g} km is {where} (accepted: '
-                         f'{MIN_ALTITUDE_KM:g} to {MAX_ALTITUDE_KM:g} km)')
-        inc = orbit['inclination_deg']
-        if not 0.0 <= inc <= 180.0:
-            checker.fail(line, f'{key}.inclination_deg', f'{inc:g} deg is not in [0, 180]')
-        for angle in ('raan_deg', 'arg_latitude0_deg'):
-            if abs(orbit.get(angle, 0.0)) > 3600.0:
-                checker.fail(line, f'{key}.{angle}', f'{orbit[angle]:g} deg: give an angle '
-                             'within +-3600 deg')
-    elif orbit.get('type') == 'tle':
-        try:
-            from sgp4.api import Satrec, jday
-        except ImportError:  # pragma: no cover - pinned in ros2_ws/requirements.txt
-            return
-        try:
-            sat = Satrec.twoline2rv(orbit['line1'], orbit['line2'])
-            jd, fr = jday(epoch.year, epoch.month, epoch.day, epoch.hour, epoch.minute,
-                          epoch.second + epoch.microsecond * 1e-6)
-            err, r_km, _ = sat.sgp4(jd, fr)
-        except Exception as exc:  # noqa: BLE001 - sgp4 raises several types for bad text
-            checker.fail(line, key, f'the TLE does not parse: {exc}')
-        if err != 0 or not all(math.isfinite(c) for c in r_km):
-            checker.fail(line, key, f'SGP4 cannot propagate the TLE to the epoch {epoch} '
-                         f'(error code {err}: decayed or bad elements)')
-        radius = math.sqrt(sum(c * c for c in r_km)) * 1e3
-        if radius < EARTH_RADIUS_M + MIN_ALTITUDE_KM * 1e3:
-            checker.fail(line, key, f'the TLE puts the satellite at '
-                         f'{(radius - EARTH_RADIUS_M) / 1e3:.0f} km altitude at the epoch')
-
-
-def _check_physical(checker: _Checker, sc: Dict[str, Any], lines: Dict[str, int]) -> None:
-    """Reject values no spacecraft can have or no run can do (after the schema checks).
-
-    Checks the scenario-level keys: ``name`` (``NAME_PATTERN``), ``seed`` (int64, >= 0),
-    ``epoch`` (parses; the run fits ROS time, :func:`check_epoch`), ``duration_s`` and
-    ``timing`` (``FRAME_S_RANGE``, ``MAX_SUBSTEPS``, ``MAX_TIMEOUT_S``, ``MAX_FRAMES``),
-    ``orbit`` and ``estimator.onboard_orbit`` (circular: altitude, inclination; TLE: SGP4
-    propagates it to the epoch, above the atmosphere), ``spacecraft`` (inertia positive
-    definite, principal moments obeying the triangle inequality, non-negative limits, wheels
-    with a spin axis, positive inertia and ``|h0| <= max_momentum``), ``initial`` (rate norm
-    at most ``MAX_RATE_DEG_S``) and, in every section, the naming conventions of
-    ``_CONVENTIONS`` (standard deviations >= 0, probabilities in [0, 1], limits >= 0).
-    Node parameter ranges are the registry's.
-    """
-    name = sc['name']
-    if not NAME_PATTERN.fullmatch(name):
-        checker.fail(lines.get('name'), 'name', f'{name!r}: use 1 to 100 letters, digits, '
-                     '"_", "." or "-" (it names the run directory)')
-    if not 0 <= sc['seed'] <= MAX_SEED:
-        checker.fail(lines.get('seed'), 'seed', f'{sc["seed"]} is not in [0, 2^63 - 1]')
-    timing = sc['timing']
-    frame = timing['frame_s']
-    if not FRAME_S_RANGE[0] <= frame <= FRAME_S_RANGE[1]:
-        checker.fail(lines.get('timing'), 'timing.frame_s', f'{frame:g} s is not in '
-                     f'[{FRAME_S_RANGE[0]:g}, {FRAME_S_RANGE[1]:g}] s')
-    if not 1 <= timing['substeps'] <= MAX_SUBSTEPS:
-        checker.fail(lines.get('timing'), 'timing.substeps', f'{timing["substeps"]} is not in '
-                     f'[1, {MAX_SUBSTEPS}]')
-    if not 0 < timing['timeout_s'] <= MAX_TIMEOUT_S:
-        checker.fail(lines.get('timing'), 'timing.timeout_s', f'{timing["timeout_s"]:g} s is '
-                     f'not in (0, {MAX_TIMEOUT_S:g}] s')
-    duration = sc['duration_s']
-    if not duration > 0 or duration / frame > MAX_FRAMES:
-        checker.fail(lines.get('duration_s'), 'duration_s', f'{duration:g} s is not in (0, '
-                     f'{MAX_FRAMES:g} frames of {frame:g} s]')
-    epoch = check_epoch(sc['epoch'], duration, lines.get('epoch'), checker.path)
-    _check_orbit(checker, sc['orbit'], 'orbit', lines.get('orbit'), epoch)
-    if 'onboard_orbit' in sc.get('estimator', {}):
-        _check_orbit(checker, sc['estimator']['onboard_orbit'], 'estimator.onboard_orbit',
-                     lines.get('estimator'), epoch)
-
-    craft, line = sc['spacecraft'], lines.get('spacecraft')
-    inertia = craft['inertia_kgm2']
-    sym = [[0.5 * (inertia[i][j] + inertia[j][i]) for j in range(3)] for i in range(3)]
-    moments = _sym3_eigenvalues(sym)
-    if moments[0] <= 0.0:
-        checker.fail(line, 'spacecraft.inertia_kgm2', 'not positive definite (principal '
-                     f'moments {", ".join(f"{m:.6g}" for m in moments)} kg m^2)')
-    if moments[2] > MAX_INERTIA_KGM2:
-        checker.fail(line, 'spacecraft.inertia_kgm2', f'principal moment {moments[2]:.6g} '
-                     f'kg m^2 is above {MAX_INERTIA_KGM2:g}')
-    if moments[2] > (moments[0] + moments[1]) * (1.0 + 1e-9):
-        checker.fail(line, 'spacecraft.inertia_kgm2', 'principal moments '
-                     f'{", ".join(f"{m:.6g}" for m in moments)} kg m^2 break the triangle '
-                     'inequality (largest <= sum of the others): no rigid body has them')
-    for i, wheel in enumerate(craft.get('wheels', [])):
-        key = f'spacecraft.wheels[{i}]'
-        if math.sqrt(sum(a * a for a in wheel['axis'])) < 1e-9:
-            checker.fail(line, f'{key}.axis', 'a spin axis of zero length')
-        if not wheel['inertia_kgm2'] > 0:
-            checker.fail(line, f'{key}.inertia_kgm2', 'must be positive')
-        if abs(wheel['h0_Nms']) > wheel['max_momentum_Nms']:
-            checker.fail(line, f'{key}.h0_Nms', f'|{wheel["h0_Nms"]:g}| N m s is above '
-                         f'max_momentum_Nms {wheel["max_momentum_Nms"]:g}')
-    dist = craft.get('disturbance', {})
-    if 'random_period_s' in dist and not dist['random_period_s'] > 0:
-        checker.fail(line, 'spacecraft.disturbance.random_period_s', 'must be positive')
-    for key in ('aerodynamic_Nm', 'solar_pressure_Nm', 'synthetic_gravity_gradient_Nm',
-                'unloading_Nm'):
-        if any(a < 0 for a in dist.get(key, [])):
-            checker.fail(line, f'spacecraft.disturbance.{key}', 'amplitudes must be >= 0')
-    for key in ('harmonic_period_s', 'unloading_period_s'):
-        if key in dist and not dist[key] > 0:
-            checker.fail(line, f'spacecraft.disturbance.{key}', 'must be positive')
-    if not 0 <= dist.get('unloading_duration_s', 0.0) <= dist.get('unloading_period_s', 1.0):
-        checker.fail(line, 'spacecraft.disturbance.unloading_duration_s',
-                     'must be in [0, unloading_period_s]')
-    if craft.get('wheel_error_std_Nms', 0.0) < 0:
-        checker.fail(line, 'spacecraft.wheel_error_std_Nms', 'must be >= 0')
-    if craft.get('wheel_error_std_Nms', 0.0) > 0 and not craft.get('wheels'):
-        checker.fail(line, 'spacecraft.wheel_error_std_Nms', 'needs spacecraft.wheels')
-    if 'wheel_error_period_s' in craft and not craft['wheel_error_period_s'] > 0:
-        checker.fail(line, 'spacecraft.wheel_error_period_s', 'must be positive')
-    flex = craft.get('flexible')
-    if flex is not None:
-        if not 0 <= flex['damping'] < 1:
-            checker.fail(line, 'spacecraft.flexible.damping', f'{flex["damping"]:g} is not in '
-                         '[0, 1)')
-
-    init = sc['initial']
-    for key in ('omega_body_eci_body_deg_s', 'omega_body_orbit_body_deg_s'):
-        if key in init:
-            rate = math.sqrt(sum(w * w for w in init[key]))
-            if rate > MAX_RATE_DEG_S:
-                checker.fail(lines.get('initial'), f'initial.{key}', f'rate {rate:.6g} deg/s '
-                             f'is above {MAX_RATE_DEG_S:g} deg/s')
-    _check_conventions(checker, {k: v for k, v in sc.items() if not k.startswith('_')}, '',
-                       lines)
-
-
+# ---------------------------------------------------------------------- listing, docs
 def list_scenarios(directory: str) -> List[Tuple[str, str]]:
     """(file name, first line of the description) of every scenario in ``directory``."""
     rows = []
-    for fname in sorted(os.listdir(directory)):
-        if not fname.endswith(('.yaml', '.yml')):
-            continue
+    for fname in sorted(f for f in os.listdir(directory) if f.endswith(('.yaml', '.yml'))):
         try:
             sc = load_scenario(os.path.join(directory, fname))
             desc = sc['description'].strip().splitlines()[0] if sc['description'] else ''
@@ -1129,42 +622,26 @@ def list_scenarios(directory: str) -> List[Tuple[str, str]]:
 def schema_markdown() -> str:
     """The scenario keys as a Markdown table (``docs/scenarios.md`` is generated from this)."""
     rows = ['# Scenario keys', '',
-            'Generated by `adcs schema` from `adcs_nodes/scenario.py` and the registry '
+            'Generated by `adcs schema` from the specs (`adcs_nodes/core/spec.py`: the orbit '
+            'in `core/orbit.py`, the field in `core/geomag.py`, the spacecraft and initial '
+            'state in `sim_node/models/spacecraft_config.py`, ...) and the registry '
             '(`adcs_nodes/entries.py`, `sim_node/entries.py`); do not edit.',
-            'Unknown keys are rejected. Angles in degrees only where the key ends in `_deg`.', '',
+            'Unknown keys are rejected. Angles in degrees only where the key ends in `_deg`. '
+            'The nodes take the same values, with the same ranges, as parameters.', '',
             '| key | type | default | meaning |', '|---|---|---|---|']
 
-    def default(spec: F) -> str:
-        if spec.default is REQUIRED:
-            return 'required'
-        if spec.default is OPTIONAL:
-            return 'optional'
-        return f'`{spec.default}`'
-
-    def walk(prefix: str, schema: Dict[str, Any]) -> None:
-        for key, spec in schema.items():
-            full = prefix + key
-            if isinstance(spec, dict):
-                walk(full + '.', spec)
-            elif isinstance(spec, Variant):
-                walk(full + '.', spec.common)
+    def walk(prefix: str, specs) -> None:
+        for spec in specs:
+            full = prefix + spec.name
+            if isinstance(spec, Section):
+                walk(full + '.', spec.params)
                 for name, keys in spec.variants.items():
                     walk(f'{full}.({spec.selector}={name}).', keys)
-            elif isinstance(spec, Param):
-                rows.append(f'| `{full}` | {spec.type} | `{spec.default}` | {spec.doc()} |')
-            elif spec in ('ORBIT', 'FIELD', 'ORBIT?', 'FIELD?'):
-                sel, common, variants = (('type', _ORBIT_COMMON, ORBIT_VARIANTS)
-                                         if spec.startswith('ORBIT') else
-                                         ('model', _FIELD_COMMON, FIELD_VARIANTS))
-                walk(full + '.', common)
-                for name, keys in variants.items():
-                    walk(f'{full}.({sel}={name}).', keys)
-            else:
-                choices = f' (one of {", ".join(spec.choices)})' if spec.choices else ''
-                rows.append(f'| `{full}` | {spec.kind} | {default(spec)} | {spec.doc}{choices} |')
+                continue
+            rows.append(f'| `{full}` | {spec.type} | {spec.default_text()} | {spec.doc()} |')
+            walk(full + '[i].', spec.fields)
 
-    walk('', schema())
-    walk('spacecraft.wheels[i].', _WHEEL_KEYS)
+    walk('', schema().params)
     rows += ['', '## Fault kinds (`faults:`)', '',
              'Each entry is `{at_s, kind, target, params}`; the kinds are registered in '
              '`sim_node/faults.py` (its docstring says how each engine applies them). A '
@@ -1181,18 +658,10 @@ def schema_markdown() -> str:
 
 # ---------------------------------------------------------------------- overrides (--set)
 def parse_overrides(items: Any) -> Dict[str, Any]:
-    """``--set`` arguments to overrides: ``['a.b=3', 'x=[1, 2]']`` -> ``{'a.b': 3, 'x': [1, 2]}``.
-
-    The key is a dotted scenario key (a list element by its index: ``spacecraft.wheels.0.
-    max_torque_Nm``); the value is YAML, read as a scenario file reads it (``1e-5`` is a
-    float); ``null`` removes the key (its default applies again). A dict is returned as is.
-
-    Raises
-    ------
-    ScenarioError
-        An item without ``=``, an empty key or key part, an empty value, or a value that is
-        not YAML; the message names the item.
-    """
+    """``--set`` arguments: ``['a.b=3', 'x=[1, 2]']`` -> ``{'a.b': 3, 'x': [1, 2]}`` (a dict
+    is returned as is). The key is dotted (a list element by its index:
+    ``spacecraft.wheels.0.max_torque_Nm``), the value YAML as a scenario file reads it;
+    ``null`` removes the key. ``ScenarioError`` naming a malformed item."""
     if isinstance(items, dict):
         return dict(items)
     out: Dict[str, Any] = {}
@@ -1205,7 +674,7 @@ def parse_overrides(items: Any) -> Dict[str, Any]:
         if not text.strip():
             raise ScenarioError(f'--set {key}: no value (write {key}=null to remove the key)')
         try:
-            out[key] = _plain(yaml.load(text, Loader=_LineLoader))  # noqa: S506 - SafeLoader
+            out[key] = plain(yaml.load(text, Loader=_LineLoader))  # noqa: S506 - SafeLoader
         except (yaml.YAMLError, ScenarioError, RecursionError) as exc:
             why = getattr(exc, 'problem', None) or str(exc) or type(exc).__name__
             raise ScenarioError(shorten_message(f'--set {key}: the value is not YAML: {why}')) \
@@ -1213,89 +682,45 @@ def parse_overrides(items: Any) -> Dict[str, Any]:
     return out
 
 
-def _plain(value: Any) -> Any:
-    """Plain dicts, lists and Python scalars (what ``yaml.safe_dump`` writes)."""
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if hasattr(value, 'tolist') and not isinstance(value, (str, bytes)):
-        return _plain(value.tolist())        # numpy arrays and scalars
-    return value
-
-
-def _set_dotted(data: Dict[str, Any], key: str, value: Any) -> None:
-    node: Any = data
-    *path, leaf = key.split('.')
-    for i, part in enumerate(path + [leaf]):
-        where = '.'.join(path[:i]) or '<top>'
-        last = i == len(path)
-        if isinstance(node, list):
-            if not part.isdigit() or int(part) >= len(node):
-                raise ScenarioError(f'--set {key}: {where} is a list of {len(node)}: '
-                                    f'{part!r} is not an index of it')
-            if last:
-                if value is None:
-                    raise ScenarioError(f'--set {key}: a list element cannot be removed')
-                node[int(part)] = value
-                return
-            node = node[int(part)]
-        elif isinstance(node, dict):
-            if last:
-                if value is None:
-                    node.pop(part, None)
-                else:
-                    node[part] = value
-                return
-            if node.get(part) is None:
-                node[part] = {}            # a new section (the validation names a bad one)
-            node = node[part]
-        else:
-            raise ScenarioError(f'--set {key}: {where} is a value ({node!r}), not a section')
-
-
 def apply_overrides(sc: Dict[str, Any], overrides: Any) -> Dict[str, Any]:
-    """A validated copy of scenario ``sc`` with ``overrides`` set (``--set KEY=VALUE``).
-
-    Parameters
-    ----------
-    sc : dict
-        A validated scenario (:func:`load_scenario`; it is not changed).
-    overrides : dict or sequence of str
-        ``{dotted key: value}`` (``None`` removes the key) or ``KEY=VALUE`` strings
-        (:func:`parse_overrides`).
-
-    Returns
-    -------
-    dict
-        The edited scenario, validated again by every check of :func:`load_scenario` (as if
-        the file said so); ``_path`` stays the original file's. The overrides apply to the
-        effective scenario: the flight software's onboard models are their own keys
-        (``estimator.onboard_orbit.*``, ``estimator.onboard_field.*``), so a change of the
-        truth ``orbit`` or ``field`` leaves them as they were (a model error), unless set too.
-
-    Raises
-    ------
-    ScenarioError
-        An unknown key, a bad value or a physically impossible combination; the message starts
-        with ``--set`` and the overridden keys and names the offending key (no file line: the
-        edit has none).
+    """A copy of the validated scenario ``sc`` with ``overrides`` (``{dotted key: value}``,
+    ``None`` removes the key, or ``KEY=VALUE`` strings) set, validated again as the file is;
+    ``_path`` stays the file's. The onboard models are their own keys
+    (``estimator.onboard_orbit.*``): a change of the truth ``orbit`` leaves them as they were
+    (a model error), unless set too. ``ScenarioError``: ``--set KEY=VALUE: key: why``.
     """
-    import tempfile
-
     changes = parse_overrides(overrides)
     data = copy.deepcopy({k: v for k, v in sc.items() if not str(k).startswith('_')})
     for key, value in changes.items():
         _set_dotted(data, key, copy.deepcopy(value))
     what = ', '.join(f'{k}={v!r}' for k, v in changes.items())
-    with tempfile.TemporaryDirectory(prefix='adcs-set-') as tmp:
-        path = os.path.join(tmp, 'scenario.yaml')
-        with open(path, 'w', encoding='utf-8') as fh:
-            yaml.safe_dump(_plain(data), fh, sort_keys=False)
-        try:
-            out = load_scenario(path)
-        except ScenarioError as exc:
-            text = re.sub(r'^' + re.escape(path) + r'(:\d+)?: ', '', str(exc))
-            raise ScenarioError(shorten_message(f'--set {what}: {text}')) from None
-    out['_path'] = sc.get('_path', out['_path'])
-    return out
+    try:
+        return check_scenario({**data, **{k: v for k, v in sc.items() if str(k)[:1] == '_'}})
+    except ScenarioError as exc:
+        raise ScenarioError(shorten_message(f'--set {what}: {exc}')) from None
+
+
+def _set_dotted(data: Dict[str, Any], key: str, value: Any) -> None:
+    """Set ``key`` (dotted; a list element by its index) to ``value`` (``None``: remove)."""
+    node: Any = data
+    parts = key.split('.')
+    for i, part in enumerate(parts):
+        where, last = '.'.join(parts[:i]) or '<top>', i == len(parts) - 1
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise ScenarioError(f'--set {key}: {where} is a list of {len(node)}: '
+                                    f'{part!r} is not an index of it')
+            if last and value is None:
+                raise ScenarioError(f'--set {key}: a list element cannot be removed')
+            part = int(part)
+        elif not isinstance(node, dict):
+            raise ScenarioError(f'--set {key}: {where} is a value ({node!r}), not a section')
+        elif last and value is None:
+            node.pop(part, None)
+            return
+        elif not last and node.get(part) is None:
+            node[part] = {}            # a new section (the validation names a bad one)
+        if last:
+            node[part] = value
+            return
+        node = node[part]

@@ -1,155 +1,120 @@
-"""The one spec language of every configurable value: :class:`Param` (type, default, unit,
-range or choices, description, read-only), validated the same way wherever the value enters
-(scenario, node parameter, run-time change).
+"""The specs every node, the graph and the plain engine share: the run's timing, the common
+node parameters (:data:`COMMON`), the guidance profile and the manager's schedule.
+
+The spec language itself (:class:`Param`, :class:`Section`) is :mod:`adcs_nodes.core.spec`;
+the world's sections are declared beside their models (orbit: ``core/orbit.py``, field:
+``core/geomag.py``, the automatic sequence: ``core/manager.py``, spacecraft and initial state:
+``sim_node/models/spacecraft_config.py``), the components' in their registry entries.
 
 Pure Python; no rclpy.
 """
 from __future__ import annotations
 
-import array
-import difflib
-import math
-from dataclasses import dataclass
-from typing import Any, Optional, Sequence, Tuple
+from dataclasses import replace
+
+from adcs_nodes.core.spec import (REQUIRED, ROS_TYPE, TYPES, Param, Section,  # noqa: F401
+                                  SpecError, did_you_mean, iso_time, plain, short,
+                                  unknown_message)
+
+#: The scenario's ``timing`` section.
+FRAME_S = Param('frame_s', 'float', 1.0, 's', 'base frame period; every period is a multiple '
+                'of it', min=1e-6, max=86400.0)
+TIMEOUT_S = Param('timeout_s', 'float', 5.0, 's', 'wall-clock wait for a missing input before '
+                  'going on', positive=True, max=3600.0)
+SUBSTEPS = Param('substeps', 'int', 10, '-', 'RK4 substeps per frame in the dynamics', min=1,
+                 max=10000)
+TIMING = Section('timing', (FRAME_S, SUBSTEPS, TIMEOUT_S))
+EPOCH = Param('epoch', 'time', '2026-01-01T00:00:00Z', '-', 'UTC date-time of sim time 0 '
+              '(ISO 8601)')
+SEED = Param('seed', 'int', 0, '-', 'scenario seed; every node derives its own random stream '
+             'from it', min=0, max=2**63 - 1)
+
+#: Wall-clock wait for a missing input, in units of ``timing.timeout_s``, by depth in the
+#: frame's chain (estimator -> controllers -> manager -> dynamics): a node waits longer than
+#: its producers, so a missing input upstream times out there first and the consumers get
+#: the fallback instead of timing out themselves at the same moment. A sensor waits for the
+#: truth of the next frame, which comes only once the world has stepped: after the clock
+#: master's own wait.
+CHAIN_TIMEOUT = {'estimator': 1.0, 'controller': 2.0, 'manager': 3.0, 'dynamics': 4.0,
+                 'sensor': 5.0}
+
+#: Parameters every lockstep node has.
+COMMON = {p.name: p for p in (
+    replace(EPOCH, read_only=True),
+    replace(FRAME_S, name='frame_period_s', read_only=True),
+    TIMEOUT_S,
+    Param('timeout_factor', 'float', 1.0, '-', 'the wait for a missing input is timeout_s '
+          "times this: the node's depth in the frame's chain (CHAIN_TIMEOUT; the launcher "
+          'sets it)', min=1.0, max=max(CHAIN_TIMEOUT.values()), read_only=True),
+    replace(SEED, read_only=True),
+    Param('real_time', 'bool', False, '-', 'latest-value mode paced by the wall clock',
+          read_only=True),
+    Param('duration_s', 'float', None, 's', 'run length (not given: unbounded)',
+          positive=True, read_only=True),
+    Param('expected_matches', 'str[]', [], '-', 'start handshake: pub:/sub:<topic>=<n> '
+          'matched endpoints before ready', read_only=True),
+    Param('expected_publishers', 'str[]', [''], '-', 'lockstep inputs accepted only from '
+          "the named node's publisher: \"<topic>=<node>\" entries (['']: accept every "
+          'publisher)', read_only=True),
+    Param('plugins', 'str[]', [], '-', 'registry plugin modules or .py files to load',
+          read_only=True),
+    Param('autostart', 'bool', True, '-', 'managed nodes: configure and activate at start '
+          '(false: wait for the lifecycle services)', read_only=True),
+    Param('dead_after_frames', 'int', 3, '-', 'a producer that missed this many frames in a '
+          'row is dead and no longer awaited until it publishes again', min=1, max=1000000),
+    Param('max_sample_age_s', 'float', 5.0, 's', 'live mode: older samples are rejected',
+          positive=True),
+    Param('max_future_s', 'float', 0.5, 's', 'live mode: samples stamped further ahead of '
+          'the clock are rejected', min=0.0),
+    Param('live_latency_s', 'float', 0.05, 's', 'live mode: a frame with no new sample is '
+          'stamped the clock time minus this (samples in transit are not late)', min=0.0,
+          max=60.0),
+    Param('status_period_s', 'float', 1.0, 's', 'lockstep/status period (sim time)',
+          positive=True),
+    Param('external_inputs', 'str[]', [], '-', 'lockstep mode: inputs taken in sample '
+          'timing (a driver publishes them, or --real-time): never awaited, each sample used '
+          'once at its own stamp, in stamp order; late ones rejected', read_only=True),
+    Param('timing_mode', 'str', '', '-', "lockstep (with the simulator) or live (real "
+          "drivers); '': live when started alone", choices=('', 'lockstep', 'live'),
+          read_only=True),
+    Param('killed_at_s', 'float', -1.0, 's', 'a node_killed fault: from this sim time on the '
+          'node fires no frame and publishes nothing, as a crashed process (-1: never)',
+          min=-1.0, read_only=True),
+)}
 
 
-#: Parameter types: ROS parameter type names.
-TYPES = ('float', 'int', 'bool', 'str', 'float[]', 'str[]')
+# ---------------------------------------------------------------------- guidance, schedule
+def _segments(segments):
+    """A profile's rules beyond each field's range; sorted by ``t_s``."""
+    for i, seg in enumerate(segments):
+        if seg['type'] == 'slew' and not seg['duration_s'] > 0:
+            raise SpecError(f'[{i}].duration_s', 'a slew needs duration_s > 0')
+        if seg['type'] == 'track' and not seg['period_s'] > 0:
+            raise SpecError(f'[{i}].period_s', 'a track needs period_s > 0')
+    return sorted(segments, key=lambda e: e['t_s'])
 
 
-def short(value: Any, limit: int = 80) -> str:
-    """``repr(value)`` cut to ``limit`` characters (error messages never echo huge input)."""
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + '...'
+#: ``guidance.profile``: time-tagged attitude segments (:func:`adcs_nodes.core.guidance.
+#: guidance_from_params`); the guidance node takes it as ``profile_<field>`` arrays.
+PROFILE = Param(
+    'profile', 'table', [], '-', 'time-tagged segments (empty: hold the orbital frame)',
+    fields=(Param('t_s', 'float', REQUIRED, 's', 'start time of the segment', min=0.0),
+            Param('type', 'str', REQUIRED, '-', 'segment type',
+                  choices=('hold', 'slew', 'track')),
+            Param('q_xyzw', 'quat', [0.0, 0.0, 0.0, 1.0], '-', 'attitude of the segment, '
+                  'scalar last'),
+            Param('duration_s', 'float', 0.0, 's', 'slew duration', min=0.0),
+            Param('axis_body', 'vec3', [0.0, 0.0, 1.0], '-', 'tracking axis, body axes'),
+            Param('amplitude_deg', 'float', 0.0, 'deg', 'tracking amplitude', min=0.0,
+                  max=180.0),
+            Param('period_s', 'float', 0.0, 's', 'tracking period', min=0.0)),
+    check=_segments)
+#: The segment of an empty profile: hold the orbital frame.
+HOLD = PROFILE.validate([{'t_s': 0.0, 'type': 'hold'}])
 
-
-@dataclass(frozen=True)
-class Param:
-    """One typed parameter of a registered component.
-
-    Attributes
-    ----------
-    name : str
-        Parameter name; the node parameter and the scenario key are both this name.
-    type : str
-        One of :data:`TYPES`.
-    default : Any
-        Default value (the only place it is written).
-    unit : str
-        Unit, e.g. ``'1/s'``, ``'A m^2'``, ``'-'`` for none.
-    description : str
-        One line.
-    min, max : float or None
-        Inclusive range of the value (of each element for arrays).
-    positive : bool
-        The value (each element) must be > 0.
-    choices : tuple of str
-        Allowed values of a ``str`` parameter.
-    length : int or None
-        Required length of an array.
-    read_only : bool
-        A change needs a restart (refused at run time).
-    """
-
-    name: str
-    type: str
-    default: Any
-    unit: str = '-'
-    description: str = ''
-    min: Optional[float] = None
-    max: Optional[float] = None
-    positive: bool = False
-    choices: Tuple[str, ...] = ()
-    length: Optional[int] = None
-    read_only: bool = False
-
-    def __post_init__(self) -> None:
-        if self.type not in TYPES:
-            raise ValueError(f'parameter {self.name}: unknown type {self.type!r}; known {TYPES}')
-        self.validate(self.default)          # a default outside its own range is a bug
-
-    # ---------------------------------------------------------------- validation
-    def validate(self, value: Any) -> Any:
-        """Return ``value`` converted to this parameter's type, or raise ``ValueError``.
-
-        The message says why (type, range, choices, length), never echoing more than 80
-        characters of the value. An array may come as a list, a tuple or an ``array.array``
-        (what rclpy hands over for a ``double_array_value`` set at run time).
-        """
-        t = self.type
-        if t == 'float':
-            return self._number(value)
-        if t == 'int':
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise ValueError(f'{self.name}: expected an integer, got {short(value)}')
-            self._range(value)
-            return int(value)
-        if t == 'bool':
-            if not isinstance(value, bool):
-                raise ValueError(f'{self.name}: expected true or false, got {short(value)}')
-            return value
-        if t == 'str':
-            if not isinstance(value, str):
-                raise ValueError(f'{self.name}: expected text, got {short(value)}')
-            if self.choices and value not in self.choices:
-                near = difflib.get_close_matches(value, self.choices, n=1)
-                hint = f' (did you mean {near[0]!r}?)' if near else ''
-                raise ValueError(f'{self.name}: {short(value)} is not one of '
-                                 f'{", ".join(self.choices)}{hint}')
-            return value
-        if isinstance(value, array.array):
-            value = value.tolist()
-        if not isinstance(value, (list, tuple)):
-            raise ValueError(f'{self.name}: expected a list, got {short(value)}')
-        if self.length is not None and len(value) != self.length:
-            raise ValueError(f'{self.name}: expected {self.length} values, got {len(value)}')
-        if t == 'str[]':
-            if not all(isinstance(v, str) for v in value):
-                raise ValueError(f'{self.name}: expected a list of text, got {short(value)}')
-            return list(value)
-        return [self._number(v) for v in value]
-
-    def _number(self, value: Any) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f'{self.name}: expected a number, got {short(value)}')
-        x = float(value)
-        if not math.isfinite(x):
-            raise ValueError(f'{self.name}: expected a finite number, got {short(value)}')
-        self._range(x)
-        return x
-
-    def _range(self, x: float) -> None:
-        unit = f' {self.unit}' if self.unit not in ('', '-') else ''
-        if self.positive and not x > 0:
-            raise ValueError(f'{self.name}: must be > 0{unit}, got {x:g}')
-        if self.min is not None and x < self.min:
-            raise ValueError(f'{self.name}: must be >= {self.min:g}{unit}, got {x:g}')
-        if self.max is not None and x > self.max:
-            raise ValueError(f'{self.name}: must be <= {self.max:g}{unit}, got {x:g}')
-
-    # ---------------------------------------------------------------- documentation
-    def range_text(self) -> str:
-        """Human range: ``> 0``, ``[0, 1]``, ``one of a, b``, or ''."""
-        if self.choices:
-            return 'one of ' + ', '.join(self.choices)
-        lo = '> 0' if self.positive else (f'>= {self.min:g}' if self.min is not None else '')
-        hi = f'<= {self.max:g}' if self.max is not None else ''
-        return ', '.join(p for p in (lo, hi) if p)
-
-    def doc(self) -> str:
-        """Description with unit and range, for descriptors and docs."""
-        extra = [f'[{self.unit}]'] if self.unit not in ('', '-') else []
-        rng = self.range_text()
-        if rng:
-            extra.append(f'({rng})')
-        if self.read_only:
-            extra.append('(read-only: restart to change)')
-        return ' '.join([self.description] + extra)
-
-
-def unknown_message(key: str, known: Sequence[str], where: str) -> str:
-    """'unknown parameter X of WHERE (did you mean Y?); known: ...'."""
-    near = difflib.get_close_matches(str(key), list(known), n=1)
-    hint = f' (did you mean {near[0]!r}?)' if near else ''
-    return (f'unknown parameter {short(key, 60)} of {where}{hint}; known: '
-            f'{", ".join(sorted(known))}')
+#: ``manager.schedule``: scripted switches (the manager takes ``schedule_<field>`` arrays).
+SCHEDULE = Param(
+    'schedule', 'table', [], '-', 'scripted switches, in time order',
+    fields=(Param('t_s', 'float', REQUIRED, 's', 'switch time'),
+            Param('controller', 'str', REQUIRED, '-', 'controller switched to')),
+    check=lambda items: sorted(items, key=lambda e: e['t_s']))

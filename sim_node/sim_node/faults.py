@@ -1,55 +1,23 @@
-"""Faults of the simulated world: the registered kinds and how a component applies them.
+"""Faults of the simulated world: the registered kinds (``adcs list``, ``docs/scenarios.md``:
+each kind's description and parameters) and how a component applies them.
 
-A scenario's ``faults:`` list (``{at_s, kind, target, params}``) is validated against the
-kinds registered here (``adcs list`` shows them; ``docs/scenarios.md``). Each fault happens at
-exact sim time ``at_s`` and lasts ``params.duration_s`` (0: to the end of the run), is seeded
-(``derive_seed(seed, 'fault/<index>')``), and is announced on ``sim/faults``
-(``diagnostic_msgs/DiagnosticArray``: one status per fault starting or ending that frame, level
-WARN while active, OK when it ends). The components apply them, so the plain, composed and
-graph engines see the same faults:
+A scenario's ``faults:`` (``{at_s, kind, target, params}``, validated by
+:func:`adcs_nodes.scenario.check_fault`) happen at exact sim time ``at_s``, last
+``params.duration_s`` (0: to the end), are seeded (``derive_seed(seed, 'fault/<index>')``) and
+announced on ``sim/faults`` (one ``DiagnosticArray`` status per fault starting, WARN, or
+ending, OK). The components apply them, so the plain, composed and graph engines see the same
+faults: a sensor's to the sample it publishes (:class:`SensorFaults`; a star tracker's bias is
+a rotation vector applied to its attitude), an actuator's to the held command in the dynamics
+(:class:`ActuatorFaults`). ``node_killed`` stops the node for good at ``at_s`` in every engine
+(no frame, no message, as a crashed process; a graph run then SIGKILLs its process, after the
+node went silent at ``at_s``, so the series do not depend on when the signal lands): the graph
+reacts as to any crash and the run ends degraded naming the node (:func:`lost_text`). The
+simulated world and the recorder cannot be killed; it is a scripted fault only.
 
-* sensor faults, in the sensor's component (:class:`SensorFaults`) on the sample it publishes:
-
-  - ``dropout``: the sensor is silent (publishes nothing; a consumer in lockstep waits its
-    timeout, counts a missed frame, then no longer waits for a dead producer);
-  - ``nan``: samples with every value NaN (what a driver sends for "no data");
-  - ``stuck``: every sample repeats the values of the last sample before the fault;
-  - ``bias_step``: ``bias`` added to the values (sensor units: T, rad/s, rad; a star tracker's
-    bias is a rotation vector [rad] applied to its attitude);
-  - ``noise_burst``: white noise of ``std`` per axis added (seeded);
-
-* actuator faults, in the dynamics (:class:`ActuatorFaults`) on the held command:
-
-  - ``wheel_stuck``: the wheel's motor torque is zero (its speed relative to the body stays
-    where it was) and stays so;
-  - ``wheel_torque_lost``: the wheel's motor delivers ``fraction`` of its command (0: none);
-  - ``coil_open``: the magnetorquer axis (``x``, ``y``, ``z``) gives no dipole.
-
-* a node fault, in every engine:
-
-  - ``node_killed``: the node (``target``: its name in the graph, ``adcs list`` and the
-    validator name the scenario's) stops for good at ``at_s``: from that frame on it fires no
-    frame and publishes nothing (no data, no progress, no status), as a crashed process. In
-    a graph run (one process per node) the launcher then kills its process with SIGKILL as
-    soon as the run's clock has reached ``at_s``; the node went silent at exactly ``at_s``
-    first, so the series do not depend on when the signal lands and every engine gives the
-    same one. The rest of the graph reacts as to any crash: its consumers wait their
-    timeout, count the missed frames and stop waiting for a dead producer; the manager falls
-    back (a dead controller or estimator), the dynamics applies a zero command (a dead
-    manager); the run ends degraded (exit 3) and its reason names the node
-    (:func:`lost_text`). A scripted fault only: ``adcs fault`` refuses it (kill the process
-    of a running graph yourself: ``adcs status`` shows the pids). The simulated world
-    (``dynamics``, ``environment``) and the recorder cannot be killed this way.
-
-Live faults (``adcs fault KIND TARGET``): one fault as JSON text on :data:`INJECT_TOPIC`
-(``std_msgs/String``, reliable): ``{index, kind, target, at_s, params}``, ``at_s`` null for
-"the next frame". The sensor nodes and the dynamics take it (:func:`injected`, the same
-registry specs as a scenario's fault; a fault for another node is not theirs, a bad one is
-refused with the reason in the log), hand it to their component (:meth:`SensorFaults.add`,
-:meth:`ActuatorFaults.add`), and the dynamics announces it on ``sim/faults`` like a scripted
-one. It starts at ``at_s``, or at the receiver's next frame when that time has passed or is
-not given: when that is depends on wall time (how far each node got when the message came),
-so a live fault is not deterministic, unlike a scenario's.
+Live faults (``adcs fault KIND TARGET``): one fault as JSON on :data:`INJECT_TOPIC`
+(``{index, kind, target, at_s, params}``, ``at_s`` null: the next frame), checked as a
+scenario's (:func:`injected`), applied by the sensor nodes and the dynamics from ``at_s`` or
+their next frame: not deterministic, its frame depends on wall time.
 """
 from __future__ import annotations
 
@@ -159,11 +127,6 @@ def parse(text: str) -> List[Fault]:
                          start + int(round(duration * NS_PER_S)) if duration > 0 else None,
                          dict(item.get('params', {}))))
     return out
-
-
-def to_text(faults: Sequence[Dict[str, Any]]) -> str:
-    """JSON text of validated scenario faults (with their index) for a node parameter."""
-    return json.dumps(list(faults), sort_keys=True)
 
 
 # ---------------------------------------------------------------------- sensors
@@ -278,26 +241,13 @@ INJECT_TOPIC = 'sim/inject_fault'
 
 def check(kind: str, target: str, params: Optional[Dict[str, Any]], sensors: Sequence[str],
           wheels: Sequence[str], magnetorquer: bool) -> Dict[str, Any]:
-    """The parameters of fault ``kind`` striking ``target``, validated with the kind's
-    registry specs and filled with their defaults, as a scenario's ``faults:`` entry is
-    (``ValueError`` with the reason: unknown kind, a target it cannot strike among
-    ``sensors``, ``wheels`` and the magnetorquer axes, a parameter out of range)."""
-    from adcs_nodes import registry
-    entry = registry.get('fault', kind)
-    if NODE in entry.targets:
-        raise ValueError(f'{kind} is a scripted fault only (a scenario\'s faults:); to kill a '
-                         'node of a running graph, kill its process (adcs status shows the '
-                         'pids)')
-    if SENSOR in entry.targets:
-        known = list(sensors)
-    elif WHEEL in entry.targets:
-        known = list(wheels)
-    else:
-        known = list(AXES) if magnetorquer else []
-    if target not in known:
-        raise ValueError(f'{kind} cannot strike {target!r}; it strikes '
-                         f'{", ".join(entry.targets)}: {", ".join(known) or "none here"}')
-    return entry.validate(dict(params or {}))
+    """The parameters of live fault ``kind`` striking ``target`` among ``sensors``,
+    ``wheels`` and the magnetorquer axes, validated and filled as a scenario's fault is
+    (:func:`adcs_nodes.scenario.check_fault`: ``ValueError`` with the reason)."""
+    from adcs_nodes.scenario import check_fault
+    return check_fault(kind, target, params, {
+        SENSOR: list(sensors), WHEEL: list(wheels),
+        MAGNETORQUER: list(AXES) if magnetorquer else []}, scripted=False)
 
 
 def injected(text: str, earliest_ns: int, sensors: Optional[Sequence[str]] = (),
@@ -306,7 +256,8 @@ def injected(text: str, earliest_ns: int, sensors: Optional[Sequence[str]] = (),
     ``sensors`` (None: any sensor, the dynamics, which announces them all), ``wheels`` and
     (``magnetorquer``) the coils.
 
-    Returns None when the fault is not this node's (another sensor's); raises ``ValueError``
+    Returns None when the fault is not this node's (another sensor's; an actuator's for a
+    sensor node, which strikes no wheel and no coil); raises ``ValueError``
     with the reason for a malformed or invalid one. It starts at ``at_s``, but no earlier than
     ``earliest_ns`` (the receiver's next frame; also when ``at_s`` is null), and lasts
     ``params.duration_s`` from its start (0: to the end of the run).
@@ -322,6 +273,8 @@ def injected(text: str, earliest_ns: int, sensors: Optional[Sequence[str]] = (),
     entry = registry.get('fault', kind)
     if SENSOR in entry.targets and sensors is not None and target not in sensors:
         return None                                  # another sensor's
+    if SENSOR not in entry.targets and sensors and not wheels and not magnetorquer:
+        return None                                  # an actuator's: the dynamics'
     params = check(kind, target, item.get('params'), [target] if sensors is None else sensors,
                    wheels, magnetorquer)
     at = item.get('at_s')

@@ -201,16 +201,22 @@ def test_sigkill_of_the_recorder_stops_the_run_and_export_and_report_read_the_ba
 def test_a_node_refusing_its_configuration_makes_the_run_exit_2(tmp_path, monkeypatch):
     """A node exiting with code 2 (configuration error) ends the run with exit code 2."""
     from adcs_nodes.tools.run import launcher
+    from adcs_nodes.tools.run.launcher import isolation
     from adcs_nodes.scenario import load_scenario
 
-    monkeypatch.setattr(launcher, 'RUNS_DIR', str(tmp_path / 'runs'))
+    monkeypatch.setattr(isolation, 'RUNS_DIR', str(tmp_path / 'runs'))
+    bag = tmp_path / 'bag'
     run = launcher.Launcher(load_scenario(FREE_TUMBLE), duration_s=10.0, progress=False,
-                            log=lambda *a: None)
-    refuse = [sys.executable, '-c', 'import sys; print("bad parameter"); sys.exit(2)']
+                            log=lambda *a: None, record=str(bag))
+    refuse = [sys.executable, '-c', f'import os, sys, time\nwhile not os.path.isdir('
+              f'{str(bag)!r}): time.sleep(0.01)\nprint("bad parameter"); sys.exit(2)']
     wait = [sys.executable, '-c', 'import signal; signal.pause()']   # until the launcher stops it
+    recorder = [sys.executable, '-c', f'import os, signal; os.mkdir({str(bag)!r}); '
+                'signal.pause()']                   # creates its bag at start, as the recorder
     monkeypatch.setattr(run, '_commands', lambda params: {
-        'environment': wait, 'dynamics': wait, 'magnetometer': refuse})
+        'environment': wait, 'dynamics': wait, 'magnetometer': refuse, 'recorder': recorder})
     result = run.run()
     assert result.exit_code == 2, result.message
     assert 'magnetometer refused its configuration' in result.message
+    assert result.bag is None and not bag.exists()    # no bag: line for a run that never ran
     assert 'bad parameter' in result.message

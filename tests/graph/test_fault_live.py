@@ -18,13 +18,13 @@ import yaml
 
 from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
 from adcs_nodes.bag import header_stamp_ns, read_messages
+from adcs_nodes.tools.run import live
 
 EPOCH_NS = 1767225600 * 10**9          # paper000_control's epoch
 
 
 def _scenario(tmp_path):
-    """paper000_control, recording sim/faults too (it has no scripted fault, so the graph
-    would not list the topic)."""
+    """paper000_control, recording what the test reads."""
     with open(os.path.join(SCENARIOS, 'paper000_control.yaml')) as fh:
         sc = yaml.safe_load(fh)
     sc['record'] = {'topics': ['/clock', 'sim/faults', 'sensors/magnetometer',
@@ -68,6 +68,13 @@ def test_a_live_magnetometer_nan_is_announced_and_refused_by_the_estimator(tmp_p
         assert m, out
         t_fault = float(m.group(1))
         assert 'not deterministic' in out
+        # a valid future time: the command returns once the fault is scheduled, with its
+        # time (200 s of wall time ahead at the pace: it strikes after this test)
+        t0 = time.monotonic()
+        out = adcs('fault', 'dropout', 'magnetometer', '--at', f'{t_fault + 20000:g}',
+                   '--run', pid).stdout
+        assert time.monotonic() - t0 < live.ANNOUNCE_WAIT_S, out
+        assert f'scheduled from t = {t_fault + 20000:g} s' in out, out
         # the run goes on past the fault's end: its end is in the bag being written
         deadline = time.monotonic() + 60.0
         while not any('cleared' in msg for _, msg in _faults(bag)):

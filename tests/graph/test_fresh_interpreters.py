@@ -36,11 +36,11 @@ def test_compiled_and_python_world_kernels_agree():
     """``tests/unit/test_kernels.py``'s ``scenario()`` (every world kernel path) compiled here
     and as plain Python there: identical, or within 1e-12 relative."""
     from sim_node.models import kernels
-    assert type(kernels.frame_step).__name__ == 'CPUDispatcher'      # compiled here
     compiled = runpy.run_path(WORLD)['scenario']()
+    assert type(kernels.frame_step).__name__ == 'CPUDispatcher'      # compiled here
     code = ('import json, runpy; from sim_node.models import kernels; '
-            f'm = runpy.run_path({WORLD!r}); '
-            'print(json.dumps([type(kernels.frame_step).__name__, m["scenario"]()]))')
+            f'm = runpy.run_path({WORLD!r}); out = m["scenario"](); '
+            'print(json.dumps([type(kernels.frame_step).__name__, out]))')
     kind, python = _run(code, {'NUMBA_DISABLE_JIT': '1'})
     assert kind == 'function'                                       # plain Python there
     a = np.array([float.fromhex(v) for v in compiled])
@@ -71,15 +71,46 @@ def test_compile_cache_serves_a_second_process(tmp_path):
 
 def test_compiled_and_uncompiled_control_kernels_give_the_same_bits():
     """``tests/unit/test_control_kernels.py``'s ``sample()`` (the magnetic law, the manager's
-    checks, the dipole field, the onboard reference) compiled here and uncompiled there."""
+    checks, the dipole field, the onboard reference, the shared kernels) compiled here,
+    uncompiled there (``NUMBA_DISABLE_JIT=1``), and as a node process that calls no kernel
+    which loads numba runs them: plain Python, numba never imported."""
     kinds, compiled = runpy.run_path(CONTROL)['sample']()
     assert set(kinds) == {'CPUDispatcher'}                      # numba-compiled here
-    code = ('import json, runpy; m = runpy.run_path(%r); print(json.dumps(m["sample"]()))'
-            % CONTROL)
-    kinds_py, python = _run(code, {'NUMBA_DISABLE_JIT': '1'}, timeout=300)
+    code = ('import json, runpy, sys; m = runpy.run_path(%r); '
+            'kinds, out = m["sample"](%s); print(json.dumps([kinds, "numba" in sys.modules, '
+            'out]))')
+    kinds_py, loaded, python = _run(code % (CONTROL, 'True'), {'NUMBA_DISABLE_JIT': '1'},
+                                    timeout=300)
     assert set(kinds_py) == {'function'}                        # plain Python there
-    assert len(compiled) == len(python) > 3000
+    kinds_lazy, loaded, lazy = _run(code % (CONTROL, 'False'), {'NUMBA_DISABLE_JIT': '0'},
+                                    timeout=300)
+    assert set(kinds_lazy) == {'Lazy'} and not loaded           # not compiled, no numba
+    assert len(compiled) == len(python) == len(lazy) > 3000
     assert compiled == python
+    assert compiled == lazy
+
+
+#: Every node executable's module (``setup.py`` entry points) and the composed runner.
+NODE_MODULES = ('adcs_nodes.nodes.recorder', 'adcs_nodes.nodes.estimator',
+                'adcs_nodes.nodes.controller', 'adcs_nodes.nodes.guidance',
+                'adcs_nodes.nodes.controller_manager', 'adcs_nodes.nodes.tf',
+                'adcs_nodes.nodes.slew_action', 'sim_node.nodes.dynamics',
+                'sim_node.nodes.environment', 'sim_node.nodes.magnetometer',
+                'sim_node.nodes.horizon_sensor', 'sim_node.nodes.star_tracker',
+                'sim_node.nodes.gyro', 'sim_node.nodes.wheel_tachometer')
+
+
+def test_node_modules_import_no_numba_scipy_or_plotting():
+    """A node process pays for numba (~0.5 s CPU) only when it calls a kernel that loads it,
+    never for an import; scipy, plotting and analysis modules are not imported at all."""
+    heavy = ('numba', 'scipy', 'matplotlib', 'pandas', 'adcs_nodes.tools')
+    code = ('import importlib, json, sys; importlib.import_module(sys.argv[1]); '
+            f'print(json.dumps(sorted(m for m in {heavy!r} if m in sys.modules)))')
+    for module in NODE_MODULES:
+        proc = subprocess.run([sys.executable, '-c', code, module], capture_output=True,
+                              text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert json.loads(proc.stdout.strip().splitlines()[-1]) == [], module
 
 
 def test_run_sh_resolves_paths_against_the_callers_directory():

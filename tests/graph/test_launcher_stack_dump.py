@@ -12,11 +12,10 @@ import os
 import subprocess
 import sys
 import time
-from types import SimpleNamespace
 
 import pytest
 
-from adcs_nodes.tools.run.launcher import Launcher
+from adcs_nodes.tools.run.launcher.processes import Processes
 
 pytestmark = pytest.mark.parallel
 
@@ -44,9 +43,9 @@ def test_a_stuck_node_tells_its_stack_and_lives_on(tmp_path):
             assert proc.poll() is None, log_path.read_text()
             time.sleep(0.05)
         assert 'factory entered' in log_path.read_text()
-        launcher = SimpleNamespace(procs={'stuck': proc}, run_dir=str(tmp_path))
-        launcher._log_tail = lambda name, lines=15: Launcher._log_tail(launcher, name, lines)
-        dump = Launcher._dump_stack(launcher, 'stuck', wait_s=60.0)
+        procs = Processes(str(tmp_path))
+        procs.procs['stuck'] = proc
+        dump = procs.dump_stack('stuck', wait_s=60.0)
         assert 'asked with SIGUSR1' in dump
         assert 'stuck_in_configure' in dump, dump
         assert proc.poll() is None                   # the dump did not end the process
@@ -58,6 +57,6 @@ def test_a_stuck_node_tells_its_stack_and_lives_on(tmp_path):
 def test_a_process_already_gone_gives_no_dump(tmp_path):
     proc = subprocess.Popen([sys.executable, '-c', 'pass'])
     proc.wait()
-    launcher = SimpleNamespace(procs={'gone': proc}, run_dir=str(tmp_path))
-    launcher._log_tail = lambda name, lines=15: ''
-    assert Launcher._dump_stack(launcher, 'gone') == ''
+    procs = Processes(str(tmp_path))
+    procs.procs['gone'] = proc
+    assert procs.dump_stack('gone') == ''

@@ -211,6 +211,30 @@ def test_plain_engine_gives_the_graph_trajectory(graph_runs, tmp_path):
                                                               abs=1e-7)
 
 
+def test_a_reused_worker_process_gives_a_fresh_processs_series(three_runs, tmp_path):
+    """Two worker processes (--jobs 2) ran the three runs: one ran two of them. Its second run,
+    run again alone in a new worker process (a resume), gives the same series to the bit."""
+    src, _ = three_runs
+    results = [mc.load_result(mc.run_dir_of(str(src), i)) for i in range(3)]
+    pids = [r['worker_pid'] for r in results]
+    assert len(set(pids)) == 2, pids
+    assert all(r['supervisor_pid'] not in pids for r in results)
+    second = max(i for i in range(3) if pids.count(pids[i]) == 2)   # runs go in order
+    out = tmp_path / 'campaign'
+    shutil.copytree(src, out)
+    os.unlink(os.path.join(mc.run_dir_of(str(out), second), 'result.json'))
+    proc = campaign(out, '--runs', '3', '--jobs', '1')
+    assert 'executed 1 run(s)' in proc.stdout, proc.stdout
+    rerun = mc.load_result(mc.run_dir_of(str(out), second))
+    assert rerun['worker_pid'] not in pids
+    old = np.load(os.path.join(mc.run_dir_of(str(src), second), mc.SERIES_FILE))
+    new = np.load(os.path.join(mc.run_dir_of(str(out), second), mc.SERIES_FILE))
+    assert sorted(old.files) == sorted(new.files)
+    for key in old.files:
+        assert old[key].dtype == new[key].dtype and old[key].shape == new[key].shape, key
+        assert old[key].tobytes() == new[key].tobytes(), key
+
+
 def test_restart_reruns_only_incomplete_runs(three_runs, tmp_path):
     src, _ = three_runs
     out = tmp_path / 'campaign'

@@ -1,6 +1,6 @@
-"""``adcs montecarlo`` execution: one BLAS thread per run process, ``--dask-local``.
+"""``adcs montecarlo`` execution: one BLAS thread per worker process, ``--dask-local``.
 
-Short: the run processes here are stand-ins or 20 s plain-engine runs. The full campaigns
+Short: the worker processes here are stand-ins or 20 s plain-engine runs. The full campaigns
 (``--scheduler``, resume, Ctrl-C; the graph engine in ``make test-long``) are in
 tests/graph/test_montecarlo.py. Processes, no ROS graph: graph tier, marked ``parallel``
 (was ``tests/unit``).
@@ -21,17 +21,24 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 SCENARIO = os.path.join(ROOT, 'scenarios', 'paper000_control.yaml')
 pytestmark = pytest.mark.parallel
 
-#: Stand-in run process: reports the thread counts its BLAS libraries really use.
+#: Stand-in worker process: each run reports the thread counts its BLAS libraries really use.
 PROBE = r'''
 import json, os, sys
-import numpy, scipy.linalg
-from threadpoolctl import threadpool_info
-run_dir = sys.argv[1]
-info = [{'api': i['internal_api'], 'threads': i['num_threads']} for i in threadpool_info()]
-open(os.path.join(run_dir, 'series.npz'), 'wb').close()
-with open(os.path.join(run_dir, 'result.json'), 'w') as fh:
-    env = {k: os.environ.get(k) for k in ('OPENBLAS_NUM_THREADS', 'NUMBA_NUM_THREADS')}
-    json.dump({'index': 0, 'status': 'captured', 'pools': info, 'env': env}, fh)
+from adcs_nodes.tools.campaigns.runner import serve
+
+
+def run(run_dir):
+    import numpy, scipy.linalg
+    from threadpoolctl import threadpool_info
+    info = [{'api': i['internal_api'], 'threads': i['num_threads']} for i in threadpool_info()]
+    open(os.path.join(run_dir, 'series.npz'), 'wb').close()
+    with open(os.path.join(run_dir, 'result.json'), 'w') as fh:
+        env = {k: os.environ.get(k) for k in ('OPENBLAS_NUM_THREADS', 'NUMBA_NUM_THREADS')}
+        json.dump({'index': 0, 'status': 'captured', 'pools': info, 'env': env}, fh)
+    return 0
+
+
+raise SystemExit(serve(sys.argv[1], run))
 '''
 
 
@@ -39,10 +46,12 @@ def test_run_process_gets_one_blas_thread(tmp_path, monkeypatch):
     pytest.importorskip('threadpoolctl')
     monkeypatch.setenv('OPENBLAS_NUM_THREADS', '4')    # the campaign's own setting loses
     monkeypatch.setenv('OMP_NUM_THREADS', '4')
-    monkeypatch.setitem(runner.WORKER_COMMANDS, 'plain', ['-c', PROBE])
-    job = {'index': 0, 'run_dir': str(tmp_path), 'stop_file': str(tmp_path / 'stop'),
+    monkeypatch.setattr(runner, 'SERVER_COMMAND', ['-c', PROBE])
+    job = {'index': 0, 'run_dir': str(tmp_path / 'run'), 'stop_file': str(tmp_path / 'stop'),
            'engine': 'plain'}
+    os.makedirs(job['run_dir'])
     result = mc.execute_run(job)
+    assert mc.close_servers(job['stop_file']) == 1
     assert result['status'] == 'captured', result
     assert result['env'] == {'OPENBLAS_NUM_THREADS': '1', 'NUMBA_NUM_THREADS': '1'}
     assert result['pools'], 'numpy loaded no BLAS library?'
@@ -140,7 +149,7 @@ def _run_processes(out):
     found = []
     for p in psutil.process_iter(['cmdline']):
         cmd = p.info['cmdline'] or []
-        if '_mc_worker' in cmd and any(str(out) in c for c in cmd):
+        if runner.SERVER_COMMAND[-1] in cmd and any(str(out) in c for c in cmd):
             found.append(p)
     return found
 

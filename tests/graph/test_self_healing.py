@@ -18,9 +18,10 @@ NOWHERE = '-r /clock:=/adcs_test/nowhere'
 
 def _run(monkeypatch, node_args, **kw):
     from adcs_nodes.tools.run import launcher
+    from adcs_nodes.tools.run.launcher import healing, processes
     from adcs_nodes.scenario import load_scenario
-    monkeypatch.setattr(launcher, 'HEAL_WAIT_S', 10.0)    # the first 'still waiting' line
-    monkeypatch.setenv(launcher.TEST_NODE_ARGS_ENV, node_args)
+    monkeypatch.setattr(healing, 'HEAL_WAIT_S', 10.0)    # the first 'still waiting' line
+    monkeypatch.setenv(processes.TEST_NODE_ARGS_ENV, node_args)
     lines = []
     run = launcher.Launcher(load_scenario(FREE_TUMBLE), duration_s=4.0, progress=False,
                             log=lines.append, **kw)

@@ -6,7 +6,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 
-from adcs_nodes.nodes.convert import stamp_ns, to_stamp
+from adcs_nodes.msgs.fields import stamp_ns, to_stamp
 from adcs_nodes.nodes.diagnostics import Diagnostics
 
 EPOCH_NS = 1767225600 * 10**9
@@ -108,3 +108,29 @@ def test_the_estimator_reports_its_filter_restarts(ros_context):
     node.component.core.resets = 2        # as the filter counts a divergence reset
     assert dict(node.diagnostics.values())['resets'] == 2
     node.destroy_node()
+
+
+def test_the_first_frame_logs_the_process_cpu_once(ros_context, spin):
+    """``start cost {json}`` at the node's first frame (the bench's start-up row reads it)."""
+    import json
+    import time
+
+    from rcl_interfaces.msg import Log
+
+    from adcs_nodes.nodes.runtime import START_COST_PREFIX
+    node = _Node(ros_context)
+    diag = Diagnostics(node)
+    probe = rclpy.create_node('probe', context=ros_context)
+    lines = []
+    sub = probe.create_subscription(Log, '/rosout', lambda m: lines.append(m.msg)
+                                    if m.name == 'fake_estimator' else None, 100)
+    assert spin([node, probe], lambda: sub.get_publisher_count() >= 2)
+    for k in (5, 6, 7):                     # a node that joins at t = 5 s
+        diag.frame(k * 1_000_000_000)
+    cpu_now = time.process_time()
+    node.get_logger().info('end of test')   # (in order after any line the frames logged)
+    assert spin([node, probe], lambda: 'end of test' in lines)
+    costs = [json.loads(x[len(START_COST_PREFIX):]) for x in lines
+             if x.startswith(START_COST_PREFIX)]
+    assert len(costs) == 1
+    assert costs[0]['t_s'] == 5.0 and 0.0 < costs[0]['cpu_s'] <= cpu_now

@@ -160,7 +160,7 @@ def test_launcher_lifecycle_driver_survives_a_dropped_answer(ros_context):
     from lifecycle_msgs.msg import State, Transition
     from lifecycle_msgs.srv import ChangeState, GetState
 
-    from adcs_nodes.tools.run.launcher import _Transitions
+    from adcs_nodes.tools.run.launcher.lifecycle import Transitions as _Transitions
     node = rclpy.create_node('estimator', context=ros_context)
     state = {'id': State.PRIMARY_STATE_UNCONFIGURED}
     done, dropped = [], []

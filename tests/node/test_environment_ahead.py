@@ -5,7 +5,7 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from adcs_msgs.msg import Environment
-from adcs_nodes.nodes.convert import stamp_ns, to_stamp
+from adcs_nodes.msgs.fields import stamp_ns, to_stamp
 from sim_node.nodes.environment import EnvironmentNode
 
 EPOCH_NS = 1767225600 * 10**9          # 2026-01-01T00:00:00Z

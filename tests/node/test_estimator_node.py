@@ -9,8 +9,10 @@ from sensor_msgs.msg import MagneticField
 from adcs_msgs.msg import AttitudeState, FilterDiagnostics
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
-from adcs_nodes.nodes.convert import stamp_ns, to_stamp, to_vec3
-from adcs_nodes.nodes.estimator import DEFAULT_FIELD, DEFAULT_ORBIT, EstimatorNode
+from adcs_nodes.msgs.fields import stamp_ns, to_stamp, to_vec3
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
+from adcs_nodes.nodes.estimator import EstimatorNode
 from adcs_nodes.nodes.lockstep_node import parse_epoch
 
 EPOCH_NS = 1767225600 * 10**9
@@ -31,7 +33,7 @@ def test_estimates_at_the_frame_stamps_and_bad_samples_rejected(ros_context, spi
     assert spin([node, probe], lambda: clock.get_subscription_count()
                 and mag.get_subscription_count())
     # the truth: the body sits on the orbit frame; field from the node's own reference model
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD,
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(),
                                  parse_epoch('2026-01-01T00:00:00Z'))
     for k in range(6):                               # frames 0, 2, ..., 10 s
         t = 2 * k

@@ -20,9 +20,11 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import MagneticField
 
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
-from adcs_nodes.nodes import lockstep_node
-from adcs_nodes.nodes.convert import to_stamp, to_vec3
-from adcs_nodes.nodes.estimator import DEFAULT_FIELD, DEFAULT_ORBIT, EstimatorNode
+from adcs_nodes.core import handshake
+from adcs_nodes.msgs.fields import to_stamp, to_vec3
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
+from adcs_nodes.nodes.estimator import EstimatorNode
 
 S = 10**9
 
@@ -38,7 +40,7 @@ def _sample(ref, epoch_ns, t_ns):
 def _clock(node, t_ns):
     c = Clock()
     c.clock = to_stamp(node.epoch_ns + t_ns)
-    node._on_clock_tick(c)
+    node.timing.on_clock_tick(c)
 
 
 def test_external_samples_are_used_once_at_their_own_stamps(ros_context):
@@ -48,11 +50,11 @@ def test_external_samples_are_used_once_at_their_own_stamps(ros_context):
         Parameter('magnetometer_period_s', value=10.0),
         Parameter('external_inputs', value=['mag'])])
     node.est_pub.publish = est.append                      # what the node publishes
-    assert node.external == {'mag'}
+    assert set(node.external) == {'mag'}
     sub = node._subs['/sensors/magnetometer']
     assert sub.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
-    cb = node._external_cb('mag')
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
+    cb = node.timing.external_cb('mag')
     _clock(node, 0)                                         # frame 0: initialisation
     stamps = [int(1.3 * S), int(2.9 * S), int(3.4 * S), int(7.3 * S)]   # off the 2 s grid
     cb(_sample(ref, node.epoch_ns, stamps[0]))
@@ -66,7 +68,7 @@ def test_external_samples_are_used_once_at_their_own_stamps(ros_context):
     assert node.update_count == 3
     late = _sample(ref, node.epoch_ns, int(3.9 * S))        # its interval was taken at 6 s:
     cb(late)                                                # late
-    assert node.rejected_samples['late'] == 1
+    assert node.counts.rejected['late'] == 1
     cb(_sample(ref, node.epoch_ns, stamps[3]))              # taken at 7.3 s, sent at once
     _clock(node, 8 * S)
     assert node.update_count == 3                           # 7.3 s is not covered yet
@@ -87,14 +89,14 @@ def test_bad_external_samples_are_rejected_by_reason(ros_context):
     node = EstimatorNode(context=ros_context, parameter_overrides=[
         Parameter('timing_mode', value='lockstep'), Parameter('period_s', value=2.0),
         Parameter('external_inputs', value=['mag'])])
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
-    cb = node._external_cb('mag')
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
+    cb = node.timing.external_cb('mag')
     _clock(node, 100 * S)
     cb(_sample(ref, 0, 0))                                  # zero stamp
     cb(_sample(ref, node.epoch_ns, 200 * S))                # 100 s in the future
     cb(_sample(ref, node.epoch_ns, 99 * S))
     cb(_sample(ref, node.epoch_ns, 98 * S))                 # older than the one before
-    r = node.rejected_samples
+    r = node.counts.rejected
     assert (r['zero_stamp'], r['future'], r['out_of_order']) == (1, 1, 1)
     node.destroy_node()
 
@@ -107,11 +109,11 @@ def test_a_starved_external_input_is_named_and_recovers(ros_context):
         Parameter('timing_mode', value='lockstep'), Parameter('period_s', value=2.0),
         Parameter('magnetometer_period_s', value=10.0),
         Parameter('external_inputs', value=['mag'])])
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
-    cb = node._external_cb('mag')
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
+    cb = node.timing.external_cb('mag')
     for k in range(16):                                     # 0 .. 30 s: not yet
         _clock(node, 2 * k * S)
-    assert node.starved == {}
+    assert node.external.starved == {}
     _clock(node, 32 * S)                                    # 32 s > 3 x 10 s
     assert node.run_summary()['starved'] == {'/sensors/magnetometer': {'since_s': 0.0,
                                                                        'frames': 1}}
@@ -121,7 +123,7 @@ def test_a_starved_external_input_is_named_and_recovers(ros_context):
     cb(nan)
     _clock(node, 34 * S)
     _clock(node, 36 * S)                                    # the NaN taken: not usable
-    assert node.starved['mag']['frames'] == 3
+    assert node.external.starved['mag']['frames'] == 3
     assert node.run_summary()['rejected'].get('check') == 1
     cb(_sample(ref, node.epoch_ns, 37 * S))
     _clock(node, 38 * S)
@@ -138,24 +140,24 @@ def test_the_handshake_waits_for_the_external_publisher(ros_context, monkeypatch
     node = EstimatorNode(context=ros_context, parameter_overrides=[
         Parameter('timing_mode', value='lockstep'), Parameter('period_s', value=2.0),
         Parameter('external_inputs', value=['mag'])])
-    assert node._external_unmatched() == ['/sensors/magnetometer']
+    assert node.handshake.external_unmatched() == ['/sensors/magnetometer']
     assert node.unmatched() == []          # not an endpoint the self-healing restarts for
     driver = rclpy.create_node('a_driver', context=ros_context)
     driver.create_publisher(MagneticField, 'sensors/magnetometer', 10)      # reliable
     deadline = time.monotonic() + 30.0
-    while node._external_unmatched() and time.monotonic() < deadline:
+    while node.handshake.external_unmatched() and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert node._external_unmatched() == []
+    assert node.handshake.external_unmatched() == []
     driver.destroy_node()
     deadline = time.monotonic() + 30.0
-    while not node._external_unmatched() and time.monotonic() < deadline:
+    while not node.handshake.external_unmatched() and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert node._external_unmatched() == ['/sensors/magnetometer']          # gone again
-    monkeypatch.setattr(lockstep_node, 'EXTERNAL_WAIT_S', 0.0)
+    assert node.handshake.external_unmatched() == ['/sensors/magnetometer']          # gone again
+    monkeypatch.setattr(handshake, 'EXTERNAL_WAIT_S', 0.0)
     deadline = time.monotonic() + 30.0
-    while node._external_unmatched() and time.monotonic() < deadline:
+    while node.handshake.external_unmatched() and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert node._ext_gave_up and node._external_unmatched() == []
+    assert node.handshake.driver_wait.gave_up and node.handshake.external_unmatched() == []
     node.destroy_node()
 
 
@@ -166,14 +168,14 @@ def test_a_live_sample_replaced_before_a_tick_is_superseded(ros_context):
         Parameter('period_s', value=1.0), Parameter('max_sample_age_s', value=1e9),
         Parameter('max_future_s', value=1e9)])
     assert node.timing_mode == 'live'
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
-    cb = node._live_cb('mag')
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
+    cb = node.timing.live_cb('mag')
     now = node.get_clock().now().nanoseconds
     cb(_sample(ref, node.epoch_ns, now - 3 * S - node.epoch_ns))
     cb(_sample(ref, node.epoch_ns, now - 2 * S - node.epoch_ns))   # replaces the first
-    assert node.superseded_samples == 1
-    node._live_tick()                                              # reads the second
+    assert node.counts.superseded == 1
+    node.timing.live_tick()                                              # reads the second
     cb(_sample(ref, node.epoch_ns, now - 1 * S - node.epoch_ns))   # the second was read
-    assert node.superseded_samples == 1
+    assert node.counts.superseded == 1
     assert node.run_summary()['superseded'] == 1
     node.destroy_node()

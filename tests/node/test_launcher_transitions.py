@@ -11,7 +11,7 @@ future is a lost reply).
 from lifecycle_msgs.msg import State, Transition
 from rclpy.task import Future
 
-from adcs_nodes.tools.run.launcher import _Transitions
+from adcs_nodes.tools.run.launcher.lifecycle import Transitions as _Transitions
 
 
 class _Client:

@@ -21,7 +21,7 @@ from rclpy.parameter import Parameter
 from adcs_msgs.msg import ActuatorCommand, AttitudeTarget
 from adcs_nodes.nodes.controller import ControllerNode
 from adcs_nodes.nodes.controller_manager import ControllerManagerNode
-from adcs_nodes.nodes.convert import stamp_ns
+from adcs_nodes.msgs.fields import stamp_ns
 from adcs_nodes.nodes.estimator import EstimatorNode
 from adcs_nodes.nodes.guidance import GuidanceNode
 from adcs_nodes.nodes.managed import ManagedLockstepNode

@@ -18,8 +18,10 @@ from sensor_msgs.msg import MagneticField
 from adcs_msgs.msg import AttitudeState, FilterDiagnostics
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
-from adcs_nodes.nodes.convert import stamp_ns, to_stamp, to_vec3
-from adcs_nodes.nodes.estimator import DEFAULT_FIELD, DEFAULT_ORBIT, EstimatorNode
+from adcs_nodes.msgs.fields import stamp_ns, to_stamp, to_vec3
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
+from adcs_nodes.nodes.estimator import EstimatorNode
 
 S = 10**9
 
@@ -54,7 +56,7 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
     sub = node._subs['/sensors/magnetometer']
     assert spin([node, driver], lambda: mag.get_subscription_count() > 0
                 and sub.get_publisher_count() > 0, timeout=30.0)
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
     sent = []
     for k in range(8):
         s = time.time_ns() - 1_234_567 - 97_531 * k       # off-grid wall-clock stamp
@@ -62,7 +64,7 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
         mag.publish(_sample(ref, node.epoch_ns, s))
         assert spin([node, driver], lambda: any(stamp_ns(m.header.stamp) == s for m in est),
                     timeout=30.0), (f'no estimate stamped with sample {k}',
-                                    node.rejected_samples, node.last_rejected_sample)
+                                    node.counts.rejected, node.counts.last_rejected)
     stamps = [stamp_ns(m.header.stamp) for m in est]
     assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)  # never replayed
     assert set(sent) <= set(stamps)                   # each sample used at its own stamp
@@ -72,7 +74,7 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
         assert np.all(np.isfinite(q))
         assert np.degrees(att.angle_between(q, [0.0, 0.0, 0.0, 1.0])) < 1.0
     assert spin([node, driver], lambda: diag and diag[-1].update_count >= 8, timeout=30.0)
-    assert sum(node.rejected_samples.values()) == 0
+    assert sum(node.counts.rejected.values()) == 0
 
     # bad stamps: each rejected with its reason, none used (100 s old: past the 30 s limit)
     now = time.time_ns()
@@ -80,9 +82,9 @@ def test_best_effort_driver_with_wall_clock_stamps_drives_the_live_estimator(ros
     for stamp in (0, now + 10 * S, now - 100 * S, sent[-1] - S):
         mag.publish(_sample(ref, node.epoch_ns, max(stamp, 1)) if stamp else
                     _sample(ref, node.epoch_ns, 0))
-    assert spin([node, driver], lambda: sum(node.rejected_samples.values()) >= 4,
+    assert spin([node, driver], lambda: sum(node.counts.rejected.values()) >= 4,
                 timeout=30.0)
-    r = node.rejected_samples
+    r = node.counts.rejected
     assert (r['zero_stamp'], r['future'], r['too_old'], r['out_of_order']) == (1, 1, 1, 1)
     assert node.timing_diagnostics()['rejected_samples'] == '4'
     assert all(stamp_ns(m.header.stamp) not in (now + 10 * S, now - 100 * S)
@@ -103,7 +105,7 @@ def test_same_node_in_lockstep_mode_gives_exact_frames(ros_context, spin):
     driver.create_subscription(AttitudeState, 'adcs/attitude_estimate', est.append, 100)
     mag = driver.create_publisher(MagneticField, 'sensors/magnetometer', 100)
     assert spin([node, driver], lambda: mag.get_subscription_count() > 0, timeout=30.0)
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
     for k in range(4):
         mag.publish(_sample(ref, node.epoch_ns, node.epoch_ns + 2 * k * S))
     assert spin([node, driver], lambda: len(est) >= 4, timeout=30.0)
@@ -176,19 +178,19 @@ def test_a_late_sample_is_counted_and_never_applied(ros_context):
     node = EstimatorNode(context=ros_context, parameter_overrides=[
         Parameter('period_s', value=0.2), Parameter('max_sample_age_s', value=30.0)])
     assert node.timing_mode == 'live'
-    ref = make_onboard_reference(DEFAULT_ORBIT, DEFAULT_FIELD, node.epoch)
-    cb = node._live_cb('mag')
+    ref = make_onboard_reference(ORBIT.defaults(), FIELD.defaults(), node.epoch)
+    cb = node.timing.live_cb('mag')
     cb(_sample(ref, node.epoch_ns, time.time_ns() - 3 * S))       # a good sample ...
-    node._live_tick()                                             # ... used at its stamp
+    node.timing.live_tick()                                             # ... used at its stamp
     assert node.update_count == 1
-    node._live_tick()              # no new sample: a frame at the clock's time (now - 50 ms)
+    node.timing.live_tick()              # no new sample: a frame at the clock's time (now - 50 ms)
     cb(_sample(ref, node.epoch_ns, time.time_ns() - 2 * S))       # stamped before that frame
-    node._live_tick()
-    assert node.rejected_samples['late'] == 1
+    node.timing.live_tick()
+    assert node.counts.rejected['late'] == 1
     assert node.update_count == 1                                 # not applied
-    node._live_tick()
+    node.timing.live_tick()
     assert node.update_count == 1                                 # nor later
     cb(_sample(ref, node.epoch_ns, time.time_ns()))               # a good one again
-    node._live_tick()
+    node.timing.live_tick()
     assert node.update_count == 2
     node.destroy_node()

@@ -7,7 +7,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
 from adcs_msgs.msg import LockstepStatus
-from adcs_nodes.nodes.convert import to_stamp
+from adcs_nodes.msgs.fields import to_stamp
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 
 EPOCH_NS = 1767225600 * 10**9
@@ -155,7 +155,7 @@ def test_status_is_stamped_with_sim_time_once_per_sim_second(ros_context, spin):
     got = []
     src, (pa,) = _pubs(node, ros_context, spin, 'in/a')
     src.create_subscription(LockstepStatus, 'lockstep/status', got.append, 100)
-    assert spin([node, src], lambda: node._status_pub.get_subscription_count() > 0)
+    assert spin([node, src], lambda: node.status.pub.get_subscription_count() > 0)
     for k in range(6):
         pa.publish(msg(k, f'a{k}'))
     assert spin([node, src], lambda: any(m.final for m in got), timeout=30.0)

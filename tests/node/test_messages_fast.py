@@ -1,4 +1,4 @@
-"""``nodes.messages.make`` fills message slots directly (issue 13): for the messages the nodes
+"""``msgs.fields.make`` fills message slots directly (issue 13): for the messages the nodes
 publish every frame, random field values (NaN, inf, -0.0, subnormals, the largest doubles,
 integer limits, empty and long sequences, non-ASCII strings) give a message that equals the
 generated constructor's message for the same values and serializes to the same bytes
@@ -29,7 +29,7 @@ from std_msgs.msg import Header  # noqa: E402
 
 from adcs_msgs.msg import (ActuatorCommand, AttitudeState, AttitudeTarget,  # noqa: E402
                            Environment, LockstepStatus)
-from adcs_nodes.nodes import messages  # noqa: E402
+from adcs_nodes.msgs import fields as messages  # noqa: E402
 from adcs_nodes.bag import ensure_type, make_typestore  # noqa: E402
 
 TYPES = [Header, Clock, Environment, AttitudeState, ActuatorCommand, AttitudeTarget,

@@ -30,18 +30,18 @@ from sensor_msgs.msg import MagneticField
 
 from adcs_msgs.msg import ActuatorCommand
 from adcs_nodes.nodes.controller import ControllerNode
-from adcs_nodes.nodes.convert import to_stamp, to_vec3
+from adcs_nodes.msgs.fields import to_stamp, to_vec3
 
 S = 10**9
 #: Every node class of the graph, with the module it lives in.
 NODE_CLASSES = [
     ('sim_node.nodes.environment', 'EnvironmentNode'),
     ('sim_node.nodes.dynamics', 'DynamicsNode'),
-    ('sim_node.nodes.magnetometer', 'MagnetometerNode'),
-    ('sim_node.nodes.horizon_sensor', 'HorizonSensorNode'),
-    ('sim_node.nodes.star_tracker', 'StarTrackerNode'),
-    ('sim_node.nodes.gyro', 'GyroNode'),
-    ('sim_node.nodes.wheel_tachometer', 'WheelTachometerNode'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:magnetometer'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:horizon_sensor'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:star_tracker'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:gyro'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:wheel_tachometer'),
     ('adcs_nodes.nodes.estimator', 'EstimatorNode'),
     ('adcs_nodes.nodes.guidance', 'GuidanceNode'),
     ('adcs_nodes.nodes.controller', 'ControllerNode'),
@@ -57,6 +57,9 @@ WHEELS = [Parameter('wheel_axes_body', value=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0,
 
 def _make(module, cls, ctx, tmp_path, overrides=()):
     kwargs = {'context': ctx, 'parameter_overrides': list(overrides)}
+    cls, _, sensor = cls.partition(':')        # the generic sensor node: SensorNode:<sensor>
+    if sensor:
+        kwargs['sensor'] = sensor
     if cls == 'RecorderNode':
         names = {p.name for p in overrides}
         if 'output' not in names:
@@ -205,8 +208,8 @@ def test_writable_gain_applies_at_the_next_frame_boundary(ros_context, spin):
 
 
 @pytest.mark.parametrize('module, cls, name, text', [
-    ('sim_node.nodes.magnetometer', 'MagnetometerNode', 'period_s', '1.0'),   # the issue's
-    ('sim_node.nodes.magnetometer', 'MagnetometerNode', 'noise_std_T', '[1e-7, 1e-7, 1e-7]'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:magnetometer', 'period_s', '1.0'),   # the issue's
+    ('sim_node.nodes.sensor_node', 'SensorNode:magnetometer', 'noise_std_T', '[1e-7, 1e-7, 1e-7]'),
     ('sim_node.nodes.dynamics', 'DynamicsNode', 'substeps', '20'),
     ('sim_node.nodes.environment', 'EnvironmentNode', 'timeout_s', '9.0'),
     ('adcs_nodes.nodes.estimator', 'EstimatorNode', 'min_field_T', '2e-6'),
@@ -430,7 +433,7 @@ def test_every_parameter_of_a_launched_graph_is_described(ros_context, tmp_path,
     for module, cls, name, overrides in _graph_overrides(scenario, tmp_path):
         ctor = getattr(importlib.import_module(module), cls)
         kwargs = {'context': ros_context, 'parameter_overrides': overrides}
-        if cls == 'ControllerNode':
+        if cls in ('ControllerNode', 'SensorNode'):
             kwargs['name'] = name
         node = ctor(**kwargs)
         try:

@@ -177,9 +177,9 @@ def test_malformed_payload_is_dropped_not_raised(ros_context, spin, monkeypatch,
     assert spin([listener, stranger], lambda: listener.got)
     assert len(listener.got) == 1
     same(listener.got[0], _env(0))
-    assert listener.rejected_samples['undecodable'] == 4           # counted for /diagnostics
+    assert listener.counts.rejected['undecodable'] == 4           # counted for /diagnostics
     assert listener.timing_diagnostics()['rejected_undecodable'] == '4'
-    assert 'does not decode' in listener.last_rejected_sample
+    assert 'does not decode' in listener.counts.last_rejected
 
 
 def test_decoding_reports_errors():

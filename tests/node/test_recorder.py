@@ -219,37 +219,102 @@ def test_records_every_message_latched_and_schemas(context, executor, tmp_path):
     assert 'version: 8' in (bag / 'metadata.yaml').read_text()
 
 
-def test_sim_time_stamps_and_topic_list(context, executor, tmp_path):
-    """With use_sim_time and no /clock yet the log time is header.stamp; then the sim clock."""
+def _mount(t_ns: int):
+    """A latched ``/tf_static`` mount stamped ``t_ns`` (what the mounts node publishes)."""
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+    tf = TransformStamped()
+    tf.header.stamp.sec, tf.header.stamp.nanosec = divmod(t_ns, 10**9)
+    tf.header.frame_id, tf.child_frame_id, tf.transform.rotation.w = 'body', 'magnetometer', 1.0
+    return TFMessage(transforms=[tf])
+
+
+def test_log_time_is_the_stamp_unstamped_at_the_clock(context, executor, tmp_path):
+    """A bag's timeline is the simulation's (DESIGN section 8; issue 37, items 1 and 2).
+
+    Log time = the message's own stamp: the latched ``/tf_static`` mount that arrives before
+    any ``/clock`` publisher exists, an Environment one frame ahead of ``/clock``. An unstamped
+    String: at its receive time while no ``/clock`` publisher exists, held until the first
+    ``/clock`` once one does, then at the latest ``/clock``. Unlisted topics are not recorded.
+    """
+    from adcs_nodes.nodes.tf import QOS_TF_STATIC
     talker = Node('talker2', context=context)
+    tf_pub = talker.create_publisher(_mount(0).__class__, '/tf_static', QOS_TF_STATIC)
+    tf_pub.publish(_mount(T0_NS))                  # latched, before the recorder exists
     env_pub = talker.create_publisher(Environment, 'env_only', 100)
+    str_pub = talker.create_publisher(String, 'chatter', 100)
     other_pub = talker.create_publisher(String, 'not_listed', 10)
-    clock_pub = talker.create_publisher(Clock, '/clock', 10)
     executor.add_node(talker)
     bag = tmp_path / 'simbag'
     recorder = RecorderNode(context=context, parameter_overrides=[
-        Parameter('output', value=str(bag)), Parameter('topics', value=['env_only']),
-        Parameter('use_sim_time', value=True), Parameter('discovery_period_s', value=0.1)])
+        Parameter('output', value=str(bag)), Parameter('discovery_period_s', value=0.1),
+        Parameter('topics', value=['env_only', 'chatter', '/tf_static', '/clock'])])
     executor.add_node(recorder)
+
+    def counts(topic):
+        return recorder.counts.get(topic)
+
     try:
-        spin_until(executor, lambda: env_pub.get_subscription_count() > 0, what='subscription')
-        for i in range(3):
-            env_pub.publish(make_environment(i))
+        spin_until(executor, lambda: (counts('/tf_static') == 1
+                                      and str_pub.get_subscription_count() > 0),
+                   what='the mount recorded, chatter subscribed')
+        wall_before = time.time_ns()
+        str_pub.publish(String(data='no simulation yet'))
+        spin_until(executor, lambda: counts('/chatter') == 1, what='first chatter')
+        wall_after = time.time_ns()
+        clock_pub = talker.create_publisher(Clock, '/clock', 10)
+        spin_until(executor, lambda: (clock_pub.get_subscription_count() > 0
+                                      and env_pub.get_subscription_count() > 0),
+                   what='clock and env subscribed')
+        str_pub.publish(String(data='before the first clock'))
+        env_pub.publish(make_environment(0))
+        env_pub.publish(make_environment(1))
         other_pub.publish(String(data='ignored'))
-        spin_until(executor, lambda: recorder.counts.get('/env_only') == 3, what='3 messages')
-        clock = Clock()
-        clock.clock.sec = 1_800_000_000
-        spin_until(executor, lambda: clock_pub.get_subscription_count() >= 2,
-                   what='/clock subscriptions (time source and status)')
-        clock_pub.publish(clock)
-        spin_until(executor, lambda: recorder.get_clock().now().nanoseconds > 0, what='sim time')
-        env_pub.publish(make_environment(3))
-        spin_until(executor, lambda: recorder.counts.get('/env_only') == 4, what='4th message')
-        assert recorder.topics == ['/env_only']
+        spin_until(executor, lambda: counts('/env_only') == 2, what='2 environments')
+        assert counts('/chatter') == 1                  # the second one is held
+        clock_pub.publish(_clock(T0_NS))
+        spin_until(executor, lambda: counts('/clock') == 1 and counts('/chatter') == 2,
+                   what='first clock, held chatter written')
+        env_pub.publish(make_environment(3))           # ahead of /clock
+        str_pub.publish(String(data='after the first clock'))
+        spin_until(executor, lambda: counts('/env_only') == 3 and counts('/chatter') == 3,
+                   what='3rd environment and chatter')
+        assert sorted(recorder.topics) == ['/chatter', '/clock', '/env_only', '/tf_static']
     finally:
         _remove(executor, recorder, talker)
-    log_times = [t for _, t, _ in read_messages(bag)]
-    assert log_times == [T0_NS, T0_NS + 100_000_000, T0_NS + 200_000_000, 1_800_000_000 * 10**9]
+    got, chatter = {}, {}
+    for topic, t_ns, msg in read_messages(bag):     # in log-time order
+        got.setdefault(topic, []).append(t_ns)
+        if topic == '/chatter':
+            chatter[msg.data] = t_ns
+    assert got['/tf_static'] == [T0_NS]
+    assert got['/env_only'] == [T0_NS, T0_NS + 100_000_000, T0_NS + 300_000_000]
+    assert got['/clock'] == [T0_NS]
+    assert wall_before <= chatter.pop('no simulation yet') <= wall_after
+    assert chatter == {'before the first clock': T0_NS, 'after the first clock': T0_NS}
+
+
+def test_a_clock_from_zero_is_a_clock(context, executor, tmp_path):
+    """A simulator whose ``/clock`` starts at 0 (Gazebo): that /clock is logged at 0 and an
+    unstamped message after it at 0, not held for a later clock."""
+    talker, clock_pub, chat_pub, _ = _talker(context, executor, 'zero')
+    bag = tmp_path / 'zero'
+    recorder = RecorderNode(context=context, parameter_overrides=[
+        Parameter('output', value=str(bag)), Parameter('discovery_period_s', value=0.1),
+        Parameter('topics', value=['/clock', 'zero_chatter'])])
+    executor.add_node(recorder)
+    try:
+        spin_until(executor, lambda: (clock_pub.get_subscription_count() > 0
+                                      and chat_pub.get_subscription_count() > 0),
+                   what='recorder subscriptions')
+        clock_pub.publish(_clock(0))
+        spin_until(executor, lambda: recorder.counts.get('/clock') == 1, what='clock 0')
+        chat_pub.publish(String(data='at zero'))
+        spin_until(executor, lambda: recorder.counts.get('/zero_chatter') == 1, what='chatter')
+    finally:
+        _remove(executor, recorder, talker)
+    got = sorted((topic, t) for topic, t, _ in read_messages(bag))
+    assert got == [('/clock', 0), ('/zero_chatter', 0)]
 
 
 def test_existing_output_is_an_error(context, tmp_path):
@@ -346,18 +411,17 @@ def test_sigkill_keeps_everything_but_the_last_seconds(context, executor, tmp_pa
         [sys.executable, '-m', 'adcs_nodes.nodes.recorder', '--ros-args',
          '-p', f'output:={bag}', '-p', 'discovery_period_s:=0.1', '-p', 'flush_sim_s:=2.0',
          '-p', 'flush_period_s:=1000.0', '-p', 'fsync_period_s:=1000.0',
-         '-p', 'status_period_s:=0.1'],
+         '-p', 'status_period_s:=0.1',
+         '-p', 'exclude:=[/rosout, /parameter_events, /lockstep/ready]'],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
     phase1 = list(range(37))        # clocks 0 .. 18 s
     phase2 = list(range(37, 41))    # clocks 18.5 .. 20 s
     try:
-        # ... and its own latched lockstep/ready recorded (frames >= 1): with it still to come,
-        # "phase 1 written" below could hold one message early, and a phase-1 chatter message
-        # taken after the first phase-2 clock gets log time 18.5 s, which may be lost
+        # its own lockstep/ready is excluded: an unstamped message held until the first clock
+        # would make "phase 1 written" below count one message early
         spin_until(executor, lambda: (clock_pub.get_subscription_count() > 0
                                       and chat_pub.get_subscription_count() > 0
-                                      and statuses and statuses[-1].frames >= 1),
-                   timeout=60.0, what='recorder subscribed, its lockstep/ready recorded')
+                                      and statuses), timeout=60.0, what='recorder subscribed')
         written0 = statuses[-1].frames
 
         def publish(steps):

@@ -44,8 +44,8 @@ def test_estimator_node_parameters_default_to_the_spec(ros_context):
         entry = registry.get('estimator', 'magnetic_filter')
         for p in entry.params:
             assert node.get_parameter(p.name).value == p.default
-            assert schema()['estimator'].variants['magnetic_filter'][p.name].default == \
-                p.default
+            keys = schema()['estimator'].keys({'algorithm': 'magnetic_filter'})
+            assert keys[p.name].default == p.default
         assert all(d.description for n, d in _describe(node).items() if n != 'use_sim_time')
     finally:
         node.destroy_node()
@@ -81,11 +81,11 @@ def test_run_time_changes_are_validated(ros_context):
 @pytest.mark.parametrize('module, cls', [
     ('sim_node.nodes.environment', 'EnvironmentNode'),
     ('sim_node.nodes.dynamics', 'DynamicsNode'),
-    ('sim_node.nodes.magnetometer', 'MagnetometerNode'),
-    ('sim_node.nodes.horizon_sensor', 'HorizonSensorNode'),
-    ('sim_node.nodes.star_tracker', 'StarTrackerNode'),
-    ('sim_node.nodes.gyro', 'GyroNode'),
-    ('sim_node.nodes.wheel_tachometer', 'WheelTachometerNode'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:magnetometer'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:horizon_sensor'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:star_tracker'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:gyro'),
+    ('sim_node.nodes.sensor_node', 'SensorNode:wheel_tachometer'),
     ('adcs_nodes.nodes.estimator', 'EstimatorNode'),
     ('adcs_nodes.nodes.guidance', 'GuidanceNode'),
     ('adcs_nodes.nodes.controller_manager', 'ControllerManagerNode'),
@@ -93,7 +93,9 @@ def test_run_time_changes_are_validated(ros_context):
 def test_every_node_describes_every_parameter(ros_context, module, cls):
     """What ``ros2 param describe`` prints: a description for each parameter of each node."""
     import importlib
-    node = getattr(importlib.import_module(module), cls)(context=ros_context)
+    cls, _, sensor = cls.partition(':')        # the generic sensor node: SensorNode:<sensor>
+    kwargs = {'sensor': sensor} if sensor else {}
+    node = getattr(importlib.import_module(module), cls)(context=ros_context, **kwargs)
     try:
         missing = [n for n, d in _describe(node).items()
                    if not d.description and n not in ('use_sim_time',

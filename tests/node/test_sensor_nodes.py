@@ -3,6 +3,7 @@
 Truth is built here independently of the nodes: attitudes with scipy's ``Rotation`` and
 ``attitude.from_euler_321``, the field in body axes as ``R_eci_body^T b_eci``.
 """
+import functools
 import math
 import signal
 import subprocess
@@ -21,12 +22,15 @@ from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import derive_seed
 from domains import worker_domain
 from adcs_nodes.tools.run.launcher import child_env
-from adcs_nodes.nodes.convert import quat, stamp_ns, to_quat, to_stamp, to_vec3, vec3
+from adcs_nodes.msgs.fields import quat, stamp_ns, to_quat, to_stamp, to_vec3, vec3
 from sim_node.models.sensors import StarTracker
-from sim_node.nodes.gyro import GyroNode
-from sim_node.nodes.horizon_sensor import HorizonSensorNode
-from sim_node.nodes.magnetometer import MagnetometerNode
-from sim_node.nodes.star_tracker import StarTrackerNode
+from sim_node.nodes.sensor_node import SensorNode
+
+#: The generic sensor node with each built-in sensor (``ros2 run sim_node gyro`` etc.).
+GyroNode = functools.partial(SensorNode, sensor='gyro')
+HorizonSensorNode = functools.partial(SensorNode, sensor='horizon_sensor')
+MagnetometerNode = functools.partial(SensorNode, sensor='magnetometer')
+StarTrackerNode = functools.partial(SensorNode, sensor='star_tracker')
 
 EPOCH_NS = 1767225600 * 10**9          # 2026-01-01T00:00:00Z
 S = 10**9
@@ -258,12 +262,18 @@ def _wait_for_nodes(domain_id, names, procs, timeout=120.0):
 
 
 def test_each_node_runs_alone_with_defaults():
-    """``python -m sim_node.nodes.<name>`` starts, spins and stops cleanly on SIGINT."""
+    """The generic sensor node started alone, the sensor chosen by the node's name (as the
+    launcher starts it) or by ``-p sensor:=`` (``ros2 run sim_node sensor_node``) or by the
+    alias (``ros2 run sim_node gyro``), starts, spins and stops cleanly on SIGINT."""
     env = child_env(worker_domain(100, 50))
     names = ('magnetometer', 'horizon_sensor', 'star_tracker', 'gyro')
-    procs = [subprocess.Popen([sys.executable, '-m', f'sim_node.nodes.{n}'], env=env,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for n in names]
+    node = [sys.executable, '-m', 'sim_node.nodes.sensor_node', '--ros-args']
+    commands = [node + ['-r', '__node:=magnetometer'], node + ['-r', '__node:=horizon_sensor'],
+                node + ['-r', '__node:=star_tracker', '-p', 'sensor:=star_tracker'],
+                [sys.executable, '-c', 'from sim_node.nodes.sensor_node import main_gyro; '
+                 'raise SystemExit(main_gyro())']]
+    procs = [subprocess.Popen(c, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for c in commands]
     try:
         _wait_for_nodes(int(env['ROS_DOMAIN_ID']), names, procs)   # readiness, no fixed sleep
         assert [p.poll() for p in procs] == [None] * 4, [p.communicate() for p in procs]

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from adcs_msgs.action import Slew
 from adcs_msgs.msg import ActuatorCommand, AttitudeState
-from adcs_nodes.nodes.convert import to_quat, to_stamp, to_vec3
+from adcs_nodes.msgs.fields import to_quat, to_stamp, to_vec3
 from adcs_nodes.nodes.slew_action import SlewActionServer, check_goal
 from adcs_nodes.tools.run.slew import goal_quaternion, make_goal
 

@@ -32,10 +32,10 @@ def test_status_skipped_only_when_the_monitor_alone_would_drop_it(ros_context, s
     assert spin(nodes, lambda: all(
         [i.node_name for i in n.get_subscriptions_info_by_topic('/lockstep/status')]
         == [MONITOR_NODE] for n in (other, master)), timeout=30.0)
-    assert not other._status_wanted()           # the monitor's filter would drop it
-    assert master._status_wanted()              # the clock master's: kept
+    assert not other.status.wanted()           # the monitor's filter would drop it
+    assert master.status.wanted()              # the clock master's: kept
     other.missed_frames = 1
-    assert other._status_wanted()               # missed frames: the monitor keeps it
+    assert other.status.wanted()               # missed frames: the monitor keeps it
     other.missed_frames = 0
     for k in range(3):
         other.frames = master.frames = k + 1
@@ -48,8 +48,8 @@ def test_status_skipped_only_when_the_monitor_alone_would_drop_it(ros_context, s
     got2 = []
     echo = _reader(ros_context, 'echo', got2)
     nodes.append(echo)
-    assert spin(nodes, lambda: other._status_pub.get_subscription_count() == 2
-                and other._status_wanted(), timeout=30.0)
+    assert spin(nodes, lambda: other.status.pub.get_subscription_count() == 2
+                and other.status.wanted(), timeout=30.0)
     other.publish_status()
     assert spin(nodes, lambda: any(m.node == 'estimator' for m in got2), timeout=30.0)
     for n in nodes:
@@ -58,8 +58,8 @@ def test_status_skipped_only_when_the_monitor_alone_would_drop_it(ros_context, s
 
 def test_no_reader_no_status(ros_context):
     node = _node(ros_context, 'lonely')
-    assert node._status_pub.get_subscription_count() == 0
-    assert not node._status_wanted()
+    assert node.status.pub.get_subscription_count() == 0
+    assert not node.status.wanted()
     node.destroy_node()
 
 
@@ -75,10 +75,10 @@ def test_master_status_to_the_monitor_alone_is_held_to_its_wall_period(ros_conte
     nodes = [master, monitor]
     assert spin(nodes, lambda: [i.node_name for i in master.get_subscriptions_info_by_topic(
         '/lockstep/status')] == [MONITOR_NODE], timeout=30.0)
-    assert master._status_wanted()       # (reads the readers' names)
+    assert master.status.wanted()       # (reads the readers' names)
     sent = []
-    publish = master._status_pub.publish
-    master._status_pub.publish = lambda m: (sent.append(m), publish(m))
+    publish = master.status.pub.publish
+    master.status.pub.publish = lambda m: (sent.append(m), publish(m))
 
     def frames(first, n, final_last=False):
         for k in range(first, first + n):
@@ -92,7 +92,7 @@ def test_master_status_to_the_monitor_alone_is_held_to_its_wall_period(ros_conte
     n = len(sent)
     frames(200, 1, final_last=True)      # the final status: sent at once
     assert len(sent) == n + 1 and sent[-1].final
-    master._final_sent = False
+    master.status.pacer.final_sent = False
     master.missed_frames = 1             # missed frames: every sim second again
     frames(201, 20)
     assert len(sent) == n + 1 + 20
@@ -101,7 +101,7 @@ def test_master_status_to_the_monitor_alone_is_held_to_its_wall_period(ros_conte
     master.missed_frames = 0
     echo = _reader(ros_context, 'echo', [])
     nodes.append(echo)
-    assert spin(nodes, lambda: master._status_pub.get_subscription_count() == 2, timeout=30.0)
+    assert spin(nodes, lambda: master.status.pub.get_subscription_count() == 2, timeout=30.0)
     n = len(sent)
     frames(221, 20)
     assert len(sent) == n + 20

@@ -8,7 +8,7 @@ from rosgraph_msgs.msg import Clock
 
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, Environment
 from adcs_nodes.core import attitude as att
-from adcs_nodes.nodes.convert import quat, stamp_ns, to_stamp, vec3
+from adcs_nodes.msgs.fields import quat, stamp_ns, to_stamp, vec3
 from sim_node.nodes.dynamics import DynamicsNode
 from sim_node.nodes.environment import EnvironmentNode
 
@@ -72,7 +72,7 @@ def test_dynamics_goes_on_when_the_environment_stops(ros_context, spin):
     env = EnvironmentNode(context=ros_context)
     dyn = DynamicsNode(context=ros_context, parameter_overrides=params(
         duration_s=8.0, timeout_s=0.3, substeps=2,
-        **{'initial.omega_body_eci_body': [0.01, -0.02, 0.03]}))
+        **{'initial.omega_body_eci_body_deg_s': [0.6, -1.2, 1.8]}))
     probe = rclpy_node(ros_context, 'probe')
     states = collector(probe, AttitudeState, 'sim/state')
     ok = spin([env, dyn, probe], lambda: len(states) >= 3, timeout=30.0)
@@ -97,7 +97,7 @@ def test_nan_command_is_rejected_as_zero(ros_context, spin):
     # no input may time out (missed_frames 0) however slow this process is under load
     dyn = DynamicsNode(context=ros_context, parameter_overrides=params(
         duration_s=3.0, timeout_s=60.0, command_period_s=1.0,
-        **{'spacecraft.max_dipole_Am2': [10.0, 10.0, 10.0]}))
+        **{'spacecraft.magnetorquer.max_dipole_Am2': [10.0, 10.0, 10.0]}))
     probe = rclpy_node(ros_context, 'probe')
     states = collector(probe, AttitudeState, 'sim/state')
     cmd_pub = probe.create_publisher(ActuatorCommand, 'adcs/actuator_command', 10)

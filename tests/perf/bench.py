@@ -29,7 +29,13 @@ Every row is measured in the same run, on the same machine, at the same time (is
    ``GravityGradientEffector``, same inertia, same 0.1 s RK4 step; Basilisk also integrates
    the orbit with point-mass gravity). Bench-only dependency: installed on demand into its own
    virtual environment (``~/.cache/adcs/bsk-venv``, or ``$ADCS_BSK_VENV``) so its pins never
-   touch the workspace's; the row is skipped with the reason if that fails.
+   touch the workspace's; the row is skipped with the reason if that fails;
+7. ``start-up`` (issue 35): the CPU of all node processes from ``adcs run`` of the scenario as
+   shipped to their first frame (each lockstep node logs its process CPU then, and before its
+   ``main`` ran: the interpreter start and imports), one process per node (``7g``) and
+   composed (``7c``); below the table, each node process's figures;
+8. ``campaign``: ``adcs montecarlo`` of 100 dispersed runs of 6 orbits of the scenario on the
+   plain engine, ``--jobs 2`` (:class:`CampaignMeasure`; measured once, not repeated).
 
 Each row gives frames (or RK4 steps) per wall second, sim seconds per wall second and per
 CPU second, the wall time and the CPU seconds of all its processes (``resource.getrusage``
@@ -47,21 +53,27 @@ Targets, as ratios of this run (a target not met prints NOT MET with its ratio):
 engine >= 10,000 x real time (rows 4 and 4p; issue 19), by wall time and by CPU time. Also
 printed: the plain engine (4) against Basilisk (6) in sim seconds per wall and per CPU
 second (Basilisk integrates the free body alone, the FrameLoop the whole closed loop).
+(f) start-up CPU to frame 0, one process per node <= 2.0 x composed (row 7; issue 35).
+(g) the campaign's CPU (all its processes) <= 1.05 x the sum of its runs' FrameLoop CPU
+(row 8; issue 35; its wall time and CPU split beside it).
 
 Usage::
 
     PYTHONPATH=tests python -m perf.bench [--frames 2000] [--repeats 2] [--quick]
                                    [--basilisk auto|skip] [--out out/bench.txt]
-                                   [--rows 1,1h,2,3,3i,4,4p,5,6]
+                                   [--rows 1,1h,2,3,3i,4,4p,5,6,7g,7c,8]
+                                   [--campaign-runs 100] [--campaign-orbits 6]
 """
 from __future__ import annotations
 
 import argparse
 import copy
+import glob
 import json
 import math
 import os
 import platform
+import re
 import resource
 import shutil
 import statistics
@@ -71,7 +83,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from perf.bench_ring import RingError, run_ring
 
@@ -87,6 +99,8 @@ TARGET_COMPOSED_VS_GRAPH = 3.0
 TARGET_REAL_TIME = 2000.0
 TARGET_LOOP_VS_BASILISK = 0.5
 TARGET_PLAIN_REAL_TIME = 10_000.0
+TARGET_START_GRAPH_VS_COMPOSED = 2.0
+TARGET_CAMPAIGN_CPU = 1.05
 BSK_VENV = os.environ.get('ADCS_BSK_VENV',
                           os.path.join(os.path.expanduser('~'), '.cache', 'adcs', 'bsk-venv'))
 
@@ -293,6 +307,77 @@ class GraphMeasure:
         return s
 
 
+# ---------------------------------------------------------------------- (7) start-up
+#: The line every lockstep node logs at its first frame (``LockstepNode.frame_done``).
+START_COST = re.compile(r'\[([A-Za-z0-9_./]+)\]: start cost (\{.*\})\s*$', re.M)
+#: Frames of a start-up run (the nodes log their CPU at the first).
+START_FRAMES = 2
+
+
+def start_costs(run_dir: str) -> Dict[str, dict]:
+    """Per node process (log file) of a finished run: CPU seconds at the first frame (the
+    largest of its nodes' lines: a composed process logs one per node), the CPU before its
+    ``main`` ran (interpreter start and imports; one process per node only) and its nodes."""
+    out: Dict[str, dict] = {}
+    for path in sorted(glob.glob(os.path.join(run_dir, 'logs', '*.log'))):
+        with open(path, encoding='utf-8', errors='replace') as fh:
+            lines = [(m.group(1).rsplit('.', 1)[-1], json.loads(m.group(2)))
+                     for m in START_COST.finditer(fh.read())]
+        if lines:
+            out[os.path.basename(path)[:-4]] = {
+                'cpu_s': max(c['cpu_s'] for _, c in lines),
+                'import_cpu_s': max(c.get('import_cpu_s', 0.0) for _, c in lines),
+                'nodes': sorted(n for n, _ in lines)}
+    return out
+
+
+class StartupMeasure:
+    """A run of :data:`START_FRAMES` frames; its sample's ``cpu_s``: the CPU of all node
+    processes from their start to their first frame (from their logs); ``rate``: not a rate
+    (NaN). ``details``: the per-process costs of each repeat."""
+
+    def __init__(self, sc: dict, compose: bool) -> None:
+        self.sc, self.compose = sc, compose
+        self.details: List[Dict[str, dict]] = []
+
+    def __call__(self) -> Sample:
+        from adcs_nodes.tools.run.launcher import Launcher
+
+        run_dir = tempfile.mkdtemp(prefix='adcs-bench-start-')
+        t0 = time.monotonic()
+        try:
+            res = Launcher(self.sc, duration_s=START_FRAMES * float(self.sc['timing']['frame_s']),
+                           compose=self.compose, progress=False, run_dir=run_dir,
+                           log=lambda *a, **k: None).run()
+            costs = start_costs(run_dir)
+        finally:
+            shutil.rmtree(run_dir, ignore_errors=True)
+        if res.exit_code != 0 or not costs:
+            raise BenchError(f'start-up run (compose={self.compose}) failed: exit '
+                             f'{res.exit_code}, {res.message}; start costs logged: {costs}')
+        self.details.append(costs)
+        return Sample(len(costs), math.nan, time.monotonic() - t0,
+                      sum(c['cpu_s'] for c in costs.values()))
+
+
+def startup_lines(graph: Row, comp: Row) -> List[str]:
+    """Row (7)'s target line and, per node process of the graph, its CPU to the first frame
+    and before ``main`` (imports), medians over the repeats."""
+    ratio = _ratio(graph.median('cpu_s'), comp.median('cpu_s'))
+    if ratio is None:
+        return ['  (f) start-up CPU graph / composed <= 2.0: NOT MEASURED']
+    ok = 'MET' if ratio <= TARGET_START_GRAPH_VS_COMPOSED else 'NOT MET'
+    out = [f'  {"(f) start-up CPU to frame 0, graph (7g) / composed (7c)":<50} {ratio:7.2f} x  '
+           f'(target <= {TARGET_START_GRAPH_VS_COMPOSED:g} x)  {ok:<7}  '
+           f'{_num(graph.median("cpu_s"))} vs {_num(comp.median("cpu_s"))} CPU s',
+           '  (7g) per node process, CPU s to its first frame (of it before main: imports):']
+    for name in sorted(graph.measure.details[0]):
+        runs = [d[name] for d in graph.measure.details if name in d]
+        out.append(f'       {name:<22} {statistics.median(r["cpu_s"] for r in runs):6.2f}  '
+                   f'({statistics.median(r["import_cpu_s"] for r in runs):.2f})')
+    return out
+
+
 # ---------------------------------------------------------------------- (4) plain engine
 def plain_sample(sc: dict, frames: int) -> Sample:
     """The plain engine (:class:`sim_node.engine.FrameLoop`), ``frames`` frames, no sink.
@@ -448,7 +533,7 @@ HEADER = ['', 'measurement', 'rate /wall s (min-max)', 'unit', 'sim s/wall s', '
 def _cells(r: Row) -> List[str]:
     if not r.samples:
         return [r.key, r.label, '-', r.unit, '-', '-', '-', '-', '-', '-', r.skipped or r.note]
-    rates = [s.rate for s in r.samples]
+    rates = [s.rate for s in r.samples if math.isfinite(s.rate)]
     rate = _num(r.rate) + (f' ({_num(min(rates))}-{_num(max(rates))})' if len(rates) > 1
                            else '')
     cpu_unit = r.median('cpu_per_unit_s')
@@ -473,19 +558,72 @@ def format_table(rows: Sequence[Row]) -> str:
     return '\n'.join(lines)
 
 
-def verdict(name: str, ratio: Optional[float], target: float, detail: str) -> str:
-    """One MET / NOT MET line (``ratio`` None: not measured)."""
+def verdict(name: str, ratio: Optional[float], target: float, detail: str,
+            at_most: bool = False) -> str:
+    """One MET / NOT MET line (``ratio`` None: not measured; ``at_most``: target <=)."""
+    rel = '<=' if at_most else '>='
     if ratio is None:
-        return f'  {name:<50} {"-":>7}    (target >= {target:g} x)  NOT MEASURED  {detail}'
-    ok = 'MET' if ratio >= target else 'NOT MET'
-    return f'  {name:<50} {ratio:7.2f} x  (target >= {target:g} x)  {ok:<7}  {detail}'
+        return f'  {name:<50} {"-":>7}    (target {rel} {target:g} x)  NOT MEASURED  {detail}'
+    ok = 'MET' if (ratio <= target if at_most else ratio >= target) else 'NOT MET'
+    return f'  {name:<50} {ratio:7.2f} x  (target {rel} {target:g} x)  {ok:<7}  {detail}'
+
+
+# ---------------------------------------------------------------------- (8) campaign
+class CampaignMeasure:
+    """Row (8): ``adcs montecarlo`` of ``runs`` dispersed runs of ``orbits`` orbits each on the
+    plain engine, ``--jobs 2``, as a user starts it (``python -m adcs_nodes.tools.campaigns``).
+
+    ``cpu_s``: the command and every process it started (``resource.getrusage`` of the
+    children: process starts, scenario and result files, series, table, summary and plot
+    included); against the sum of the runs' own FrameLoop CPU (building it and stepping it,
+    ``frameloop_cpu_s`` of each ``result.json``): :attr:`ratio`; :attr:`split`: that sum and
+    the rest of the runs' CPU (series, files, metrics).
+    """
+
+    def __init__(self, scenario: str, runs: int, orbits: float, jobs: int = 2) -> None:
+        from adcs_nodes.scenario import load_scenario
+        from adcs_nodes.tools.campaigns import orbit_period_s
+        sc = load_scenario(scenario)
+        frame_s = float(sc['timing']['frame_s'])       # a whole number of frames
+        self.scenario, self.runs, self.orbits, self.jobs = scenario, runs, orbits, jobs
+        self.duration_s = frame_s * round(orbits * orbit_period_s(sc) / frame_s)
+        self.ratio: Optional[float] = None
+        self.split = (math.nan, math.nan)
+
+    def __call__(self) -> Sample:
+        from adcs_nodes.tools.campaigns import load_result, run_dir_of
+        with tempfile.TemporaryDirectory(prefix='adcs-bench-mc-') as out:
+            cpu0, w0 = _cpu_now(), time.monotonic()
+            proc = subprocess.run([sys.executable, '-m', 'adcs_nodes.tools.campaigns',
+                                   self.scenario, '--engine', 'plain', '--runs', str(self.runs),
+                                   '--jobs', str(self.jobs), '--duration', f'{self.duration_s:g}',
+                                   '--out', out], capture_output=True, text=True)
+            wall, cpu = time.monotonic() - w0, _cpu_now() - cpu0
+            if proc.returncode != 0:
+                raise BenchError(f'campaign failed ({proc.returncode}): '
+                                 f'{(proc.stdout + proc.stderr).strip()[-1500:]}')
+            results = [load_result(run_dir_of(out, i)) for i in range(self.runs)]
+        loop_cpu = sum(r['frameloop_cpu_s'] for r in results)
+        self.ratio = cpu / loop_cpu
+        self.split = (loop_cpu, sum(r['cpu_s'] for r in results) - loop_cpu)
+        return Sample(self.runs, self.runs / wall, wall, cpu, cpu / self.runs)
+
+    def verdict(self, row: 'Row') -> str:
+        """Target (g)'s line."""
+        cpu = row.median('cpu_s')
+        return verdict('(g) campaign CPU / its runs\' FrameLoop CPU', self.ratio,
+                       TARGET_CAMPAIGN_CPU, f'{_num(row.median("wall_s"))} s wall, {_num(cpu)} s '
+                       f'CPU for {self.runs} runs: FrameLoop {_num(self.split[0])} s, the runs\' '
+                       f'series, files and metrics {_num(self.split[1])} s, the rest (process '
+                       f'starts, the campaign) {_num(cpu - sum(self.split))} s'
+                       if row.samples else row.skipped, at_most=True)
 
 
 # ---------------------------------------------------------------------- main
 def plan(sc: dict, frames: int, basilisk: Optional[str], bsk_why: str,
-         own: Optional[dict] = None) -> List[Row]:
+         own: Optional[dict] = None, campaign: Optional[CampaignMeasure] = None) -> List[Row]:
     """The table's rows, each with the measurement that fills it (not run yet); ``own``: the
-    scenario at its own frames (row 4p; default ``sc``)."""
+    scenario at its own frames (row 4p; default ``sc``); ``campaign``: row 8's."""
     own = sc if own is None else own
     own_frame = float(own['timing']['frame_s'])
     hops = hop_pattern(sc, FRAME_S)
@@ -514,6 +652,11 @@ def plan(sc: dict, frames: int, basilisk: Optional[str], bsk_why: str,
             Row('(5)', 'free body + GG, this RK4', unit='RK4 steps', step_s=0.1,
                 note='Spacecraft.step, 0.1 s step',
                 measure=lambda: free_body_sample(20 * frames))]
+    rows += [Row('(7g)', 'start-up to frame 0, 1 process/node', unit='processes',
+                 note=f'{START_FRAMES}-frame runs; CPU s: node processes to their first frame',
+                 measure=StartupMeasure(own, compose=False)),
+             Row('(7c)', 'start-up to frame 0, composed', unit='processes',
+                 note='the same, one process', measure=StartupMeasure(own, compose=True))]
     bsk = Row('(6)', 'free body + GG, Basilisk', unit='RK4 steps', step_s=0.1,
               note='bsk, 0.1 s step, + orbit')
     if basilisk:
@@ -521,6 +664,11 @@ def plan(sc: dict, frames: int, basilisk: Optional[str], bsk_why: str,
     else:
         bsk.skipped = bsk_why
     rows.append(bsk)
+    if campaign is not None:
+        rows.append(Row('(8)', 'campaign, plain, --jobs 2', unit='runs',
+                        step_s=campaign.duration_s, measure=campaign,
+                        note=f'{campaign.runs} runs x {campaign.orbits:g} orbits, all '
+                        'processes; CPU ms/unit: per run'))
     return rows
 
 
@@ -533,9 +681,11 @@ def _ratio(a: Optional[float], b: Optional[float]) -> Optional[float]:
 
 
 def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
-              log: Callable[[str], None], only: Sequence[str] = ()) -> str:
+              log: Callable[[str], None], only: Sequence[str] = (),
+              campaign: Tuple[int, float] = (100, 6.0)) -> str:
     """Run every measurement (or the rows whose keys are in ``only``, e.g. ``2, 3, 3i``) and
-    return the report text (table, targets)."""
+    return the report text (table, targets); ``campaign``: row 8's runs and orbits (measured
+    once, not repeated)."""
     from adcs_nodes.nodes.runtime import limit_blas_threads
     from adcs_nodes.scenario import load_scenario
 
@@ -545,13 +695,14 @@ def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
     info = machine_info()
     t_start = time.monotonic()
     bsk_py, bsk_why = basilisk_python(basilisk_mode, log)
-    rows = plan(sc, frames, bsk_py, bsk_why, own)
+    mc_row = CampaignMeasure(scenario, *campaign)
+    rows = plan(sc, frames, bsk_py, bsk_why, own, mc_row)
     for r in rows:
         if only and r.key.strip('()') not in only:
             r.measure, r.skipped = None, 'not selected (--rows)'
     for rep in range(repeats):
         for r in rows:
-            if r.measure is None:
+            if r.measure is None or (rep and r.key == '(8)'):
                 continue
             log(f'[bench] repeat {rep + 1}/{repeats}: {r.key} {r.label} ...')
             r.loads.append(load1())
@@ -613,6 +764,9 @@ def run_bench(scenario: str, frames: int, repeats: int, basilisk_mode: str,
                                _ratio(rtf, 1.0), TARGET_PLAIN_REAL_TIME,
                                f'{_num(rtf)} sim s per {clock} s at {row.step_s:g} s frames'
                                f'{miss}'))
+    if _row(rows, '(7g)').samples:
+        out += startup_lines(_row(rows, '(7g)'), _row(rows, '(7c)'))
+    out.append(mc_row.verdict(_row(rows, '(8)')))
     if bsk.samples and plain.samples:
         out.append(f'  plain engine (4) vs Basilisk (6): '
                    f'{_num(_ratio(plain.rate * plain.step_s, bsk.rate * bsk.step_s))} x its sim '
@@ -633,15 +787,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     help='auto: measure Basilisk, installing bsk on demand in its own venv')
     ap.add_argument('--scenario', default=DEFAULT_SCENARIO)
     ap.add_argument('--out', default='out/bench.txt', help='also write the report here')
+    ap.add_argument('--campaign-runs', type=int, default=100, help='row 8: runs')
+    ap.add_argument('--campaign-orbits', type=float, default=6.0, help='row 8: orbits a run')
     ap.add_argument('--rows', default='',
                     help='comma-separated row keys to measure (e.g. 2,3,3i); default: all')
     args = ap.parse_args(argv)
     only = [k.strip() for k in args.rows.split(',') if k.strip()]
-    known = ('1', '1h', '2', '3', '3i', '4', '4p', '5', '6')
+    known = ('1', '1h', '2', '3', '3i', '4', '4p', '5', '6', '7g', '7c', '8')
     if any(k not in known for k in only):
         ap.error(f'--rows: known keys are {", ".join(known)}')
     if args.quick:
         args.frames, args.repeats = 300, 1
+        args.campaign_runs, args.campaign_orbits = 10, 1.0
     if args.frames <= SHORT_FRAMES or args.repeats < 1:
         ap.error(f'--frames must be > {SHORT_FRAMES} and --repeats >= 1')
 
@@ -649,7 +806,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(msg, file=sys.stderr, flush=True)
 
     try:
-        text = run_bench(args.scenario, args.frames, args.repeats, args.basilisk, log, only)
+        text = run_bench(args.scenario, args.frames, args.repeats, args.basilisk, log, only,
+                         (args.campaign_runs, args.campaign_orbits))
     except (BenchError, RingError) as exc:
         print(f'[bench] failed: {exc}', file=sys.stderr)
         return 1

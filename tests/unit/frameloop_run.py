@@ -8,7 +8,8 @@ import os
 import numpy as np
 import yaml
 
-from adcs_nodes.nodes.convert import stamp_ns
+from adcs_nodes.inputs import converter
+from adcs_nodes.msgs.fields import stamp_ns
 from adcs_nodes.scenario import load_scenario
 from sim_node.engine import FrameLoop
 
@@ -41,12 +42,19 @@ def control_scenario(tmp_path, **changes):
     return sc
 
 
+def messages(frame, loop):
+    """``[(topic, message)]`` of a frame: its core samples made messages by their topics'
+    converters (what the bag sink writes and the nodes publish)."""
+    return [(topic, converter(topic).to_msg(x, loop.epoch_ns)) for topic, x in frame.outputs]
+
+
 def run(sc, duration_s=None):
-    """Run the validated scenario ``sc`` to its end: ``({topic: [message, ...]}, loop)``."""
+    """Run the validated scenario ``sc`` to its end: ``({topic: [message, ...]}, loop)``
+    (:func:`messages`)."""
     loop = FrameLoop.from_scenario(sc, duration_s)
     out = collections.defaultdict(list)
     for frame in loop.run():
-        for topic, msg in frame.outputs:
+        for topic, msg in messages(frame, loop):
             out[topic].append(msg)
     return out, loop
 

@@ -20,7 +20,7 @@ from datetime import datetime, timezone
 import numpy as np
 import pytest
 
-from adcs_nodes.core import attitude, geomag, manager
+from adcs_nodes.core import attitude, geomag, kernels, manager
 from adcs_nodes.core.control import Estimate, Target, cross3, scale_to_limits
 from adcs_nodes.core.control import magnetic
 from adcs_nodes.core.control.magnetic import (MagneticController, dipole_from_torque,
@@ -199,8 +199,12 @@ def test_dipole_field_and_orbit_axes_give_the_numpy_bits():
 
 
 # ----------------------------------------------------------- compiled vs uncompiled
-def sample():
-    """Outputs of every kernel here on fixed inputs, as hex floats (run in both modes)."""
+def sample(compile_now=True):
+    """Outputs of every kernel here and of the shared ones (``core.kernels``) on fixed inputs,
+    as hex floats (run compiled, with ``NUMBA_DISABLE_JIT=1``, and before numba is loaded:
+    ``compile_now`` False, as in a node process that compiles nothing)."""
+    if compile_now:
+        kernels.compile_all()
     rng = np.random.default_rng(5)
     out = []
     for mode in magnetic.MODES:
@@ -220,7 +224,11 @@ def sample():
         out.extend(geomag.dipole_eci(r, rng.uniform(0, 6.3), np.array([0.1, -0.2, -0.97]),
                                      8e15).tolist())
         out.extend(onboard.to_orbit_axes(rng.standard_normal(4), r).tolist())
+        p, q, m = rng.standard_normal(4), rng.standard_normal(4), rng.standard_normal((3, 3))
+        for value in (kernels.qmul(p, q), kernels.dcm(q), kernels.cross(p[:3], q[:3]),
+                      kernels.skew(p[:3]), kernels.mv(m, q[:3]), kernels.matmul(m, m.T)):
+            out.extend(value.ravel().tolist())
     kinds = [type(f).__name__ for f in (magnetic.law_kernel, manager.limit_violation,
                                         manager.clip_finite, geomag.dipole_eci,
-                                        onboard.to_orbit_axes)]
+                                        onboard.to_orbit_axes, kernels.qmul, kernels.matmul)]
     return kinds, [float(x).hex() for x in out]

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from adcs_nodes.nodes.convert import all_finite
+from adcs_nodes.core.samples import all_finite
 
 
 def _truth(*arrays) -> bool:

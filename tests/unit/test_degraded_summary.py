@@ -2,12 +2,13 @@
 for part of the time says so and ends with exit code 3, not "done"."""
 from types import SimpleNamespace
 
-from adcs_nodes.tools.run.launcher import EXIT_DEGRADED, Launcher, _Monitor
+from adcs_nodes.tools.run.launcher import EXIT_DEGRADED
+from adcs_nodes.tools.run.launcher.monitor import Monitor as _Monitor
+from adcs_nodes.tools.run.launcher.result import degraded_text
 
 
 def _degraded(lost=(), lost_at=None, status=None):
-    launcher = SimpleNamespace(lost=set(lost), lost_at=lost_at or {})
-    return Launcher._degraded(launcher, SimpleNamespace(controller_status=status))
+    return degraded_text({}, {n: (lost_at or {}).get(n, 0.0) for n in lost}, {}, 0.0, status)
 
 
 def test_clean_run_is_not_degraded():

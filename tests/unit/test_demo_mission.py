@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from adcs_nodes.core import attitude as att
-from adcs_nodes.nodes.convert import stamp_ns
-from frameloop_run import q, raw, v, validated
+from adcs_nodes.msgs.fields import stamp_ns
+from frameloop_run import messages, q, raw, v, validated
 from sim_node.engine import FrameLoop
 
 #: The topics the tests read (keeping every topic of 9600 frames costs more than the run).
@@ -47,7 +47,7 @@ def mission(tmp_path_factory):
     loop = FrameLoop.from_scenario(sc)
     out = collections.defaultdict(list)
     for frame in loop.run():
-        for topic, msg in frame.outputs:
+        for topic, msg in messages(frame, loop):
             if topic in KEPT:
                 out[topic].append(msg)
     assert t_s(out['sim/state'][0]) == 0.0

@@ -16,7 +16,8 @@ from adcs_nodes.core import attitude
 from sim_node.models.actuators import Magnetorquer, WheelCluster
 from sim_node.models.disturbances import MU_EARTH, ConstantTorque, gravity_gradient_torque
 from sim_node.models.dynamics import (ActuatorCommand, FrameEnvironment, Spacecraft,
-                                      SpacecraftState, pack_state, rk4_step, unpack_state)
+                                      SpacecraftState)
+from reference_dynamics import pack_state, rk4_step, unpack_state
 
 # Asymmetric inertia with products of inertia (paper 000's 118/100/19.6 plus products).
 INERTIA = np.array([[118.0, 3.0, -2.0],

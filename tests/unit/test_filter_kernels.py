@@ -345,6 +345,7 @@ def test_kernels_are_compiled_when_numba_is_there():
     numba = pytest.importorskip('numba')
     if os.environ.get('NUMBA_DISABLE_JIT', '0') not in ('', '0'):
         pytest.skip('JIT disabled in this process')
+    mf.warm_up()                      # (the filter's kernels load numba at their first call)
     assert isinstance(mf.predict_kernel, numba.core.registry.CPUDispatcher)
     assert isinstance(mf.update_kernel, numba.core.registry.CPUDispatcher)
     for fn in (mf.predict_kernel, mf.update_kernel):

@@ -1,7 +1,7 @@
 """Flexible appendages in the world integrator (sim_node.models.dynamics + kernels, issue 9).
 
 Truth used here:
-* ``sim_node.models.flexible.FlexibleSpacecraft``: an independent implementation of the same
+* ``reference_dynamics.FlexibleSpacecraft`` (tests/unit): an independent implementation of the same
   hybrid equations (numpy, its own RK4 loop) must give the same trajectory to round-off;
 * conservation laws: without damping and torques the energy
   ``1/2 [w; eta_dot]^T M [w; eta_dot] + 1/2 eta^T Lambda^2 eta`` and the inertial angular
@@ -19,9 +19,10 @@ from adcs_nodes.core import attitude
 from sim_node.models.actuators import WheelCluster, WheelMomentumError
 from sim_node.models.disturbances import ConstantTorque, HarmonicTorque
 from sim_node.models.dynamics import (ActuatorCommand, FlexibleModes, FrameEnvironment,
-                                      Spacecraft, SpacecraftState, pack_state, unpack_state)
-from sim_node.models.flexible import FlexibleSpacecraft, PAPER001_INERTIA, paper001_modes
-from sim_node.models.spacecraft_config import spacecraft_from_config
+                                      Spacecraft, SpacecraftState)
+from reference_dynamics import FlexibleSpacecraft, pack_state, unpack_state
+from sim_node.models.flexible import PAPER001_INERTIA, paper001_modes
+from sim_node.models.spacecraft_config import SPACECRAFT, spacecraft_from_config
 
 Q0 = attitude.normalize([0.1, -0.2, 0.3, 0.9])
 W0 = np.radians([0.3, -0.3, 0.3])
@@ -187,15 +188,15 @@ def test_state_packing_and_bad_modal_state_are_refused():
 
 
 def test_config_builds_the_paper001_world():
-    cfg = {'inertia_kgm2': PAPER001_INERTIA.ravel().tolist(), 'gravity_gradient': True,
-           'wheel_axes': np.eye(3).ravel().tolist(), 'wheel_max_torque_Nm': [1.0] * 3,
-           'wheel_max_momentum_Nms': [55.0] * 3, 'wheel_inertia_kgm2': [0.1] * 3,
-           'flexible.model': 'paper001', 'flexible.wings': 'two', 'flexible.damping': 0.01,
-           'aerodynamic_Nm': [1e-6] * 3, 'solar_pressure_Nm': [1e-5] * 3,
-           'residual_magnetic_Nm': [1e-8] * 3, 'unloading_Nm': [1e-3] * 3,
-           'harmonic_period_s': 5801.0, 'unloading_period_s': 600.0,
-           'unloading_duration_s': 60.0, 'wheel_error_std_Nms': 0.01 / 3,
-           'wheel_error_period_s': 0.2}
+    wheels = [{'name': f'w{i}', 'axis': list(axis), 'max_torque_Nm': 1.0,
+               'max_momentum_Nms': 55.0, 'inertia_kgm2': 0.1} for i, axis in enumerate(np.eye(3))]
+    cfg = {'inertia_kgm2': PAPER001_INERTIA.tolist(), 'gravity_gradient': True,
+           'wheels': wheels, 'flexible': {'model': 'paper001', 'wings': 'two', 'damping': 0.01},
+           'disturbance': {'aerodynamic_Nm': [1e-6] * 3, 'solar_pressure_Nm': [1e-5] * 3,
+                           'residual_magnetic_Nm': [1e-8] * 3, 'unloading_Nm': [1e-3] * 3,
+                           'harmonic_period_s': 5801.0, 'unloading_period_s': 600.0,
+                           'unloading_duration_s': 60.0},
+           'wheel_error_std_Nms': 0.01 / 3, 'wheel_error_period_s': 0.2}
     sc = spacecraft_from_config(cfg, seed=7)
     assert sc.n_modes == 10 and sc.flexible.damping[0] == 0.01
     assert sc.wheel_error is not None and sc.wheel_error.period_s == 0.2
@@ -208,9 +209,10 @@ def test_config_builds_the_paper001_world():
     other = spacecraft_from_config(cfg, seed=8)
     assert not np.array_equal(sum(d.torque(10.0) for d in other.disturbances), torques[0])
     with pytest.raises(ValueError, match='flexible.model'):
-        spacecraft_from_config({**cfg, 'flexible.model': 'nope'}, seed=1)
+        spacecraft_from_config({**cfg, 'flexible': {'model': 'nope'}}, seed=1)
     with pytest.raises(ValueError, match='harmonic_period_s'):
-        spacecraft_from_config({**cfg, 'harmonic_period_s': 0.0}, seed=1)
+        spacecraft_from_config({**cfg, 'disturbance': {**cfg['disturbance'],
+                                                       'harmonic_period_s': 0.0}}, seed=1)
 
 
 def test_graph_gives_the_dynamics_node_the_flexible_world():
@@ -223,19 +225,18 @@ def test_graph_gives_the_dynamics_node_the_flexible_world():
     dyn = next(n for n in nodes if n.name == 'dynamics')
     p = dyn.params
     assert p['spacecraft.flexible.model'] == 'paper001'
-    assert p['spacecraft.unloading_Nm'] == [1e-3] * 3
+    assert p['spacecraft.disturbance.unloading_Nm'] == [1e-3] * 3
     # 600 km circular orbit: T = 2 pi sqrt(a^3 / mu) = 5801 s
-    assert p['spacecraft.harmonic_period_s'] == pytest.approx(5801.0, abs=1.0)
+    assert p['spacecraft.disturbance.harmonic_period_s'] == pytest.approx(5801.0, abs=1.0)
     assert orbital_period_s(sc['orbit']) == pytest.approx(5801.0, abs=1.0)
     assert 'sim/appendages' in dyn.publishes
     assert topic_type('sim/appendages') == 'adcs_msgs/msg/AppendageState'
     rec = next(n for n in nodes if n.name == 'recorder')
     assert 'sim/appendages=adcs_msgs/msg/AppendageState' in rec.params['topics']
-    cfg = {k[len('spacecraft.'):]: v for k, v in p.items() if k.startswith('spacecraft.')}
-    assert spacecraft_from_config(cfg, seed=1).n_modes == 10            # two wings, 5 each
+    assert spacecraft_from_config(SPACECRAFT.read(p, 'spacecraft'), seed=1).n_modes == 10
+    # (two wings, 5 each)
     # the replication scenario: the 5 modes of (32) only (F = C_a, digest option R)
     one = build_graph(load_scenario(os.path.join(root, 'scenarios', 'paper001_mpi.yaml')),
                       10.0, record=True)
     p1 = next(n for n in one if n.name == 'dynamics').params
-    cfg1 = {k[len('spacecraft.'):]: v for k, v in p1.items() if k.startswith('spacecraft.')}
-    assert spacecraft_from_config(cfg1, seed=1).n_modes == 5
+    assert spacecraft_from_config(SPACECRAFT.read(p1, 'spacecraft'), seed=1).n_modes == 5

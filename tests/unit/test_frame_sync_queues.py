@@ -3,9 +3,11 @@
 Truth: :class:`NaiveSync`, written here from the timing rules of DESIGN section 6 with plain
 scans and sorts (the form ``FrameSync`` had before the queues): the latest message at or before
 a frame is the maximum of the stamps not after it, the history keeps the newest ``history``
-stamps, pruning keeps the newest stamp before the frame. Random sequences of arrivals (in
-order, out of order, duplicated stamps), queries, prunes and misses must give the same
-answers from both.
+stamps, pruning keeps the newest stamp before the frame; misses are in a row when no message is
+stamped between the stamps they lacked, a dead input returns with its first message stamped
+after its death (stored already or arriving later) and is held for ``hold`` after it (issue 38).
+Random sequences of arrivals (in order, out of order, duplicated stamps), queries, prunes and
+misses must give the same answers from both.
 """
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -25,7 +27,7 @@ class NaiveSync:
             period, kind = spec if isinstance(spec, tuple) else (spec, 'frame')
             self.inp[name] = {'p': period, 'kind': kind if period else 'latest',
                               'msgs': {}, 'latest': None, 'misses': 0, 'dead': False,
-                              'revived': -1, 'held': False}
+                              'revived': -1, 'held': False, 'last': -1, 'died': -1}
         self.history, self.dead_after, self.hold = history, dead_after, hold
 
     def required(self, name, t):
@@ -38,9 +40,10 @@ class NaiveSync:
 
     def add(self, name, s, v):
         i = self.inp[name]
-        i['misses'] = 0
-        if i['dead']:                   # a revival: not stored, awaited after the hold
-            i['dead'], i['revived'], i['held'] = False, s + self.hold, True
+        if i['dead']:
+            if s <= i['died']:
+                return False            # stale: dropped
+            self.revive(i, s)           # a return: not stored, awaited after the hold
             return True
         if i['held'] and s <= i['revived']:
             return False                # within the hold: not stored
@@ -72,14 +75,28 @@ class NaiveSync:
             for s in sorted(s for s in i['msgs'] if s < t)[:-1]:
                 del i['msgs'][s]
 
+    def revive(self, i, s):
+        i['dead'], i['held'], i['misses'], i['last'] = False, True, 0, -1
+        i['revived'] = s + self.hold
+        for k in [k for k in i['msgs'] if i['died'] < k <= i['revived']]:
+            del i['msgs'][k]
+        if i['latest'] is not None and i['died'] < i['latest'][0] <= i['revived']:
+            i['latest'] = (max(i['msgs']), i['msgs'][max(i['msgs'])]) if i['msgs'] else None
+
     def record_misses(self, t):
         newly = []
         for n in self.missing(t):
             i = self.inp[n]
-            i['misses'] += 1
+            s = self.required(n, t)
+            between = any(i['last'] < k < s for k in i['msgs'])
+            i['misses'] = 1 if between else i['misses'] + 1
+            i['last'] = s
             if self.dead_after and i['misses'] >= self.dead_after:
-                i['dead'] = True
+                i['dead'], i['died'] = True, s
                 newly.append(n)
+                later = [k for k in i['msgs'] if k > s]
+                if later:
+                    self.revive(i, min(later))
         return newly
 
 

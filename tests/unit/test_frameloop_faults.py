@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 import yaml
 
-from adcs_nodes.nodes.convert import quat, vec3
+from adcs_nodes.msgs.fields import quat, vec3
+from frameloop_run import messages
 from adcs_nodes.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -39,7 +40,7 @@ def run(sc, duration):
     loop = FrameLoop.from_scenario(sc, duration)
     out = {}
     for frame in loop.run():
-        for topic, msg in frame.outputs:
+        for topic, msg in messages(frame, loop):
             out.setdefault(topic, []).append((frame.t_ns / 1e9, msg))
     return out, loop
 
@@ -163,7 +164,7 @@ def test_coil_open_zeroes_one_magnetorquer_axis_and_magnetometer_faults(tmp_path
     loop = FrameLoop.from_scenario(sc, 200.0)
     commanded, applied = [], []
     for frame in loop.run():
-        cmd = [m for topic, m in frame.outputs if topic == 'adcs/actuator_command']
+        cmd = [m for topic, m in messages(frame, loop) if topic == 'adcs/actuator_command']
         if cmd and not loop.done:       # the dipole the world applied over this frame
             commanded.append(vec3(cmd[0].dipole_body))
             applied.append(np.array(loop.dynamics.applied['dipole_body']))
@@ -186,9 +187,33 @@ def test_coil_open_zeroes_one_magnetorquer_axis_and_magnetometer_faults(tmp_path
     ({'at_s': 1.0, 'kind': 'noise_burst', 'target': 'gyro',
       'params': {'std': [5.0, 0.0, 0.0]}}, 'std'),
     ({'at_s': 1.0, 'kind': 'coil_open', 'target': 'z'}, 'none in this scenario'),
-    ({'at_s': 1.0, 'kind': 'dropout'}, 'needs at_s, kind, target'),
+    ({'at_s': 1.0, 'kind': 'dropout'}, 'faults[0].target: missing required key'),
 ])
 def test_bad_faults_are_refused_with_the_key(tmp_path, fault, why):
     with pytest.raises(ScenarioError, match='faults') as exc:
         scenario(tmp_path, 'paper001_mpi', [fault])
     assert why in str(exc.value), str(exc.value)
+
+
+def test_a_star_tracker_back_during_its_filter_restart_is_held_like_any_return(tmp_path):
+    """Issue 38's case on the plain engine: two overlapping star-tracker bias steps make the
+    MEKF refuse 10 samples and restart (no estimate until a star-tracker sample initialises
+    it); the star tracker is then silent 3 frames (dead) and returns stuck: its returning
+    samples are held for ``REVIVE_HOLD_FRAMES`` frames like any dead producer's return, so
+    no estimate in the run after the restart (the composed engine used to resume at the
+    return: tests/node/test_fault_parity.py)."""
+    from adcs_nodes.core.lockstep import REVIVE_HOLD_FRAMES
+    at = {'target': 'star_tracker'}
+    sc = scenario(tmp_path, 'demo_mission', [
+        {**at, 'at_s': 2.0, 'kind': 'bias_step',
+         'params': {'bias': [0.01, 0, 0], 'duration_s': 15.0}},
+        {**at, 'at_s': 3.0, 'kind': 'bias_step',
+         'params': {'bias': [0, 0.01, 0], 'duration_s': 15.0}},
+        {**at, 'at_s': 12.0, 'kind': 'dropout', 'params': {'duration_s': 5.0}},
+        {**at, 'at_s': 13.0, 'kind': 'stuck', 'params': {'duration_s': 10.0}}])
+    out, loop = run(sc, 40.0)
+    est = [t for t, _ in out['adcs/attitude_estimate']]
+    assert est == [float(k) for k in range(11)]          # the 10th refusal (11 s) restarts
+    assert 17.0 + REVIVE_HOLD_FRAMES > 40.0               # back at 17 s: held past the end
+    assert [t for t, _ in out['sensors/star_tracker']] == \
+        [float(k) for k in range(41) if not 12 <= k < 17]

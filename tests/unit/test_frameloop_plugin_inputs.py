@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 import yaml
 
-from adcs_nodes.nodes.convert import vec3
+from adcs_nodes.msgs.fields import vec3
+from frameloop_run import messages
 from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -59,7 +60,7 @@ def test_a_gyro_and_star_tracker_plugin_controller_runs_on_the_frameloop(tmp_pat
     loop = FrameLoop.from_scenario(damper_scenario(tmp_path), duration_s=30.0)
     omegas, sources = [], set()
     for frame in loop.run():
-        for topic, msg in frame.outputs:
+        for topic, msg in messages(frame, loop):
             if topic == 'sim/state':
                 omegas.append(vec3(msg.omega_body_eci_body))
             elif topic == 'adcs/actuator_command':

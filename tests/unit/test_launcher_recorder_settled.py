@@ -9,8 +9,8 @@ delivers it; a fake monotonic clock advances 0.1 s a spin).
 """
 from types import SimpleNamespace
 
-import adcs_nodes.tools.run.launcher as launcher
-from adcs_nodes.tools.run.launcher import _Monitor
+import adcs_nodes.tools.run.launcher.monitor as launcher
+from adcs_nodes.tools.run.launcher.monitor import Monitor as _Monitor
 
 
 def _monitor(script, clock):

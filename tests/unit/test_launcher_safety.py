@@ -8,8 +8,10 @@ import stat
 
 import pytest
 
-from adcs_nodes.tools.run import launcher
-from adcs_nodes.tools.run.launcher import LaunchError, Launcher, acquire_domain, prune_runs
+from adcs_nodes.tools.run.launcher import isolation as launcher
+from adcs_nodes.tools.run.launcher import result
+from adcs_nodes.tools.run.launcher import LaunchError, Launcher, acquire_domain
+from adcs_nodes.tools.run.launcher.isolation import prune_runs
 from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -97,17 +99,17 @@ def test_private_files_and_dirs(tmp_path):
     d = tmp_path / 'run'
     d.mkdir(mode=0o755)
     os.chmod(d, 0o755)
-    launcher._private_dir(str(d))
+    launcher.private_dir(str(d))
     assert stat.S_IMODE(os.stat(d).st_mode) == 0o700
     f = d / 'active-1.json'
-    launcher._write_private(str(f), '{"domain": 5}')
+    launcher.write_private(str(f), '{"domain": 5}')
     assert stat.S_IMODE(os.stat(f).st_mode) == 0o600
     assert json.loads(f.read_text()) == {'domain': 5}
 
 
 @pytest.mark.parametrize('change, message', [
-    ({'name': '../../escape'}, 'must match'),
-    ({'name': 'a/b'}, 'must match'),
+    ({'name': '../../escape'}, 'names the run directory'),
+    ({'name': 'a/b'}, 'names the run directory'),
     ({'epoch': 'not-a-date'}, 'ISO-8601'),
     ({'epoch': '2037-12-31T00:00:00Z'}, '2038'),
 ])
@@ -119,8 +121,43 @@ def test_launcher_refuses_bad_runs(change, message):
 
 @pytest.mark.parametrize('duration', [float('inf'), float('nan'), -1.0, 0.0])
 def test_launcher_refuses_non_finite_durations(duration):
-    with pytest.raises(LaunchError, match='positive finite'):
+    with pytest.raises(LaunchError, match=r'--duration .*duration_s: (expected a finite|must '
+                       'be > 0)'):
         Launcher(load_scenario(FREE_TUMBLE), duration_s=duration, progress=False)
+
+
+def test_a_fault_after_a_duration_override_is_refused_up_front():
+    """Issue 38 item 7: a scripted fault after the end of a shortened run never strikes;
+    the launcher says so before it starts anything (the validator's check, named for
+    ``--duration``)."""
+    sc = load_scenario(os.path.join(ROOT, 'scenarios', 'paper000_estimation.yaml'))
+    sc = dict(sc, faults=[{'index': 0, 'kind': 'dropout', 'target': 'magnetometer',
+                           'at_s': 50.0, 'params': {'duration_s': 5.0}}])
+    with pytest.raises(LaunchError, match=r'^--duration 20: faults\[0\]\.at_s: 50 s is '
+                       r'outside the run \[0, 20\] s'):
+        Launcher(sc, duration_s=20.0, progress=False)
+    assert Launcher(sc, duration_s=60.0, progress=False).duration_s == 60.0
+
+
+@pytest.mark.parametrize('engine', ['plain', 'composed', 'graph'])
+def test_adcs_run_refuses_a_fault_after_a_duration_override(tmp_path, capsys, engine):
+    import yaml
+
+    from adcs_nodes.tools import cli
+    with open(os.path.join(ROOT, 'scenarios', 'paper000_estimation.yaml')) as fh:
+        sc = yaml.safe_load(fh)
+    sc['faults'] = [{'kind': 'dropout', 'target': 'magnetometer', 'at_s': 50.0}]
+    path = tmp_path / 'late_fault.yaml'
+    path.write_text(yaml.safe_dump(sc))
+    assert cli.main(['run', str(path), '--engine', engine, '--duration', '20', '--record',
+                     str(tmp_path / 'bag')]) == 2
+    err = capsys.readouterr().err
+    assert 'adcs run: --duration 20: faults[0].at_s: 50 s is outside the run' in err, err
+    assert not (tmp_path / 'bag').exists()
+    from adcs_nodes.scenario import ScenarioError
+    from adcs_nodes.tools.run.launch_graph import launch_graph
+    with pytest.raises(ScenarioError, match='--duration 20: faults'):   # ros2 launch duration:=
+        launch_graph(str(path), duration_s=20.0)
 
 
 def test_a_100_kB_controller_name_is_refused_unsent_and_not_echoed():
@@ -142,8 +179,8 @@ def test_save_scenario_on_a_full_disk_reports_and_keeps_the_bag(tmp_path, monkey
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(launcher.yaml, 'safe_dump', full)
-    message = run._save_scenario()
+    monkeypatch.setattr(result.yaml, 'safe_dump', full)
+    message = result.save_scenario(run.sc, run.record, run.duration_s)
     assert 'disk full' in message and 'the bag is kept' in message
     assert sorted(p.name for p in bag.iterdir()) == ['bag.mcap']   # no cut scenario.yaml
 

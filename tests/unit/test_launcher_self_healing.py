@@ -5,7 +5,8 @@ The launched version (a node that never matches, restarted once): tests/graph/
 test_self_healing.py."""
 import time
 
-from adcs_nodes.tools.run.launcher import _Transitions, heal_decision, restart_plan
+from adcs_nodes.tools.run.launcher.healing import heal_decision, restart_plan
+from adcs_nodes.tools.run.launcher.lifecycle import Transitions as _Transitions
 
 NODES = ['environment', 'dynamics', 'magnetometer', 'estimator', 'guidance',
          'magnetic_controller', 'controller_manager', 'recorder']
@@ -101,33 +102,30 @@ def test_an_unanswered_node_that_uses_cpu_is_waited_for_an_idle_one_restarted(mo
     nothing: it is given more time. One that used no CPU in the window is restarted."""
     from types import SimpleNamespace
 
-    from adcs_nodes.tools.run import launcher
+    from adcs_nodes.tools.run.launcher import healing, processes
     cpu = {'t': 10.0}
-    monkeypatch.setattr(launcher, '_cpu_seconds', lambda pid: cpu['t'])
-    run = launcher.Launcher.__new__(launcher.Launcher)
-    run.procs = {'estimator': SimpleNamespace(pid=1)}
-    run._cpu_seen, run.restarts, run.restart_notes, lines, restarted = {}, {}, [], [], []
-    run.log = lines.append
-    run._guards, run.compose = {}, False
-    run._restart = lambda monitor, name, why: restarted.append(name)
-    run._transitions = _Transitions(_Node(), ['estimator'], deadline_s=600.0)
+    monkeypatch.setattr(processes, 'cpu_seconds', lambda pid: cpu['t'])
+    lines, restarted = [], []
+    procs = SimpleNamespace(procs={'estimator': SimpleNamespace(pid=1)})
+    healer = healing.Healer([], procs, 'dynamics', lambda name, note: restarted.append(name),
+                            lines.append)
+    transitions = _Transitions(_Node(), ['estimator'], deadline_s=600.0)
     monitor = SimpleNamespace(ready=set())
-    assert run._heal_lifecycle(monitor, 'estimator') is None       # window starts
-    cpu['t'] = 13.0                                                 # 3 s of CPU: busy
-    assert run._heal_lifecycle(monitor, 'estimator') is None and not restarted
+    assert healer.lifecycle(monitor, transitions, 'estimator') is None    # window starts
+    cpu['t'] = 13.0                                                        # 3 s of CPU: busy
+    assert healer.lifecycle(monitor, transitions, 'estimator') is None and not restarted
     assert 'is busy (3.0 s CPU' in lines[-1]
-    assert run._heal_lifecycle(monitor, 'estimator') is None       # a new window
-    assert run._heal_lifecycle(monitor, 'estimator') is None       # no CPU used: stuck
+    assert healer.lifecycle(monitor, transitions, 'estimator') is None    # a new window
+    assert healer.lifecycle(monitor, transitions, 'estimator') is None    # no CPU: stuck
     assert restarted == ['estimator']
-    run.restarts = {'estimator': 1}
-    run._heal_lifecycle(monitor, 'estimator')
-    assert run._heal_lifecycle(monitor, 'estimator') == ('estimator', 'unanswered')
+    healer.lifecycle(monitor, transitions, 'estimator')
+    assert healer.lifecycle(monitor, transitions, 'estimator') == ('estimator', 'unanswered')
 
 
 def test_cpu_seconds_of_this_process():
     import os
 
-    from adcs_nodes.tools.run.launcher import _cpu_seconds
+    from adcs_nodes.tools.run.launcher.processes import cpu_seconds as _cpu_seconds
     t0 = _cpu_seconds(os.getpid())
     end = time.process_time() + 0.2
     while time.process_time() < end:

@@ -82,18 +82,6 @@ def test_derived_seeds_are_stable_and_distinct():
     assert 0 <= a < 2 ** 64
 
 
-def test_an_input_can_stop_being_awaited_and_come_back():
-    sync = FrameSync({'ctrl': S, 'est': S})
-    sync.add('est', 0, 'e0')
-    assert sync.missing(0) == ['ctrl']
-    sync.set_period('ctrl', 0)          # producer declared dead
-    assert sync.ready(0) and sync.period('ctrl') == 0
-    sync.set_period('ctrl', S)          # it published again
-    assert sync.missing(0) == ['ctrl']
-    with pytest.raises(ValueError):
-        sync.set_period('ctrl', -1)
-
-
 # ------------------------------------------------------------------ previous-frame inputs
 def test_previous_frame_input_is_awaited_with_the_stamp_before_t():
     # estimator every 2 s, command every 2 s: at t = 4 s it needs the command of t = 2 s

@@ -316,7 +316,7 @@ def test_auto_sequence_from_dict_degrees():
     assert auto.rate_enter_rad_s == pytest.approx(math.radians(0.3))
     assert auto.angle_enter_rad == pytest.approx(math.radians(2.0))
     assert auto.angle_exit_rad is None and auto.confirm_frames == 5
-    with pytest.raises(ValueError, match='unknown keys'):
+    with pytest.raises(ValueError, match='rate_enter: unknown key'):
         AutoSequence.from_dict({'rate_enter': 1.0})
 
 

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import yaml
 
-from adcs_nodes.nodes.convert import stamp_ns, vec3
+from adcs_nodes.msgs.fields import stamp_ns, vec3
+from frameloop_run import messages
 from adcs_nodes.scenario import ScenarioError, load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -38,7 +39,7 @@ def run(sc):
     loop = FrameLoop.from_scenario(sc, DURATION_S)
     out = {}
     for frame in loop.run():
-        for topic, msg in frame.outputs:
+        for topic, msg in messages(frame, loop):
             out.setdefault(topic, []).append((frame.t_ns / 1e9, msg))
     return out, loop
 

@@ -134,3 +134,19 @@ def test_graph_names_the_producer_of_each_guarded_input():
     sc = load_scenario(os.path.join(root, 'scenarios', 'free_tumble.yaml'))
     nodes = {n.name: n for n in build_graph(sc, 100.0)}
     assert nodes['dynamics'].params['expected_publishers'] == ['sim/environment=environment']
+
+
+def test_the_expected_node_re_creating_its_publisher_is_locked_to_once_the_old_is_gone():
+    """A lifecycle cleanup and configure gives the expected node a new publisher GID: taken
+    only when none of the locked ones is left (a second publisher beside the first is not)."""
+    from adcs_nodes.nodes.publisher_guard import PublisherGuard
+    g = PublisherGuard({'/cmd': 'bdot_controller'})
+    old, new, stranger = b'\x01' * 16, b'\x02' * 16, b'\x03' * 16
+    g.lock('/cmd', [old])
+    assert g.check('/cmd', new, 10) == 'foreign_publisher'
+    assert not g.relock('/cmd', [new], present=[old, new])     # the old one is still there
+    assert not g.relock('/cmd', [], present=[stranger])         # not the expected node's
+    assert g.relock('/cmd', [new], present=[new])
+    assert g.check('/cmd', new, 10) is None and g.check('/cmd', old, 12) == 'foreign_publisher'
+    assert not g.relock('/cmd', [new], present=[new])           # already locked to it
+    assert g.diagnostic_values()['relocks'] == '1'

@@ -9,7 +9,7 @@ from adcs_nodes.core.lockstep import derive_seed
 from sim_node.models import disturbances as dist
 from sim_node.models.disturbances import RandomTorque, standard_normal3
 
-pytestmark = pytest.mark.skipif(not dist._COMPILED, reason='numba JIT off: the Python path')
+pytestmark = pytest.mark.skipif(not dist._compiled(), reason='numba JIT off: the Python path')
 
 SEED = derive_seed(21, 'dynamics/disturbance')
 

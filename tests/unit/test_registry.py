@@ -4,7 +4,9 @@ Typed parameter checks, did-you-mean for unknown names, plugin loading errors, a
 scenario/graph behaviour that comes from entries: wheels-only spacecraft, controllers refused
 with a reason when their actuators or sensors are missing, external sensors.
 """
+import math
 import os
+import re
 
 import pytest
 import yaml
@@ -63,7 +65,7 @@ def test_schema_defaults_are_the_entries_defaults():
                 assert section[name][p.name].default == p.default, (kind, name, p.name)
     for name, entry in registry.entries('estimator').items():
         for p in entry.params:
-            assert sch['estimator'].variants[name][p.name].default == p.default
+            assert sch['estimator'].keys({'algorithm': name})[p.name].default == p.default
 
 
 def _write(tmp_path, sc):
@@ -132,3 +134,48 @@ def test_the_managers_point_mode_is_reachable_from_a_scenario(tmp_path):
     sc['manager']['auto'] = {'point': 'mpi', 'angle_enter_deg': 10.0}
     with pytest.raises(ScenarioError, match="'mpi' is not a configured controller"):
         load_scenario(_write(tmp_path, sc))
+
+
+#: Naming conventions every spec'd value follows (the validator checked them by name at run
+#: time; now each spec states its range, checked here): pattern -> (lowest, highest) allowed
+#: by the spec's range.
+CONVENTIONS = (
+    (re.compile(r'(^|_)std(_|$)|noise_std'), 0.0, math.inf, 'standard deviation'),
+    (re.compile(r'probability'), 0.0, 1.0, 'probability'),
+    (re.compile(r'^max_|_max$|limit|saturation|lsb|p0_diag'), 0.0, math.inf, 'limit'),
+)
+
+
+def _all_specs():
+    from adcs_nodes.scenario import schema
+    from adcs_nodes.spec import Section
+
+    def walk(specs, prefix):
+        for spec in specs:
+            if isinstance(spec, Section):
+                yield from walk(spec.params + tuple(p for v in spec.variants.values()
+                                                    for p in v), f'{prefix}{spec.name}.')
+            else:
+                yield f'{prefix}{spec.name}', spec
+                yield from walk(spec.fields, f'{prefix}{spec.name}[i].')
+    yield from walk(schema().params, '')
+    for kind in registry.KINDS:
+        for name, entry in registry.entries(kind).items():
+            yield from walk(entry.params, f'{kind} {name}: ')
+
+
+def test_every_spec_follows_the_naming_conventions():
+    """A standard deviation, a limit are >= 0 and a probability is in [0, 1] by their
+    spec, so the validator, the plain engine and the nodes refuse the same values."""
+    bad = []
+    for key, spec in _all_specs():
+        if spec.type not in ('float', 'int', 'float[]', 'vec3'):
+            continue
+        for pattern, low, high, what in CONVENTIONS:
+            if not pattern.search(spec.name):
+                continue
+            lo = 0.0 if spec.positive else spec.min
+            hi = math.inf if spec.max is None else spec.max
+            if lo is None or lo < low or hi > high:
+                bad.append(f'{key} ({what}): [{lo}, {hi}]')
+    assert bad == []

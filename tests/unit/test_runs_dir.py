@@ -10,6 +10,7 @@ import sys
 import tempfile
 
 from adcs_nodes.tools.run import launcher, live
+from adcs_nodes.tools.run.launcher import isolation
 from adcs_nodes.tools.run.launcher import Launcher
 from adcs_nodes.scenario import load_scenario
 
@@ -19,7 +20,7 @@ FREE_TUMBLE = os.path.join(ROOT, 'scenarios', 'free_tumble.yaml')
 
 def _fresh_launcher_module(monkeypatch):
     """A separate copy of the launcher module, executed now (reads the environment now)."""
-    spec = importlib.util.spec_from_file_location('launcher_copy', launcher.__file__)
+    spec = importlib.util.spec_from_file_location('launcher_copy', isolation.__file__)
     mod = importlib.util.module_from_spec(spec)
     monkeypatch.setitem(sys.modules, 'launcher_copy', mod)    # (its dataclasses look it up)
     spec.loader.exec_module(mod)

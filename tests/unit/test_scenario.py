@@ -62,7 +62,7 @@ def test_unknown_key_names_key_line_and_suggestion(tmp_path):
 @pytest.mark.parametrize('old,new,expect', [
     ('duration_s: 10.0', 'duration_s: ten', 'duration_s: expected a number'),
     ('duration_s: 10.0', 'duration_s: .nan', 'finite'),
-    ('duration_s: 10.0', 'duration_s: -1.0', 'must be positive'),
+    ('duration_s: 10.0', 'duration_s: -1.0', 'duration_s: must be > 0 s'),
     ('duration_s: 10.0', 'duration_s: 10.5', 'whole number'),
     ('model: dipole', 'model: wmm', "unknown model 'wmm'"),
     ('[1.0, 2.0, 3.0]', '[1.0, 2.0]', 'expected 3 numbers or a 3x3'),
@@ -90,9 +90,15 @@ def test_free_tumble_graph_converts_paper_conventions():
     sc = load_scenario(os.path.join(SCEN, 'free_tumble.yaml'))
     nodes = {n.name: n for n in build_graph(sc, 60.0, record=True)}
     dyn = nodes['dynamics'].params
-    # paper 000 Lambda(0) scalar first -> scalar last
-    assert dyn['initial.q_orbit_body'] == pytest.approx([0.48, -0.48, 0.64, 0.36])
-    assert dyn['initial.omega_body_eci_body'][0] == pytest.approx(-3.0 * 3.141592653589793 / 180)
+    # the dynamics reads the scenario's initial section (the same spec): paper 000's Lambda(0)
+    # scalar first -> scalar last, deg/s -> rad/s, with the orbit frame at the identity
+    from sim_node.models.spacecraft_config import INITIAL, SPACECRAFT, initial_state
+    from sim_node.models.spacecraft_config import spacecraft_from_config
+    assert dyn['initial.q_orbit_body_wxyz'] == pytest.approx([0.36, 0.48, -0.48, 0.64])
+    craft = spacecraft_from_config(SPACECRAFT.read(dyn, 'spacecraft'), seed=0)
+    state = initial_state(INITIAL.read(dyn, 'initial'), [0.0, 0.0, 0.0, 1.0], [0.0] * 3, craft)
+    assert state.q_eci_body == pytest.approx([0.48, -0.48, 0.64, 0.36])
+    assert state.omega_body_eci_body[0] == pytest.approx(-3.0 * 3.141592653589793 / 180)
     assert dyn['wait_for_nodes'] == ['environment', 'recorder']
     assert 'pub:/clock=2' in dyn['expected_matches']        # environment + recorder
     assert 'sub:sim/environment=1' in dyn['expected_matches']
@@ -125,3 +131,12 @@ def test_flight_software_never_subscribes_to_the_simulator(fname):
         # every published topic has a message type for the recorder
         for topic in node.publishes:
             assert topic_type(topic), topic
+
+
+def test_an_epoch_written_as_a_yaml_timestamp_is_the_iso_text(tmp_path):
+    """``epoch: 2026-01-01T00:00:00Z`` unquoted is a YAML timestamp (a ``ros2 param dump``
+    style value): it loads as the same ISO text the quoted form gives (issue 37, 6)."""
+    sc = load_scenario(write(tmp_path, GOOD + 'epoch: 2026-03-04T05:06:07Z  # t0\n'))
+    assert sc['epoch'] == '2026-03-04T05:06:07Z'
+    with pytest.raises(ScenarioError, match='epoch: expected ISO-8601 text, got date'):
+        load_scenario(write(tmp_path, GOOD + 'epoch: 2026-03-04  # a date, no time\n'))

@@ -69,8 +69,8 @@ CASES = {
                      'nested too deeply'),
     'a 50 MB file': (lambda: text_of() + '#' * 50_000_000 + '\n', 'larger than'),
     # physics
-    'altitude below the surface': (lambda: replaced('altitude_km: 690.0',
-                                                    'altitude_km: -100.0'), 'below the Earth'),
+    'altitude below the surface': (lambda: replaced('altitude_km: 690.0', 'altitude_km: -100.0'),
+                                   'orbit.altitude_km: must be >= 100 km'),
     'zero inertia': (lambda: replaced('[118.0, 118.0, 19.6]', '[0, 0, 0]'),
                      'not positive definite'),
     'negative principal moment': (
@@ -91,7 +91,7 @@ CASES = {
                      'timing.substeps'),
     'negative disturbance std': (lambda: replaced('random_std_Nm: 1.0e-5',
                                                   'random_std_Nm: -1.0e-5'),
-                                 'standard deviation'),
+                                 'random_std_Nm: must be >= 0'),
     'negative seed': (lambda: replaced('seed: 1', 'seed: -1'), 'seed'),
     'path in the name': (lambda: replaced('name: free_tumble', 'name: ../../outside'),
                          'names the run directory'),
@@ -119,7 +119,7 @@ def test_bad_input_is_refused_with_a_short_clear_message(case, tmp_path, capsys)
 
 def test_sensor_noise_and_probability_ranges(tmp_path, capsys):
     """A probability of 5 and a negative noise std are refused (by the registry's parameter
-    ranges or the naming conventions of ``_check_physical``, whichever sees it first)."""
+    ranges, which follow the naming conventions: test_registry)."""
     text = text_of(os.path.join(SCENARIOS, 'paper000_estimation.yaml'))
     data = yaml.safe_load(text)
     for mutate, expected in [

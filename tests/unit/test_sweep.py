@@ -87,7 +87,7 @@ def test_the_command_exits_2_before_any_run(sets, message, tmp_path, capsys):
 def test_bad_campaign_arguments_exit_2(tmp_path, capsys):
     base = ['sweep', SCENARIO, '--set', f'{ALPHA}=2e-3', '--out', str(tmp_path / 'sw')]
     assert cli.main(base + ['--runs', '0']) == 2
-    assert '--runs must be >= 1' in capsys.readouterr().err
+    assert '--runs must be in [1, 100000], got 0' in capsys.readouterr().err
     assert cli.main(base + ['--runs', '1', '--duration', '3']) == 2
     assert 'whole number' in capsys.readouterr().err
 

@@ -10,13 +10,11 @@ import math
 import numpy as np
 import pytest
 
-from adcs_msgs.msg import ActuatorCommand
-from adcs_nodes.components.base import FrameClock
-from adcs_nodes.components.controller import ControllerComponent, command_from_msg
+from adcs_nodes.components.controller import ControllerComponent, command_of
+from adcs_nodes.core.samples import ActuatorCommand, WheelSpeeds
 from adcs_nodes.core.control import Command
 from adcs_nodes.core.manager import ControllerManagerCore
 from adcs_nodes.core.wheel_health import CONFIRM_FRAMES, WheelHealth
-from sensor_msgs.msg import JointState
 
 J = np.array([3e-4, 3e-4, 3e-4])
 H_MAX = np.array([0.2, 0.2, 0.2])
@@ -112,19 +110,14 @@ class _Steady:
         return Command(np.zeros(3), np.array([2e-4, 2e-4, 2e-4]), np.zeros(3))
 
 
-def _joint(clock, t_ns, w):
-    msg = JointState()
-    msg.header.stamp = clock.stamp(t_ns)
-    msg.name = list(NAMES)
-    msg.velocity = [float(v) for v in w]
-    return msg
+def _joint(t_ns, w):
+    return WheelSpeeds(t_ns, 'wheel_tachometer', tuple(NAMES), np.array(w, dtype=float))
 
 
 def test_the_component_invalidates_its_command_and_the_manager_falls_back_with_the_reason():
-    clock = FrameClock(0)
     ctx = {'wheel_max_torque_Nm': [0.01] * 3, 'wheel_inertia_kgm2': list(J),
            'wheel_max_momentum_Nms': list(H_MAX), 'period_s': 1.0, 'reference': None}
-    comp = ControllerComponent(_Steady(), 'mpi', ctx, None, clock)
+    comp = ControllerComponent(_Steady(), 'mpi', ctx, None)
     manager = ControllerManagerCore(['bdot', 'mpi'], 'bdot', initial='mpi',
                                     max_dipole_Am2=[5.0] * 3, max_wheel_torque=[0.01] * 3)
     bdot = Command(np.array([0.1, 0.0, 0.0]), np.zeros(0), np.zeros(3))
@@ -133,15 +126,14 @@ def test_the_component_invalidates_its_command_and_the_manager_falls_back_with_t
     statuses = []
     for k in range(10):
         t_ns = k * 10**9
-        msgs = {'wheels': _joint(clock, t_ns, w), 'cmd': applied}
-        out = comp.step(t_ns, msgs, lambda key, m: True)
-        cmd, status = manager.step(float(k), {'mpi': (float(k), command_from_msg(out)),
+        samples = {'wheels': _joint(t_ns, w), 'cmd': applied}
+        out = comp.step(t_ns, samples, lambda key: True)
+        cmd, status = manager.step(float(k), {'mpi': (float(k), command_of(out)),
                                               'bdot': (float(k), bdot)})
         statuses.append(status)
         assert np.all(np.isfinite(cmd.wheel_torque)) and np.all(np.isfinite(cmd.dipole_body))
-        applied = ActuatorCommand()
-        applied.header.stamp = clock.stamp(t_ns)
-        applied.wheel_torque = [float(v) for v in cmd.wheel_torque]
+        applied = ActuatorCommand(t_ns, np.zeros(3), np.array(cmd.wheel_torque, dtype=float),
+                                  np.zeros(3), 'mpi')
         w = w + np.asarray(cmd.wheel_torque) / J * np.array([0.0, 1.0, 1.0])   # wheel_x stuck
     sources = [s['source'] for s in statuses]
     # frame k judges the interval [k - 1, k]: the 5th bad one is frame 5

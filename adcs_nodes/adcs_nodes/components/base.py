@@ -1,6 +1,5 @@
-"""What every component shares: the frame clock (elapsed sim time <-> absolute stamps), a log
-callback, and the mount table of the sensors (``/tf_static`` in a graph, the scenario in the
-FrameLoop)."""
+"""What every component shares: the run's epoch, a log callback, the mount table of the
+sensors (``/tf_static`` in a graph, the scenario in the FrameLoop) and the flat parameters."""
 from __future__ import annotations
 
 from datetime import datetime, timezone
@@ -10,7 +9,6 @@ import numpy as np
 
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.lockstep import NS_PER_S
-from adcs_nodes.nodes.convert import to_stamp
 
 #: Epoch of a node started without one (ISO-8601 UTC).
 DEFAULT_EPOCH = '2026-01-01T00:00:00Z'
@@ -40,23 +38,8 @@ def epoch_to_ns(epoch: datetime) -> int:
     return (delta.days * 86400 + delta.seconds) * NS_PER_S + delta.microseconds * 1000
 
 
-class FrameClock:
-    """Elapsed sim time [ns] <-> absolute ``builtin_interfaces/Time`` of the run's epoch."""
-
-    def __init__(self, epoch_ns: int) -> None:
-        self.epoch_ns = int(epoch_ns)
-
-    def stamp(self, elapsed_ns: int):
-        """Absolute stamp of an elapsed sim time."""
-        return to_stamp(self.epoch_ns + int(elapsed_ns))
-
-    def elapsed_ns(self, stamp_ns: int) -> int:
-        """Elapsed sim time of an absolute stamp [ns]."""
-        return int(stamp_ns) - self.epoch_ns
-
-
 class Mounts:
-    """Sensor mounts ``q_body_sensor`` (scalar last) by the samples' ``header.frame_id``.
+    """Sensor mounts ``q_body_sensor`` (scalar last) by the samples' ``frame_id``.
 
     The FrameLoop fills it from the sensors' parameters (what their nodes put on
     ``/tf_static``); a node wraps its ``MountTable``, which fills it from ``/tf_static``.
@@ -80,9 +63,9 @@ class Mounts:
 
 def covariance_to_body(covariance: Sequence[float],
                        q_body_sensor: Sequence[float]) -> Optional[np.ndarray]:
-    """A message's 3x3 covariance (row-major, sensor axes) in body axes, or ``None``.
+    """A sample's 3x3 covariance (row-major, sensor axes) in body axes, or ``None``.
 
-    ``C_body = R C_sensor R^T`` with ``R = R(q_body_sensor)``. ``None`` when the message
+    ``C_body = R C_sensor R^T`` with ``R = R(q_body_sensor)``. ``None`` when the sample
     gives none, by the ``sensor_msgs`` conventions: all zeros ("unknown"), ``covariance[0]
     = -1`` ("not provided"), or anything not finite, not symmetric or not positive
     semi-definite.
@@ -116,31 +99,13 @@ def _covariance_to_body(c: np.ndarray, q_body_sensor: np.ndarray) -> Optional[np
 
 # ---------------------------------------------------------------------- flat parameters
 def param_value(spec: Any, params: Dict[str, Any]) -> Any:
-    """The value of registry parameter ``spec`` in the flat node parameters ``params``, as the
-    node declares it (:func:`adcs_nodes.nodes.params.declare`): the given value, integers
-    promoted to floats where a float is due, validated; else the default."""
+    """The value of parameter ``spec`` in the flat node parameters ``params``, validated as
+    the node declares it (:meth:`adcs_nodes.core.spec.Param.from_ros`); else the default."""
     if spec.name not in params or params[spec.name] is None:
-        return list(spec.default) if spec.type.endswith('[]') else spec.default
-    given = params[spec.name]
-    if spec.type == 'float' and isinstance(given, int) and not isinstance(given, bool):
-        given = float(given)
-    if spec.type == 'float[]' and isinstance(given, (list, tuple)):
-        given = [float(v) if isinstance(v, int) and not isinstance(v, bool) else v
-                 for v in given]
-    return spec.validate(list(given) if isinstance(given, tuple) else given)
+        return spec.default if spec.default is None else spec.validate(spec.default)
+    return spec.from_ros(params[spec.name])
 
 
 def param_values(specs: Sequence[Any], params: Dict[str, Any]) -> Dict[str, Any]:
     """``{name: value}`` of every spec (:func:`param_value`)."""
     return {s.name: param_value(s, params) for s in specs}
-
-
-def section(params: Dict[str, Any], prefix: str, defaults: Dict[str, Any],
-            merge: bool = True) -> Dict[str, Any]:
-    """The ``prefix.*`` keys of the flat parameters as a dict, as a node's ``section`` reads
-    them: merged over ``defaults``, or (``merge=False``) ``defaults`` only when none is given."""
-    n = len(prefix) + 1
-    given = {k[n:]: v for k, v in params.items() if k.startswith(prefix + '.')}
-    if merge:
-        return {**defaults, **given}
-    return given if given else dict(defaults)

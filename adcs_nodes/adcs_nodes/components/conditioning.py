@@ -1,9 +1,9 @@
-"""Message -> core conversion of each sensor input, with its plausibility checks (pure).
+"""Core sample -> checked value of each sensor input, in body axes (pure).
 
 Each function returns ``(value, None)`` or ``(None, why)``: the estimator counts a rejection
 with its reason, a controller simply reads nothing. Sensor frames are rotated into body axes
-with the mount of the sample's ``header.frame_id`` (``mounts.lookup``: ``/tf_static`` in a
-graph, the sensors' parameters in the FrameLoop).
+with the mount of the sample's ``frame_id`` (``mounts.lookup``: ``/tf_static`` in a graph,
+the sensors' parameters in the FrameLoop).
 """
 from __future__ import annotations
 
@@ -13,16 +13,18 @@ from typing import Any, Optional, Tuple
 import numpy as np
 
 from adcs_nodes.core import attitude as att
-from adcs_nodes.nodes.convert import all_finite, quat, vec3
+from adcs_nodes.core.samples import (ActuatorCommand, GyroSample, HorizonSample,
+                                     MagnetometerSample, StarTrackerSample, WheelSpeeds,
+                                     all_finite)
 
 Checked = Tuple[Optional[Any], Optional[str]]
 
 
-def field_body(msg: Any, mounts: Any,
+def field_body(x: MagnetometerSample, mounts: Any,
                field_range: Optional[Tuple[float, float]] = None) -> Checked:
     """Magnetometer sample in body axes [T]: finite, ``|B|`` inside ``field_range`` (when
     given), a known mount."""
-    b_sensor = vec3(msg.magnetic_field)
+    b_sensor = x.b_sensor_T
     if not all_finite(b_sensor):
         return None, 'magnetometer sample is not finite'
     if field_range is not None:
@@ -30,47 +32,47 @@ def field_body(msg: Any, mounts: Any,
         lo, hi = field_range
         if not lo <= norm <= hi:
             return None, f'magnetometer |B| = {norm:.3g} T outside [{lo:g}, {hi:g}] T'
-    q_body_sensor = mounts.lookup(msg.header.frame_id)
+    q_body_sensor = mounts.lookup(x.frame_id)
     if q_body_sensor is None:
-        return None, f'no /tf_static mount body -> {msg.header.frame_id!r}'
+        return None, f'no /tf_static mount body -> {x.frame_id!r}'
     return att.rotate(q_body_sensor, b_sensor), None
 
 
-def horizon_roll_pitch(msg: Any) -> Checked:
+def horizon_roll_pitch(x: HorizonSample) -> Checked:
     """(roll, pitch) [rad] of a valid horizon-sensor sample."""
-    if not msg.valid or not math.isfinite(msg.roll) or not math.isfinite(msg.pitch):
+    if not x.valid or not math.isfinite(x.roll_rad) or not math.isfinite(x.pitch_rad):
         return None, 'horizon sensor sample invalid (out of view or not finite)'
-    return (float(msg.roll), float(msg.pitch)), None
+    return (float(x.roll_rad), float(x.pitch_rad)), None
 
 
-def gyro_rate_body(msg: Any, mounts: Any) -> Checked:
+def gyro_rate_body(x: GyroSample, mounts: Any) -> Checked:
     """Gyro rate in body axes [rad/s]: finite, a known mount."""
-    w = vec3(msg.angular_velocity)
-    if not all_finite(w):
+    if not all_finite(x.omega_sensor_rad_s):
         return None, 'gyro sample is not finite'
-    q_body_sensor = mounts.lookup(msg.header.frame_id)
+    q_body_sensor = mounts.lookup(x.frame_id)
     if q_body_sensor is None:
-        return None, f'no /tf_static mount body -> {msg.header.frame_id!r}'
-    return att.rotate(q_body_sensor, w), None
+        return None, f'no /tf_static mount body -> {x.frame_id!r}'
+    return att.rotate(q_body_sensor, x.omega_sensor_rad_s), None
 
 
-def star_q_eci_body(msg: Any) -> Checked:
+def star_q_eci_body(x: StarTrackerSample) -> Checked:
     """Star-tracker ``q_eci_body`` (scalar last): finite and a unit quaternion (to 1e-3)."""
-    q = quat(msg.orientation)
+    q = x.q_eci_body
     if not all_finite(q) or abs(float(np.linalg.norm(q)) - 1.0) > 1e-3:
         return None, 'star tracker attitude not finite or not a unit quaternion'
     return att.normalize(q), None
 
 
-def wheel_speeds(msg: Any, n_wheels: int) -> Checked:
+def wheel_speeds(x: WheelSpeeds, n_wheels: int) -> Checked:
     """Measured wheel speeds [rad/s]: the configured count, finite."""
-    if len(msg.velocity) != n_wheels:
-        return None, f'{len(msg.velocity)} wheel speeds for {n_wheels} wheels'
-    w = np.asarray(msg.velocity, dtype=float)
+    if len(x.speed_rad_s) != n_wheels:
+        return None, f'{len(x.speed_rad_s)} wheel speeds for {n_wheels} wheels'
+    w = np.array(x.speed_rad_s, dtype=float)
     return (w, None) if all_finite(w) else (None, 'wheel speeds not finite')
 
 
-def applied_dipole(msg: Any) -> np.ndarray:
+def applied_dipole(x: Optional[ActuatorCommand]) -> np.ndarray:
     """The dipole of an applied command [A m^2, body]; zero when absent or not finite."""
-    dipole = vec3(msg.dipole_body) if msg is not None else np.zeros(3)
-    return dipole if all_finite(dipole) else np.zeros(3)
+    if x is None or not all_finite(x.dipole_body_Am2):
+        return np.zeros(3)
+    return np.array(x.dipole_body_Am2, dtype=float)

@@ -1,4 +1,4 @@
-"""A controller's frame step: input messages -> the controller context (:class:`ControlInputs`)
+"""A controller's frame step: input samples -> the controller context (:class:`ControlInputs`)
 -> the registered controller's ``update`` -> ``adcs/controllers/<name>/command``.
 
 Conditioning (the same for the node and the FrameLoop):
@@ -11,7 +11,8 @@ Conditioning (the same for the node and the FrameLoop):
   estimate, the onboard-model field ``n* = R(q_orbit_body)^T B*`` is offered too (between
   samples);
 * wheel speeds (``sensors/wheels``): the right count and finite, and the wheel momentum from
-  them (:func:`adcs_nodes.entries.wheel_momentum`).
+  them (:func:`adcs_nodes.entries.wheel_momentum`);
+* a plugin's input kinds (``inputs.register``): their fresh samples in ``ControlInputs.samples``.
 
 Wheel health: a controller that commands wheels and reads both the tachometer and the applied
 command (``actuator_command``, e.g. ``mpi``) checks that each wheel's measured speed follows
@@ -26,27 +27,25 @@ import math
 from typing import Any, Callable, Dict, Optional
 
 import numpy as np
-from std_msgs.msg import Header
 
-from adcs_msgs.msg import ActuatorCommand, AttitudeState, AttitudeTarget
 from adcs_nodes import inputs
 from adcs_nodes.components import conditioning as cond
-from adcs_nodes.components.base import FrameClock
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.control import Command, ControlInputs, Estimate, Target
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.core.spec import all_or_none
+from adcs_nodes.core.samples import ActuatorCommand, AttitudeState, AttitudeTarget, all_finite
 from adcs_nodes.core.wheel_health import WheelHealth
 from adcs_nodes.entries import wheel_momentum
-from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_vec3, vec3
-from adcs_nodes.nodes.messages import make
 from adcs_nodes.registry import Param
 
 
-#: Onboard models of a node started alone (paper 000's orbit, a dipole field).
-DEFAULT_ORBIT = {'type': 'circular', 'altitude_km': 690.0, 'inclination_deg': 98.0,
-                 'raan_deg': 0.0, 'arg_latitude0_deg': 0.0}
-DEFAULT_FIELD = {'model': 'dipole'}
+def _triples(values):
+    if len(values) % 3:
+        raise ValueError(f'expected 3 values per wheel, got {len(values)}')
+    return values
+
 
 #: The spacecraft context every controller node knows (defaults: paper 000's satellite).
 CONTEXT_PARAMS = (
@@ -55,14 +54,13 @@ CONTEXT_PARAMS = (
     Param('controller', 'str', 'magnetic', '-', 'registered controller this node runs',
           read_only=True),
     Param('period_s', 'float', 2.0, 's', 'control period', positive=True, read_only=True),
-    Param('inertia_kgm2', 'float[]', [118.0, 118.0, 19.6], 'kg m^2',
-          "the controller's own inertia: 3 diagonal values or 9 (row-major)",
-          read_only=True),
+    Param('inertia_kgm2', 'matrix3', [118.0, 118.0, 19.6], 'kg m^2',
+          "the controller's own inertia", read_only=True),
     Param('max_dipole_Am2', 'float[]', [40.0, 40.0, 40.0], 'A m^2',
           'magnetorquer limits per body axis (all zero: no magnetorquer)', length=3, min=0.0,
-          read_only=True),
+          read_only=True, check=all_or_none),
     Param('wheel_axes_body', 'float[]', [], '-', 'wheel spin axes, body axes, 3 per wheel',
-          read_only=True),
+          read_only=True, check=_triples),
     Param('wheel_max_torque_Nm', 'float[]', [], 'N m', 'wheel motor torque limits',
           positive=True, read_only=True),
     Param('wheel_max_momentum_Nms', 'float[]', [], 'N m s', 'wheel momentum limits',
@@ -70,6 +68,12 @@ CONTEXT_PARAMS = (
     Param('wheel_inertia_kgm2', 'float[]', [], 'kg m^2', 'wheel inertias about their axes',
           positive=True, read_only=True),
 ) + inputs.period_params(inputs.NAMES)
+
+
+def plugin_period_params(entry: Any) -> tuple:
+    """The period parameters of ``entry``'s plugin input kinds (the built-ins' are in
+    :data:`CONTEXT_PARAMS`)."""
+    return inputs.period_params([n for n in entry.inputs if n not in inputs.NAMES])
 
 
 def inertia_matrix(values) -> np.ndarray:
@@ -111,49 +115,52 @@ def controller_context(entry: Any, ctx_p: Dict[str, Any], epoch: Any, seed: int,
     return ctx
 
 
-def estimate_from_msg(msg: Optional[AttitudeState]) -> Optional[Estimate]:
-    """Controller-core estimate from ``adcs/attitude_estimate`` (None if absent).
+def estimate_of(x: Optional[AttitudeState]) -> Optional[Estimate]:
+    """Controller-core estimate of an ``adcs/attitude_estimate`` sample (None if absent).
 
-    The orbit rate is recovered from the two rates in the message:
+    The orbit rate is recovered from its two rates:
     ``|omega_body_eci_body - omega_body_orbit_body| = omega0``.
     """
-    if msg is None:
+    if x is None:
         return None
-    w_abs, w_rel = vec3(msg.omega_body_eci_body), vec3(msg.omega_body_orbit_body)
-    q, q_eci = quat(msg.q_orbit_body), quat(msg.q_eci_body)
+    w_abs, w_rel, q, q_eci = (x.omega_body_eci_body, x.omega_body_orbit_body, x.q_orbit_body,
+                              x.q_eci_body)
     valid = all_finite(q, w_abs, w_rel, q_eci)
     d = w_abs - w_rel
     omega0 = math.sqrt(d.dot(d)) if valid else 0.0       # np.linalg.norm's operations
     return Estimate(q, w_abs, omega0, valid, q_eci if valid else None)
 
 
-def target_from_msg(msg: Optional[AttitudeTarget]) -> Optional[Target]:
-    """Core target from ``adcs/attitude_target`` (None if absent or malformed)."""
-    if msg is None:
+def target_of(x: Optional[AttitudeTarget]) -> Optional[Target]:
+    """Core target of an ``adcs/attitude_target`` sample (None if absent or malformed: a
+    frame other than ``orbit``/``eci``, a value not finite, a near-zero quaternion)."""
+    if x is None:
         return None
-    q = quat(msg.q_ref_body)
-    w, a = vec3(msg.omega_body_ref_body), vec3(msg.omega_dot_body_ref_body)
-    frame = msg.header.frame_id or 'orbit'
+    q, w, a = x.q_ref_body, x.omega_body_ref_body, x.omega_dot_body_ref_body
+    frame = x.frame or 'orbit'
     if frame not in ('orbit', 'eci') or not all_finite(q, w, a) or math.sqrt(q.dot(q)) < 0.5:
         return None
-    return Target(att.normalize(q), w, a, frame, float(msg.time_to_go_s))
+    return Target(att.normalize(q), w, a, frame, float(x.time_to_go_s))
 
 
-def command_msg(cmd: Command, stamp, source: str) -> ActuatorCommand:
-    """Core command -> ``adcs_msgs/ActuatorCommand``."""
-    return make(ActuatorCommand, header=make(Header, stamp=stamp, frame_id='body'),
-                dipole_body=to_vec3(cmd.dipole_body),
-                wheel_torque=np.asarray(cmd.wheel_torque, dtype=float).tolist(),
-                torque_body=to_vec3(cmd.torque_body), source=source)
+def command_sample(cmd: Command, t_ns: int, source: str) -> ActuatorCommand:
+    """Core command -> the ``ActuatorCommand`` sample sent (arrays copied as float64)."""
+    return ActuatorCommand(t_ns, np.array(cmd.dipole_body, dtype=float),
+                           np.array(cmd.wheel_torque, dtype=float).reshape(-1),
+                           np.array(cmd.torque_body, dtype=float), source)
 
 
-def command_from_msg(msg: ActuatorCommand) -> Command:
-    """``adcs_msgs/ActuatorCommand`` -> core command (values as sent, unchecked); a ``source``
-    ``'<name>: <reason>'`` (a controller saying why its command is invalid) gives the
-    ``reason``."""
-    _, sep, reason = str(msg.source).partition(': ')
-    return Command(vec3(msg.dipole_body), np.asarray(msg.wheel_torque, float),
-                   vec3(msg.torque_body), reason if sep else '')
+def command_of(x: ActuatorCommand) -> Command:
+    """An ``ActuatorCommand`` sample -> core command (values as sent, unchecked); a
+    ``source`` ``'<name>: <reason>'`` (a controller saying why its command is invalid) gives
+    the ``reason``."""
+    _, sep, reason = str(x.source).partition(': ')
+    return Command(x.dipole_body_Am2, x.wheel_torque_Nm, x.torque_body_Nm,
+                   reason if sep else '')
+
+
+#: Input keys of the built-in records (a plugin's kinds reach its controller as ``samples``).
+_BUILTIN = frozenset(rec.key for rec in inputs.INPUTS)
 
 
 class ControllerComponent:
@@ -170,17 +177,13 @@ class ControllerComponent:
         ``wheel_*``: the wheels).
     mounts
         ``lookup(frame_id) -> q_body_sensor or None``.
-    clock : FrameClock
-        Stamps of the run.
     """
 
-    def __init__(self, core: Any, name: str, ctx: Dict[str, Any], mounts: Any,
-                 clock: FrameClock) -> None:
+    def __init__(self, core: Any, name: str, ctx: Dict[str, Any], mounts: Any) -> None:
         self.core = core
         self.name = name
         self.ctx = ctx
         self.mounts = mounts
-        self.clock = clock
         self.n_wheels = len(ctx.get('wheel_max_torque_Nm') or [])
         self._last_t: Optional[int] = None
         #: the wheel check (a controller reading the tachometer and the applied command)
@@ -190,9 +193,9 @@ class ControllerComponent:
             self.wheel_health = WheelHealth(ctx['wheel_inertia_kgm2'],
                                             ctx['wheel_max_momentum_Nms'], ctx['period_s'])
 
-    def inputs_for(self, t_ns: int, msgs: Dict[str, Any],
-                   fresh: Callable[[str, Any], bool]) -> ControlInputs:
-        """Messages of frame ``t_ns`` -> the core's :class:`ControlInputs`.
+    def inputs_for(self, t_ns: int, inputs: Dict[str, Any],
+                   fresh: Callable[[str], bool]) -> ControlInputs:
+        """Samples of frame ``t_ns`` -> the core's :class:`ControlInputs`.
 
         Sensor samples (magnetometer, horizon, gyro, star tracker) only when fresh (lockstep:
         stamped t; live: newer than the last one used), each checked
@@ -200,50 +203,49 @@ class ControllerComponent:
         estimate, target and wheel speeds are the latest.
         """
         def sample(key, convert):
-            msg = msgs.get(key)
-            return convert(msg)[0] if msg is not None and fresh(key, msg) else None
+            x = inputs.get(key)
+            return convert(x)[0] if x is not None and fresh(key) else None
         t = t_ns / NS_PER_S
-        estimate = estimate_from_msg(msgs.get('est'))
+        estimate = estimate_of(inputs.get('est'))
         b_model = None
         ref = self.ctx['reference']
         if ref is not None and estimate is not None and estimate.is_usable():
             b_model = att.to_matrix(estimate.q_orbit_body).T @ ref.at(t).b_orbit  # n* = R^T B*
-        wheels = msgs.get('wheels')
+        wheels = inputs.get('wheels')
         speeds = None if wheels is None else cond.wheel_speeds(wheels, self.n_wheels)[0]
         return ControlInputs(
-            estimate, target_from_msg(msgs.get('target')),
-            sample('mag', lambda m: cond.field_body(m, self.mounts)), b_model, speeds,
+            estimate, target_of(inputs.get('target')),
+            sample('mag', lambda x: cond.field_body(x, self.mounts)), b_model, speeds,
             wheel_momentum(speeds, self.ctx),
             horizon_roll_pitch=sample('horizon', cond.horizon_roll_pitch),
-            gyro_rate_body=sample('gyro', lambda m: cond.gyro_rate_body(m, self.mounts)),
+            gyro_rate_body=sample('gyro', lambda x: cond.gyro_rate_body(x, self.mounts)),
             q_eci_body_meas=sample('star', cond.star_q_eci_body),
-            applied_dipole_body=cond.applied_dipole(msgs['cmd']) if 'cmd' in msgs else None)
+            applied_dipole_body=cond.applied_dipole(inputs['cmd']) if 'cmd' in inputs else None,
+            samples={k: v for k, v in inputs.items() if k not in _BUILTIN and fresh(k)})
 
-    def step(self, t_ns: int, msgs: Dict[str, Any],
-             fresh: Callable[[str, Any], bool]) -> ActuatorCommand:
-        """This controller's command message for frame ``t_ns``."""
+    def step(self, t_ns: int, inputs: Dict[str, Any],
+             fresh: Callable[[str], bool]) -> ActuatorCommand:
+        """This controller's command for frame ``t_ns``."""
         dt = 0.0 if self._last_t is None else (t_ns - self._last_t) / NS_PER_S
         self._last_t = t_ns
-        cmd = self.core.update(self.inputs_for(t_ns, msgs, fresh), t_ns / NS_PER_S, dt)
-        why = self._wheels_failed(msgs)
+        cmd = self.core.update(self.inputs_for(t_ns, inputs, fresh), t_ns / NS_PER_S, dt)
+        why = self._wheels_failed(inputs)
         if why:        # invalid: the manager falls back with the reason
             cmd = Command(cmd.dipole_body, np.full(self.n_wheels, np.nan), cmd.torque_body)
-            return command_msg(cmd, self.clock.stamp(t_ns), f'{self.name}: {why}')
-        return command_msg(cmd, self.clock.stamp(t_ns), self.name)
+            return command_sample(cmd, t_ns, f'{self.name}: {why}')
+        return command_sample(cmd, t_ns, self.name)
 
-    def _wheels_failed(self, msgs: Dict[str, Any]) -> str:
+    def _wheels_failed(self, inputs: Dict[str, Any]) -> str:
         """The wheel check of this frame ('' when the wheels follow their torques or the
         controller does not read both the tachometer and the applied command)."""
-        if self.wheel_health is None or 'wheels' not in msgs or 'cmd' not in msgs:
+        if self.wheel_health is None or 'wheels' not in inputs or 'cmd' not in inputs:
             return ''
-        wheels, cmd = msgs.get('wheels'), msgs.get('cmd')
+        wheels, cmd = inputs.get('wheels'), inputs.get('cmd')
         if wheels is None:
             return self.wheel_health.reason()
-        if len(wheels.name) == self.n_wheels:
-            self.wheel_health.names = list(wheels.name)
+        if len(wheels.names) == self.n_wheels:
+            self.wheel_health.names = list(wheels.names)
         speeds = cond.wheel_speeds(wheels, self.n_wheels)[0]
-        t_cmd = None if cmd is None else \
-            self.clock.elapsed_ns(stamp_ns(cmd.header.stamp)) / NS_PER_S
         return self.wheel_health.update(
-            self.clock.elapsed_ns(stamp_ns(wheels.header.stamp)) / NS_PER_S, speeds, t_cmd,
-            None if cmd is None else cmd.wheel_torque)
+            wheels.t_ns / NS_PER_S, speeds, None if cmd is None else cmd.t_ns / NS_PER_S,
+            None if cmd is None else cmd.wheel_torque_Nm)

@@ -8,38 +8,23 @@ its LVLH 3-1-2 Euler angles (:mod:`adcs_nodes.core.guidance_profiles`).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from typing import Any, Dict, Optional
 
 import numpy as np
-from std_msgs.msg import Header
 
-from adcs_msgs.msg import AttitudeTarget
-from adcs_nodes.components.base import FrameClock
-from adcs_nodes.core.guidance import FRAMES, SEGMENT_TYPES, TargetSample, guidance_from_params
+from adcs_nodes.core.guidance import FRAMES, TargetSample, guidance_from_params
 from adcs_nodes.core.guidance_profiles import profile_from_dicts
 from adcs_nodes.core.lockstep import NS_PER_S
-from adcs_nodes.nodes.convert import to_quat, to_vec3
-from adcs_nodes.nodes.messages import make
+from adcs_nodes.core.samples import AttitudeTarget
 from adcs_nodes.registry import Param
+from adcs_nodes.spec import HOLD, PROFILE
 
 PARAMS = (
     Param('period_s', 'float', 2.0, 's', 'publication period', positive=True, read_only=True),
     Param('frame', 'str', 'orbit', '-', 'frame of the profile attitudes', choices=FRAMES,
           read_only=True),
-    Param('profile_t_s', 'float[]', [0.0], 's', 'start time of each segment', min=0.0,
-          read_only=True),
-    Param('profile_type', 'str[]', ['hold'], '-', 'type of each segment: '
-          + ', '.join(SEGMENT_TYPES), read_only=True),
-    Param('profile_q_xyzw', 'float[]', [0.0, 0.0, 0.0, 1.0], '-', 'attitude of each segment '
-          '(4 values each, scalar last)', min=-1.0, max=1.0, read_only=True),
-    Param('profile_duration_s', 'float[]', [0.0], 's', 'slew duration of each segment',
-          min=0.0, read_only=True),
-    Param('profile_axis_body', 'float[]', [0.0, 0.0, 1.0], '-', 'tracking axis of each '
-          'segment (3 values each)', read_only=True),
-    Param('profile_amplitude_deg', 'float[]', [0.0], 'deg', 'tracking amplitude of each '
-          'segment', min=0.0, max=180.0, read_only=True),
-    Param('profile_period_s', 'float[]', [0.0], 's', 'tracking period of each segment',
-          min=0.0, read_only=True),
+    *replace(PROFILE, read_only=True).columns('profile_', HOLD),
     Param('controllers', 'str[]', [''], '-', 'controllers a slew goal may name (the run\'s)',
           read_only=True),
     Param('euler312_profile', 'str', '', '-', "paper 001 profile as JSON: a list of "
@@ -67,7 +52,7 @@ class _Euler312:
 class GuidanceComponent:
     """The target of each frame: the profile's, or a slew goal's hold (:meth:`hold`)."""
 
-    def __init__(self, p: Dict[str, Any], clock: FrameClock) -> None:
+    def __init__(self, p: Dict[str, Any]) -> None:
         if p['euler312_profile']:
             self.guidance = _Euler312(p['euler312_profile'])
         else:
@@ -75,7 +60,6 @@ class GuidanceComponent:
                 p['profile_t_s'], p['profile_type'], p['profile_q_xyzw'],
                 p['profile_duration_s'], p['profile_axis_body'], p['profile_amplitude_deg'],
                 p['profile_period_s'], p['frame'])
-        self.clock = clock
         self.override: Optional[TargetSample] = None     # a slew goal's hold target
 
     def hold(self, q_xyzw: np.ndarray, frame: str) -> None:
@@ -85,10 +69,9 @@ class GuidanceComponent:
                                      'slew_goal')
 
     def step(self, t_ns: int) -> AttitudeTarget:
-        """The target message of frame ``t_ns``."""
+        """The target of frame ``t_ns``."""
         s = self.override or self.guidance.at(t_ns / NS_PER_S)
-        return make(
-            AttitudeTarget, header=make(Header, stamp=self.clock.stamp(t_ns), frame_id=s.frame),
-            q_ref_body=to_quat(s.q_ref_body), omega_body_ref_body=to_vec3(s.omega_body_ref_body),
-            omega_dot_body_ref_body=to_vec3(s.omega_dot_body_ref_body),
-            time_to_go_s=float(s.time_to_go_s), profile=s.profile)
+        return AttitudeTarget(t_ns, s.frame, np.array(s.q_ref_body, dtype=float),
+                              np.array(s.omega_body_ref_body, dtype=float),
+                              np.array(s.omega_dot_body_ref_body, dtype=float),
+                              float(s.time_to_go_s), s.profile)

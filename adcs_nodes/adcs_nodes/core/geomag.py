@@ -10,11 +10,9 @@ Centred tilted dipole (digest of paper 000, section 5.2; Wertz 1978, appendix H)
 
     b_ecef = B0 (R / |r|)^3 [3 (m . r_hat) r_hat - m]                                 (G2)
 
-``m`` is the unit dipole moment, pointing to the geomagnetic SOUTH pole: ``m = -p`` with ``p``
-the unit vector to the north geomagnetic (boreal) pole at colatitude ``theta_p``, east longitude
-``phi_p``. So at the north geomagnetic pole ``b = -2 B0 (R/r)^3 r_hat`` (down) and on the
-geomagnetic equator ``b = +B0 (R/r)^3 p`` (northward). ``theta_p = 0`` is the aligned
-("straight") dipole. From the IGRF degree-1 Gauss coefficients (nT)::
+``m = -p`` is the unit dipole moment, ``p`` the unit vector to the north geomagnetic pole
+(colatitude ``theta_p``, east longitude ``phi_p``; ``theta_p = 0``: aligned dipole), so
+``b = -2 B0 (R/r)^3 r_hat`` at that pole. From the IGRF degree-1 Gauss coefficients (nT)::
 
     B0 = sqrt(g10^2 + g11^2 + h11^2),   m = (g11, h11, g10) / B0   (ECEF)               (G3)
 
@@ -25,50 +23,26 @@ semi-normalised ``P_n^m(cos theta)``, reference radius ``a = 6371.2 km``::
     V = a sum_n (a/r)^(n+1) sum_m P_n^m (g_nm cos m phi + h_nm sin m phi)               (G4)
     B_r = -dV/dr,  B_theta = -(1/r) dV/dtheta,  B_phi = -(1/(r sin theta)) dV/dphi
 
-with ``g, h`` linear in the decimal year ``y`` between the 5-year model epochs ``Y_k`` and
-with the secular variation ``sv`` after the last one (the interpolation of the reference
-``igrf14syn`` program)::
+with ``g, h`` linear in the decimal year ``y`` between the 5-year model epochs ``Y_k``, and
+the secular variation ``sv`` after the last one (as the reference ``igrf14syn``)::
 
     g(y) = g(Y_k) + (y - Y_k) / 5 [g(Y_k+1) - g(Y_k)],   Y_k <= y < Y_k+1               (G4a)
     g(y) = g(2025) + (y - 2025) sv,                      y >= 2025
 
-(``ppigrf``'s table gives the 2030 column as ``g(2025) + 5 sv``, so (G4a) is one formula).
-The decimal year of an instant is ``y = Y + (instant - Y-01-01) / length of year Y``, the
-same definition at the scenario epoch and at every ``t`` of a run (one year length: the
-calendar year's own, 365 or 366 days). ``ppigrf`` itself interpolates linearly in time
-between the epoch dates, which differs from (G4a) by up to a day's secular variation
-(~0.03 nT). The spherical components go to ECEF by
-``b = B_r r_hat + B_theta theta_hat + B_phi phi_hat`` (theta_hat points south).
+(``ppigrf``'s 2030 column is ``g(2025) + 5 sv``: one formula). ``y = Y + (instant -
+Y-01-01) / length of year Y``; ``b = B_r r_hat + B_theta theta_hat + B_phi phi_hat``
+(``theta_hat`` points south).
 
 Rate along the trajectory (motion + Earth rotation + secular variation), central difference::
 
     b_dot_eci(t) = [b_eci(r(t+h), t+h) - b_eci(r(t-h), t-h)] / (2 h),   h = 0.5 s       (G5)
 
-Its truncation error is ``h^2/6 |b'''|``: the dipole field seen on a circular orbit turns
-mainly at twice the orbit rate ``n``, so the relative error is ``(2 n h)^2 / 6 ~ 2e-7`` in LEO
-(a test measures 1.9e-7 against the analytic derivative).
-
-Data and cost
--------------
-The IGRF coefficients are read once per process from the ``ppigrf`` package (2.1.0 ships
-IGRF-13 and IGRF-14; this module uses ``IGRF14.shc``: the 14th generation, IGRF 1900-1940,
-DGRF 1945-2020, IGRF 2025 and predictive secular variation 2025-2030; dates up to 2035 are
-extrapolated with that secular variation, like ``igrf14syn``, and are less accurate).
-``ppigrf.igrf_gc`` re-reads its coefficient file with pandas on every call (13-16 ms per
-point, measured on the 2-core development machine), so the spherical-harmonic sum (G4) is
-evaluated here with the coefficients read once: measured 0.06 ms per
-:meth:`IgrfField.field_eci` (degree 13) and 0.23 ms per
-:meth:`~GeomagneticField.field_and_rate` (three fields, three orbit states); the dipole takes
-0.011 ms and 0.075 ms. Tests check the sum against ``ppigrf.igrf_gc`` (< 0.001 nT) and against
-values of the IAGA reference program ``igrf14syn`` (< 0.1 nT).
-
-Compiled (issue 13): the rotations (G1) and the dipole (G2) are numba kernels
-(:func:`dipole_eci`, ``cache=True``, no fastmath: IEEE arithmetic in the order written, the
-same bits as the numpy expressions they replace; uncompiled with ``NUMBA_DISABLE_JIT=1``, a
-test compares both): about 2 us per dipole :meth:`~GeomagneticField.field_eci` instead of 7.
-
-Assumption: ``B0 = 3.0e-5 T`` for the default dipole and its pole at 79 deg N, 71 deg W
-(colatitude 11 deg) are the digest's proposals (section 5.2), not values from the paper.
+(relative truncation error ``(2 n h)^2 / 6 ~ 2e-7`` in LEO). The coefficients are read once
+from ``ppigrf``'s ``IGRF14.shc`` (1900-2030; extrapolated with the secular variation up to
+2035); the sum (G4) is checked against ``ppigrf.igrf_gc`` (< 0.001 nT) and ``igrf14syn``
+(< 0.1 nT). The rotations (G1) and the dipole (G2) are numba kernels (same bits uncompiled).
+ASSUMPTION: the default dipole (``B0 = 3.0e-5 T``, pole at 79 deg N, 71 deg W) is the digest's
+proposal (section 5.2), not the paper's.
 """
 from __future__ import annotations
 
@@ -85,6 +59,7 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core.kernels import jit
 from adcs_nodes.core.orbit import OrbitModel, _finite, _utc, gmst
+from adcs_nodes.core.spec import Param, Section
 
 R_REF_M = 6371200.0
 """Geomagnetic reference radius [m] (IGRF)."""
@@ -149,13 +124,8 @@ def _position(r_eci: ArrayLike) -> np.ndarray:
 
 
 class GeomagneticField(abc.ABC):
-    """Earth-fixed field model; subclasses give :meth:`field_ecef`.
-
-    Parameters
-    ----------
-    epoch : datetime
-        Timezone-aware UTC instant of ``t = 0``.
-    """
+    """Earth-fixed field model (``epoch``: aware UTC instant of ``t = 0``); subclasses give
+    :meth:`field_ecef`."""
 
     rate_step_s = 0.5
     """Half step ``h`` [s] of the central difference (G5)."""
@@ -169,13 +139,8 @@ class GeomagneticField(abc.ABC):
         """Field (3,) [T] in ECEF at the ECEF position ``r_ecef`` (3,) [m], ``t`` s after epoch."""
 
     def field_eci(self, r_eci: ArrayLike, t: float) -> np.ndarray:
-        """Field ``b_eci`` (3,) [T], ECI, at position ``r_eci`` (3,) [m], ECI, time ``t`` [s] (G1).
-
-        Raises
-        ------
-        ValueError
-            If ``r_eci`` is not a finite non-zero (3,) vector.
-        """
+        """Field ``b_eci`` (3,) [T], ECI, at the finite non-zero ``r_eci`` (3,) [m], ECI, time
+        ``t`` [s] (G1)."""
         r = _position(r_eci)
         theta = gmst(self.epoch, t)
         c, s = math.cos(theta), math.sin(theta)
@@ -183,30 +148,10 @@ class GeomagneticField(abc.ABC):
 
     def field_and_rate(self, orbit: OrbitModel, t: float,
                        r_eci: ArrayLike = None) -> tuple[np.ndarray, np.ndarray]:
-        """Field and its total time derivative along the orbit (G5).
-
-        Parameters
-        ----------
-        orbit : OrbitModel
-            Anything with ``state(t).r_eci`` and the same :attr:`epoch` as this model.
-        t : float
-            Seconds after the epoch.
-        r_eci : array_like, shape (3,), optional
-            ``orbit.state(t).r_eci`` [m] when the caller has it already (saves one state).
-
-        Returns
-        -------
-        b_eci : numpy.ndarray
-            Field (3,) [T], ECI, at ``orbit.state(t).r_eci``.
-        b_dot_eci : numpy.ndarray
-            ``d b_eci / dt`` (3,) [T/s], ECI components, including the satellite's motion, the
-            Earth's rotation and the secular variation.
-
-        Raises
-        ------
-        ValueError
-            If the orbit's epoch differs from this model's (their ``t`` would disagree).
-        """
+        """``(b_eci (3,) [T], b_dot_eci (3,) [T/s])``, ECI, at ``orbit.state(t).r_eci`` (or the
+        given ``r_eci`` [m]), ``t`` [s]; the rate (G5) includes the satellite's motion, the
+        Earth's rotation and the secular variation. ``ValueError`` if the orbit's epoch
+        differs from this model's."""
         if getattr(orbit, 'epoch', self.epoch) != self.epoch:
             raise ValueError(f'orbit epoch {orbit.epoch} differs from field epoch {self.epoch}')
         t = float(t)
@@ -219,26 +164,9 @@ class GeomagneticField(abc.ABC):
 
 
 class DipoleField(GeomagneticField):
-    """Centred tilted dipole (G2), fixed in ECEF.
-
-    Parameters
-    ----------
-    epoch : datetime
-        Timezone-aware UTC instant of ``t = 0``.
-    b0_T : float
-        Equatorial field at ``r_ref_m`` [T], > 0 (default 3.0e-5, digest 5.2 assumption).
-    r_ref_m : float
-        Reference radius [m], > 0.
-    pole_colatitude_rad : float
-        Colatitude of the north geomagnetic pole [rad], in [0, pi]; 0 gives the aligned dipole.
-    pole_longitude_rad : float
-        East longitude of the north geomagnetic pole [rad].
-
-    Raises
-    ------
-    ValueError
-        On a non-finite, non-positive or out-of-range argument, or a naive ``epoch``.
-    """
+    """Centred tilted dipole (G2), fixed in ECEF: equatorial field ``b0_T`` [T] > 0 at
+    ``r_ref_m`` [m] > 0, north geomagnetic pole at ``pole_colatitude_rad`` in [0, pi] and east
+    ``pole_longitude_rad`` [rad]. ``ValueError`` on a bad argument or a naive ``epoch``."""
 
     def __init__(self, epoch: datetime, *, b0_T: float = B0_DEFAULT_T,
                  r_ref_m: float = R_REF_M,
@@ -261,25 +189,9 @@ class DipoleField(GeomagneticField):
 
     @classmethod
     def from_igrf(cls, epoch: datetime, coefficient_date: datetime | None = None) -> DipoleField:
-        """Dipole of the IGRF-14 degree-1 coefficients (G3) at ``coefficient_date`` or ``epoch``.
-
-        The dipole stays fixed in ECEF (no secular variation during the run). At 700 km in 2025
-        it differs from the full IGRF by 23 % RMS (vector), 15 % in mean magnitude and 8 deg in
-        mean direction, up to ~70 % over the South Atlantic Anomaly (measured by a test).
-
-        Parameters
-        ----------
-        epoch : datetime
-            Timezone-aware UTC instant of ``t = 0``.
-        coefficient_date : datetime or None
-            Timezone-aware date of the coefficients (decimal year in 1900-2035); default
-            ``epoch``.
-
-        Raises
-        ------
-        ValueError
-            On a naive or out-of-range date.
-        """
+        """Dipole of the IGRF-14 degree-1 coefficients (G3) at the aware ``coefficient_date``
+        (1900-2035; default ``epoch``), fixed in ECEF for the run (23 % RMS from the full IGRF
+        at 700 km in 2025, a test measures it)."""
         date = _utc(epoch if coefficient_date is None else coefficient_date, 'coefficient_date')
         year = _decimal_year(date)
         if not IGRF_YEARS[0] <= year <= IGRF_YEARS[1]:
@@ -301,20 +213,8 @@ class DipoleField(GeomagneticField):
 
 
 class IgrfField(GeomagneticField):
-    """IGRF-14 main field (G4) with the coefficients of the ``ppigrf`` package.
-
-    Parameters
-    ----------
-    epoch : datetime
-        Timezone-aware UTC instant of ``t = 0``; its decimal year must be in 1900-2035.
-    max_degree : int
-        Highest spherical-harmonic degree, 1..13.
-
-    Raises
-    ------
-    ValueError
-        On a bad ``max_degree``, a naive epoch or an epoch outside 1900-2035.
-    """
+    """IGRF-14 main field (G4) up to ``max_degree`` (1..13), ``epoch`` an aware instant in
+    1900-2035 (``ValueError`` if not)."""
 
     def __init__(self, epoch: datetime, max_degree: int = 13) -> None:
         super().__init__(epoch)
@@ -421,14 +321,10 @@ def _shc_path() -> str:
 
 
 def _read_igrf14(keys: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(years (T,), g (T, K), h (T, K))`` [nT] of the ``keys`` ``(n, m)`` from IGRF14.shc.
-
-    The ``.shc`` text format: ``#`` comments, a line of sizes, a line of model years, then one
-    line ``n m c_1 .. c_T`` per coefficient, ``m < 0`` for ``h_n^|m|``. Read here with plain
-    Python (``ppigrf.read_shc`` imports pandas: 0.17 s per process); a test checks the values
-    against ``ppigrf.read_shc``. The model years are whole years, whose decimal year is the
-    number itself; any other file goes through ``ppigrf``.
-    """
+    """``(years (T,), g (T, K), h (T, K))`` [nT] of the ``keys`` ``(n, m)`` from IGRF14.shc:
+    ``#`` comments, a line of sizes, a line of model years, then ``n m c_1 .. c_T`` per
+    coefficient (``m < 0``: ``h_n^|m|``). Plain Python (``ppigrf.read_shc`` imports pandas);
+    a file whose years are not whole goes through ``ppigrf``."""
     rows: dict = {}
     with open(_shc_path(), encoding='utf-8') as fh:
         lines = [line.split() for line in fh if line.strip() and not line.startswith('#')]
@@ -459,39 +355,33 @@ def _igrf_table(max_degree: int) -> _IgrfTable:
 
 
 # ----------------------------------------------------------------------------- factory
-_FIELD_KEYS = {
-    'dipole': {'b0_T', 'r_ref_m', 'pole_colatitude_deg', 'pole_longitude_deg'},
-    'igrf_dipole': {'coefficient_date'},
-    'igrf': {'max_degree'},
-}
+#: The ``field`` section (a scenario's, a node's ``field.*`` and ``onboard_field.*``).
+FIELD = Section('field', (
+    Param('model', 'str', 'dipole', '-', 'geomagnetic model',
+          choices=('dipole', 'igrf_dipole', 'igrf')),
+), 'the geomagnetic field', selector='model', variants={
+    'dipole': (
+        Param('b0_T', 'float', None, 'T', 'dipole strength at the reference radius',
+              positive=True, max=1e-3),
+        Param('r_ref_m', 'float', None, 'm', 'reference radius of b0_T', positive=True,
+              max=1e9),
+        Param('pole_colatitude_deg', 'float', None, 'deg', 'geographic colatitude of the '
+              'dipole axis', min=0.0, max=180.0),
+        Param('pole_longitude_deg', 'float', None, 'deg', 'geographic east longitude of the '
+              'axis', min=-360.0, max=360.0)),
+    'igrf_dipole': (Param('coefficient_date', 'time', None, '-', 'date of the IGRF degree-1 '
+                          'coefficients (ISO 8601; default: the epoch)'),),
+    'igrf': (Param('max_degree', 'int', None, '-', 'truncation degree of the IGRF expansion',
+                   min=1, max=13),)})
 
 
 def make_field(cfg: Mapping, epoch: datetime) -> GeomagneticField:
-    """Build a field model from a scenario mapping.
-
-    Parameters
-    ----------
-    cfg : mapping
-        ``{'model': 'dipole', 'b0_T', 'r_ref_m', 'pole_colatitude_deg', 'pole_longitude_deg'}``
-        (all but ``model`` optional, defaults of :class:`DipoleField`),
-        ``{'model': 'igrf_dipole', 'coefficient_date'}`` (optional ISO date with time zone) or
-        ``{'model': 'igrf', 'max_degree'}`` (optional, default 13).
-    epoch : datetime
-        Timezone-aware scenario epoch (``t = 0``).
-
-    Raises
-    ------
-    ValueError
-        On a missing or unknown model, an unknown key (named in the message) or a bad value.
-    """
+    """The field model of a :data:`FIELD` mapping at the aware scenario ``epoch``
+    (``ValueError`` naming a missing or unknown model or key, or a bad value)."""
     if not isinstance(cfg, Mapping) or 'model' not in cfg:
         raise ValueError("field config must be a mapping with a 'model' key")
+    cfg = FIELD.validate(cfg)
     model = cfg['model']
-    if model not in _FIELD_KEYS:
-        raise ValueError(f'unknown field model {model!r}; expected one of {sorted(_FIELD_KEYS)}')
-    unknown = sorted(set(cfg) - _FIELD_KEYS[model] - {'model'})
-    if unknown:
-        raise ValueError(f'field config of model {model!r} has unknown key(s) {unknown}')
     if model == 'igrf':
         return IgrfField(epoch, max_degree=cfg.get('max_degree', 13))
     if model == 'igrf_dipole':
@@ -505,5 +395,5 @@ def make_field(cfg: Mapping, epoch: datetime) -> GeomagneticField:
     kwargs = {k: cfg[k] for k in ('b0_T', 'r_ref_m') if k in cfg}
     for key in ('pole_colatitude_deg', 'pole_longitude_deg'):
         if key in cfg:
-            kwargs[key.replace('_deg', '_rad')] = math.radians(_finite(cfg[key], key))
+            kwargs[key.replace('_deg', '_rad')] = math.radians(cfg[key])
     return DipoleField(epoch, **kwargs)

@@ -45,23 +45,9 @@ FRAMES = ('orbit', 'eci')
 
 @dataclass(frozen=True)
 class Segment:
-    """One profile segment (see the module docstring).
-
-    Attributes
-    ----------
-    t_s : float
-        Start time [s].
-    type : str
-        ``hold``, ``slew`` or ``track``.
-    q : ndarray (4,)
-        Hold attitude, slew end attitude, or tracking centre attitude (scalar last).
-    duration_s : float
-        Slew duration [s] (slew only).
-    axis_body : ndarray (3,)
-        Tracking axis, body axes (track only).
-    amplitude_rad, period_s : float
-        Tracking amplitude [rad] and period [s] (track only).
-    """
+    """One profile segment from ``t_s`` [s]: ``type`` ``hold``, ``slew`` or ``track``; ``q`` (4,)
+    the hold, slew end or tracking centre attitude; ``duration_s`` of a slew; ``axis_body``
+    (3,), ``amplitude_rad`` and ``period_s`` of a track."""
 
     t_s: float
     type: str
@@ -89,22 +75,9 @@ def _rotation(q0: np.ndarray, axis: np.ndarray, theta: float) -> np.ndarray:
 
 
 class Guidance:
-    """A time-tagged attitude profile in one frame.
-
-    Parameters
-    ----------
-    segments : sequence of Segment
-        At least one; sorted by ``t_s`` here. A profile that starts after t = 0 holds the
-        identity attitude until its first segment.
-    frame : {'orbit', 'eci'}
-        Frame of every attitude in the profile.
-
-    Raises
-    ------
-    ValueError
-        On an unknown frame or segment type, a non-unit quaternion, a slew without a positive
-        duration or a track without a positive period.
-    """
+    """A time-tagged attitude profile of ``segments`` (sorted here; identity held before the
+    first) in one ``frame`` (``'orbit'`` or ``'eci'``). ``ValueError`` on an unknown frame or
+    type, a non-unit quaternion, or a slew or track without a positive duration or period."""
 
     def __init__(self, segments: Sequence[Segment], frame: str = 'orbit') -> None:
         if frame not in FRAMES:

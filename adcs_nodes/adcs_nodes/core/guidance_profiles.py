@@ -33,26 +33,13 @@ import numpy as np
 from adcs_nodes.core.control.mpi import (body_accel_from_euler312, body_rate_from_euler312,
                                          q_orbit_body_of_lvlh_euler312)
 
-__all__ = ['ProfilePoint', 'Maneuver', 'Hold', 'SineTracking', 'Profile', 'profile_from_dicts',
-           'PAPER001_PROFILE', 'PAPER001_INITIAL', 'paper001_profile', 'paper001_initial_state']
+__all__ = ['ProfilePoint', 'Maneuver', 'Hold', 'SineTracking', 'Profile', 'profile_from_dicts']
 
 
 class ProfilePoint(NamedTuple):
-    """One evaluation of a profile (unpacks as the 5-tuple of the guidance interface).
-
-    Attributes
-    ----------
-    q_ref_body : numpy.ndarray, shape (4,)
-        Target attitude, scalar last, rotates target-body vectors into ``frame``.
-    omega_body_ref_body : numpy.ndarray, shape (3,)
-        Target rate w.r.t. ``frame``, target-body axes [rad/s].
-    omega_dot_body_ref_body : numpy.ndarray, shape (3,)
-        Its time derivative [rad/s^2].
-    time_to_go_s : float
-        Time left in a maneuver [s]; 0 when holding or tracking.
-    frame : str
-        ``'orbit'``.
-    """
+    """One evaluation of a profile: ``q_ref_body`` (4,) scalar last into ``frame`` (``'orbit'``),
+    ``omega_body_ref_body`` (3,) [rad/s] w.r.t. it, target-body axes, its derivative
+    ``omega_dot_body_ref_body`` [rad/s^2], ``time_to_go_s`` (0 when holding or tracking)."""
 
     q_ref_body: np.ndarray
     omega_body_ref_body: np.ndarray
@@ -169,13 +156,8 @@ class SineTracking:
 
 
 class Profile:
-    """A time-ordered list of non-overlapping segments.
-
-    Raises
-    ------
-    ValueError
-        On an empty list, an unknown segment, or overlapping segments.
-    """
+    """A time-ordered list of non-overlapping segments (``ValueError`` if empty, unknown or
+    overlapping)."""
 
     def __init__(self, segments: Iterable[Any]) -> None:
         segs = sorted(segments, key=lambda s: s.start_s)
@@ -211,7 +193,7 @@ class Profile:
 
 def profile_from_dicts(items: Iterable[dict]) -> Profile:
     """Profile from plain dicts (``type``: ``maneuver``, ``hold`` or ``sine`` plus the
-    segment's fields), e.g. :data:`PAPER001_PROFILE`; ``ValueError`` on unknown keys/types."""
+    segment's fields); ``ValueError`` on unknown keys/types."""
     kinds = {'maneuver': Maneuver, 'hold': Hold, 'sine': SineTracking}
     segs = []
     for item in items:
@@ -224,28 +206,3 @@ def profile_from_dicts(items: Iterable[dict]) -> Profile:
         except TypeError as exc:
             raise ValueError(f'{kind} segment: {exc}') from None
     return Profile(segs)
-
-
-#: Paper 001's 5000 s profile (Sec. 6), LVLH 3-1-2 Euler angles [deg].
-PAPER001_PROFILE = (
-    {'type': 'maneuver', 'start_s': 0.0, 'end_s': 200.0, 'euler_deg': [40.0, -40.0, 20.0]},
-    {'type': 'hold', 'start_s': 200.0, 'end_s': 1000.0, 'euler_deg': [40.0, -40.0, 20.0]},
-    {'type': 'sine', 'start_s': 1000.0, 'end_s': 3500.0, 'center_deg': [40.0, -40.0, 20.0],
-     'amplitude_deg': [11.46, 8.60, 5.73], 'period_s': [750.0, 600.0, 500.0]},
-    {'type': 'maneuver', 'start_s': 3500.0, 'end_s': 3700.0, 'euler_deg': [0.0, 0.0, 0.0]},
-    {'type': 'hold', 'start_s': 3700.0, 'end_s': 5000.0, 'euler_deg': [0.0, 0.0, 0.0]},
-)
-#: Paper 001's initial state: 3-1-2 Euler angles [deg] and Euler-angle rates [deg/s], LVLH.
-PAPER001_INITIAL = {'euler_deg': [3.0, -3.0, 3.0], 'euler_rate_deg_s': [0.3, -0.3, 0.3]}
-
-
-def paper001_profile() -> Profile:
-    """:data:`PAPER001_PROFILE` as a :class:`Profile`."""
-    return profile_from_dicts(PAPER001_PROFILE)
-
-
-def paper001_initial_state() -> tuple[np.ndarray, np.ndarray]:
-    """``(q_orbit_body, omega_body_orbit_body)`` of :data:`PAPER001_INITIAL` [-, rad/s]."""
-    e = np.radians(PAPER001_INITIAL['euler_deg'])
-    de = np.radians(PAPER001_INITIAL['euler_rate_deg_s'])
-    return q_orbit_body_of_lvlh_euler312(e), body_rate_from_euler312(e, de)

@@ -11,24 +11,69 @@ the integrators and filters. Checked, user-facing versions are in
 :mod:`adcs_nodes.core.attitude` (and :func:`finite_vector` here is the one "finite array or
 ``ValueError``" check). :func:`jit` compiles with numba (``cache=True``, no fastmath: IEEE
 arithmetic in the order written); the same functions run as plain Python with
-``NUMBA_DISABLE_JIT=1`` or without numba, and give the same bits.
+``NUMBA_DISABLE_JIT=1`` or without numba, and give the same bits. A process imports numba only
+when it calls a kernel that loads it (the RK4 frame, the filter: ~0.5 s CPU with the first
+cache load); until then the small kernels run as plain Python, the same bits.
 """
 from __future__ import annotations
 
+import functools
 import math
+import sys
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-try:  # compiled kernels; the same functions run as plain Python without numba
-    from numba import njit as _njit
-except ImportError:  # pragma: no cover - numba is pinned in ros2_ws/requirements.txt
-    _njit = None
+#: The kernels not compiled yet (:class:`Lazy`).
+_LAZY: list = []
+#: ``[numba.njit]`` (``[False]`` without numba) once a kernel loaded numba.
+_NJIT: list = []
 
 
-def jit(fn):
-    """numba ``njit(cache=True)`` (no fastmath) when numba is there, else ``fn`` itself."""
-    return fn if _njit is None else _njit(cache=True)(fn)
+class Lazy:
+    """A kernel before numba is loaded (:func:`jit`): called, it runs as plain Python or
+    (``loads_numba``) first loads numba and compiles every kernel (:func:`compile_all`)."""
+
+    def __init__(self, fn, loads_numba: bool) -> None:
+        functools.update_wrapper(self, fn)
+        self.py_func, self.dispatcher, self.loads_numba = fn, None, loads_numba
+        _LAZY.append(self)
+
+    def __call__(self, *args):
+        if self.dispatcher is None and self.loads_numba:
+            compile_all()
+        return (self.py_func if self.dispatcher is None else self.dispatcher)(*args)
+
+
+def compile_all() -> None:
+    """Load numba; every kernel becomes its ``njit(cache=True)`` dispatcher (compiled at its
+    first call, or loaded from numba's on-disk cache), also where a module imported it."""
+    if not _NJIT:
+        try:
+            from numba import njit
+        except ImportError:  # pragma: no cover - numba is pinned in ros2_ws/requirements.txt
+            njit = False
+        _NJIT.append(njit)
+    done = {}
+    for k in _LAZY:
+        k.dispatcher = done[id(k)] = _NJIT[0](cache=True)(k.py_func) if _NJIT[0] else k.py_func
+    _LAZY.clear()
+    for module in list(sys.modules.values()):
+        names = getattr(module, '__dict__', None) or {}
+        for key, value in list(names.items()):
+            if type(value) is Lazy and id(value) in done:
+                names[key] = done[id(value)]
+
+
+def jit(fn=None, *, loads_numba: bool = False):
+    """``fn`` compiled by numba ``njit(cache=True)`` (no fastmath) in a process that loaded
+    numba, else run as plain Python; ``loads_numba``: its first call loads numba (a kernel
+    whose plain Python would cost much more than numba's start, ~0.5 s CPU)."""
+    if fn is None:
+        return lambda f: jit(f, loads_numba=loads_numba)
+    if _NJIT:
+        return _NJIT[0](cache=True)(fn) if _NJIT[0] else fn
+    return Lazy(fn, loads_numba)
 
 
 @jit

@@ -14,15 +14,19 @@ Timing model (DESIGN section 6)
 * An input of kind ``latest`` (period 0) is never waited for. It must not influence the
   node's output in lockstep (that would make the output depend on arrival order).
 * Dead producers: a due input that times out ``dead_after`` frames in a row is *dead*: it is
-  no longer awaited until a message of it arrives again (:meth:`FrameSync.add` revives it).
-  A revived input is re-admitted after a hold: the messages stamped up to ``REVIVE_HOLD_FRAMES``
-  base frames after the reviving one are not stored, and the input is awaited again only from
-  the frames after that (the re-admission hold of a sensor FDIR). The hold is what makes the
-  revival deterministic: a node does not wait for a dead input, so the reviving message may
-  arrive frames after its stamp (its producer was starved of CPU while the chain went on); the
-  clock master never runs more than ``MAX_LAG_FRAMES`` (+ one ``PROGRESS_EVERY`` report) ahead
-  of any node, so within the hold the node's frames are the same whenever it arrived. The plain
-  engine applies the same hold (``sim_node.engine``).
+  no longer awaited until a message of it arrives again. "In a row" and "again" are read
+  from the stamps, never from the order of arrival (a consumer does not wait for a dead
+  input, so the world may run ahead of it: the controllers stop waiting for a dead estimate,
+  and the star tracker's return reaches the estimator before its own third miss): a miss
+  follows the previous one when no message is stamped between them, and the producer
+  returns with its first message stamped after the frame it died at (whether that message
+  came before the death was counted, or after). It is then re-admitted after a hold: its
+  messages stamped up to ``REVIVE_HOLD_FRAMES`` base frames after the returning one are not
+  used, and it is awaited again only from the frames after that (the re-admission hold of a
+  sensor FDIR). The hold makes the return deterministic: the clock master never runs more
+  than ``MAX_LAG_FRAMES`` (+ one ``PROGRESS_EVERY`` report) ahead of any node, so within the
+  hold the node's frames are the same whenever the returning message arrived. The plain
+  engine uses the same :class:`FrameSync` (``sim_node.engine``).
 * Seeds: one scenario seed; each node derives its own stream with :func:`derive_seed`, so
   adding a node never changes another node's random numbers.
 
@@ -110,7 +114,9 @@ class _Input:
     stamps: List[int] = field(default_factory=list)   # keys of by_stamp, ascending
     latest: Optional[Tuple[int, Any]] = None
     misses: int = 0           # due frames missed in a row
+    last_miss: int = -1       # the stamp the last miss lacked
     dead: bool = False
+    died_at: int = -1         # the stamp its last miss lacked
     revived_at: int = -1      # end of the hold after the message that last revived it
     held: bool = False        # revived once: messages stamped up to revived_at are dropped
 
@@ -184,21 +190,6 @@ class FrameSync:
         """Kind of input ``name``."""
         return self._inputs[name].kind
 
-    def set_period(self, name: str, period_ns: int) -> None:
-        """Change the period of input ``name`` (0: stop waiting for it)."""
-        if int(period_ns) < 0:
-            raise ValueError(f'input {name!r}: period must be >= 0, got {period_ns}')
-        inp = self._inputs[name]
-        inp.period_ns = int(period_ns)
-        if inp.period_ns == 0:
-            inp.kind = InputKind.LATEST
-        elif inp.kind is InputKind.LATEST:
-            inp.kind = InputKind.FRAME
-
-    def period(self, name: str) -> int:
-        """Current period of input ``name`` [ns]."""
-        return self._inputs[name].period_ns
-
     def required_stamp(self, name: str, t_ns: int) -> Optional[int]:
         """Stamp input ``name`` must have for frame ``t_ns`` (None: nothing required then)."""
         inp = self._inputs[name]
@@ -221,9 +212,10 @@ class FrameSync:
         Returns
         -------
         bool
-            True when the input was dead and is awaited again from the frames after
-            ``stamp_ns + revive_hold_ns``; that message, and those of the hold, are not
-            stored (see the module docstring).
+            True when the input was dead and this message, stamped after its death, revives
+            it: awaited again from the frames after ``stamp_ns + revive_hold_ns``; that
+            message, and those of the hold, are not stored (see the module docstring). A
+            dead input's message stamped at or before its death is dropped.
 
         Raises
         ------
@@ -232,10 +224,10 @@ class FrameSync:
         """
         inp = self._inputs[name]
         stamp_ns = int(stamp_ns)
-        inp.misses = 0
         if inp.dead:
-            inp.dead, inp.revived_at = False, stamp_ns + self.revive_hold_ns
-            inp.held = True
+            if stamp_ns <= inp.died_at:
+                return False              # stale: the frames it was due for are done
+            self._revive(inp, stamp_ns)
             return True
         if inp.held and stamp_ns <= inp.revived_at:
             return False                  # within the re-admission hold
@@ -251,6 +243,19 @@ class FrameSync:
         if inp.latest is None or stamp_ns >= inp.latest[0]:
             inp.latest = (stamp_ns, value)
         return False
+
+    def _revive(self, inp: _Input, stamp_ns: int) -> None:
+        """``inp`` returns with a message stamped ``stamp_ns``: the hold starts; what is
+        stored in it is dropped."""
+        inp.dead, inp.held, inp.misses, inp.last_miss = False, True, 0, -1
+        inp.revived_at = stamp_ns + self.revive_hold_ns
+        lo = bisect.bisect_right(inp.stamps, inp.died_at)
+        hi = bisect.bisect_right(inp.stamps, inp.revived_at)
+        for s in inp.stamps[lo:hi]:
+            del inp.by_stamp[s]
+        del inp.stamps[lo:hi]
+        if inp.latest is not None and inp.died_at < inp.latest[0] <= inp.revived_at:
+            inp.latest = (inp.stamps[-1], inp.by_stamp[inp.stamps[-1]]) if inp.stamps else None
 
     def has(self, name: str, t_ns: int) -> bool:
         """True when input ``name`` has a message stamped exactly ``t_ns``."""
@@ -280,17 +285,26 @@ class FrameSync:
         return True
 
     def record_misses(self, t_ns: int) -> List[str]:
-        """Count a timed-out frame ``t_ns`` against every input missing then.
+        """Count a timed-out frame ``t_ns`` against every input missing then (in a row with
+        the previous miss when no message is stamped between the two stamps they lacked).
 
-        Returns the inputs that became dead with this miss (``dead_after`` in a row).
+        Returns the inputs that died with this miss (``dead_after`` in a row); one with a
+        message stamped after the one it lacked here already returns at once (:meth:`add`).
         """
         newly = []
         for name in self.missing(t_ns):
             inp = self._inputs[name]
-            inp.misses += 1
+            s = self.required_stamp(name, t_ns)
+            i = bisect.bisect_left(inp.stamps, s)           # stamps[:i] are < s
+            between = i > 0 and inp.stamps[i - 1] > inp.last_miss
+            inp.misses = 1 if between else inp.misses + 1
+            inp.last_miss = s
             if self.dead_after and inp.misses >= self.dead_after:
-                inp.dead = True
+                inp.dead, inp.died_at = True, s
                 newly.append(name)
+                later = bisect.bisect_right(inp.stamps, s)
+                if later < len(inp.stamps):                # it came back already
+                    self._revive(inp, inp.stamps[later])
         return newly
 
     def is_dead(self, name: str) -> bool:
@@ -382,37 +396,26 @@ class ClockMaster:
 
     Parameters
     ----------
-    frame_ns : int
-        Base frame [ns] (> 0).
-    duration_ns : int
-        Run length [ns]; 0 = endless.
-    command_period_ns : int
-        Period of ``adcs/actuator_command`` [ns]; 0 = no command (free body).
+    frame_ns, duration_ns, command_period_ns : int
+        Base frame [ns] (> 0); run length [ns] (0: endless); period of
+        ``adcs/actuator_command`` [ns] (0: no command, free body).
     wait_for_nodes : iterable of str
-        Nodes whose progress gates the clock (flow control) and whose final frame ends the run.
+        Nodes whose progress gates the clock and whose final frame ends the run.
     timeout_s : float
         Wall-clock wait [s] for a missing input before going on (> 0).
-    max_lag_frames : int
-        A node may lag this many frames behind the clock.
-    lag_frames : mapping str -> int, optional
-        Per-node override of ``max_lag_frames``.
+    max_lag_frames : int, lag_frames : mapping str -> int
+        How many frames a node may lag behind the clock (per-node overrides).
     dead_after : int
-        Command frames missed in a row after which the command producer is dead: a zero
-        command is applied without waiting until it publishes again (>= 1).
+        Command frames missed in a row after which a zero command is applied without waiting
+        until the producer publishes again (>= 1).
     no_final : iterable of str
-        Nodes not waited for at the end (they report no final frame, e.g. the recorder).
-    always_wait : iterable of str
-        Nodes waited for ``patience`` timeouts in a row, not one (the recorder: going on
-        without it loses messages the publishers no longer keep; a dead recorder ends the run
-        in the launcher). A warning is logged every ``timeout_s`` while the clock waits; after
-        ``patience`` timeouts the clock goes on with an error saying that the bag misses
-        messages (a recorder stuck for good must not hang the run).
-    patience : int
-        See ``always_wait`` (>= 1).
+        Nodes not waited for at the end (no final frame, e.g. the recorder).
+    always_wait : iterable of str, patience : int
+        Nodes waited for ``patience`` (>= 1) timeouts in a row, not one (the recorder), with a
+        warning every ``timeout_s``, then an error saying the bag misses messages.
     pace_s : float
-        Wall seconds per frame at the least (0: as fast as the chain goes). Frame k starts no
-        earlier than ``k * pace_s`` after frame 0 (a schedule, so a frame that started late is
-        caught up); waiting for it changes no number of the run, only its wall time.
+        Frame k starts no earlier than ``k * pace_s`` wall seconds after frame 0 (0: as fast as
+        the chain goes); it changes no number of the run.
     """
 
     def __init__(self, frame_ns: int, duration_ns: int = 0, command_period_ns: int = 0,

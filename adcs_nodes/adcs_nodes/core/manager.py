@@ -1,236 +1,47 @@
-"""Controller-manager logic: switching, schedule, automatic mode sequence, fallback (no ROS).
+"""Controller-manager logic: switching rules, schedule and status (no ROS).
 
 The ``controller_manager`` node wraps :class:`ControllerManagerCore`: every frame it passes the
-frame time and the latest command of every controller (all controllers run in shadow mode,
-DESIGN section 7) and publishes what :meth:`ControllerManagerCore.step` returns. Every decision
-is a function of the frame times and the inputs only (no wall clock, no randomness).
+frame time and the latest command of every controller (all run in shadow mode, DESIGN section
+7) and publishes what :meth:`ControllerManagerCore.step` returns. Every decision is a function
+of the frame times and the inputs only. The concerns live in three modules: the switching
+rules here, the automatic mode sequence in :mod:`adcs_nodes.core.mode_sequence`, the command
+health check and fallback chain in :mod:`adcs_nodes.core.command_health`.
 
-Rules
------
-* **Switch at a frame boundary, one zero frame** (ros2_control: switch between updates;
-  Basilisk: commands zeroed on a mode change). A request made with time ``t_req`` becomes
-  effective at the first frame with ``t > t_req`` (``t_req = None``: the next frame). The frame
-  in which a switch takes effect outputs exactly one all-zero command; the new controller's
-  command is forwarded from the following frame. A switch to the controller already active
-  changes nothing (no zero frame, not counted).
-* **One pending request, the last one wins**: requests are not queued. A request made while
-  another is pending (before its frame boundary) replaces it; the answer says so (``replaces
-  the pending request for X, which will not be applied``) and ``replaced_requests`` counts it.
-  A request for the controller already active cancels a pending one. So 100 rapid requests
-  between two frames apply exactly one switch, the last one, and every answer says what will
-  happen when it is given.
-* **Schedule**: ``(t_s, name)`` entries apply at the frame whose time equals ``t_s`` (to 1 ns),
-  or the first frame after ``t_s`` if none falls on it; that frame is the zero frame. When
-  several entries are due in one frame the last one wins. A pending operator request made
-  before the frame takes precedence over a scheduled entry due in the same frame.
-* **Automatic mode sequence** (:class:`AutoSequence`): ``detumble`` (B-dot) until the rate
-  ``|omega|`` is below ``rate_enter`` for ``confirm_frames`` consecutive frames, then
-  ``acquire`` (the magnetic law), then optionally ``point`` once the attitude error is below
-  ``angle_enter`` for ``confirm_frames`` frames. Back-transitions with hysteresis: a rate above
-  ``rate_exit`` (> ``rate_enter``) for ``exit_confirm_frames`` frames returns to ``detumble``;
-  an error above ``angle_exit`` (> ``angle_enter``) returns from ``point`` to ``acquire``. A mode
-  change that changes the controller switches in the frame of the decision (zero frame). An
-  invalid or missing estimate holds the mode and clears the counters. An operator or scheduled
-  switch to a controller suspends the sequence (mode ``''``); the pseudo-name ``'auto'``
-  (request or schedule) restarts it in ``detumble``.
-* **Fallback**: the active controller's command is forwarded only if it is fresh (stamp equal
-  to the frame time, or older by at most ``stale_after_s``; never from the future), has the
-  right shapes, is finite and is inside the actuator limits, and, when the active controller
-  uses the estimate (``estimate_users``) and the estimate is monitored (``estimate_period_s``),
-  only if the estimate is fresh too (stamped at the estimator's last frame at or before ``t``,
-  or older by at most ``stale_after_s``) and usable. Otherwise the safe controller's
-  command (same checks) is forwarded in the same frame, ``missed_frames`` counts the frame and
-  ``last_fault`` says why (stale / non-finite / out of range, naming the component). With a
-  ``fallback`` list, its controllers are tried first, in order, with the same checks (e.g.
-  ``['magnetic']``: a wheel controller whose wheel check failed hands over to the magnetic law
-  on the magnetorquers, which does not need the wheels, and B-dot is the last resort); the
-  first usable one is forwarded and named in ``last_fault`` (``; fallback to magnetic``). With
-  ``latch_fallback`` the safe controller also becomes the active one (a counted switch, no
-  zero frame: the safe command is needed now) and the automatic sequence is suspended; by
-  default the fallback is per frame and the active controller resumes as soon as its command
-  is valid again. If the safe command is bad too, the output is zero. The status key
-  ``active`` is the selected controller, ``source`` the one whose command was forwarded.
+* **Switch at a frame boundary, one zero frame** (ros2_control; Basilisk). A request made at
+  ``t_req`` takes effect at the first frame with ``t > t_req`` (``None``: the next frame); that
+  frame outputs one all-zero command, the new controller's command goes out from the next. A
+  switch to the active controller changes nothing (no zero frame, not counted).
+* **One pending request, the last one wins** (``replaced_requests`` counts the replaced ones;
+  the answer says what will happen). A request for the active controller cancels a pending one.
+* **Schedule**: ``(t_s, name)`` applies at the frame whose time equals ``t_s`` (to 1 ns), or
+  the first frame after; the last entry due in a frame wins; a pending operator request beats
+  a scheduled entry due in the same frame.
+* **Automatic sequence**: a mode change that changes the controller switches in the frame of
+  the decision (zero frame). An operator or scheduled switch to a controller suspends the
+  sequence (mode ``''``); the pseudo-name ``'auto'`` restarts it in ``detumble``.
+* **Fallback**: an unusable active command is replaced in the same frame by the first usable
+  fallback (``missed_frames``, ``last_fault``). With ``latch_fallback`` the controller used
+  becomes the active one (a counted switch, no zero frame) and the sequence is suspended.
+  Status key ``active`` is the selected controller, ``source`` the one forwarded.
 * **Start**: the first frame forwards the initial controller (no zero frame).
-* **Last line of defence**: the output is always finite and inside the limits (non-finite
-  entries are zeroed, then every component is clipped).
-
-A controller that does not use wheels may send an empty ``wheel_torque``: it is read as zero
-torque on every wheel.
-
-Compiled checks (issue 13)
---------------------------
-The per-component tests of a command (finite, ``|v_i| <= l_i (1 + 1e-9) + 1e-12``) and the last
-line of defence (non-finite -> 0, then ``clip(v, -l, l)``) are the numba kernels
-:func:`limit_violation` and :func:`clip_finite` (``cache=True``, no fastmath); uncompiled
-(``NUMBA_DISABLE_JIT=1``) they are the same Python. They compare and copy values, so the
-forwarded command has the bits of the controller's.
 """
 from __future__ import annotations
 
-import functools
 import math
-from dataclasses import dataclass
 from typing import Iterable, Mapping, Optional, Sequence
 
-import numpy as np
 from numpy.typing import ArrayLike
 
-from adcs_nodes.core import attitude
-from adcs_nodes.core.control import Command, Estimate, Target, limits_vector, positive
-from adcs_nodes.core.kernels import jit
+from adcs_nodes.core.command_health import (TIME_TOL_S, CommandHealth, clip_finite,
+                                            limit_violation, warm_up)
+from adcs_nodes.core.control import Command, Estimate, Target
+from adcs_nodes.core.mode_sequence import AUTO_SEQUENCE, AutoSequence, ModeSequencer
+
+__all__ = ['AUTO', 'AUTO_SEQUENCE', 'AutoSequence', 'ControllerManagerCore', 'TIME_TOL_S',
+           'clip_finite', 'limit_violation', 'warm_up']
 
 AUTO = 'auto'
 """Pseudo-controller name that (re)starts the automatic mode sequence."""
-TIME_TOL_S = 1e-9
-"""Tolerance on time comparisons [s] (sim time comes from integer nanoseconds)."""
-_LIMIT_RTOL = 1e-9
-
-
-@jit
-def limit_violation(v, limit, rtol):
-    """First bad component of ``v`` against the limits ``limit`` (both float64, shape (n,)).
-
-    Returns
-    -------
-    int
-        ``-1`` when every ``v_i`` is finite and ``|v_i| <= limit_i (1 + rtol) + 1e-12``;
-        ``-2 - i`` when ``v_i`` is the first non-finite component (checked first); else the
-        first ``i`` over its limit.
-    """
-    for i in range(v.shape[0]):
-        if not math.isfinite(v[i]):
-            return -2 - i
-    for i in range(v.shape[0]):
-        if abs(v[i]) > limit[i] * (1.0 + rtol) + 1e-12:
-            return i
-    return -1
-
-
-@jit
-def clip_finite(v, limit):
-    """``clip(v, -limit, limit)`` after zeroing the non-finite entries, shape (n,)."""
-    out = np.zeros(v.shape[0])
-    for i in range(v.shape[0]):
-        if math.isfinite(v[i]):
-            out[i] = min(max(v[i], -limit[i]), limit[i])
-    return out
-
-
-@functools.cache
-def warm_up() -> None:
-    """Compile (or load from the numba cache) the check kernels, once per process (from the
-    constructor: never inside a frame)."""
-    for n in (0, 3):
-        v = np.zeros(n)
-        limit_violation(v, v, _LIMIT_RTOL)
-        clip_finite(v, v)
-
-
-def _opt_positive(value, name: str, unit: str) -> Optional[float]:
-    return None if value is None else positive(value, name, unit)
-
-
-def _count(value, name: str) -> int:
-    if isinstance(value, bool) or int(value) != value or value < 1:
-        raise ValueError(f'{name} must be an integer >= 1, got {value!r}')
-    return int(value)
-
-
-@dataclass(frozen=True)
-class AutoSequence:
-    """Thresholds of the automatic mode sequence detumble -> acquire [-> point].
-
-    Attributes
-    ----------
-    detumble, acquire : str
-        Controllers of the ``detumble`` and ``acquire`` modes (default ``bdot``, ``magnetic``).
-    point : str, optional
-        Controller of the optional ``point`` mode (may equal ``acquire``; needs
-        ``angle_enter_rad``).
-    rate_enter_rad_s : float
-        ``detumble -> acquire`` when the rate is below this [rad/s] (default 0.5 deg/s).
-    rate_exit_rad_s : float, optional
-        ``acquire/point -> detumble`` when the rate is above this [rad/s]; must exceed
-        ``rate_enter_rad_s`` (hysteresis). ``None``: no way back.
-    confirm_frames : int
-        Consecutive frames a forward condition must hold (>= 1).
-    exit_confirm_frames : int
-        Consecutive frames a back-transition condition must hold (>= 1).
-    angle_enter_rad, angle_exit_rad : float, optional
-        ``acquire -> point`` below ``angle_enter``, ``point -> acquire`` above ``angle_exit``
-        (> ``angle_enter``) [rad]; attitude error to the target.
-    rate_frame : {'eci', 'orbit'}
-        Rate compared with the thresholds: ``|omega_body_eci_body|`` (default) or the rate
-        relative to the orbital frame ``|omega - omega0 e_N|`` (paper 000 eq. (7)).
-    """
-
-    detumble: str = 'bdot'
-    acquire: str = 'magnetic'
-    point: Optional[str] = None
-    rate_enter_rad_s: float = math.radians(0.5)
-    rate_exit_rad_s: Optional[float] = math.radians(1.0)
-    confirm_frames: int = 10
-    exit_confirm_frames: int = 1
-    angle_enter_rad: Optional[float] = None
-    angle_exit_rad: Optional[float] = None
-    rate_frame: str = 'eci'
-
-    def __post_init__(self) -> None:
-        for name in ('detumble', 'acquire'):
-            if not isinstance(getattr(self, name), str) or not getattr(self, name):
-                raise ValueError(f'auto sequence: {name} must be a controller name')
-        enter = _opt_positive(self.rate_enter_rad_s, 'auto sequence: rate_enter_rad_s',
-                              'rad/s')
-        if enter is None:
-            raise ValueError('auto sequence: rate_enter_rad_s is required')
-        leave = _opt_positive(self.rate_exit_rad_s, 'auto sequence: rate_exit_rad_s', 'rad/s')
-        if leave is not None and not leave > enter:
-            raise ValueError(f'auto sequence: rate_exit_rad_s ({leave:g}) must be > '
-                             f'rate_enter_rad_s ({enter:g}) for hysteresis')
-        _count(self.confirm_frames, 'auto sequence: confirm_frames')
-        _count(self.exit_confirm_frames, 'auto sequence: exit_confirm_frames')
-        a_in = _opt_positive(self.angle_enter_rad, 'auto sequence: angle_enter_rad', 'rad')
-        a_out = _opt_positive(self.angle_exit_rad, 'auto sequence: angle_exit_rad', 'rad')
-        if self.point is not None and a_in is None:
-            raise ValueError('auto sequence: a point mode needs angle_enter_rad')
-        if self.point is None and (a_in is not None or a_out is not None):
-            raise ValueError('auto sequence: angle thresholds given without a point controller')
-        if a_out is not None and not a_out > a_in:
-            raise ValueError(f'auto sequence: angle_exit_rad ({a_out:g}) must be > '
-                             f'angle_enter_rad ({a_in:g}) for hysteresis')
-        if self.rate_frame not in ('eci', 'orbit'):
-            raise ValueError(f"auto sequence: rate_frame must be 'eci' or 'orbit', got "
-                             f'{self.rate_frame!r}')
-
-    @classmethod
-    def from_dict(cls, config: Mapping) -> 'AutoSequence':
-        """Build from a scenario mapping with degree units.
-
-        Keys: ``detumble``, ``acquire``, ``point``, ``rate_enter_deg_s``, ``rate_exit_deg_s``,
-        ``confirm_frames``, ``exit_confirm_frames``, ``angle_enter_deg``, ``angle_exit_deg``,
-        ``rate_frame``; all optional. Unknown keys raise ``ValueError``.
-        """
-        known = {'detumble', 'acquire', 'point', 'rate_enter_deg_s', 'rate_exit_deg_s',
-                 'confirm_frames', 'exit_confirm_frames', 'angle_enter_deg', 'angle_exit_deg',
-                 'rate_frame'}
-        unknown = sorted(set(config) - known)
-        if unknown:
-            raise ValueError(f'auto sequence: unknown keys {unknown}; known: {sorted(known)}')
-        kw = {k: config[k] for k in ('detumble', 'acquire', 'point', 'confirm_frames',
-                                     'exit_confirm_frames', 'rate_frame') if k in config}
-        for key, field_name in (('rate_enter_deg_s', 'rate_enter_rad_s'),
-                                ('rate_exit_deg_s', 'rate_exit_rad_s'),
-                                ('angle_enter_deg', 'angle_enter_rad'),
-                                ('angle_exit_deg', 'angle_exit_rad')):
-            if key in config:
-                value = config[key]
-                kw[field_name] = None if value is None else math.radians(float(value))
-        return cls(**kw)
-
-    def controller_of(self, mode: str) -> str:
-        """Controller name of a mode ``'detumble'``, ``'acquire'`` or ``'point'``."""
-        return {'detumble': self.detumble, 'acquire': self.acquire,
-                'point': self.point or self.acquire}[mode]
 
 
 class ControllerManagerCore:
@@ -245,12 +56,9 @@ class ControllerManagerCore:
     initial : str, optional
         Controller active at start; default the auto sequence's ``detumble`` controller, else
         ``safe``. With ``auto`` it must be the ``detumble`` controller.
-    max_dipole_Am2 : float or array_like, shape (3,)
-        Magnetorquer limits, body axes [A m^2] (``>= 0``; ``inf``: none).
-    max_wheel_torque : float or array_like, shape (n,)
-        Wheel motor torque limits [N m]; its length is the number of wheels (default none).
-    max_torque : float or array_like, shape (3,)
-        Ideal body-torque limits, body axes [N m] (default 0: no ideal actuator).
+    max_dipole_Am2, max_wheel_torque, max_torque : float or array_like
+        Actuator limits, shapes (3,) [A m^2], (n_wheels,) [N m] (default none), (3,) [N m]
+        (default 0: no ideal actuator); ``inf``: none.
     stale_after_s : float
         A command older than this (frame time minus stamp) [s] is stale; 0 = exact stamp only.
     schedule : iterable of (float, str)
@@ -258,23 +66,17 @@ class ControllerManagerCore:
     auto : AutoSequence, optional
         Automatic mode sequence (active from the start when given).
     latch_fallback : bool
-        Make the safe controller the active one after a fault (default: per-frame fallback).
+        Make the fallback controller the active one after a fault (default: per frame).
     estimate_period_s : float, optional
-        Period of the attitude estimator [s]; given, the estimate passed to :meth:`step` is
-        checked for staleness (``None``: not monitored, e.g. no estimator).
+        Period of the estimator [s]; given, the estimate's staleness is checked.
     estimate_users : iterable of str, optional
-        Controllers whose command depends on the estimate (default: all but ``safe``; the safe
-        controller, B-dot, needs the magnetometer only).
+        Controllers whose command depends on the estimate (default: all but ``safe``).
     fallback : sequence of str
-        Controllers tried in order, before ``safe``, when the active controller's command is
-        not usable (default none: straight to ``safe``).
+        Controllers tried in order, before ``safe``, when the active command is not usable.
     startup_s : float
-        Start-up [s]: until the first frame that forwards the active controller's command,
-        a frame at most this long after the manager's first frame that forwards nothing is a
-        start-up frame (zero or fallback command, counted in ``startup_frames``), not a
-        missed one (default 0: every frame counts, lockstep). In sample timing a command
-        needs one period of each stage of the estimator-controller-manager chain before its
-        first arrival (``components.manager.manager_core``).
+        Until the first frame that forwards the active command, a frame at most this long [s]
+        after the first one that forwards nothing is a start-up frame (``startup_frames``),
+        not a missed one (default 0: lockstep).
 
     Raises
     ------
@@ -299,6 +101,30 @@ class ControllerManagerCore:
         if safe not in names:
             raise ValueError(f'safe controller {safe!r} is not among the controllers {names}')
         self.safe = safe
+        self.auto = auto
+        self._initial = self._check_initial(initial)
+        users = [n for n in names if n != safe] if estimate_users is None else \
+            list(estimate_users)
+        unknown = [n for n in users if n not in names]
+        if unknown:
+            raise ValueError(f'estimate_users: unknown controllers {unknown}; known: {names}')
+        self.health = CommandHealth(max_dipole_Am2, max_wheel_torque, max_torque,
+                                    stale_after_s, estimate_period_s, users)
+        self.n_wheels = self.health.n_wheels
+        self.schedule = self._check_schedule(schedule)
+        self.latch_fallback = bool(latch_fallback)
+        self.fallback = [str(n) for n in fallback]
+        bad = [n for n in self.fallback if n not in names]
+        if bad or safe in self.fallback or len(set(self.fallback)) != len(self.fallback):
+            raise ValueError(f'fallback must list configured controllers other than the safe '
+                             f'one ({safe!r}), each once; got {self.fallback}; known: {names}')
+        self.startup_s = float(startup_s)
+        if not (math.isfinite(self.startup_s) and self.startup_s >= 0.0):
+            raise ValueError(f'startup_s must be finite and >= 0 [s], got {startup_s!r}')
+        self.reset()
+
+    def _check_initial(self, initial: Optional[str]) -> str:
+        auto, names = self.auto, self.names
         if auto is not None:
             if not isinstance(auto, AutoSequence):
                 raise ValueError(f'auto must be an AutoSequence, got {type(auto).__name__}')
@@ -313,43 +139,11 @@ class ControllerManagerCore:
                 raise ValueError(f'initial controller {initial!r} conflicts with the auto '
                                  f'sequence, which starts with {auto.detumble!r}')
             initial = auto.detumble
-        initial = safe if initial is None else initial
+        initial = self.safe if initial is None else initial
         if initial not in names:
             raise ValueError(f'initial controller {initial!r} is not among the controllers '
                              f'{names}')
-        self.auto = auto
-        self.max_dipole = limits_vector(max_dipole_Am2, 'max_dipole_Am2', 3)
-        wheel = np.atleast_1d(np.asarray(max_wheel_torque, dtype=float))
-        self.max_wheel = limits_vector(wheel, 'max_wheel_torque', wheel.size)
-        self.n_wheels = int(wheel.size)
-        self.max_torque = limits_vector(max_torque, 'max_torque', 3)
-        warm_up()
-        try:
-            self.stale_after = float(stale_after_s)
-        except (TypeError, ValueError):
-            raise ValueError(f'stale_after_s must be a number [s], got {stale_after_s!r}') \
-                from None
-        if not (math.isfinite(self.stale_after) and self.stale_after >= 0.0):
-            raise ValueError(f'stale_after_s must be finite and >= 0 [s], got {stale_after_s!r}')
-        self.schedule = self._check_schedule(schedule)
-        self.latch_fallback = bool(latch_fallback)
-        self.estimate_period = _opt_positive(estimate_period_s, 'estimate_period_s', 's')
-        users = [n for n in names if n != safe] if estimate_users is None else \
-            list(estimate_users)
-        unknown = [n for n in users if n not in names]
-        if unknown:
-            raise ValueError(f'estimate_users: unknown controllers {unknown}; known: {names}')
-        self.estimate_users = set(users)
-        self.fallback = [str(n) for n in fallback]
-        bad = [n for n in self.fallback if n not in names]
-        if bad or safe in self.fallback or len(set(self.fallback)) != len(self.fallback):
-            raise ValueError(f'fallback must list configured controllers other than the safe '
-                             f'one ({safe!r}), each once; got {self.fallback}; known: {names}')
-        self.startup_s = float(startup_s)
-        if not (math.isfinite(self.startup_s) and self.startup_s >= 0.0):
-            raise ValueError(f'startup_s must be finite and >= 0 [s], got {startup_s!r}')
-        self._initial = initial
-        self.reset()
+        return initial
 
     def _check_schedule(self, schedule) -> list[tuple[float, str]]:
         entries = []
@@ -385,14 +179,18 @@ class ControllerManagerCore:
         self._pending: Optional[tuple[str, Optional[float]]] = None
         self._sched_idx = 0
         self._auto_on = self.auto is not None
-        self._auto_mode = 'detumble' if self._auto_on else ''
-        self._counts = {'enter': 0, 'exit': 0, 'angle_exit': 0}
+        self._sequencer = ModeSequencer(self.auto) if self._auto_on else None
         self._status: dict = self._make_status(None, '', '', False)
 
     @property
     def mode(self) -> str:
         """Mode of the automatic sequence, '' when it is off or suspended."""
-        return self._auto_mode if self._auto_on else ''
+        return self._sequencer.mode if self._auto_on else ''
+
+    @property
+    def estimate_users(self) -> set:
+        """Controllers whose command depends on the estimate."""
+        return self.health.estimate_users
 
     def list_controllers(self) -> tuple[list[str], str, str]:
         """``(names, active, safe)`` for the ``~/list_controllers`` service."""
@@ -404,23 +202,11 @@ class ControllerManagerCore:
 
     # --------------------------------------------------------------- requests
     def request_switch(self, name: str, t: Optional[float] = None) -> tuple[bool, str]:
-        """Ask for a switch; it takes effect at the first frame with time > ``t``.
+        """Ask for a switch to ``name`` (or ``'auto'``) at the first frame with time > ``t``
+        [s] (``None``: the next frame).
 
-        Parameters
-        ----------
-        name : str
-            Controller name, or ``'auto'`` to restart the automatic sequence.
-        t : float, optional
-            Sim time of the request [s] (normally the last frame processed); ``None``: the
-            next frame whatever its time.
-
-        Returns
-        -------
-        success : bool
-            False for an unknown name (nothing changes).
-        message : str
-            What will happen: the switch and its frame, or that it replaces (or equals) the
-            pending request (one pending request; the last one before a frame wins).
+        Returns ``(success, message)``: False for an unknown name (nothing changes); the
+        message says what will happen, or that it replaces (or equals) the pending request.
         """
         if not isinstance(name, str) or name not in self._known():
             shown = repr(name) if len(repr(name)) <= 60 else repr(name)[:57] + '...'
@@ -463,13 +249,11 @@ class ControllerManagerCore:
         commands : mapping str -> (float, Command or None)
             Latest command of each controller with its stamp [s]; missing = none received.
         estimate : Estimate, optional
-            Attitude estimate at ``t``, used only by the automatic sequence.
+            Attitude estimate at ``t`` (automatic sequence, estimate check).
         target : Target, optional
-            Target for the attitude-error threshold of the ``point`` mode (default the orbital
-            frame).
+            Target of the ``point`` mode's attitude error (default the orbital frame).
         estimate_t : float, optional
-            Stamp of ``estimate`` [s] (checked when ``estimate_period_s`` is set; a stale
-            estimate is not used by the automatic sequence either).
+            Stamp of ``estimate`` [s] (checked when ``estimate_period_s`` is set).
 
         Returns
         -------
@@ -478,7 +262,7 @@ class ControllerManagerCore:
         status : dict
             ``t``, ``mode``, ``active``, ``available``, ``safe``, ``source`` (controller whose
             command was forwarded, '' for zero), ``pending``, ``switch_count``,
-            ``missed_frames``, ``last_fault``, ``fault`` (this frame, '' if none),
+            ``missed_frames``, ``startup_frames``, ``last_fault``, ``fault`` (this frame),
             ``fallback`` (bool), ``zero_frame`` (bool), ``estimate_fault`` (this frame),
             ``estimate_stale_frames``, ``replaced_requests``.
         """
@@ -487,26 +271,32 @@ class ControllerManagerCore:
             raise ValueError(f'frame time must be finite, got {t}')
         if self._t_first is None:
             self._t_first = t
-        est_fault = self._estimate_fault(t, estimate, estimate_t)
+        est_fault = self.health.estimate_fault(t, estimate, estimate_t)
         if est_fault:
             self.estimate_stale_frames += 1
-        request = self._due_request(t)
         old = self.active
-        if request is not None:
-            self._apply_request(request)
+        request = self._due_request(t)
+        if request == AUTO:
+            self._auto_on = True
+            self.active = self._sequencer.restart()
+        elif request is not None:
+            self._auto_on = False
+            self.active = request
         elif self._auto_on:
-            self._auto_step(None if est_fault else estimate, target)
+            self.active = self._sequencer.update(None if est_fault else estimate,
+                                                 target) or self.active
         if self.active != old:
             self.switch_count += 1
-            cmd = self._zero(f'switch {old} -> {self.active}: zero command for one frame')
+            cmd = Command.zero(self.n_wheels,
+                               f'switch {old} -> {self.active}: zero command for one frame')
             self._status = self._make_status(t, '', '', False, zero_frame=True)
             return cmd, self.status()
+        return self._forward(t, commands, est_fault)
 
-        fault = ''
-        cmd, why = self._check(commands.get(self.active), t)
-        if cmd is not None and est_fault and self.active in self.estimate_users:
-            cmd, why = None, f'estimator {est_fault}'
-        source = self.active
+    def _forward(self, t: float, commands: Mapping, est_fault: str) -> tuple[Command, dict]:
+        """The active command if usable, else the fallback chain's (or zero)."""
+        fault, source = '', self.active
+        cmd, why = self.health.usable(commands, self.active, t, est_fault)
         if cmd is not None:
             self._forwarded = True
         elif (self.startup_s > 0.0 and not self._forwarded
@@ -515,56 +305,19 @@ class ControllerManagerCore:
         else:
             self.missed_frames += 1
         if cmd is None:
-            fault = f'{self.active}: {why}'
-            source = ''
-            for name in (self.fallback + [self.safe]) if self.active != self.safe else ():
-                if name == self.active:
-                    continue
-                cmd, why_other = self._check(commands.get(name), t)
-                if cmd is not None and est_fault and name in self.estimate_users:
-                    cmd, why_other = None, f'estimator {est_fault}'
-                if cmd is not None:
-                    fault += f'; fallback to {name}'
-                    source = name
-                    break
-                fault += (f'; safe controller {name}' if name == self.safe else
-                          f'; fallback {name}') + f': {why_other}'
-            if cmd is None:
-                fault += '; zero command'
+            chain = self.fallback + [self.safe] if self.active != self.safe else []
+            cmd, source, fault = self.health.fall_back(commands, t, self.active, why, chain,
+                                                       est_fault)
             self.last_fault = fault
             if self.latch_fallback and self.active != self.safe:
                 self.active = source or self.safe
                 self.switch_count += 1
                 self._auto_on = False
-        out = self._zero(fault) if cmd is None else self._sanitize(cmd, fault)
+        out = (Command.zero(self.n_wheels, fault) if cmd is None else
+               self.health.sanitize(cmd, fault))
         self._status = self._make_status(t, source, fault, bool(fault) and bool(source),
                                          estimate_fault=est_fault)
         return out, self.status()
-
-    # -------------------------------------------------------------- internals
-    def _estimate_fault(self, t: float, estimate: Optional[Estimate],
-                        estimate_t: Optional[float]) -> str:
-        """'' when the estimate is fresh and usable (or not monitored), else why not."""
-        if self.estimate_period is None:
-            return ''
-        if estimate is None or estimate_t is None:
-            return 'stale: no estimate received'
-        try:
-            stamp = float(estimate_t)
-        except (TypeError, ValueError):
-            return f'stale: bad estimate stamp {estimate_t!r}'
-        if not math.isfinite(stamp):
-            return f'stale: estimate stamp not finite ({stamp})'
-        if stamp > t + TIME_TOL_S:
-            return f'stale: estimate stamp {stamp:.9g} s is ahead of the frame {t:.9g} s'
-        p = self.estimate_period
-        last_frame = p * math.floor((t + TIME_TOL_S) / p)       # estimator's frame <= t
-        if last_frame - stamp > self.stale_after + TIME_TOL_S:
-            return (f'stale: estimate stamped {stamp:.9g} s, the estimator\'s frame is '
-                    f'{last_frame:.9g} s (limit {self.stale_after:g} s)')
-        if not estimate.is_usable():
-            return 'invalid estimate (flagged invalid or not finite)'
-        return ''
 
     def _due_request(self, t: float) -> Optional[str]:
         scheduled = None
@@ -578,115 +331,6 @@ class ControllerManagerCore:
                 self._pending = None
                 return name                    # the operator's request beats the schedule
         return scheduled
-
-    def _apply_request(self, name: str) -> None:
-        if name == AUTO:
-            self._auto_on = True
-            self._set_auto_mode('detumble')
-        else:
-            self._auto_on = False
-            self.active = name
-
-    def _set_auto_mode(self, mode: str) -> None:
-        self._auto_mode = mode
-        self._counts = {'enter': 0, 'exit': 0, 'angle_exit': 0}
-        self.active = self.auto.controller_of(mode)
-
-    def _auto_step(self, estimate: Optional[Estimate], target: Optional[Target]) -> None:
-        a = self.auto
-        if estimate is None or not estimate.is_usable():
-            self._counts = {'enter': 0, 'exit': 0, 'angle_exit': 0}
-            return
-        omega = np.asarray(estimate.omega_body_eci_body, dtype=float)
-        q = attitude.normalize(estimate.q_orbit_body)
-        if a.rate_frame == 'orbit':
-            e_n = attitude.rotate(attitude.conjugate(q), [0.0, 1.0, 0.0])
-            omega = omega - float(estimate.omega0) * e_n
-        rate = float(np.linalg.norm(omega))
-        c = self._counts
-        mode = self._auto_mode
-        if mode == 'detumble':
-            c['enter'] = c['enter'] + 1 if rate < a.rate_enter_rad_s else 0
-            if c['enter'] >= a.confirm_frames:
-                self._set_auto_mode('acquire')
-            return
-        if a.rate_exit_rad_s is not None:
-            c['exit'] = c['exit'] + 1 if rate > a.rate_exit_rad_s else 0
-            if c['exit'] >= a.exit_confirm_frames:
-                self._set_auto_mode('detumble')
-                return
-        if a.point is None:
-            return
-        q_ref = Target().q_orbit_body_ref if target is None else target.q_orbit_body_ref
-        try:
-            angle = attitude.angle_between(q, q_ref)
-        except ValueError:
-            return
-        if mode == 'acquire':
-            c['enter'] = c['enter'] + 1 if angle < a.angle_enter_rad else 0
-            if c['enter'] >= a.confirm_frames:
-                self._set_auto_mode('point')
-        elif a.angle_exit_rad is not None:
-            c['angle_exit'] = c['angle_exit'] + 1 if angle > a.angle_exit_rad else 0
-            if c['angle_exit'] >= a.exit_confirm_frames:
-                self._set_auto_mode('acquire')
-
-    def _check(self, entry, t: float) -> tuple[Optional[Command], str]:
-        """``(command, '')`` if usable, else ``(None, reason)``."""
-        if entry is None:
-            return None, 'stale: no command received'
-        try:
-            stamp, cmd = entry
-            stamp = float(stamp)
-        except (TypeError, ValueError):
-            return None, f'malformed entry {entry!r}'
-        if cmd is None:
-            return None, f'stale: no command (stamp {stamp:.9g} s)'
-        if not math.isfinite(stamp):
-            return None, f'stale: stamp not finite ({stamp})'
-        if stamp > t + TIME_TOL_S:
-            return None, f'stale: stamp {stamp:.9g} s is ahead of the frame {t:.9g} s'
-        if t - stamp > self.stale_after + TIME_TOL_S:
-            return None, (f'stale: stamp {stamp:.9g} s is {t - stamp:.9g} s older than the '
-                          f'frame {t:.9g} s (limit {self.stale_after:g} s)')
-        try:
-            fields = (('dipole_body', cmd.dipole_body, self.max_dipole, 'A m^2'),
-                      ('wheel_torque', cmd.wheel_torque, self.max_wheel, 'N m'),
-                      ('torque_body', cmd.torque_body, self.max_torque, 'N m'))
-        except AttributeError:
-            return None, f'malformed command {type(cmd).__name__}'
-        values = {}
-        for name, value, limit, unit in fields:
-            try:
-                arr = np.asarray(value, dtype=float)
-            except (TypeError, ValueError):
-                return None, f'malformed {name}: {value!r}'
-            if name == 'wheel_torque' and arr.shape == (0,):
-                arr = np.zeros(self.n_wheels)
-            if arr.shape != limit.shape:
-                return None, f'malformed {name}: shape {arr.shape}, expected {limit.shape}'
-            i = limit_violation(arr, limit, _LIMIT_RTOL)
-            if i <= -2:
-                why = str(getattr(cmd, 'reason', '') or '')      # the controller's own word
-                return None, f'non-finite (NaN or inf) {name}: {arr}' + (f' ({why})' if why
-                                                                         else '')
-            if i >= 0:
-                return None, (f'out of range: {name}[{i}] = {arr[i]:.6g} {unit} exceeds the '
-                              f'limit {limit[i]:.6g} {unit}')
-            values[name] = arr
-        info = getattr(cmd, 'info', None)
-        return Command(values['dipole_body'], values['wheel_torque'], values['torque_body'],
-                       str(getattr(cmd, 'reason', '')), dict(info) if info else {}), ''
-
-    def _sanitize(self, cmd: Command, reason: str) -> Command:
-        def clip(v, lim):
-            return clip_finite(np.asarray(v, dtype=float), lim)
-        return Command(clip(cmd.dipole_body, self.max_dipole),
-                       clip(cmd.wheel_torque, self.max_wheel),
-                       clip(cmd.torque_body, self.max_torque), reason or cmd.reason, cmd.info)
-
-    def _zero(self, reason: str) -> Command:
-        return Command.zero(self.n_wheels, reason)
 
     def _make_status(self, t: Optional[float], source: str, fault: str, fallback: bool,
                      zero_frame: bool = False, estimate_fault: str = '') -> dict:

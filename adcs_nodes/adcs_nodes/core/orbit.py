@@ -13,11 +13,9 @@ Orbit frame (papers 000/004; DESIGN section 4), columns of ``R_eci_orbit``::
 
     z = r / |r| (zenith),  y = h / |h| with h = r x v (orbit normal),  x = y x z   (O3)
 
-``x`` is the along-track direction (equal to ``v / |v|`` on a circular orbit). The frame
-rotates with ``omega_orbit_eci_eci = h / |r|^2`` (exact for a Keplerian orbit, where ``h`` is
-constant; it neglects the slow turning of ``h`` under perturbations in :class:`Sgp4Orbit`).
-LVLH (paper 001): x along-track, y = -orbit normal, z nadir, i.e. a half turn about the orbit
-x axis: ``q_orbit_lvlh = [1, 0, 0, 0]``.
+``x`` is along-track; the frame rotates with ``omega_orbit_eci_eci = h / |r|^2`` (exact for
+a Keplerian orbit). LVLH (paper 001: x along-track, y = -normal, z nadir) is a half turn about
+the orbit x axis, ``q_orbit_lvlh = [1, 0, 0, 0]``.
 
 Argument of latitude: angle from the ascending node ``N = e_z x h`` to ``r``, positive about
 ``h``; for an equatorial orbit (``N = 0``) it is measured from the ECI x axis::
@@ -31,19 +29,10 @@ J2000::
     GMST [s] = 67310.54841 + (876600 h + 8640184.812866) T + 0.093104 T^2 - 6.2e-6 T^3  (E1)
     R_eci_ecef = Rz(GMST),  q_eci_ecef = [0, 0, sin(GMST/2), cos(GMST/2)]          (E2)
 
-Approximations (stated honestly)
---------------------------------
-* UT1 is taken equal to UTC: ``|UT1 - UTC| < 0.9 s``, i.e. < 6.6e-5 rad (0.004 deg) of Earth
-  rotation. Polar motion (< 0.5 arcsec) is ignored, so "ecef" is the pseudo-Earth-fixed frame.
-* :class:`Sgp4Orbit` returns SGP4's TEME frame (true equator, mean equinox of date) and this
-  module treats it as "eci". TEME -> Earth-fixed is exactly Rz(-GMST82) (Vallado et al. 2006,
-  AIAA 2006-6753), so the Earth-fixed position fed to the field models is right. TEME is NOT
-  J2000/GCRF: they differ by precession and nutation, about 50.3 arcsec per year since 2000
-  (about 0.35 deg in 2025) plus up to ~20 arcsec of nutation. TEME itself turns by only
-  ~8e-12 rad/s, negligible for the dynamics. Inside the simulator every node uses the same
-  "eci", so this matters only when comparing with external J2000 data (star catalogues).
-* For :class:`CircularOrbit` "eci" is the ideal inertial frame whose z axis is the Earth's
-  rotation axis and whose x axis is the GMST origin (mean equinox); RAAN is measured from it.
+Approximations: UT1 = UTC (< 0.004 deg of Earth rotation), no polar motion. :class:`Sgp4Orbit`
+gives TEME, used as "eci" (TEME -> Earth-fixed is exactly Rz(-GMST82), Vallado et al. 2006;
+TEME is not J2000: ~0.35 deg of precession in 2025, which matters only against external J2000
+data). For :class:`CircularOrbit` "eci" has z along the Earth's axis, x at the GMST origin.
 
 References: Vallado (2013) ch. 2-3; Vallado, Crawford, Hujsak, Kelso, "Revisiting Spacetrack
 Report #3" (2006); paper 000 (Lebedev et al.) and its digest section 1.2 for the orbit frame.
@@ -60,6 +49,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.spec import REQUIRED, Param, Section
 
 MU_EARTH = 3.986004418e14
 """Earth gravitational parameter [m^3/s^2] (WGS 84 / EGM96)."""
@@ -78,23 +68,9 @@ _TWO_PI = 2.0 * math.pi
 
 @dataclass(frozen=True)
 class OrbitState:
-    """Orbit state at one instant.
-
-    Attributes
-    ----------
-    r_eci : numpy.ndarray
-        Position, shape (3,) [m], ECI.
-    v_eci : numpy.ndarray
-        Velocity, shape (3,) [m/s], ECI.
-    q_eci_orbit : numpy.ndarray
-        Attitude of the orbit frame, shape (4,) scalar last: ``v_eci = R(q) v_orbit``.
-    omega_orbit_eci_eci : numpy.ndarray
-        Rate of the orbit frame w.r.t. ECI, shape (3,) [rad/s], ECI axes (``h / |r|^2``).
-    orbit_rate : float
-        ``|omega_orbit_eci_eci|`` [rad/s].
-    argument_of_latitude : float
-        Angle from the ascending node to ``r`` [rad], in [0, 2 pi).
-    """
+    """Orbit state at one instant: ``r_eci`` (3,) [m], ``v_eci`` (3,) [m/s], ``q_eci_orbit``
+    (4,) scalar last (``v_eci = R(q) v_orbit``), ``omega_orbit_eci_eci`` (3,) [rad/s] ECI
+    axes, ``orbit_rate`` its norm [rad/s], ``argument_of_latitude`` in [0, 2 pi) [rad]."""
 
     r_eci: np.ndarray
     v_eci: np.ndarray
@@ -148,20 +124,8 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------------------ Earth rotation
 def gmst(t_utc: datetime, t: float = 0.0) -> float:
-    """Greenwich mean sidereal time, IAU 1982 formula (E1), with UT1 = UTC.
-
-    Parameters
-    ----------
-    t_utc : datetime
-        Timezone-aware instant.
-    t : float
-        Seconds added to ``t_utc`` (keeps full precision for ``epoch + t``).
-
-    Returns
-    -------
-    float
-        GMST [rad] in [0, 2 pi): angle from the ECI x axis to the ECEF x axis about z.
-    """
+    """GMST [rad] in [0, 2 pi) (E1), UT1 = UTC, at the aware instant ``t_utc`` plus ``t`` [s]
+    (added here for full precision): the angle from the ECI to the ECEF x axis about z."""
     days = (_seconds_since_j2000(t_utc) + float(t)) / 86400.0
     cent = days / 36525.0
     # 876600 h T = 86400 s * days, kept apart from the small terms for precision.
@@ -209,18 +173,8 @@ def _frame_axes(r: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
 
 
 def orbit_frame_dcm(r_eci: ArrayLike, v_eci: ArrayLike) -> np.ndarray:
-    """``R_eci_orbit`` (3, 3): columns are the orbit x (along-track), y (normal), z (zenith).
-
-    Parameters
-    ----------
-    r_eci, v_eci : array_like
-        Position [m] and velocity [m/s], shape (3,), ECI.
-
-    Raises
-    ------
-    ValueError
-        If the inputs are not finite (3,) vectors, or ``r`` and ``v`` are zero or parallel.
-    """
+    """``R_eci_orbit`` (3, 3), columns the orbit x, y, z (O3), of ``r_eci`` [m] and ``v_eci``
+    [m/s] (3,), ECI (``ValueError`` if not finite, zero or parallel)."""
     x, y, z = _frame_axes(_vec3(r_eci, 'r_eci'), _vec3(v_eci, 'v_eci'))
     return np.column_stack((x, y, z))
 
@@ -253,8 +207,7 @@ def state_from_rv(r_eci: ArrayLike, v_eci: ArrayLike) -> OrbitState:
 
 
 def _quat_from_axes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
-    # Shepperd's method on R = [x y z], as attitude.from_matrix (a test pins the equality) but
-    # without its orthonormality checks (40 us -> 5 us); the axes are orthonormal by construction.
+    # Shepperd's method on R = [x y z], as attitude.from_matrix without its checks.
     m00, m11, m22 = x[0], y[1], z[2]
     tr = m00 + m11 + m22
     diag = (m00, m11, m22, tr)
@@ -276,26 +229,10 @@ def _quat_from_axes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ orbits
 class CircularOrbit:
-    """Keplerian circular orbit (O1, O2) around a point-mass Earth.
-
-    Parameters
-    ----------
-    altitude_m : float
-        Height above ``R_EARTH`` [m], > 0.
-    inclination_rad : float
-        Inclination [rad], in [0, pi].
-    raan_rad : float
-        Right ascension of the ascending node [rad] (from the ECI x axis).
-    arg_latitude0_rad : float
-        Argument of latitude at ``t = 0`` [rad].
-    epoch : datetime
-        Timezone-aware UTC instant of ``t = 0`` (the orbit itself does not depend on it).
-
-    Raises
-    ------
-    ValueError
-        On a non-finite or out-of-range argument, or a naive ``epoch``.
-    """
+    """Keplerian circular orbit (O1, O2) around a point-mass Earth: ``altitude_m`` > 0 above
+    ``R_EARTH``, ``inclination_rad`` in [0, pi], ``raan_rad`` (from the ECI x axis),
+    ``arg_latitude0_rad`` at ``t = 0``, ``epoch`` the aware UTC instant of ``t = 0``.
+    ``ValueError`` on a bad argument."""
 
     def __init__(self, altitude_m: float, inclination_rad: float, raan_rad: float = 0.0,
                  arg_latitude0_rad: float = 0.0, *, epoch: datetime) -> None:
@@ -346,25 +283,10 @@ class CircularOrbit:
 
 
 class Sgp4Orbit:
-    """SGP4/SDP4 propagation of a two-line element set with the ``sgp4`` library.
-
-    Positions and velocities are SGP4's TEME frame, used as "eci" (see the module docstring
-    for the size of that approximation), converted from km and km/s to m and m/s. The elements
-    are parsed with the WGS 72 constants, as TLEs are generated.
-
-    Parameters
-    ----------
-    line1, line2 : str
-        The two TLE lines (69 characters each, valid checksums).
-    epoch : datetime or None
-        Timezone-aware instant of ``t = 0``; ``None`` uses the TLE epoch.
-
-    Raises
-    ------
-    ValueError
-        On a malformed TLE (length, line numbers, checksum, satellite number, parse error),
-        elements that SGP4 rejects at the epoch, or a naive ``epoch``.
-    """
+    """SGP4/SDP4 propagation (``sgp4`` library, WGS 72 constants) of the TLE ``line1``,
+    ``line2``; TEME used as "eci", in m and m/s. ``epoch``: aware instant of ``t = 0``
+    (``None``: the TLE epoch). ``ValueError`` on a malformed TLE (length, line numbers,
+    checksum, satellite number), elements SGP4 rejects at the epoch, or a naive ``epoch``."""
 
     def __init__(self, line1: str, line2: str, epoch: datetime | None = None) -> None:
         from sgp4.api import WGS72, Satrec
@@ -398,13 +320,8 @@ class Sgp4Orbit:
         return _TWO_PI / self.mean_motion
 
     def state(self, t: float) -> OrbitState:
-        """:class:`OrbitState` at ``t`` seconds after :attr:`epoch` (TEME as ECI).
-
-        Raises
-        ------
-        RuntimeError
-            If SGP4 fails at that time (e.g. the satellite has decayed).
-        """
+        """:class:`OrbitState` at ``t`` s after :attr:`epoch` (TEME as ECI); ``RuntimeError``
+        if SGP4 fails (e.g. the satellite has decayed)."""
         r_km, v_kms = self._propagate(t)
         return state_from_rv(np.multiply(r_km, 1e3), np.multiply(v_kms, 1e3))
 
@@ -435,45 +352,32 @@ def _check_tle_line(line: str, number: int) -> str:
 
 
 # ----------------------------------------------------------------------------- factory
-_ORBIT_KEYS = {
-    'circular': ({'type', 'altitude_km', 'inclination_deg'}, {'raan_deg', 'arg_latitude0_deg'}),
-    'tle': ({'type', 'line1', 'line2'}, set()),
-}
+#: The ``orbit`` section (a scenario's, a node's ``orbit.*`` and ``onboard_orbit.*``).
+ORBIT = Section('orbit', (
+    Param('type', 'str', 'circular', '-', 'orbit model', choices=('circular', 'tle')),
+), 'the orbit', selector='type', variants={
+    'circular': (
+        Param('altitude_km', 'float', REQUIRED, 'km', 'altitude above the reference radius '
+              '(100 km: the Karman line; 400,000 km: about the Moon)', min=100.0,
+              max=400_000.0),
+        Param('inclination_deg', 'float', REQUIRED, 'deg', 'inclination', min=0.0, max=180.0),
+        Param('raan_deg', 'float', 0.0, 'deg', 'right ascension of the ascending node',
+              min=-360.0, max=360.0),
+        Param('arg_latitude0_deg', 'float', 0.0, 'deg', 'argument of latitude at the epoch',
+              min=-360.0, max=360.0)),
+    'tle': (Param('line1', 'str', REQUIRED, '-', 'TLE line 1'),
+            Param('line2', 'str', REQUIRED, '-', 'TLE line 2'))},
+    standalone={'altitude_km': 690.0, 'inclination_deg': 98.0})   # paper 000's orbit
 
 
 def make_orbit(cfg: Mapping, epoch: datetime) -> CircularOrbit | Sgp4Orbit:
-    """Build an orbit model from a scenario mapping.
-
-    Parameters
-    ----------
-    cfg : mapping
-        ``{'type': 'circular', 'altitude_km', 'inclination_deg', 'raan_deg'=0,
-        'arg_latitude0_deg'=0}`` or ``{'type': 'tle', 'line1', 'line2'}``.
-    epoch : datetime
-        Timezone-aware scenario epoch (``t = 0``), also used for a TLE.
-
-    Raises
-    ------
-    ValueError
-        On an unknown type, a missing or unknown key (named in the message), or a bad value.
-    """
+    """The orbit model of an :data:`ORBIT` mapping at the aware scenario ``epoch`` (also a
+    TLE's ``t = 0``); ``ValueError`` naming an unknown type or key or a value out of range."""
     if not isinstance(cfg, Mapping) or 'type' not in cfg:
         raise ValueError("orbit config must be a mapping with a 'type' key")
-    kind = cfg['type']
-    if kind not in _ORBIT_KEYS:
-        raise ValueError(f'unknown orbit type {kind!r}; expected one of {sorted(_ORBIT_KEYS)}')
-    required, optional = _ORBIT_KEYS[kind]
-    missing = sorted(required - set(cfg))
-    if missing:
-        raise ValueError(f'orbit config of type {kind!r} is missing key(s) {missing}')
-    unknown = sorted(set(cfg) - required - optional)
-    if unknown:
-        raise ValueError(f'orbit config of type {kind!r} has unknown key(s) {unknown}')
-    if kind == 'tle':
+    cfg = ORBIT.validate(cfg)
+    if cfg['type'] == 'tle':
         return Sgp4Orbit(cfg['line1'], cfg['line2'], epoch=epoch)
-    return CircularOrbit(_finite(cfg['altitude_km'], 'altitude_km') * 1e3,
-                         math.radians(_finite(cfg['inclination_deg'], 'inclination_deg')),
-                         math.radians(_finite(cfg.get('raan_deg', 0.0), 'raan_deg')),
-                         math.radians(_finite(cfg.get('arg_latitude0_deg', 0.0),
-                                              'arg_latitude0_deg')),
+    return CircularOrbit(cfg['altitude_km'] * 1e3, math.radians(cfg['inclination_deg']),
+                         math.radians(cfg['raan_deg']), math.radians(cfg['arg_latitude0_deg']),
                          epoch=epoch)

@@ -1,72 +1,29 @@
-"""Raw CDR codecs of ROS 2 messages, generated once per type from the rosidl introspection.
-
-Issue 13 (graph mode, target (a)): a typed rclpy publish converts the Python message to C
-and serializes it; a typed take deserializes and converts back, field by field, through the
-generated property setters. For the small fixed-layout messages of the lockstep topics the
-same bytes are made (and read) by a few ``struct`` calls. :func:`codec` builds, once per
-message class, an encoder ``encode(msg) -> bytes`` and a decoder ``decode(bytes) -> msg``
-from ``SLOT_TYPES`` and ``__slots__``:
-
-* wire format: XCDR1 plain CDR, little endian, with the 4-byte encapsulation header
-  ``00 01 00 00`` (``CDR_LE``); a primitive is aligned to its size (at most 8) counted from
-  the end of the encapsulation header; a string is ``uint32 length`` (with the NUL) + UTF-8
-  bytes + NUL; a sequence is ``uint32 count`` + elements; a fixed array is its elements; a
-  nested message is its fields in order (no padding of its own); the elements of an empty
-  sequence are not aligned (what Fast CDR writes: the count of the next field follows). These
-  are the bytes a typed publish sends (``rmw_fastrtps_cpp``), with the alignment padding
-  zeroed (Fast CDR leaves it uncleared). ``rclpy.serialization.serialize_message`` writes the
-  same content but reports a length that counts the alignment of empty sequences' elements and
-  rounds up (4-16 bytes more after an empty ``float64[]``; rosbags refuses those bytes). Tested:
-  ``tests/unit/test_cdr.py`` (against ``serialize_message`` and rosbags),
-  ``tests/node/test_raw_cdr.py`` (against what DDS delivers).
-* covered: every basic numeric type, ``bool`` and ``byte``, strings (bounded or not), nested
-  messages, fixed arrays and sequences (bounded or not) of numbers, strings and messages. Not
-  covered: ``wchar``/``wstring`` fields, ``bool`` and ``byte`` arrays, a nested class that
-  cannot be imported: such a type gets :class:`RclpyCodec` (rclpy's
-  ``serialize_message``/``deserialize_message``), so :func:`codec` always returns a codec.
-* encoding: fixed-size runs of primitives are one ``struct.pack`` each; the ``struct`` of a
-  run is chosen by the alignment (offset mod 8) where it starts, so the padding is exact
-  after strings and sequences. Numeric sequences and fixed arrays are ``array``/``numpy``
-  buffers (``tobytes``). A string with a NUL is cut there (what rclpy's C conversion does).
-* decoding: a real message object of the class, filled through its slots with the field
-  checks off (as ``convert.to_vec3`` builds them): numeric sequences as ``array.array``, fixed
-  numeric arrays as writable ``numpy`` arrays, strings as ``str``, as ``deserialize_message``
-  gives them. A big-endian payload is handed to ``deserialize_message``.
-
-Use: ``codec(Environment).encode(msg)``; ``codec(Environment).decode(data)``. A message the
-encoder cannot pack (a value out of its type's range, a fixed array of the wrong length)
-raises ``struct.error``/``ValueError``, as the typed path would refuse it.
-"""
+"""Raw CDR endpoints of the nodes: publishers that send the generated codec's bytes and
+``raw=True`` subscriptions that decode them (:mod:`adcs_nodes.msgs.cdr`; a typed rclpy hop
+costs about 10x more CPU, DESIGN section 6). A type the generator does not cover, and a
+payload that is not little-endian CDR, go through rclpy's serializer."""
 from __future__ import annotations
 
-import array
 import inspect
 import os
 import struct
-import sys
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Optional
 
-import numpy as np
-import rosidl_parser.definition as rdef
+from adcs_nodes.msgs import cdr as _cdr
+from adcs_nodes.msgs.cdr import Codec, Unsupported
+from adcs_nodes.msgs.cdr import codec as generated_codec
 
-#: Encapsulation header of a little-endian plain CDR payload (XCDR1, options 0).
-HEADER = b'\x00\x01\x00\x00'
-#: ``(struct format, size, array typecode, numpy dtype)`` of each basic numeric type.
-BASIC = {
-    'double': ('d', 8, 'd', '<f8'), 'float': ('f', 4, 'f', '<f4'),
-    'int8': ('b', 1, 'b', 'i1'), 'uint8': ('B', 1, 'B', 'u1'),
-    'int16': ('h', 2, 'h', '<i2'), 'uint16': ('H', 2, 'H', '<u2'),
-    'int32': ('i', 4, 'i', '<i4'), 'uint32': ('I', 4, 'I', '<u4'),
-    'int64': ('q', 8, 'q', '<i8'), 'uint64': ('Q', 8, 'Q', '<u8'),
-    'boolean': ('?', 1, None, None), 'octet': ('c', 1, None, None),
-}
-#: ``long double`` is 16 bytes in some IDL mappings: not covered (rclpy fallback).
-_LITTLE = sys.byteorder == 'little'
-_new = object.__new__
+#: Environment switch of the raw path: ``0``/``false``/``no``/``off`` turns it off (typed
+#: publishes and takes); anything else (or unset) leaves it on.
+ENV = 'ADCS_RAW_CDR'
 
 
-class Unsupported(TypeError):
-    """A field type the generator does not cover (the type gets :class:`RclpyCodec`)."""
+def _rclpy_decode(data: bytes, msg_type: type) -> Any:
+    from rclpy.serialization import deserialize_message
+    return deserialize_message(data, msg_type)
+
+
+_cdr.foreign_decoder = _rclpy_decode       # a big-endian payload: rclpy's deserializer
 
 
 class RclpyCodec:
@@ -82,320 +39,12 @@ class RclpyCodec:
         self.decode: Callable[[bytes], Any] = lambda data: deserialize_message(data, msg_type)
 
 
-class Codec:
-    """Generated codec of one message class (see the module docstring).
-
-    Attributes
-    ----------
-    msg_type : type
-        The message class.
-    encode : callable
-        ``encode(msg) -> bytes``: CDR with the encapsulation header.
-    decode : callable
-        ``decode(data) -> msg``: a message of ``msg_type`` from CDR bytes.
-    source : str
-        The generated Python source (for reading and debugging).
-    """
-
-    generated = True
-
-    def __init__(self, msg_type: type, encode, decode, source: str) -> None:
-        self.msg_type = msg_type
-        self.encode = encode
-        self.decode = decode
-        self.source = source
-
-
-# ---------------------------------------------------------------------- plan
-def _slots(cls: type) -> List[str]:
-    return [s for s in cls.__slots__ if s != '_check_fields']
-
-
-def _basic(t) -> Tuple[str, int, Optional[str], Optional[str]]:
-    name = t.typename
-    if name not in BASIC:
-        raise Unsupported(f'basic type {name!r}')
-    return BASIC[name]
-
-
-def _msg_class(t: 'rdef.NamespacedType') -> type:
-    """The Python class of a nested type (``pkg.msg.Name``; an action's or a service's parts,
-    ``Slew_Goal``, live in ``pkg.action._slew``)."""
-    import importlib
-    import re
-    mod = importlib.import_module('.'.join(t.namespaces))
-    if hasattr(mod, t.name):
-        return getattr(mod, t.name)
-    base = re.sub(r'(?<=[a-z0-9])(?=[A-Z])', '_', t.name.split('_')[0]).lower()
+def codec(msg_type: type) -> Any:
+    """The generated codec of ``msg_type``, or :class:`RclpyCodec` (``.why`` says why)."""
     try:
-        return getattr(importlib.import_module(f'{mod.__name__}._{base}'), t.name)
-    except (ImportError, AttributeError):
-        raise Unsupported(f'class of {".".join(t.namespaces)}.{t.name} not found') from None
-
-
-def _flatten(cls: type, path: Tuple[str, ...], out: List[tuple], nested: List[tuple]) -> None:
-    """Leaves of ``cls`` (fields of nested messages inlined) in wire order.
-
-    ``out`` gets ``(kind, path, *details)``; ``nested`` gets ``(path, class)`` of every
-    nested message object to build when decoding (parents first)."""
-    for slot, t in zip(_slots(cls), cls.SLOT_TYPES):
-        p = path + (slot,)
-        if isinstance(t, rdef.BasicType):
-            fmt, size, _, _ = _basic(t)
-            out.append(('prim', p, fmt, size))
-        elif isinstance(t, rdef.AbstractWString):
-            raise Unsupported('wstring')
-        elif isinstance(t, rdef.AbstractString):
-            out.append(('str', p))
-        elif isinstance(t, rdef.NamespacedType):
-            sub = _msg_class(t)
-            nested.append((p, sub))
-            _flatten(sub, p, out, nested)
-        elif isinstance(t, (rdef.Array, rdef.AbstractSequence)):
-            fixed = isinstance(t, rdef.Array)
-            n = t.size if fixed else None
-            vt = t.value_type
-            if isinstance(vt, rdef.BasicType):
-                fmt, size, code, dtype = _basic(vt)
-                if code is None:
-                    raise Unsupported(f'{vt.typename} array or sequence')
-                out.append(('nums', p, fmt, size, code, dtype, n))
-            elif isinstance(vt, rdef.AbstractWString):
-                raise Unsupported('wstring array or sequence')
-            elif isinstance(vt, rdef.AbstractString):
-                out.append(('strs', p, n))
-            elif isinstance(vt, rdef.NamespacedType):
-                out.append(('msgs', p, _msg_class(vt), n))
-            else:
-                raise Unsupported(f'array of {vt!r}')
-        else:
-            raise Unsupported(f'field type {t!r}')
-
-
-def _block_structs(prims: List[tuple]) -> List[struct.Struct]:
-    """The 8 ``struct.Struct`` of a run of primitives, one per start offset mod 8 (the
-    leading and inner padding as ``x`` bytes)."""
-    out = []
-    for start in range(8):
-        fmt, off = '<', start
-        for _, _, f, size in prims:
-            pad = -off % size
-            fmt += 'x' * pad + f
-            off += pad + size
-        out.append(struct.Struct(fmt))
-    return out
-
-
-# ---------------------------------------------------------------------- generation
-def _count_encoder(n: Optional[int], field: str, what: str) -> List[str]:
-    """Source lines writing a sequence's uint32 length (``n`` None) or checking a fixed
-    array's length ``n``, for the list ``L`` of ``field``."""
-    if n is None:
-        return ['    q = -o & 3', '    parts.append(PAD[q] + U32.pack(len(L)))', '    o += q + 4']
-    return [f'    if len(L) != {n}: raise ValueError("{field}: want {n} {what}")']
-
-
-def _count_decoder(n: Optional[int]) -> List[str]:
-    """Source lines reading a sequence's uint32 length into ``c`` (a fixed array: ``n``)."""
-    if n is None:
-        return ['    o += -o & 3', '    (c,) = U32.unpack_from(d, o)', '    o += 4']
-    return [f'    c = {n}']
-
-
-class _Gen:
-    def __init__(self) -> None:
-        self.env: Dict[str, Any] = {
-            'array': array.array, 'np': np, 'U32': struct.Struct('<I'), 'HEADER': HEADER,
-            '_new': _new, 'PAD': [b'\x00' * i for i in range(8)], 'nums': _nums,
-            'strip': _strip, 'MV': memoryview, 'frombuffer': np.frombuffer}
-        self.n = 0
-        self.bodies: Dict[type, Tuple[str, str]] = {}
-        self.lines: List[str] = []
-
-    def name(self, prefix: str, value: Any) -> str:
-        self.n += 1
-        key = f'{prefix}{self.n}'
-        self.env[key] = value
-        return key
-
-    def body(self, cls: type) -> Tuple[str, str]:
-        """Names of the generated ``enc_X(m, parts, o) -> o`` and ``dec_X(d, o) -> (m, o)``
-        of ``cls`` (generated on first use; the source goes to ``self.lines``)."""
-        if cls in self.bodies:
-            return self.bodies[cls]
-        ops: List[tuple] = []
-        nested: List[tuple] = []
-        _flatten(cls, (), ops, nested)
-        self.n += 1
-        enc, dec = f'enc_{cls.__name__}_{self.n}', f'dec_{cls.__name__}_{self.n}'
-        self.bodies[cls] = (enc, dec)
-        self.env[f'C_{dec}'] = cls
-        e = [f'def {enc}(m, parts, o):']
-        d = [f'def {dec}(d, o):', f'    m = _new(C_{dec})', '    m._check_fields = False']
-        for p, sub in nested:
-            k = self.name('C', sub)
-            var = 'm_' + '_'.join(x.lstrip('_') for x in p)
-            parent = 'm_' + '_'.join(x.lstrip('_') for x in p[:-1]) if len(p) > 1 else 'm'
-            d += [f'    {var} = _new({k})', f'    {var}._check_fields = False',
-                  f'    {parent}.{p[-1]} = {var}']
-
-        def ref(p: Tuple[str, ...]) -> str:
-            return 'm.' + '.'.join(p)
-
-        def dref(p: Tuple[str, ...]) -> str:
-            parent = 'm_' + '_'.join(x.lstrip('_') for x in p[:-1]) if len(p) > 1 else 'm'
-            return f'{parent}.{p[-1]}'
-
-        i = 0
-        while i < len(ops):
-            op = ops[i]
-            kind = op[0]
-            if kind == 'prim':
-                j = i
-                while j < len(ops) and ops[j][0] == 'prim':
-                    j += 1
-                run = ops[i:j]
-                k = self.name('B', _block_structs(run))
-                args = ', '.join(ref(r[1]) for r in run)
-                e += [f'    S = {k}[o & 7]', f'    parts.append(S.pack({args}))',
-                      '    o += S.size']
-                targets = ', '.join(dref(r[1]) for r in run)
-                d += [f'    S = {k}[o & 7]', f'    ({targets},) = S.unpack_from(d, o)',
-                      '    o += S.size']
-                i = j
-                continue
-            p = op[1]
-            if kind == 'str':
-                e += [f'    s = {ref(p)}.encode()', "    if b'\\0' in s: s = strip(s)",
-                      '    n = len(s) + 1', '    q = -o & 3',
-                      "    parts.append(PAD[q] + U32.pack(n) + s + b'\\0')",
-                      '    o += q + 4 + n']
-                d += ['    o += -o & 3', '    (n,) = U32.unpack_from(d, o)',
-                      f"    {dref(p)} = str(d[o + 4:o + 3 + n], 'utf-8')", '    o += 4 + n']
-            elif kind == 'nums':
-                _, _, fmt, size, code, dtype, n = op
-                al = min(size, 8)
-                if n is None:      # sequence: count, then the elements aligned
-                    e += [f'    v = nums({ref(p)}, {code!r})', '    q = -o & 3',
-                          f'    c = len(v) // {size}', '    o += q + 4',
-                          f'    r = -o & {al - 1} if c else 0' if al > 1 else '    r = 0',
-                          '    parts.append(PAD[q] + U32.pack(c) + PAD[r] + v)',
-                          '    o += r + len(v)']
-                    d += ['    o += -o & 3', '    (c,) = U32.unpack_from(d, o)', '    o += 4']
-                    if al > 1:
-                        d += [f'    if c: o += -o & {al - 1}']
-                    d += [f'    a = array({code!r})',
-                          f'    a.frombytes(d[o:o + c * {size}])', f'    {dref(p)} = a',
-                          f'    o += c * {size}']
-                else:              # fixed array: the elements, aligned
-                    e += [f'    v = nums({ref(p)}, {code!r}, {n})',
-                          f'    r = -o & {al - 1}' if al > 1 else '    r = 0',
-                          '    parts.append(PAD[r] + v)', '    o += r + len(v)']
-                    if al > 1:
-                        d += [f'    o += -o & {al - 1}']
-                    d += [f"    {dref(p)} = frombuffer(d, {dtype!r}, {n}, o)"
-                          f'.astype({dtype[-2:].lstrip("<")!r})',
-                          f'    o += {n * size}']
-            elif kind == 'strs':
-                n = op[2]
-                e += [f'    L = {ref(p)}'] + _count_encoder(n, p[-1], 'strings')
-                e += ['    for s in L:', '        s = s.encode()',
-                      "        if b'\\0' in s: s = strip(s)",
-                      '        k = len(s) + 1', '        q = -o & 3',
-                      "        parts.append(PAD[q] + U32.pack(k) + s + b'\\0')",
-                      '        o += q + 4 + k']
-                d += _count_decoder(n)
-                d += ['    L = []', '    for _ in range(c):', '        o += -o & 3',
-                      '        (k,) = U32.unpack_from(d, o)',
-                      "        L.append(str(d[o + 4:o + 3 + k], 'utf-8'))", '        o += 4 + k',
-                      f'    {dref(p)} = L']
-            elif kind == 'msgs':
-                sub, n = op[2], op[3]
-                se, sd = self.body(sub)
-                e += [f'    L = {ref(p)}'] + _count_encoder(n, p[-1], 'items')
-                e += ['    for x in L:', f'        o = {se}(x, parts, o)']
-                d += _count_decoder(n)
-                d += ['    L = []', '    for _ in range(c):', f'        x, o = {sd}(d, o)',
-                      '        L.append(x)', f'    {dref(p)} = L']
-            i += 1
-        e += ['    return o']
-        d += ['    return m, o']
-        self.lines += e + [''] + d + ['']
-        return enc, dec
-
-
-def _strip(s: bytes) -> bytes:
-    """UTF-8 bytes cut at the first NUL (rclpy's C string conversion stops there)."""
-    return s.split(b'\0', 1)[0]
-
-
-def _nums(v: Any, code: str, n: Optional[int] = None) -> bytes:
-    """Little-endian bytes of a numeric sequence or fixed array (``array.array``, numpy
-    array or any sequence of numbers); ``n``: the fixed length (ValueError if it differs)."""
-    if type(v) is array.array and v.typecode == code:
-        b = v.tobytes()
-    elif isinstance(v, np.ndarray):
-        b = np.ascontiguousarray(v, dtype=np.dtype(code).newbyteorder('<')).tobytes()
-    else:
-        b = array.array(code, v).tobytes()
-    if n is not None and len(b) != n * array.array(code).itemsize:
-        raise ValueError(f'fixed array of {n} elements, got {len(v)}')
-    return b
-
-
-_CACHE: Dict[type, Any] = {}
-
-
-def codec(msg_type: type):
-    """The codec of ``msg_type`` (generated on the first call, then cached): a
-    :class:`Codec`, or :class:`RclpyCodec` when a field type is not covered or the host is
-    big-endian (``.why`` says which)."""
-    got = _CACHE.get(msg_type)
-    if got is not None:
-        return got
-    if not _LITTLE:
-        got = RclpyCodec(msg_type, 'big-endian host')
-    else:
-        try:
-            got = _generate(msg_type)
-        except Unsupported as exc:
-            got = RclpyCodec(msg_type, str(exc))
-    _CACHE[msg_type] = got
-    return got
-
-
-def deserialize_message(data: bytes, msg_type: type) -> Any:
-    """rclpy's deserialiser, imported on first use (a big-endian payload only), so encoding
-    needs no rclpy (the plain engine's bags)."""
-    from rclpy.serialization import deserialize_message as rclpy_deserialize
-    return rclpy_deserialize(data, msg_type)
-
-
-def _generate(msg_type: type) -> Codec:
-    g = _Gen()
-    enc, dec = g.body(msg_type)
-    g.env['deserialize_message'] = deserialize_message
-    g.env['T'] = msg_type
-    g.lines += [
-        'def encode(m):',
-        '    parts = [HEADER]',
-        f'    {enc}(m, parts, 0)',
-        "    return b''.join(parts)",
-        '',
-        'def decode(data):',
-        "    if data[1] != 1:   # not CDR_LE: rclpy's deserializer",
-        '        return deserialize_message(data, T)',
-        f'    return {dec}(MV(data)[4:], 0)[0]',
-        '']
-    source = '\n'.join(g.lines)
-    exec(compile(source, f'<cdr {msg_type.__module__}.{msg_type.__name__}>', 'exec'), g.env)
-    return Codec(msg_type, g.env['encode'], g.env['decode'], source)
-
-
-# ---------------------------------------------------------------------- raw endpoints
-#: Environment switch of the raw path: ``0``/``false``/``no``/``off`` turns it off (typed
-#: publishes and takes, as before issue 13); anything else (or unset) leaves it on.
-ENV = 'ADCS_RAW_CDR'
+        return generated_codec(msg_type)
+    except Unsupported as exc:
+        return RclpyCodec(msg_type, str(exc))
 
 
 def enabled() -> bool:
@@ -415,10 +64,9 @@ def raw_codec(msg_type: type) -> Optional[Codec]:
 def raw_publisher(pub: Any) -> Any:
     """Make ``pub.publish(msg)`` send ``codec.encode(msg)`` (rclpy's ``publish`` takes bytes
     and skips its conversion and serialization). A message of another class (or bytes) goes
-    to the original ``publish`` unchanged. A lifecycle publisher keeps its check (the
-    original bound ``publish`` is called: inactive, nothing is sent). No-op when the raw path
-    is off or the type is not covered. Returns ``pub``; ``pub.raw_codec`` is the codec or
-    None."""
+    to the original ``publish`` unchanged; a lifecycle publisher keeps its check. No-op when
+    the raw path is off or the type is not covered. Returns ``pub``; ``pub.raw_codec`` is the
+    codec or None."""
     c = raw_codec(pub.msg_type)
     pub.raw_codec = c
     if c is None:
@@ -445,20 +93,17 @@ def takes_info(callback: Callable) -> bool:
 
 #: What a malformed payload raises in a generated decoder.
 DECODE_ERRORS = (struct.error, ValueError, IndexError, UnicodeDecodeError, TypeError,
-                 RuntimeError)   # RuntimeError: rclpy's deserializer (not CDR_LE)
+                 RuntimeError)   # RuntimeError: rclpy's deserializer
 
 
 def decoding(callback: Callable, c: Codec,
              on_error: Optional[Callable[[Exception], None]] = None) -> Callable:
     """A subscription callback for a ``raw=True`` subscription: bytes are decoded with ``c``
-    and passed on as a message; a message object (the composed runner's in-process path
-    calls the callback with the publisher's object) is passed on as it is. A callback that
-    takes the message info (``publisher_guard.WithInfo``) gets it, from either executor's
-    calling convention (``cb(msg, info)`` or ``cb((msg, info))``).
-
-    A payload that does not decode (truncated, invalid UTF-8: only a stranger on the domain
-    sends one) is dropped: ``on_error(exc)`` is called, ``callback`` is not, nothing raises
-    into the executor."""
+    and passed on as a message; a message object
+    (the composed runner's in-process path) is passed on as it is. A callback that takes the
+    message info (``publisher_guard.WithInfo``) gets it, from either executor's calling
+    convention (``cb(msg, info)`` or ``cb((msg, info))``). A payload that does not decode is
+    dropped: ``on_error(exc)`` is called, ``callback`` is not, nothing raises."""
     decode = c.decode
 
     def safe(data: Any) -> Any:

@@ -5,19 +5,12 @@ mode", so a switch is bumpless) and publishes ``adcs/controllers/<name>/command`
 (``adcs_msgs/ActuatorCommand``, stamped with the frame it was computed for); the controller
 manager forwards the active one.
 
-What the node subscribes to comes from the registry entry's ``inputs`` (nothing else):
-
-* ``estimate``: ``adcs/attitude_estimate`` (``adcs_msgs/AttitudeState``);
-* ``target``: ``adcs/attitude_target`` (``adcs_msgs/AttitudeTarget``, from ``guidance``);
-* ``magnetometer``: ``sensors/magnetometer`` (``sensor_msgs/MagneticField``, rotated from the
-  sensor frame into body axes with the mount from ``/tf_static``); with ``estimate`` too, the
-  onboard-model field ``n* = R(q_orbit_body)^T B*`` is offered between samples
-  (``ControlInputs.b_body_model``);
-* ``wheel_speeds``: ``sensors/wheels`` (``sensor_msgs/JointState`` velocities [rad/s]).
-
-So B-dot, whose entry declares only the magnetometer, keeps working when the estimator dies
-(the safe-mode rule). The parameters are the entry's own (``ros2 param describe`` shows each
-with unit and range) plus the spacecraft context below, all declared from typed specs.
+What the node subscribes to comes from the registry entry's ``inputs`` (their records in
+:mod:`adcs_nodes.inputs`: topic, type, converter), nothing else, so B-dot, whose entry declares
+only the magnetometer, keeps working when the estimator dies (the safe-mode rule); the
+conditioning is the component's (:mod:`adcs_nodes.components.controller`). The parameters
+are the entry's own (``ros2 param describe`` shows each with unit and range) plus the
+spacecraft context, all declared from typed specs.
 """
 from __future__ import annotations
 
@@ -27,14 +20,21 @@ from typing import Any, Dict, List, Optional
 from adcs_msgs.msg import ActuatorCommand
 from adcs_nodes import registry
 from adcs_nodes.inputs import lockstep_inputs as node_inputs
-from adcs_nodes.components.base import FrameClock
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
 from adcs_nodes.components.controller import (  # noqa: F401 (the node's names, re-exported)
-    CONTEXT_PARAMS, DEFAULT_FIELD, DEFAULT_ORBIT, ControllerComponent, command_msg,
-    controller_context, estimate_from_msg, inertia_matrix, target_from_msg)
+    CONTEXT_PARAMS, ControllerComponent, controller_context, inertia_matrix,
+    plugin_period_params)
+from adcs_nodes.msgs.convert import COMMAND
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.adapter import records_to_core
 from adcs_nodes.nodes.managed import ManagedLockstepNode
 from adcs_nodes.nodes.tf import MountTable
+
+
+#: The controller of a generic ``controller`` node given none (``CONTEXT_PARAMS``).
+DEFAULT = next(p.default for p in CONTEXT_PARAMS if p.name == 'controller')
 
 
 class ControllerNode(ManagedLockstepNode):
@@ -43,8 +43,12 @@ class ControllerNode(ManagedLockstepNode):
 
     def __init__(self, name: Optional[str] = None, controller: Optional[str] = None,
                  **kwargs: Any) -> None:
+        """Named ``<controller>_controller`` after the controller it runs (``controller``,
+        else the ``controller`` parameter given, else the default); ``-r __node:=`` wins."""
         self._fixed_controller = controller   # (configure runs inside super().__init__)
-        super().__init__(name or f'{controller or "magnetic"}_controller', **kwargs)
+        given = {p.name: p.value for p in kwargs.get('parameter_overrides') or []}
+        super().__init__(name or f'{controller or given.get("controller") or DEFAULT}_controller',
+                         **kwargs)
 
     def configure(self) -> None:
         """Parameters, controller core and endpoints (lifecycle configure)."""
@@ -57,12 +61,12 @@ class ControllerNode(ManagedLockstepNode):
         self.entry = registry.get('controller', ctx_p['controller'])
         self.controller_name = self.entry.name
         own = node_params.declare_all(self, self.entry.params)
+        ctx_p.update(node_params.declare_all(self, plugin_period_params(self.entry)))
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
         self.add_ready_check(lambda: self.mounts.missing(ctx_p['expected_mounts']))
         self.ctx = controller_context(
             self.entry, ctx_p, self.epoch, self.seed,
-            self.section('onboard_orbit', DEFAULT_ORBIT, merge=False),
-            self.section('onboard_field', DEFAULT_FIELD, merge=False))
+            self.section('onboard_orbit', ORBIT), self.section('onboard_field', FIELD))
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
         self.core = self.entry.build(own, self.ctx)
@@ -70,19 +74,23 @@ class ControllerNode(ManagedLockstepNode):
         self.pub = self.publisher(ActuatorCommand,
                                   f'adcs/controllers/{self.controller_name}/command')
         self.component = ControllerComponent(self.core, self.controller_name, self.ctx,
-                                             self.mounts, FrameClock(self.epoch_ns))
+                                             self.mounts)
+        self.to_core = records_to_core(self.entry.inputs, self.epoch_ns)
         self.lockstep_inputs(inputs, ctx_p['period_s'], self.on_frame)
         self.start_handshake()
 
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Compute and publish this controller's command for frame ``t_ns``."""
-        self.pub.publish(self.component.step(t_ns, msgs,
-                                             lambda key, m: self.fresh(key, m, t_ns)))
+        fresh = {k for k, m in msgs.items() if self.fresh(k, m, t_ns)}
+        self.pub.publish(COMMAND.to_msg(self.component.step(
+            t_ns, self.to_core(msgs), fresh.__contains__), self.epoch_ns))
 
 
 def main(args=None) -> int:
-    """``ros2 run adcs_nodes controller --ros-args -p controller:=NAME``."""
-    return runtime.run(ControllerNode, args)
+    """``ros2 run adcs_nodes controller --ros-args -p controller:=NAME``: the node is named
+    ``NAME_controller`` (two generic controllers never share a name)."""
+    name = f'{runtime.given_parameter("controller", args) or DEFAULT}_controller'
+    return runtime.run(lambda: ControllerNode(name), args)
 
 
 def main_magnetic(args=None) -> int:

@@ -29,14 +29,19 @@ from __future__ import annotations
 import time
 from typing import Any, Dict, List, Optional, Tuple
 
+from geometry_msgs.msg import Vector3Stamped
+from sensor_msgs.msg import JointState
+
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, ControllerStatus
 from adcs_msgs.srv import ListControllers, SwitchController
-from adcs_nodes.components.base import FrameClock
-from adcs_nodes.components.manager import MANAGER_PARAMS, ManagerComponent, manager_core
+from adcs_nodes.components.manager import (MAGNETORQUER_TOPIC, MANAGER_PARAMS, WHEELS_TOPIC,
+                                           ManagerComponent, actuator_commands, manager_core,
+                                           status_key, wheel_names_for)
+from adcs_nodes.core.manager import AUTO_SEQUENCE
+from adcs_nodes.msgs import convert
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.actuator_topics import ActuatorTopics, wheel_names_for
-from adcs_nodes.nodes.adapter import node_log
+from adcs_nodes.nodes.adapter import ToCore, node_log
 from adcs_nodes.nodes.lockstep_node import QOS_LATCHED
 from adcs_nodes.nodes.managed import ManagedLockstepNode
 
@@ -55,7 +60,7 @@ class ControllerManagerNode(ManagedLockstepNode):
     def configure(self) -> None:
         """Parameters, manager core, endpoints and services (lifecycle configure)."""
         p = node_params.declare_all(self, MANAGER_PARAMS)
-        auto = self.section('auto', {}, merge=False)     # (specs: params.AUTO_PARAMS)
+        auto = self.section('auto', AUTO_SEQUENCE)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
         self.core = manager_core(p, auto, self.live, sample_timing=self.live or self.real_time)
@@ -64,16 +69,22 @@ class ControllerManagerNode(ManagedLockstepNode):
         ctrl_period_s = float(p['controller_period_s']) or period_s
         est_period_s = float(p['estimator_period_s'])
         wheel_limits = list(p['max_wheel_torque_Nm'])
-        self.component = ManagerComponent(self.core, FrameClock(self.epoch_ns), node_log(self))
+        self.component = ManagerComponent(self.core, node_log(self))
         inputs: Dict[str, tuple] = {
             n: (ActuatorCommand, f'adcs/controllers/{n}/command', ctrl_period_s)
             for n in self.names}
         if est_period_s > 0:
             inputs['_estimate'] = (AttitudeState, 'adcs/attitude_estimate', est_period_s)
+        self.to_core = ToCore({n: convert.COMMAND.to_core for n in self.names}
+                              | {'_estimate': convert.ATTITUDE_STATE.to_core}, self.epoch_ns)
         self.cmd_pub = self.publisher(ActuatorCommand, 'adcs/actuator_command')
-        self.actuators = ActuatorTopics(    # standard per-actuator topics, for drivers
-            self, bool(p['max_dipole_Am2']), wheel_names_for(
-                0 if wheel_limits == [-1.0] else len(wheel_limits), p['wheel_names']))
+        # the standard per-actuator topics, for drivers (published when someone reads them)
+        self.wheel_names = wheel_names_for(0 if wheel_limits == [-1.0] else len(wheel_limits),
+                                           p['wheel_names'])
+        self.actuator_pubs = {MAGNETORQUER_TOPIC: self.publisher(Vector3Stamped,
+                                                                 MAGNETORQUER_TOPIC)}
+        if self.wheel_names:
+            self.actuator_pubs[WHEELS_TOPIC] = self.publisher(JointState, WHEELS_TOPIC)
         self.status_pub = self.publisher(ControllerStatus, 'adcs/controller_status',
                                          QOS_LATCHED)
         self.create_service(SwitchController, SWITCH_SERVICE, self.on_switch)
@@ -126,19 +137,20 @@ class ControllerManagerNode(ManagedLockstepNode):
     # ------------------------------------------------------------------ frames
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Decide and publish the actuator command of frame ``t_ns``."""
-        out, _ = self.component.step(t_ns, msgs)
-        self.cmd_pub.publish(out)
-        self.actuators.publish(out)
+        cmd, _ = self.component.step(t_ns, self.to_core(msgs))
+        self.cmd_pub.publish(convert.COMMAND.to_msg(cmd, self.epoch_ns))
+        for topic, x in actuator_commands(cmd, self.wheel_names):
+            pub = self.actuator_pubs[topic]
+            if pub.get_subscription_count() > 0:
+                pub.publish(convert.for_topic(topic).to_msg(x, self.epoch_ns))
         # the last frame's status always goes out: a degraded run's missed-frame count is the
         # one the launcher reads from it (docs/reliability.md, engine parity of the count)
         self._publish_status(force=self.is_last_frame(t_ns, self._own_period_ns))
 
     def _publish_status(self, force: bool = False) -> None:
         st = self.core.status()
-        # published on a change of what is forwarded (not of the fault text, which carries
-        # times) and once per wall second
-        key = (st.get('active', self.core.active), st.get('mode', ''),
-               st.get('switch_count', 0), st.get('source', ''))
+        # published on a change of what is forwarded and once per wall second
+        key = status_key(st, self.core.active)
         now = time.monotonic()
         if not force and key == self._last_status and now - self._last_status_wall < 1.0:
             return
@@ -146,15 +158,8 @@ class ControllerManagerNode(ManagedLockstepNode):
             self.get_logger().info(f'controller status: active {key[0]}, mode {key[1] or "-"}'
                                    f', switches {key[2]}, forwarding {key[3] or "zero"}')
         self._last_status, self._last_status_wall = key, now
-        msg = ControllerStatus()
-        msg.header.stamp = self.stamp(self.sim_t_ns)
-        msg.active = str(key[0])
-        msg.available = list(self.names)
-        msg.mode = str(key[1] or '')
-        msg.switch_count = int(key[2])
-        msg.missed_frames = int(st.get('missed_frames', 0))
-        msg.last_fault = str(st.get('last_fault', ''))
-        self.status_pub.publish(msg)
+        self.status_pub.publish(convert.CONTROLLER_STATUS.to_msg(
+            self.component.status(self.sim_t_ns, st), self.epoch_ns))
 
 
 def main(args=None) -> int:

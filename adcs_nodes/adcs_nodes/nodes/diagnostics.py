@@ -1,47 +1,29 @@
-"""``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) of any ADCS node.
+"""``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) of any ADCS node, and the
+``lockstep/status`` and ``lockstep/progress`` of a lockstep node (:class:`StatusTopics`).
 
-What ``rqt_robot_monitor``, Foxglove's diagnostics panel and ``diagnostic_aggregator`` read.
-Every lockstep node owns one :class:`Diagnostics` and calls :meth:`Diagnostics.frame` once per
-processed frame; a ``DiagnosticArray`` with one ``DiagnosticStatus`` (name = node name,
-hardware id ``adcs``) goes out once per ``period_s`` of sim time (default 1 s, the rate of
-``diagnostic_updater``), stamped with that sim time. Publishing from the frame path (not a
-wall timer) keeps the topic deterministic in lockstep, so it can be recorded and compared.
-
-Only when someone reads it: the status is built and published only while a subscription is
-matched to ``/diagnostics`` (a recorder recording it, ``rqt_robot_monitor``, ``ros2 topic
-echo``; :meth:`Diagnostics.wanted`, about 0.5 us). Building it was about 14 % of a composed
-paper000 frame with nobody listening (issue 13). A recorder that records the topic is matched
-before frame 0 (the launcher's start handshake), so a bag holds every status as before.
-
-Values (``KeyValue``, strings), in this order:
-
-* the node's ``timing_diagnostics()`` (every lockstep node: timing mode, frames, missed
-  frames, dead inputs, rejected samples by reason);
-* the node's attributes among :data:`ATTRIBUTES` when it has them (estimator:
-  ``rejected_count``, ``last_rejection``, ``update_count``, ``resets``; dynamics:
-  ``rejected_commands``; magnetometer: ``dropouts``);
-* the node's ``diagnostic_values()`` (controller manager: the active controller, mode,
-  forwarded source, ``fallback`` reason).
-
-Level: ``OK``; ``WARN`` when a counter of :data:`COUNTERS` grew since the last published
-status (with a reader from the start: during the last period) or a ``fallback`` is active
-(the message says which); ``ERROR`` when the node sets ``diagnostic_error`` (a text).
+``/diagnostics`` is what ``rqt_robot_monitor``, Foxglove and ``diagnostic_aggregator`` read:
+one ``DiagnosticStatus`` (name = node name, hardware id ``adcs``) once per ``period_s`` of sim
+time, published from the frame path (deterministic in lockstep, so recorded and compared) and
+only while someone reads the topic (:meth:`Diagnostics.wanted`). Values (strings), in order:
+the node's ``timing_diagnostics()``, its attributes among :data:`ATTRIBUTES`, its
+``diagnostic_values()`` (the manager's active controller, ``fallback``, ...). Level ``WARN``
+when a counter of :data:`COUNTERS` grew since the last status or a ``fallback`` is active,
+``ERROR`` when the node sets ``diagnostic_error``, else ``OK``.
 """
 from __future__ import annotations
 
+import time
 from typing import Any, Dict, List, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from adcs_msgs.msg import LockstepStatus
+from adcs_nodes.core.run_status import StatusPacer
+from adcs_nodes.nodes import cdr, runtime
+from adcs_nodes.nodes.adapter import QOS_DATA
 
 TOPIC = '/diagnostics'
 HARDWARE_ID = 'adcs'
-#: ``diagnostic_updater``'s publisher QoS (reliable, volatile), but keep last 100 as every
-#: lockstep topic: the clock master lets a recorder lag 40 frames, and with 10 a lagging
-#: recorder lost ``/diagnostics`` messages (seen in a clean-clone run under load).
-QOS_DIAGNOSTICS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                             history=HistoryPolicy.KEEP_LAST,
-                             durability=DurabilityPolicy.VOLATILE)
 
 #: Node attributes reported when present (and not already in ``timing_diagnostics()``).
 ATTRIBUTES = ('frames', 'missed_frames', 'last_missed_input', 'update_count', 'rejected_count',
@@ -77,9 +59,9 @@ class Diagnostics:
         self.node = node
         self.period_ns = int(round(period_s * NS_PER_S))
         make = getattr(node, 'publisher', None)
-        self.pub = (make(DiagnosticArray, TOPIC, QOS_DIAGNOSTICS) if make is not None
-                    else node.create_publisher(DiagnosticArray, TOPIC, QOS_DIAGNOSTICS))
-        self._next_ns = 0
+        self.pub = (make(DiagnosticArray, TOPIC, QOS_DATA) if make is not None
+                    else node.create_publisher(DiagnosticArray, TOPIC, QOS_DATA))
+        self._next_ns = -1
         self._last: Dict[str, int] = {}
         # the rcl call, without rclpy's `with handle` guard (0.09 us against 0.47 us; called
         # by every node every sim second; a destroyed publisher raises RCLError either way)
@@ -88,9 +70,11 @@ class Diagnostics:
     def frame(self, t_ns: int) -> bool:
         """Called once per processed frame (elapsed sim time ``t_ns``); publishes when a
         period boundary is reached and someone reads the topic. Returns True when a status
-        was published."""
+        was published. The first frame logs the process CPU so far (:func:`runtime.start_cost`)."""
         if t_ns < self._next_ns:
             return False
+        if self._next_ns < 0:
+            self.node.get_logger().info(runtime.start_cost(t_ns))
         self._next_ns = (t_ns // self.period_ns + 1) * self.period_ns
         if not self.wanted():
             return False
@@ -149,4 +133,75 @@ class Diagnostics:
         msg = DiagnosticArray()
         msg.header.stamp = self.node.stamp(t_ns)
         msg.status = [self.status()]
+        self.pub.publish(msg)
+
+
+class StatusTopics:
+    """``lockstep/status`` and ``lockstep/progress`` of a lockstep node, and its
+    ``/diagnostics`` (:attr:`diagnostics`); when each is due is
+    :class:`~adcs_nodes.core.run_status.StatusPacer`'s decision.
+
+    Progress (every ``PROGRESS_EVERY`` frames of sim time seen, and at the last frame) is the
+    clock master's flow control; status (frames, missed frames, wall time; once per
+    ``status_period_ns`` of sim time, at the last frame, and once a wall second while the
+    node is stalled) is what the launcher and a user read. After the final status, or once
+    :meth:`stop` (a ``node_killed`` fault), nothing more is published.
+    """
+
+    def __init__(self, node: Any, status_period_ns: int) -> None:
+        self.node, self.wall0 = node, time.monotonic()
+        self.pacer = StatusPacer(node.get_name(), node.frame_ns, status_period_ns, self.wall0)
+        self.stopped = False
+        self.pub = cdr.raw_publisher(
+            node.create_publisher(LockstepStatus, 'lockstep/status', QOS_DATA))
+        self.progress_pub = cdr.raw_publisher(
+            node.create_publisher(LockstepStatus, 'lockstep/progress', QOS_DATA))
+        self.diagnostics = Diagnostics(node)     # once per sim second (frame_done)
+        node.create_timer(1.0, self._watchdog)
+
+    def _msg(self, t_ns: int, final: bool) -> LockstepStatus:
+        n = self.node
+        msg = LockstepStatus(node=n.get_name(), frames=int(n.frames),
+                             missed_frames=int(n.missed_frames), final=bool(final))
+        msg.header.stamp = n.stamp(t_ns)
+        return msg
+
+    def stop(self) -> None:
+        """Publish nothing more (a crashed process)."""
+        self.stopped = self.pacer.final_sent = True
+
+    def progress(self, seen_ns: int, final: bool = False) -> None:
+        """``lockstep/progress`` for sim time ``seen_ns`` when due."""
+        if not self.stopped and self.pacer.progress_due(seen_ns, final):
+            self.progress_pub.publish(self._msg(seen_ns, final))
+
+    def frame_done(self, t_ns: int, final: bool = False) -> None:
+        """After frame ``t_ns``: ``/diagnostics`` and ``lockstep/status`` when due."""
+        self.diagnostics.frame(t_ns)
+        if self.pacer.status_due(t_ns, final, self.node.missed_frames,
+                                 self.pub.get_subscription_count, time.monotonic()):
+            self.publish(final)
+
+    def _watchdog(self) -> None:
+        if self.pacer.stalled(time.monotonic()):
+            self.publish()
+
+    def wanted(self) -> bool:
+        """Whether a status now would reach a reader (:meth:`StatusPacer.wanted`)."""
+        return self.pacer.wanted(
+            self.pub.get_subscription_count(), lambda: [
+                i.node_name for i in self.node.get_subscriptions_info_by_topic(
+                    self.pub.topic_name)], self.node.missed_frames, time.monotonic())
+
+    def publish(self, final: bool = False) -> None:
+        """``lockstep/status`` stamped with the sim time of the node's last frame."""
+        if self.pacer.final_sent:
+            return
+        self.pacer.final_sent = bool(final)
+        self.pacer.last_wall = time.monotonic()
+        if not self.wanted():
+            return
+        msg = self._msg(self.node.sim_t_ns, final)
+        msg.last_missed_input = self.node.last_missed_input
+        msg.wall_time = time.monotonic() - self.wall0
         self.pub.publish(msg)

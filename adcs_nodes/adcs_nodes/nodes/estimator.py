@@ -1,18 +1,11 @@
 """``estimator`` node: attitude and rate estimate from the sensors (flight software).
 
-The algorithm is a registered estimator (parameter ``algorithm``; ``adcs list`` shows them):
-the node converts messages to numpy, checks them, and calls the core's
-``step(EstimatorInputs, t, dt)`` (:mod:`adcs_nodes.core.estimation.algorithms`). What it
-subscribes to comes from the entry's ``inputs``:
-
-* ``magnetometer``: ``sensors/magnetometer`` (``sensor_msgs/MagneticField``, sensor frame;
-  rotated into body axes with the mount from ``/tf_static``);
-* ``horizon``: ``sensors/horizon`` (``adcs_msgs/HorizonSensor``);
-* ``star_tracker``, ``gyro``: ``sensors/star_tracker``, ``sensors/gyro`` (``sensor_msgs/Imu``);
-* ``actuator_command``: ``adcs/actuator_command`` (the applied dipole, for the prediction).
-
-Never ``sim/*``: the reference field and orbit are the flight software's own models
-(``onboard_orbit.*``, ``onboard_field.*``).
+The algorithm is a registered estimator (parameter ``algorithm``; ``adcs list`` shows them);
+the node subscribes to the topics of its entry's ``inputs`` (magnetometer, horizon sensor,
+star tracker, gyro, the applied command), converts each message to its core sample (the
+records' converters), and the component checks them and steps the core
+(:mod:`adcs_nodes.components.estimator`). Never ``sim/*``: the reference field and orbit are
+the flight software's own models (``onboard_orbit.*``, ``onboard_field.*``).
 
 Publishes ``adcs/attitude_estimate`` (``adcs_msgs/AttitudeState``: q to the orbit frame and to
 ECI, rates, 6x6 covariance), ``adcs/estimator/diagnostics`` (``adcs_msgs/FilterDiagnostics``)
@@ -27,14 +20,14 @@ from typing import Any, Dict, List
 from adcs_msgs.msg import AttitudeState, FilterDiagnostics
 from adcs_nodes import registry
 from adcs_nodes.inputs import lockstep_inputs as node_inputs
-from adcs_nodes.components.base import FrameClock
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
 from adcs_nodes.components.estimator import (  # noqa: F401 (the node's names, re-exported)
     CONTEXT_PARAMS, build_estimator)
+from adcs_nodes.msgs.convert import ATTITUDE_STATE, DIAGNOSTICS
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.adapter import node_log
-from adcs_nodes.nodes.controller import DEFAULT_FIELD, DEFAULT_ORBIT
-from adcs_nodes.nodes.convert import quat
+from adcs_nodes.nodes.adapter import node_log, records_to_core
 from adcs_nodes.nodes.managed import ManagedLockstepNode
 from adcs_nodes.nodes.tf import MountTable, TfPublisher, estimate_transforms
 
@@ -55,13 +48,13 @@ class EstimatorNode(ManagedLockstepNode):
         self.mounts = MountTable(self)    # sensor mounts from /tf_static, by header.frame_id
         self.add_ready_check(lambda: self.mounts.missing(p['expected_mounts']))
         self.tf_pub = TfPublisher(self)   # /tf: eci -> body_estimate
-        orbit = self.section('onboard_orbit', DEFAULT_ORBIT, merge=False)
-        field = self.section('onboard_field', DEFAULT_FIELD, merge=False)
+        orbit = self.section('onboard_orbit', ORBIT)
+        field = self.section('onboard_field', FIELD)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
         self.component = build_estimator(self.entry, p, own, orbit, field, self.epoch,
-                                         self.seed, self.mounts, FrameClock(self.epoch_ns),
-                                         log=node_log(self))
+                                         self.seed, self.mounts, log=node_log(self))
+        self.to_core = records_to_core(self.entry.inputs, self.epoch_ns)
         self.core, self.reference = self.component.core, self.component.reference
         self.field_range = self.component.field_range
         # the command applied over [t_k-1, t_k] is the one stamped t_k-1: awaited (determinism)
@@ -91,18 +84,21 @@ class EstimatorNode(ManagedLockstepNode):
     # ------------------------------------------------------------------ frame
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """One estimator step at elapsed sim time ``t_ns`` (the component's), published."""
-        msg = self.component.step(
-            t_ns, msgs, lambda key, m: self.fresh(key, m, t_ns), missing,
-            self.external_samples(t_ns) if self.external else (), tuple(self.external))
-        if msg is None:
+        fresh = {k for k, m in msgs.items() if self.fresh(k, m, t_ns)}
+        samples = [(s, k, self.to_core.one(k, m)) for s, k, m in
+                   self.external_samples(t_ns)] if self.external else ()
+        est = self.component.step(t_ns, self.to_core(msgs), fresh.__contains__, missing,
+                                  samples, tuple(self.external))
+        if est is None:
             return
+        msg = ATTITUDE_STATE.to_msg(est, self.epoch_ns)
         self.est_pub.publish(msg)
         if self.tf_pub.wanted():          # /tf and the filter diagnostics: only when read
             self.tf_pub.send(estimate_transforms(msg.header.stamp,
-                                                 self.component.last_ref.r_eci,
-                                                 quat(msg.q_eci_body)))
+                                                 self.component.last_ref.r_eci, est.q_eci_body))
         if self.diag_pub.get_subscription_count() > 0:
-            self.diag_pub.publish(self.component.diagnostics_msg(msg.header))
+            self.diag_pub.publish(DIAGNOSTICS.to_msg(self.component.diagnostics(t_ns),
+                                                     self.epoch_ns))
 
 
 def main(args=None) -> int:

@@ -23,8 +23,8 @@ import numpy as np
 
 from adcs_msgs.msg import AttitudeTarget
 from adcs_msgs.srv import SwitchController
-from adcs_nodes.components.base import FrameClock
 from adcs_nodes.components.guidance import PARAMS, GuidanceComponent
+from adcs_nodes.msgs.convert import TARGET
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
 from adcs_nodes.nodes.managed import ManagedLockstepNode
@@ -42,7 +42,7 @@ class GuidanceNode(ManagedLockstepNode):
         p = node_params.declare_all(self, PARAMS)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
-        self.component = GuidanceComponent(p, FrameClock(self.epoch_ns))
+        self.component = GuidanceComponent(p)
         self.pub = self.publisher(AttitudeTarget, 'adcs/attitude_target')
         names = [n for n in p['controllers'] if n]
         self.switch_client = self.create_client(SwitchController, 'adcs/switch_controller')
@@ -66,7 +66,7 @@ class GuidanceNode(ManagedLockstepNode):
 
     def on_frame(self, t_ns: int, msgs: Dict[str, Any], missing: List[str]) -> None:
         """Publish the target of frame ``t_ns``."""
-        self.pub.publish(self.component.step(t_ns))
+        self.pub.publish(TARGET.to_msg(self.component.step(t_ns), self.epoch_ns))
 
 
 def main(args=None) -> int:

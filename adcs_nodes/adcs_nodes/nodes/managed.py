@@ -1,59 +1,49 @@
 """Managed (lifecycle) flight-software nodes: :class:`ManagedLockstepNode`.
 
 The estimator, the controllers, the controller manager and guidance are ROS 2 managed nodes
-(``rclpy.lifecycle``, the standard state machine and services); the simulated world and the
+(``rclpy.lifecycle``: the standard state machine and services); the simulated world and the
 recorder stay plain nodes.
 
-States and what the node has in each
-------------------------------------
-* ``unconfigured``: only the node, its parameters as given and the lifecycle interface
-  (``~/change_state``, ``~/get_state``, ``~/get_available_states``,
-  ``~/get_available_transitions``, ``~/get_transition_graph``, ``~/transition_event``).
-  No topic, no timer.
-* ``configure`` reads and validates every parameter and builds the core (a bad value: the
-  transition fails with the reason logged as ``configuration error: ...``, no traceback, and
-  the node stays ``unconfigured``), then creates every publisher, subscription, timer,
-  service and action. -> ``inactive``.
-* ``inactive``: frames are processed (the filter and the controllers keep their state, so an
-  activation is bumpless), but no output is published: the node's topics (estimate,
-  commands, targets, ``/tf``, controller status, ...) are lifecycle publishers and drop what
-  is published. The lockstep bookkeeping (``lockstep/status``, ``lockstep/progress``,
-  ``/diagnostics``) goes on, so a lockstep run never stalls on an inactive node.
-* ``activate`` enables the outputs; only now does the start handshake say ``lockstep/ready``
-  (the clock master starts frame 0 when every node is ready, so in a run no frame is
-  computed before the nodes are active). -> ``active``. ``deactivate`` -> ``inactive``.
-* ``cleanup`` destroys everything ``configure`` created (endpoints, timers, services, the
-  parameter declarations it made) -> ``unconfigured``; a new ``configure`` reads the
-  parameters again (their current values). ``shutdown`` (from any state) ends the process
-  (``done``, exit code 0).
+* ``unconfigured``: the node, its parameters as given and the lifecycle services; no topic.
+* ``configure`` reads and validates every parameter, builds the core and creates every
+  endpoint, timer, service and action (a bad value: the transition fails with the reason
+  logged as ``configuration error: ...``, the node stays ``unconfigured``). -> ``inactive``:
+  frames are processed (an activation is bumpless) but the outputs (lifecycle publishers)
+  drop what is published; ``lockstep/status``, ``progress`` and ``/diagnostics`` go on.
+* ``activate`` enables the outputs; only then does the handshake say ``lockstep/ready``.
+* ``cleanup`` destroys what ``configure`` created; a new ``configure`` reads the parameters
+  again and, during a lockstep run, rejoins it at the world's frame
+  (:mod:`adcs_nodes.core.frame_schedule`). ``shutdown`` ends the process (exit code 0).
 
-Autostart
----------
-Parameter ``autostart`` (bool, default ``true``): the node configures and activates itself
-in its constructor, as every node did before it was managed (nav2's lifecycle manager
-style), so ``ros2 run adcs_nodes estimator`` and ``python -m adcs_nodes.nodes.estimator`` work
-as before, and a bad parameter still ends the process with exit code 2. With
-``autostart:=false`` the node starts ``unconfigured`` and waits for the standard services::
+``autostart`` (default true) configures and activates in the constructor, so a node started
+alone runs at once (a bad parameter: exit code 2); ``adcs run`` starts them with
+``autostart: false`` and drives the transitions (``ros2 lifecycle set /estimator configure``
+does the same by hand).
 
-    ros2 lifecycle set /estimator configure     # or: ros2 service call
-    ros2 lifecycle set /estimator activate      #   /estimator/change_state ...
-
-``adcs run`` starts these nodes with ``autostart: false`` and drives the transitions
-(:mod:`adcs_nodes.tools.run.launcher`; ``--compose`` does it in process).
+Run-time parameter changes: only a registered controller's own parameters are writable
+(:data:`REBUILT_AT_RUN_TIME`): validated when set, applied at the next frame boundary by
+rebuilding the core (from its reset state); a value set to what it is changes nothing.
 """
 from __future__ import annotations
 
 import traceback
-from typing import Any, Dict, Optional
+from typing import Any, Dict, List, Optional
 
 from rclpy.lifecycle import LifecycleNodeMixin, LifecyclePublisher, TransitionCallbackReturn
 from rclpy.node import Node
 
+from adcs_nodes.core.lockstep import NS_PER_S
+from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes.lockstep_node import NODE_OPTIONS, LockstepNode
 
 #: Node attributes of the parameter layer (``adcs_nodes.nodes.params``) that exist before
 #: ``configure`` (the ``autostart`` parameter) and grow in it: restored by ``cleanup``.
 _SAVED_ATTRS = ('_adcs_specs', '_adcs_prefixes', '_asked')
+#: Registry kinds whose own parameters a node applies at run time: the core is rebuilt from
+#: its entry with the new values at the next frame boundary. A controller starts again from
+#: its reset state (as a controller switched in does); an estimator would lose its filter
+#: and a sensor its seeded noise stream, so their parameters are read-only.
+REBUILT_AT_RUN_TIME = ('controller',)
 
 
 class ManagedLockstepNode(LifecycleNodeMixin, LockstepNode):
@@ -74,6 +64,8 @@ class ManagedLockstepNode(LifecycleNodeMixin, LockstepNode):
         self._outputs_managed = False     # publishers created now are lifecycle publishers
         self._active = False
         self._saved: Optional[Dict[str, Any]] = None
+        self._world_seen_ns = -1          # sim time seen before a cleanup (-1: none)
+        self._params_pending: Dict[str, Any] = {}
         autostart = self.param('autostart', True, 'configure and activate at start (false: '
                                'wait for the lifecycle services)')
         if autostart:   # (a failed configure raises: the caller reports it, exit code 2)
@@ -102,6 +94,75 @@ class ManagedLockstepNode(LifecycleNodeMixin, LockstepNode):
         """True in the ``active`` state (outputs enabled)."""
         return self._active
 
+    # ------------------------------------------------------------------ run-time parameters
+    def _rebuilt_entry(self):
+        """The registry entry whose core this node rebuilds on a run-time change, or None."""
+        entry = getattr(self, 'entry', None)
+        return entry if getattr(entry, 'kind', None) in REBUILT_AT_RUN_TIME else None
+
+    def applies_at_run_time(self, name: str) -> bool:
+        """Whether a run-time change of ``name`` takes effect (else it is read-only): the own
+        parameters of a registered controller."""
+        entry = self._rebuilt_entry()
+        return entry is not None and any(p.name == name for p in entry.params)
+
+    def _held(self, attr: str) -> Any:
+        """``attr`` (``core``, ``ctx``) of the node's frame component, else of the node."""
+        for holder in (getattr(self, 'component', None), self):
+            if holder is not None and hasattr(holder, attr):
+                return getattr(holder, attr)
+        return None
+
+    def _build_core(self, changes: Dict[str, Any]):
+        """A core of this node's entry, its current parameters overlaid by ``changes``."""
+        entry = self._rebuilt_entry()
+        values = {p.name: changes[p.name] if p.name in changes
+                  else node_params._plain(self.get_parameter(p.name).value)
+                  for p in entry.params}
+        return entry.build(entry.validate(values), self._held('ctx'))
+
+    def check_parameters(self, changes: Dict[str, Any]) -> str:
+        """The controller must build with the new values (e.g. magnetic's k > beta /
+        (2 alpha)): the reason if not, else ''. The values that differ from the current ones
+        are kept for :meth:`parameters_set`."""
+        if self._rebuilt_entry() is None or self._held('ctx') is None:
+            return ''
+        try:
+            self._build_core(changes)
+        except ValueError as exc:
+            return f'{", ".join(changes)}: {exc}'
+        self._checked = {n: v for n, v in changes.items()
+                         if v != node_params._plain(self.get_parameter(n).value)}
+        return ''
+
+    def parameters_set(self, names: List[str]) -> None:
+        """Run-time change accepted: applied at the next frame boundary. A value set to what
+        it is already changes nothing (the controller is not restarted)."""
+        checked = getattr(self, '_checked', {})
+        self._params_pending.update({n: checked[n] for n in names if n in checked})
+        if not any(n in checked for n in names):
+            self.get_logger().info(f'parameters {", ".join(names)}: unchanged values, '
+                                   'nothing to apply')
+        self._checked = {}
+
+    def apply_parameters(self) -> None:
+        """At a frame boundary: the controller core is rebuilt with the parameters changed
+        since the last frame (the same object, so every holder sees it; it starts from its
+        reset state)."""
+        if not self._params_pending or self._rebuilt_entry() is None:
+            return
+        names, self._params_pending = sorted(self._params_pending), {}
+        core, new = self._held('core'), self._build_core({})
+        if core is None or type(new) is not type(core) or not hasattr(core, '__dict__'):
+            self.get_logger().error(f'parameters {", ".join(names)} set but not applied: no '
+                                    'controller core to rebuild')
+            return
+        vars(core).clear()
+        vars(core).update(vars(new))
+        self.get_logger().info(f'parameters {", ".join(names)} applied from this frame on '
+                               f'(t={self.sim_t_ns / NS_PER_S:g} s; the controller restarts '
+                               'from its reset state)')
+
     # ------------------------------------------------------------------ endpoints
     def create_publisher(self, *args: Any, **kwargs: Any):
         """Publishers created by :meth:`configure` are lifecycle publishers (silent unless
@@ -126,8 +187,8 @@ class ManagedLockstepNode(LifecycleNodeMixin, LockstepNode):
             'parameters': dict(self._parameters), 'descriptors': dict(self._descriptors),
             'on_set': list(self._on_set_parameters_callbacks),
             'attrs': {a: _copy(getattr(self, a)) for a in _SAVED_ATTRS if hasattr(self, a)}}
-        try:
-            self.setup_lockstep()
+        try:   # configured again during a run: rejoin at the world's frame, not at 0
+            self.setup_lockstep(rejoin=self._world_seen_ns >= 0)
             self._outputs_managed = True
             self.add_ready_check(lambda: [] if self._active else
                                  [f'{self.get_name()} is not active (lifecycle)'])
@@ -160,8 +221,14 @@ class ManagedLockstepNode(LifecycleNodeMixin, LockstepNode):
         return super().on_deactivate(state)
 
     def on_cleanup(self, state) -> TransitionCallbackReturn:
-        """``cleanup``: back to ``unconfigured``."""
+        """``cleanup``: back to ``unconfigured`` (the sim time seen is kept, so a new
+        ``configure`` rejoins the run at the world's frame)."""
         self._active = False
+        schedule = getattr(self, 'schedule', None)
+        if schedule is not None and schedule.seen_ns >= 0:
+            self._world_seen_ns = schedule.seen_ns
+            self.get_logger().info(f'cleanup at sim t={schedule.seen_ns / NS_PER_S:g} s: a '
+                                   'new configure rejoins the run at the world\'s frame')
         self._undo_configure()
         return super().on_cleanup(state)
 

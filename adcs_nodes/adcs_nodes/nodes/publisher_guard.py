@@ -1,43 +1,25 @@
 """Publisher identity of lockstep inputs: only the launched node's publisher is used.
 
-DDS without its security plugins lets any process on the run's domain publish on any topic
-(``docs/security.md``). A consumer given ``expected_publishers`` (the launcher sets it for
-``dynamics`` and ``controller_manager``: ``"<topic>=<node name>"`` per guarded input, from the
-graph) checks who sent each message of those topics:
+Any process on the run's domain can publish on any topic (``docs/security.md``). A consumer
+given ``expected_publishers`` (``"<topic>=<node name>"`` per guarded input; the launcher sets
+it for ``dynamics`` and ``controller_manager``) checks who sent each message:
 
-* Start handshake: the node is not ready until a publisher of the named node is discovered
-  on every guarded topic; when the handshake completes, each guarded topic is **locked** to
-  the endpoint GID(s) of that node's publisher(s) there (``get_publishers_info_by_topic``).
-  Other publishers present then are reported (``second_publisher``), not trusted.
-* After the lock, a message is dropped (never stored, never used) when
+* it is not ready until the named node's publisher is discovered on every guarded topic; at
+  the end of the handshake each topic is **locked** to that publisher's GID(s); others present
+  are reported (``second_publisher``);
+* after the lock a message is dropped when its publisher GID is not a locked one
+  (``foreign_publisher``), its stamp was received already (``duplicate_stamp``) or is older
+  than the last :data:`HISTORY` (``old_stamp``), or it came before the lock
+  (``before_handshake``); a publisher joining later is reported once (``second_publisher``),
+  except the expected node's own new one once none of the locked ones is left (a lifecycle
+  cleanup and configure): the topic is locked to it (``relocks``, ``last_relock``);
+* every event is logged (throttled), counted on ``/diagnostics`` and published on
+  ``adcs/security_events`` (at most :data:`MAX_EVENTS_PER_S` a second, the rest counted).
 
-  - its publisher GID (``MessageInfo['publisher_gid']``) is not a locked one
-    (``foreign_publisher``);
-  - its stamp was already received on that topic (``duplicate_stamp``), or is older than
-    every stamp remembered (``old_stamp``; the last :data:`HISTORY` are remembered): the
-    launched producers stamp strictly increasing frames;
-  - it arrives before the lock (``before_handshake``; no launched producer publishes a
-    lockstep topic before every consumer is ready, so only a stranger can).
-
-  A publisher appearing on a guarded topic after the lock is reported once
-  (``second_publisher``, from the graph, even before it publishes).
-* Every event is logged (throttled), counted (``/diagnostics``: ``security_events``, one
-  counter per reason, ``last_security_event``) and published on ``adcs/security_events``
-  (``diagnostic_msgs/DiagnosticArray``, one WARN status per event; reliable, recorded by the
-  recorder). Publishing is limited to :data:`MAX_EVENTS_PER_S` per wall second; the number
-  left out is carried in the next one (``suppressed``).
-
-Messages delivered in process by the composed runner's in-process path carry no message info
-(``info is None``): they come from a publisher of this process (a node the launcher built), so
-only their stamps are checked. A node started alone (no ``expected_publishers``) is unguarded:
-it accepts everything, as before.
-
-Not prevented (``docs/security.md``): a stranger that is on the domain *before* the handshake
-under the expected node name is locked in with the real node (its messages then pass the GID
-check, and only a duplicate stamp is caught, whichever of the two came second); forged
-``/clock``, services and any topic not guarded. DDS Security (SROS2) is the real answer.
-
-:class:`PublisherGuard` is the bookkeeping (pure Python); :class:`NodeGuard` the rclpy glue.
+In-process deliveries (composed runs) carry no message info: only their stamps are checked.
+Not prevented: a stranger under the expected name before the handshake, forged ``/clock``,
+services, unguarded topics (SROS2 is the real answer). :class:`PublisherGuard` is the pure
+bookkeeping; :class:`NodeGuard` the rclpy glue.
 """
 from __future__ import annotations
 
@@ -54,9 +36,7 @@ HISTORY = 4096
 #: Events published on the events topic per wall second at most (the rest are counted).
 MAX_EVENTS_PER_S = 100
 EVENTS_TOPIC = 'adcs/security_events'
-PARAM = 'expected_publishers'
-PARAM_DOC = ('lockstep inputs accepted only from the named node\'s publisher: '
-             '"<topic>=<node>" entries (empty: accept every publisher)')
+PARAM = 'expected_publishers'      # (its spec: ``nodes.params.COMMON``)
 
 
 def parse_expected(entries: Iterable[str]) -> Dict[str, str]:
@@ -110,6 +90,7 @@ class PublisherGuard:
         self.counts: Dict[str, int] = {r: 0 for r in REASONS}
         self.by_topic: Dict[Tuple[str, str], int] = collections.Counter()
         self.last_event = ''
+        self.relocks, self.last_relock = 0, ''
 
     @property
     def topics(self) -> List[str]:
@@ -143,6 +124,18 @@ class PublisherGuard:
             raise ValueError(f'{topic}: no publisher of {self.expected[topic]} to lock to')
         self.allowed[topic] = allowed
         self.known[topic] |= allowed
+
+    def relock(self, topic: str, mine: Iterable[bytes], present: Iterable[bytes]) -> bool:
+        """Lock ``topic`` to the expected node's publishers ``mine`` now when none of the
+        locked ones is ``present`` any more (the node re-created its publisher); True if so."""
+        mine = {bytes(g) for g in mine}
+        if topic not in self.allowed or not mine or mine <= self.allowed[topic] or \
+                self.allowed[topic] & {bytes(g) for g in present}:
+            return False
+        self.allowed[topic] = mine
+        self.known[topic] |= mine
+        self.relocks += 1
+        return True
 
     def new_publishers(self, topic: str, gids: Iterable[bytes]) -> List[bytes]:
         """Publishers of a locked ``topic`` seen for the first time (each reported once)."""
@@ -190,6 +183,7 @@ class PublisherGuard:
         out = {'security_events': str(self.total)}
         out.update({f'security_{r}': str(n) for r, n in self.counts.items()})
         out['last_security_event'] = self.last_event
+        out.update(relocks=str(self.relocks), last_relock=self.last_relock)
         return out
 
 
@@ -202,19 +196,18 @@ class NodeGuard:
 
     def __init__(self, node: Any, expected: Dict[str, str]) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,
-                               ReliabilityPolicy)
+
+        from adcs_nodes.nodes.adapter import QOS_DATA
         self.node = node
         self.core = PublisherGuard({node.resolve_topic_name(t): n
                                     for t, n in expected.items()})
         self._array = DiagnosticArray
-        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
-        self.pub = node.publisher(DiagnosticArray, EVENTS_TOPIC, qos)
+        self.pub = node.publisher(DiagnosticArray, EVENTS_TOPIC, QOS_DATA)
         self._window = (0.0, 0)        # (wall second, events published in it)
         self.suppressed = 0
         node.add_ready_check(self.missing)
         self._graph_timer = None
+        self._relock_after: Dict[str, float] = {}
 
     # ------------------------------------------------------------------ handshake
     def _publishers(self, topic: str) -> Tuple[List[bytes], List[Tuple[str, bytes]]]:
@@ -251,10 +244,30 @@ class NodeGuard:
                            f'({gid_hex(gid)}): not trusted')
         self._graph_timer = self.node.create_timer(1.0, self.check_graph)
 
+    def relock(self, topic: str) -> bool:
+        """Lock ``topic`` to its expected node's new publisher if that node re-created it
+        (:meth:`PublisherGuard.relock`); logged, and said on ``/diagnostics``."""
+        now = time.monotonic()
+        if now < self._relock_after.get(topic, 0.0):
+            return False                      # (a stranger's flood: the graph asked 10/s)
+        mine, others = self._publishers(topic)
+        if not self.core.relock(topic, mine, mine + [g for _, g in others]):
+            self._relock_after[topic] = now + 0.1
+            return False
+        self.core.last_relock = (
+            f'{topic}: {self.core.expected[topic]} re-created its publisher (a lifecycle '
+            f'cleanup and configure?) at t={self.node.sim_t_ns / 1e9:g} s; its old one is '
+            f'gone: accepted from now on ({", ".join(map(gid_hex, mine))})')
+        self.node.get_logger().info(self.core.last_relock)
+        return True
+
     def check_graph(self) -> None:
-        """Report a publisher that joined a guarded topic after the lock (once each)."""
+        """Report a publisher that joined a guarded topic after the lock (once each), or
+        lock to it when it is the expected node's own new one (:meth:`relock`)."""
         for topic in self.core.topics:
             if self.node.count_publishers(topic) <= len(self.core.known[topic]):
+                continue
+            if self.relock(topic):
                 continue
             infos = {bytes(i.endpoint_gid): i for i in
                      self.node.get_publishers_info_by_topic(topic)}
@@ -281,6 +294,8 @@ class NodeGuard:
             stamp = self.node.elapsed_ns(
                 msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
             reason = core.check(topic, gid, stamp)
+            if reason == 'foreign_publisher' and self.relock(topic):
+                reason = core.check(topic, gid, stamp)     # the expected node's new one
             if reason is None:
                 callback(msg)
                 return
@@ -323,14 +338,9 @@ class NodeGuard:
 
 
 class WithInfo:
-    """A subscription callback that rclpy calls with the message info, from any executor.
-
-    rclpy gives a callback the ``MessageInfo`` when its signature takes two arguments. Its
-    ``SingleThreadedExecutor`` then calls ``cb(msg, info)``, but the ``EventsExecutor`` of
-    rclpy 9.1.2 (the wheels here, ``runtime.make_executor``) calls ``cb((msg, info))``: one
-    tuple (a plain two-argument function fails there with ``SystemError: null argument to
-    internal routine``). This wrapper declares two arguments and accepts both calls.
-    """
+    """A subscription callback that gets the message info from any executor: rclpy's
+    ``SingleThreadedExecutor`` calls ``cb(msg, info)``, the ``EventsExecutor`` of rclpy 9.1
+    ``cb((msg, info))`` (a plain two-argument function fails there)."""
 
     __signature__ = inspect.Signature([
         inspect.Parameter('msg', inspect.Parameter.POSITIONAL_ONLY),
@@ -348,6 +358,6 @@ def for_node(node: Any) -> Optional[NodeGuard]:
     parameter), or None when the parameter is empty (unguarded)."""
     if hasattr(node, '_publisher_guard'):
         return node._publisher_guard
-    expected = parse_expected(node.param(PARAM, [''], PARAM_DOC) or [])
+    expected = parse_expected(node.param(PARAM, ['']) or [])
     node._publisher_guard = NodeGuard(node, expected) if expected else None
     return node._publisher_guard

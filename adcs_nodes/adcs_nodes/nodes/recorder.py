@@ -1,89 +1,39 @@
 """Recorder node: every topic (or a list), raw CDR, into a rosbag2 MCAP bag via ``rosbags``.
 
 ``ros2 bag`` is not available as a PyPI wheel (DESIGN section 3), so this node is the
-project's recorder. It subscribes with ``raw=True`` and writes the serialized bytes unchanged;
-the bag is a rosbag2 directory (``metadata.yaml`` version 8, readable by Jazzy and Kilted)
-with one ``.mcap`` file whose schemas embed the full ``ros2msg`` definitions (RIHS01 hashes equal
-to the installed interfaces), so ``ros2 bag info``, Foxglove and ``rosbags`` read it.
+project's recorder. It subscribes with ``raw=True`` and writes the serialized bytes unchanged
+into a rosbag2 directory (``metadata.yaml`` version 8, one ``.mcap`` file with the full
+``ros2msg`` definitions and RIHS01 hashes of the installed interfaces).
 
-Parameters
-----------
-output : str
-    Bag directory to create, default ``adcs_bag_<UTC date-time>``. An existing path is an
-    error (never overwritten).
-topics : string array
-    Topics to record, absolute or relative, optionally with their type as ``topic=pkg/msg/Name``
-    (the graph's type wins, with a warning, if they differ); unset or empty (default) records
-    every topic found on the graph. The graph is re-scanned every ``discovery_period_s``.
-exclude : string array
-    Topics never recorded (exact names or ``fnmatch`` patterns), default
-    ``['/rosout', '/parameter_events']``. The recorder's own status topic is always excluded.
-discovery_period_s : float
-    Wall-clock period of the graph scan [s], default 0.5.
-status_period_s : float
-    Wall-clock period of ``recorder/status`` [s], default 0.5.
-flush_sim_s : float
-    Crash safety: the pending chunk is written to the file (and flushed to the kernel) once it
-    spans this much log (simulated) time [s], default 2.0.
-flush_period_s : float
-    ... and at the latest after this much wall time [s], default 0.5.
-fsync_period_s : float
-    Wall-clock period of ``fsync`` of the bag file [s] (machine crash, power loss), default 2.0.
-expected_matches : string array
-    Lockstep start handshake (as :mod:`adcs_nodes.nodes.lockstep_node`): entries
-    ``sub:<topic>=<n>`` (the recording subscription of ``topic`` has ``n`` matched publishers)
-    or ``pub:<topic>=<n>``. When all hold, the node publishes its name once on the latched
-    ``lockstep/ready``, so the clock master starts only when the recorder listens. Unset: ready
-    at once.
+Parameters: :data:`PARAMS` (all read-only). ``topics`` entries may carry their type,
+``topic=pkg/msg/Name``; empty records every topic found on the graph (re-scanned every
+``discovery_period_s``). ``expected_matches`` (``sub:<topic>=<n>``) is the lockstep start
+handshake: when every recording subscription has its publishers, the node publishes its name
+once on the latched ``lockstep/ready``.
 
-Topics
-------
-``recorder/status`` (``adcs_msgs/LockstepStatus``): ``node`` = node name, ``frames`` = messages
-written, ``header.stamp`` = latest ``/clock`` seen, ``missed_frames`` = messages the middleware
-reported lost, ``last_missed_input`` = topic of the last loss, ``wall_time`` = wall seconds
-since the first message written; published every ``status_period_s`` and every
-:data:`STATUS_EVERY_CLOCKS` ``/clock`` messages received. The clock master lets the recorder
-fall behind by fewer frames than the publishers keep (``sim_node.nodes.dynamics``), so a
-message the recorder has not received yet can always still be resent. A launcher waits on it
-(clock stamp reached the end of the run, frame count stable) before stopping the recorder. A
-launcher that needs every message of a topic gives ``expected_matches`` and waits for
-``lockstep/ready`` before starting the simulation. ``/clock`` is subscribed once only (the
-recording subscription when ``/clock`` is recorded), so the recorder adds exactly one DDS
-match per recorded topic to the publishers' handshakes.
+``recorder/status`` (``adcs_msgs/LockstepStatus``): ``frames`` = messages written,
+``header.stamp`` = latest ``/clock``, ``missed_frames`` = messages the middleware reported
+lost, ``last_missed_input`` = topic of the last loss (or ``write failed: ...``), ``wall_time``
+= wall seconds since the first message; every ``status_period_s`` and every
+:data:`STATUS_EVERY_CLOCKS` ``/clock`` messages (the clock master's flow control).
 
-QoS
----
-A topic is subscribed once it has at least one publisher: reliable (best effort if any
-publisher is best effort, since a reliable reader would not match it), KEEP_LAST 1000, and
-TRANSIENT_LOCAL when every publisher is transient local (latched topics such as
-``adcs/controller_status``: the value published before the recorder started is recorded),
-else VOLATILE. The publishers' QoS are stored as ``offered_qos_profiles``.
+QoS: a topic is subscribed once it has a publisher: reliable (best effort if any publisher
+is), KEEP_LAST 1000, transient local when every publisher is (latched topics); the publishers'
+QoS are stored as ``offered_qos_profiles``.
 
-Crash safety
-------------
-The rosbags MCAP writer keeps up to 1 MiB in memory; a recorder killed with SIGKILL once left a
-0-byte bag. The recorder closes the pending chunk every ``flush_sim_s`` of log time or
-``flush_period_s`` of wall time, whichever comes first, and flushes it
-(:func:`adcs_nodes.bag.flush_writer`), so a killed recorder loses at most that much; the
-analysis tools read the unfinished file (:func:`adcs_nodes.bag.recover_mcap`). A write
-error (``ENOSPC``: disk full) stops the recording, not the process with a traceback: the node
-logs what happened and how much the bag keeps, reports it in ``recorder/status``
-(``last_missed_input`` = ``disk full: ...``) and exits with :data:`EXIT_WRITE_FAILED`; the
-complete records written before stay readable.
+Time stamps (DESIGN section 8): the log time of a message is its own stamp: ``header.stamp``,
+the ``clock`` of ``rosgraph_msgs/Clock``, or the first element's header stamp of a sequence of
+stamped messages (``tf2_msgs/TFMessage``). A message without a stamp (or stamped 0) is logged
+at the latest ``/clock``; before the first ``/clock`` of a simulation it is held (at most
+:data:`MAX_HELD` messages) and logged at the first ``/clock``. Without any ``/clock`` publisher
+it is logged at its receive time (system time), as ``ros2 bag record`` does. The bag's
+duration is then the run's.
 
-Time stamps
------------
-The log time of a message is its receive time in simulated time when there is a simulation:
-the node's clock with ``use_sim_time``, else the latest ``/clock`` the recorder received (the
-lockstep launcher does not set ``use_sim_time``: its time-source subscription would be one more
-DDS match on ``/clock``). Without any ``/clock`` publisher it is the system time, as with
-``ros2 bag record``. In a simulation whose clock has not ticked yet it is the message's own
-stamp (``header.stamp``, or ``clock`` of ``rosgraph_msgs/Clock``), else the latest log time
-written, else wall time. Log times are kept non-decreasing per topic, so
-reading a topic in log-time order gives the arrival order. Log times differ between two runs of
-the same simulation; message contents and counts do not (reliable, deep queues, no
-reordering within a topic). The analysis tools (:mod:`adcs_nodes.bag`, export, report)
-use header stamps, never log times.
+Crash safety: the pending chunk is closed and flushed every ``flush_sim_s`` of log time or
+``flush_period_s`` of wall time (:func:`adcs_nodes.bag.flush_writer`), so a killed recorder
+loses at most that much; the tools read the unfinished file (:func:`adcs_nodes.bag.recover_mcap`).
+A write error (disk full) stops the recording, not the process: logged, reported in
+``recorder/status``, exit :data:`EXIT_WRITE_FAILED`.
 """
 from __future__ import annotations
 
@@ -108,21 +58,19 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import String
 
+from adcs_nodes.core import handshake
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.adapter import QOS_READY
 from adcs_nodes.registry import Param
 from adcs_nodes.bag import (BAG_VERSION, cdr_stamp_ns, ensure_type, flush_writer,
-                            make_typestore, stamp_kind)
+                            make_typestore, stamp_offset)
 from adcs_nodes.distro import close_writer
 
 DEFAULT_EXCLUDE = ['/rosout', '/parameter_events']
 QUEUE_DEPTH = 1000
 STATUS_TOPIC = 'recorder/status'
 READY_TOPIC = 'lockstep/ready'
-#: Same QoS as the lockstep nodes' ready topic: reliable, transient local.
-QOS_READY = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                       history=HistoryPolicy.KEEP_LAST,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 HANDSHAKE_PERIOD_S = 0.02
 #: ``recorder/status`` is also published every this many ``/clock`` messages written (as the
 #: lockstep nodes report progress every 10 frames), so the clock master's flow control sees
@@ -134,6 +82,9 @@ EXIT_WRITE_FAILED = 3
 #: Prefix of ``recorder/status.last_missed_input`` after a write error.
 WRITE_FAILED_PREFIX = 'write failed: '
 DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+#: Unstamped messages held until the first ``/clock`` of a simulation; more are logged at
+#: their receive time.
+MAX_HELD = 10_000
 
 #: The recorder's parameters (module docstring). All read-only: the bag, its topics and its
 #: flush periods are set when the recording starts.
@@ -184,17 +135,13 @@ def import_message_class(msgtype: str):
 
 
 def _qos_time(duration) -> QosTime:
-    sec, nsec = divmod(int(duration.nanoseconds), 1_000_000_000)
-    return QosTime(sec, nsec)
+    return QosTime(*divmod(int(duration.nanoseconds), 1_000_000_000))
 
 
 def _to_bag_qos(profile: QoSProfile) -> Qos:
     """rosbags ``Qos`` of an rclpy ``QoSProfile`` (enum members are matched by name)."""
     def conv(enum_cls, policy):
-        name = getattr(policy, 'name', None)
-        if name is None:
-            return enum_cls(int(policy))
-        return enum_cls[name] if name in enum_cls.__members__ else enum_cls.UNKNOWN
+        return enum_cls.__members__.get(policy.name, enum_cls.UNKNOWN)
 
     return Qos(
         history=conv(QosHistory, profile.history),
@@ -231,32 +178,18 @@ class _Topic:
     msgtype: str
     connection: object
     subscription: object
-    stamp_kind: Optional[str]
+    stamp_offset: Optional[int]
     count: int = 0
-    last_ns: int = 0
     lost: int = 0
 
 
 class RecorderNode(node_params.SpecParameters, Node):
-    """Record topics raw into a rosbag2 MCAP bag (parameters and QoS: module docstring).
-
-    Parameters
-    ----------
-    node_name : str
-        ROS node name, default ``'recorder'``.
-    **kwargs
-        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ...).
-
-    Raises
-    ------
-    OutputExistsError
-        If ``output`` exists (a ``ValueError``: the runtime reports it as a configuration
-        error).
-    """
+    """Record topics raw into a rosbag2 MCAP bag (module docstring). ``**kwargs`` go to
+    :class:`rclpy.node.Node`. Raises :class:`OutputExistsError` (a ``ValueError``: the runtime
+    reports a configuration error) if ``output`` exists."""
 
     def __init__(self, node_name: str = 'recorder', **kwargs) -> None:
-        # what is given is declared at once (unknown names refused with a did-you-mean), and
-        # nothing undeclared can be set at run time
+        # given names declared at once (unknown ones refused with a did-you-mean)
         kwargs.setdefault('automatically_declare_parameters_from_overrides', True)
         super().__init__(node_name, **kwargs)
         self._writer: Optional[Writer] = None
@@ -291,11 +224,9 @@ class RecorderNode(node_params.SpecParameters, Node):
                 self._declared_types[topic] = msgtype.strip()
         self._wanted: Optional[Set[str]] = wanted or None
         self._exclude = [self._resolve(t) for t in p['exclude']]
-        self._expected = self._parse_expected(p['expected_matches'])
-        discovery_s, status_s = p['discovery_period_s'], p['status_period_s']
-        flush_sim_s, flush_s = p['flush_sim_s'], p['flush_period_s']
+        self._expected = handshake.parse_expectations(p['expected_matches'], self._resolve)
         self._fsync_s = p['fsync_period_s']
-        self._flush_sim_ns = int(flush_sim_s * 1e9)
+        self._flush_sim_ns = int(p['flush_sim_s'] * 1e9)
         self._chunk_t0_ns: Optional[int] = None   # log time of the first pending message
         self._last_fsync = time.monotonic()
         self.write_error = ''
@@ -317,8 +248,8 @@ class RecorderNode(node_params.SpecParameters, Node):
         self.messages_written = 0
         self.messages_lost = 0
         self._last_lost_topic = ''
-        self._last_log_ns = 0
-        self._latest_clock_ns = 0
+        self._latest_clock_ns, self._clock_seen = 0, False
+        self._held: List[tuple] = []   # (topic, raw, receive time) before the first /clock
         self._clocks_written = 0
         self._clock_in_graph = False
         self._first_write_wall: Optional[float] = None
@@ -335,12 +266,12 @@ class RecorderNode(node_params.SpecParameters, Node):
             self.create_subscription(ClockMsg, '/clock', self._on_clock, QoSProfile(
                 depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._last_discovery = 0.0
-        self._discovery_timer = self.create_timer(discovery_s, self.discover, clock=steady)
-        self._status_timer = self.create_timer(status_s, self.publish_status, clock=steady)
-        self._handshake_timer = self.create_timer(HANDSHAKE_PERIOD_S, self._check_ready,
-                                                  clock=steady)
-        self._flush_timer = self.create_timer(flush_s, self.flush, clock=steady)
+        self._last_discovery, self._t_start = 0.0, time.monotonic()
+        self._discovery_timer, self._status_timer, self._handshake_timer, self._flush_timer = (
+            self.create_timer(period, callback, clock=steady) for period, callback in (
+                (p['discovery_period_s'], self.discover),
+                (p['status_period_s'], self.publish_status),
+                (HANDSHAKE_PERIOD_S, self._check_ready), (p['flush_period_s'], self.flush)))
         what = 'every topic' if self._wanted is None else ', '.join(sorted(self._wanted))
         self.get_logger().info(f'recording {what} into {self.output} '
                                f'(excluding {", ".join(self._exclude) or "nothing"})')
@@ -417,7 +348,7 @@ class RecorderNode(node_params.SpecParameters, Node):
         connection = self._writer.add_connection(
             topic, msgtype, typestore=self._store,
             offered_qos_profiles=[_to_bag_qos(p) for p in profiles])
-        rec = _Topic(topic, msgtype, connection, None, stamp_kind(self._store, msgtype))
+        rec = _Topic(topic, msgtype, connection, None, stamp_offset(self._store, msgtype))
         events = SubscriptionEventCallbacks(
             message_lost=lambda info, r=rec: self._on_lost(r, info))
         rec.subscription = self.create_subscription(
@@ -429,45 +360,27 @@ class RecorderNode(node_params.SpecParameters, Node):
             f'{qos.durability.name.lower()}, {len(publishers)} publisher(s))')
 
     # ------------------------------------------------------------------ handshake
-    def _parse_expected(self, items: List[str]) -> List[tuple]:
-        out = []
-        for item in items:
-            if not item:
-                continue
-            try:
-                kind, rest = str(item).split(':', 1)
-                topic, n = rest.rsplit('=', 1)
-                if kind not in ('sub', 'pub'):
-                    raise ValueError(kind)
-                out.append((kind, self._resolve(topic.strip()), int(n)))
-            except ValueError as exc:
-                raise ValueError(f'bad expected_matches entry {item!r} '
-                                 '(want "sub:<topic>=<n>" or "pub:<topic>=<n>")') from exc
-        return out
-
     def unmatched(self) -> List[str]:
-        """Start-handshake expectations not met yet, as readable strings.
-
-        ``sub:<topic>=<n>``: the recording subscription of ``topic`` has at least ``n`` matched
-        publishers; ``pub:<topic>=<n>``: the recorder's publisher (``recorder/status``) has at
-        least ``n`` matched subscriptions.
-        """
-        missing = []
-        pubs = {self._status_topic: self._status_pub}
-        for kind, topic, n in self._expected:
+        """Start-handshake expectations not met yet (:func:`handshake.unmet`): ``sub``: the
+        recording subscription of the topic has that many matched publishers; ``pub``: the
+        recorder's publisher (``recorder/status``) that many matched subscriptions."""
+        def matched(kind: str, topic: str) -> int:
             if kind == 'sub':
                 rec = self._topics.get(topic)
-                have = rec.subscription.get_publisher_count() if rec is not None else 0
-            else:
-                pub = pubs.get(topic)
-                have = pub.get_subscription_count() if pub is not None else 0
-            if have < n:
-                missing.append(f'{kind}:{topic} {have}/{n}')
-        return missing
+                return rec.subscription.get_publisher_count() if rec is not None else 0
+            return self._status_pub.get_subscription_count() if topic == self._status_topic \
+                else 0
+        return handshake.unmet(self._expected, matched, self.get_name())
 
     def _check_ready(self) -> None:
         """Handshake timer: publish our name on ``lockstep/ready`` once every match holds."""
         missing = self.unmatched()
+        if missing and self._handshake_timer.timer_period_ns < 100_000_000 and \
+                time.monotonic() - self._t_start > 1.0:     # slower after a second
+            self._handshake_timer.cancel()
+            self.destroy_timer(self._handshake_timer)
+            self._handshake_timer = self.create_timer(0.1, self._check_ready, clock=Clock(
+                clock_type=ClockType.STEADY_TIME))
         if missing:
             # scan faster than discovery_period_s while topics we wait for are not subscribed
             if time.monotonic() - self._last_discovery > 0.1 and any(
@@ -479,31 +392,20 @@ class RecorderNode(node_params.SpecParameters, Node):
         self.ready = True
         self._ready_pub.publish(String(data=self.get_name()))
         self.get_logger().info(f'ready: {len(self._expected)} expected match(es) hold')
+        self.get_logger().info(runtime.start_cost(0))
 
     # ------------------------------------------------------------------ callbacks
-    def _log_time_ns(self, rec: _Topic, raw: bytes) -> int:
-        """Log time of a message (module docstring, 'Time stamps')."""
-        clock = self.get_clock()
-        if getattr(clock, 'ros_time_is_active', False):
-            t_ns = clock.now().nanoseconds  # use_sim_time: 0 until the first /clock
-        elif self._latest_clock_ns > 0:
-            t_ns = self._latest_clock_ns  # a simulation without use_sim_time: latest /clock
-        elif self._clock_in_graph:
-            t_ns = 0  # a simulation whose clock has not ticked yet
-        else:
-            t_ns = clock.now().nanoseconds  # no simulation: system time, as ros2 bag
-        if t_ns <= 0:
-            stamp = cdr_stamp_ns(raw) if rec.stamp_kind else None
-            if stamp is not None and stamp > 0:
-                t_ns = stamp
-            elif self._last_log_ns > 0:
-                t_ns = self._last_log_ns
-            else:
-                t_ns = time.time_ns()
-        t_ns = max(t_ns, rec.last_ns)
-        rec.last_ns = t_ns
-        self._last_log_ns = max(self._last_log_ns, t_ns)
-        return t_ns
+    def _log_time_ns(self, rec: _Topic, raw: bytes) -> Optional[int]:
+        """Log time of a message (module docstring); ``None``: hold it until the first /clock."""
+        if rec.stamp_offset is not None:
+            stamp = cdr_stamp_ns(raw, rec.stamp_offset)
+            if stamp is not None and (stamp > 0 or rec.msgtype == CLOCK_TYPE):
+                return stamp
+        if self._clock_seen:
+            return self._latest_clock_ns
+        if not self._clock_in_graph:   # discovery may not have seen it yet
+            self._clock_in_graph = self.count_publishers('/clock') > 0
+        return None if self._clock_in_graph else time.time_ns()
 
     def _on_message(self, rec: _Topic, raw: bytes) -> None:
         if self._writer is None:
@@ -513,8 +415,18 @@ class RecorderNode(node_params.SpecParameters, Node):
             stamp = cdr_stamp_ns(raw)
             if stamp is not None:
                 self._latest_clock_ns = max(self._latest_clock_ns, stamp)
-                clock_tick = True
+                self._clock_seen = clock_tick = True
         t_ns = self._log_time_ns(rec, raw)
+        if t_ns is None and len(self._held) < MAX_HELD:
+            self._held.append((rec, raw, time.time_ns()))
+            return
+        self._write(rec, raw, time.time_ns() if t_ns is None else t_ns)
+        if clock_tick:
+            self._clock_ticked()
+
+    def _write(self, rec: _Topic, raw: bytes, t_ns: int) -> None:
+        if self._writer is None:
+            return
         try:
             self._writer.write(rec.connection, t_ns, raw)
         except OSError as exc:
@@ -526,13 +438,17 @@ class RecorderNode(node_params.SpecParameters, Node):
         self.messages_written += 1
         if self._first_write_wall is None:
             self._first_write_wall = time.monotonic()
-        # abs: the log time may jump back once, from wall time to the first /clock
         if abs(t_ns - self._chunk_t0_ns) >= self._flush_sim_ns:
             self.flush()
-        if clock_tick:
-            self._clocks_written += 1
-            if self._clocks_written % STATUS_EVERY_CLOCKS == 0:
-                self.publish_status()    # progress for the clock master's flow control
+
+    def _clock_ticked(self) -> None:
+        """A /clock arrived: write the held messages at it; progress for the flow control."""
+        held, self._held = self._held, []
+        for rec, raw, _ in held:
+            self._write(rec, raw, self._latest_clock_ns)
+        self._clocks_written += 1
+        if self._clocks_written % STATUS_EVERY_CLOCKS == 0:
+            self.publish_status()
 
     def flush(self, fsync: Optional[bool] = None) -> None:
         """Write the pending chunk and flush it to the kernel (module docstring, 'Crash safety').
@@ -584,9 +500,8 @@ class RecorderNode(node_params.SpecParameters, Node):
     def _on_clock(self, msg: ClockMsg) -> None:
         stamp = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
         self._latest_clock_ns = max(self._latest_clock_ns, stamp)
-        self._clocks_written += 1
-        if self._clocks_written % STATUS_EVERY_CLOCKS == 0:
-            self.publish_status()
+        self._clock_seen = True
+        self._clock_ticked()
 
     def publish_status(self) -> None:
         """Publish ``recorder/status`` now (also called by the wall-clock timer)."""
@@ -613,6 +528,12 @@ class RecorderNode(node_params.SpecParameters, Node):
         self._flush_timer.cancel()
         for rec in self._topics.values():
             self.destroy_subscription(rec.subscription)
+        self._writer, held, self._held = writer, self._held, []
+        for rec, raw, received_ns in held:      # no /clock came: at their receive time
+            self._write(rec, raw, received_ns)
+        writer, self._writer = self._writer, None
+        if writer is None:                      # a write error above
+            return
         try:
             close_writer(writer)      # metadata carries the real ROS distro, not 'rosbags'
         except OSError as exc:

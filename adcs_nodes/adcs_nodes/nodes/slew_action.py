@@ -46,7 +46,7 @@ from rclpy.task import Future
 from adcs_msgs.action import Slew
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, AttitudeTarget
 from adcs_nodes.core import attitude
-from adcs_nodes.nodes.convert import quat, stamp_ns, to_quat, to_vec3, vec3
+from adcs_nodes.msgs.fields import quat, stamp_ns, to_quat, to_vec3, vec3
 
 ACTION_NAME = 'adcs/slew'
 FRAMES = ('orbit', 'eci')

@@ -30,26 +30,15 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence
 
 import numpy as np
 from geometry_msgs.msg import TransformStamped
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
-from adcs_nodes.components.base import covariance_to_body  # noqa: F401 (re-export)
+from adcs_nodes.components.base import Mounts
 from adcs_nodes.core import attitude as att
-from adcs_nodes.nodes.convert import quat, to_quat, to_vec3
+from adcs_nodes.msgs.fields import quat, to_quat, to_vec3
+from adcs_nodes.nodes.adapter import QOS_DATA, QOS_LATCHED, QOS_READY
 
-#: tf2_ros ``DynamicBroadcasterQoS`` / ``DynamicListenerQoS``.
-QOS_TF = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                    history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
-#: tf2_ros ``StaticBroadcasterQoS`` / ``StaticListenerQoS`` (latched).
-QOS_TF_STATIC = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                           history=HistoryPolicy.KEEP_LAST,
-                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: A /tf_static reader keeps many messages (tf2's static listener: depth 100): TFMessage has
-#: no key, so with depth 1 the latched mounts of two sensors arriving together overwrote each
-#: other and one mount was never seen (the estimator then waited for it forever).
-QOS_TF_STATIC_READER = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                                  history=HistoryPolicy.KEEP_LAST,
-                                  durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: tf2_ros's QoS: ``/tf``, ``/tf_static`` (latched) and a ``/tf_static`` reader (depth 100)
+QOS_TF, QOS_TF_STATIC, QOS_TF_STATIC_READER = QOS_DATA, QOS_LATCHED, QOS_READY
 
 BODY = 'body'
 BODY_ESTIMATE = 'body_estimate'
@@ -143,16 +132,13 @@ class TfPublisher:
         return self.static or self._subscription_count() > 0
 
 
-class MountTable:
-    """Sensor mounts ``q_body_sensor`` read from ``/tf_static`` (``body -> frame``).
-
-    ``lookup(frame_id)`` gives the rotation of a sample stamped in ``frame_id`` into body axes:
-    identity for ``''`` or ``body``, the latest ``body -> frame_id`` from ``/tf_static``, else
-    ``None`` (no mount known yet: the caller rejects the sample and says why).
-    """
+class MountTable(Mounts):
+    """The sensor mounts read from ``/tf_static`` (``body -> frame``, finite and non-zero
+    ones), looked up by the samples' ``frame_id`` (:class:`Mounts`: identity for ``''`` or
+    ``body``; ``None`` for a mount not known yet: the consumer rejects the sample)."""
 
     def __init__(self, node: Any) -> None:
-        self._mounts: Dict[str, np.ndarray] = {}
+        super().__init__()
         make = getattr(node, 'subscription', None)
         if make is not None:
             make(TFMessage, '/tf_static', self.on_message, QOS_TF_STATIC_READER)
@@ -161,22 +147,16 @@ class MountTable:
                                      QOS_TF_STATIC_READER)
 
     def on_message(self, msg: TFMessage) -> None:
-        """Store every ``body -> X`` rotation of a ``/tf_static`` message (finite ones only)."""
+        """Store every ``body -> X`` rotation of a ``/tf_static`` message."""
         for t in msg.transforms:
             q = quat(t.transform.rotation)
             if t.header.frame_id == BODY and t.child_frame_id and np.all(np.isfinite(q)) \
                     and np.linalg.norm(q) > 0.5:
-                self._mounts[t.child_frame_id] = att.normalize(q)
-
-    def lookup(self, frame_id: str) -> Optional[np.ndarray]:
-        """``q_body_sensor`` of ``frame_id`` (shape (4,), [x, y, z, w]) or ``None``."""
-        if frame_id in ('', BODY):
-            return np.array([0.0, 0.0, 0.0, 1.0])
-        return self._mounts.get(frame_id)
+                self.set(t.child_frame_id, q)
 
     def frames(self) -> List[str]:
         """Sensor frames with a known mount."""
-        return sorted(self._mounts)
+        return sorted(self._q)
 
     def missing(self, expected: List[str]) -> List[str]:
         """The ``expected`` frames whose mount has not arrived yet (for the start handshake:

@@ -1,43 +1,5 @@
-"""``adcs``: the command-line launcher of the ADCS node graph.
-
-Commands
---------
-``adcs run SCENARIO [--record BAG] [--duration S] [--real-time] [--rate F]
-[--engine plain|composed|graph] [--set KEY=VALUE ...] [--report]``
-    Validate the scenario, start its nodes (one process each, all in one process, or the
-    plain FrameLoop without ROS), show progress, stop everything cleanly at the end, on
-    Ctrl-C or when a node dies. ``--rate F`` without ``--real-time``: lockstep paced to at
-    most F x real time (the same series).
-``adcs switch NAME [--run PID]`` / ``adcs status [--run PID] [--watch]``
-    Switch the active controller of a graph started by ``adcs run``, or show its controllers
-    and lockstep health (missed frames per node); ``--watch``: refreshed once a second.
-``adcs fault KIND TARGET [--at S] [--param KEY=VALUE ...] [--run PID]``
-    Inject one fault into a running graph (``sim/inject_fault``), announced on ``sim/faults``
-    like a scenario's; validated as a scenario's (exit 2 with the reason). Not deterministic.
-``adcs list [--dir scenarios]``
-    Scenarios (with their description) and the known nodes.
-``adcs validate SCENARIO``
-    Check a scenario file only (errors name the key and the line).
-``adcs schema``
-    Every scenario key with type, default and meaning (this is ``docs/scenarios.md``).
-``adcs montecarlo SCENARIO --runs N [--jobs J] [--scheduler ADDRESS] [--out DIR]``
-    Dispersed runs (attitude, rate, magnetometer errors, seeds) in parallel or on a Dask
-    cluster; resumable; ``campaign.csv``, ``summary.md``, ``capture_vs_rate.png``.
-``adcs sweep SCENARIO --set KEY=V1,V2,... [--set ...] --runs N [--jobs J] [--out DIR]``
-    One Monte Carlo campaign (plain engine) per point of a parameter grid of scenario keys;
-    resumable; the table of capture, hold and filter convergence per point (``sweep.md``,
-    ``sweep.csv``, ``sweep.png``).
-``adcs replay BAG [--topics T ...] [--rate F] [--time-offset S | --now]``
-    Publish a bag's recorded sensor topics (best effort, original stamps, ``/clock``) as
-    drivers would, to run the flight software without ``sim_node``.
-``adcs export BAG --csv DIR``
-    One CSV per topic, flattened fields, time column ``t`` in seconds.
-``adcs report BAG [--out DIR]``
-    Metrics, PNG plots, ``summary.md`` and ``report.html`` (one self-contained page: timeline
-    of controllers, modes and faults, pointing, wheels, dipole, estimator against the truth).
-
-``adcs slew --to ROLL PITCH YAW [--frame inertial|orbit] [--controller NAME] [--run PID]``
-    Slew a running graph (``adcs/slew`` action): feedback, then settling time, energy, error.
+"""``adcs``: the command-line launcher of the ADCS node graph (every command and option: the
+README, "Commands"; ``adcs COMMAND --help``).
 
 Exit codes: 0 success, 1 run failure (a world node or the recorder died, recorder lagged),
 2 bad input (scenario, arguments, bag, a node refusing its parameters), 3 degraded run (it
@@ -103,12 +65,14 @@ REAL_TIME_KEPT = 0.9
 
 def cmd_run(args) -> int:
     from adcs_nodes.tools.run.launcher import LaunchError, Launcher, pace
+    from adcs_nodes.tools.run.launch_graph import with_duration
     engine = args.engine or ('composed' if args.compose else 'graph')
     try:
         sc = load_scenario(args.scenario)
         if args.set:
             from adcs_nodes.scenario import apply_overrides
             sc = apply_overrides(sc, args.set)
+        sc = with_duration(sc, args.duration)     # a fault after the end: refused up front
         if args.compose and engine != 'composed':
             raise LaunchError(f'--compose means --engine composed, not {engine}')
         rate_factor, max_rate = pace(args.rate, args.real_time)
@@ -119,11 +83,11 @@ def cmd_run(args) -> int:
             from sim_node.engine import EngineError
             from adcs_nodes.tools.run.plain import run_plain
             try:
-                result = run_plain(sc, args.duration, args.record, progress=not args.quiet)
+                result = run_plain(sc, None, args.record, progress=not args.quiet)
             except EngineError as exc:
                 raise LaunchError(str(exc)) from None
         else:
-            launcher = Launcher(sc, duration_s=args.duration, record=args.record,
+            launcher = Launcher(sc, record=args.record,
                                 real_time=args.real_time,
                                 rate_factor=rate_factor, max_rate=max_rate,
                                 compose=engine == 'composed', progress=not args.quiet,
@@ -148,7 +112,7 @@ def cmd_run(args) -> int:
               'their frame were rejected (counted above)'
               + ('; all nodes in one process (--engine composed) keep a faster pace'
                  if engine == 'graph' else ''), file=sys.stderr)
-    if result.bag:
+    if result.bag and os.path.exists(result.bag):      # (only a bag that was written)
         print(f'[adcs] bag: {result.bag}')
     if result.exit_code in (0, 3) and args.report and result.bag:   # degraded: a whole bag
         return cmd_report(argparse.Namespace(bag=result.bag, out=None)) or result.exit_code
@@ -181,52 +145,47 @@ def cmd_validate(args) -> int:
     return 0
 
 
-def cmd_switch(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError, finish, switch
+def _live(command: str, action) -> int:
+    """Run ``action()`` on a running graph (``adcs switch``, ``status``, ``fault``): print its
+    text, or the LiveError (exit 2)."""
+    from adcs_nodes.tools.run.live import LiveError, finish
     try:
-        print(switch(args.controller, args.run))
+        text = action()
     except LiveError as exc:
-        print(f'adcs switch: {exc}', file=sys.stderr)
+        print(f'adcs {command}: {exc}', file=sys.stderr)
         return finish(2)
+    if isinstance(text, int):       # (status --watch: its exit code)
+        return finish(text)
+    print(text)
     return finish(0)
 
 
+def cmd_switch(args) -> int:
+    from adcs_nodes.tools.run.live import switch
+    return _live('switch', lambda: switch(args.controller, args.run))
+
+
 def cmd_slew(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError
     from adcs_nodes.tools.run.slew import slew
     if not all(math.isfinite(v) for v in args.to):
         print(f'adcs slew: --to needs three finite angles [deg], got {args.to}',
               file=sys.stderr)
         return 2
-    try:
-        print(slew(*args.to, frame=args.frame, controller=args.controller,
-                   tolerance_deg=args.tolerance_deg, timeout_s=args.timeout_s, pid=args.run))
-    except LiveError as exc:
-        print(f'adcs slew: {exc}', file=sys.stderr)
-        return 2
-    return 0
+    return _live('slew', lambda: slew(*args.to, frame=args.frame, controller=args.controller,
+                                      tolerance_deg=args.tolerance_deg,
+                                      timeout_s=args.timeout_s, pid=args.run))
 
 
 def cmd_status(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError, finish, status, watch
-    try:
-        if args.watch:
-            return finish(watch(args.run, count=args.count))
-        print(status(args.run))
-    except LiveError as exc:
-        print(f'adcs status: {exc}', file=sys.stderr)
-        return finish(2)
-    return finish(0)
+    from adcs_nodes.tools.run.live import status, watch
+    return _live('status', lambda: watch(args.run, count=args.count) if args.watch
+                 else status(args.run))
 
 
 def cmd_fault(args) -> int:
-    from adcs_nodes.tools.run.live import LiveError, fault, finish, parse_params
-    try:
-        print(fault(args.kind, args.target, args.at, parse_params(args.param), args.run))
-    except LiveError as exc:
-        print(f'adcs fault: {exc}', file=sys.stderr)
-        return finish(2)
-    return finish(0)
+    from adcs_nodes.tools.run.live import fault, parse_params
+    return _live('fault', lambda: fault(args.kind, args.target, args.at,
+                                        parse_params(args.param), args.run))
 
 
 def cmd_schema(args) -> int:
@@ -235,10 +194,26 @@ def cmd_schema(args) -> int:
     return 0
 
 
+def bag_checked(bag: str, command: str) -> bool:
+    """The bag's stored scenario is usable as data (a hostile one: one line, False); a note
+    names the plugins its run used, which are not imported."""
+    from adcs_nodes.tools.bagfile import BagError, bag_scenario, plugin_note
+    try:
+        note = plugin_note(bag, bag_scenario(bag))
+    except BagError as exc:
+        print(f'adcs {command}: {exc}', file=sys.stderr)
+        return False
+    if note:
+        print(f'adcs {command}: note: {note}', file=sys.stderr)
+    return True
+
+
 def cmd_export(args) -> int:
     from adcs_nodes.tools.analyse.export import export_csv
+    if not bag_checked(args.bag, 'export'):
+        return 2
     try:
-        files = export_csv(args.bag, args.csv)
+        files = export_csv(args.bag, args.csv, getattr(args, 'topic', None))
     except (FileNotFoundError, ValueError) as exc:
         print(f'adcs export: {exc}', file=sys.stderr)
         return 2
@@ -251,6 +226,8 @@ def cmd_report(args) -> int:
     from adcs_nodes.tools.analyse.report import make_report
     from adcs_nodes.tools.analyse.reproductions import expectations_for
     out = args.out or os.path.normpath(args.bag.rstrip('/')) + '_report'
+    if not bag_checked(args.bag, 'report'):
+        return 2
     try:
         _, rows = expectations_for(args.bag)
         make_report(args.bag, out, expectations=rows)
@@ -274,8 +251,14 @@ def cmd_report(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog='adcs', description='Run, record and analyse the satellite ADCS node graph.',
-        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split('Exit')[0])
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog='Exit' + __doc__.split('Exit', 1)[1].rstrip('\n"'))
     sub = ap.add_subparsers(dest='command', required=True)
+    # shared argument groups
+    run_pid = argparse.ArgumentParser(add_help=False)
+    run_pid.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
+    a_bag = argparse.ArgumentParser(add_help=False)
+    a_bag.add_argument('bag', help='rosbag2 bag directory (or .mcap file) recorded by adcs run')
 
     p = sub.add_parser('run', help='run a scenario')
     p.add_argument('scenario', help='scenario YAML file (see `adcs list`)')
@@ -313,13 +296,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('scenario')
     p.set_defaults(func=cmd_validate)
 
-    p = sub.add_parser('switch', help='switch the active controller of a running graph')
+    p = sub.add_parser('switch', help='switch the active controller of a running graph',
+                       parents=[run_pid])
     p.add_argument('controller', help='controller name (see `adcs status`)')
-    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_switch)
 
     p = sub.add_parser('slew', help='slew a running graph to an attitude (adcs/slew action) '
-                       'and wait for the result')
+                       'and wait for the result', parents=[run_pid])
     p.add_argument('--to', nargs=3, type=float, required=True, metavar=('ROLL', 'PITCH', 'YAW'),
                    help='target attitude, 3-2-1 Euler angles [deg]')
     p.add_argument('--frame', choices=('inertial', 'orbit'), default='inertial',
@@ -329,11 +312,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help='done below this angle (default: the server\'s, 0.1 deg)')
     p.add_argument('--timeout-s', type=float, default=0.0,
                    help='abort after this much sim time (default: the server\'s, 600 s)')
-    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_slew)
 
-    p = sub.add_parser('status', help='controllers and lockstep health of a running graph')
-    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
+    p = sub.add_parser('status', help='controllers and lockstep health of a running graph',
+                       parents=[run_pid])
     p.add_argument('--watch', action='store_true', help='refresh once a second until the run '
                    'ends (Ctrl-C stops): controller, mode, attitude error, rates, wheel '
                    'momentum, faults, missed frames')
@@ -341,7 +323,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_status)
 
     p = sub.add_parser('fault', help='inject one fault into a running graph (sim/faults '
-                       'announces it; not deterministic: its frame depends on wall time)')
+                       'announces it; not deterministic: its frame depends on wall time)',
+                       parents=[run_pid])
     p.add_argument('kind', help='fault kind (adcs list: dropout, nan, stuck, bias_step, '
                    'noise_burst, wheel_stuck, wheel_torque_lost, coil_open)')
     p.add_argument('target', help='what it strikes: a sensor (e.g. magnetometer), a wheel '
@@ -351,7 +334,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--param', action='append', default=[], metavar='KEY=VALUE',
                    help='a parameter of the kind (YAML value), e.g. duration_s=60 or '
                    'bias=[1e-6,0,0]; repeatable')
-    p.add_argument('--run', type=int, metavar='PID', help='launcher PID when several runs')
     p.set_defaults(func=cmd_fault)
 
     from adcs_nodes.tools import campaigns as montecarlo
@@ -373,13 +355,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('schema', help='print every scenario key (Markdown table)')
     p.set_defaults(func=cmd_schema)
 
-    p = sub.add_parser('export', help='export a bag to CSV files')
-    p.add_argument('bag')
+    p = sub.add_parser('export', help='export a bag to CSV files', parents=[a_bag])
     p.add_argument('--csv', required=True, metavar='DIR', help='output directory')
+    p.add_argument('--topic', action='append', metavar='TOPIC',
+                   help='only this topic (repeatable; default: every topic)')
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser('report', help='metrics, plots and summary of a bag')
-    p.add_argument('bag')
+    p = sub.add_parser('report', help='metrics, plots and summary of a bag', parents=[a_bag])
     p.add_argument('--out', metavar='DIR', help='output directory (default BAG_report)')
     p.set_defaults(func=cmd_report)
     return ap
@@ -387,8 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``adcs`` console script."""
-    # a crash inside a C library (rclpy, Fast DDS) prints where Python was on stderr instead
-    # of ending the command without a word (seen once: `adcs switch` killed by SIGSEGV)
+    # a crash inside a C library (rclpy, Fast DDS) prints where Python was
     try:
         faulthandler.enable()
     except (OSError, ValueError):   # stderr without a file descriptor (captured in tests)
@@ -405,13 +386,9 @@ CTRL_C_COMMANDS = ('status', 'slew', 'switch', 'fault', 'replay')
 
 
 def ctrl_c_stops() -> None:
-    """Python's own SIGINT handling (``KeyboardInterrupt``) where SIGINT was inherited ignored.
-
-    Python keeps an inherited "ignore": bash starts the commands of a script's background job
-    so, and pytest-xdist its workers. ``adcs status --watch`` started so went on after
-    ``kill -INT`` until it was killed (30 s in the switch and slew tests of ``make test``);
-    the node processes already do the same (``nodes/runtime.stop_handler_from_start``).
-    """
+    """Python's own SIGINT handling (``KeyboardInterrupt``) where SIGINT was inherited ignored
+    (bash's background jobs, pytest-xdist workers), as the nodes do
+    (``nodes/runtime.stop_handler_from_start``)."""
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
 

@@ -3,29 +3,31 @@
 
 The equations of motion are :mod:`sim_node.models.dynamics` (rigid body, wheels, flexible
 modes and the orbit in one compiled RK4 kernel); here: the initial state from the first
-environment, the message edge, a malformed command made safe (zero), the environment carried
-along its orbit when it is stamped earlier than the frame, and the wheel driver status.
+environment, the samples of the truth, a malformed command made safe (zero), the environment
+carried along its orbit when it is stamped earlier than the frame, and the wheel driver
+status.
 """
 from __future__ import annotations
 
 from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from std_msgs.msg import Header
 
-from adcs_msgs.msg import AppendageState, AttitudeState, WheelState
-from adcs_nodes.components.base import FrameClock, Log, silent
+from adcs_nodes.components.base import Log, silent
 from adcs_nodes.core import attitude as att
+from adcs_nodes.core import samples as s
 from adcs_nodes.core.lockstep import ZERO, derive_seed, ns_to_seconds
-from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, to_quat, to_vec3, vec3
-from adcs_nodes.nodes.messages import make
+from adcs_nodes.core.samples import all_finite
 from sim_node.faults import ActuatorFaults, Fault
 from sim_node.models.dynamics import ActuatorCommand as Command
 from sim_node.models.dynamics import FrameEnvironment, SpacecraftState, propagate_environment
 from sim_node.models.spacecraft_config import initial_state, spacecraft_from_config
 
-_ZERO3 = (0.0, 0.0, 0.0)
+_ZERO3 = np.zeros(3)
+
+
+def _f(a: Any) -> np.ndarray:
+    return np.array(a, dtype=float)
 
 
 class DynamicsComponent:
@@ -40,24 +42,23 @@ class DynamicsComponent:
         'dynamics/disturbance')``).
     frame_ns, substeps : int
         Frame length and RK4 substeps per frame.
-    clock : FrameClock
     log : Log
     """
 
     def __init__(self, spacecraft_cfg: Dict[str, Any], initial_cfg: Dict[str, Any],
-                 seed: int, frame_ns: int, substeps: int, clock: FrameClock,
-                 log: Log = silent, faults: Sequence[Fault] = ()) -> None:
+                 seed: int, frame_ns: int, substeps: int, log: Log = silent,
+                 faults: Sequence[Fault] = ()) -> None:
         if substeps < 1:
             raise ValueError('substeps must be >= 1')
         self.spacecraft = spacecraft_from_config(
             spacecraft_cfg, seed=derive_seed(seed, 'dynamics/disturbance'))
         self.initial_cfg = initial_cfg
-        self.wheel_names = list(spacecraft_cfg.get('wheel_names', [])) or [
+        wheels = spacecraft_cfg.get('wheels') or []
+        self.wheel_names = [w['name'] for w in wheels] or [
             f'wheel{i}' for i in range(self.spacecraft.n_wheels)]
-        self.wheel_h0 = spacecraft_cfg.get('wheel_h0_Nms')
+        self.wheel_h0 = [w['h0_Nms'] for w in wheels] or None
         self.frame_ns = int(frame_ns)
         self.substeps = int(substeps)
-        self.clock = clock
         self.log = log
         self.state: Optional[SpacecraftState] = None
         self._last_q_orbit_body: Optional[np.ndarray] = None
@@ -73,91 +74,73 @@ class DynamicsComponent:
         self.faults = ActuatorFaults(faults, self.wheel_names)
 
     # ------------------------------------------------------------------ commands
-    def to_command(self, msg: Any) -> Command:
-        """Message -> model command; NaN or a wrong wheel count -> zero command, logged."""
+    def to_command(self, x: s.ActuatorCommand) -> Command:
+        """Sample -> model command; NaN or a wrong wheel count -> zero command, logged."""
         n = self.spacecraft.n_wheels
-        wheel = np.asarray(msg.wheel_torque, dtype=float)
+        wheel = _f(x.wheel_torque_Nm)
         if wheel.size == 0:
             wheel = np.zeros(n)
-        dipole, torque = vec3(msg.dipole_body), vec3(msg.torque_body)
+        dipole, torque = _f(x.dipole_body_Am2), _f(x.torque_body_Nm)
         if wheel.size != n or not all_finite(dipole, torque, wheel):
             self.rejected_commands += 1
-            self.log('warning', f'rejected actuator command from {msg.source!r} (non-finite '
+            self.log('warning', f'rejected actuator command from {x.source!r} (non-finite '
                      f'or {wheel.size} wheel torques for {n} wheels): using zero command')
             return self.spacecraft.zero_command()
         return Command(dipole_body=dipole, wheel_torque=wheel, torque_body=torque)
 
     # ------------------------------------------------------------------ truth of frame k
-    def state_msg(self, t_ns: int, env_msg: Any) -> AttitudeState:
+    def truth(self, t_ns: int, env: s.EnvironmentSample) -> s.AttitudeState:
         """``sim/state`` of frame ``t_ns`` (the state is initialised at the first frame)."""
-        q_eci_orbit = quat(env_msg.q_eci_orbit)
-        omega_orbit_eci_eci = vec3(env_msg.omega_orbit_eci_eci)
         if self.state is None:
-            self.state = initial_state(self.initial_cfg, q_eci_orbit, omega_orbit_eci_eci,
-                                       self.spacecraft, self.wheel_h0)
+            self.state = initial_state(self.initial_cfg, env.q_eci_orbit,
+                                       env.omega_orbit_eci_eci, self.spacecraft, self.wheel_h0)
         st = self.state
         r_body_eci = att.to_matrix(st.q_eci_body).T
-        q_orbit_body = att.multiply(att.conjugate(q_eci_orbit), st.q_eci_body)
+        q_orbit_body = att.multiply(att.conjugate(env.q_eci_orbit), st.q_eci_body)
         if self._last_q_orbit_body is not None and q_orbit_body @ self._last_q_orbit_body < 0:
             q_orbit_body = -q_orbit_body     # keep the published sign continuous in time
         self._last_q_orbit_body = q_orbit_body
-        return make(AttitudeState, header=make(Header, stamp=self.clock.stamp(t_ns),
-                                               frame_id='body'),
-                    q_eci_body=to_quat(st.q_eci_body), q_orbit_body=to_quat(q_orbit_body),
-                    omega_body_eci_body=to_vec3(st.omega_body_eci_body),
-                    omega_body_orbit_body=to_vec3(st.omega_body_eci_body
-                                                  - r_body_eci @ omega_orbit_eci_eci),
-                    covariance=np.zeros(36))     # truth: no covariance
+        w = _f(st.omega_body_eci_body)
+        return s.AttitudeState(t_ns, _f(st.q_eci_body), q_orbit_body, w,
+                               w - r_body_eci @ env.omega_orbit_eci_eci,
+                               np.zeros(36))     # truth: no covariance
 
-    def faults_msg(self, t_ns: int) -> Optional[DiagnosticArray]:
+    def fault_events(self, t_ns: int) -> Optional[s.FaultEvents]:
         """``sim/faults`` of frame ``t_ns``: the faults that start or end in it (None: none)."""
         events = self.faults.events(t_ns, self.frame_ns)
         if not events:
             return None
-        msg = DiagnosticArray()
-        msg.header.stamp = self.clock.stamp(t_ns)
+        out = []
         for e in events:
             f = e['fault']
-            st = DiagnosticStatus()
-            st.level = DiagnosticStatus.WARN if e['active'] else DiagnosticStatus.OK
-            st.name = f'fault/{f.index}'
-            st.hardware_id = f.target
-            st.message = ('active: ' if e['active'] else 'cleared: ') + f.describe()
-            st.values = [KeyValue(key='kind', value=f.kind),
-                         KeyValue(key='target', value=f.target),
-                         *(KeyValue(key=k, value=str(v)) for k, v in sorted(f.params.items()))]
-            msg.status.append(st)
+            out.append(s.FaultEvent(f.index, bool(e['active']), f.kind, f.target, f.describe(),
+                                    tuple((k, str(v)) for k, v in sorted(f.params.items()))))
             self.log('warning' if e['active'] else 'info',
-                     f't={t_ns / 1e9:g} s: fault {st.message}')
-        return msg
+                     f't={t_ns / 1e9:g} s: fault ' + ('active: ' if e['active'] else 'cleared: ')
+                     + f.describe())
+        return s.FaultEvents(t_ns, tuple(out))
 
-    def wheels_msg(self, header: Any) -> WheelState:
+    def wheels(self, t_ns: int) -> s.WheelState:
         """``sim/wheels`` of the current state (momentum, speed, applied torque)."""
         st = self.state
-        h = np.asarray(st.h_wheels, dtype=float)
+        h = _f(st.h_wheels)
         wheels = self.spacecraft.wheels
+        names = tuple(self.wheel_names)
         if wheels is None:
-            return make(WheelState, header=header, names=self.wheel_names, momentum=h.tolist(),
-                        speed=[], torque=[], h_wheels_body=to_vec3(_ZERO3))
-        return make(WheelState, header=header, names=self.wheel_names, momentum=h.tolist(),
-                    speed=wheels.speed(h, st.omega_body_eci_body).tolist(),
-                    torque=np.asarray(self.applied_wheel_torque, dtype=float).tolist(),
-                    h_wheels_body=to_vec3(wheels.h_body(h)))
+            return s.WheelState(t_ns, names, h, np.zeros(0), np.zeros(0), _ZERO3)
+        return s.WheelState(t_ns, names, h, _f(wheels.speed(h, st.omega_body_eci_body)),
+                            _f(self.applied_wheel_torque), _f(wheels.h_body(h)))
 
-    def appendages_msg(self, header: Any) -> Optional[AppendageState]:
+    def appendages(self, t_ns: int) -> Optional[s.AppendageState]:
         """``sim/appendages`` (modal coordinates) of a flexible spacecraft, else None."""
         if not self.spacecraft.n_modes:
             return None
         st = self.state
-        a = AppendageState()
-        a.header = header
-        a.eta = np.asarray(st.eta, dtype=float).tolist()
-        a.eta_dot = np.asarray(st.eta_dot, dtype=float).tolist()
-        a.frequency_hz = self.spacecraft.flexible.frequencies_hz.tolist()
-        return a
+        return s.AppendageState(t_ns, _f(st.eta), _f(st.eta_dot),
+                                _f(self.spacecraft.flexible.frequencies_hz))
 
     # ------------------------------------------------------------------ t_k -> t_k+1
-    def step(self, t_ns: int, env_msg: Any, cmd: Any) -> None:
+    def step(self, t_ns: int, env_sample: s.EnvironmentSample, cmd: Any) -> None:
         """Zero-order-hold the command and integrate from t_k to t_k+1.
 
         ``cmd``: a model command, :data:`~adcs_nodes.core.lockstep.ZERO` (timeout or dead
@@ -167,11 +150,11 @@ class DynamicsComponent:
             self.last_cmd = self.spacecraft.zero_command()
         elif cmd is not None:
             self.last_cmd = cmd
-        env = FrameEnvironment(r_eci=vec3(env_msg.r_eci), v_eci=vec3(env_msg.v_eci),
-                               b_eci=vec3(env_msg.b_eci), b_dot_eci=vec3(env_msg.b_dot_eci))
+        env = FrameEnvironment(r_eci=env_sample.r_eci_m, v_eci=env_sample.v_eci_m_s,
+                               b_eci=env_sample.b_eci_T, b_dot_eci=env_sample.b_dot_eci_T_s)
         # environment stamped earlier (timeout, real-time mode): carry it along its orbit and
         # field line; such a sample is no base for the model's in-frame field cubic (E8)
-        dt_env = ns_to_seconds(t_ns - self.clock.elapsed_ns(stamp_ns(env_msg.header.stamp)))
+        dt_env = ns_to_seconds(t_ns - env_sample.t_ns)
         if dt_env:
             env = propagate_environment(env, dt_env, self.spacecraft.mu)
             self.spacecraft.reset_field_history()

@@ -7,9 +7,8 @@ Magnetorquers (paper 000, eqs. (4)-(6))::
     tau_body = m_body x b_body                                                          (A1)
     m_i      = clip(m_cmd_i, -m_max_i, +m_max_i),  i = x, y, z                           (A2)
 
-(A2) is what the *hardware* does: each coil driver saturates on its own axis. Scaling the
-whole dipole by ``sigma = 1 / max_i(|m_i| / m_max_i)`` to keep its direction (paper 000,
-eq. (31)) is the *controller's* job; a controller that does it never reaches (A2).
+(A2) is the hardware (each coil saturates on its own axis); keeping the dipole's direction by
+scaling (paper 000 eq. (31)) is the controller's job.
 
 Reaction wheels (paper 001, eq. (6); ``a_k`` = unit spin axis of wheel k in body axes, the
 columns of ``A = [a_1 ... a_n]`` (3, n))::
@@ -19,16 +18,16 @@ columns of ``A = [a_1 ... a_n]`` (3, n))::
     tau_body   = -A tau_w                  reaction of the motors on the body            (W3)
     tau_w,k    = clip(tau_cmd,k, -tau_max,k, +tau_max,k)                                  (W4)
 
-``h_w`` is the wheel's angular momentum about its own axis in inertial space,
-``J_k (Omega_k + a_k . omega_body_eci_body)``; with it (W2) holds exactly and the rotor's axial
-inertia is not part of the spacecraft inertia. (W4) is followed by the momentum limit: a
-torque that would drive ``|h_w,k|`` past ``h_max,k`` is cut to zero at the limit, or, when the
-hold time ``dt`` is known, reduced so that ``h_w,k + tau_w,k dt`` lands on the limit;
-:meth:`WheelCluster.saturation_status` says which wheels are torque- or momentum-limited.
+``h_w`` is the wheel's inertial axial momentum ``J_k (Omega_k + a_k . omega_body_eci_body)``,
+so (W2) is exact and the rotor's axial inertia is not in the spacecraft inertia. After (W4) a
+torque that would drive ``|h_w,k|`` past ``h_max,k`` within the hold time ``dt`` is reduced so
+that ``h_w,k + tau_w,k dt`` lands on the limit (without ``dt``: cut to zero at the limit).
 
-Momentum control error (paper 001: 0.01 N m s, 3-sigma), :class:`WheelMomentumError`::
+Momentum control error (paper 001: 0.01 N m s, 3-sigma), redrawn every period ``T``
+(``j = floor(t / T)``), not accumulated, realised as a torque held over period ``j``, so
+``h_w(j T) = h_cmd(j T) + e_{j-1}``; ``e_j`` from ``default_rng([seed, j])``::
 
-    delta_tau_j = (e_j - e_{j-1}) / T,   e_j ~ N(0, sigma^2) per wheel and period j       (W5)
+    delta_tau_j = (e_j - e_{j-1}) / T,   e_j ~ N(0, sigma^2),  e_{-1} = 0                 (W5)
 """
 from __future__ import annotations
 
@@ -59,35 +58,15 @@ def _limits(value, name: str, shape: tuple) -> np.ndarray:
 
 
 class Magnetorquer:
-    """Three orthogonal magnetorquers along the body axes, saturating per axis (A2).
-
-    Parameters
-    ----------
-    max_dipole_Am2 : array_like, shape (3,) or scalar
-        Largest dipole magnitude of each coil [A m^2], body x, y, z; ``>= 0``.
-
-    Raises
-    ------
-    ValueError
-        If a limit is negative, NaN or of the wrong shape.
-    """
+    """Three orthogonal magnetorquers along the body axes, saturating per axis (A2):
+    ``max_dipole_Am2`` (3,) or scalar [A m^2] >= 0 (``ValueError`` if not)."""
 
     def __init__(self, max_dipole_Am2) -> None:
         self.max_dipole_Am2 = _limits(max_dipole_Am2, 'max_dipole_Am2', (3,))
 
     def apply(self, dipole_cmd) -> np.ndarray:
-        """Dipole the coils produce for a requested dipole (per-axis clipping, A2).
-
-        Parameters
-        ----------
-        dipole_cmd : array_like, shape (3,)
-            Requested dipole, body axes [A m^2]; must be finite.
-
-        Returns
-        -------
-        numpy.ndarray, shape (3,)
-            Applied dipole ``m_body``, body axes [A m^2].
-        """
+        """Applied dipole ``m_body`` (3,) [A m^2] of the finite request ``dipole_cmd`` (3,),
+        body axes (A2)."""
         m = _vector(dipole_cmd, 'dipole_cmd', (3,))
         if not np.all(np.isfinite(m)):
             raise ValueError(f'dipole_cmd is not finite: {m}')
@@ -95,15 +74,8 @@ class Magnetorquer:
 
     @staticmethod
     def torque(dipole_body, b_body) -> np.ndarray:
-        """Magnetic torque ``tau_body = m_body x b_body`` (A1) [N m], body axes.
-
-        Parameters
-        ----------
-        dipole_body : array_like, shape (3,)
-            Dipole [A m^2], body axes (already saturated).
-        b_body : array_like, shape (3,)
-            Geomagnetic field [T], body axes.
-        """
+        """``tau_body = m_body x b_body`` (A1) [N m] of the dipole [A m^2] and field [T], all
+        (3,) body axes."""
         m = _vector(dipole_body, 'dipole_body', (3,))
         b = _vector(b_body, 'b_body', (3,))
         return np.cross(m, b)
@@ -112,23 +84,10 @@ class Magnetorquer:
 class WheelCluster:
     """Reaction wheels with arbitrary spin axes, torque and momentum limits (W1)-(W4).
 
-    Parameters
-    ----------
-    axes_body : array_like, shape (n, 3)
-        Spin axis of each wheel in body axes; normalised here. Positive wheel torque and
-        momentum are along this axis.
-    max_torque : array_like, shape (n,) or scalar
-        Largest motor torque magnitude per wheel [N m], ``>= 0``.
-    max_momentum : array_like, shape (n,) or scalar
-        Largest wheel momentum magnitude per wheel [N m s], ``>= 0`` (``inf``: no limit).
-    inertia : array_like, shape (n,) or scalar
-        Rotor axial inertia per wheel [kg m^2], ``> 0``; used only for the wheel speed.
-
-    Raises
-    ------
-    ValueError
-        If there is no wheel, an axis is (near) zero or not finite, a limit is negative or
-        NaN, an inertia is not positive and finite, or the shapes disagree.
+    ``axes_body`` (n, 3): spin axes in body axes (normalised here; positive torque and momentum
+    along them); per wheel, (n,) or scalar: ``max_torque`` [N m] >= 0, ``max_momentum``
+    [N m s] >= 0 (``inf``: none), rotor ``inertia`` [kg m^2] > 0 (for the speed only).
+    ``ValueError`` on no wheel, a zero axis, a bad limit or inertia, or disagreeing shapes.
     """
 
     def __init__(self, axes_body, max_torque, max_momentum, inertia) -> None:
@@ -165,24 +124,9 @@ class WheelCluster:
         return arr
 
     def apply(self, torque_cmd, h_wheels, dt: float | None = None) -> np.ndarray:
-        """Motor torque actually applied to each wheel, (W4) and the momentum limit.
-
-        Parameters
-        ----------
-        torque_cmd : array_like, shape (n,)
-            Requested motor torque per wheel [N m].
-        h_wheels : array_like, shape (n,)
-            Wheel momentum about each spin axis [N m s] at the start of the hold.
-        dt : float, optional
-            Hold time [s] of the torque. Without it, the torque of a wheel at (or past) its
-            momentum limit is zero when it pushes further. With it, the torque is also reduced
-            so that ``h_wheels + tau dt`` stays inside ``[-max_momentum, max_momentum]``.
-
-        Returns
-        -------
-        numpy.ndarray, shape (n,)
-            Applied motor torque per wheel [N m]; the body feels ``-A tau`` (W3).
-        """
+        """Applied motor torque (n,) [N m] per wheel, (W4) and the momentum limit over the
+        hold time ``dt`` [s] (module docstring), of ``torque_cmd`` (n,) [N m] and the wheel
+        momenta ``h_wheels`` (n,) [N m s] at the start of the hold."""
         tau = np.clip(self._per_wheel(torque_cmd, 'torque_cmd'), -self.max_torque,
                       self.max_torque)
         h = self._per_wheel(h_wheels, 'h_wheels')
@@ -197,15 +141,8 @@ class WheelCluster:
         return np.clip(tau, lower, upper)
 
     def saturation_status(self, torque_cmd, h_wheels, dt: float | None = None) -> dict:
-        """Which wheels :meth:`apply` limits, the status a wheel driver reports.
-
-        Returns
-        -------
-        dict of numpy.ndarray, shape (n,), bool
-            ``torque_limited``: the command exceeds the torque limit (W4);
-            ``momentum_limited``: the torque is cut by the momentum limit (the wheel is at, or
-            would pass within ``dt``, its ``max_momentum``).
-        """
+        """Which wheels :meth:`apply` limits: ``{'torque_limited', 'momentum_limited'}``, each
+        (n,) bool (W4; the momentum limit), as a wheel driver reports."""
         cmd = self._per_wheel(torque_cmd, 'torque_cmd')
         clipped = np.clip(cmd, -self.max_torque, self.max_torque)
         applied = self.apply(cmd, h_wheels, dt)
@@ -221,17 +158,8 @@ class WheelCluster:
         return -(self.A @ self._per_wheel(wheel_torque, 'wheel_torque'))
 
     def speed(self, h_wheels, omega_body_eci_body=None) -> np.ndarray:
-        """Wheel speed [rad/s], shape (n,).
-
-        Parameters
-        ----------
-        h_wheels : array_like, shape (n,)
-            Wheel momentum about each spin axis [N m s].
-        omega_body_eci_body : array_like, shape (3,), optional
-            Body rate [rad/s]. Given, the result is the speed relative to the body,
-            ``h / J - a . omega``; omitted, it is ``h / J`` (the inertial spin rate, equal to the
-            relative speed up to the body rate, which is small against a wheel's).
-        """
+        """Wheel speed (n,) [rad/s] of ``h_wheels`` (n,) [N m s]: ``h / J - a . omega``
+        relative to the body given ``omega_body_eci_body`` (3,) [rad/s], else ``h / J``."""
         spin = self._per_wheel(h_wheels, 'h_wheels') / self.inertia
         if omega_body_eci_body is None:
             return spin
@@ -240,29 +168,8 @@ class WheelCluster:
 
 
 class WheelMomentumError:
-    """Seeded momentum control error of a wheel cluster (paper 001: 0.01 N m s, 3-sigma).
-
-    The wheel momentum deviates from the commanded integral by ``e_j ~ N(0, sigma^2)`` per
-    wheel, redrawn every period ``T`` (index ``j = floor(t / T)``); it does not accumulate.
-    Realised as an extra motor torque held over period ``j``::
-
-        delta_tau_j = (e_j - e_{j-1}) / T,     e_{-1} = 0                                  (W5)
-
-    so ``h_w(j T) = h_cmd(j T) + e_{j-1}`` exactly. ``e_j`` comes from
-    ``numpy.random.default_rng([seed, j])`` (a pure function of the seed and the period, as
-    :class:`~sim_node.models.disturbances.RandomTorque`).
-
-    Parameters
-    ----------
-    std_Nms : float or array_like, shape (n,)
-        ``sigma`` per wheel [N m s], ``>= 0`` (paper 001: 0.01 / 3).
-    period_s : float
-        ``T`` [s], ``> 0`` (the control period).
-    n : int
-        Number of wheels.
-    seed : int
-        Non-negative seed.
-    """
+    """Seeded momentum control error (W5) of ``n`` wheels: ``std_Nms`` ``sigma`` (n,) or scalar
+    [N m s] >= 0 (paper 001: 0.01 / 3), ``period_s`` ``T`` [s] > 0, ``seed`` >= 0."""
 
     def __init__(self, std_Nms, period_s: float, n: int, seed: int) -> None:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:

@@ -2,15 +2,11 @@
 
 Equations
 ---------
-Gravity gradient of a central Newtonian field (paper 000, eq. (3), written for any orbit
-instead of ``3 w0^2 e_R x I e_R``, which is its circular-orbit form since
-``w0^2 = mu / |r|^3``)::
+Gravity gradient of a central field (paper 000 eq. (3), ``3 w0^2 e_R x I e_R`` on a circular
+orbit, written for any orbit)::
 
     r_hat_body = R(q_eci_body)^T r_eci / |r_eci|
     tau_gg_body = 3 mu / |r_eci|^3  r_hat_body x (I r_hat_body)                          (D1)
-
-It vanishes when a principal axis of ``I`` points along ``r`` (the gravity-gradient
-equilibria, paper 000 section 2).
 
 Residual torques, body axes (paper 000 section 4: constant ``M_r`` and a Gaussian torque of
 std up to 1e-5 N m)::
@@ -18,26 +14,13 @@ std up to 1e-5 N m)::
     tau_const_body(t) = M_r                                                              (D2)
     tau_rand_body(t)  = sigma * n_j,  j = floor(t / T),  n_j ~ N(0, I3)                  (D3)
 
-(D3) is a zero-order hold redrawn every period ``T``. ``n_j`` comes from
-``numpy.random.default_rng([seed, j])``: it depends only on ``(seed, j)``, never on how often
-or in which order the torque is queried, so a trajectory does not depend on the number of
-integrator substeps. The spacecraft model samples every disturbance once per RK4 substep, at
-the substep midpoint, and holds it over the substep; with ``T`` a multiple of the substep this
-is exact for (D3).
-
-Drawing ``n_j`` with ``default_rng([seed, key])`` costs about 8 us (most of it building the
-``SeedSequence`` and ``PCG64``), 20 times per frame at the paper's 0.1 s period. The same bits
-come from a compiled PCG64: :func:`pcg64_seed_words` is numpy's ``SeedSequence`` hash
-(``mix_entropy`` with pool size 4, then ``generate_state(4, uint64)`` as eight 32-bit words;
-numpy ``bit_generator.pyx``), :func:`pcg64_seeded` applies PCG64's seeding
-(``pcg_setseq_128_srandom_r``: ``inc = 2 initseq + 1``, ``s = (inc + initstate) a + inc`` mod
-2^128, in two 64-bit words), :func:`pcg64_next64` is PCG64's step and XSL-RR output, and
-:func:`pcg64_normal` numpy's ziggurat ``random_standard_normal`` (``distributions.c``, with its
-tables as numba carries them for its own ``Generator``). :meth:`RandomTorque.add_to` fills a
-frame's substeps in one compiled call (about 1 us a draw instead of 8).
-``tests/unit/test_random_draw.py`` checks every bit against ``default_rng`` (both ziggurat
-rejection paths included); without numba the draw sets the state of one reused numpy
-``PCG64`` instead (same bits, slower).
+(D3) is a zero-order hold redrawn every period ``T``; ``n_j`` is
+``default_rng([seed, j]).standard_normal(3)``, a function of ``(seed, j)`` only, so a
+trajectory does not depend on the number of substeps. The draw is a compiled copy of numpy's
+``SeedSequence`` hash (:func:`pcg64_seed_words`, ``bit_generator.pyx``), PCG64 seeding and
+XSL-RR output (:func:`pcg64_seeded`, :func:`pcg64_next64`) and ziggurat
+``random_standard_normal`` (:func:`pcg64_normal`, ``distributions.c``): the same bits as
+``default_rng`` (``tests/unit/test_random_draw.py``), about 1 us a draw instead of 8.
 """
 from __future__ import annotations
 
@@ -48,8 +31,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.kernels import jit
 from adcs_nodes.core.orbit import MU_EARTH  # one value for the whole project
-from sim_node.models.kernels import njit
 
 _INDEX_TOL = 1e-9   # [periods]: t = j T minus a rounding error still belongs to period j
 _NO_INDEX = -2**62  # no period drawn yet
@@ -64,19 +47,8 @@ class Disturbance(Protocol):
 
 
 def check_inertia(inertia, name: str = 'inertia') -> np.ndarray:
-    """Validate a rigid-body inertia matrix and return it as a (3, 3) float array.
-
-    Parameters
-    ----------
-    inertia : array_like, shape (3, 3)
-        Inertia about the centre of mass, body axes [kg m^2].
-
-    Raises
-    ------
-    ValueError
-        If it is not finite, not symmetric (relative 1e-9), not positive definite, or its
-        principal moments break the triangle inequality ``I1 + I2 >= I3`` of a real body.
-    """
+    """The inertia (3, 3) [kg m^2], body axes, as a float array; ``ValueError`` unless finite,
+    symmetric (relative 1e-9), positive definite, with ``I1 + I2 >= I3``."""
     m = np.array(inertia, dtype=float)
     if m.shape != (3, 3):
         raise ValueError(f'{name} must have shape (3, 3), got {m.shape}')
@@ -96,24 +68,8 @@ def check_inertia(inertia, name: str = 'inertia') -> np.ndarray:
 
 
 def gravity_gradient_torque(q_eci_body, r_eci, inertia, mu: float = MU_EARTH) -> np.ndarray:
-    """Gravity-gradient torque (D1) [N m], body axes.
-
-    Parameters
-    ----------
-    q_eci_body : array_like, shape (4,)
-        Attitude, scalar last; rotates body components into ECI.
-    r_eci : array_like, shape (3,)
-        Position of the centre of mass, ECI [m]; non-zero.
-    inertia : array_like, shape (3, 3)
-        Inertia, body axes [kg m^2].
-    mu : float
-        Gravitational parameter [m^3/s^2].
-
-    Returns
-    -------
-    numpy.ndarray, shape (3,)
-        ``tau_gg_body`` [N m].
-    """
+    """``tau_gg_body`` (3,) [N m], (D1), of ``q_eci_body`` (4,), the non-zero position
+    ``r_eci`` (3,) [m], ECI, the inertia (3, 3) [kg m^2], body axes, and ``mu`` [m^3/s^2]."""
     inertia = check_inertia(inertia)
     r = np.array(r_eci, dtype=float)
     if r.shape != (3,) or not np.all(np.isfinite(r)):
@@ -128,13 +84,7 @@ def gravity_gradient_torque(q_eci_body, r_eci, inertia, mu: float = MU_EARTH) ->
 
 
 class ConstantTorque:
-    """Constant body-fixed disturbance torque (D2).
-
-    Parameters
-    ----------
-    torque_body : array_like, shape (3,)
-        Torque [N m], body axes; finite.
-    """
+    """Constant body-fixed disturbance torque (D2), ``torque_body`` (3,) [N m]."""
 
     def __init__(self, torque_body) -> None:
         tau = np.array(torque_body, dtype=float)
@@ -148,17 +98,8 @@ class ConstantTorque:
 
 
 class RandomTorque:
-    """Gaussian body-fixed disturbance torque, zero-order hold redrawn every period (D3).
-
-    Parameters
-    ----------
-    std_Nm : float or array_like, shape (3,)
-        Standard deviation per body axis [N m], ``>= 0``.
-    period_s : float
-        Hold period ``T`` [s], ``> 0``.
-    seed : int
-        Non-negative seed; with the period index it fully determines every draw.
-    """
+    """Gaussian body-fixed torque held over each period (D3): ``std_Nm`` (float or (3,))
+    [N m] >= 0, ``period_s`` ``T`` [s] > 0, ``seed`` >= 0."""
 
     def __init__(self, std_Nm, period_s: float, seed: int) -> None:
         std = np.array(std_Nm, dtype=float)
@@ -180,12 +121,8 @@ class RandomTorque:
         return math.floor(t / self.period_s + _INDEX_TOL)
 
     def draw(self, j: int) -> np.ndarray:
-        """Torque of period ``j`` [N m], body axes, shape (3,); a pure function of (seed, j).
-
-        ``std_Nm * default_rng([seed, key]).standard_normal(3)`` with ``key = 2 j`` (``j >=
-        0``) or ``-2 j - 1``, computed on one reused ``PCG64`` (module docstring).
-        """
-        # SeedSequence entropy must be non-negative: map ..., -2, -1, 0, 1, ... one-to-one.
+        """Torque (3,) [N m] of period ``j``: ``std default_rng([seed, key]).standard_normal(3)``,
+        ``key = 2 j`` for ``j >= 0``, else ``-2 j - 1`` (the entropy must be >= 0)."""
         key = 2 * j if j >= 0 else -2 * j - 1
         return self.std_Nm * standard_normal3(self.seed, key)
 
@@ -200,7 +137,7 @@ class RandomTorque:
     def add_to(self, table: np.ndarray, t: float, h: float) -> None:
         """Add the torque at each substep midpoint ``t + i h + h/2`` to row ``i`` of ``table``
         (substeps, 3) [N m]: ``table[i] += torque(t + i h + 0.5 h)``, the same bits."""
-        if _COMPILED and self.seed < 2**64:
+        if self.seed < 2**64 and _compiled():
             last = _NO_INDEX if self._last_index is None else self._last_index
             self._last_index = random_torque_rows(_U(self.seed), self.std_Nm, self.period_s,
                                                   float(t), float(h), last, self._last_value,
@@ -215,23 +152,11 @@ _PCG64_MULT = (2549297995355413924 << 64) + 4865540595714422341   # PCG_DEFAULT_
 _LOCAL = threading.local()            # one reseeded PCG64 per thread (module docstring)
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_seed_words(ent, n):
-    """``SeedSequence(entropy).generate_state(4, np.uint64)`` as eight 32-bit words.
-
-    Parameters
-    ----------
-    ent : numpy.ndarray, shape (4,), int64
-        The entropy as 32-bit words (``_coerce_to_uint32_array``: each integer of the entropy
-        list split into words, low first; ``0`` is one word), zero padded.
-    n : int
-        Number of entropy words, 1 to 4.
-
-    Returns
-    -------
-    numpy.ndarray, shape (8,), int64
-        Words ``w``: 64-bit word ``k`` is ``w[2k] + 2**32 w[2k + 1]``.
-    """
+    """``SeedSequence(entropy).generate_state(4, np.uint64)`` as eight 32-bit words (int64
+    (8,); 64-bit word ``k`` is ``w[2k] + 2**32 w[2k + 1]``) of the ``n`` (1 to 4) entropy
+    words ``ent`` (4,) (each integer split into 32-bit words, low first, zero padded)."""
     m32 = 0xFFFFFFFF
     pool = np.zeros(4, np.int64)
     h = 0x43b0d7e5                       # INIT_A
@@ -268,7 +193,7 @@ def standard_normal3(seed: int, key: int) -> np.ndarray:
     """``numpy.random.default_rng([seed, key]).standard_normal(3)``, bit for bit, shape (3,)."""
     if not 0 <= seed < 2**64 or not 0 <= key < 2**64:
         return np.random.default_rng([seed, key]).standard_normal(3)
-    if _COMPILED:
+    if _compiled():
         return pcg64_normal3(np.uint64(seed), np.uint64(key))
     ent = np.zeros(4, np.int64)
     n = 0
@@ -295,19 +220,31 @@ def standard_normal3(seed: int, key: int) -> np.ndarray:
 # uint64 words throughout (numba types a mix of signed and unsigned integers as float)
 _U = np.uint64
 _MULT_HI, _MULT_LO = _U(_PCG64_MULT >> 64), _U(_PCG64_MULT & (2**64 - 1))
-try:                     # numpy's ziggurat tables (ziggurat_constants.h), as numba carries them
-    from numba.np.random import _constants as _zig
-    _KI = np.asarray(_zig.ki_double, dtype=np.uint64)
-    _WI = np.asarray(_zig.wi_double, dtype=np.float64)
-    _FI = np.asarray(_zig.fi_double, dtype=np.float64)
-    _NOR_R, _NOR_INV_R = float(_zig.ziggurat_nor_r), float(_zig.ziggurat_nor_inv_r)
-    from numba import config as _numba_config
-    _COMPILED = not _numba_config.DISABLE_JIT
-except ImportError:  # pragma: no cover - numba is pinned
-    _COMPILED = False
+#: numpy's ziggurat tables (ziggurat_constants.h) as numba carries them, loaded with numba by
+#: :func:`_compiled` (the kernels below read them when they compile)
+_KI = _WI = _FI = None
+_NOR_R = _NOR_INV_R = 0.0
+_COMPILED: list = []
 
 
-@njit(cache=True)
+def _compiled() -> bool:
+    """True when the draw runs compiled (numba there, its JIT not disabled)."""
+    global _KI, _WI, _FI, _NOR_R, _NOR_INV_R
+    if not _COMPILED:
+        try:
+            from numba import config
+            from numba.np.random import _constants as z
+        except ImportError:  # pragma: no cover - numba is pinned
+            config = None
+        else:
+            _KI, _WI, _FI = (np.asarray(z.ki_double, dtype=np.uint64),
+                             np.asarray(z.wi_double, dtype=float), np.asarray(z.fi_double))
+            _NOR_R, _NOR_INV_R = float(z.ziggurat_nor_r), float(z.ziggurat_nor_inv_r)
+        _COMPILED.append(config is not None and not config.DISABLE_JIT)
+    return _COMPILED[0]
+
+
+@jit(loads_numba=True)
 def _mulhi64(a, b):
     """High 64 bits of the 128-bit product of two uint64."""
     m32, s32 = _U(0xFFFFFFFF), _U(32)
@@ -318,7 +255,7 @@ def _mulhi64(a, b):
     return (hi_lo >> s32) + (cross >> s32) + a_hi * b_hi
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def _pcg64_step(st):
     """``state = state a + inc`` mod 2^128; ``st = [state_hi, state_lo, inc_hi, inc_lo]``."""
     hi, lo = st[0], st[1]
@@ -329,7 +266,7 @@ def _pcg64_step(st):
     st[1] = n_lo
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_seeded(seed, key):
     """PCG64 state ``[state_hi, state_lo, inc_hi, inc_lo]`` (uint64) of ``default_rng([seed,
     key])``, ``seed``, ``key`` uint64."""
@@ -354,7 +291,7 @@ def pcg64_seeded(seed, key):
     return st
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_next64(st):
     """PCG64's next uint64 (``pcg_setseq_128_xsl_rr_64_random_r``: step, then XSL-RR)."""
     _pcg64_step(st)
@@ -363,12 +300,12 @@ def pcg64_next64(st):
     return (v >> rot) | (v << ((_U(64) - rot) & _U(63)))
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def _next_double(st):
     return float(pcg64_next64(st) >> _U(11)) * (1.0 / 9007199254740992.0)
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_normal(st):
     """numpy's ``random_standard_normal`` (ziggurat, 256 layers) on the PCG64 state ``st``."""
     while True:
@@ -391,7 +328,7 @@ def pcg64_normal(st):
             return x
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def pcg64_normal3(seed, key):
     """``default_rng([seed, key]).standard_normal(3)`` (``seed``, ``key`` uint64)."""
     st = pcg64_seeded(seed, key)
@@ -401,7 +338,7 @@ def pcg64_normal3(seed, key):
     return out
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def random_torque_rows(seed, std, period, t, h, last, value, table):
     """(D3) at the substep midpoints added to ``table`` (substeps, 3), as
     :meth:`RandomTorque.torque` gives it: ``j = floor(t_mid / T + tol)``, ``value = std n_j``
@@ -435,21 +372,8 @@ class HarmonicTorque:
 
         tau_i(t) = a_i sin(w t + phi_i),   phi_i ~ U[0, 2 pi) from default_rng(seed)        (D4)
 
-    Paper 001 (Sec. 6) gives only magnitudes: gravity gradient 1e-5, aerodynamic 1e-6, solar
-    pressure 1e-5 N m. ASSUMPTION (digest section 6): gravity gradient at ``2 w0``, aero and
-    solar at ``w0`` (see :func:`paper001_disturbances`). ``w = 0`` gives a constant
-    ``a_i sin(phi_i)``.
-
-    Parameters
-    ----------
-    amplitude_Nm : float or array_like, shape (3,)
-        ``a`` per body axis [N m], ``>= 0``.
-    omega_rad_s : float
-        Angular frequency ``w`` [rad/s], ``>= 0``.
-    seed : int
-        Non-negative seed of the phases.
-    phase_rad : array_like, shape (3,), optional
-        Fixed phases instead of seeded ones [rad].
+    ``amplitude_Nm`` ``a`` (float or (3,)) [N m] >= 0, ``omega_rad_s`` ``w`` >= 0, ``seed``
+    >= 0, or fixed ``phase_rad`` (3,) [rad].
     """
 
     def __init__(self, amplitude_Nm, omega_rad_s: float, seed: int = 0,
@@ -478,20 +402,9 @@ class PeriodicPulseTorque:
 
         tau(t) = s o a  if (t - t_start) mod T < d  and t >= t_start, else 0               (D5)
 
-    ``s`` in {-1, +1}^3: per-axis signs drawn from ``default_rng(seed)`` unless given.
-
-    Parameters
-    ----------
-    amplitude_Nm : float or array_like, shape (3,)
-        ``a`` per body axis [N m], ``>= 0``.
-    period_s, duration_s : float
-        ``T > 0`` and ``0 <= d <= T`` [s]; ``d = T`` is a constant torque.
-    start_s : float
-        First switch-on [s].
-    seed : int
-        Non-negative seed of the signs.
-    signs : array_like, shape (3,), optional
-        Fixed signs (+-1) instead of seeded ones.
+    ``amplitude_Nm`` ``a`` (float or (3,)) [N m] >= 0, ``period_s`` ``T > 0``, ``duration_s``
+    ``0 <= d <= T``, ``start_s`` [s]; per-axis signs ``s`` in {-1, +1}^3 from
+    ``default_rng(seed)`` or fixed ``signs`` (3,).
     """
 
     def __init__(self, amplitude_Nm, period_s: float, duration_s: float, start_s: float = 0.0,
@@ -521,25 +434,3 @@ class PeriodicPulseTorque:
         phase = (t - self.start_s) % self.period_s
         on = phase < self.duration_s or self.duration_s >= self.period_s
         return self.signs * self.amplitude_Nm if on else np.zeros(3)
-
-
-def paper001_disturbances(omega0: float, seed: int, unloading: bool = True,
-                          unloading_period_s: float = 600.0,
-                          unloading_duration_s: float = 60.0) -> list:
-    """Paper 001's disturbance set at its magnitudes (Sec. 6), each seeded from ``seed``.
-
-    ASSUMPTION (waveforms not in the paper, digest section 6): gravity gradient 1e-5 N m at
-    ``2 w0``; aerodynamic 1e-6 N m at ``w0``; solar pressure 1e-5 N m at ``w0``; residual
-    magnetic 1e-8 N m constant; unloading 1e-3 N m per axis, on ``unloading_duration_s``
-    every ``unloading_period_s``. The synthetic gravity gradient replaces the physical one
-    (D1), which is 10-300x larger for inertia (30) (digest P12).
-    """
-    w0 = float(omega0)
-    out = [HarmonicTorque(1e-5, 2.0 * w0, seed=seed * 8 + 1),
-           HarmonicTorque(1e-6, w0, seed=seed * 8 + 2),
-           HarmonicTorque(1e-5, w0, seed=seed * 8 + 3),
-           ConstantTorque([1e-8, 1e-8, 1e-8])]
-    if unloading:
-        out.append(PeriodicPulseTorque(1e-3, unloading_period_s, unloading_duration_s,
-                                       seed=seed * 8 + 4))
-    return out

@@ -1,10 +1,7 @@
 """Attitude dynamics of the simulated spacecraft: rigid body, reaction wheels, flexible modes.
 
-Equations
----------
-State ``x = [q_eci_body (4, scalar last), omega_body_eci_body (3), h_wheels (n)]``.
-``I`` is the inertia of the spacecraft without the rotors' axial inertia, ``A`` (3, n) the
-wheel spin axes in body axes, ``h_w`` the wheels' axial momentum (see ``actuators``)::
+State ``x = [q_eci_body (4, scalar last), omega_body_eci_body (3), h_wheels (n)]``; ``I`` the
+inertia without the rotors' axial inertia, ``A`` (3, n) the wheel spin axes, body axes::
 
     dq_eci_body/dt = 1/2 q_eci_body (x) [omega, 0]                                       (E1)
     I domega/dt    = -omega x (I omega + A h_w) + tau_ext - A tau_w                      (E2)
@@ -13,69 +10,39 @@ wheel spin axes in body axes, ``h_w`` the wheels' axial momentum (see ``actuator
 
 (E2) is paper 001 eq. (6) and paper 000 eq. (1) with wheels; (E4) uses
 ``disturbances.gravity_gradient_torque`` (D1) and ``actuators`` (A1).
-Without external torque the inertial angular momentum ``R(q) (I omega + A h_w)`` is constant,
-and without wheels also the kinetic energy ``1/2 omega . I omega``.
 
-Flexible appendages (optional, :class:`FlexibleModes`; paper 001 Sec. 6, the hybrid form of
-``sim_node.models.flexible`` (H1)-(H2), ASSUMPTION: the paper writes no equations). ``I`` is
-then the whole spacecraft's inertia ``I_b``, ``F`` (3, m) the rotational coupling of the
-modes, ``eta`` (m,) the modal coordinates [kg^1/2 m], ``Lambda = 2 pi diag(f)``::
+Flexible appendages (optional, :class:`FlexibleModes`; the hybrid form (H1)-(H2) of
+``sim_node.models.flexible``): ``I`` is the whole spacecraft's ``I_b``, ``F`` (3, m) the
+coupling, ``eta`` (m,) the modal coordinates [kg^1/2 m], ``Lambda = 2 pi diag(f)``::
 
     I domega/dt + F eta_ddot = -omega x (I omega + F eta_dot + A h_w) + tau_ext - A tau_w  (E2f)
     eta_ddot + 2 zeta Lambda eta_dot + Lambda^2 eta + F^T domega/dt = 0                    (E9)
 
-solved together with the constant mass matrix ``[[I, F], [F^T, E_m]]``. Without damping and
-torques the energy ``1/2 [omega; eta_dot]^T M [omega; eta_dot] + 1/2 eta^T Lambda^2 eta`` and
-``R(q) (I omega + F eta_dot + A h_w)`` are conserved.
+solved with the constant mass matrix ``[[I, F], [F^T, E_m]]``. Without damping and torques the
+energy and ``R(q) (I omega + F eta_dot + A h_w)`` are conserved. The wheel momentum control
+error (``actuators.WheelMomentumError`` (W5)) is added after the limits (W4), clipped again.
 
-Wheel momentum control error (optional, ``actuators.WheelMomentumError`` (W5), paper 001:
-0.01 N m s 3-sigma): an extra motor torque held over the frame, added after the limits (W4)
-and clipped to the torque and momentum limits again.
+Frame step (DESIGN section 6): the command is held from ``t_k`` to ``t_k + dt``; with
+``s = t - t_k`` the orbit is integrated with the attitude in the same RK4 stages (E6) and the
+field follows a cubic (E7), whose higher terms come from the cubic Hermite polynomial through
+``(b, b_dot)`` at ``t_{k-1}`` and ``t_k`` when frames are consecutive (E8), else the line::
 
-Frame step (DESIGN section 6): from ``t_k`` to ``t_k + dt`` the command is held (zero-order
-hold). The environment at ``t_k`` (the orbit model's ``r, v`` and the field model's ``b`` and
-``b_dot``) is carried through the frame, ``s = t - t_k``, as follows:
+    dr_eci/dt = v_eci,   dv_eci/dt = -mu r_eci / |r_eci|^3                             (E6)
+    b_eci(t_k + s) = b + b_dot s + b_ddot s^2 / 2 + b_dddot s^3 / 6                    (E7)
+    tau = t_k - t_{k-1},  D = b_k - b_{k-1}                                             (E8)
+    b_ddot  = 2 [(2 b_dot_k + b_dot_{k-1}) / tau - 3 D / tau^2]
+    b_dddot = 6 [(b_dot_k + b_dot_{k-1}) / tau^2 - 2 D / tau^3]
 
-* Orbit: two-body motion integrated with the attitude in the same RK4 stages (E6), so the
-  position at every stage lies on the orbit, not on the straight line ``r + v s``::
-
-      dr_eci/dt = v_eci,   dv_eci/dt = -mu r_eci / |r_eci|^3                             (E6)
-
-  For the Keplerian circular orbit this *is* the orbit model (RK4 truncation at a 0.1 s
-  substep: < 1e-9 m per frame). For SGP4 it leaves out the perturbations inside one frame
-  (J2 about 1e-2 m/s^2: < 1 m, 1e-7 rad of direction, over a 10 s frame); the next frame
-  starts again from the orbit model.
-* Field: a cubic in ``s`` (E7). With only ``b, b_dot`` it is the line ``b + b_dot s``. A
-  straight line biases ``|b|``: the field seen on an orbit turns at about twice the orbit
-  rate ``n``, so the line is off by ``(2 n s)^2 / 2`` relative at ``s`` (2e-4 at the end of a
-  10 s frame, 7e-5 on average, always with the same sign). :class:`Spacecraft` therefore
-  fits, when consecutive frames are stepped, the cubic Hermite polynomial through
-  ``(b, b_dot)`` at ``t_{k-1}`` and ``t_k`` and extrapolates it over the frame (E8); its
-  error is ``b''''/24 (s + tau)^2 s^2`` (about ``(2 n dt)^4 / 6`` relative at the frame end:
-  3e-8 at 10 s, 3e-12 at 1 s frames)::
-
-      b_eci(t_k + s) = b + b_dot s + b_ddot s^2 / 2 + b_dddot s^3 / 6                    (E7)
-      tau = t_k - t_{k-1},  D = b_k - b_{k-1}                                             (E8)
-      b_ddot  = 2 [(2 b_dot_k + b_dot_{k-1}) / tau - 3 D / tau^2]
-      b_dddot = 6 [(b_dot_k + b_dot_{k-1}) / tau^2 - 2 D / tau^3]
-
-  ASSUMPTION: the first frame and any frame after a gap (not consecutive with the previous
-  step, or :meth:`Spacecraft.reset_field_history`) use the line. The dynamics node cannot
-  see the field at ``t_{k+1}`` before it integrates frame k, so the cubic interpolates the
-  past instead of interpolating between the frame's ends.
-
-Integration: classical fixed-step RK4 with ``substeps`` equal substeps, compiled with numba in
-``kernels.frame_step`` (one call per frame; the same function runs as Python with
-``NUMBA_DISABLE_JIT=1``); the quaternion is renormalised after each substep; disturbance
-torques are sampled at each substep's midpoint and held over it. Inputs are validated once per
-frame, never inside the substep loop.
+Integration: fixed-step RK4 with ``substeps`` substeps in one compiled call
+(``kernels.frame_step``), the quaternion renormalised after each substep, disturbances sampled
+at each substep's midpoint. Inputs are validated once per frame.
 """
 from __future__ import annotations
 
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -91,20 +58,10 @@ def _zeros3() -> np.ndarray:
 
 @dataclass
 class SpacecraftState:
-    """Dynamic state of the spacecraft.
-
-    Attributes
-    ----------
-    q_eci_body : numpy.ndarray, shape (4,)
-        Attitude, scalar last, rotates body components into ECI.
-    omega_body_eci_body : numpy.ndarray, shape (3,)
-        Rate of the body w.r.t. ECI, body axes [rad/s].
-    h_wheels : numpy.ndarray, shape (n_wheels,)
-        Wheel momentum about each spin axis [N m s]; length 0 without wheels.
-    eta, eta_dot : numpy.ndarray, shape (n_modes,)
-        Modal coordinates [kg^1/2 m] and their rates [kg^1/2 m/s] of the flexible
-        appendages (:class:`FlexibleModes`); length 0 for a rigid spacecraft.
-    """
+    """Dynamic state: ``q_eci_body`` (4,) scalar last (body -> ECI components),
+    ``omega_body_eci_body`` (3,) [rad/s] body axes, ``h_wheels`` (n_wheels,) [N m s] about each
+    spin axis, ``eta``, ``eta_dot`` (n_modes,) [kg^1/2 m], [kg^1/2 m/s] modal coordinates
+    (:class:`FlexibleModes`); the last three have length 0 without wheels or modes."""
 
     q_eci_body: np.ndarray
     omega_body_eci_body: np.ndarray
@@ -122,22 +79,9 @@ class SpacecraftState:
 
 @dataclass
 class FlexibleModes:
-    """Flexible appendages as modes in hybrid coordinates, (E2f), (E9).
-
-    Attributes
-    ----------
-    coupling : numpy.ndarray, shape (3, m)
-        Rotational coupling ``F`` of all modes, body axes [kg^1/2 m].
-    frequencies_hz : numpy.ndarray, shape (m,)
-        Constrained-hub modal frequencies [Hz], > 0.
-    damping : numpy.ndarray, shape (m,)
-        Modal damping ratios ``zeta`` in [0, 1) (a scalar is broadcast).
-
-    Raises
-    ------
-    ValueError
-        On bad shapes, non-finite values, frequencies <= 0 or damping outside [0, 1).
-    """
+    """Flexible appendages as modes in hybrid coordinates, (E2f), (E9): ``coupling`` ``F``
+    (3, m) [kg^1/2 m] body axes, constrained-hub ``frequencies_hz`` (m,) > 0, ``damping``
+    ratios ``zeta`` (m,) in [0, 1) (a scalar is broadcast). ``ValueError`` if not."""
 
     coupling: np.ndarray
     frequencies_hz: np.ndarray
@@ -170,22 +114,9 @@ class FlexibleModes:
 
 @dataclass
 class FrameEnvironment:
-    """Environment at the start ``t_k`` of a frame, with the rates that carry it (E6), (E7).
-
-    Attributes
-    ----------
-    r_eci : numpy.ndarray, shape (3,)
-        Position [m], ECI.
-    v_eci : numpy.ndarray, shape (3,)
-        Velocity [m/s], ECI.
-    b_eci : numpy.ndarray, shape (3,)
-        Geomagnetic field [T], ECI.
-    b_dot_eci : numpy.ndarray, shape (3,)
-        Time derivative of ``b_eci`` along the trajectory [T/s], ECI.
-    b_ddot_eci, b_dddot_eci : numpy.ndarray, shape (3,), optional
-        Second and third derivatives [T/s^2], [T/s^3], ECI, for (E7). ``None`` (the default)
-        lets :meth:`Spacecraft.step` take them from the previous frame (E8), or zero.
-    """
+    """Environment at the start ``t_k`` of a frame, (E6), (E7), all (3,) ECI: ``r_eci`` [m],
+    ``v_eci`` [m/s], ``b_eci`` [T], ``b_dot_eci`` [T/s] along the trajectory, optional
+    ``b_ddot_eci`` [T/s^2], ``b_dddot_eci`` [T/s^3] (``None``: from the previous frame (E8))."""
 
     r_eci: np.ndarray
     v_eci: np.ndarray = field(default_factory=_zeros3)
@@ -197,84 +128,20 @@ class FrameEnvironment:
 
 @dataclass
 class ActuatorCommand:
-    """Actuator request, held constant over a frame.
-
-    Attributes
-    ----------
-    dipole_body : numpy.ndarray, shape (3,)
-        Magnetorquer dipole [A m^2], body axes.
-    wheel_torque : numpy.ndarray, shape (n_wheels,) or (0,)
-        Motor torque on each wheel [N m]; length 0 means zero for every wheel.
-    torque_body : numpy.ndarray, shape (3,)
-        Ideal external torque [N m], body axes (thrusters, test torques).
-    """
+    """Actuator request held over a frame: ``dipole_body`` (3,) [A m^2], ``wheel_torque``
+    (n_wheels,) [N m] motor torques (length 0: zero), ``torque_body`` (3,) [N m] ideal
+    external torque (thrusters, test torques), body axes."""
 
     dipole_body: np.ndarray = field(default_factory=_zeros3)
     wheel_torque: np.ndarray = field(default_factory=lambda: np.zeros(0))
     torque_body: np.ndarray = field(default_factory=_zeros3)
 
 
-def rk4_step(f: Callable[[float, np.ndarray], np.ndarray], t: float, x: np.ndarray,
-             h: float) -> np.ndarray:
-    """One classical Runge-Kutta step of ``dx/dt = f(t, x)`` (the scheme of the kernel).
-
-    Parameters
-    ----------
-    f : callable
-        ``f(t, x) -> dx/dt``, flat arrays of the shape of ``x``.
-    t : float
-        Time at the start of the step [s].
-    x : numpy.ndarray, shape (m,)
-        State at ``t``.
-    h : float
-        Step [s].
-
-    Returns
-    -------
-    numpy.ndarray, shape (m,)
-        State at ``t + h``.
-    """
-    half = 0.5 * h
-    k1 = f(t, x)
-    k2 = f(t + half, x + half * k1)
-    k3 = f(t + half, x + half * k2)
-    k4 = f(t + h, x + h * k3)
-    return x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
-
-
-def pack_state(state: SpacecraftState) -> np.ndarray:
-    """Flat state ``[q (4), omega (3), h_wheels (n), eta (m), eta_dot (m)]``,
-    shape (7 + n + 2 m,)."""
-    return np.concatenate((state.q_eci_body, state.omega_body_eci_body, state.h_wheels,
-                           state.eta, state.eta_dot))
-
-
-def unpack_state(x: np.ndarray, n_modes: int = 0) -> SpacecraftState:
-    """Inverse of :func:`pack_state` (copies) for ``n_modes`` flexible modes."""
-    m = int(n_modes)
-    end = len(x) - 2 * m
-    return SpacecraftState(x[0:4].copy(), x[4:7].copy(), x[7:end].copy(),
-                           x[end:end + m].copy(), x[end + m:].copy())
-
-
 def hermite_field_derivatives(b_prev, b_dot_prev, b, b_dot, tau: float
                               ) -> tuple[np.ndarray, np.ndarray]:
-    """``(b_ddot, b_dddot)`` at the right end of the cubic Hermite polynomial (E8).
-
-    Parameters
-    ----------
-    b_prev, b_dot_prev : numpy.ndarray, shape (3,)
-        Field [T] and its rate [T/s] at ``t - tau``, ECI.
-    b, b_dot : numpy.ndarray, shape (3,)
-        Field [T] and its rate [T/s] at ``t``, ECI.
-    tau : float
-        Time between the two samples [s], ``> 0``.
-
-    Returns
-    -------
-    tuple of numpy.ndarray, shape (3,)
-        Second [T/s^2] and third [T/s^3] derivative of the cubic at ``t``.
-    """
+    """``(b_ddot [T/s^2], b_dddot [T/s^3])`` (3,) each, at ``t``, of the cubic Hermite
+    polynomial (E8) through the field [T] and its rate [T/s] (3,) ECI at ``t - tau`` and ``t``
+    (``tau > 0`` [s])."""
     tau = float(tau)
     if not (tau > 0.0 and math.isfinite(tau)):
         raise ValueError(f'tau must be > 0 and finite, got {tau}')
@@ -286,12 +153,8 @@ def hermite_field_derivatives(b_prev, b_dot_prev, b, b_dot, tau: float
 
 def propagate_environment(env: FrameEnvironment, ds: float,
                           mu: float = MU_EARTH) -> FrameEnvironment:
-    """``env`` moved by ``ds`` [s]: ``r, v`` along the two-body orbit (E6), ``b`` along its
-    line ``b + b_dot ds`` (higher field terms dropped: they are not meant for long spans).
-
-    For an environment sample that is late (a timeout, real-time mode); RK4 steps of at most
-    1 s.
-    """
+    """``env`` moved by ``ds`` [s] (a late sample): ``r, v`` along the two-body orbit (E6),
+    RK4 steps of at most 1 s; ``b`` along ``b + b_dot ds``."""
     r = np.asarray(env.r_eci, dtype=float)
     v = np.asarray(env.v_eci, dtype=float)
     if ds and r.any():
@@ -323,12 +186,8 @@ _kernel_loaded = False
 
 
 def _load_kernel() -> None:
-    """Compile ``kernels.frame_step`` (or load it from numba's cache) now, once per process.
-
-    Called when the first :class:`Spacecraft` is built, so a node pays the ~0.15 s CPU of
-    loading the compiled frame while it starts (in parallel with the other nodes' start-up
-    and discovery) rather than in its first frame, on the lockstep's critical path.
-    """
+    """Compile ``kernels.frame_step`` (or load it from numba's cache) once per process, when
+    the first :class:`Spacecraft` is built: at start-up, not in the first frame."""
     global _kernel_loaded
     if _kernel_loaded:
         return
@@ -349,32 +208,24 @@ class Spacecraft:
     ----------
     inertia : array_like, shape (3, 3)
         Inertia about the centre of mass, body axes [kg m^2], without the rotors' axial
-        inertia; symmetric positive definite. With ``flexible``: the whole spacecraft's
-        ``I_b`` (appendages included, undeformed); ``I_b - F F^T`` must be positive definite.
-    magnetorquer : Magnetorquer, optional
-        Without it, dipole commands are ignored (the applied dipole is zero).
-    wheels : WheelCluster, optional
-        Without it, the state and commands have no wheel entries.
+        inertia, symmetric positive definite; with ``flexible`` the whole ``I_b``, and
+        ``I_b - F F^T`` must be positive definite.
+    magnetorquer, wheels : optional
+        :class:`Magnetorquer` (without it the dipole is zero), :class:`WheelCluster`.
     disturbances : sequence of Disturbance
-        Objects with ``torque(t) -> (3,)`` [N m], body axes (``ConstantTorque``,
-        ``RandomTorque``...).
+        ``torque(t) -> (3,)`` [N m], body axes.
     gravity_gradient : bool
         Include the gravity-gradient torque (D1).
     mu : float
         Gravitational parameter [m^3/s^2] for (D1) and the orbit (E6).
     field_history : bool
-        Use the previous frame's field for the cubic (E8) when frames are consecutive;
-        ``False``: the line ``b + b_dot s`` in every frame.
+        Use the previous frame's field for the cubic (E8); ``False``: always the line.
     flexible : FlexibleModes, optional
-        Modes of flexible appendages (E2f), (E9); without it the body is rigid.
+        Modes of flexible appendages (E2f), (E9).
     wheel_error : WheelMomentumError, optional
-        Momentum control error of the wheels (W5) (needs ``wheels``, one entry per wheel).
+        Momentum control error (W5), one entry per wheel.
 
-    Raises
-    ------
-    ValueError
-        On an invalid inertia, actuator, disturbance or modes object, or ``mu``, or a
-        coupling too large for the inertia.
+    ``ValueError`` on an invalid argument or a coupling too large for the inertia.
     """
 
     def __init__(self, inertia, magnetorquer: Magnetorquer | None = None,
@@ -589,26 +440,11 @@ class Spacecraft:
     # ---------------------------------------------------------------------- the model
     def derivative(self, t: float, state: SpacecraftState, env_at_t: tuple,
                    applied: ActuatorCommand) -> SpacecraftState:
-        """Right-hand side (E1)-(E4) at one instant.
+        """Right-hand side (E1)-(E4), (E9) at ``t`` [s] for ``env_at_t = (r_eci [m], b_eci
+        [T])`` (ECI) and the actuation ``applied`` as given (no saturation).
 
-        Parameters
-        ----------
-        t : float
-            Time [s] since the scenario epoch (for the disturbances).
-        state : SpacecraftState
-            State at ``t``.
-        env_at_t : tuple of numpy.ndarray
-            ``(r_eci [m], b_eci [T])`` at ``t``, ECI.
-        applied : ActuatorCommand
-            Actuation taken as applied as given (no saturation): dipole [A m^2], motor torque
-            per wheel [N m], ideal torque [N m].
-
-        Returns
-        -------
-        SpacecraftState
-            The derivative: ``q_eci_body`` holds ``dq/dt`` [1/s], ``omega_body_eci_body``
-            holds ``domega/dt`` [rad/s^2], ``h_wheels`` holds ``dh_w/dt`` [N m], ``eta`` and
-            ``eta_dot`` hold ``d eta/dt`` and ``d^2 eta/dt^2``.
+        Returns the derivative as a :class:`SpacecraftState`: ``dq/dt`` [1/s],
+        ``domega/dt`` [rad/s^2], ``dh_w/dt`` [N m], ``d eta/dt``, ``d^2 eta/dt^2``.
         """
         self.check_state(state)
         r_eci, b_eci = env_at_t
@@ -629,28 +465,11 @@ class Spacecraft:
 
     def step(self, state: SpacecraftState, t: float, dt: float, env: FrameEnvironment,
              command: ActuatorCommand, substeps: int = 1) -> tuple[SpacecraftState, dict]:
-        """Integrate one frame from ``t`` to ``t + dt`` with the command held constant.
+        """Integrate one frame from ``t`` to ``t + dt`` [s] (``> 0``) with ``command`` held.
 
-        The command is saturated by the actuators once, at ``t`` (the wheel torque so that no
-        wheel passes its momentum limit within ``dt``), then held; the orbit follows (E6), the
-        field (E7) (with (E8) when this frame follows the previous call's frame); fixed RK4
-        with ``substeps`` equal substeps, quaternion renormalised after each, all in one
-        compiled call (``kernels.frame_step``).
-
-        Parameters
-        ----------
-        state : SpacecraftState
-            State at ``t``.
-        t : float
-            Frame start [s] since the scenario epoch.
-        dt : float
-            Frame length [s], ``> 0``.
-        env : FrameEnvironment
-            Environment at ``t`` with its rates.
-        command : ActuatorCommand
-            Requested actuation.
-        substeps : int
-            Number of RK4 substeps, ``>= 1``.
+        The command is saturated once, at ``t`` (the wheel torque so that no wheel passes its
+        momentum limit within ``dt``); the orbit follows (E6), the field (E7), (E8); RK4 with
+        ``substeps`` (>= 1) substeps. ``env`` is the environment at ``t``.
 
         Returns
         -------
@@ -686,7 +505,11 @@ class Spacecraft:
                            self.gravity_gradient, self._dipole_max, self._wheel_max_torque,
                            self._wheel_max_momentum, u, wheel_extra, tau_dist, coef, b_prev,
                            tau_prev, out)
+        return self._state_of(x), self._applied(u, tau_dist, out)
 
+    def _applied(self, u: np.ndarray, tau_dist: np.ndarray, out: np.ndarray) -> dict:
+        """The ``applied`` dict of :meth:`step` from the kernel's outputs ``out``."""
+        n = self.n_wheels
         tau_ideal = u[3:6]
         tau_dist_first = tau_dist[0].copy()
         tau_wheels = out[kernels.OUT_WHEELS_BODY]
@@ -709,7 +532,7 @@ class Spacecraft:
                                  self._wheel_max_torque)
             applied['torque_limited'] = np.abs(cmd_w) > self._wheel_max_torque
             applied['momentum_limited'] = limited != clipped
-        return self._state_of(x), applied
+        return applied
 
     # ------------------------------------------------------------------ diagnostics
     def angular_momentum_eci(self, state: SpacecraftState) -> np.ndarray:

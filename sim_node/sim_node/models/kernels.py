@@ -24,19 +24,12 @@ The kernel integrates (E1)-(E3), (E6) of :mod:`sim_node.models.dynamics` with th
         (the momentum control error, inside the torque and momentum limits: the torque stops
         at the momentum limit as hardware does)
 
-(D1), (A2), (W4) are ``disturbances`` and ``actuators``' equations (papers 000 eqs. (3)-(6),
-001 eq. (6)); ``tau_held = tau_ideal - A tau_w + tau_dist`` is constant over a substep (the
-disturbance is sampled by the caller at the substep midpoint, one row per substep).
-(E2f) and (E9) are solved together at every evaluation with the inverse of the constant mass
-matrix ``M = [[I, F], [F^T, E_m]]`` (``mass_inv``, (3 + m, 3 + m)); ``F`` (3, m) is the
-rotational coupling, ``Lambda = 2 pi diag(f)``. Without modes (m = 0) ``mass_inv`` is
-``I^-1`` and the arithmetic is the rigid one, operation for operation.
+(D1), (A2), (W4) are ``disturbances`` and ``actuators``' equations; ``tau_held = tau_ideal -
+A tau_w + tau_dist`` is held over a substep (disturbance sampled at its midpoint). (E2f), (E9)
+use the inverse of the constant mass matrix ``M = [[I, F], [F^T, E_m]]`` (``mass_inv``); with
+no modes it is ``I^-1`` and the arithmetic is the rigid one, operation for operation.
 
-State layout
-------------
-The kernel's state is one float64 array ``x`` of :func:`state_size` entries; every model part
-owns a named slice, so a new part (e.g. the modal coordinates of flexible appendages) is one
-more slice appended after the wheels, its derivative written in :func:`rhs`::
+State: one float64 array ``x`` of :func:`state_size` entries, a named slice per part::
 
     x[Q]  q_eci_body (4, scalar last)        x[W]  omega_body_eci_body [rad/s] (3)
     x[R]  r_eci [m] (3)                      x[V]  v_eci [m/s] (3)
@@ -44,21 +37,11 @@ more slice appended after the wheels, its derivative written in :func:`rhs`::
     x[H0 + n : H0 + n + m]          eta, modal coordinates [kg^1/2 m] (paper 001 (32) units)
     x[H0 + n + m : H0 + n + 2 m]    eta_dot [kg^1/2 m / s]
 
-To add a part: give it the next slice (after the modal coordinates), grow
-:func:`state_size`, fill it in ``Spacecraft._frame_inputs`` and read it back in
-``Spacecraft.step``; :func:`frame_step` integrates every entry of ``x`` (its RK4 loops run
-over the whole array), so only :func:`rhs` needs the new equations. Coupled terms go into
-:func:`rhs` before ``xdot[W]`` is written (as the modal accelerations, solved with
-``domega/dt`` through ``mass_inv``). Inputs that are not state (commands, limits) are extra
-arguments, outputs of a frame go to ``applied`` (``OUT_*``).
-
-The orbit (E6) is integrated with the attitude in the same RK4 stages, from the orbit model's
-``r, v`` at ``t_k``: the position at every stage is the two-body orbit, not a straight line.
-
-One implementation: the functions here are plain Python on numpy arrays, compiled by
-``numba.njit(cache=True)`` (no fastmath, so IEEE semantics are kept); with
-``NUMBA_DISABLE_JIT=1`` (or without numba) the very same functions run as Python.
-``tests/unit/test_kernels.py`` compares the two.
+A new part is the next slice (grow :func:`state_size`, fill it in
+``Spacecraft._frame_inputs``, its equations in :func:`rhs`; :func:`frame_step` integrates the
+whole array). Plain Python compiled by ``numba.njit(cache=True)`` at the first call
+(:func:`adcs_nodes.core.kernels.jit`; no fastmath); with ``NUMBA_DISABLE_JIT=1`` the same
+functions run as Python (``test_kernels.py``).
 """
 from __future__ import annotations
 
@@ -66,14 +49,7 @@ import math
 
 import numpy as np
 
-try:
-    from numba import njit
-except ImportError:  # pragma: no cover - numba is pinned; this keeps the model importable
-    def njit(*args, **kwargs):
-        """Stand-in for ``numba.njit``: returns the function unchanged."""
-        if args and callable(args[0]):
-            return args[0]
-        return lambda f: f
+from adcs_nodes.core.kernels import jit
 
 #: Slices of the kernel state (see module docstring).
 Q = slice(0, 4)
@@ -96,29 +72,13 @@ def modal_slices(n_wheels: int, n_modes: int) -> tuple[slice, slice]:
     return slice(e0, e0 + m), slice(e0 + m, e0 + 2 * m)
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def external_torques(s, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, out):
-    """Gravity-gradient (D1) and magnetic (A1) torques at ``t_k + s``, body axes [N m].
-
-    Parameters
-    ----------
-    s : float
-        Time since the frame start [s] (for the field polynomial (E7)).
-    x : numpy.ndarray, shape (N,)
-        Kernel state (``Q`` and ``R`` are read).
-    inertia : numpy.ndarray, shape (3, 3)
-        Inertia, body axes [kg m^2].
-    mu : float
-        Gravitational parameter [m^3/s^2].
-    use_gg, use_mtq : bool
-        Compute (D1), (A1); a term switched off is zero.
-    dipole : numpy.ndarray, shape (3,)
-        Applied dipole, body axes [A m^2].
-    b_coef : numpy.ndarray, shape (4, 3)
-        Field polynomial (E7), row j = ``c_j`` [T/s^j], ECI.
-    out : numpy.ndarray, shape (6,)
-        Written: ``tau_gg_body`` (3) then ``tau_magnetic_body`` (3).
-    """
+    """Gravity-gradient (D1) and magnetic (A1) torques [N m], body axes, at ``t_k + s`` [s],
+    written to ``out`` (6,) (``tau_gg_body``, ``tau_magnetic_body``; zero when ``use_gg``,
+    ``use_mtq`` are off). ``x`` the kernel state, ``inertia`` (3, 3) [kg m^2], ``mu``
+    [m^3/s^2], ``dipole`` (3,) [A m^2], ``b_coef`` (4, 3) the field polynomial (E7) [T/s^j],
+    ECI."""
     qx, qy, qz, qw = x[0], x[1], x[2], x[3]
     # R(q / |q|)^T: ECI components to body components
     k = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)
@@ -158,7 +118,7 @@ def external_torques(s, x, inertia, mu, use_gg, use_mtq, dipole, b_coef, out):
         out[5] = dipole[0] * by - dipole[1] * bx
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def rhs(s, x, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu, use_gg, use_mtq, dipole,
         b_coef, tau_held, tau_w, work, xdot):
     """Right-hand side (E1)-(E3), (E2f), (E6), (E9) at ``t_k + s``; writes ``xdot`` (N,).
@@ -223,7 +183,7 @@ def rhs(s, x, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu, use_gg, u
     xdot[12] = ko * rz
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def saturate(dt, dipole_cmd, dipole_max, wheel_cmd, wheel_max_torque, wheel_max_momentum,
              h_wheels):
     """Applied dipole (A2) [A m^2] (3,) and wheel torque (W4) [N m] (n,) of a command held
@@ -244,7 +204,7 @@ def saturate(dt, dipole_cmd, dipole_max, wheel_cmd, wheel_max_torque, wheel_max_
     return dipole, tau_w
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def hermite_terms(b_prev, b_dot_prev, b, b_dot, tau, out):
     """Coefficients ``c2``, ``c3`` of (E7) from the cubic Hermite polynomial (E8) through
     ``(b_prev, b_dot_prev)`` at ``-tau`` and ``(b, b_dot)`` at 0 (ECI, (3,) each, [T], [T/s]),
@@ -267,7 +227,7 @@ OUT_WHEELS_BODY = slice(9, 12)
 OUT_TAU_W = 12
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def frame_step(x, dt, substeps, inertia, mass_inv, axes, coupling, modal_c, modal_k, mu,
                use_gg, dipole_max, wheel_max_torque, wheel_max_momentum, u, wheel_extra,
                tau_dist, b_coef, b_prev, tau_prev, applied):
@@ -386,7 +346,7 @@ def frame_step(x, dt, substeps, inertia, mass_inv, axes, coupling, modal_c, moda
             x[c] /= norm
 
 
-@njit(cache=True)
+@jit(loads_numba=True)
 def propagate_two_body(r0, v0, dt, mu, steps):
     """Two-body orbit (E6) from ``r0`` [m], ``v0`` [m/s] (3,), ECI, over ``dt`` [s] (any
     sign) in ``steps`` RK4 steps; returns ``(r, v)``."""

@@ -1,11 +1,9 @@
 """Seeded attitude-sensor models of the simulated world: magnetometer, horizon, star tracker, gyro.
 
 Every model takes truth (numpy arrays, SI units, radians) and returns one measurement per
-call. Randomness comes only from ``numpy.random.Generator`` objects created from the ``seed``
-given at construction (one independent child stream per error source, via
-``numpy.random.SeedSequence(seed).spawn``), so a model is deterministic for a given seed and
-sequence of calls. Every error source draws its random numbers on every call, whatever the
-outcome (dropout, invalid output), so the streams never shift.
+call. Randomness: one ``SeedSequence(seed).spawn`` child stream per error source, drawn on
+every call whatever the outcome (dropout, invalid output), so the streams never shift. Every
+constructor raises ``ValueError`` on a malformed, non-finite or out-of-range parameter.
 
 Magnetometer (paper 000, digest sections 5.1-5.2: bias up to 120 nT, misalignment up to
 10 deg, LSB 20 nT, noise std 375/25/65 nT). Effects in this order::
@@ -47,11 +45,11 @@ Gyro (rate-integrating model with a random-walk bias)::
     beta_k = beta_{k-1} + sigma_w sqrt(dt_k) w_k,   w_k ~ N(0, I3),   beta_0 = bias_initial
     omega_m = omega_body_eci_body + beta_k + sigma_v v_k,   v_k ~ N(0, I3)                (G1)
 
-so ``Var(beta_k - beta_0) = sigma_w^2 t_k`` per axis, linear in time. ``sigma_w`` is the rate
-random-walk density [rad/s/sqrt(s)]. Paper 001 (digest section 4) quotes a "random drift"
-of 0.01 deg/h (3-sigma); :data:`GYRO_DRIFT_WALK_RAD_S_SQRT_S` is the ``sigma_w`` whose bias
-random walk reaches that 3-sigma value one hour after start:
+so ``Var(beta_k - beta_0) = sigma_w^2 t_k`` per axis. Paper 001's "random drift" of
+0.01 deg/h (3-sigma, digest section 4) is reached after one hour by
 ``sigma_w = (0.01 / 3 deg/h) / sqrt(3600 s) = 2.69e-10 rad/s/sqrt(s)``.
+
+Wheel tachometer: ``w_meas,i = q round((w_i + n_i) / q)``, ``n_i ~ N(0, sigma^2)``     (T1)
 """
 from __future__ import annotations
 
@@ -127,34 +125,13 @@ def _input_vec3(v, name: str) -> np.ndarray:
 
 
 class Magnetometer:
-    """Three-axis magnetometer, equations (M1)-(M7) of the module docstring.
+    """Three-axis magnetometer, (M1)-(M7).
 
-    Parameters
-    ----------
-    noise_std_T : float or array_like, shape (3,)
-        White Gaussian noise std per sensor axis [T], ``>= 0``.
-    bias_T : float or array_like, shape (3,)
-        Constant bias, sensor axes [T].
-    misalignment_rad : array_like, shape (3,)
-        Rotation vector ``delta`` [rad] carrying the nominal sensor axes into the real ones
-        (small: ``|delta| <= pi/2``; large rotations belong in ``q_body_sensor``).
-    scale_factor_error : float or array_like, shape (3,)
-        ``s_i`` in ``measured_i = (1 + s_i) true_i``; each ``> -1``.
-    lsb_T : float
-        Quantisation step [T], ``>= 0`` (0: no quantisation).
-    saturation_T : float or array_like, shape (3,)
-        Per-axis full scale [T]: outputs are clipped to ``[-S_i, S_i]``; ``S_i = 0``: none.
-    dropout_probability : float
-        Probability in ``[0, 1]`` that a sample is lost.
-    q_body_sensor : array_like, shape (4,)
-        Nominal mounting, scalar last, unit norm: ``v_body = R(q_body_sensor) v_sensor``.
-    seed : int
-        Non-negative seed of the noise and dropout streams.
-
-    Raises
-    ------
-    ValueError
-        On any malformed, non-finite or out-of-range parameter.
+    Parameters (float or (3,), sensor axes): ``noise_std_T`` [T] >= 0, ``bias_T`` [T],
+    ``misalignment_rad`` rotation vector ``delta`` (3,) [rad], ``|delta| <= pi/2`` (large
+    rotations belong in ``q_body_sensor``), ``scale_factor_error`` ``s_i > -1``, ``lsb_T`` [T]
+    (0: none), ``saturation_T`` [T] (0: none), ``dropout_probability`` in [0, 1],
+    ``q_body_sensor`` (4,) unit, ``v_body = R(q_body_sensor) v_sensor``, ``seed`` >= 0.
     """
 
     def __init__(self, noise_std_T=0.0, bias_T=0.0, misalignment_rad=(0.0, 0.0, 0.0),
@@ -188,23 +165,8 @@ class Magnetometer:
         return np.diag(self.noise_std_T ** 2)
 
     def measure(self, b_body) -> Optional[np.ndarray]:
-        """One sample of the field.
-
-        Parameters
-        ----------
-        b_body : array_like, shape (3,)
-            True geomagnetic field, body axes [T].
-
-        Returns
-        -------
-        numpy.ndarray, shape (3,), or None
-            Measured field, sensor axes [T]; ``None`` when the sample dropped out.
-
-        Raises
-        ------
-        ValueError
-            If ``b_body`` is not a finite (3,) vector.
-        """
+        """Measured field (3,) [T], sensor axes, of the true ``b_body`` (3,) [T], body axes;
+        ``None`` when the sample dropped out."""
         b = self.matrix @ _input_vec3(b_body, 'b_body') + self.bias_T
         b = b + self.noise_std_T * self._noise_rng.standard_normal(3)
         lost = self._drop_rng.random() < self.dropout_probability
@@ -224,18 +186,8 @@ class HorizonMeasurement(NamedTuple):
 
 
 def roll_pitch_of_zenith(zenith_body) -> tuple:
-    """True roll and pitch [rad] from the zenith direction in body axes, equation (H1).
-
-    Parameters
-    ----------
-    zenith_body : array_like, shape (3,)
-        Local vertical "up" (orbit-frame z) in body components; any non-zero length.
-
-    Returns
-    -------
-    tuple of float
-        ``(roll, pitch)``: roll in (-pi, pi], pitch in [-pi/2, pi/2].
-    """
+    """True ``(roll in (-pi, pi], pitch in [-pi/2, pi/2])`` [rad], (H1), of the zenith
+    (orbit-frame z) ``zenith_body`` (3,) in body components, any non-zero length."""
     z = _input_vec3(zenith_body, 'zenith_body')
     n = np.linalg.norm(z)
     if n == 0.0:
@@ -247,25 +199,11 @@ def roll_pitch_of_zenith(zenith_body) -> tuple:
 
 
 class HorizonSensor:
-    """Earth horizon sensor giving roll and pitch, equations (H1)-(H2) of the module docstring.
+    """Earth horizon sensor giving roll and pitch, (H1)-(H2).
 
-    Parameters
-    ----------
-    noise_std_rad : float or array_like, shape (2,)
-        White Gaussian noise std of (roll, pitch) [rad], ``>= 0``.
-    bias_rad : float or array_like, shape (2,)
-        Constant bias of (roll, pitch) [rad].
-    scale_factor_error : float or array_like, shape (2,)
-        ``s`` in ``measured = (1 + s) true`` for (roll, pitch); each ``> -1``.
-    fov_rad : float or array_like, shape (2,)
-        Largest true ``|roll|``, ``|pitch|`` [rad] with a valid output; each in ``(0, pi/2]``.
-    seed : int
-        Non-negative seed of the noise stream.
-
-    Raises
-    ------
-    ValueError
-        On any malformed, non-finite or out-of-range parameter.
+    Parameters (float or (2,) for (roll, pitch)): ``noise_std_rad`` [rad] >= 0, ``bias_rad``
+    [rad], ``scale_factor_error`` ``s > -1``, ``fov_rad`` largest true angle with a valid
+    output, in (0, pi/2] [rad], ``seed`` >= 0.
     """
 
     def __init__(self, noise_std_rad=0.0, bias_rad=0.0, scale_factor_error=0.0,
@@ -284,19 +222,8 @@ class HorizonSensor:
         return self.noise_std_rad ** 2
 
     def measure_zenith(self, zenith_body) -> HorizonMeasurement:
-        """Measure from the zenith direction (orbit-frame z) in body axes.
-
-        Parameters
-        ----------
-        zenith_body : array_like, shape (3,)
-            Local vertical "up" in body components (``R(q_eci_body)^T r_eci`` or
-            ``R(q_orbit_body)^T z0``); any non-zero length.
-
-        Returns
-        -------
-        HorizonMeasurement
-            Measured roll and pitch [rad] and validity (NaN angles when not valid).
-        """
+        """Measured roll and pitch [rad] (NaN when not valid) of the zenith ``zenith_body``
+        (3,) in body components (``R(q_eci_body)^T r_eci``), any non-zero length."""
         z = _input_vec3(zenith_body, 'zenith_body')
         roll, pitch = roll_pitch_of_zenith(z)
         noise = self.noise_std_rad * self._noise_rng.standard_normal(2)
@@ -309,37 +236,13 @@ class HorizonSensor:
         return HorizonMeasurement(float(out[0]), float(out[1]), True)
 
     def measure(self, q_orbit_body) -> HorizonMeasurement:
-        """Measure roll and pitch of the body w.r.t. the orbit frame.
-
-        Parameters
-        ----------
-        q_orbit_body : array_like, shape (4,)
-            True attitude, scalar last; rotates body components into the orbit frame.
-
-        Returns
-        -------
-        HorizonMeasurement
-            ``(roll, pitch, valid)``, angles [rad], NaN when not valid.
-        """
+        """Measured roll and pitch of the true attitude ``q_orbit_body`` (4,)."""
         return self.measure_zenith(att.to_matrix(q_orbit_body)[2, :])
 
 
 class StarTracker:
-    """Star tracker: the true attitude times a small random rotation in body axes, (S1).
-
-    Parameters
-    ----------
-    noise_std_rad : float or array_like, shape (3,)
-        Std of the error rotation about each body axis [rad], ``>= 0``
-        (:data:`STAR_TRACKER_STD_RAD` for paper 001's 0.02 deg 3-sigma).
-    seed : int
-        Non-negative seed of the noise stream.
-
-    Raises
-    ------
-    ValueError
-        On a malformed, negative or non-finite parameter.
-    """
+    """Star tracker, (S1): ``noise_std_rad`` (float or (3,)) [rad] >= 0 about each body axis
+    (default paper 001's 0.02 deg 3-sigma), ``seed`` >= 0."""
 
     def __init__(self, noise_std_rad=STAR_TRACKER_STD_RAD, seed: int = 0) -> None:
         self.noise_std_rad = _vector(noise_std_rad, 3, 'noise_std_rad', nonneg=True)
@@ -351,42 +254,18 @@ class StarTracker:
         return np.diag(self.noise_std_rad ** 2)
 
     def measure(self, q_eci_body) -> np.ndarray:
-        """Measured attitude.
-
-        Parameters
-        ----------
-        q_eci_body : array_like, shape (4,)
-            True attitude, scalar last (normalised here).
-
-        Returns
-        -------
-        numpy.ndarray, shape (4,)
-            ``q_eci_body`` measured, unit norm, same hemisphere as the input.
-        """
+        """Measured ``q_eci_body`` (4,), unit norm, of the true one (normalised here)."""
         q = att.normalize(q_eci_body)
         delta = self.noise_std_rad * self._noise_rng.standard_normal(3)
         return att.normalize(att.multiply(q, att.from_rotation_vector(delta)))
 
 
 class Gyro:
-    """Three-axis rate gyro with white noise and a random-walk bias, equation (G1).
+    """Three-axis rate gyro with white noise and a random-walk bias, (G1).
 
-    Parameters
-    ----------
-    noise_std_rad_s : float or array_like, shape (3,)
-        White noise std per sample and body axis [rad/s], ``>= 0``.
-    bias_initial_rad_s : float or array_like, shape (3,)
-        Bias at the first sample, body axes [rad/s].
-    bias_walk_std_rad_s_sqrt_s : float or array_like, shape (3,)
-        Rate random-walk density ``sigma_w`` [rad/s/sqrt(s)], ``>= 0``; see
-        :data:`GYRO_DRIFT_WALK_RAD_S_SQRT_S`.
-    seed : int
-        Non-negative seed of the bias-walk and noise streams.
-
-    Raises
-    ------
-    ValueError
-        On a malformed, negative or non-finite parameter.
+    Parameters (float or (3,), body axes): ``noise_std_rad_s`` [rad/s] >= 0 per sample,
+    ``bias_initial_rad_s`` [rad/s], ``bias_walk_std_rad_s_sqrt_s`` ``sigma_w``
+    [rad/s/sqrt(s)] >= 0, ``seed`` >= 0.
     """
 
     def __init__(self, noise_std_rad_s=0.0, bias_initial_rad_s=0.0,
@@ -409,25 +288,8 @@ class Gyro:
         return np.diag(self.noise_std_rad_s ** 2)
 
     def measure(self, omega_body_eci_body, dt: float) -> np.ndarray:
-        """Advance the bias by ``dt`` and return one rate sample.
-
-        Parameters
-        ----------
-        omega_body_eci_body : array_like, shape (3,)
-            True rate of the body w.r.t. ECI, body axes [rad/s].
-        dt : float
-            Time since the previous sample [s], ``>= 0`` (0 for the first one).
-
-        Returns
-        -------
-        numpy.ndarray, shape (3,)
-            Measured rate, body axes [rad/s].
-
-        Raises
-        ------
-        ValueError
-            If the rate is not a finite (3,) vector or ``dt`` is negative or not finite.
-        """
+        """Measured rate (3,) [rad/s], body axes, of the true ``omega_body_eci_body``, after
+        advancing the bias by ``dt`` >= 0 [s] (0 for the first sample)."""
         w = _input_vec3(omega_body_eci_body, 'omega_body_eci_body')
         dt = _nonneg_scalar(dt, 'dt')
         walk = self._walk_rng.standard_normal(3)
@@ -436,21 +298,8 @@ class Gyro:
 
 
 class WheelTachometer:
-    """Reaction-wheel tachometer: each measured speed is, per wheel i,
-
-        w_meas,i = q * round((w_i + n_i) / q),   n_i ~ N(0, noise_std^2)              (T1)
-
-    with ``q`` the speed resolution (``q = 0``: no quantisation).
-
-    Parameters
-    ----------
-    noise_std_rad_s : float
-        White noise std of each speed [rad/s], ``>= 0``.
-    quantization_rad_s : float
-        Speed resolution ``q`` [rad/s], ``>= 0``.
-    seed : int
-        Non-negative seed of the noise stream.
-    """
+    """Reaction-wheel tachometer, (T1): ``noise_std_rad_s`` [rad/s] >= 0, speed resolution
+    ``quantization_rad_s`` ``q`` [rad/s] >= 0 (0: none), ``seed`` >= 0."""
 
     def __init__(self, noise_std_rad_s: float = 0.0, quantization_rad_s: float = 0.0,
                  seed: int = 0) -> None:

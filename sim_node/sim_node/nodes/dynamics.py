@@ -37,22 +37,21 @@ from std_msgs.msg import String
 
 from adcs_msgs.msg import (ActuatorCommand, AppendageState, AttitudeState, Environment,
                            LockstepStatus, WheelState)
-from adcs_nodes.components.base import FrameClock
 from adcs_nodes.core.lockstep import Act, Action, ClockMaster, ns_to_seconds, seconds_to_ns
+from adcs_nodes.core.samples import all_finite
+from adcs_nodes.msgs import convert
+from adcs_nodes.msgs.fields import make, stamp_ns, to_stamp
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import publisher_guard, runtime
 from adcs_nodes.nodes.adapter import node_log
-from adcs_nodes.nodes.convert import all_finite, quat, stamp_ns, vec3
 from adcs_nodes.nodes.lockstep_node import (MAX_LAG_FRAMES, QOS_DATA, QOS_READY,
                                             LockstepNode)
-from adcs_nodes.nodes.messages import make
 from adcs_nodes.nodes.tf import TfPublisher, truth_transforms
-from adcs_nodes.registry import Param
 from sim_node.components.dynamics import DynamicsComponent
+from sim_node.entries import DYNAMICS_PARAMS
 from sim_node.faults import FAULTS_PARAM, INJECT_TOPIC, injected
 from sim_node.faults import parse as parse_faults
-from sim_node.models.dynamics import ActuatorCommand as Command
-from sim_node.models.spacecraft_config import DEFAULT_INITIAL, DEFAULT_SPACECRAFT
+from sim_node.models.spacecraft_config import INITIAL, SPACECRAFT
 
 QOS_CLOCK = QOS_DATA
 #: The recorder may lag no further than the lockstep nodes: what it has not received must
@@ -61,113 +60,27 @@ QOS_CLOCK = QOS_DATA
 #: recorder lost tens to hundreds of frames of every world topic: test_free_tumble).
 RECORDER_LAG_FRAMES = MAX_LAG_FRAMES
 
-#: The dynamics node's own parameters (the common ones: ``LockstepNode``). The simulated world
-#: is fixed by the scenario: every parameter is read-only (``adcs_nodes.nodes.params``).
-PARAMS = (
-    Param('substeps', 'int', 10, '-', 'RK4 substeps per frame', min=1, max=10000),
-    Param('rate_factor', 'float', 1.0, '-', 'real-time mode: sim seconds per wall second',
-          positive=True, max=1e6),
-    Param('lockstep_max_rate', 'float', 0.0, '-', 'lockstep: at most this many sim seconds '
-          'per wall second (0: as fast as the chain goes); the series do not change',
-          min=0.0, max=1e6),
-    Param('command_period_s', 'float', 0.0, 's', 'period of adcs/actuator_command, a multiple '
-          'of frame_period_s (0: none awaited)', min=0.0, max=86400.0),
-    Param('wait_for_nodes', 'str[]', [], '-', 'nodes whose lockstep/ready starts frame 0'),
-    Param('result_file', 'str', '', '-', "JSON file written at the end of the run (frames/s, "
-          "final state; '': none)"),
-    Param('start_timeout_s', 'float', 120.0, 's', 'wall-clock wait for every node ready',
-          positive=True, max=86400.0),
-)
-
-
-def _sc(name, ptype, default, unit, doc, **kw) -> Param:
-    return Param(name, ptype, default, unit, doc, read_only=True, **kw)
-
-
-#: ``spacecraft.*``: the keys of ``sim_node.models.spacecraft_config.spacecraft_from_config``
-#: (the launcher derives them from the scenario's ``spacecraft`` section, docs/scenarios.md).
-SPACECRAFT_PARAMS = (
-    _sc('inertia_kgm2', 'float[]', [118.0, 118.0, 19.6], 'kg m^2', 'inertia tensor about the '
-        'centre of mass, body axes: 3 diagonal values or 9 (row-major)'),
-    _sc('gravity_gradient', 'bool', True, '-', 'apply the gravity-gradient torque'),
-    _sc('max_dipole_Am2', 'float[]', [40.0, 40.0, 40.0], 'A m^2', 'magnetorquer limits per '
-        'body axis (absent: no magnetorquer)', length=3, min=0.0),
-    _sc('wheel_names', 'str[]', [], '-', 'reaction wheel names'),
-    _sc('wheel_axes', 'float[]', [], '-', 'wheel spin axes, body axes, 3 per wheel'),
-    _sc('wheel_max_torque_Nm', 'float[]', [], 'N m', 'wheel motor torque limits',
-        positive=True),
-    _sc('wheel_max_momentum_Nms', 'float[]', [], 'N m s', 'wheel momentum limits',
-        positive=True),
-    _sc('wheel_inertia_kgm2', 'float[]', [], 'kg m^2', 'wheel inertias about their axes',
-        positive=True),
-    _sc('wheel_h0_Nms', 'float[]', [], 'N m s', 'initial wheel momenta'),
-    _sc('constant_torque_Nm', 'float[]', [0.0, 0.0, 0.0], 'N m', 'constant body torque',
-        length=3),
-    _sc('random_std_Nm', 'float', 0.0, 'N m', 'std of the random body torque per axis',
-        min=0.0),
-    _sc('random_period_s', 'float', 2.0, 's', 'hold time of each random draw', positive=True),
-    _sc('aerodynamic_Nm', 'float[]', [0.0, 0.0, 0.0], 'N m', 'aerodynamic torque amplitude '
-        'per body axis (harmonic)', length=3, min=0.0),
-    _sc('solar_pressure_Nm', 'float[]', [0.0, 0.0, 0.0], 'N m', 'solar pressure torque '
-        'amplitude per body axis (harmonic)', length=3, min=0.0),
-    _sc('synthetic_gravity_gradient_Nm', 'float[]', [0.0, 0.0, 0.0], 'N m', 'harmonic '
-        'stand-in for the gravity gradient, amplitude per body axis', length=3, min=0.0),
-    _sc('residual_magnetic_Nm', 'float[]', [0.0, 0.0, 0.0], 'N m', 'constant residual '
-        'magnetic torque', length=3),
-    _sc('unloading_Nm', 'float[]', [0.0, 0.0, 0.0], 'N m', 'momentum unloading torque per '
-        'axis (pulses)', length=3, min=0.0),
-    _sc('harmonic_period_s', 'float', 5800.0, 's', 'period of the aerodynamic and solar '
-        'torques', positive=True),
-    _sc('unloading_period_s', 'float', 600.0, 's', 'unloading period', positive=True),
-    _sc('unloading_duration_s', 'float', 60.0, 's', 'unloading pulse length', min=0.0),
-    _sc('unloading_start_s', 'float', 0.0, 's', 'first unloading pulse', min=0.0),
-    _sc('wheel_error_std_Nms', 'float', 0.0, 'N m s', 'wheel momentum control error, '
-        '1-sigma (0: none)', min=0.0),
-    _sc('wheel_error_period_s', 'float', 0.2, 's', 'period of the momentum error draws',
-        positive=True),
-    _sc('flexible.model', 'str', 'paper001', '-', 'flexible appendage modes',
-        choices=('paper001',)),
-    _sc('flexible.wings', 'str', 'two', '-', 'both wings or the +X wing only',
-        choices=('one', 'two')),
-    _sc('flexible.damping', 'float', 0.005, '-', 'modal damping ratio of every mode',
-        min=0.0, max=1.0),
-)
-#: ``initial.*``: the initial state (``sim_node.models.spacecraft_config.initial_state``).
-INITIAL_PARAMS = (
-    _sc('q_orbit_body', 'float[]', [0.0, 0.0, 0.0, 1.0], '-', 'initial attitude body -> '
-        'orbit, scalar last', length=4, min=-1.0, max=1.0),
-    _sc('omega_body_orbit_body', 'float[]', [0.0, 0.0, 0.0], 'rad/s', 'initial rate w.r.t. '
-        'the orbit frame, body axes', length=3),
-    _sc('omega_body_eci_body', 'float[]', [0.0, 0.0, 0.0], 'rad/s', 'initial rate w.r.t. '
-        'ECI, body axes (instead of omega_body_orbit_body)', length=3),
-)
-
 
 class DynamicsNode(LockstepNode):
     """Clock master and rigid-body integrator (see module docstring)."""
-
-    #: Specs of the sections this node reads (``self.section``).
-    SECTION_PARAMS = {'spacecraft': SPACECRAFT_PARAMS, 'initial': INITIAL_PARAMS}
 
     SIMULATED_WORLD = True      # the simulator: lockstep only
 
     def __init__(self, name: str = 'dynamics', **kwargs) -> None:
         super().__init__(name, **kwargs)
         self.duration_ns = seconds_to_ns(self.param('duration_s', 0.0))
-        p = node_params.declare_all(self, PARAMS + (FAULTS_PARAM,))
+        p = node_params.declare_all(self, DYNAMICS_PARAMS + (FAULTS_PARAM,))
         self.substeps = p['substeps']
         self.rate_factor = p['rate_factor']
         cmd_period_s = p['command_period_s']
-        cmd_ns = seconds_to_ns(cmd_period_s) if cmd_period_s > 0 else 0
+        cmd_ns = seconds_to_ns(cmd_period_s) if cmd_period_s else 0
         if cmd_ns % self.frame_ns:
             raise ValueError('command_period_s must be a multiple of frame_period_s')
         self.wait_for_nodes = [n for n in p['wait_for_nodes'] if n]
         self.result_file = p['result_file']
         self.component = DynamicsComponent(
-            self.section('spacecraft', DEFAULT_SPACECRAFT),
-            self.section('initial', DEFAULT_INITIAL), self.seed, self.frame_ns, self.substeps,
-            FrameClock(self.epoch_ns), node_log(self),
-            parse_faults(p['faults']))
+            self.section('spacecraft', SPACECRAFT), self.section('initial', INITIAL),
+            self.seed, self.frame_ns, self.substeps, node_log(self), parse_faults(p['faults']))
         self.spacecraft = self.component.spacecraft
         self.wheel_names = self.component.wheel_names
 
@@ -259,7 +172,7 @@ class DynamicsNode(LockstepNode):
         for a in actions:
             self._exec_t = a.t_ns
             if a.kind is Act.CLOCK:
-                self.clock_pub.publish(make(Clock, clock=self.stamp(a.t_ns)))
+                self.clock_pub.publish(make(Clock, clock=to_stamp(self.epoch_ns + a.t_ns)))
             elif a.kind is Act.STATE:
                 self.publish_state(a.value)
                 self.frame_done(a.t_ns)
@@ -287,19 +200,18 @@ class DynamicsNode(LockstepNode):
         self._run(self.master.on_progress('recorder', t, False, time.monotonic()))
 
     def on_environment(self, msg: Environment) -> None:
-        """Store an environment message (dropped with a warning if it holds NaN)."""
-        vals = (vec3(msg.r_eci), vec3(msg.v_eci), vec3(msg.b_eci), vec3(msg.b_dot_eci),
-                quat(msg.q_eci_orbit))
-        if not all_finite(*vals):
+        """Store an environment sample (dropped with a warning if it holds NaN)."""
+        x = convert.ENVIRONMENT.to_core(msg, self.epoch_ns)
+        if not all_finite(x.r_eci_m, x.v_eci_m_s, x.b_eci_T, x.b_dot_eci_T_s, x.q_eci_orbit):
             self.get_logger().warning('sim/environment with non-finite values ignored')
             return
-        t = self.elapsed_ns(stamp_ns(msg.header.stamp))
-        self._run(self.master.on_environment(t, msg, time.monotonic()))
+        self._run(self.master.on_environment(x.t_ns, x, time.monotonic()))
 
     def on_command(self, msg: ActuatorCommand) -> None:
         """Store an actuator command; a malformed one becomes a zero command (safe)."""
-        t_ns = self.elapsed_ns(stamp_ns(msg.header.stamp))
-        self._run(self.master.on_command(t_ns, self.to_command(msg), time.monotonic()))
+        x = convert.COMMAND.to_core(msg, self.epoch_ns)
+        self._run(self.master.on_command(x.t_ns, self.component.to_command(x),
+                                         time.monotonic()))
 
     def on_inject_fault(self, msg: String) -> None:
         """A live fault (``adcs fault``): applied if it strikes an actuator, announced on
@@ -316,13 +228,9 @@ class DynamicsNode(LockstepNode):
         self.get_logger().warning(f'live fault {fault.describe()} from t = '
                                   f'{fault.start_ns / 1e9:g} s (not deterministic)')
 
-    def to_command(self, msg: ActuatorCommand) -> Command:
-        """Message -> model command (the component's: a malformed one is a zero command)."""
-        return self.component.to_command(msg)
-
-    def step_frame(self, t: int, env_msg: Environment, cmd: Any) -> None:
+    def step_frame(self, t: int, env: Any, cmd: Any) -> None:
         """Zero-order-hold the command and integrate from t_k to t_k+1 (the component's)."""
-        self.component.step(t, env_msg, cmd)
+        self.component.step(t, env, cmd)
         self.frames += 1
 
     @property
@@ -364,21 +272,24 @@ class DynamicsNode(LockstepNode):
             self._run(self.master.free_running_frame())
 
     # ------------------------------------------------------------------ outputs
-    def publish_state(self, env_msg: Environment) -> None:
+    def publish_state(self, env: Any) -> None:
         """Phase B: publish truth state and wheels of frame k (initialises at frame 0)."""
-        self.sim_t_ns = self.t_ns
-        faults = self.component.faults_msg(self.t_ns)
+        t, e = self.t_ns, self.epoch_ns
+        self.sim_t_ns = t
+        faults = self.component.fault_events(t)
         if faults is not None:
-            self.faults_pub.publish(faults)
-        msg = self.component.state_msg(self.t_ns, env_msg)
+            self.faults_pub.publish(convert.FAULTS.to_msg(faults, e))
+        x = self.component.truth(t, env)
+        msg = convert.ATTITUDE_STATE.to_msg(x, e)
         self.state_pub.publish(msg)
         if self.tf_pub.wanted():     # /tf, sim/wheels, sim/appendages: built only when read
-            self.tf_pub.send(truth_transforms(msg.header.stamp, vec3(env_msg.r_eci),
-                                              quat(env_msg.q_eci_orbit), quat(msg.q_orbit_body)))
+            self.tf_pub.send(truth_transforms(msg.header.stamp, env.r_eci_m, env.q_eci_orbit,
+                                              x.q_orbit_body))
         if self.wheels_pub.get_subscription_count() > 0:
-            self.wheels_pub.publish(self.component.wheels_msg(msg.header))
+            self.wheels_pub.publish(convert.WHEEL_STATE.to_msg(self.component.wheels(t), e))
         if self.appendages_pub is not None and self.appendages_pub.get_subscription_count() > 0:
-            self.appendages_pub.publish(self.component.appendages_msg(msg.header))
+            self.appendages_pub.publish(convert.APPENDAGES.to_msg(self.component.appendages(t),
+                                                                  e))
 
     def finish(self) -> None:
         """End of the scenario: report and let the runtime stop the process."""

@@ -17,30 +17,26 @@ from __future__ import annotations
 from rosgraph_msgs.msg import Clock
 
 from adcs_msgs.msg import Environment
-from adcs_nodes.components.base import FrameClock
+from adcs_nodes.core.geomag import FIELD
+from adcs_nodes.core.orbit import ORBIT
+from adcs_nodes.msgs.convert import ENVIRONMENT
+from adcs_nodes.msgs.fields import stamp_ns
 from adcs_nodes.nodes import params as node_params
 from adcs_nodes.nodes import runtime
-from adcs_nodes.nodes.convert import quat, stamp_ns
 from adcs_nodes.nodes.lockstep_node import LockstepNode
 from adcs_nodes.nodes.tf import TfPublisher, earth_transforms
-from sim_node.components.environment import (  # noqa: F401 (re-exported)
-    DEFAULT_FIELD, DEFAULT_ORBIT, EnvironmentComponent)
+from sim_node.components.environment import EnvironmentComponent
 
 
 class EnvironmentNode(LockstepNode):
     """Publishes the orbit and field at each ``/clock`` tick (see module docstring)."""
 
     SIMULATED_WORLD = True      # the simulator: lockstep only
-    #: This node's own parameters: the ``orbit.*`` and ``field.*`` sections (the common ones:
-    #: ``LockstepNode``); read-only, as the whole simulated world.
-    SECTION_PARAMS = {'orbit': node_params.ORBIT_PARAMS, 'field': node_params.FIELD_PARAMS}
 
     def __init__(self, name: str = 'environment', **kwargs) -> None:
         super().__init__(name, **kwargs)
         self.component = EnvironmentComponent(
-            self.section('orbit', DEFAULT_ORBIT, merge=False),
-            self.section('field', DEFAULT_FIELD, merge=False), self.epoch,
-            FrameClock(self.epoch_ns))
+            self.section('orbit', ORBIT), self.section('field', FIELD), self.epoch)
         node_params.refuse_unknown(self)
         node_params.install_validator(self)
         self.orbit, self.field = self.component.orbit, self.component.field
@@ -50,10 +46,6 @@ class EnvironmentNode(LockstepNode):
         self._last_ns = None
         self._ahead_ns = None        # frame already published ahead (lockstep)
         self.start_handshake()
-
-    def compute(self, t_ns: int) -> Environment:
-        """Environment message for elapsed sim time ``t_ns`` (the component's)."""
-        return self.component.step(t_ns)
 
     def on_clock(self, msg: Clock) -> None:
         """One frame: publish for the clock's time unless that was done ahead, then (lockstep)
@@ -72,10 +64,11 @@ class EnvironmentNode(LockstepNode):
 
     def publish_frame(self, t_ns: int) -> None:
         """Compute and publish ``sim/environment`` (and ``/tf``, ``/diagnostics``) of ``t_ns``."""
-        msg = self.compute(t_ns)
+        x = self.component.step(t_ns)
+        msg = ENVIRONMENT.to_msg(x, self.epoch_ns)
         self.pub.publish(msg)
         if self.tf_pub.wanted():           # only built when someone reads /tf
-            self.tf_pub.send(earth_transforms(msg.header.stamp, quat(msg.q_eci_ecef)))
+            self.tf_pub.send(earth_transforms(msg.header.stamp, x.q_eci_ecef))
         self.frames += 1
         self.sim_t_ns = t_ns
         self.diagnostics.frame(t_ns)      # /diagnostics once per sim second

@@ -2,14 +2,11 @@
 
 Command line: ``python -m sim_node.tools.warm_kernels [--scenarios DIR] [--frames N]``.
 
-Why: the kernels of ``adcs_nodes.core`` and ``sim_node.models`` are ``njit(cache=True)``; their
-compiled code lives in ``__pycache__/*.nbi`` (index) and ``*.nbc`` (object code) next to the
-sources. Two processes that compile and save different signatures of one kernel at the same
-time can both write the same ``*-N.nbc`` name, and one index then points at the other's code
-(numba issues #4807 and #10128): a later process loads the wrong machine code and may crash
-(the SIGSEGV of a ``bdot_controller`` seen at start-up in a fresh-clone CI run). A process
-writes the cache only when it compiles (a signature is missing, or the source changed), so
-once every signature the nodes use is there, node processes only read it.
+Why: the compiled kernels of ``adcs_nodes.core`` and ``sim_node.models`` are cached in
+``__pycache__/*.nbi`` / ``*.nbc`` next to their sources; two processes that compile and save
+signatures of one kernel at the same time can corrupt that cache (numba #4807, #10128: a node
+then loads the wrong machine code and may crash). A process writes the cache only when it
+compiles, so once every signature the nodes use is there, they only read it.
 ``ros2_ws/bootstrap.sh`` runs this module once, under its lock, when the core sources change.
 
 What it runs, in this order:
@@ -45,12 +42,14 @@ PACKAGES = ('adcs_nodes.core', 'sim_node.models')
 
 
 def warm_entry_points() -> None:
-    """Step 1: the modules' ``warm_up()`` and the kernels called from plain Python."""
-    from adcs_nodes.core import geomag, manager
+    """Step 1: the modules' ``warm_up()`` and the kernels called from plain Python, every
+    kernel compiled (a node process compiles its small kernels once it loads numba)."""
+    from adcs_nodes.core import geomag, kernels, manager
     from adcs_nodes.core.control import cross3, magnetic
     from adcs_nodes.core.estimation import magnetic_filter, onboard
     from sim_node.models import disturbances, dynamics
 
+    kernels.compile_all()
     for module in (geomag, manager, magnetic, magnetic_filter):
         module.warm_up()
     z3, q = np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])

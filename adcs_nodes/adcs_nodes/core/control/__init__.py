@@ -28,14 +28,14 @@ Direction-preserving scaling onto the actuator box (paper 000, eq. (31))::
     sigma = 1 if phi <= 1 else 1 / phi                                                  (31)
     v_out = sigma v
 
-so every component satisfies ``|v_out,i| <= l_i`` and ``v_out`` is parallel to ``v`` (the
-paper writes ``u_i = sigma L*_i / l_i`` with ``u`` in the unit cube (6); ``L = l o u``).
+so ``|v_out,i| <= l_i`` and ``v_out`` is parallel to ``v`` (the paper's ``u_i = sigma L*_i /
+l_i`` in the unit cube (6)).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional, Protocol
+from typing import Any, Mapping, Optional, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -64,14 +64,8 @@ def positive(value, name: str, unit: str) -> float:
 
 
 def inertia_matrix(value: ArrayLike, name: str = 'inertia_kgm2') -> np.ndarray:
-    """An inertia tensor [kg m^2] as a (3, 3) float array: a (3,) value is the diagonal; it
-    must be finite with a positive definite symmetric part.
-
-    Raises
-    ------
-    ValueError
-        On a bad shape, a non-finite entry, or a symmetric part that is not positive definite.
-    """
+    """An inertia tensor [kg m^2] as a (3, 3) float array (a (3,) value is the diagonal);
+    ``ValueError`` unless finite with a positive definite symmetric part."""
     J = np.asarray(value, dtype=float)
     if J.shape == (3,):
         J = np.diag(J)
@@ -83,24 +77,9 @@ def inertia_matrix(value: ArrayLike, name: str = 'inertia_kgm2') -> np.ndarray:
 
 def limits_vector(value: ArrayLike, name: str, n: int, allow_zero: bool = True,
                   allow_inf: bool = True) -> np.ndarray:
-    """Per-axis actuator limits as a float array of shape (n,).
-
-    Parameters
-    ----------
-    value : float or array_like, shape (n,)
-        Limit(s); a scalar is broadcast to all ``n`` axes.
-    name : str
-        Parameter name for the error message.
-    n : int
-        Number of axes.
-    allow_zero, allow_inf : bool
-        Whether a zero limit (actuator absent) or ``inf`` (no limit) is accepted.
-
-    Raises
-    ------
-    ValueError
-        On NaN, negative, or (when not allowed) zero or infinite limits, or a bad shape.
-    """
+    """Per-axis actuator limits (n,) of a scalar or (n,) ``value``; ``ValueError`` naming
+    ``name`` on NaN, negative, a bad shape, or zero (absent) or ``inf`` (no limit) when not
+    allowed."""
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
@@ -119,24 +98,9 @@ def limits_vector(value: ArrayLike, name: str, n: int, allow_zero: bool = True,
 
 
 def scale_to_limits(v: ArrayLike, limits: ArrayLike) -> tuple[np.ndarray, float]:
-    """Scale ``v`` by one factor so every component fits its limit, eq. (31).
-
-    Parameters
-    ----------
-    v : array_like, shape (n,)
-        Demanded actuator vector (e.g. the dipole ``L*``, body axes [A m^2]); finite.
-    limits : array_like, shape (n,)
-        Per-axis limits ``l_i >= 0`` in the units of ``v``; ``inf`` means no limit. A zero
-        limit with a non-zero demand on that axis gives ``sigma = 0`` (the direction cannot be
-        kept, so nothing is commanded).
-
-    Returns
-    -------
-    v_out : ndarray, shape (n,)
-        ``sigma * v``: ``|v_out_i| <= l_i`` and ``v_out`` parallel to ``v``.
-    sigma : float
-        The factor in [0, 1] (1 when ``v`` already fits).
-    """
+    """``(sigma v (n,), sigma in [0, 1])``, eq. (31), of the finite demand ``v`` (n,) and the
+    per-axis ``limits`` (n,) >= 0 (``inf``: none; a zero limit with a non-zero demand gives
+    ``sigma = 0``)."""
     v = np.asarray(v, dtype=float)
     lim = np.asarray(limits, dtype=float)
     mag = np.abs(v)
@@ -153,22 +117,10 @@ def scale_to_limits(v: ArrayLike, limits: ArrayLike) -> tuple[np.ndarray, float]
 
 @dataclass(frozen=True)
 class Estimate:
-    """Attitude and rate estimate handed to a controller.
-
-    Attributes
-    ----------
-    q_orbit_body : ndarray, shape (4,)
-        Attitude, scalar last ``[x, y, z, w]``: rotates body vectors into the orbital frame
-        (x along-track, y orbit normal, z zenith). Paper 000's ``Lambda`` (scalar first).
-    omega_body_eci_body : ndarray, shape (3,)
-        Absolute angular rate of the body w.r.t. ECI, body axes [rad/s] (paper's ``omega``).
-    omega0 : float
-        Orbit rate [rad/s] (paper's ``omega_0``).
-    valid : bool
-        False while the estimator has no usable solution; controllers then command zero.
-    q_eci_body : ndarray, shape (4,), or None
-        Inertial attitude, scalar last (rotates body vectors into ECI); ``None`` if unknown.
-    """
+    """Attitude and rate estimate handed to a controller: ``q_orbit_body`` (4,) scalar last
+    (paper 000's ``Lambda``), ``omega_body_eci_body`` (3,) [rad/s] body axes, ``omega0`` the
+    orbit rate [rad/s], ``valid`` (False: no usable solution, controllers command zero),
+    ``q_eci_body`` (4,) or ``None`` if unknown."""
 
     q_orbit_body: np.ndarray
     omega_body_eci_body: np.ndarray
@@ -203,23 +155,10 @@ def _identity_quat() -> np.ndarray:
 
 @dataclass(frozen=True)
 class Target:
-    """Attitude target from guidance, in the frame ``frame``.
-
-    Attributes
-    ----------
-    q_ref_body : ndarray, shape (4,)
-        Target attitude, scalar last: rotates target-body vectors into the frame ``frame``.
-        Default identity: body axes on the orbital axes (paper 000's ``Lambda* = 1``, (11)).
-    omega_body_ref_body : ndarray, shape (3,)
-        Target rate of the body w.r.t. the reference frame, body axes [rad/s]; a
-        feed-forward relative rate. Default zero.
-    omega_dot_body_ref_body : ndarray, shape (3,)
-        Target angular acceleration w.r.t. the reference frame, body axes [rad/s^2].
-    frame : str
-        ``'orbit'`` (papers 000/004 orbital frame) or ``'eci'`` (inertial).
-    time_to_go_s : float
-        Time left in the current maneuver [s]; 0 when holding or tracking.
-    """
+    """Attitude target from guidance in ``frame`` (``'orbit'`` or ``'eci'``): ``q_ref_body``
+    (4,) scalar last (default identity, paper 000's ``Lambda* = 1``, (11)), feed-forward
+    ``omega_body_ref_body`` (3,) [rad/s] and ``omega_dot_body_ref_body`` (3,) [rad/s^2] w.r.t.
+    the frame, body axes, and ``time_to_go_s`` of the maneuver (0: holding or tracking)."""
 
     q_ref_body: np.ndarray = field(default_factory=_identity_quat)
     omega_body_ref_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -259,22 +198,9 @@ class Target:
 
 @dataclass
 class Command:
-    """Actuator command produced by a controller (or forwarded by the manager).
-
-    Attributes
-    ----------
-    dipole_body : ndarray, shape (3,)
-        Magnetorquer dipole, body axes [A m^2].
-    wheel_torque : ndarray, shape (n,)
-        Reaction-wheel motor torques in scenario order [N m]; shape (0,) for a controller that
-        does not use wheels (the manager reads an empty vector as zero torque on every wheel).
-    torque_body : ndarray, shape (3,)
-        Ideal body torque (thrusters / ideal actuator), body axes [N m].
-    reason : str
-        Why the command is zero or degraded ('' when nominal).
-    info : dict
-        Diagnostics of the law (e.g. demanded torque, scaling factor), for logs and tests.
-    """
+    """Actuator command of a controller: ``dipole_body`` (3,) [A m^2], ``wheel_torque`` (n,)
+    [N m] in scenario order ((0,): no wheels, zero torque), ``torque_body`` (3,) [N m] ideal,
+    body axes; ``reason`` why it is zero or degraded; ``info`` the law's diagnostics."""
 
     dipole_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
     wheel_torque: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -315,6 +241,8 @@ class ControlInputs:
     q_eci_body_meas: Optional[np.ndarray] = None
     #: the dipole applied over the previous command frame [A m^2, body axes]
     applied_dipole_body: Optional[np.ndarray] = None
+    #: fresh samples of a plugin's input kinds, by input key (``adcs_nodes.inputs.register``)
+    samples: Mapping[str, Any] = field(default_factory=dict)
 
     def field_body(self) -> Optional[np.ndarray]:
         """The fresh measurement when there is one, else the onboard-model field."""

@@ -26,14 +26,11 @@ Eigenangle and eigenaxis::
     phi = arccos((tr A - 1) / 2)                                                          (7)
     V_i = (a_{i+1,i+2} - a_{i+2,i+1}) / (2 sin phi),   i = 1..3 cyclic                     (6)
 
-``A = cos phi I + (1 - cos phi) e e^T - sin phi [e x]``, so ``e_phi = V`` is the rotation axis
-of ``A^T`` (target axes -> body axes) and ``d phi / dt = e_phi . omega`` (``omega`` the body
-rate relative to the target, body axes): ``phi`` decreases when ``omega`` points along
-``-e_phi``. Numerically (pitfalls 1-3 of the digest): ``phi = atan2(|v| / 2, (tr A - 1) / 2)``
-with ``v = 2 sin phi e_phi`` (accurate near 0 where ``arccos`` is not), ``e_phi = v / |v|``;
-near 180 deg ``v -> 0`` and the axis comes from the symmetric part
-``A + A^T = 2 cos phi I + 2 (1 - cos phi) e e^T``; its sign is free there (either is a
-shortest slew) and is kept from the previous axis (hysteresis) so the axis does not chatter.
+``e_phi = V`` is the rotation axis of ``A^T`` and ``d phi / dt = e_phi . omega`` (``omega``
+relative to the target, body axes). Numerically (digest pitfalls 1-3): ``phi = atan2(|v| / 2,
+(tr A - 1) / 2)`` with ``v = 2 sin phi e_phi``; near 180 deg the axis comes from the symmetric
+part ``A + A^T = 2 cos phi I + 2 (1 - cos phi) e e^T`` and its free sign is kept from the
+previous axis (hysteresis).
 
 Torque directions (``J`` the inertia matrix; the paper's principal ``J_i`` are its diagonal)::
 
@@ -73,19 +70,8 @@ HYSTERESIS_RAD = math.radians(1.0)
 
 
 def dcm_euler_321(psi: float, theta: float, gamma: float) -> np.ndarray:
-    """The DCM ``A`` of eq. (1), row 3 corrected (reference axes -> body axes).
-
-    Parameters
-    ----------
-    psi, theta, gamma : float
-        Euler-Krylov angles [rad]: ``psi`` about x3, then ``theta`` about x'2, then ``gamma``
-        about x'1 (3-2-1; our yaw, pitch, roll).
-
-    Returns
-    -------
-    ndarray, shape (3, 3)
-        ``A`` with ``v_body = A v_ref``; equals ``R(from_euler_321(gamma, theta, psi))^T``.
-    """
+    """The DCM ``A`` (3, 3) of eq. (1), row 3 corrected, ``v_body = A v_ref``, of the 3-2-1
+    Euler-Krylov angles [rad] (yaw, pitch, roll); ``R(from_euler_321(gamma, theta, psi))^T``."""
     cp, sp = math.cos(psi), math.sin(psi)
     ct, st = math.cos(theta), math.sin(theta)
     cg, sg = math.cos(gamma), math.sin(gamma)
@@ -107,26 +93,11 @@ def _keep_sign(phi: float, e: np.ndarray, axis_prev: Optional[np.ndarray],
 
 def eigen_from_dcm(A: ArrayLike, axis_prev: Optional[ArrayLike] = None,
                    hysteresis_rad: float = HYSTERESIS_RAD) -> Tuple[float, np.ndarray]:
-    """Eigenangle (7) and eigenaxis (6) of a DCM, robust near 0 and 180 deg.
+    """``(phi [rad], e_phi (3,))``, eigenangle (7) and unit eigenaxis (6) of the rotation
+    ``A`` (3, 3), ``v_body = A v_ref``, robust near 0 and 180 deg.
 
-    Parameters
-    ----------
-    A : array_like, shape (3, 3)
-        Proper rotation, ``v_body = A v_ref`` (eq. (1), or the error DCM).
-    axis_prev : array_like, shape (3,), optional
-        Previous eigenaxis (unit). Used when the axis is undefined (``phi = 0``) and, within
-        ``hysteresis_rad`` of 180 deg, to keep the axis sign (``phi`` may then exceed pi by up
-        to ``hysteresis_rad``: the same rotation the long way round).
-    hysteresis_rad : float
-        Width of the sign-keeping band below 180 deg [rad].
-
-    Returns
-    -------
-    phi : float
-        Eigenangle [rad], in [0, pi] (up to ``pi + hysteresis_rad`` with ``axis_prev``).
-    e_phi : ndarray, shape (3,)
-        Unit eigenaxis (body = reference components), the rotation axis of ``A^T``. At
-        ``phi = 0`` it is ``axis_prev`` (zeros without one): the axis is undefined there.
+    ``axis_prev`` (3,) is returned at ``phi = 0`` (zeros without one) and keeps the axis sign
+    within ``hysteresis_rad`` of 180 deg (``phi`` may then exceed pi by up to that band).
     """
     a = np.asarray(A, dtype=float)
     v = np.array([a[1, 2] - a[2, 1], a[2, 0] - a[0, 2], a[0, 1] - a[1, 0]])   # 2 sin phi e
@@ -156,23 +127,8 @@ def eigen_from_dcm(A: ArrayLike, axis_prev: Optional[ArrayLike] = None,
 
 def eigen_from_quaternion(q_target_body: ArrayLike, axis_prev: Optional[ArrayLike] = None,
                           hysteresis_rad: float = HYSTERESIS_RAD) -> Tuple[float, np.ndarray]:
-    """Eigenangle and eigenaxis of an attitude error quaternion (same as (6), (7)).
-
-    Parameters
-    ----------
-    q_target_body : array_like, shape (4,)
-        Error quaternion, scalar last, rotating body vectors into the target axes
-        (``A_err = R(q)^T``); normalised here (must have non-zero norm).
-    axis_prev, hysteresis_rad
-        As in :func:`eigen_from_dcm`.
-
-    Returns
-    -------
-    phi : float
-        [rad], in [0, pi] (up to ``pi + hysteresis_rad`` with ``axis_prev``).
-    e_phi : ndarray, shape (3,)
-        Unit eigenaxis; ``axis_prev`` (or zeros) at ``phi = 0``.
-    """
+    """As :func:`eigen_from_dcm` for the error quaternion ``q_target_body`` (4,), scalar last,
+    body -> target axes (``A_err = R(q)^T``), normalised here."""
     q = np.asarray(q_target_body, dtype=float)
     q = q / np.linalg.norm(q)
     if q[3] < 0.0:
@@ -186,22 +142,8 @@ def eigen_from_quaternion(q_target_body: ArrayLike, axis_prev: Optional[ArrayLik
 
 
 def torque_direction(inertia: ArrayLike, e: ArrayLike) -> Tuple[np.ndarray, float]:
-    """Torque direction that accelerates along ``e``: eq. (4) (``e_phi``) or (5) (``e_g``).
-
-    Parameters
-    ----------
-    inertia : array_like, shape (3,) or (3, 3)
-        Principal inertias ``J_i`` or the inertia matrix [kg m^2], body axes.
-    e : array_like, shape (3,)
-        Unit direction, body axes.
-
-    Returns
-    -------
-    e_k : ndarray, shape (3,)
-        ``J e / |J e|`` (zeros if ``e`` is zero).
-    J_k : float
-        ``|J e|`` [kg m^2], the inertia "about ``e_k``" of the paper.
-    """
+    """``(e_k = J e / |J e| (3,), J_k = |J e| [kg m^2])``, eq. (4) or (5), of the inertia
+    (3,) or (3, 3) [kg m^2] and the unit direction ``e`` (3,), body axes (zeros if ``e = 0``)."""
     J = np.asarray(inertia, dtype=float)
     je = (J @ np.asarray(e, dtype=float)) if J.ndim == 2 else J * np.asarray(e, dtype=float)
     jk = float(np.linalg.norm(je))                                              # (4), (5)
@@ -211,24 +153,9 @@ def torque_direction(inertia: ArrayLike, e: ArrayLike) -> Tuple[np.ndarray, floa
 
 
 def gyroscopic_rate(omega: ArrayLike, e_phi: ArrayLike) -> Tuple[float, np.ndarray, float]:
-    """Eigenaxis rate and the parasitic rate off the eigenaxis, eq. (9).
-
-    Parameters
-    ----------
-    omega : array_like, shape (3,)
-        Body rate relative to the target axes, body axes [rad/s].
-    e_phi : array_like, shape (3,)
-        Unit eigenaxis.
-
-    Returns
-    -------
-    phi_dot : float
-        ``e_phi . omega`` [rad/s] (= d phi / dt).
-    phidot_g : ndarray, shape (3,)
-        ``omega - phi_dot e_phi`` [rad/s], body axes (9).
-    g : float
-        ``|phidot_g|`` [rad/s].
-    """
+    """``(phi_dot = e_phi . omega, phidot_g = omega - phi_dot e_phi (3,), g = |phidot_g|)``
+    [rad/s], eq. (9), of the relative rate ``omega`` (3,) [rad/s] and the unit ``e_phi``, body
+    axes."""
     w = np.asarray(omega, dtype=float)
     e = np.asarray(e_phi, dtype=float)
     phi_dot = float(np.dot(e, w))
@@ -276,17 +203,8 @@ class EigenaxisTorqueLaw:
 
     def _set_wheels(self, wheel_axes_body: Optional[ArrayLike],
                     wheel_max_torque_Nm: Optional[ArrayLike]) -> None:
-        """Reaction wheels: ``wheels``, a
-        :class:`~adcs_nodes.core.control.wheel_allocation.WheelAllocator` that scales onto the
-        torque limits (A2) without a momentum headroom (why: that module's docstring), and
-        ``A_w`` (3, n) its unit spin axes, body axes; ``A_w = None`` without wheels (ideal
-        body torque).
-
-        Raises
-        ------
-        ValueError
-            If the axes are not finite or do not span 3-D, or the limits are bad.
-        """
+        """``wheels``, a :class:`WheelAllocator` scaling onto the torque limits (A2), and
+        ``A_w`` (3, n) its unit spin axes, body axes (``None``: ideal body torque)."""
         if wheel_axes_body is not None and np.size(wheel_axes_body) > 0:
             self.wheels = WheelAllocator(wheel_axes_body, wheel_max_torque_Nm, 'scale')
             self.A_w = self.wheels.A_w                                        # (3, n)

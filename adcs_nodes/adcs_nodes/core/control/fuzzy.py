@@ -16,37 +16,19 @@ Two Mamdani controllers run in parallel (Fig. 3)::
 Negative ``M_k`` accelerates along ``-e_phi`` (toward the target); negative ``M_gk`` brakes the
 parasitic rate.
 
-Mamdani inference (the paper names Mamdani [6] and triangular membership functions; the
-rest is the standard choice, ASSUMPTION): fuzzification with triangular functions whose feet
-sit on the neighbouring peaks (the two outer terms are shoulders; the input is clipped to
-[first peak, last peak]), so the memberships of each input sum to 1; rule strength
-``w_r = min(mu_1, mu_2)``; implication by clipping (``min``); aggregation by ``max``;
-defuzzification by the centroid of the piecewise-linear aggregated set on a grid of the
-output universe (the formula of scikit-fuzzy's ``centroid``). The inference is vectorised
-over rules, terms and the grid (and over a batch of inputs).
+Mamdani inference (the paper names Mamdani [6] and triangular functions; the rest is the
+standard choice, ASSUMPTION): triangular terms with feet on the neighbouring peaks (shoulders
+at both ends, input clipped), so memberships sum to 1; ``w_r = min(mu_1, mu_2)``; ``min``
+implication, ``max`` aggregation; centroid of the piecewise-linear set on a grid (the formula
+of scikit-fuzzy's ``centroid``), vectorised over rules, terms, grid and inputs.
 
-Table 1 row order (interpretation)
-----------------------------------
-Read with its printed row labels (top to bottom Б, С, М, ОМ, Н), Table 1 gives the rule
-(φ = Н, φ̇ = Н) -> О: at the target and at rest (and only that rule fires there) the output is
-the centroid of О, a non-zero torque, so the end state (3) of the paper (at the target, at
-rest) is not an equilibrium, whatever the breakpoints; and the rule (Б, Н) -> Н leaves a
-spacecraft at rest at a big angle where it is. With the rows taken in the order in which the
-text lists the φ terms (Н, ОМ, М, С, Б top to bottom, i.e. the printed labels reversed), the
-table is a conventional rate-profile controller: (Н, Н) -> Н, rate damping at φ = Н, full
-acceleration from rest at ОМ/М and braking when faster than a cruise rate that grows with φ.
-So the paper means the reversed reading (``table1_rows='reversed'``, the default); the
-literal one is kept as ``'as_printed'``. Table 2 is symmetric, so its order does not matter.
-On the paper's case (:mod:`adcs_nodes.tools.analyse.papers.paper003`, default breakpoints) the
-reversed
-reading settles (5 % band) in 26.7 s with 40.2 N m s (paper: 25.73 s, 42.91 N m s); the printed
-one swings +-14 deg through the target and has not settled after 80 s.
+Table 1 is read with its rows reversed (Н, ОМ, М, С, Б top to bottom, the text's order of the
+φ terms; ``table1_rows='reversed'``, the default): read as printed, (Н, Н) -> О makes the end
+state (3) no equilibrium. ``'as_printed'`` keeps the literal reading (docs/decisions.md).
 
-Assumptions (not in the paper: breakpoints are only in Figs. 4, 5)
--------------------------------------------------------------------
-* Breakpoints (term peaks) and output half-widths: :data:`DEFAULTS`, fitted from the digest's
-  set S1 to the paper's settling time and energy (ASSUMPTION; see the comment there), and
-  :data:`SMOOTH`, a set without overshoot.
+Assumptions (the breakpoints are only in Figs. 4, 5):
+* Breakpoints and output half-widths: :data:`DEFAULTS` (fitted to the paper's settling time
+  and energy) and :data:`SMOOTH` (no overshoot).
 * ``mk_gain``: a gain on the defuzzified ``M_k`` before the limit (ASSUMPTION; 1 = none).
 * Limit: uniform scaling ``M <- M / max(1, max_i |M_i| / l_i)`` (keeps the direction and so
   the eigenaxis; ASSUMPTION), or per-axis clipping (``saturation='clip'``).
@@ -139,20 +121,8 @@ def _check_peaks(peaks: ArrayLike, name: str, n: int) -> np.ndarray:
 
 
 def triangular_memberships(x: ArrayLike, peaks: np.ndarray) -> np.ndarray:
-    """Memberships of a triangular partition (shoulders at both ends).
-
-    Parameters
-    ----------
-    x : array_like, shape (k,) or scalar
-        Crisp inputs, clipped to ``[peaks[0], peaks[-1]]``.
-    peaks : ndarray, shape (n,)
-        Strictly increasing term peaks; each triangle's feet are the neighbouring peaks.
-
-    Returns
-    -------
-    ndarray, shape (k, n)
-        ``mu[j, i]`` of input ``j`` in term ``i``; every row sums to 1 (at most two non-zero).
-    """
+    """Memberships ``mu[j, i]`` (k, n) of the inputs ``x`` (k,) (clipped to the end peaks) in
+    the triangular partition of the increasing ``peaks`` (n,); every row sums to 1."""
     return _memberships(x, peaks, *_inverse_widths(peaks))
 
 
@@ -171,21 +141,8 @@ def _memberships(x: ArrayLike, peaks: np.ndarray, inv_left: np.ndarray,
 
 
 def centroid(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
-    """Centroid of the piecewise-linear set sampled as ``mu`` on the grid ``x``.
-
-    Parameters
-    ----------
-    x : ndarray, shape (N,)
-        Increasing grid of the output universe.
-    mu : ndarray, shape (k, N)
-        Aggregated memberships of ``k`` sets.
-
-    Returns
-    -------
-    ndarray, shape (k,)
-        Centroids (segment-wise exact for linear interpolation between grid points, the
-        formula of ``skfuzzy.defuzz(..., 'centroid')``); 0 for an empty set.
-    """
+    """Centroids (k,) of the piecewise-linear sets ``mu`` (k, N) on the increasing grid ``x``
+    (N,) (exact per segment, as ``skfuzzy.defuzz(..., 'centroid')``); 0 for an empty set."""
     dx = np.diff(x)
     return _centroid(mu, x[:-1], dx, dx * dx / 6.0)
 
@@ -202,28 +159,10 @@ def _centroid(mu: np.ndarray, x0: np.ndarray, dx: np.ndarray, dx2_6: np.ndarray)
 
 
 class Mamdani:
-    """Two-input, one-output Mamdani controller with triangular terms.
-
-    Parameters
-    ----------
-    peaks1 : array_like, shape (n1,)
-        Term peaks of input 1 (increasing; partition with shoulders).
-    peaks2 : array_like, shape (n2,)
-        Term peaks of input 2.
-    out_peaks : array_like, shape (m,)
-        Output term peaks (increasing).
-    out_half_width : float
-        Half base width of every output triangle (> 0), output units.
-    table : array_like of int, shape (n1, n2)
-        Rule base: output term index of the rule (term i of input 1 AND term j of input 2).
-    n_points : int
-        Grid points on the output universe ``[out_peaks[0] - w, out_peaks[-1] + w]``.
-
-    Raises
-    ------
-    ValueError
-        On non-increasing peaks, a bad table, a non-positive width or too few points.
-    """
+    """Two-input, one-output Mamdani controller with triangular terms: increasing term peaks
+    ``peaks1`` (n1,), ``peaks2`` (n2,), ``out_peaks`` (m,); ``out_half_width`` > 0 of every
+    output triangle; ``table`` (n1, n2) of output term indices; ``n_points`` on the output
+    universe ``[out_peaks[0] - w, out_peaks[-1] + w]``. ``ValueError`` if not."""
 
     def __init__(self, peaks1: ArrayLike, peaks2: ArrayLike, out_peaks: ArrayLike,
                  out_half_width: float, table: ArrayLike, n_points: int = 501) -> None:
@@ -266,12 +205,8 @@ class Mamdani:
         return float(self.x[0]), float(self.x[-1])
 
     def strengths(self, x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
-        """Firing strength of each output term, ``max`` over its rules of ``min(mu1, mu2)``.
-
-        Returns
-        -------
-        ndarray, shape (k, m)
-        """
+        """Firing strength (k, m) of each output term: ``max`` over its rules of
+        ``min(mu1, mu2)``."""
         mu1 = _memberships(x1, self.peaks1, *self._w1)                     # (k, n1)
         mu2 = _memberships(x2, self.peaks2, *self._w2)                     # (k, n2)
         w = np.minimum(mu1[:, :, None], mu2[:, None, :]).reshape(mu1.shape[0], -1)
@@ -288,16 +223,8 @@ class Mamdani:
 
 
 # ---------------------------------------------------------------------- the controller
-#: Default breakpoints (ASSUMPTION: the paper gives them only in Figs. 4, 5). Units: deg,
-#: deg/s, deg/s^2, N m. Fitted on the paper's scenario
-#: (:mod:`adcs_nodes.tools.analyse.papers.paper003`):
-#: starting from the digest's set S1, a random search over scalings of the phi and phi_dot
-#: peaks, ``mk_gain`` and the compensation output, rounded, picked the clean set (no residual
-#: torque after settling) closest to the paper's 25.73 s and 42.91 N m s. It accelerates to
-#: ~3.5 deg/s, brakes late and overshoots the target by ~4.5 deg before settling; +-10 % on
-#: any of the four scalings keeps it within 24-29 s and 37-44 N m s. The compensation output
-#: is x4 S1's (with S1's +-0.1 N m the body circled the target at ~1 deg; without compensation
-#: it did not settle at all).
+#: Default breakpoints (ASSUMPTION, fitted from the digest's set S1 to the paper's settling
+#: time and energy; docs/decisions.md). Units: deg, deg/s, deg/s^2, N m.
 DEFAULTS = dict(
     phi_peaks_deg=(0.0, 2.5, 10.0, 30.0, 90.0),
     dphi_peaks_deg_s=(-6.4, -4.8, -2.4, -0.8, 0.0, 0.8, 2.4, 4.8, 6.4),
@@ -309,8 +236,7 @@ DEFAULTS = dict(
     mgk_peaks_Nm=(-0.4, -0.2, 0.0, 0.2, 0.4),
     mgk_half_width_Nm=0.2,
 )
-#: A smoother set (ASSUMPTION; the first tuning): no overshoot, about the same settling time
-#: and ~40 % less energy than :data:`DEFAULTS`, i.e. far from the paper's energy.
+#: A smoother set (ASSUMPTION): no overshoot, ~40 % less energy than :data:`DEFAULTS`.
 SMOOTH = dict(
     DEFAULTS,
     phi_peaks_deg=(0.0, 3.0, 12.0, 35.0, 90.0),
@@ -324,35 +250,12 @@ SMOOTH = dict(
 class FuzzyEigenaxisController(ea.EigenaxisTorqueLaw):
     """Paper 003's fuzzy eigenaxis slew controller (interface of :mod:`..control`).
 
-    Parameters
-    ----------
-    inertia_kgm2 : array_like, shape (3, 3) or (3,)
-        Onboard inertia (or principal inertias) [kg m^2], body axes.
-    max_torque_Nm : float or array_like, shape (3,)
-        Per-axis torque limit ``|M_i| <= l_i`` [N m] (paper: 1).
-    table1_rows : str
-        ``'reversed'`` (default; the reading that works, see the module docstring) or
-        ``'as_printed'``.
-    compensation : bool
-        Run the gyroscopic-compensation controller (Table 2).
-    saturation : str
-        ``'scale'`` (keep the direction) or ``'clip'`` (per axis).
-    phi_peaks_deg, dphi_peaks_deg_s, mk_peaks_Nm, mk_half_width_Nm, mk_gain,
-    g_peaks_deg_s, dg_peaks_deg_s2, mgk_peaks_Nm, mgk_half_width_Nm :
-        Breakpoints of Figs. 4, 5 (ASSUMPTION; defaults :data:`DEFAULTS`).
-    n_points : int
-        Output grid points of each centroid.
-    wheel_axes_body : array_like, shape (n, 3), optional
-        Reaction-wheel spin axes; with them the torque is allocated to the wheels.
-    wheel_max_torque_Nm : array_like, shape (n,), optional
-        Wheel motor torque limits [N m].
-    hysteresis_deg : float
-        Axis-sign hysteresis below 180 deg [deg].
-
-    Raises
-    ------
-    ValueError
-        On bad configuration (shapes, non-increasing breakpoints, unknown options).
+    ``inertia_kgm2`` (3, 3) or (3,) [kg m^2] body axes; ``max_torque_Nm`` per-axis limit
+    [N m] (paper: 1); ``table1_rows`` ``'reversed'`` or ``'as_printed'``; ``compensation``:
+    run Table 2; ``saturation`` ``'scale'`` or ``'clip'``; the breakpoints of :data:`DEFAULTS`
+    as keywords; ``n_points`` per centroid grid; ``wheel_axes_body`` (n, 3) and
+    ``wheel_max_torque_Nm`` (n,) [N m] to allocate to wheels; ``hysteresis_deg`` of the axis
+    sign below 180 deg. ``ValueError`` on a bad configuration.
     """
 
     def __init__(self, inertia_kgm2: ArrayLike, max_torque_Nm: ArrayLike = 1.0,
@@ -392,23 +295,11 @@ class FuzzyEigenaxisController(ea.EigenaxisTorqueLaw):
 
     # ------------------------------------------------------------------ law
     def law(self, q_target_body: ArrayLike, omega_rel_body: ArrayLike, dt: float) -> dict:
-        """One step of the law on the attitude error.
+        """One step on the error quaternion ``q_target_body`` (4,) and the relative rate
+        ``omega_rel_body`` (3,) [rad/s], body axes, period ``dt`` [s] (``tau`` of (15)).
 
-        Parameters
-        ----------
-        q_target_body : array_like, shape (4,)
-            Error quaternion (body -> target axes), scalar last.
-        omega_rel_body : array_like, shape (3,)
-            Body rate relative to the target, body axes [rad/s].
-        dt : float
-            Period [s] (``tau`` of (15)).
-
-        Returns
-        -------
-        dict
-            ``torque_body`` (3,) [N m] after the limit, and the diagnostics
-            ``torque_unlimited`` (before the limit), ``phi``, ``phi_dot``, ``g``, ``g_dot``,
-            ``M_k``, ``M_gk``, ``e_phi``, ``sigma``.
+        Returns a dict: ``torque_body`` (3,) [N m] after the limit, and ``torque_unlimited``,
+        ``phi``, ``phi_dot``, ``g``, ``g_dot``, ``M_k``, ``M_gk``, ``e_phi``, ``sigma``.
         """
         w = np.asarray(omega_rel_body, dtype=float)
         phi, e_phi = ea.eigen_from_quaternion(q_target_body, self._axis, self.hysteresis)

@@ -1,10 +1,8 @@
 """Reference rest-to-rest eigenaxis slew: bang-bang rate profile with a PD end (pure numpy).
 
-The comparison controller of paper 003 (digest ``papers/fuzzy-eigenaxis-slew.md``, section 10).
-The paper compares its fuzzy slew "with [7]" and gives neither the reference law nor its
-parameters (the citation is most likely the optimal spatial turn of Shklyar & Malshenko, its
-ref. [6]). This module is our stand-in (ASSUMPTION): a near time-optimal eigenaxis slew under
-the same per-axis torque limit, written as a rate-profile tracker.
+The comparison controller of paper 003 (digest ``papers/fuzzy-eigenaxis-slew.md``, section 10)
+is not given by the paper; this is our stand-in (ASSUMPTION): a near time-optimal eigenaxis
+slew under the same per-axis torque limit, as a rate-profile tracker.
 
 Law (``phi``, ``e_phi`` from (6), (7); ``omega`` the body rate relative to the target)::
 
@@ -15,13 +13,9 @@ Law (``phi``, ``e_phi`` from (6), (7); ``omega`` the body rate relative to the t
     M       = J k (omega_d - omega) + omega x J omega          rate tracking + gyroscopic
     M       <- M / max(1, max_i |M_i| / l_i)                   same limit as the fuzzy law
 
-Far from the target ``omega_d`` is the rest-to-rest bang-bang profile (full acceleration,
-then the parabola ``|omega| = sqrt(2 a phi)`` down to rest); below the angle where
-``lambda phi < sqrt(2 a phi)`` it is the PD law ``M ~ -J k (lambda phi e + omega)``.
-``f_a < 1`` leaves torque for the gyroscopic term and the rate loop. Defaults (ASSUMPTION):
-``f_a = 0.9``, ``k = 2 1/s``, ``lambda = 0.5 1/s`` (the linear end starts at
-``phi = 2 a / lambda^2``, about 1.3 deg in the paper's case): on the paper's case it enters the
-5 % band within 1 % of the bang-bang eigenaxis time with the full acceleration.
+Below ``phi = 2 a / lambda^2`` it is the PD law ``M ~ -J k (lambda phi e + omega)``; ``f_a < 1``
+leaves torque for the gyroscopic term. Defaults (ASSUMPTION): ``f_a = 0.9``, ``k = 2 1/s``,
+``lambda = 0.5 1/s`` (within 1 % of the bang-bang time on the paper's case).
 """
 from __future__ import annotations
 
@@ -40,30 +34,12 @@ __all__ = ['ReferenceSlewController']
 class ReferenceSlewController(ea.EigenaxisTorqueLaw):
     """Near time-optimal eigenaxis slew (interface of :mod:`adcs_nodes.core.control`).
 
-    Parameters
-    ----------
-    inertia_kgm2 : array_like, shape (3, 3) or (3,)
-        Onboard inertia [kg m^2], body axes.
-    max_torque_Nm : float or array_like, shape (3,)
-        Per-axis torque limit [N m].
-    accel_fraction : float
-        ``f_a`` in (0, 1]: fraction of the admissible eigenaxis acceleration planned.
-    rate_gain_per_s : float
-        ``k`` [1/s] of the rate loop.
-    linear_gain_per_s : float
-        ``lambda`` [1/s] of the linear (PD) end of the profile.
-    max_rate_deg_s : float
-        ``w_max`` [deg/s]; ``inf`` for none.
-    gyroscopic_compensation : bool
-        Add ``omega x J omega`` (default). Off: the classical law built on assumption (10)
-        (``omega = phi_dot e_phi``), which the paper says is wrong for an asymmetric body.
-    wheel_axes_body, wheel_max_torque_Nm : optional
-        Reaction wheels, as in :class:`~adcs_nodes.core.control.fuzzy.FuzzyEigenaxisController`.
-
-    Raises
-    ------
-    ValueError
-        On bad configuration.
+    ``inertia_kgm2`` (3, 3) or (3,) [kg m^2] body axes; ``max_torque_Nm`` per axis [N m];
+    ``accel_fraction`` ``f_a`` in (0, 1]; ``rate_gain_per_s`` ``k``; ``linear_gain_per_s``
+    ``lambda``; ``max_rate_deg_s`` ``w_max`` (``inf``: none); ``gyroscopic_compensation``:
+    add ``omega x J omega`` (off: the classical law on the paper's assumption (10));
+    ``wheel_axes_body``, ``wheel_max_torque_Nm`` as the fuzzy controller's.
+    ``ValueError`` on a bad configuration.
     """
 
     def __init__(self, inertia_kgm2: ArrayLike, max_torque_Nm: ArrayLike = 1.0,

@@ -12,8 +12,7 @@ Allocation (minimum-norm least squares; ``A_w`` must span 3-D)::
 
     tau_w = A_w^+ h_dot_b,   A_w^+ = A_w^T (A_w A_w^T)^-1                                  (A1)
 
-so ``A_w tau_w = h_dot_b`` exactly and ``tau_w`` has the smallest norm among the solutions
-(for three orthogonal wheels ``A_w^+ = A_w^T``).
+(``A_w tau_w = h_dot_b`` exactly, ``tau_w`` of smallest norm).
 
 Torque limit ``|tau_i| <= l_i``, one of two policies (``saturation``)::
 
@@ -21,18 +20,12 @@ Torque limit ``|tau_i| <= l_i``, one of two policies (``saturation``)::
               (paper 000, eq. (31): keeps the direction of the body torque)
     'clip':   tau_i <- clip(tau_i, -l_i, l_i)  (what each wheel driver does on its own)    (A3)
 
-Optional momentum headroom over one hold period ``T`` (``max_momentum_Nms`` given), so that
-``h_i + T tau_i`` stays within ``[-H_i, H_i]`` (the plant's own rule, ``WheelCluster.apply``
-with ``dt``; per wheel, so it cannot keep the direction)::
+Optional momentum headroom over one hold period ``T`` (the plant's own rule), per wheel::
 
     tau_i <- clip(tau_i, min((-H_i - h_i) / T, 0), max((H_i - h_i) / T, 0))                (A4)
 
-Why both policies stay: the MPI law (paper 001) offers ``'scale'`` and ``'clip'`` (digest P17:
-the paper does not say which, and its settle times depend on it) and applies (A4), because it
-knows its hold period and paper 001's 55 N m s limit. The eigenaxis laws scale (A2) without
-(A4): paper 003 gives only a torque limit, their registry entries take no momentum limit, and
-the plant stops a wheel at its momentum limit anyway; adding (A4) there would change the
-shipped fuzzy and reference-slew results (demo mission) for no claim of their paper.
+The MPI law (paper 001) offers both policies (the paper does not say which, digest P17) and
+(A4); the eigenaxis laws (paper 003: a torque limit only) scale (A2) without (A4).
 """
 from __future__ import annotations
 
@@ -53,25 +46,10 @@ SATURATION = ('scale', 'clip')
 class WheelAllocator:
     """Motor torques of a wheel cluster for a demanded body-axis wheel momentum rate.
 
-    Parameters
-    ----------
-    wheel_axes_body : array_like, shape (n, 3)
-        Spin axes, body axes (normalised here, as the plant does); they must span 3-D.
-    max_torque_Nm : float or array_like, shape (n,)
-        Per-wheel torque limits ``l_i > 0`` [N m] (``inf``: none).
-    saturation : {'scale', 'clip'}
-        (A2) one factor keeping the direction, or (A3) per-wheel clipping.
-    max_momentum_Nms : float or array_like, shape (n,), optional
-        Per-wheel momentum limits ``H_i > 0`` [N m s] (``inf``: none) for the headroom (A4);
-        None: no headroom check (the eigenaxis laws, see the module docstring).
-    period_s : float, optional
-        Hold period ``T`` [s] of (A4); required with ``max_momentum_Nms``.
-
-    Raises
-    ------
-    ValueError
-        Axes empty, not finite, of zero length or not spanning 3-D; bad limits; an unknown
-        ``saturation``; ``max_momentum_Nms`` without a positive finite ``period_s``.
+    ``wheel_axes_body`` (n, 3) spanning 3-D (normalised here); ``max_torque_Nm`` (n,) or
+    scalar ``l_i > 0`` [N m]; ``saturation`` (A2) ``'scale'`` or (A3) ``'clip'``;
+    ``max_momentum_Nms`` (n,) ``H_i > 0`` [N m s] and ``period_s`` ``T`` [s] for (A4)
+    (``None``: no headroom). ``ValueError`` on a bad argument.
     """
 
     def __init__(self, wheel_axes_body: ArrayLike, max_torque_Nm: ArrayLike,
@@ -115,22 +93,9 @@ class WheelAllocator:
 
     def limit(self, tau_w: ArrayLike, h_w: Optional[ArrayLike] = None
               ) -> Tuple[np.ndarray, float]:
-        """Torque limit (A2) or (A3), then the momentum headroom (A4) when configured.
-
-        Parameters
-        ----------
-        tau_w : array_like, shape (n,)
-            Motor torques [N m], finite.
-        h_w : array_like, shape (n,), optional
-            Wheel momenta [N m s] for (A4); required when a momentum limit is configured.
-
-        Returns
-        -------
-        tau_out : numpy.ndarray, shape (n,)
-            Limited motor torques [N m].
-        sigma : float
-            The factor of (A2) (1 with ``'clip'`` or when nothing is scaled).
-        """
+        """``(tau_out (n,) [N m], sigma)``: the finite motor torques ``tau_w`` (n,) [N m] after
+        (A2) or (A3) (``sigma`` the factor of (A2), else 1), then (A4) with the wheel momenta
+        ``h_w`` (n,) [N m s] (required with a momentum limit)."""
         tau_w = np.asarray(tau_w, dtype=float)
         if self.saturation == 'clip':
             out, sigma = np.clip(tau_w, -self.max_torque, self.max_torque), 1.0      # (A3)

@@ -427,7 +427,7 @@ def _rates_k(q, omega, m, inertia, inertia_inv, omega0, dipole, field, field_mod
     return q_dot, omega_dot
 
 
-@jit
+@jit(loads_numba=True)
 def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, field_mode,
                    h, substeps):
     """``substeps`` RK4 steps of (33) of ``h`` [s] and ``P <- F P F^T`` (34); the arguments
@@ -459,7 +459,7 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
     return q, omega, p
 
 
-@jit
+@jit(loads_numba=True)
 def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_innovation,
                   form_phi):
     """(36)/(37) (and (M2)), the sequential update (38) and the correction (39) on arrays:
@@ -515,7 +515,7 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
     return q_new, omega_new, m_new, p, z, w, sigma
 
 
-@jit
+@jit(loads_numba=True)
 def correct_kernel(q, omega, m, w, form_phi):
     """Correction (39) on arrays; see :func:`correct_state` (``form_phi``: form (36))."""
     v = w[0:3].copy()

@@ -1,23 +1,11 @@
-"""Bag to CSV: one file per topic, one row per message, flattened fields, first column ``t``.
-
-Columns
--------
-* ``t`` [s]: ``header.stamp`` in seconds (epoch of the stamp, i.e. the scenario's UTC date in
-  simulation) when the message has a header (``rosgraph_msgs/Clock``: its ``clock``), else the
-  bag's log time. ``header.stamp`` itself is not repeated; ``header.frame_id`` is kept.
-* every other field with a dotted name: ``r_eci.x``, ``q_eci_orbit.w``; fixed arrays
-  ``covariance[0]`` ... ``covariance[35]``; variable arrays ``momentum[0]`` ... up to the longest
-  array seen on the topic (shorter rows leave the extra cells empty).
-* booleans are written ``1`` / ``0``; floats with ``repr`` (exact round trip).
-
-File names: the topic without its leading ``/``, every ``/`` replaced by ``__``:
-``/sim/state`` -> ``sim__state.csv``. Rows are in recording order (per topic, arrival order).
-Since ``t`` comes from header stamps, the CSV of a deterministic simulation is identical
-between runs (log times are not exported).
+"""Bag to CSV (``adcs export``): one file per topic (``/sim/state`` -> ``sim__state.csv``), one
+row per message in recording order, first column ``t`` [s] from ``header.stamp`` (a Clock's
+``clock``; else the log time), so a deterministic simulation exports identical files. Other
+fields flattened with dotted names (``r_eci.x``, ``covariance[35]``, variable arrays up to the
+longest seen), booleans ``1``/``0``, floats with ``repr``.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import os
 from pathlib import Path
@@ -33,10 +21,8 @@ def topic_file_name(topic: str) -> str:
 
 
 class _ColumnOrder:
-    """Ordered union of the column names of all rows, new names placed after their predecessor.
-
-    Keeps ``momentum[3]`` right after ``momentum[2]`` even when the first rows are shorter.
-    """
+    """Ordered union of the rows' column names, a new name after its predecessor
+    (``momentum[3]`` right after ``momentum[2]`` even when the first rows are shorter)."""
 
     def __init__(self) -> None:
         self.names: List[str] = []
@@ -75,30 +61,10 @@ def flatten_row(msg: Any, log_time_ns: int) -> List[tuple]:
 
 def export_csv(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
                topics: Optional[Sequence[str]] = None) -> List[Path]:
-    """Write one CSV per topic of ``bag_path`` into ``out_dir`` (created if needed).
-
-    Parameters
-    ----------
-    bag_path : path-like
-        rosbag2 bag directory or ``.mcap`` file.
-    out_dir : path-like
-        Output directory; existing CSV files of the same names are replaced.
-    topics : sequence of str, optional
-        Only these topics; all when ``None``.
-
-    Returns
-    -------
-    list of pathlib.Path
-        The written files, sorted by topic name. Topics without messages get a file with the
-        header row ``t`` only.
-
-    Raises
-    ------
-    FileNotFoundError
-        If the bag does not exist.
-    ValueError
-        If it is not a readable bag, or a CSV file cannot be written (disk full).
-    """
+    """Write one CSV per topic (all, or ``topics``) of the bag into ``out_dir`` (created;
+    files of the same names replaced); the files, sorted by topic (a topic without messages:
+    the header ``t`` only). FileNotFoundError without a bag; ValueError for an unreadable bag
+    or a file that cannot be written."""
     rows: Dict[str, List[Dict[str, Any]]] = {}
     columns: Dict[str, _ColumnOrder] = {}
     messages = read_messages(bag_path, topics)  # raises before out_dir is touched
@@ -128,23 +94,3 @@ def export_csv(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         raise ValueError(f'cannot write {path}: {exc.strerror or exc} '
                          f'({len(written)} of {len(rows)} CSV files written)') from None
     return written
-
-
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.analyse.export BAG OUT_DIR [--topic T ...]``."""
-    parser = argparse.ArgumentParser(description='Export a rosbag2 bag to one CSV per topic.')
-    parser.add_argument('bag', help='bag directory or .mcap file')
-    parser.add_argument('out_dir', help='directory for the CSV files')
-    parser.add_argument('--topic', action='append', help='topic to export (repeatable)')
-    args = parser.parse_args(argv)
-    try:
-        files = export_csv(args.bag, args.out_dir, args.topic)
-    except (FileNotFoundError, ValueError) as exc:
-        parser.exit(2, f'error: {exc}\n')
-    for path in files:
-        print(path)
-    return 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())

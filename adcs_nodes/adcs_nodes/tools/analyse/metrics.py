@@ -1,37 +1,20 @@
-"""End-of-run metrics of an attitude-error signal, as the papers word them (pure numpy).
+"""End-of-run metrics of an attitude-error signal as the papers word them (pure numpy), one
+definition for ``adcs report``, the Monte Carlo campaigns and the studies.
 
-One definition for everything that judges a run: ``adcs report`` (the paper tables,
-:mod:`adcs_nodes.tools.analyse.papers`), the Monte Carlo campaigns
-(:mod:`adcs_nodes.tools.campaigns`)
-and the studies on the FrameLoop (:mod:`adcs_nodes.tools.analyse.study`).
-
-Definitions (``t`` [s] increasing, ``e`` error [deg] >= 0, same length n)
----------------------------------------------------------------------------
 Paper 000, section 4: the satellite "reaches the required attitude within 3-4 orbits" and is
-then "held with accuracy of the order of 1 deg". In numbers:
+"held with accuracy of the order of 1 deg". For ``t`` [s] increasing and ``e`` [deg]:
 
-* **capture time** ``t_cap`` (:func:`capture_time`): the first time the error enters the
-  capture band ``e < band`` and after which it stays within the hold band ``e < hold_band``
-  to the end of the run::
+* capture time (:func:`capture_index`): ``j`` = the last index with ``e >= hold_band``, the
+  capture is the first ``i > j`` with ``e[i] < band``; ``band`` 5 deg, ``hold_band`` 10 deg
+  (ASSUMPTION: the paper gives no band; twice the band separates a wobbling captured
+  satellite from a tumbling one);
+* last exit (:func:`last_exit_time`): the same with ``hold_band = band``, so ``t_exit >=
+  t_cap``; first entry (:func:`first_entry_time`): the first ``e < band``;
+* hold accuracy (:func:`hold_stats`): RMS, median, 95th percentile and max over ``t >= t_hold``
+  (default 4 orbits, the end of the paper's 3-4).
 
-      j   = last index with e[j] >= hold_band           (-1 if none)
-      i   = first index > j with e[i] < band
-      t_cap = t[i]                                       (None if no such i)
-
-  ``band`` = 5 deg and ``hold_band`` = 10 deg by default (ASSUMPTION: the paper gives no band;
-  5 deg is "reached the attitude" for a 1 deg-class controller, and a hold band of twice the
-  capture band separates a captured satellite that wobbles from one that tumbles away).
-* **last exit** ``t_exit`` (:func:`last_exit_time`): the first time after which ``e < band``
-  to the end (the start of the final stay in the band). With ``hold_band = band`` the two
-  definitions coincide; ``t_exit >= t_cap`` always. It measures how well the attitude is held
-  rather than how fast it is reached, and is reported under its own name.
-* **first entry** (:func:`first_entry_time`): the first time ``e < band``.
-* **hold accuracy** (:func:`hold_stats`): over the hold window ``t >= t_hold`` (default 4
-  orbits, the end of the paper's 3-4 orbit capture) to the end of the run: RMS
-  ``sqrt(mean(e^2))``, median, 95th percentile (linear interpolation, numpy default) and max.
-
-Samples are taken as given (no time weighting): the runs sample at a fixed frame period.
-Non-finite errors count as outside every band and are left out of the hold statistics.
+Samples count alike (fixed frames); a non-finite error is outside every band and out of the
+hold statistics.
 """
 from __future__ import annotations
 
@@ -65,21 +48,8 @@ def _outside(e: np.ndarray, limit: float) -> np.ndarray:
 
 def capture_index(e: ArrayLike, band: float = CAPTURE_BAND_DEG,
                   hold_band: Optional[float] = HOLD_BAND_DEG) -> Optional[int]:
-    """Index of the capture: first entry into ``band`` after which ``e < hold_band`` to the end.
-
-    Parameters
-    ----------
-    e : array_like, shape (n,)
-        Error per sample [deg] (any unit, as long as the bands use it).
-    band : float
-        Capture band (error strictly below it).
-    hold_band : float or None
-        Hold band (>= ``band``); ``None`` means ``band`` (then this is the last exit).
-
-    Returns
-    -------
-    int or None
-        The index, or ``None`` when the run never captures.
+    """Index of the first entry into ``band`` after which ``e < hold_band`` (>= ``band``;
+    None: ``band``, the last exit) to the end; None when the run never captures.
 
     Examples
     --------
@@ -172,30 +142,14 @@ def run_metrics(t: ArrayLike, e: ArrayLike, period_s: Optional[float],
                 capture_within_orbits: float = HOLD_FROM_ORBITS) -> Dict[str, Any]:
     """All end-of-run metrics of one error signal, as a flat JSON-ready dict.
 
-    Parameters
-    ----------
-    t : array_like, shape (n,)
-        Time since the start of the run [s].
-    e : array_like, shape (n,)
-        Angle between body and target frame [deg].
-    period_s : float or None
-        Orbit period [s]; without it the orbit-based values are None (hold window = the
-        last half of the run).
-    band, hold_band : float
-        Capture and hold bands [deg] (see the module docstring).
-    hold_from_orbits : float
-        Start of the hold window [orbits].
-    capture_within_orbits : float
-        Deadline of ``captured_in_time`` [orbits].
-
-    Returns
-    -------
-    dict
-        ``capture_time_s``, ``capture_orbits``, ``captured_in_time`` (bool), ``last_exit_s``,
-        ``last_exit_orbits``, ``first_entry_s``, ``hold_rms_deg``, ``hold_median_deg``,
-        ``hold_p95_deg``, ``hold_max_deg``, ``hold_samples``, ``hold_from_s``,
-        ``hold_complete`` (the run reaches past the window start), ``final_deg``, ``band_deg``,
-        ``hold_band_deg``, ``period_s``; times are None when the event never happens.
+    ``t`` (n,) [s since the start], ``e`` (n,) the angle between body and target [deg];
+    ``period_s`` the orbit period [s] (None: no orbit-based values, the hold window is the
+    last half of the run); bands [deg]; the hold window's start and the deadline of
+    ``captured_in_time`` [orbits]. Returns ``capture_time_s``, ``capture_orbits``,
+    ``captured_in_time``, ``last_exit_s``, ``last_exit_orbits``, ``first_entry_s``,
+    ``hold_rms_deg``, ``hold_median_deg``, ``hold_p95_deg``, ``hold_max_deg``,
+    ``hold_samples``, ``hold_from_s``, ``hold_complete`` (the run reaches past the window
+    start), ``final_deg``, ``band_deg``, ``hold_band_deg``, ``period_s`` (None: never).
     """
     t, e = _arrays(t, e)
     if t.size == 0:
@@ -288,25 +242,13 @@ def slerp_at(t_src: ArrayLike, q_src: ArrayLike, t: ArrayLike) -> np.ndarray:
 def estimate_errors_deg(t_truth: ArrayLike, q_truth: ArrayLike, t_est: ArrayLike,
                         q_est: ArrayLike) -> Dict[str, Any]:
     """Attitude error of estimates against the truth interpolated at each estimate's own
-    stamp (:func:`slerp_at`), so an estimate stamped off the truth's grid (a live estimator,
-    an external driver's samples) is judged at its time, not dropped or matched to the
-    nearest truth sample.
+    stamp (:func:`slerp_at`): an estimate off the truth's grid is judged at its time.
 
-    Parameters
-    ----------
-    t_truth, q_truth : array_like, shapes (n,), (n, 4)
-        Truth stamps (increasing, any unit as long as ``t_est`` uses it) and quaternions
-        (scalar last, the same frames as the estimate's).
-    t_est, q_est : array_like, shapes (m,), (m, 4)
-        Estimate stamps and quaternions.
-
-    Returns
-    -------
-    dict
-        ``t`` (k,) the estimate stamps inside the truth's span (the others are left out:
-        no extrapolation), ``deg`` (k,) the angle of ``q_est^* q_truth(t)`` [deg],
-        ``on_grid`` the number of those stamps equal to a truth stamp, ``outside`` the number
-        left out.
+    ``t_truth`` (n,) increasing and ``q_truth`` (n, 4), ``t_est`` (m,) and ``q_est`` (m, 4):
+    stamps in one unit, quaternions scalar last in the same frames. Returns ``t`` (k,) the
+    estimate stamps inside the truth's span (no extrapolation), ``deg`` (k,) the angle of
+    ``q_est^* q_truth(t)`` [deg], ``on_grid`` (stamps equal to a truth stamp) and
+    ``outside`` (left out).
     """
     tt = np.asarray(t_truth, dtype=float).reshape(-1)
     te = np.asarray(t_est, dtype=float).reshape(-1)

@@ -5,12 +5,17 @@ misalignment: the study on the FrameLoop and its last measurement (shown by ``ad
 ``python -m adcs_nodes.tools.analyse.study sensitivity scenarios/paper000_control.yaml --out FILE``
 runs :func:`sensitivity` (one parameter changed at a time through scenario overrides, each
 case twice: from the paper's initial state, and started on the target) and prints
-:func:`sensitivity_markdown`; :data:`MEASURED` holds the JSON of the last run. A measurement,
-not a paper value: refresh it when the cores change.
+:func:`sensitivity_markdown`; :data:`MEASURED` is the JSON of the last run (``--out`` writes
+it). A measurement, not a paper value: refresh it when the cores change.
 """
 from __future__ import annotations
 
+import json
+import os
 from typing import Any, Dict, Optional
+
+#: The last run of :func:`sensitivity` (2026-12-02, alpha 2e-3: the gain map's).
+MEASURED = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'paper000_sensitivity.json')
 
 #: Sensitivity cases: the random torque's correlation time [s] and the misalignment [deg].
 CORRELATION_S = (0.1, 0.5, 2.0)
@@ -123,9 +128,11 @@ _PARAM_NAMES = {'random_period_s': 'random torque correlation [s]',
 
 def sensitivity_markdown(data: Optional[Dict[str, Any]] = None) -> str:
     """Markdown table of the study (``data``: :func:`sensitivity`'s result; default the stored
-    :data:`MEASURED`)."""
+    measurement, :data:`MEASURED`)."""
     from adcs_nodes.tools.analyse.papers.paper000 import orbits_text
-    data = MEASURED if data is None else data
+    if data is None:
+        with open(MEASURED, encoding='utf-8') as fh:
+            data = json.load(fh)
     base = data['baseline']
     lines = [
         f'Scenario `{data["scenario"]}`, seed {data["seed"]}, one parameter changed at a time '
@@ -154,142 +161,3 @@ def sensitivity_markdown(data: Optional[Dict[str, Any]] = None) -> str:
     if data.get('note'):
         lines += ['', data['note']]
     return '\n'.join(lines) + '\n'
-
-
-#: The baseline run (the scenario's own values), listed under both parameters.
-_BASELINE_RESULT = {
-    "capture_orbits": 3.0525086707121454,
-    "last_exit_orbits": 3.0525086707121454,
-    "first_entry_s": 15698.0,
-    "hold_rms_deg": 1.3707060154930073,
-    "hold_median_deg": 1.174779835335012,
-    "hold_p95_deg": 2.434695713582028,
-    "hold_max_deg": 2.651894843408416,
-    "est_err_median_deg": 0.47460169292482923,
-    "hold_only": {
-        "rms_deg": 1.412339348132098,
-        "median_deg": 1.2958875496762632,
-        "p95_deg": 2.449144158786734,
-        "max_deg": 2.6114205955853107,
-        "est_err_median_deg": 0.5752428450347127
-    },
-    "wall_s": 50.41996174700034
-}
-
-#: The last run of :func:`sensitivity` (2026-12-02, alpha 2e-3: the gain map's).
-MEASURED = {
-    "scenario": "paper000_control",
-    "seed": 21,
-    "duration_s": 35484.0,
-    "hold_only_orbits": 3.0,
-    "hold_only_from_orbits": 1.0,
-    "baseline": {
-        "random_period_s": 0.1,
-        "misalignment_deg": 0.0
-    },
-    "engine": "FrameLoop (plain engine)",
-    "cases": [
-        {"parameter": "random_period_s", "value": 0.1, **_BASELINE_RESULT},
-        {
-            "parameter": "random_period_s",
-            "value": 0.5,
-            "capture_orbits": 2.754900911989933,
-            "last_exit_orbits": 2.754900911989933,
-            "first_entry_s": 13230.0,
-            "hold_rms_deg": 1.4629097672949434,
-            "hold_median_deg": 0.7639671675289674,
-            "hold_p95_deg": 3.340967405987613,
-            "hold_max_deg": 3.6303559179266958,
-            "est_err_median_deg": 0.5259808156134274,
-            "hold_only": {
-                "rms_deg": 1.6698145257974975,
-                "median_deg": 1.3146074203669205,
-                "p95_deg": 2.9888021175222153,
-                "max_deg": 3.36109425050473,
-                "est_err_median_deg": 0.6077271005227318
-            },
-            "wall_s": 65.30341801000031
-        },
-        {
-            "parameter": "random_period_s",
-            "value": 2.0,
-            "capture_orbits": 2.65310553088154,
-            "last_exit_orbits": None,
-            "first_entry_s": 15690.0,
-            "hold_rms_deg": 3.6420291709757655,
-            "hold_median_deg": 2.3448714360471103,
-            "hold_p95_deg": 7.311490851031133,
-            "hold_max_deg": 7.577011145348194,
-            "est_err_median_deg": 0.5366673805941378,
-            "hold_only": {
-                "rms_deg": 2.401288047415773,
-                "median_deg": 2.2611675965920055,
-                "p95_deg": 4.10458653226271,
-                "max_deg": 4.345881100534718,
-                "est_err_median_deg": 0.5754900876224194
-            },
-            "wall_s": 39.51170728100078
-        },
-        {"parameter": "misalignment_deg", "value": 0.0, **_BASELINE_RESULT},
-        {
-            "parameter": "misalignment_deg",
-            "value": 0.5,
-            "capture_orbits": 2.858725436907796,
-            "last_exit_orbits": 3.4769379175262096,
-            "first_entry_s": 16906.0,
-            "hold_rms_deg": 0.9715405510022911,
-            "hold_median_deg": 0.7949689742103131,
-            "hold_p95_deg": 1.6397034592695556,
-            "hold_max_deg": 1.787098869997463,
-            "est_err_median_deg": 0.7087009158564466,
-            "hold_only": {
-                "rms_deg": 0.8932742744892156,
-                "median_deg": 0.7180944912348703,
-                "p95_deg": 1.7160466112507593,
-                "max_deg": 1.8414137207839514,
-                "est_err_median_deg": 0.7309723388183644
-            },
-            "wall_s": 32.626612382999156
-        },
-        {
-            "parameter": "misalignment_deg",
-            "value": 1.0,
-            "capture_orbits": 3.101546312774328,
-            "last_exit_orbits": 3.101546312774328,
-            "first_entry_s": 18342.0,
-            "hold_rms_deg": 1.4015459421971357,
-            "hold_median_deg": 0.9017406390728991,
-            "hold_p95_deg": 2.742202325505536,
-            "hold_max_deg": 2.894282169784847,
-            "est_err_median_deg": 1.14770545700866,
-            "hold_only": {
-                "rms_deg": 1.3165550501652166,
-                "median_deg": 0.8475431420301454,
-                "p95_deg": 2.3386104127155614,
-                "max_deg": 2.4399255110540112,
-                "est_err_median_deg": 1.0991416851603015
-            },
-            "wall_s": 44.673972524999044
-        },
-        {
-            "parameter": "misalignment_deg",
-            "value": 2.0,
-            "capture_orbits": 3.1286015635672566,
-            "last_exit_orbits": 5.48951038588517,
-            "first_entry_s": 12212.0,
-            "hold_rms_deg": 3.2349868515848037,
-            "hold_median_deg": 2.4824056898981772,
-            "hold_p95_deg": 5.585522552689112,
-            "hold_max_deg": 5.921678810011331,
-            "est_err_median_deg": 2.071045544541652,
-            "hold_only": {
-                "rms_deg": 3.2000139013584317,
-                "median_deg": 2.353689385542896,
-                "p95_deg": 5.334034456793814,
-                "max_deg": 5.641287629407025,
-                "est_err_median_deg": 2.004815415932046
-            },
-            "wall_s": 32.129711333998785
-        }
-    ]
-}

@@ -1,34 +1,12 @@
 """Bag to report: metrics, PNG plots (matplotlib, Agg) and ``summary.md``.
 
-What is computed (all times from ``header.stamp``, the simulated time, never bag log times, so
-two runs of the same simulation give the same report):
-
-* topics: message count and rate ``(n - 1) / (t_last - t_first)`` [Hz] from header stamps
-  (log times only for types without a header);
-* attitude (``/sim/state``): angle between body and orbit frame
-  ``theta = angle(q_orbit_body, identity)`` [deg] over time, quaternion components;
-* body rate: ``|omega_body_eci_body|`` and ``|omega_body_orbit_body|`` [deg/s];
-* field: ``/sim/environment`` ``b_eci`` and, if recorded, ``/sensors/magnetometer`` [uT];
-* wheels (``/sim/wheels``, if any): momentum per wheel [N m s];
-* estimate error (``/adcs/attitude_estimate``, if any): ``angle(q_eci_body_est, q_eci_body_true)``
-  [deg] and ``|omega_est - omega_true|`` [deg/s], the truth interpolated at each estimate's
-  own stamp (slerp of the attitude, linear rate; :func:`adcs_nodes.tools.analyse.metrics.
-  estimate_errors_deg`), so a live bag's off-grid estimates are judged too;
-* paper comparison: a table filled from ``expectations`` (empty by default), so scenarios that
-  reproduce a paper add their rows ``(name, paper value, measured value, verdict)``
-  (:mod:`adcs_nodes.tools.analyse.papers`, the same table ``make reproduce`` prints); verdict
-  True/False prints PASS/FAIL (a comparison with a paper number), ``None`` prints ``info`` (no
-  paper value), :class:`~adcs_nodes.tools.analyse.papers.NotComparable` prints ``not comparable:
-  <reason>`` (a paper claim this run cannot check); only PASS/FAIL count in ``all_pass``;
-* the paper's own figures (papers 001 and 003) and extra sections (e.g. paper 000's
-  sensitivity table) from :func:`adcs_nodes.tools.analyse.reproductions.sections_for`.
-
-Time axes are in orbits when the run lasts at least half an orbit (orbit rate from
-``/sim/environment``), else in seconds, counted from the first ``/sim/state`` stamp.
-"""
+Times are ``header.stamp`` (sim time; log times only for types without a header), so two runs
+of one simulation give one report: per topic the count and rate; from ``/sim/state`` the angle
+between body and orbit frame and the rates; the field [uT]; wheel momentum; the estimate's
+error against the truth at its own stamp; the paper table (:mod:`.papers`) with its figures
+and extra sections. Time axes in orbits for a run of at least half an orbit, else seconds."""
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -89,21 +67,20 @@ class _Data:
     est: Dict[str, list] = field(default_factory=lambda: {'t': [], 'q_eci_body': [], 'w_eci': []})
 
 
-def _quat(q) -> List[float]:
-    return [q.x, q.y, q.z, q.w]
+def _xyz(v) -> List[float]:
+    return [v.x, v.y, v.z] + ([v.w] if hasattr(v, 'w') else [])
 
 
-def _vec(v) -> List[float]:
-    return [v.x, v.y, v.z]
-
-
-def _stamp(msg) -> int:
-    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+#: What :func:`_collect` keeps of each topic: ``{topic: (series of _Data, {key: field})}``.
+_FIELDS = {STATE_TOPIC: ('state', {'q_orbit_body': 'q_orbit_body', 'q_eci_body': 'q_eci_body',
+                                   'w_eci': 'omega_body_eci_body',
+                                   'w_orbit': 'omega_body_orbit_body'}),
+           ENV_TOPIC: ('env', {'b_eci': 'b_eci'}), MAG_TOPIC: ('mag', {'b': 'magnetic_field'}),
+           ESTIMATE_TOPIC: ('est', {'q_eci_body': 'q_eci_body', 'w_eci': 'omega_body_eci_body'})}
 
 
 def _collect(bag_path) -> _Data:
     data = _Data()
-    interest = {STATE_TOPIC, ENV_TOPIC, MAG_TOPIC, WHEELS_TOPIC, ESTIMATE_TOPIC}
     with open_bag(bag_path) as reader:
         kinds = {}
         for conn in reader.connections:
@@ -114,7 +91,7 @@ def _collect(bag_path) -> _Data:
             for conn, t_log, raw in reader.messages():
                 stamp = cdr_stamp_ns(raw) if kinds[conn.topic] else None
                 data.stats[conn.topic].add(stamp if stamp is not None else t_log)
-                if conn.topic in interest:
+                if conn.topic in _FIELDS or conn.topic == WHEELS_TOPIC:
                     _store(data, conn.topic, reader.deserialize(raw, conn.msgtype))
         except Exception as exc:
             raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
@@ -122,29 +99,19 @@ def _collect(bag_path) -> _Data:
 
 
 def _store(data: _Data, topic: str, msg) -> None:
-    if topic == STATE_TOPIC:
-        s = data.state
-        s['t'].append(_stamp(msg))
-        s['q_orbit_body'].append(_quat(msg.q_orbit_body))
-        s['q_eci_body'].append(_quat(msg.q_eci_body))
-        s['w_eci'].append(_vec(msg.omega_body_eci_body))
-        s['w_orbit'].append(_vec(msg.omega_body_orbit_body))
-    elif topic == ENV_TOPIC:
-        data.env['t'].append(_stamp(msg))
-        data.env['b_eci'].append(_vec(msg.b_eci))
-        data.env['n'].append(float(msg.orbit_rate))
-    elif topic == MAG_TOPIC:
-        data.mag['t'].append(_stamp(msg))
-        data.mag['b'].append(_vec(msg.magnetic_field))
-    elif topic == WHEELS_TOPIC:
-        data.wheels['t'].append(_stamp(msg))
+    t = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+    if topic == WHEELS_TOPIC:
+        data.wheels['t'].append(t)
         data.wheels['h'].append([float(x) for x in msg.momentum])
-        if not data.wheels['names']:
-            data.wheels['names'] = list(msg.names)
-    elif topic == ESTIMATE_TOPIC:
-        data.est['t'].append(_stamp(msg))
-        data.est['q_eci_body'].append(_quat(msg.q_eci_body))
-        data.est['w_eci'].append(_vec(msg.omega_body_eci_body))
+        data.wheels['names'] = data.wheels['names'] or list(msg.names)
+        return
+    name, fields = _FIELDS[topic]
+    series = getattr(data, name)
+    series['t'].append(t)
+    for key, attr in fields.items():
+        series[key].append(_xyz(getattr(msg, attr)))
+    if topic == ENV_TOPIC:
+        series['n'].append(float(msg.orbit_rate))
 
 
 class _TimeAxis:
@@ -160,75 +127,50 @@ class _TimeAxis:
         return (np.asarray(t_ns, dtype=np.int64) - self.t0_ns) * 1e-9 / self.scale
 
 
-def _angle_to_identity(quats: np.ndarray) -> np.ndarray:
-    """Rotation angle of each quaternion [rad] (:func:`metrics.angle_to_identity_deg`)."""
-    return np.radians(angle_to_identity_deg(quats))
-
-
-def _save(fig: Figure, out: Path, name: str, plots: List[str]) -> None:
+def _plot(out: Path, name: str, plots: List[str], axis: '_TimeAxis', panels,
+          height: float = 3.0) -> None:
+    """One PNG of stacked panels sharing the time axis: each panel ``(ylabel, lines,
+    legend columns)``, each line ``(t, y, label, style)``."""
+    fig = Figure(figsize=(8, height * len(panels) + (0 if len(panels) > 1 else 1)))
+    axes = np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))
+    for ax, (ylabel, lines, ncol) in zip(axes, panels):
+        for t, y, label, style in lines:
+            ax.plot(t, y, style, label=label)
+        ax.set_ylabel(ylabel)
+        if ncol:
+            ax.legend(loc='best', ncol=ncol)
+        ax.grid(True)
+    axes[-1].set_xlabel(axis.label)
     fig.tight_layout()
     fig.savefig(out / name, dpi=110)
     plots.append(name)
 
 
-def _plot_attitude(data, axis, out, plots) -> None:
+def _plot_truth(data, axis, out, plots) -> None:
     s = data.state
     t = axis(s['t'])
-    fig = Figure(figsize=(8, 6))
-    ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    ax1.plot(t, _angle_to_identity(np.array(s['q_orbit_body'])) * _RAD2DEG)
-    ax1.set_ylabel('angle body to orbit frame [deg]')
-    ax1.grid(True)
     q = np.array(s['q_orbit_body'])
-    for i, name in enumerate('xyzw'):
-        ax2.plot(t, q[:, i], label=f'q_{name}')
-    ax2.set_ylabel('q_orbit_body [-]')
-    ax2.set_xlabel(axis.label)
-    ax2.legend(loc='best', ncol=4)
-    ax2.grid(True)
-    _save(fig, out, 'attitude.png', plots)
-
-
-def _plot_rates(data, axis, out, plots) -> None:
-    s = data.state
-    t = axis(s['t'])
     w = np.array(s['w_eci']) * _RAD2DEG
-    fig = Figure(figsize=(8, 6))
-    ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    for i, name in enumerate('xyz'):
-        ax1.plot(t, w[:, i], label=f'omega_{name}')
-    ax1.set_ylabel('omega_body_eci_body [deg/s]')
-    ax1.legend(loc='best', ncol=3)
-    ax1.grid(True)
-    ax2.plot(t, np.linalg.norm(w, axis=1), label='|omega_body_eci_body|')
-    ax2.plot(t, np.linalg.norm(np.array(s['w_orbit']), axis=1) * _RAD2DEG,
-             label='|omega_body_orbit_body|')
-    ax2.set_ylabel('rate norm [deg/s]')
-    ax2.set_xlabel(axis.label)
-    ax2.legend(loc='best')
-    ax2.grid(True)
-    _save(fig, out, 'rates.png', plots)
+    _plot(out, 'attitude.png', plots, axis, [
+        ('angle body to orbit frame [deg]', [(t, angle_to_identity_deg(q), None, '-')], 0),
+        ('q_orbit_body [-]', [(t, q[:, i], f'q_{c}', '-') for i, c in enumerate('xyzw')], 4)])
+    _plot(out, 'rates.png', plots, axis, [
+        ('omega_body_eci_body [deg/s]',
+         [(t, w[:, i], f'omega_{c}', '-') for i, c in enumerate('xyz')], 3),
+        ('rate norm [deg/s]', [(t, np.linalg.norm(w, axis=1), '|omega_body_eci_body|', '-'),
+                               (t, np.linalg.norm(np.array(s['w_orbit']), axis=1) * _RAD2DEG,
+                                '|omega_body_orbit_body|', '-')], 1)])
 
 
 def _plot_field(data, axis, out, plots) -> None:
     panels = []
-    if data.env['t']:
-        panels.append((data.env, 'b_eci', 'b_eci [uT] (ECI)'))
-    if data.mag['t']:
-        panels.append((data.mag, 'b', 'magnetometer [uT] (sensor frame)'))
-    fig = Figure(figsize=(8, 3 * len(panels) + 1))
-    axes = np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))
-    for ax, (series, key, label) in zip(axes, panels):
-        t = axis(series['t'])
-        b = np.array(series[key]) * _T2UT
-        for i, name in enumerate('xyz'):
-            ax.plot(t, b[:, i], label=name)
-        ax.plot(t, np.linalg.norm(b, axis=1), 'k--', label='norm')
-        ax.set_ylabel(label)
-        ax.legend(loc='best', ncol=4)
-        ax.grid(True)
-    axes[-1].set_xlabel(axis.label)
-    _save(fig, out, 'field.png', plots)
+    for series, key, label in ((data.env, 'b_eci', 'b_eci [uT] (ECI)'),
+                               (data.mag, 'b', 'magnetometer [uT] (sensor frame)')):
+        if series['t']:
+            t, b = axis(series['t']), np.array(series[key]) * _T2UT
+            panels.append((label, [(t, b[:, i], c, '-') for i, c in enumerate('xyz')]
+                           + [(t, np.linalg.norm(b, axis=1), 'norm', 'k--')], 4))
+    _plot(out, 'field.png', plots, axis, panels)
 
 
 def _wheel_matrix(data) -> np.ndarray:
@@ -240,18 +182,10 @@ def _wheel_matrix(data) -> np.ndarray:
 
 
 def _plot_wheels(data, axis, out, plots) -> None:
-    h = _wheel_matrix(data)
-    t = axis(data.wheels['t'])
-    fig = Figure(figsize=(8, 4))
-    ax = fig.subplots()
-    names = data.wheels['names']
-    for i in range(h.shape[1]):
-        ax.plot(t, h[:, i], label=names[i] if i < len(names) else f'wheel {i}')
-    ax.set_ylabel('wheel momentum [N m s]')
-    ax.set_xlabel(axis.label)
-    ax.legend(loc='best')
-    ax.grid(True)
-    _save(fig, out, 'wheels.png', plots)
+    h, names, t = _wheel_matrix(data), data.wheels['names'], axis(data.wheels['t'])
+    _plot(out, 'wheels.png', plots, axis, [('wheel momentum [N m s]', [
+        (t, h[:, i], names[i] if i < len(names) else f'wheel {i}', '-')
+        for i in range(h.shape[1])], 1)])
 
 
 def _estimate_errors(data) -> Optional[Tuple[List[int], np.ndarray, np.ndarray]]:
@@ -279,35 +213,14 @@ def _estimate_errors(data) -> Optional[Tuple[List[int], np.ndarray, np.ndarray]]
 def _plot_estimate(errors, axis, out, plots) -> None:
     stamps, angles, rate_err = errors
     t = axis(stamps)
-    fig = Figure(figsize=(8, 6))
-    ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    ax1.plot(t, angles * _RAD2DEG)
-    ax1.set_ylabel('attitude estimate error [deg]')
-    ax1.grid(True)
-    ax2.plot(t, rate_err * _RAD2DEG)
-    ax2.set_ylabel('rate estimate error [deg/s]')
-    ax2.set_xlabel(axis.label)
-    ax2.grid(True)
-    _save(fig, out, 'estimate_error.png', plots)
-
-
-def _fmt(value: Any) -> str:
-    if isinstance(value, bool):
-        return 'yes' if value else 'no'
-    if isinstance(value, (float, np.floating)):
-        return f'{float(value):.4g}'
-    return str(value)
+    _plot(out, 'estimate_error.png', plots, axis, [
+        ('attitude estimate error [deg]', [(t, angles * _RAD2DEG, None, '-')], 0),
+        ('rate estimate error [deg/s]', [(t, rate_err * _RAD2DEG, None, '-')], 0)])
 
 
 def _utc(t_ns: int) -> str:
     return datetime.fromtimestamp(t_ns * 1e-9, tz=timezone.utc).strftime(
         '%Y-%m-%d %H:%M:%S.%f UTC')
-
-
-def verdict_text(ok: Any) -> str:
-    """``PASS`` / ``FAIL`` for a comparison with the paper, ``info`` for ``None``, ``not
-    comparable: <reason>`` (:func:`adcs_nodes.tools.analyse.papers.verdict_text`)."""
-    return papers.verdict_text(ok)
 
 
 def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expectation],
@@ -356,7 +269,8 @@ def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expect
     present = [(label, key, unit) for label, key, unit in rows if key in metrics]
     if present:
         lines += ['| quantity | value | unit |', '|---|---:|---|']
-        lines += [f'| {label} | {_fmt(metrics[key])} | {unit} |' for label, key, unit in present]
+        lines += [f'| {label} | {papers.fmt(metrics[key])} | {unit} |'
+                  for label, key, unit in present]
     else:
         lines.append(f'No `{STATE_TOPIC}` in the bag.')
     lines += ['', '## Paper comparison', '']
@@ -375,45 +289,18 @@ def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expect
 def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
                 expectations: Optional[Sequence[Expectation]] = None,
                 sections: Optional[Sequence[Tuple[str, str]]] = None) -> Dict[str, Any]:
-    """Analyse a bag: write PNG plots, ``summary.md`` and ``metrics.json`` into ``out_dir``.
+    """Analyse a bag (directory or ``.mcap``): PNG plots, ``summary.md`` and ``metrics.json``
+    in ``out_dir`` (created; files of the same names replaced).
 
-    Parameters
-    ----------
-    bag_path : path-like
-        rosbag2 bag directory or ``.mcap`` file.
-    out_dir : path-like
-        Output directory (created if needed; files of the same names are replaced).
-    expectations : sequence of (str, str, object, bool or None), optional
-        Paper comparison rows ``(name, paper_value_str, measured_value, verdict)``; verdict
-        ``None`` is an information row (not counted). The table in ``summary.md`` is empty
-        without them.
-    sections : sequence of (str, str), optional
-        Extra markdown sections ``(title, text)``; default: those of the bag's scenario
-        (:func:`adcs_nodes.tools.analyse.reproductions.sections_for`).
-
-    Returns
-    -------
-    dict
-        ``duration_s`` [s], ``start_utc``, ``orbit_period_s`` [s] (if known), ``topics``
-        (per topic ``type``, ``count``, ``rate_hz``, ``rate_source``); with ``/sim/state``:
-        ``final_angle_orbit_deg``, ``max_angle_orbit_deg``, ``final_q_orbit_body`` (x, y, z, w),
-        ``final_rate_deg_s``, ``max_rate_deg_s``, ``final_rate_orbit_deg_s``; with an estimate:
-        ``estimate_final_error_deg``, ``estimate_max_error_deg``, ``estimate_rms_error_deg``,
-        ``estimate_matched``; ``wheel_max_abs_momentum_Nms``, ``field_mean_norm_uT``,
-        ``magnetometer_mean_norm_uT`` when those topics exist; with a known orbit period the
-        run metrics of :func:`adcs_nodes.tools.analyse.metrics.run_metrics` on the angle to the
-        orbit
-        frame (``capture_orbits``, ``last_exit_orbits``, ``hold_rms_deg``, ...);
-        ``expectations`` (list of dicts, ``pass`` None for information rows), ``all_pass``
-        (over the rows with a verdict; ``None`` without any), ``plots`` (file names),
-        ``summary`` and ``metrics_file`` (paths).
-
-    Raises
-    ------
-    FileNotFoundError
-        If the bag does not exist.
-    ValueError
-        If it is not a readable bag.
+    ``expectations``: the paper rows ``(name, paper value, measured, verdict)`` (verdict None:
+    information, not counted); ``sections``: extra markdown ``(title, text)``, default the
+    bag's scenario's (:func:`adcs_nodes.tools.analyse.reproductions.sections_for`). Returns
+    the metrics: ``duration_s``, ``start_utc``, ``orbit_period_s``, ``topics`` (``type``,
+    ``count``, ``rate_hz``, ``rate_source``), the truth's angles and rates, the estimate's
+    errors, wheel and field figures when those topics exist, the run metrics of
+    :func:`~adcs_nodes.tools.analyse.metrics.run_metrics` with a known orbit period,
+    ``expectations``, ``all_pass`` (None without a counted row), ``plots``, ``summary`` and
+    ``metrics_file``. FileNotFoundError without a bag, ValueError for an unreadable one.
     """
     expectations = list(expectations or [])
     if sections is None:
@@ -423,6 +310,8 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         except (OSError, ValueError, ImportError):
             sections = []
     data = _collect(bag_path)
+    if not any(st.count for st in data.stats.values()):
+        raise ValueError(f'{bag_path}: nothing to report: no message could be read from it')
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics, axis, errors = _bag_metrics(data, bag_path)
@@ -506,7 +395,7 @@ def _bag_metrics(data: _Data, bag_path) -> Tuple[Dict[str, Any], '_TimeAxis', An
 def _truth_metrics(data: _Data, t0: int, period: Optional[float]) -> Dict[str, Any]:
     """Angle to the orbit frame and rates of the truth (``/sim/state``), and with a known
     orbit period the run metrics of :func:`adcs_nodes.tools.analyse.metrics.run_metrics`."""
-    angles = _angle_to_identity(np.array(data.state['q_orbit_body'])) * _RAD2DEG
+    angles = angle_to_identity_deg(np.array(data.state['q_orbit_body']))
     w = np.linalg.norm(np.array(data.state['w_eci']), axis=1) * _RAD2DEG
     w_orb = np.linalg.norm(np.array(data.state['w_orbit']), axis=1) * _RAD2DEG
     out = {'final_angle_orbit_deg': float(angles[-1]), 'max_angle_orbit_deg': float(angles.max()),
@@ -529,8 +418,7 @@ def _draw_plots(data: _Data, axis: '_TimeAxis', errors, out: Path,
     their file names."""
     plots: List[str] = []
     if data.state['t']:
-        _plot_attitude(data, axis, out, plots)
-        _plot_rates(data, axis, out, plots)
+        _plot_truth(data, axis, out, plots)
     if data.env['t'] or data.mag['t']:
         _plot_field(data, axis, out, plots)
     if wheels:
@@ -548,22 +436,3 @@ def _json_value(value: Any) -> Any:
     if isinstance(value, (str, int, float, bool)) or value is None:
         return value
     return str(value)
-
-
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.analyse.report BAG OUT_DIR``: write the report, print the
-    summary."""
-    parser = argparse.ArgumentParser(description='Metrics, plots and summary of an ADCS bag.')
-    parser.add_argument('bag', help='bag directory or .mcap file')
-    parser.add_argument('out_dir', help='directory for plots, summary.md and metrics.json')
-    args = parser.parse_args(argv)
-    try:
-        metrics = make_report(args.bag, args.out_dir)
-    except (FileNotFoundError, ValueError) as exc:
-        parser.exit(2, f'error: {exc}\n')
-    print(Path(metrics['summary']).read_text(encoding='utf-8'))
-    return 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())

@@ -1,32 +1,11 @@
-"""``report.html``: one self-contained page of a run for people (``adcs report`` writes it).
-
-The page needs no network and no script: the plots are PNG images inline (base64, matplotlib
-Agg), the tables plain HTML. It reads any engine's bag (plain, composed, graph), whatever of
-these topics it holds (a section without its topics is left out, saying so):
-
-* timeline: shaded bands of the controller whose command was forwarded
-  (``adcs/actuator_command`` ``source``, so a fallback shows), the active controller and the
-  manager's mode (``adcs/controller_status``), fault markers (``sim/faults``), with the
-  attitude error against the target (``adcs/attitude_target``, truth ``sim/state`` at the
-  target's stamp) and the body rates under it. The same figure is written as
-  ``overview.png`` beside the page (the README's picture);
-* wheels (``sim/wheels``): speed and momentum per wheel;
-* magnetorquer dipole (``adcs/actuator_command``);
-* the estimator's error against the truth (``adcs/attitude_estimate``; the truth interpolated
-  at the estimate's stamp: slerp of the attitude between the two nearest truth samples) per
-  body axis, ``rotvec(q_est^-1 q_true)``, with its 3-sigma bound from the estimate's
-  covariance (attitude block, body axes; none when element 0 is -1, "unknown"), and the
-  estimator's rejections (``adcs/estimator/diagnostics``);
-* switches and fallbacks with their reasons, faults;
-* the paper table, when the report of :mod:`adcs_nodes.tools.analyse.report` in the same directory
-  (``metrics.json``) has one.
-
-Times are sim seconds from the first ``sim/state`` (else the first stamped message), shown in
-minutes for runs longer than 20 minutes.
-"""
+"""``report.html``: one self-contained page of a run for people (``adcs report``): no network,
+no script, inline PNG plots, plain tables, from any engine's bag (a section without its topics
+is left out, saying so): the timeline (forwarded, active controller and manager mode as
+bands, faults, attitude error to the target, body rates; also ``overview.png``), wheels,
+dipole, the estimator's per-axis error with its 3-sigma bound and rejections, switches and
+fallbacks with their reasons, faults, and the paper table of ``metrics.json``."""
 from __future__ import annotations
 
-import argparse
 import base64
 import html
 import io
@@ -39,8 +18,10 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from matplotlib.figure import Figure
+from scipy.spatial.transform import Rotation
 
 from adcs_nodes.bag import header_stamp_ns, read_messages
+from adcs_nodes.tools.analyse.metrics import angle_between_deg, slerp_at
 
 TOPICS = ('/sim/state', '/sim/wheels', '/sim/faults', '/adcs/attitude_estimate',
           '/adcs/estimator/diagnostics', '/adcs/attitude_target', '/adcs/actuator_command',
@@ -75,12 +56,25 @@ class _Series:
     topics: Dict[str, int] = field(default_factory=dict)
 
 
-def _q(m) -> List[float]:
-    return [m.x, m.y, m.z, m.w]
+def _xyz(v) -> List[float]:
+    return [v.x, v.y, v.z] + ([v.w] if hasattr(v, 'w') else [])
 
 
-def _v(m) -> List[float]:
-    return [m.x, m.y, m.z]
+#: The series of :class:`_Series` each topic fills: ``{topic: (series, {key: getter})}``.
+_FIELDS = {
+    '/sim/state': ('state', {'q_eci': lambda m: _xyz(m.q_eci_body),
+                             'q_orbit': lambda m: _xyz(m.q_orbit_body),
+                             'w_eci': lambda m: _xyz(m.omega_body_eci_body),
+                             'w_orbit': lambda m: _xyz(m.omega_body_orbit_body)}),
+    '/adcs/attitude_target': ('target', {'q': lambda m: _xyz(m.q_ref_body),
+                                         'frame': lambda m: m.header.frame_id or 'orbit'}),
+    '/adcs/attitude_estimate': ('est', {'q_eci': lambda m: _xyz(m.q_eci_body),
+                                        'cov': lambda m: list(m.covariance)}),
+    '/adcs/estimator/diagnostics': ('diag', {'rejected': lambda m: int(m.rejected_count),
+                                             'last': lambda m: str(m.last_rejection)}),
+    '/adcs/actuator_command': ('cmd', {'source': lambda m: str(m.source),
+                                       'dipole': lambda m: _xyz(m.dipole_body)}),
+}
 
 
 def _collect(bag_path) -> _Series:
@@ -92,40 +86,22 @@ def _collect(bag_path) -> _Series:
             continue
         raw.append((topic, stamp, msg))
         s.topics[topic] = s.topics.get(topic, 0) + 1
-    states = [st for tp, st, _ in raw if tp == '/sim/state']
-    stamps = states or [st for _, st, _ in raw]
+    stamps = [st for tp, st, _ in raw if tp == '/sim/state'] or [st for _, st, _ in raw]
     s.t0 = min(stamps) if stamps else 0
     for topic, stamp, m in raw:
         t = (stamp - s.t0) * 1e-9
-        if topic == '/sim/state':
-            d = s.state
-            d['t'].append(t)
-            d['q_eci'].append(_q(m.q_eci_body))
-            d['q_orbit'].append(_q(m.q_orbit_body))
-            d['w_eci'].append(_v(m.omega_body_eci_body))
-            d['w_orbit'].append(_v(m.omega_body_orbit_body))
-        elif topic == '/adcs/attitude_target':
-            s.target['t'].append(t)
-            s.target['q'].append(_q(m.q_ref_body))
-            s.target['frame'].append(m.header.frame_id or 'orbit')
-        elif topic == '/adcs/attitude_estimate':
-            s.est['t'].append(t)
-            s.est['q_eci'].append(_q(m.q_eci_body))
-            s.est['cov'].append(list(m.covariance))
-        elif topic == '/adcs/estimator/diagnostics':
-            s.diag['t'].append(t)
-            s.diag['rejected'].append(int(m.rejected_count))
-            s.diag['last'].append(str(m.last_rejection))
+        if topic in _FIELDS:
+            name, fields = _FIELDS[topic]
+            series = getattr(s, name)
+            series['t'].append(t)
+            for key, get in fields.items():
+                series[key].append(get(m))
         elif topic == '/sim/wheels':
             if len(m.speed) and len(m.speed) == len(m.momentum):
                 s.wheels['t'].append(t)
                 s.wheels['speed'].append(list(m.speed))
                 s.wheels['momentum'].append(list(m.momentum))
                 s.wheels['names'] = list(m.names)
-        elif topic == '/adcs/actuator_command':
-            s.cmd['t'].append(t)
-            s.cmd['source'].append(str(m.source))
-            s.cmd['dipole'].append(_v(m.dipole_body))
         elif topic == '/adcs/controller_status':
             s.status.append({'t': t, 'active': m.active, 'mode': m.mode,
                              'switch_count': int(m.switch_count),
@@ -141,56 +117,6 @@ def _collect(bag_path) -> _Series:
     s.status.sort(key=lambda e: e['t'])
     s.faults.sort(key=lambda e: e['t'])
     return s
-
-
-# ---------------------------------------------------------------------- quaternions (vector)
-def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product of (n, 4) scalar-last quaternions."""
-    px, py, pz, pw = p.T
-    qx, qy, qz, qw = q.T
-    return np.stack([pw * qx + px * qw + py * qz - pz * qy,
-                     pw * qy - px * qz + py * qw + pz * qx,
-                     pw * qz + px * qy - py * qx + pz * qw,
-                     pw * qw - px * qx - py * qy - pz * qz], axis=1)
-
-
-def _qconj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([-1.0, -1.0, -1.0, 1.0])
-
-
-def _angle(q: np.ndarray) -> np.ndarray:
-    """Rotation angle [rad] of (n, 4) quaternions."""
-    w = np.abs(q[:, 3]) / np.linalg.norm(q, axis=1)
-    return 2.0 * np.arccos(np.clip(w, 0.0, 1.0))
-
-
-def _rotvec(q: np.ndarray) -> np.ndarray:
-    """Rotation vectors [rad] of (n, 4) quaternions (shortest rotation)."""
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    q = np.where(q[:, 3:4] < 0.0, -q, q)
-    s = np.linalg.norm(q[:, :3], axis=1)
-    ang = 2.0 * np.arctan2(s, q[:, 3])
-    scale = np.where(s > 1e-12, ang / np.maximum(s, 1e-300), 2.0)
-    return q[:, :3] * scale[:, None]
-
-
-def slerp_at(t_src: np.ndarray, q_src: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The attitude ``q_src`` (sampled at increasing ``t_src``) at times ``t`` (slerp between
-    the two nearest samples; clamped at the ends)."""
-    i = np.clip(np.searchsorted(t_src, t, side='right') - 1, 0, len(t_src) - 1)
-    j = np.minimum(i + 1, len(t_src) - 1)
-    span = t_src[j] - t_src[i]
-    u = np.where(span > 0.0, (t - t_src[i]) / np.where(span > 0.0, span, 1.0), 0.0)
-    u = np.clip(u, 0.0, 1.0)
-    a, b = q_src[i], q_src[j].copy()
-    b[np.sum(a * b, axis=1) < 0.0] *= -1.0
-    d = _qmul(_qconj(a), b)
-    half = _rotvec(d) * u[:, None] / 2.0
-    n = np.linalg.norm(half, axis=1)
-    step = np.concatenate([half * np.where(n > 1e-12, np.sin(n) / np.maximum(n, 1e-300),
-                                           1.0)[:, None], np.cos(n)[:, None]], axis=1)
-    out = _qmul(a, step)
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
 # ---------------------------------------------------------------------- derived series
@@ -227,7 +153,7 @@ def _pointing_error(s: _Series) -> Optional[Tuple[np.ndarray, np.ndarray]]:
     q_orbit = slerp_at(ts, np.asarray(s.state['q_orbit'], dtype=float), t)
     q_eci = slerp_at(ts, np.asarray(s.state['q_eci'], dtype=float), t)
     q_true = np.where((frames == 'eci')[:, None], q_eci, q_orbit)
-    return t, _angle(_qmul(_qconj(q_ref), q_true)) * _DEG
+    return t, angle_between_deg(q_ref, q_true)
 
 
 def _estimate_error(s: _Series) -> Optional[Dict[str, np.ndarray]]:
@@ -243,7 +169,7 @@ def _estimate_error(s: _Series) -> Optional[Dict[str, np.ndarray]]:
     t = t[keep]
     q_est = np.asarray(s.est['q_eci'], dtype=float)[keep]
     q_true = slerp_at(ts, np.asarray(s.state['q_eci'], dtype=float), t)
-    err = _rotvec(_qmul(_qconj(q_est), q_true)) * _DEG
+    err = (Rotation.from_quat(q_est).inv() * Rotation.from_quat(q_true)).as_rotvec() * _DEG
     cov = np.asarray(s.est['cov'], dtype=float)[keep]
     sig = np.full(err.shape, np.nan)
     if cov.ndim == 2 and cov.shape[1] == 36:
@@ -337,6 +263,17 @@ def _mark_faults(ax, s: _Series, axis: _Axis, label: bool = False) -> None:
                         ha='left', color=colour, annotation_clip=False)
 
 
+def _style(ax, s: _Series, axis: _Axis, ylabel: str, last: bool, label: bool = False) -> None:
+    """Y label, grid and fault marks of one panel; the time label on the ``last`` one."""
+    ax.set_ylabel(ylabel, fontsize=8)
+    ax.grid(True, alpha=0.3)
+    if last:
+        ax.set_xlabel(f'sim time [{axis.unit}]')
+    else:
+        ax.tick_params(labelbottom=False)
+    _mark_faults(ax, s, axis, label=label)
+
+
 def _shade(ax, runs, colours, axis: _Axis, alpha: float = 0.12) -> None:
     for a, b, lab in runs:
         if lab not in ('zero', ''):
@@ -377,10 +314,7 @@ def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
     else:
         err_ax.text(0.5, 0.5, 'no attitude target recorded', transform=err_ax.transAxes,
                     ha='center')
-    err_ax.set_ylabel('attitude error\nto target [deg]', fontsize=8)
-    err_ax.grid(True, which='major', alpha=0.3)
-    err_ax.tick_params(labelbottom=False)
-    _mark_faults(err_ax, s, axis)
+    _style(err_ax, s, axis, 'attitude error\nto target [deg]', last=False)
     rate_ax = fig.add_subplot(gs[2], sharex=band)
     _shade(rate_ax, src_runs, colours, axis)
     if s.state['t']:
@@ -390,10 +324,7 @@ def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
         rate_ax.semilogy(t, np.maximum(np.linalg.norm(s.state['w_orbit'], axis=1) * _DEG,
                                        1e-5), lw=0.8, label='|omega| w.r.t. the orbit frame')
         rate_ax.legend(fontsize=7, loc='upper right')
-    rate_ax.set_ylabel('body rate\n[deg/s]', fontsize=8)
-    rate_ax.set_xlabel(f'sim time [{axis.unit}]')
-    rate_ax.grid(True, alpha=0.3)
-    _mark_faults(rate_ax, s, axis)
+    _style(rate_ax, s, axis, 'body rate\n[deg/s]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.08)
     return fig
 
@@ -407,19 +338,13 @@ def _wheels_fig(s: _Series, axis: _Axis) -> Figure:
     mom = np.asarray(s.wheels['momentum'])
     for i, n in enumerate(names):
         ax1.plot(t, speed[:, i], lw=0.8, label=n)
-    ax1.set_ylabel('speed [rpm]', fontsize=8)
     ax1.legend(fontsize=7, loc='upper left')
-    ax1.grid(True, alpha=0.3)
-    ax1.tick_params(labelbottom=False)
     ax1.set_xlim(t[0], t[-1])
-    _mark_faults(ax1, s, axis, label=True)
+    _style(ax1, s, axis, 'speed [rpm]', last=False, label=True)
     ax2 = fig.add_subplot(2, 1, 2, sharex=ax1)
     for i, n in enumerate(names):
         ax2.plot(t, mom[:, i], lw=0.8, label=n)
-    ax2.set_ylabel('momentum [N m s]', fontsize=8)
-    ax2.set_xlabel(f'sim time [{axis.unit}]')
-    ax2.grid(True, alpha=0.3)
-    _mark_faults(ax2, s, axis)
+    _style(ax2, s, axis, 'momentum [N m s]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.9, bottom=0.12, hspace=0.1)
     return fig
 
@@ -431,11 +356,8 @@ def _dipole_fig(s: _Series, axis: _Axis) -> Figure:
     d = np.asarray(s.cmd['dipole'])
     for i, n in enumerate('xyz'):
         ax.plot(t, d[:, i], lw=0.6, label=f'm_{n}')
-    ax.set_ylabel('dipole [A m^2]', fontsize=8)
-    ax.set_xlabel(f'sim time [{axis.unit}]')
     ax.legend(fontsize=7, loc='upper right', ncol=3)
-    ax.grid(True, alpha=0.3)
-    _mark_faults(ax, s, axis)
+    _style(ax, s, axis, 'dipole [A m^2]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.18)
     return fig
 
@@ -454,14 +376,10 @@ def _estimate_fig(s: _Series, axis: _Axis, e: Dict[str, np.ndarray]) -> Figure:
             ax.fill_between(t, -sig, sig, color='#4c72b0', alpha=0.2, lw=0,
                             label='3-sigma (estimate covariance)')
         ax.plot(t, e['err'][:, i], lw=0.6, color='k', label='error (truth at the stamp)')
-        ax.set_ylabel(f'{n} [deg]', fontsize=8)
-        ax.grid(True, alpha=0.3)
         ax.set_xlim(t[0], t[-1])
-        _mark_faults(ax, s, axis, label=i == 0)
+        _style(ax, s, axis, f'{n} [deg]', last=i == n_rows - 1, label=i == 0)
         if i == 0:
             ax.legend(fontsize=7, loc='upper right', ncol=2)
-        if i < n_rows - 1:
-            ax.tick_params(labelbottom=False)
         finite = np.abs(e['err'][:, i])
         finite = finite[np.isfinite(finite)]
         if finite.size:      # the error sets the scale (a tumbling start's bound may not)
@@ -471,10 +389,7 @@ def _estimate_fig(s: _Series, axis: _Axis, e: Dict[str, np.ndarray]) -> Figure:
         ax = fig.add_subplot(n_rows, 1, n_rows, sharex=first)
         ax.step(np.asarray(s.diag['t']) / axis.scale, s.diag['rejected'], where='post',
                 lw=0.8, color='#c44e52')
-        ax.set_ylabel('rejected\nsamples', fontsize=8)
-        ax.grid(True, alpha=0.3)
-        _mark_faults(ax, s, axis)
-    fig.axes[-1].set_xlabel(f'sim time [{axis.unit}]')
+        _style(ax, s, axis, 'rejected\nsamples', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.92, bottom=0.1, hspace=0.1)
     return fig
 
@@ -502,17 +417,11 @@ def _img(png: bytes, alt: str) -> str:
 
 
 def _scenario(bag_path) -> Dict[str, Any]:
-    """The bag's ``scenario.yaml`` (``adcs run`` writes it beside the bag), or {}."""
-    p = Path(bag_path)
-    path = (p if p.is_dir() else p.parent) / 'scenario.yaml'
+    """The bag's ``scenario.yaml`` as data (``adcs run`` writes it beside the bag), or {}."""
+    from adcs_nodes.tools.bagfile import BagError, bag_scenario
     try:
-        import yaml
-        with open(path, encoding='utf-8') as fh:
-            data = yaml.safe_load(fh)
-        return data if isinstance(data, dict) else {}
-    except (OSError, ValueError, ImportError):
-        return {}
-    except Exception:          # a malformed file (yaml.YAMLError): the page goes on without
+        return bag_scenario(str(bag_path)) or {}
+    except BagError:
         return {}
 
 
@@ -532,26 +441,10 @@ def _fmt_t(t: float, axis: _Axis) -> str:
 
 
 def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -> str:
-    """Write ``report.html`` (and ``overview.png``) of the bag into ``out_dir``.
-
-    Parameters
-    ----------
-    bag_path : path-like
-        rosbag2 bag directory or ``.mcap`` file of any engine.
-    out_dir : path-like
-        Output directory (created if needed); a ``metrics.json`` of
-        :func:`adcs_nodes.tools.analyse.report.make_report` already there gives the paper table.
-
-    Returns
-    -------
-    str
-        Path of ``report.html``.
-
-    Raises
-    ------
-    FileNotFoundError, ValueError
-        As :func:`adcs_nodes.bag.read_messages` (no bag, not a bag).
-    """
+    """Write ``report.html`` (and ``overview.png``) of the bag (any engine's) into ``out_dir``
+    (created if needed; a :func:`adcs_nodes.tools.analyse.report.make_report` ``metrics.json``
+    there gives the paper table). Returns its path; FileNotFoundError or ValueError as
+    :func:`adcs_nodes.bag.read_messages` (no bag, not a bag)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     s = _collect(bag_path)
@@ -560,11 +453,6 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
     ends += [s.cmd['t'][-1]] if s.cmd['t'] else []
     t_end = max(ends + [1e-9])
     axis = _time_axis(t_end)
-    names = sorted(set(s.cmd['source']) | {e['active'] for e in s.status}
-                   | {e['mode'] for e in s.status})
-    colours = _colours(names)
-    schedule = {float(e.get('t_s', -1.0)): str(e.get('controller', ''))
-                for e in (sc.get('manager') or {}).get('schedule') or [] if isinstance(e, dict)}
     title = str(sc.get('name') or Path(str(bag_path).rstrip('/')).name)
     parts = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
              f'<title>ADCS run {html.escape(title)}</title><style>{_CSS}</style></head><body>',
@@ -575,71 +463,8 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
                  'of sim time; topics: ' + ', '.join(
                      f'{html.escape(k)} ({v})' for k, v in sorted(s.topics.items())) + '</p>')
     missing: List[str] = []
-
-    parts.append('<h2>Timeline</h2>')
-    if s.cmd['t'] or s.status or s.state['t']:
-        fig = _overview(s, axis, t_end, colours, _pointing_error(s))
-        png = _png(fig)
-        (out / 'overview.png').write_bytes(png)
-        parts.append(_img(png, 'timeline: controllers, modes, faults, attitude error, rates'))
-    else:
-        missing.append('timeline (no sim/state, adcs/actuator_command or '
-                       'adcs/controller_status)')
-
-    parts.append('<h2>Switches and fallbacks</h2>')
-    rows = _switches(s, schedule)
-    if rows:
-        parts.append(_table(['t', 'what', 'why'], [
-            (_fmt_t(r['t'], axis), html.escape(r['what']), html.escape(r['why']))
-            for r in rows]))
-    else:
-        parts.append('<p class="note">no adcs/controller_status or adcs/actuator_command '
-                     'recorded</p>')
-
-    parts.append('<h2>Faults</h2>')
-    if s.faults:
-        parts.append(_table(['t', 'fault', 'state'], [
-            (_fmt_t(f['t'], axis), html.escape(f['message'].split(': ', 1)[-1]),
-             'active' if f['active'] else 'cleared') for f in s.faults]))
-    else:
-        parts.append('<p class="note">no fault announced on sim/faults</p>')
-
-    parts.append('<h2>Reaction wheels</h2>')
-    if s.wheels['t']:
-        parts.append(_img(_png(_wheels_fig(s, axis)), 'wheel speeds and momentum'))
-    else:
-        missing.append('reaction wheels (no sim/wheels with wheels)')
-    parts.append('<h2>Magnetorquer dipole</h2>')
-    if s.cmd['t']:
-        parts.append(_img(_png(_dipole_fig(s, axis)), 'magnetorquer dipole command'))
-    else:
-        missing.append('magnetorquer dipole (no adcs/actuator_command)')
-
-    parts.append('<h2>Estimator against the truth</h2>')
-    est = _estimate_error(s)
-    if est is not None:
-        parts.append(_img(_png(_estimate_fig(s, axis, est)),
-                          'estimator error per body axis with its 3-sigma bound'))
-        if s.diag['t']:
-            last = next((r for r in reversed(s.diag['last']) if r), '')
-            parts.append(f'<p class="note">rejected samples: {s.diag["rejected"][-1]}'
-                         + (f'; last: {html.escape(last)}' if last else '') + '</p>')
-    else:
-        missing.append('estimator (no adcs/attitude_estimate with sim/state)')
-
-    parts.append('<h2>Paper comparison</h2>')
-    paper = _paper_rows(out)
-    if paper:
-        css = {True: 'pass', False: 'fail', None: ''}
-        parts.append(_table(['quantity', 'paper', 'measured', 'verdict'], [
-            (html.escape(str(r.get('name', ''))), html.escape(str(r.get('paper', ''))),
-             html.escape(str(r.get('measured', ''))),
-             f'<span class="{css.get(r.get("pass"), "")}">'
-             f'{html.escape(str(r.get("verdict", "")))}</span>') for r in paper]))
-    else:
-        parts.append('<p class="note">no paper table for this run (the report\'s '
-                     'metrics.json has none: the scenario reproduces no paper, or the report '
-                     'was not written first)</p>')
+    parts += _timeline_sections(s, sc, axis, t_end, out, missing)
+    parts += _plot_sections(s, axis, missing) + _paper_section(out)
     if missing:
         parts.append('<h2>Not shown</h2><ul>' + ''.join(
             f'<li>{html.escape(m)}</li>' for m in missing) + '</ul>')
@@ -649,18 +474,70 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
     return str(path)
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.analyse.report_html BAG OUT_DIR``."""
-    parser = argparse.ArgumentParser(description='report.html of an ADCS bag.')
-    parser.add_argument('bag', help='bag directory or .mcap file')
-    parser.add_argument('out_dir', help='directory for report.html and overview.png')
-    args = parser.parse_args(argv)
-    try:
-        print(write_report_html(args.bag, args.out_dir))
-    except (FileNotFoundError, ValueError) as exc:
-        parser.exit(2, f'error: {exc}\n')
-    return 0
+def _timeline_sections(s: _Series, sc: Dict[str, Any], axis: _Axis, t_end: float, out: Path,
+                       missing: List[str]) -> List[str]:
+    """The timeline figure (also ``overview.png``), the switches and the faults."""
+    parts = ['<h2>Timeline</h2>']
+    if s.cmd['t'] or s.status or s.state['t']:
+        colours = _colours(sorted(set(s.cmd['source']) | {e['active'] for e in s.status}
+                                  | {e['mode'] for e in s.status}))
+        png = _png(_overview(s, axis, t_end, colours, _pointing_error(s)))
+        (out / 'overview.png').write_bytes(png)
+        parts.append(_img(png, 'timeline: controllers, modes, faults, attitude error, rates'))
+    else:
+        missing.append('timeline (no sim/state, adcs/actuator_command or '
+                       'adcs/controller_status)')
+    parts.append('<h2>Switches and fallbacks</h2>')
+    schedule = {float(e.get('t_s', -1.0)): str(e.get('controller', ''))
+                for e in (sc.get('manager') or {}).get('schedule') or [] if isinstance(e, dict)}
+    rows = _switches(s, schedule)
+    parts.append(_table(['t', 'what', 'why'], [
+        (_fmt_t(r['t'], axis), html.escape(r['what']), html.escape(r['why'])) for r in rows])
+        if rows else '<p class="note">no adcs/controller_status or adcs/actuator_command '
+        'recorded</p>')
+    parts.append('<h2>Faults</h2>')
+    parts.append(_table(['t', 'fault', 'state'], [
+        (_fmt_t(f['t'], axis), html.escape(f['message'].split(': ', 1)[-1]),
+         'active' if f['active'] else 'cleared') for f in s.faults])
+        if s.faults else '<p class="note">no fault announced on sim/faults</p>')
+    return parts
 
 
-if __name__ == '__main__':
-    raise SystemExit(main())
+def _plot_sections(s: _Series, axis: _Axis, missing: List[str]) -> List[str]:
+    """Wheels, dipole, and the estimator against the truth."""
+    parts = ['<h2>Reaction wheels</h2>']
+    if s.wheels['t']:
+        parts.append(_img(_png(_wheels_fig(s, axis)), 'wheel speeds and momentum'))
+    else:
+        missing.append('reaction wheels (no sim/wheels with wheels)')
+    parts.append('<h2>Magnetorquer dipole</h2>')
+    if s.cmd['t']:
+        parts.append(_img(_png(_dipole_fig(s, axis)), 'magnetorquer dipole command'))
+    else:
+        missing.append('magnetorquer dipole (no adcs/actuator_command)')
+    parts.append('<h2>Estimator against the truth</h2>')
+    est = _estimate_error(s)
+    if est is None:
+        missing.append('estimator (no adcs/attitude_estimate with sim/state)')
+        return parts
+    parts.append(_img(_png(_estimate_fig(s, axis, est)),
+                      'estimator error per body axis with its 3-sigma bound'))
+    if s.diag['t']:
+        last = next((r for r in reversed(s.diag['last']) if r), '')
+        parts.append(f'<p class="note">rejected samples: {s.diag["rejected"][-1]}'
+                     + (f'; last: {html.escape(last)}' if last else '') + '</p>')
+    return parts
+
+
+def _paper_section(out: Path) -> List[str]:
+    paper = _paper_rows(out)
+    if not paper:
+        return ['<h2>Paper comparison</h2>', '<p class="note">no paper table for this run '
+                '(the report\'s metrics.json has none: the scenario reproduces no paper, or '
+                'the report was not written first)</p>']
+    css = {True: 'pass', False: 'fail', None: ''}
+    return ['<h2>Paper comparison</h2>', _table(['quantity', 'paper', 'measured', 'verdict'], [
+        (html.escape(str(r.get('name', ''))), html.escape(str(r.get('paper', ''))),
+         html.escape(str(r.get('measured', ''))),
+         f'<span class="{css.get(r.get("pass"), "")}">'
+         f'{html.escape(str(r.get("verdict", "")))}</span>') for r in paper])]

@@ -1,13 +1,5 @@
-"""Paper reproductions (``make reproduce``): run a paper scenario, print its table.
-
-The table is the one ``adcs report`` prints for the same bag: the rows of the scenario's paper
-module (:mod:`adcs_nodes.tools.analyse.papers`, picked by the scenario's ``name`` in the bag's
-``scenario.yaml``) through :func:`adcs_nodes.tools.analyse.papers.table_lines`. A row that compares
-with a paper value and misses is a FAIL; information rows and claims the run cannot check
-("not comparable", with the reason) are printed and counted apart, never as a pass.
-
-Pure Python + numpy (bag reading through :mod:`adcs_nodes.bag`); no rclpy.
-"""
+"""Paper reproductions (``make reproduce``): run a paper scenario, print the table ``adcs
+report`` prints for its bag (:mod:`adcs_nodes.tools.analyse.papers`, by the scenario's name)."""
 from __future__ import annotations
 
 import os
@@ -32,8 +24,8 @@ def expectations_for(bag: str) -> Tuple[Optional[str], List[Row]]:
 def sections_for(bag: str) -> List[Tuple[str, str]]:
     """Extra report sections for the scenario of ``bag``: paper 000's sensitivity study for
     its closed-loop scenarios (empty otherwise)."""
-    from adcs_nodes.tools.analyse.papers.series import scenario_of
-    if (scenario_of(bag) or {}).get('name') not in SECTIONS:
+    from adcs_nodes.tools.bagfile import bag_scenario
+    if (bag_scenario(bag) or {}).get('name') not in SECTIONS:
         return []
     from adcs_nodes.tools.analyse.paper000_sensitivity import sensitivity_markdown
     return [('Sensitivity of the hold accuracy', sensitivity_markdown())]

@@ -1,32 +1,13 @@
 """Studies on the FrameLoop (the plain engine): a scenario with ``--set`` overrides, run without
 ROS, judged by the same paper tables as ``adcs report``.
 
-Command line (``python -m adcs_nodes.tools.analyse.study COMMAND ...``; every command takes
-``--set KEY=VALUE`` (repeatable), ``--duration S`` and ``--ideal``)::
-
-    run SCENARIO                      one run: its paper table (the rows `adcs report` prints
-                                      for a bag of the same run) and the run metrics
-    sweep SCENARIO KEY VALUE...       one run per VALUE of the dotted KEY: the measured
-                                      column of each run side by side
-    wings [SCENARIO]                  paper 001, one wing vs two:
-                                      sweep spacecraft.flexible.wings one two
-    hold-horizon [SCENARIO] [--values S...]
-                                      paper 001, the MPI hold horizon (a departure
-                                      from the paper) on the two-wing robustness case:
-                                      sweep controllers.mpi.hold_horizon_s 0 0.4 1 2
-    table1 [SCENARIO] [--figures DIR] paper 003: both readings of Table 1, the smooth set, no
-                                      compensation and the reference slew (settling time,
-                                      energy, overshoot; the paper-like Figs. 6-9)
-    sensitivity [SCENARIO] [--out JSON]
-                                      paper 000: the hold accuracy against the random
-                                      torque's correlation time and the magnetometer
-                                      misalignment (adcs_nodes.tools.analyse.paper000_sensitivity)
-
-``--ideal``: the controllers get the true state as the estimate (a perfect-knowledge
-reference run; not a graph mode). The default scenarios are the repository's
-``scenarios/paper001_mpi.yaml``, ``paper003_slew.yaml`` and ``paper000_control.yaml``. Exit
-2 for a bad scenario or override (the message names the key).
-"""
+``python -m adcs_nodes.tools.analyse.study COMMAND ...`` (each takes ``--set KEY=VALUE``,
+``--duration S``, ``--ideal``: the controllers get the true state, ``--out FILE.json``): ``run``
+(one run's paper table and metrics), ``sweep SCENARIO KEY VALUE...`` (the measured columns
+side by side), ``wings`` and ``hold-horizon`` (paper 001: one wing vs two, the MPI hold
+horizon), ``table1`` (paper 003's Table 1 readings and the reference slew, ``--figures``:
+Figs. 6-9), ``sensitivity`` (paper 000's hold accuracy,
+:mod:`adcs_nodes.tools.analyse.paper000_sensitivity`). Exit 2 for a bad scenario or override."""
 from __future__ import annotations
 
 import argparse
@@ -44,14 +25,9 @@ SUMMARY_TOPICS = ('sim/state', 'adcs/attitude_estimate')
 
 def run_rows(sc: Dict[str, Any], duration_s: Optional[float] = None, overrides: Any = None,
              ideal: bool = False) -> Tuple[Dict[str, Any], List[papers.Row], Dict[str, Any]]:
-    """One FrameLoop run: ``(effective scenario, paper rows, run summary)``.
-
-    The rows are :func:`adcs_nodes.tools.analyse.papers.rows_for` of the run (what ``adcs report``
-    prints for its bag); the summary is the run metrics of the angle to the orbit frame
-    (:func:`adcs_nodes.tools.analyse.metrics.run_metrics`) and the median estimation error from
-    half
-    an orbit on.
-    """
+    """One FrameLoop run: ``(effective scenario, paper rows, run summary)``: the rows ``adcs
+    report`` prints for its bag, the run metrics of the angle to the orbit frame and the median
+    estimation error from half an orbit on."""
     from adcs_nodes.scenario import apply_overrides
     if overrides:
         sc = apply_overrides(sc, overrides)
@@ -75,10 +51,8 @@ def summary(topics: Topics, sc: Dict[str, Any]) -> Dict[str, Any]:
     e0 = epoch_ns(sc)
     t = np.array([(k - e0) / 1e9 for k, _ in truth])
     angle = metrics.angle_to_identity_deg([quat(m.q_orbit_body) for _, m in truth])
-    period = None
-    if (sc.get('orbit') or {}).get('type', 'circular') == 'circular':
-        from adcs_nodes.tools.analyse.papers.series import orbit_period_s
-        period = orbit_period_s(sc)
+    from adcs_nodes.tools.analyse.papers.series import orbit_period_s
+    period = orbit_period_s(sc)
     out = metrics.run_metrics(t, angle, period)
     est = estimate_errors(topics, sc)
     if est['t_s'].size:

@@ -1,5 +1,6 @@
-"""Where the runs execute: a local thread pool of run processes, or a Dask cluster (an
-existing scheduler, or a ``LocalCluster`` started for the campaign)."""
+"""Where the runs execute: a local thread pool of supervisors, each feeding its worker process,
+or a Dask cluster (an existing scheduler, or a ``LocalCluster`` started for the campaign) whose
+workers do the same."""
 from __future__ import annotations
 
 import contextlib
@@ -10,17 +11,19 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from typing import Any, Dict, Iterator, List, Optional
 
 from adcs_nodes.tools.campaigns.config import CampaignError
-from adcs_nodes.tools.campaigns.runner import execute_run
+from adcs_nodes.tools.campaigns.runner import close_servers, execute_run
 
 
 class LocalBackend:
-    """J runs at once, each in its own process, supervised from a thread pool."""
+    """J runs at once: a pool of J threads, each feeding the runs to its worker process."""
 
     def __init__(self, jobs: int) -> None:
         self.pool = ThreadPoolExecutor(max_workers=jobs, thread_name_prefix='mc-run')
         self.futures: set = set()
+        self.stop_file = ''
 
     def submit(self, job: Dict[str, Any]) -> None:
+        self.stop_file = job['stop_file']
         self.futures.add(self.pool.submit(execute_run, job))
 
     def results(self) -> Iterator[Dict[str, Any]]:
@@ -37,23 +40,13 @@ class LocalBackend:
 
     def close(self) -> None:
         self.pool.shutdown(wait=False, cancel_futures=True)
+        close_servers(self.stop_file)
 
 
 class DaskBackend:
-    """Runs submitted to a Dask distributed scheduler: an existing one (``address``), or a
-    ``LocalCluster`` this backend starts and stops (``local_workers``).
-
-    Parameters
-    ----------
-    address : str or None
-        Scheduler address (``--scheduler``); None with ``local_workers``.
-    session : str
-        Campaign session id (part of the task keys).
-    local_workers : int, optional
-        Start a ``LocalCluster`` of this many worker processes with one thread each
-        (``--dask-local``): a worker supervises one run process at a time, like one slot of
-        the local thread pool.
-    """
+    """Runs submitted to a Dask scheduler: at ``address`` (``--scheduler``), or a
+    ``LocalCluster`` of ``local_workers`` single-thread processes this backend starts and stops
+    (``--dask-local``); ``session`` is part of the task keys."""
 
     def __init__(self, address: Optional[str], session: str,
                  local_workers: Optional[int] = None) -> None:
@@ -81,8 +74,10 @@ class DaskBackend:
         self.address = address
         self.session = session
         self.futures: list = []
+        self.stop_file = ''
 
     def submit(self, job: Dict[str, Any]) -> None:
+        self.stop_file = job['stop_file']
         key = f'adcs-montecarlo-{job["index"]}-{self.session}'
         self.futures.append(self.client.submit(execute_run, job, key=key, pure=False))
 
@@ -111,6 +106,11 @@ class DaskBackend:
 
     def close(self) -> None:
         try:
+            if self.stop_file:     # the campaign's worker processes in every Dask worker
+                self.client.run(close_servers, self.stop_file)
+        except Exception:  # noqa: BLE001 - a lost Dask worker's workers ended with it
+            pass
+        try:
             self.client.close()
         finally:
             self._close_cluster()
@@ -123,11 +123,9 @@ class DaskBackend:
 
 @contextlib.contextmanager
 def sigint_ignored() -> Iterator[None]:
-    """SIGINT ignored in this process meanwhile (main thread only), so that processes started
-    here inherit the ignored SIGINT: a Ctrl-C in the terminal reaches the whole foreground
-    process group, and the ``LocalCluster`` workers must keep supervising their runs while
-    the campaign stops them through its stop file (as with the local thread pool). The run
-    processes restore the default handler (:mod:`sim_node.engine`, the launcher)."""
+    """SIGINT ignored meanwhile (main thread only), inherited so by the processes started here:
+    a terminal's Ctrl-C reaches the whole process group, and the ``LocalCluster`` workers keep
+    supervising their runs while the campaign stops them through its stop file."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

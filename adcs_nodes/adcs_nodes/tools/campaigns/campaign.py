@@ -1,7 +1,6 @@
 """A campaign in its output directory: check, prepare, execute, tabulate, resume."""
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import signal
@@ -17,10 +16,10 @@ from adcs_nodes.tools.campaigns.backends import DaskBackend, LocalBackend
 from adcs_nodes.tools.campaigns.capture import ORBIT_FRAME
 from adcs_nodes.tools.campaigns.config import (IDENTITY_KEYS, CampaignConfig, CampaignError,
                                                apply_dispersion, draw_dispersion)
-from adcs_nodes.tools.campaigns.files import (campaign_lock, clean_old_stop_files, load_result,
-                                              run_dir_of, touch, write_json_atomic,
-                                              write_text_atomic)
-from adcs_nodes.tools.campaigns.runner import STOP_GRACE_S
+from adcs_nodes.tools.campaigns.files import (campaign_lock, check_layout, clean_old_stop_files,
+                                              load_result, read_campaign_json, run_dir_of,
+                                              touch, write_json_atomic, write_text_atomic)
+from adcs_nodes.tools.campaigns.runner import STOP_GRACE_S, RunOwner
 from adcs_nodes.tools.campaigns.summary import (orbit_period_s, plot_capture_vs_rate,
                                                 summary_markdown)
 from adcs_nodes.tools.campaigns.table import write_table
@@ -30,19 +29,8 @@ _FINISHED = ('captured', 'not_captured', 'error')
 
 
 class Campaign:
-    """One invocation of a campaign in ``out``: check, prepare, execute, tabulate.
-
-    Parameters
-    ----------
-    cfg : CampaignConfig
-        Campaign definition.
-    base : dict
-        The validated base scenario (:func:`~adcs_nodes.scenario.load_scenario`).
-    out : str
-        Output directory.
-    log : callable
-        Receives one progress line at a time.
-    """
+    """One invocation of a campaign (``cfg``, the validated ``base`` scenario) in ``out``:
+    check, prepare, execute, tabulate; ``log`` gets one progress line at a time."""
 
     def __init__(self, cfg: CampaignConfig, base: Dict[str, Any], out: str,
                  log: Callable[[str], None] = print) -> None:
@@ -60,8 +48,7 @@ class Campaign:
         """Create ``campaign.json``, or refuse a restart whose identity differs."""
         path = os.path.join(self.out, 'campaign.json')
         if os.path.isfile(path):
-            with open(path, encoding='utf-8') as fh:
-                old = json.load(fh)
+            old = read_campaign_json(path)
             new = self.cfg.identity()
             old.setdefault('engine', 'graph')   # written before the engines: the graph
             # written before the guidance target: every capture was measured to the orbit frame
@@ -84,8 +71,11 @@ class Campaign:
     def prepare(self, index: int) -> Dict[str, Any]:
         """Fresh run directory with ``scenario.yaml`` and ``job.json``; returns the job."""
         run_dir = run_dir_of(self.out, index)
-        if os.path.exists(run_dir):
+        RunOwner(run_dir).end_previous()        # a lost worker's run process, still writing
+        if os.path.isdir(run_dir) and not os.path.islink(run_dir):
             shutil.rmtree(run_dir)   # an incomplete run: half-written bag, logs
+        elif os.path.lexists(run_dir):
+            os.unlink(run_dir)
         os.makedirs(run_dir)
         disp = draw_dispersion(self.cfg, index)
         sc = apply_dispersion(self.base, disp, self.cfg.duration_s, self.cfg)
@@ -103,12 +93,10 @@ class Campaign:
     # -------------------------------------------------------------- execution
     def run(self, jobs: int = 1, scheduler: Optional[str] = None,
             dask_local: bool = False) -> int:
-        """Execute every run not done yet; write the table, summary and plot. Exit code.
-
-        ``jobs`` runs at once from a local thread pool; or the runs go to the Dask scheduler
-        ``scheduler``; or, with ``dask_local``, to a Dask ``LocalCluster`` of ``jobs`` worker
-        processes (one thread each) started here and stopped at the end.
-        """
+        """Execute every run not done yet; write the table, summary and plot; the exit code.
+        ``jobs`` at once from a local thread pool, or on the Dask ``scheduler``, or
+        (``dask_local``) on a ``LocalCluster`` of ``jobs`` single-thread workers."""
+        check_layout(self.out)
         os.makedirs(self.out, exist_ok=True)
         with campaign_lock(self.out):
             self.check_or_create()

@@ -1,34 +1,7 @@
-"""What a run's capture is measured against: the attitude the scenario's guidance commands.
-
-The capture test (:func:`~adcs_nodes.tools.campaigns.results.series_metrics`) judges the
-angle between the body and the guidance target, ``adcs/attitude_target``, the attitude the
-controllers track::
-
-    angle(t_k) = 2 atan2(|v|, |w|),  [v, w] = q_orbit_target(t_k)^* (x) q_orbit_body(t_k)   [deg]
-
-with ``q_orbit_target(t_k)`` the target of the latest guidance frame at or before ``t_k``.
-
-* **Orbit frame** (:data:`ORBIT_FRAME`): a scenario whose guidance holds the identity in the
-  orbit frame for the whole run (no ``guidance`` section, as paper 000; paper 003's hold), or
-  has no guidance (no controller). The angle is the angle to the orbit frame, exactly as
-  before the guidance target was used (the same numbers, bit for bit).
-* **Guidance target** (:data:`GUIDANCE_TARGET`): any other profile (paper 001's maneuvers,
-  holds and tracking; the demo's slew; a profile in the ECI frame). Samples where the target
-  is a maneuver's end state are not judged: during a paper 001 ``maneuver`` segment
-  (``profile`` ``'maneuver'``, ``time_to_go_s > 0``) the guidance commands the attitude due at
-  the segment's end, which the MPI law reaches by then, not the attitude for now (judging them
-  would make every run's capture time the end of its last maneuver). A quaternion ``slew``
-  segment commands the attitude for now (the path) and is judged.
-
-Where the target comes from: the target the run published. The graph engine's bag records it
-(read by :func:`~adcs_nodes.tools.campaigns.results.read_truth`); the plain worker records it
-per frame in ``series.npz`` (``q_orbit_target``, an ECI target converted to the orbit frame
-with the frame's truth, and ``target_judged``:
-:func:`adcs_nodes.tools.campaigns.worker.run_series`) and judges
-capture itself (:func:`adcs_nodes.tools.campaigns.worker.mc_worker`). A plain result without
-``capture_reference`` is from before that (its ``series.npz`` has no target):
-:func:`label_old_result`.
-"""
+"""What a run's capture is measured against: the attitude the scenario's guidance commands,
+``angle(t_k) = 2 atan2(|v|, |w|)`` of ``q_orbit_target(t_k)^* (x) q_orbit_body(t_k)`` [deg]
+with the target published last at or before ``t_k`` (``docs/montecarlo.md``, "What captured
+means")."""
 from __future__ import annotations
 
 import os
@@ -56,7 +29,7 @@ def capture_reference(sc: Dict[str, Any]) -> str:
     specs = [s for s in build_graph(sc, sc['duration_s']) if s.module == _GUIDANCE_MODULE]
     if not specs:
         return ORBIT_FRAME
-    g = GuidanceComponent(param_values(PARAMS, specs[0].params), clock=None).guidance
+    g = GuidanceComponent(param_values(PARAMS, specs[0].params)).guidance
     if isinstance(g, Guidance) and g.frame == 'orbit' and all(
             s.type == 'hold' and metrics.angle_to_identity_deg(s.q)[0] == 0.0
             for s in g.segments):
@@ -65,22 +38,10 @@ def capture_reference(sc: Dict[str, Any]) -> str:
 
 
 def label_old_result(run_dir: str, result: Dict[str, Any]) -> Dict[str, Any]:
-    """A run's result as a resumed campaign reads it.
-
-    A plain run's ``result.json`` without ``capture_reference`` is from before the plain
-    worker recorded the guidance target (its ``series.npz`` has no ``q_orbit_target``): its
-    numbers are the angle to the orbit frame. For a scenario whose reference is the orbit
-    frame those are the capture test's numbers: returned with ``capture_reference`` added
-    (the file is left as it is). Any other result is returned as it is.
-
-    Raises
-    ------
-    ValueError
-        For such a result of a scenario judged against its guidance target (the run is not
-        done: the campaign runs it again).
-    OSError, KeyError, adcs_nodes.scenario.ScenarioError
-        When the run's scenario cannot be read.
-    """
+    """A run's result as a resumed campaign reads it: a plain ``result.json`` without
+    ``capture_reference`` (it measured to the orbit frame) labelled so when that is its
+    scenario's reference, else ValueError (run again); OSError, KeyError or ScenarioError for
+    an unreadable scenario."""
     from adcs_nodes.scenario import load_scenario
 
     if result.get('engine') != 'plain' or 'capture_reference' in result:

@@ -9,11 +9,14 @@ from typing import Any, Dict, List, Optional
 from adcs_nodes.tools.campaigns.campaign import Campaign
 from adcs_nodes.tools.campaigns.capture import capture_reference
 from adcs_nodes.tools.campaigns.config import (ENGINES, CampaignConfig, CampaignError,
+                                               Dispersion, apply_dispersion,
                                                default_max_rate_deg_s, scenario_hash)
 from adcs_nodes.tools.campaigns.engine import plain_engine_problem, resolve_engine
-from adcs_nodes.tools.campaigns.runner import worker_main
+from adcs_nodes.tools.campaigns.runner import serve
 
-
+#: The most runs of one campaign (one directory each under ``runs/``) and runs at once.
+MAX_RUNS = 100_000
+MAX_JOBS = 256
 #: Printed by a multi-run campaign on the graph engine when the plain engine could run it.
 GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, recorded to a bag '
               '(paper000_control, 6 orbits: 60-185 s CPU per run, by machine load). '
@@ -22,25 +25,36 @@ GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, reco
               'without bags.')
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the ``adcs montecarlo`` arguments to ``parser``."""
+def add_campaign_arguments(parser: argparse.ArgumentParser, what: str = 'campaign') -> None:
+    """What ``adcs montecarlo`` and ``adcs sweep`` share: the scenario, runs, where they run,
+    the output directory (``what``: a campaign or a sweep there is resumed)."""
     parser.add_argument('scenario', help='base scenario YAML (closed loop, e.g. '
                         'scenarios/paper000_control.yaml)')
-    parser.add_argument('--runs', type=int, required=True, metavar='N', help='number of runs')
+    parser.add_argument('--runs', type=int, required=True, metavar='N',
+                        help='number of runs' + (' per grid point' if what == 'sweep' else '')
+                        + f' (at most {MAX_RUNS})')
     parser.add_argument('--jobs', type=int, default=1, metavar='J',
-                        help='runs at once on this machine, each in its own processes '
-                        '(default 1; with --dask-local: the number of Dask workers; ignored '
-                        'with --scheduler)')
+                        help='runs at once on this machine: J worker processes, started '
+                        'once and fed runs (default 1; with --dask-local: the number of Dask '
+                        'workers; ignored '
+                        f'with --scheduler; at most {MAX_JOBS})')
     where = parser.add_mutually_exclusive_group()
     where.add_argument('--scheduler', metavar='ADDRESS',
                        help='submit the runs to this Dask distributed scheduler '
                        '(e.g. tcp://host:8786); --out must be on a shared file system')
     where.add_argument('--dask-local', action='store_true',
-                       help='start a Dask LocalCluster on this machine for the campaign '
-                       '(--jobs worker processes, one thread each) and stop it at the end')
-    parser.add_argument('--out', metavar='DIR', help='campaign directory (default '
-                        'montecarlo_<scenario name>); an existing campaign there is resumed')
+                       help='start a Dask LocalCluster of --jobs worker processes (one thread '
+                       'each) on this machine' + (' per grid point' if what == 'sweep' else '')
+                       + ' and stop it at the end')
+    parser.add_argument('--out', metavar='DIR', help=f'{what} directory (default '
+                        f'{"montecarlo" if what == "campaign" else what}_<scenario name>); '
+                        f'a {what} there is resumed')
     add_dispersion_arguments(parser)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``adcs montecarlo`` arguments to ``parser``."""
+    add_campaign_arguments(parser)
     parser.add_argument('--auto-detumble', action='store_true',
                         help='B-dot detumble first (below 0.5 deg/s), then the magnetic law '
                         '(writes manager.auto into each run)')
@@ -87,23 +101,15 @@ def max_rate_deg_s(args: argparse.Namespace, base: Dict[str, Any]) -> float:
 
 
 def config_from_args(args: argparse.Namespace) -> tuple:
-    """Validate the arguments; returns ``(CampaignConfig, base scenario, out dir)``.
-
-    The engine is resolved here (:func:`~adcs_nodes.tools.campaigns.engine.resolve_engine`);
-    the reason is in ``args.engine_reason`` afterwards.
-
-    Raises
-    ------
-    CampaignError, adcs_nodes.scenario.ScenarioError
-        On a bad value or scenario.
-    """
+    """Validate the arguments: ``(CampaignConfig, base scenario, out dir)``; the engine's
+    reason in ``args.engine_reason``; CampaignError or ScenarioError on a bad value."""
     from adcs_nodes.scenario import load_scenario
 
     base = load_scenario(args.scenario)
-    if args.runs < 1:
-        raise CampaignError(f'--runs must be >= 1, got {args.runs}')
-    if args.jobs < 1:
-        raise CampaignError(f'--jobs must be >= 1, got {args.jobs}')
+    if not 1 <= args.runs <= MAX_RUNS:
+        raise CampaignError(f'--runs must be in [1, {MAX_RUNS}], got {args.runs}')
+    if not 1 <= args.jobs <= MAX_JOBS:
+        raise CampaignError(f'--jobs must be in [1, {MAX_JOBS}], got {args.jobs}')
     for name in ('max_rate_deg_s', 'mag_bias_nT', 'misalignment_deg', 'bdot_gain'):
         value = getattr(args, name, None)
         if value is None:
@@ -119,18 +125,42 @@ def config_from_args(args: argparse.Namespace) -> tuple:
                             f'{base["timing"]["frame_s"]:g} s frames')
     out = args.out or f'montecarlo_{base["name"]}'
     engine, args.engine_reason = resolve_engine(getattr(args, 'engine', None), base, out)
-    cfg = CampaignConfig(
-        scenario_path=base['_path'], scenario_sha256=scenario_hash(base), runs=args.runs,
+    cfg = campaign_config(args, base, base, duration, engine)
+    if cfg.auto_detumble and not {'magnetic', 'bdot'} <= set(base.get('controllers', {})):
+        raise CampaignError('--auto-detumble needs the controllers magnetic and bdot in the '
+                            'scenario')
+    check_dispersion(cfg, base)
+    return cfg, base, out
+
+
+def campaign_config(args: argparse.Namespace, base: Dict[str, Any], sc: Dict[str, Any],
+                    duration: float, engine: str) -> CampaignConfig:
+    """The campaign of the arguments on scenario ``sc`` (``base``, or a sweep's point)."""
+    return CampaignConfig(
+        scenario_path=base['_path'], scenario_sha256=scenario_hash(sc), runs=args.runs,
         seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
         max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
         mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
         auto_detumble=bool(getattr(args, 'auto_detumble', False)),
-        bdot_gain=getattr(args, 'bdot_gain', None),
-        engine=engine, compose=bool(args.compose), capture_reference=capture_reference(base))
-    if cfg.auto_detumble and not {'magnetic', 'bdot'} <= set(base.get('controllers', {})):
-        raise CampaignError('--auto-detumble needs the controllers magnetic and bdot in the '
-                            'scenario')
-    return cfg, base, out
+        bdot_gain=getattr(args, 'bdot_gain', None), engine=engine,
+        compose=bool(getattr(args, 'compose', False)), capture_reference=capture_reference(sc))
+
+
+def check_dispersion(cfg: CampaignConfig, base: Dict[str, Any]) -> None:
+    """The widest run ``cfg`` can draw (every rate component, bias and misalignment at its
+    bound) validated as each run's scenario is: CampaignError up front, not every run failed."""
+    from adcs_nodes.scenario import ScenarioError, apply_overrides
+    w, b, m = cfg.max_rate_deg_s, cfg.mag_bias_nT, cfg.misalignment_deg
+    worst = Dispersion(0, 0, [0.0, 0.0, 0.0, 1.0], [w] * 3,
+                       None if b is None else [b * 1e-9] * 3, None if m is None else [m] * 3)
+    try:
+        apply_overrides({**apply_dispersion(base, worst, cfg.duration_s, cfg),
+                         '_path': base['_path']}, {})
+    except ScenarioError as exc:
+        bounds = ', '.join(f'--{k} {v:g}' for k, v in (
+            ('max-rate-deg-s', w), ('mag-bias-nT', b), ('misalignment-deg', m)) if v is not None)
+        raise CampaignError(f'the dispersion bounds ({bounds}) give runs the scenario refuses: '
+                            f'{str(exc).split(": ", 1)[-1]}') from None
 
 
 def run_from_args(args: argparse.Namespace) -> int:
@@ -166,13 +196,11 @@ def run_from_args(args: argparse.Namespace) -> int:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.campaigns``: the campaign command, or one run's process.
-
-    ``_worker RUN_DIR`` is the internal per-run entry point used by :func:`execute_run`.
-    """
+    """``python -m adcs_nodes.tools.campaigns``: the campaign command, or (``_worker
+    STOP_FILE``, internal) a worker process of :func:`~.runner.execute_run`."""
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ['_worker'] and len(argv) == 2:
-        return worker_main(argv[1])
+        return serve(argv[1])
     parser = argparse.ArgumentParser(prog='adcs montecarlo',
                                      description='Dispersed Monte Carlo campaign.')
     add_arguments(parser)

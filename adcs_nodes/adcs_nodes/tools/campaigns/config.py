@@ -9,22 +9,14 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-#: Keys of ``campaign.json`` that must match for a restart to resume the campaign. A
-#: ``campaign.json`` without ``capture_reference`` is from before the capture test used the
-#: guidance target: it measured the angle to the orbit frame (``'orbit frame'``).
+#: Keys of ``campaign.json`` that must match for a restart to resume the campaign (one without
+#: ``capture_reference`` measured to the orbit frame).
 IDENTITY_KEYS = ('scenario_sha256', 'seed', 'duration_s', 'max_rate_deg_s', 'capture_deg',
                  'mag_bias_nT', 'misalignment_deg', 'auto_detumble', 'bdot_gain', 'engine',
                  'capture_reference')
-#: Default bound of each initial rate component [deg/s] by the scenario's paper (the first 3
-#: characters of its ``paper:`` key); :data:`DEFAULT_MAX_RATE_DEG_S` for any other scenario.
-#:
-#: * ``'000'``: 3 deg/s, paper 000's "initial rate components up to 3 deg/s" (its example
-#:   (-3, 3, 3) deg/s is a corner of the cube);
-#: * ``'001'``: 0.3 deg/s, ASSUMPTION (paper 001 gives one initial state, no dispersion): its
-#:   initial rates (0.3, -0.3, 0.3) deg/s are a corner of the cube, as paper 000's are of
-#:   its own; the three wheels (55 N m s, 1 N m each) absorb ``I omega`` of up to 17 N m s per
-#:   wheel at this bound (inertia (30)) beside the maneuvers' momentum, where 3 deg/s asks
-#:   up to 174 N m s per wheel: the runs would measure wheel saturation, not the law.
+#: Default bound of each initial rate component [deg/s] by the first 3 characters of the
+#: scenario's ``paper:`` key: paper 000's "up to 3 deg/s"; 0.3 deg/s for paper 001, an
+#: ASSUMPTION (its wheels would saturate at 3 deg/s): ``docs/montecarlo.md``.
 MAX_RATE_BY_PAPER_DEG_S = {'000': 3.0, '001': 0.3}
 #: Default bound for a scenario of another paper or of none [deg/s] (paper 000's).
 DEFAULT_MAX_RATE_DEG_S = 3.0
@@ -43,48 +35,34 @@ class CampaignError(ValueError):
 
 @dataclass(frozen=True)
 class CampaignConfig:
-    """What defines a campaign (its identity) plus how many runs it has.
+    """What defines a campaign (its identity, :data:`IDENTITY_KEYS`) and its number of runs.
 
     Attributes
     ----------
-    scenario_path : str
-        Absolute path of the base scenario YAML.
-    scenario_sha256 : str
-        Hash of the validated base scenario (comments and key order do not count).
-    runs : int
-        Number of runs, indices ``0 .. runs - 1``.
-    seed : int
-        Campaign seed; run ``i`` draws from ``default_rng([seed, i])``.
+    scenario_path, scenario_sha256 : str
+        The base scenario YAML (absolute path) and the hash of its validated dict.
+    runs, seed : int
+        Runs ``0 .. runs - 1``; run ``i`` draws from ``default_rng([seed, i])``.
     duration_s : float
         Simulated duration of every run [s].
-    max_rate_deg_s : float
-        Bound of each initial rate component [deg/s] (default of the command:
-        :func:`default_max_rate_deg_s`).
-    capture_deg : float
-        Capture threshold on the angle between the body and the guidance target [deg].
-    mag_bias_nT : float or None
-        Bound of each magnetometer bias component [nT]; None: the scenario's bias (not
-        dispersed).
-    misalignment_deg : float or None
-        Bound of each magnetometer misalignment rotation-vector component [deg]; None: the
-        scenario's misalignment.
+    max_rate_deg_s, capture_deg : float
+        Bound of each initial rate component [deg/s] (:func:`default_max_rate_deg_s`);
+        capture threshold on the angle between the body and the guidance target [deg].
+    mag_bias_nT, misalignment_deg : float or None
+        Bound of each magnetometer bias component [nT] and misalignment rotation-vector
+        component [deg]; None: the scenario's (not dispersed).
     auto_detumble : bool
-        Write an automatic mode sequence into each run: B-dot detumble until the rate is below
-        0.5 deg/s, then the scenario's magnetic law (``manager.auto``).
+        Each run gets the automatic sequence :data:`AUTO_DETUMBLE` (``manager.auto``).
     bdot_gain : float or None
         B-dot gain of the detumble [A m^2 s/T]; None: the scenario's.
     engine : str
-        ``'graph'`` (the ROS graph, recorded bag) or ``'plain'`` (the FrameLoop,
-        :mod:`sim_node.engine`: the same components without ROS, no bag).
+        ``'graph'`` (the ROS graph, a bag per run) or ``'plain'`` (the FrameLoop).
     compose : bool
-        Run each graph composed in one process (same trajectory, faster; not part of the
-        identity).
+        Each graph composed in one process (not part of the identity).
     capture_reference : str
-        What the capture angle is measured to, from the scenario's guidance
-        (:func:`~adcs_nodes.tools.campaigns.capture.capture_reference`): ``'orbit frame'``
-        or ``'guidance target'``. A label for the identity (a campaign measured to the orbit
-        frame is not resumed as one measured to a guidance target); the runs' metrics follow
-        their scenario.
+        ``'orbit frame'`` or ``'guidance target'``
+        (:func:`~adcs_nodes.tools.campaigns.capture.capture_reference`): a campaign measured
+        to one is not resumed as one measured to the other.
     """
 
     scenario_path: str
@@ -109,23 +87,19 @@ class CampaignConfig:
 
 @dataclass(frozen=True)
 class Dispersion:
-    """Dispersed values of one run (see the module docstring for the distributions).
+    """Dispersed values of one run (:func:`draw_dispersion`).
 
     Attributes
     ----------
-    index : int
-        Run index in the campaign.
-    seed : int
-        The run's scenario seed.
+    index, seed : int
+        Run index in the campaign; the run's scenario seed.
     q_orbit_body_xyzw : list of float, shape (4,)
         Initial attitude, body -> orbit, scalar last, ``w >= 0``.
     omega_body_eci_body_deg_s : list of float, shape (3,)
         Initial rate of body w.r.t. ECI, body axes [deg/s].
-    mag_bias_T : list of float, shape (3,), or None
-        Magnetometer bias, sensor axes [T] (None: not dispersed, the scenario's).
-    mag_misalignment_deg : list of float, shape (3,), or None
-        Magnetometer misalignment, body -> sensor rotation vector [deg] (None: the
-        scenario's).
+    mag_bias_T, mag_misalignment_deg : list of float, shape (3,), or None
+        Magnetometer bias, sensor axes [T], and misalignment, body -> sensor rotation vector
+        [deg] (None: the scenario's).
     """
 
     index: int
@@ -150,14 +124,9 @@ def scenario_hash(scenario: Dict[str, Any]) -> str:
 
 
 def draw_dispersion(cfg: CampaignConfig, index: int) -> Dispersion:
-    """Draw the dispersion of run ``index`` (deterministic in ``cfg.seed`` and ``index``).
-
-    Returns
-    -------
-    Dispersion
-        Attitude uniform on SO(3), rate components uniform in ``+-max_rate_deg_s``,
-        magnetometer bias and misalignment uniform per axis, and the run's scenario seed.
-    """
+    """The dispersion of run ``index``, deterministic in ``cfg.seed`` and ``index``: attitude
+    uniform on SO(3), rate components uniform in ``+-max_rate_deg_s``, magnetometer bias and
+    misalignment uniform per axis, the run's scenario seed (``docs/montecarlo.md``)."""
     rng = np.random.default_rng([cfg.seed, index])
     q = rng.standard_normal(4)
     q /= np.linalg.norm(q)
@@ -175,14 +144,10 @@ def draw_dispersion(cfg: CampaignConfig, index: int) -> Dispersion:
 
 def apply_dispersion(base: Dict[str, Any], disp: Dispersion, duration_s: float,
                      cfg: Optional[CampaignConfig] = None) -> Dict[str, Any]:
-    """Deep copy of the validated scenario ``base`` with the run's dispersion written in.
-
-    The initial attitude and rate replace any of the alternative keys of ``initial``
-    (``q_orbit_body_wxyz``, ``omega_body_orbit_body_deg_s``); the magnetometer errors are
-    written only when dispersed and the scenario has a magnetometer. With
-    ``cfg.auto_detumble`` the manager gets the automatic sequence :data:`AUTO_DETUMBLE`
-    (and ``cfg.bdot_gain`` when given).
-    """
+    """Deep copy of the validated scenario ``base`` with the run's dispersion written in: the
+    initial attitude and rate (replacing ``initial``'s alternative keys), the magnetometer
+    errors when dispersed, with ``cfg.auto_detumble`` the manager's :data:`AUTO_DETUMBLE`
+    (and ``cfg.bdot_gain``)."""
     sc = copy.deepcopy({k: v for k, v in base.items() if not k.startswith('_')})
     sc['seed'] = disp.seed
     sc['duration_s'] = float(duration_s)

@@ -1,11 +1,5 @@
-"""Which engine a campaign runs on: ``graph``, ``plain`` or ``auto`` (the default).
-
-``auto`` is ``plain`` (the FrameLoop, :mod:`sim_node.engine`: every scenario's components
-without ROS, the graph's series to the last bit) unless a sensor is external (a driver
-publishes it), else ``graph``. An explicit ``--engine`` wins. A campaign that already
-exists in ``--out`` resumes on the engine recorded in its ``campaign.json`` (the engine is part
-of the campaign identity, :data:`~adcs_nodes.tools.campaigns.config.IDENTITY_KEYS`).
-"""
+"""Which engine a campaign runs on (``--engine``): ``auto`` is ``plain`` unless a sensor is
+external, else ``graph``; a campaign resumed in ``--out`` keeps its recorded engine."""
 from __future__ import annotations
 
 import json
@@ -25,10 +19,8 @@ def plain_engine_problem(sc: Dict[str, Any]) -> Optional[str]:
 
 
 def recorded_engine(out: str) -> Optional[str]:
-    """The engine in ``out/campaign.json`` (a campaign to resume), or None (no campaign).
-
-    A ``campaign.json`` without an engine is from before the engines: ``'graph'``.
-    """
+    """The engine in ``out/campaign.json`` (none recorded: ``'graph'``), or None (no
+    campaign)."""
     path = os.path.join(out, 'campaign.json')
     if not os.path.isfile(path):
         return None
@@ -43,17 +35,8 @@ def recorded_engine(out: str) -> Optional[str]:
 
 def resolve_engine(requested: Optional[str], sc: Dict[str, Any],
                    out: str) -> Tuple[str, str]:
-    """The engine of a campaign and why: ``(engine, reason)``.
-
-    Parameters
-    ----------
-    requested : str or None
-        ``--engine``: ``'graph'``, ``'plain'``, or ``'auto'`` / None (the default).
-    sc : dict
-        The validated base scenario.
-    out : str
-        Campaign directory (an existing campaign there keeps its engine under ``auto``).
-    """
+    """``(engine, reason)`` of a campaign: ``requested`` (``--engine``: ``'graph'``,
+    ``'plain'``, ``'auto'`` or None) for the validated base scenario ``sc`` in ``out``."""
     if requested in ENGINES:
         return requested, '--engine'
     if requested not in (None, 'auto'):

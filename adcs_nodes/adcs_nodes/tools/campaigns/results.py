@@ -15,25 +15,12 @@ TARGET_TOPIC = '/adcs/attitude_target'
 
 
 def read_truth(bag: str) -> Dict[str, np.ndarray]:
-    """``/sim/state`` of a bag as arrays, one entry per sim-time stamp (repeats dropped), with
-    the angle to the recorded guidance target.
-
-    Returns
-    -------
-    dict
-        ``t_s`` (n,) sim time since the first sample [s], ``q`` (n, 4) ``q_orbit_body`` scalar
-        last, ``w_eci`` (n, 3) ``omega_body_eci_body`` [rad/s], ``w_orbit`` (n, 3)
-        ``omega_body_orbit_body`` [rad/s]; ``target_angle_deg`` (n,) the angle between the
-        body and the latest ``/adcs/attitude_target`` stamped at or before the sample, in the
-        target's frame (``header.frame_id``: ``orbit`` or ``eci``; NaN before the first
-        target) and ``target_judged`` (n,) False where that target is a maneuver's end state
-        (``profile`` ``'maneuver'``, :mod:`.capture`).
-
-    Raises
-    ------
-    ValueError
-        If the bag has no ``/sim/state`` message.
-    """
+    """``/sim/state`` of a bag as arrays, one per sim-time stamp (repeats dropped): ``t_s``
+    (n,) [s since the first], ``q`` (n, 4) ``q_orbit_body``, ``w_eci``, ``w_orbit`` (n, 3)
+    [rad/s]; ``target_angle_deg`` (n,) the angle to the latest ``/adcs/attitude_target`` at or
+    before the sample in its frame (``orbit`` or ``eci``; NaN before the first) and
+    ``target_judged`` (n,) False where that target is a maneuver's end state. ValueError
+    without ``/sim/state``."""
     from adcs_nodes.bag import header_stamp_ns, read_messages
 
     stamps: List[int] = []
@@ -79,11 +66,8 @@ def _xyzw(o: Any) -> tuple:
 
 
 def angle_to_target_deg(q_frame_body: np.ndarray, q_frame_target: np.ndarray) -> np.ndarray:
-    """Angle between body and target [deg], both given in the same frame, shape (n,).
-
-    ``angle = 2 atan2(|v|, |w|)`` of ``[v, w] = q_frame_target^* (x) q_frame_body`` (the
-    rotation target -> body; sign-free).
-    """
+    """Angle between body and target [deg], both in the same frame, shape (n,): ``2 atan2(|v|,
+    |w|)`` of ``[v, w] = q_frame_target^* (x) q_frame_body``."""
     return metrics.angle_between_deg(q_frame_target, q_frame_body)
 
 
@@ -91,39 +75,14 @@ def series_metrics(t_s: np.ndarray, q_orbit_body: np.ndarray, w_eci: np.ndarray,
                    w_orbit: np.ndarray, capture_deg: float, period_s: Optional[float],
                    angle_deg: Optional[np.ndarray] = None,
                    judged: Optional[np.ndarray] = None) -> Dict[str, Any]:
-    """Run metrics and status from the truth series of one run.
-
-    Parameters
-    ----------
-    t_s : numpy.ndarray, shape (n,)
-        Sim time since the start [s].
-    q_orbit_body : numpy.ndarray, shape (n, 4)
-        Truth attitude, scalar last.
-    w_eci, w_orbit : numpy.ndarray, shape (n, 3)
-        ``omega_body_eci_body`` and ``omega_body_orbit_body`` [rad/s].
-    capture_deg : float
-        Capture band [deg]; the hold band is twice it (:mod:`adcs_nodes.tools.analyse.metrics`).
-    period_s : float or None
-        Orbit period [s] (for "captured within 4 orbits" and the hold window).
-    angle_deg : numpy.ndarray, shape (n,), optional
-        Angle between the body and the guidance target [deg] (:func:`angle_to_target_deg`);
-        default: the angle to the orbit frame, ``angle_to_identity_deg(q_orbit_body)``.
-    judged : numpy.ndarray of bool, shape (n,), optional
-        The samples the capture test and the hold statistics judge (default all; a maneuver's
-        end-state target is not judged, :mod:`.capture`). With none judged, the run is not
-        captured and its statistics are None.
-
-    Returns
-    -------
-    dict
-        ``status`` (``captured``: entered the band and stayed within the hold band to the end;
-        else ``not_captured``), every key of :func:`adcs_nodes.tools.analyse.metrics.run_metrics`
-        (``capture_time_s``, ``captured_in_time``, ``last_exit_s``, ``hold_rms_deg``, ...)
-        over the judged samples, ``final_angle_deg`` (the last sample's angle, judged or
-        not), ``final_rate_deg_s`` (w.r.t. the orbit frame), ``max_rate_deg_s`` (largest
-        w.r.t. ECI), ``samples`` and ``bag_initial`` (first sample: ``q_orbit_body_xyzw``,
-        ``omega_body_eci_body_rad_s``, ``omega_body_eci_body_deg_s``).
-    """
+    """Run metrics and status from the truth series of one run: ``t_s`` (n,) [s since the
+    start], ``q_orbit_body`` (n, 4), ``w_eci`` and ``w_orbit`` (n, 3) [rad/s]; ``capture_deg``
+    the band [deg] (the hold band twice it); ``period_s`` [s] or None; ``angle_deg`` (n,) to the
+    guidance target (default the orbit frame's); ``judged`` (n,) the samples judged (default
+    all; none: not captured). Returns ``status`` (``captured``/``not_captured``), the keys of
+    :func:`~adcs_nodes.tools.analyse.metrics.run_metrics` over the judged samples,
+    ``final_angle_deg``, ``final_rate_deg_s`` (to the orbit frame), ``max_rate_deg_s`` (to ECI),
+    ``samples`` and ``bag_initial`` (the first sample); non-finite values None."""
     t = np.asarray(t_s, dtype=float)
     angle = (metrics.angle_to_identity_deg(q_orbit_body) if angle_deg is None
              else np.asarray(angle_deg, dtype=float))

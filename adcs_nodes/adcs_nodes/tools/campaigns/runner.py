@@ -1,51 +1,53 @@
-"""One run: the worker process that runs it, and the supervisor that starts and watches it."""
+"""One run: the worker process that runs it and the supervisor that feeds and watches it. A
+campaign starts its workers once and feeds them runs (numpy, numba and the packages imported
+once per worker); a graph run, whose nodes are processes anyway, gets a worker of its own."""
 from __future__ import annotations
 
+import fcntl
 import json
 import os
+import select
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
-from typing import Any, Dict, Optional
+import traceback
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from adcs_nodes.tools.campaigns.capture import capture_reference
-from adcs_nodes.tools.campaigns.files import (FAILED_FILE, RESULT_FILE, load_result,
-                                              write_json_atomic)
+from adcs_nodes.tools.campaigns.config import CampaignError
+from adcs_nodes.tools.campaigns.files import (FAILED_FILE, RESULT_FILE, fail, load_result,
+                                              result_head, write_json_atomic)
 from adcs_nodes.tools.campaigns.results import bag_metrics
 
 #: Seconds a supervisor waits for an interrupted run to close its bag before killing it.
 STOP_GRACE_S = 60.0
-#: Seconds between repeated SIGINTs to a run being stopped (see :func:`_supervise`).
+#: Seconds between repeated SIGINTs to a run being stopped (see :meth:`RunServer.run`).
 SIGINT_REPEAT_S = 2.0
-#: Per-engine worker command (``python`` + these + ``RUN_DIR``). The plain engine's worker is
-#: a simulator tool: the flight-software package names it but never imports it.
-WORKER_COMMANDS = {
-    'graph': ['-m', 'adcs_nodes.tools.campaigns', '_worker'],
-    'plain': ['-m', 'adcs_nodes.tools.campaigns.worker'],
-}
-#: Set in every run process's environment: one BLAS/OpenMP/numba thread per run (J runs share
+#: A worker process: ``python`` + these + the campaign's stop file (:func:`serve`).
+SERVER_COMMAND = ['-m', 'adcs_nodes.tools.campaigns', '_worker']
+#: Prefix of a worker's reply line (the rest is JSON ``{"code", "message"}``).
+REPLY = '@adcs-run-ended '
+#: Set in every worker's environment: one BLAS/OpenMP/numba thread per worker (J workers share
 #: J cores; the models make only tiny LAPACK calls, where extra threads cost CPU and give the
 #: same bits: :mod:`adcs_nodes.nodes.runtime`). The numba kernels use their on-disk cache
-#: (``cache=True``), so a run process loads them instead of compiling.
+#: (``cache=True``), so a worker loads them instead of compiling.
 ONE_THREAD_ENV = {key: '1' for key in (
     'OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'BLIS_NUM_THREADS',
     'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS', 'NUMBA_NUM_THREADS')}
 
 
 def worker_env() -> Dict[str, str]:
-    """Environment of a run process: this process's, with :data:`ONE_THREAD_ENV`."""
+    """Environment of a worker process: this process's, with :data:`ONE_THREAD_ENV`."""
     return {**os.environ, **ONE_THREAD_ENV}
 
 
 def worker_main(run_dir: str) -> int:
-    """Body of the per-run process: launch the dispersed scenario, record, write the result.
-
-    Writes ``result.json`` (atomically; capture judged against the recorded guidance target,
-    :mod:`.capture`) when the graph ran to its end, ``failed.json`` when it failed; writes
-    nothing when interrupted (exit code 130).
-    """
+    """A graph-engine run: launch the dispersed scenario, record it, write ``result.json``
+    (capture judged from the bag, :mod:`.capture`) or ``failed.json``; nothing when
+    interrupted (exit code 130)."""
     from adcs_nodes.tools.run.launcher import LaunchError, Launcher
     from adcs_nodes.scenario import ScenarioError, load_scenario
 
@@ -80,103 +82,281 @@ def worker_main(run_dir: str) -> int:
     return 0
 
 
-def result_head(job: Dict[str, Any]) -> Dict[str, Any]:
-    return {'index': job['index'], 'dispersion': job['dispersion'], 'bag': 'bag',
-            'host': socket.gethostname(), 'supervisor_pid': os.getppid(),
-            'finished_utc': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}
+class RunOwner:
+    """One run in one worker process at a time: an exclusive ``flock`` on ``RUN_DIR.owner``
+    (beside the run directory, which a new attempt recreates) held for the run by the process
+    named in it (host, pid). A previous holder still alive on this host is ended (its process
+    group: SIGTERM, SIGKILL after :data:`STOP_GRACE_S`) first; on another host the run is
+    refused (CampaignError)."""
+
+    def __init__(self, run_dir: str) -> None:
+        self.path = run_dir.rstrip('/') + '.owner'
+        self.fd: Optional[int] = None
+
+    def acquire(self) -> 'RunOwner':
+        """Take the run, naming this process its owner."""
+        os.makedirs(os.path.dirname(self.path), exist_ok=True)
+        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        if self._wait_lock(0.0):
+            return self._named()
+        try:
+            with open(self.path, encoding='utf-8') as fh:
+                owner = json.load(fh)
+            host, pid = owner['host'], int(owner['pid'])
+        except (OSError, ValueError, KeyError, TypeError):
+            host, pid = socket.gethostname(), 0    # not named yet: it is being started
+        if host != socket.gethostname():
+            self.release()
+            raise CampaignError(f'{self.path}: the run is held by process {pid} on {host}')
+        for sig in (signal.SIGTERM, signal.SIGKILL):
+            if pid:
+                _signal_group(pid, sig)
+            if self._wait_lock(STOP_GRACE_S):
+                return self._named()
+        self.release()
+        raise CampaignError(f'{self.path}: the run is still held by its previous run process')
+
+    def _wait_lock(self, seconds: float) -> bool:
+        deadline = time.monotonic() + seconds
+        while True:
+            try:
+                fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                return True
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    return False
+                time.sleep(0.1)
+
+    def _named(self) -> 'RunOwner':
+        os.ftruncate(self.fd, 0)
+        os.pwrite(self.fd, json.dumps({'host': socket.gethostname(),
+                                       'pid': os.getpid()}).encode(), 0)
+        return self
+
+    def end_previous(self) -> None:
+        """Take the run (ending a previous owner still alive) and let it go again."""
+        self.acquire().release()
+
+    def release(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
 
 
-def fail(run_dir: str, job: Dict[str, Any], code: int, message: str, wall: float) -> int:
-    write_json_atomic(os.path.join(run_dir, FAILED_FILE),
-                      {**result_head(job), 'status': 'error', 'exit_code': code,
-                       'message': message, 'wall_time_s': wall})
-    print(f'[montecarlo] run failed: {message}', flush=True)
-    return code or 1
+class RunServer:
+    """A worker process (:func:`serve`) seen from its supervisor: a run goes as its directory
+    (a line on the worker's stdin), its exit code comes back (a :data:`REPLY` line). The
+    worker has its own session, a parent-death signal (it ends with the thread that started
+    it) and one BLAS thread."""
+
+    def __init__(self, stop_file: str) -> None:
+        from adcs_nodes.tools.run.launcher.processes import with_parent_death_signal
+        cmd = with_parent_death_signal([sys.executable] + SERVER_COMMAND + [stop_file])
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, start_new_session=True,
+                                     env=worker_env(), text=True)
+        self.noise: List[str] = []     # its last lines printed outside a run
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def run(self, run_dir: str, stop_file: str) -> Tuple[int, str]:
+        """Exit code and message of the run in ``run_dir``. When ``stop_file`` appears the
+        run gets SIGINT, repeated every :data:`SIGINT_REPEAT_S` (a worker of ``--dask-local``
+        starts with SIGINT ignored until :func:`serve` installs its handler), and SIGKILL
+        after :data:`STOP_GRACE_S`."""
+        try:
+            self.proc.stdin.write(run_dir + '\n')
+            self.proc.stdin.flush()
+        except OSError:
+            return self._ended()
+        stopped_at: Optional[float] = None
+        last_int = 0.0
+        while True:
+            if select.select([self.proc.stdout], [], [], 0.5)[0]:
+                line = self.proc.stdout.readline()
+                if not line:
+                    return self._ended()
+                if line.startswith(REPLY):
+                    reply = json.loads(line[len(REPLY):])
+                    return int(reply['code']), str(reply['message'])
+                self.noise = (self.noise + [line.rstrip()])[-5:]
+                continue
+            now = time.monotonic()
+            if stopped_at is None and os.path.exists(stop_file):
+                stopped_at = last_int = now
+                _signal_group(self.proc.pid, signal.SIGINT)
+            elif stopped_at is not None and now - stopped_at > STOP_GRACE_S:
+                _signal_group(self.proc.pid, signal.SIGKILL)
+            elif stopped_at is not None and now - last_int >= SIGINT_REPEAT_S:
+                last_int = now
+                _signal_group(self.proc.pid, signal.SIGINT)
+
+    def _ended(self) -> Tuple[int, str]:
+        code = self.proc.wait()
+        return code or 1, f'the worker process ended ({code}): {" | ".join(self.noise)}'
+
+    def close(self, grace_s: float = 5.0) -> None:
+        """End of input: the worker exits; SIGKILL to its group after ``grace_s``."""
+        try:
+            self.proc.stdin.close()
+            self.proc.wait(timeout=grace_s)
+        except (OSError, subprocess.TimeoutExpired):
+            _signal_group(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+        self.proc.stdout.close()
+
+
+#: The workers of this process by (supervising thread, campaign stop file): one thread's
+#: plain-engine runs of one campaign go to one worker; a graph run gets a worker of its own.
+_SERVERS: Dict[Tuple[int, str], RunServer] = {}
+_SERVERS_LOCK = threading.Lock()
+
+
+def _server_for(job: Dict[str, Any]) -> RunServer:
+    """This thread's worker for the campaign of ``job`` (started if it has none alive)."""
+    key = (threading.get_ident(), job['stop_file'])
+    with _SERVERS_LOCK:
+        server = _SERVERS.pop(key, None)
+    if server is not None and not server.alive():
+        server.close()
+        server = None
+    return server or RunServer(job['stop_file'])
+
+
+def close_servers(stop_file: Optional[str] = None) -> int:
+    """Close this process's workers of the campaign ``stop_file`` (None: all); how many."""
+    with _SERVERS_LOCK:
+        servers = [_SERVERS.pop(k) for k in list(_SERVERS) if stop_file in (None, k[1])]
+    for server in servers:
+        server.close()
+    return len(servers)
 
 
 def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
-    """Run one prepared run directory in its own process and return its result dict.
+    """Run one prepared run directory (``job``: ``index``, ``run_dir``, ``stop_file``,
+    ``engine``) in this thread's worker process for the campaign and return its result
+    (``result.json``, or ``{'index', 'status': 'error' | 'interrupted', 'message', ...}``).
 
-    This is the unit of work submitted to the local thread pool or to Dask workers. It
-    starts ``python -m adcs_nodes.tools.campaigns _worker RUN_DIR`` (graph engine) or
-    ``python -m adcs_nodes.tools.campaigns.worker RUN_DIR`` (plain engine), output to
-    ``worker.log``, one BLAS thread (:func:`worker_env`). While waiting it watches
-    ``job['stop_file']``: when that file appears (Ctrl-C on the campaign) the run gets
-    SIGINT, closes its bag and is reported ``interrupted``.
-
-    Parameters
-    ----------
-    job : dict
-        ``index``, ``run_dir`` (prepared: ``job.json`` and ``scenario.yaml``), ``stop_file``,
-        ``engine`` (default ``'graph'``).
-
-    Returns
-    -------
-    dict
-        ``result.json`` content, or ``{'index', 'status': 'error' | 'interrupted',
-        'message', ...}``.
+    The unit of work of the local thread pool and of Dask workers. A plain-engine worker whose
+    run ended well is kept for the thread's next run. When ``stop_file`` appears (Ctrl-C on
+    the campaign) the run gets SIGINT and is reported ``interrupted``.
     """
     run_dir, index = job['run_dir'], job['index']
     if os.path.exists(job['stop_file']):
         return {'index': index, 'status': 'interrupted', 'message': 'not started'}
     t0 = time.monotonic()
-    cmd = WORKER_COMMANDS[job.get('engine', 'graph')] + [run_dir]
-    cmd = [sys.executable] + cmd
-    with open(os.path.join(run_dir, 'worker.log'), 'w') as log:
-        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, start_new_session=True,
-                                env=worker_env())
-        code = _supervise(proc, job['stop_file'])
+    server = _server_for(job)
+    code, message = server.run(run_dir, job['stop_file'])
     wall = time.monotonic() - t0
+    if job.get('engine', 'graph') == 'plain' and code == 0:
+        with _SERVERS_LOCK:         # kept for this thread's next run
+            _SERVERS[(threading.get_ident(), job['stop_file'])] = server
+    else:
+        server.close()
     result = load_result(run_dir) if code == 0 else None
     if result is not None:
         return result
     if code == 130 or os.path.exists(job['stop_file']):
         return {'index': index, 'status': 'interrupted', 'message': 'interrupted (Ctrl-C)',
                 'wall_time_s': wall}
-    return _failure_of(run_dir, index, code, wall)
+    return _failure_of(run_dir, index, code, message, wall)
 
 
-def _supervise(proc: subprocess.Popen, stop_file: str) -> int:
-    """Wait for ``proc``; on ``stop_file`` send SIGINT, then SIGKILL after the grace time.
+def serve(stop_file: str, run: Optional[Callable[[str], int]] = None) -> int:
+    """Body of a worker process: the run directories read from stdin, one at a time until end
+    of input, each answered with :data:`REPLY` and ``{"code", "message"}``.
 
-    SIGINT is repeated every :data:`SIGINT_REPEAT_S` (the run's handlers are idempotent): a
-    run process started by a ``--dask-local`` worker inherits an ignored SIGINT until its
-    Python code installs a handler (``backends.sigint_ignored``), and a signal that arrives
-    in that window is lost.
+    A run holds its :class:`RunOwner` lock, starts clean, writes stdout and stderr to
+    ``worker.log``; ``run(run_dir)`` (default :func:`run_job`) gives the exit code (130:
+    interrupted; an exception: 1, its traceback in the log). Nothing starts once the
+    campaign's ``stop_file`` exists.
     """
-    stopped_at: Optional[float] = None
-    last_int = 0.0
-    while True:
-        try:
-            return proc.wait(timeout=0.5)
-        except subprocess.TimeoutExpired:
-            pass
-        now = time.monotonic()
-        if stopped_at is None and os.path.exists(stop_file):
-            stopped_at = last_int = now
-            _signal_group(proc, signal.SIGINT)
-        elif stopped_at is not None and now - stopped_at > STOP_GRACE_S:
-            _signal_group(proc, signal.SIGKILL)
-            return proc.wait()
-        elif stopped_at is not None and now - last_int >= SIGINT_REPEAT_S:
-            last_int = now
-            _signal_group(proc, signal.SIGINT)
-
-
-def _signal_group(proc: subprocess.Popen, sig: int) -> None:
+    signal.signal(signal.SIGINT, signal.default_int_handler)   # inherited ignored (Dask)
+    replies = os.fdopen(os.dup(1), 'w', buffering=1)
+    quiet = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(quiet, 1)
     try:
-        os.killpg(proc.pid, sig)
-    except ProcessLookupError:
+        for line in sys.stdin:
+            code, message = _serve_one(line.strip(), stop_file, run or run_job, quiet)
+            replies.write(REPLY + json.dumps({'code': code, 'message': message}) + '\n')
+    except KeyboardInterrupt:    # between runs: the campaign is stopping
+        return 130
+    return 0
+
+
+def _serve_one(run_dir: str, stop_file: str, run: Callable[[str], int],
+               quiet: int) -> Tuple[int, str]:
+    if os.path.exists(stop_file):
+        return 130, 'not started'
+    try:
+        owner = RunOwner(run_dir).acquire()
+    except CampaignError as exc:
+        return 1, str(exc)
+    try:
+        clean_attempt(run_dir)
+        log = os.open(os.path.join(run_dir, 'worker.log'), os.O_WRONLY | os.O_CREAT, 0o644)
+        os.dup2(log, 1)
+        os.dup2(log, 2)
+        os.close(log)
+        try:
+            return run(run_dir), ''
+        except Exception as exc:  # noqa: BLE001 - a run's bug ends the run, not the worker
+            traceback.print_exc()
+            return 1, f'{type(exc).__name__}: {exc}'
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(quiet, 1)
+            os.dup2(quiet, 2)
+    except KeyboardInterrupt:
+        return 130, 'interrupted'
+    finally:
+        owner.release()
+
+
+def run_job(run_dir: str) -> int:
+    """One run on its engine (``job.json``): the FrameLoop
+    (:func:`adcs_nodes.tools.campaigns.worker.mc_worker`) or a graph (:func:`worker_main`)."""
+    with open(os.path.join(run_dir, 'job.json'), encoding='utf-8') as fh:
+        engine = json.load(fh).get('engine', 'graph')
+    if engine == 'plain':
+        from adcs_nodes.tools.campaigns.worker import mc_worker
+        return mc_worker(run_dir)
+    return worker_main(run_dir)
+
+
+def _signal_group(pid: int, sig: int) -> None:
+    try:
+        os.killpg(pid, sig)
+    except (ProcessLookupError, PermissionError):
         pass
 
 
-def _failure_of(run_dir: str, index: int, code: int, wall: float) -> Dict[str, Any]:
+#: What a prepared run directory holds before its first attempt.
+PREPARED = ('job.json', 'scenario.yaml')
+
+
+def clean_attempt(run_dir: str) -> None:
+    """Remove what an earlier attempt of this run left (bag, series, logs, results)."""
+    import shutil
+    for name in os.listdir(run_dir):
+        path = os.path.join(run_dir, name)
+        if name in PREPARED:
+            continue
+        if os.path.isdir(path) and not os.path.islink(path):
+            shutil.rmtree(path)
+        else:
+            os.unlink(path)
+
+
+def _failure_of(run_dir: str, index: int, code: int, message: str,
+                wall: float) -> Dict[str, Any]:
     path = os.path.join(run_dir, FAILED_FILE)
     if os.path.isfile(path):
         with open(path, encoding='utf-8') as fh:
             return {**json.load(fh), 'index': index}
-    tail = _tail(os.path.join(run_dir, 'worker.log'))
+    tail = _tail(os.path.join(run_dir, 'worker.log')) or message
     return {'index': index, 'status': 'error', 'exit_code': code, 'wall_time_s': wall,
             'message': f'run process exited with code {code}: {tail}'}
 

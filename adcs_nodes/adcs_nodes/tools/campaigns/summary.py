@@ -6,6 +6,7 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from adcs_nodes.tools.analyse.papers.series import orbit_period_s  # noqa: F401 (re-exported)
 from adcs_nodes.tools.campaigns.capture import ORBIT_FRAME
 from adcs_nodes.tools.campaigns.config import AUTO_DETUMBLE, CampaignConfig
 
@@ -30,16 +31,6 @@ def _bin_table(cfg: CampaignConfig, done: Sequence[Dict[str, Any]]) -> List[tupl
         in_time = sum(1 for r in inside if r.get('captured_in_time'))
         rows.append((lo, hi, len(inside), ok, in_time))
     return rows
-
-
-def orbit_period_s(base: Dict[str, Any]) -> Optional[float]:
-    """Period of the scenario's circular orbit [s], None for another orbit type."""
-    orbit = base.get('orbit', {})
-    if orbit.get('type') != 'circular':
-        return None
-    from adcs_nodes.core.orbit import MU_EARTH, R_EARTH
-    a = R_EARTH + 1e3 * orbit['altitude_km']
-    return 2.0 * math.pi * math.sqrt(a ** 3 / MU_EARTH)
 
 
 def summary_markdown(cfg: CampaignConfig, results: Sequence[Dict[str, Any]],

@@ -1,60 +1,16 @@
 """``adcs sweep``: one Monte Carlo campaign per point of a parameter grid, on the plain engine.
 
-Usage::
-
-    adcs sweep SCENARIO --set KEY=V1,V2,... [--set KEY2=W1,W2 ...] --runs N [--jobs J]
-               [--scheduler ADDRESS | --dask-local] [--out DIR] [--duration S] [--seed S]
-               [--max-rate-deg-s W] [--capture-deg A] [--mag-bias-nT B] [--misalignment-deg M]
-
-Grid
-----
-Each ``--set`` is a dotted scenario key (the keys of ``adcs run --set`` and ``python -m
-adcs_nodes.tools.analyse.study``, :func:`adcs_nodes.scenario.apply_overrides`) with one or more
-YAML values separated by commas at the top level (a comma inside brackets or quotes belongs to
-the value: ``--set spacecraft.magnetorquer.max_dipole_Am2=[40,40,40],[60,60,60]`` is two
-values). A key with one value is fixed for every point. The grid is the Cartesian product of
-the keys' values, in the order given (the last key varies fastest). Every point is validated
-as a scenario file is before the first run: an unknown key, a value of the wrong type or out
-of its range, a key given twice, a value given twice: exit 2 with the message, nothing runs.
-
-Campaigns
----------
-Every point is an ``adcs montecarlo`` campaign (:class:`~.campaign.Campaign`, engine
-``plain``: the FrameLoop of :mod:`sim_node.engine`) of the edited scenario in
-``OUT/points/<point>/``, with the same seed, so every point sees the same draws (attitude,
-rate, sensor seeds: common random numbers, the grid compares gains and not luck). A second,
-independent set of draws is another ``--seed``. The runs of one point go to the local
-processes (``--jobs``) or to Dask as ``adcs montecarlo`` sends them; the points run one after
-the other.
-
-Resume: the same command again skips every finished run of every point (a point's directory
-name is its overrides, so a grid extended by a value reuses the points it already has; the
-campaign identity check refuses a point directory made with another seed, duration or
-dispersion). Ctrl-C stops the campaign in progress (its finished runs are kept) and prints the
-table of what is done: exit 130.
-
-Outputs (``OUT`` = ``--out``, default ``sweep_<scenario name>``)
-------------------------------------------------------------------
-``sweep.json``
-    The grid and the campaign arguments of the last invocation.
-``sweep.csv``, ``sweep.md``
-    One row per point (:data:`COLUMNS`): the overrides, runs done, captured within 4 orbits,
-    capture time median and 90th percentile [orbits], hold median of the run medians (and its
-    90th percentile), the filter converged within half an orbit in two readings (from each
-    run's ``series.npz``, :func:`run_convergence`), the median estimation error after ``T/2``,
-    and the median wall time
-    of a run (it depends on the machine's load). With two swept keys ``sweep.md`` adds the
-    captured-within-4-orbits map (first key down, second across), as the paper-000 digest's
-    gain map.
-``sweep.png``
-    Heat map of the fraction captured within 4 orbits over two swept keys (one key: the
-    fraction against the value; more than two: not drawn).
+The grid (dotted scenario keys of ``adcs run --set``, YAML values separated by the commas
+outside brackets; the product of the keys' values, every point validated before the first
+run), the same draws at every point (one campaign per point in ``OUT/points/``, resumable),
+the table and the heat map: ``docs/montecarlo.md``, "Parameter sweeps".
 """
 from __future__ import annotations
 
 import argparse
 import csv
 import hashlib
+import io
 import itertools
 import json
 import math
@@ -67,8 +23,8 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from adcs_nodes.tools.analyse import metrics
-from adcs_nodes.tools.campaigns.cli import add_dispersion_arguments
-from adcs_nodes.tools.campaigns.config import CampaignConfig, CampaignError, scenario_hash
+from adcs_nodes.tools.campaigns.cli import add_campaign_arguments, campaign_config
+from adcs_nodes.tools.campaigns.config import CampaignError
 from adcs_nodes.tools.campaigns.files import (SERIES_FILE, load_result, run_dir_of,
                                               write_json_atomic, write_text_atomic)
 from adcs_nodes.tools.campaigns.summary import orbit_period_s
@@ -88,13 +44,8 @@ class SweepError(CampaignError):
 
 # ---------------------------------------------------------------------- the grid
 def split_values(text: str) -> List[str]:
-    """Split ``V1,V2,...`` at the commas outside brackets, braces and quotes.
-
-    Raises
-    ------
-    SweepError
-        An empty value (``1,,2``, a trailing comma), unbalanced brackets or quotes.
-    """
+    """Split ``V1,V2,...`` at the commas outside brackets, braces and quotes; SweepError for an
+    empty value or unbalanced brackets or quotes."""
     parts, depth, quote, cur = [], 0, '', ''
     for ch in text:
         if quote:
@@ -126,16 +77,9 @@ def split_values(text: str) -> List[str]:
 
 
 def parse_grid(items: Sequence[str]) -> List[Tuple[str, List[Any]]]:
-    """``--set KEY=V1,V2`` items to ``[(key, [values])]`` (values read as YAML, as ``adcs run
-    --set`` reads them).
-
-    Raises
-    ------
-    SweepError
-        No ``--set``, a key given twice or a value given twice for one key.
-    adcs_nodes.scenario.ScenarioError
-        An item without ``=`` or a value that is not YAML (the message names the key).
-    """
+    """``--set KEY=V1,V2`` items to ``[(key, [values])]`` (YAML values, as ``adcs run --set``);
+    SweepError for no ``--set`` or a key or value given twice, ScenarioError for an item
+    without ``=`` or a value that is not YAML."""
     from adcs_nodes.scenario import parse_overrides
     if not items:
         raise SweepError('give at least one --set KEY=V1,V2,... (the grid)')
@@ -182,24 +126,12 @@ def _value_text(v: Any) -> str:
 
 # ---------------------------------------------------------------------- metrics of a point
 def run_convergence(run_dir: str, period_s: Optional[float]) -> Dict[str, Any]:
-    """Filter convergence of one finished plain-engine run from its ``series.npz``.
-
-    Two readings of the paper's "the estimates converge within half an orbit":
-
-    * ``converged_s``: the paper-000 table's criterion (the estimate's attitude error below
-      :data:`~adcs_nodes.tools.analyse.papers.paper000.CONVERGED_DEG` = 2 deg for good) over the
-      first orbit, the length of the paper's estimation run (``paper000_estimation``): in the
-      closed loop the error of a converged filter peaks at 2-4 deg during the capture
-      maneuvers of later orbits, which is its accuracy under maneuvers, not its convergence;
-    * ``converged_5deg_s``: below the capture band (5 deg) for good over the whole run: no
-      late convergence and no later divergence.
-
-    Returns
-    -------
-    dict
-        ``converged_s``, ``converged_5deg_s`` [s since the start] (None: never, or no
-        estimate); ``has_estimate``. Without a period the first reading uses the whole run.
-    """
+    """Filter convergence of one finished plain-engine run (its ``series.npz``), two readings
+    of the paper's "the estimates converge within half an orbit": ``converged_s``, the
+    paper-000 table's criterion (error below ``CONVERGED_DEG`` = 2 deg for good) over the
+    first orbit (the paper's estimation run; later capture maneuvers push a converged filter
+    to 2-4 deg), and ``converged_5deg_s``, below 5 deg for good over the whole run [s since the
+    start; None: never, or no estimate]; ``has_estimate``."""
     path = os.path.join(run_dir, SERIES_FILE)
     none = {'converged_s': None, 'converged_5deg_s': None, 'has_estimate': False}
     if not os.path.isfile(path):
@@ -216,24 +148,9 @@ def run_convergence(run_dir: str, period_s: Optional[float]) -> Dict[str, Any]:
 
 def point_metrics(results: Sequence[Dict[str, Any]], runs: int,
                   period_s: Optional[float]) -> Dict[str, Any]:
-    """The row of one grid point from its runs' results (pure).
-
-    Parameters
-    ----------
-    results : sequence of dict
-        ``result.json`` of each finished run, each with ``converged_s`` and ``has_estimate``
-        added (:func:`run_convergence`).
-    runs : int
-        Runs of the campaign (finished or not).
-    period_s : float or None
-        Orbit period [s].
-
-    Returns
-    -------
-    dict
-        The keys of :data:`COLUMNS` except ``out``; None where nothing can be said (no run
-        done, no capture, no estimate).
-    """
+    """The row of one grid point (pure): the keys of :data:`COLUMNS` but ``out`` from the
+    ``result.json`` of its finished runs (with :func:`run_convergence` added), ``runs`` in all
+    and the orbit period [s]; None where nothing can be said."""
     done = [r for r in results if r.get('status') in ('captured', 'not_captured')]
     cap = [r for r in done if r['status'] == 'captured']
     in_time = sum(1 for r in done if r.get('captured_in_time'))
@@ -335,15 +252,13 @@ def map_markdown(rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> str:
 
 def write_csv(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> None:
     """``sweep.csv`` (atomically): the point's values of every grid key, then :data:`COLUMNS`."""
-    tmp = f'{path}.tmp-{os.getpid()}'
-    with open(tmp, 'w', encoding='utf-8', newline='') as fh:
-        w = csv.writer(fh)
-        w.writerow(list(keys) + list(COLUMNS))
-        for r in rows:
-            w.writerow([_value_text(r['point'][k]) for k in keys]
-                       + ['' if r[c] is None else (repr(r[c]) if isinstance(r[c], float)
-                                                   else r[c]) for c in COLUMNS])
-    os.replace(tmp, path)
+    text = io.StringIO()
+    w = csv.writer(text)
+    w.writerow(list(keys) + list(COLUMNS))
+    w.writerows([_value_text(r['point'][k]) for k in keys]
+                + ['' if r[c] is None else (repr(r[c]) if isinstance(r[c], float) else r[c])
+                   for c in COLUMNS] for r in rows)
+    write_text_atomic(path, text.getvalue())
 
 
 def plot_map(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> bool:
@@ -391,56 +306,24 @@ def plot_map(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> 
 # ---------------------------------------------------------------------- command
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``adcs sweep`` arguments to ``parser``."""
-    parser.add_argument('scenario', help='base scenario YAML (closed loop, e.g. '
-                        'scenarios/paper000_control.yaml)')
+    add_campaign_arguments(parser, 'sweep')   # the same as adcs montecarlo's
     parser.add_argument('--set', action='append', default=[], metavar='KEY=V1,V2,...',
                         help='a dotted scenario key and its values (YAML, separated by commas '
                         'outside brackets), e.g. --set controllers.magnetic.alpha_per_s='
                         '1.5e-3,2e-3; repeatable: the grid is the product; one value: fixed')
-    parser.add_argument('--runs', type=int, required=True, metavar='N',
-                        help='Monte Carlo runs per grid point')
-    parser.add_argument('--jobs', type=int, default=1, metavar='J',
-                        help='runs at once on this machine (default 1; with --dask-local: '
-                        'the number of Dask workers; ignored with --scheduler)')
-    where = parser.add_mutually_exclusive_group()
-    where.add_argument('--scheduler', metavar='ADDRESS',
-                       help='submit the runs to this Dask distributed scheduler')
-    where.add_argument('--dask-local', action='store_true',
-                       help='a Dask LocalCluster of --jobs workers per grid point')
-    parser.add_argument('--out', metavar='DIR', help='sweep directory (default '
-                        'sweep_<scenario name>); a sweep there is resumed')
-    add_dispersion_arguments(parser)   # the same draws' options as adcs montecarlo
     parser.add_argument('--table', action='store_true',
                         help='run nothing: the table of the finished runs in OUT as they are '
                         '(no identity check: after a code or scenario change, these are the '
                         'runs of the earlier version)')
 
 
-def _config(args: argparse.Namespace, base: Dict[str, Any],
-            point_sc: Dict[str, Any]) -> CampaignConfig:
-    from adcs_nodes.tools.campaigns.capture import capture_reference
-    from adcs_nodes.tools.campaigns.cli import max_rate_deg_s
-    duration = float(args.duration if args.duration is not None else point_sc['duration_s'])
-    return CampaignConfig(
-        scenario_path=base['_path'], scenario_sha256=scenario_hash(point_sc), runs=args.runs,
-        seed=int(args.seed if args.seed is not None else base['seed']), duration_s=duration,
-        max_rate_deg_s=max_rate_deg_s(args, base), capture_deg=args.capture_deg,
-        mag_bias_nT=args.mag_bias_nT, misalignment_deg=args.misalignment_deg,
-        engine='plain', compose=False, capture_reference=capture_reference(point_sc))
-
-
 Prepared = Tuple[Dict[str, Any], List[Tuple[str, List[Any]]], List[Dict[str, Any]], str]
 
 
 def prepare(args: argparse.Namespace) -> Prepared:
-    """Validate everything before a run: ``(base scenario, grid, points, out)``; each point
-    is ``{'point', 'scenario', 'cfg', 'out'}``.
-
-    Raises
-    ------
-    SweepError, CampaignError, adcs_nodes.scenario.ScenarioError
-        A bad argument, grid key or value (exit 2).
-    """
+    """Validate everything before a run: ``(base scenario, grid, points, out)``, each point
+    ``{'point', 'scenario', 'cfg', 'out'}``; SweepError, CampaignError or ScenarioError (exit
+    2)."""
     from adcs_nodes.tools.campaigns.cli import config_from_args
     from adcs_nodes.tools.campaigns.engine import plain_engine_problem
     from adcs_nodes.scenario import apply_overrides, load_scenario
@@ -457,7 +340,8 @@ def prepare(args: argparse.Namespace) -> Prepared:
     points = []
     for point in grid_points(grid):
         sc = apply_overrides(base, point)   # its message names the point's overrides
-        cfg = _config(args, base, sc)
+        cfg = campaign_config(args, base, sc, float(
+            args.duration if args.duration is not None else sc['duration_s']), 'plain')
         frames = cfg.duration_s / sc['timing']['frame_s']
         if abs(frames - round(frames)) > 1e-9:
             raise SweepError(f'grid point {_point_text(point)}: the duration '
@@ -565,14 +449,3 @@ def _command(args: argparse.Namespace) -> str:
     if args.capture_deg != 5.0:
         parts += ['--capture-deg', str(args.capture_deg)]
     return ' '.join(parts)
-
-
-def main(argv: Optional[List[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.campaigns.sweep`` (the same as ``adcs sweep``)."""
-    parser = argparse.ArgumentParser(prog='adcs sweep', description=__doc__.split('\n\n')[0])
-    add_arguments(parser)
-    return run_from_args(parser.parse_args(argv))
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())

@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import csv
-import os
+import io
 from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
+
+from adcs_nodes.tools.campaigns.files import write_text_atomic
 
 _VEC = ('x', 'y', 'z')
 _QUAT = ('x', 'y', 'z', 'w')
@@ -58,13 +60,11 @@ def _put(row: Dict[str, Any], pattern: str, names: Sequence[str],
 
 def write_table(path: str, results: Sequence[Dict[str, Any]]) -> None:
     """Write ``campaign.csv`` atomically; floats in full precision (``repr``)."""
-    tmp = f'{path}.tmp-{os.getpid()}'
-    with open(tmp, 'w', encoding='utf-8', newline='') as fh:
-        writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
-        writer.writeheader()
-        for result in results:
-            writer.writerow(table_row(result))
-    os.replace(tmp, path)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=CSV_COLUMNS)
+    writer.writeheader()
+    writer.writerows(table_row(result) for result in results)
+    write_text_atomic(path, text.getvalue())
 
 
 def read_table(path: str) -> List[Dict[str, str]]:

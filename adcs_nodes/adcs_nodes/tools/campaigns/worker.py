@@ -1,12 +1,12 @@
-"""The plain engine's Monte Carlo run: one prepared run directory through the FrameLoop
-(``python -m adcs_nodes.tools.campaigns.worker RUN_DIR``), and the per-frame series a study or
-a campaign reads (:func:`run_series`)."""
+"""The plain engine's Monte Carlo run (:func:`mc_worker`, in a worker process of
+:mod:`.runner`), and the per-frame series a study or a campaign reads (:func:`run_series`)."""
 from __future__ import annotations
 
+import itertools
 import os
-from typing import Any, Dict, List, Optional, Sequence
+import time
+from typing import Any, Dict, Iterator, List
 
-from adcs_nodes.tools.run.plain import one_blas_thread
 from sim_node.engine import FrameLoop
 
 
@@ -35,7 +35,6 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
     import numpy as np
 
     from adcs_nodes.core import attitude
-    from adcs_nodes.nodes.convert import quat, vec3
     from adcs_nodes.tools.analyse import metrics
     rows: Dict[str, List[Any]] = {k: [] for k in ('t_s', 'q_orbit_body', 'w_eci', 'w_orbit',
                                                   'q_est', 'w_est', 'active', 'q_orbit_target',
@@ -45,28 +44,28 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
     active, rate = 'zero', 0.0
     for frame in loop.run():
         state = None
-        for topic, msg in frame.outputs:
+        for topic, x in frame.outputs:                # core samples (adcs_nodes.core.samples)
             if topic == 'sim/state':
-                state = msg
+                state = x
             elif topic == 'adcs/attitude_estimate':
-                q_est, w_est = quat(msg.q_orbit_body), vec3(msg.omega_body_eci_body)
+                q_est, w_est = x.q_orbit_body, x.omega_body_eci_body
             elif topic == 'adcs/actuator_command':
-                active = msg.source
+                active = x.source
             elif topic == 'sim/environment':
-                rate = float(msg.orbit_rate)
+                rate = float(x.orbit_rate_rad_s)
             elif topic == 'adcs/attitude_target':
-                q_target, eci = quat(msg.q_ref_body), msg.header.frame_id == 'eci'
-                judged = msg.profile != 'maneuver'
-        q_body = quat(state.q_orbit_body)
+                q_target, eci = x.q_ref_body, x.frame == 'eci'
+                judged = x.profile != 'maneuver'
+        q_body = state.q_orbit_body
         rows['t_s'].append(frame.t_ns / 1e9)
         rows['q_orbit_body'].append(q_body)
-        rows['w_eci'].append(vec3(state.omega_body_eci_body))
-        rows['w_orbit'].append(vec3(state.omega_body_orbit_body))
+        rows['w_eci'].append(state.omega_body_eci_body)
+        rows['w_orbit'].append(state.omega_body_orbit_body)
         rows['q_est'].append(q_est)
         rows['w_est'].append(w_est)
         rows['active'].append(active)
         rows['q_orbit_target'].append(attitude.multiply(attitude.multiply(
-            q_body, attitude.conjugate(quat(state.q_eci_body))), q_target) if eci else q_target)
+            q_body, attitude.conjugate(state.q_eci_body)), q_target) if eci else q_target)
         rows['target_judged'].append(judged)
     out = {k: np.asarray(v) for k, v in rows.items()}
     out['angle_deg'] = metrics.angle_to_identity_deg(out['q_orbit_body'])
@@ -85,10 +84,11 @@ def mc_worker(run_dir: str) -> int:
     :func:`adcs_nodes.tools.campaigns.results.series_metrics` (the same result as a graph
     run): capture judged against the recorded target, or the orbit frame, as the scenario's
     ``capture_reference`` says (:mod:`adcs_nodes.tools.campaigns.capture`); or
-    ``failed.json``. Exit code 130 on SIGINT (nothing written).
+    ``failed.json``. Exit code 130 on SIGINT (nothing written). ``frameloop_cpu_s``: the CPU
+    time of building and stepping the FrameLoop (:class:`CpuTimed`); ``cpu_s``: the run's.
     """
     import json
-    import time
+    import uuid
 
     import numpy as np
 
@@ -96,25 +96,25 @@ def mc_worker(run_dir: str) -> int:
     from adcs_nodes.tools.campaigns.capture import ORBIT_FRAME, capture_reference
     from adcs_nodes.tools.campaigns.files import RESULT_FILE, SERIES_FILE, write_json_atomic
     from adcs_nodes.tools.campaigns.results import angle_to_target_deg, series_metrics
-    from adcs_nodes.tools.campaigns.runner import fail, result_head
+    from adcs_nodes.tools.campaigns.files import fail, result_head
     from adcs_nodes.scenario import ScenarioError, load_scenario
 
-    t0 = time.monotonic()
+    t0, cpu0 = time.monotonic(), time.process_time()
     with open(os.path.join(run_dir, 'job.json'), encoding='utf-8') as fh:
         job = json.load(fh)
     try:
         sc = load_scenario(os.path.join(run_dir, 'scenario.yaml'))
         reference = capture_reference(sc)
-        s = run_series(FrameLoop.from_scenario(sc, job['duration_s']))
+        loop = CpuTimed(lambda: FrameLoop.from_scenario(sc, job['duration_s']))
+        s = run_series(loop)
     except KeyboardInterrupt:
         return 130
     except (ScenarioError, ValueError) as exc:
         return fail(run_dir, job, 2, str(exc), time.monotonic() - t0)
-    tmp = os.path.join(run_dir, 'series.tmp.npz')
-    np.savez_compressed(tmp, **{k: s[k] for k in ('t_s', 'q_orbit_body', 'angle_deg',
-                                                  'est_err_deg', 'rate_err_deg_s', 'w_eci',
-                                                  'w_orbit', 'q_orbit_target',
-                                                  'target_judged')})
+    tmp = os.path.join(run_dir, f'series.tmp-{uuid.uuid4().hex}.npz')   # unique per attempt
+    np.savez(tmp, **{k: s[k] for k in ('t_s', 'q_orbit_body', 'angle_deg', 'est_err_deg',
+                                       'rate_err_deg_s', 'w_eci', 'w_orbit', 'q_orbit_target',
+                                       'target_judged')})   # uncompressed: 35 % larger, no CPU
     os.replace(tmp, os.path.join(run_dir, SERIES_FILE))
     angle = judged = None                 # the orbit frame
     if reference != ORBIT_FRAME:          # the target the run published
@@ -129,27 +129,33 @@ def mc_worker(run_dir: str) -> int:
               'est_err_median_deg': est.median if est.samples else None,
               'sim_time_s': float(s['t_s'][-1]), 'wall_time_s': time.monotonic() - t0,
               'frames': int(s['t_s'].size), 'missed_frames': 0, 'compose': False,
+              'frameloop_cpu_s': loop.cpu_s, 'cpu_s': time.process_time() - cpu0,
               'message': 'plain engine (sim_node.engine.FrameLoop)'}
     write_json_atomic(os.path.join(run_dir, RESULT_FILE), result)
     return 0
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.campaigns.worker RUN_DIR`` (the Monte Carlo's plain
-    worker)."""
-    import sys
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if len(argv) == 1:
-        return mc_worker(argv[0])
-    print('usage: python -m adcs_nodes.tools.campaigns.worker RUN_DIR (adcs run --engine '
-          'plain runs a scenario)', file=sys.stderr)
-    return 2
+class CpuTimed:
+    """The FrameLoop ``build()`` returns, with the CPU time [s] of its building and of its
+    frame steps (not of the code that consumes its frames) in ``cpu_s``. The frames are made
+    :data:`CHUNK` at a time, so that the CPU clock (a system call) is read twice a chunk."""
 
+    CHUNK = 64
 
-if __name__ == '__main__':
-    import signal
-    # a Monte Carlo run started under ``--dask-local`` inherits an ignored SIGINT: the
-    # supervisor's SIGINT must stop it
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    one_blas_thread()
-    raise SystemExit(main())
+    def __init__(self, build: Any) -> None:
+        cpu0 = time.process_time()
+        self.loop = build()
+        self.cpu_s = time.process_time() - cpu0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.loop, name)
+
+    def run(self, *args: Any, **kwargs: Any) -> Iterator[Any]:
+        frames = self.loop.run(*args, **kwargs)
+        while True:
+            cpu0 = time.process_time()
+            chunk = list(itertools.islice(frames, self.CHUNK))
+            self.cpu_s += time.process_time() - cpu0
+            if not chunk:
+                return
+            yield from chunk

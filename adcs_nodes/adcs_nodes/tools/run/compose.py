@@ -1,35 +1,16 @@
-"""Composed deployment: several ADCS nodes in one process on one ``EventsExecutor``.
-
-Like a ROS 2 component container: the same node classes and parameters as the one process
-per node deployment, so both give the same trajectory (tested), but messages skip the
-process boundaries. Used by ``adcs run --compose``::
+"""Composed deployment (``adcs run --engine composed``): the graph's node classes and
+parameters in one process on one ``EventsExecutor``, like a component container, the same
+trajectory (tested)::
 
     python -m adcs_nodes.tools.run.compose --params-file params.yaml \\
-        --nodes environment=sim_node.nodes.environment:EnvironmentNode \\
-                dynamics=sim_node.nodes.dynamics:DynamicsNode
+        --nodes environment=sim_node.nodes.environment:EnvironmentNode ...
 
-The process ends when the clock master (the node named ``dynamics``) is done, after a short
-drain so the last messages reach the recorder; or on SIGINT/SIGTERM.
-
-Lifecycle: the managed nodes (:mod:`adcs_nodes.nodes.managed`) of the parameter file that are
-still unconfigured (``autostart: false``, as ``adcs run --compose`` writes it) are configured,
-all of them, then activated, in process (``trigger_configure``/``trigger_activate``), before
-the executor spins; a node refusing its configuration ends the process with exit code 2 and
-its reason, as a configuration error while building a node does.
-
-In-process path (on by default since issue 13; ``--dds`` or ``ADCS_COMPOSE_INPROC=0`` in the
-environment sends every message over DDS as in the graph; ``--inproc`` and
-``ADCS_COMPOSE_INPROC=1`` are kept and mean the default): for a volatile topic with a
-publisher and subscriptions in this process (:class:`InProcessBus`), a message goes straight
-to the local subscriptions' callbacks when no subscription outside the process is matched
-(its ``get_subscription_count()`` is not above the local count); when one is (recorder, live
-view, ``ros2 topic echo``, the launcher's monitor on ``/clock``), it is published over DDS
-as before and every subscriber, local ones included, gets it from DDS. Each message goes one
-way only, so nothing is lost or doubled. The local deliveries run after the publishing
-callback has returned, first in first out, one callback at a time, never inside another
-callback. The lockstep fires on stamps, not arrival order, so the trajectory is the same
-(tested).
-"""
+It ends when the clock master is done (after a short drain for the recorder) or on
+SIGINT/SIGTERM; unconfigured managed nodes are configured and activated in process first (a
+refusal: exit 2 with its reason). The in-process path (default; ``--dds`` or
+``ADCS_COMPOSE_INPROC=0``: all over DDS) delivers a volatile topic's message straight to the
+local subscriptions while no outside subscription is matched, else over DDS only
+(:class:`InProcessBus`)."""
 from __future__ import annotations
 
 import argparse
@@ -81,23 +62,13 @@ def build_nodes(specs: List[str], params_doc: Dict[str, Any]):
 
 
 class InProcessBus:
-    """Direct delivery between the nodes of this process (see module docstring).
+    """Direct delivery between the nodes of this process (see the module docstring).
 
-    Local deliveries are queued and run, first in first out, when the executor callback that
-    published them (a subscription callback of a composed node, wrapped here) has returned,
-    so no callback ever runs inside another. A publish from anywhere else (a timer, a
-    service) is delivered by a zero-period one-shot timer (next turn of the executor, after
-    the events already queued; a 1 ms timer here made the running graph wait 1 ms every
-    ``max_batch`` deliveries, issue 13); so is the rest of a long chain after
-    ``max_batch`` deliveries, so signals and timers keep running.
-
-    Parameters
-    ----------
-    nodes : list of rclpy.node.Node
-        The composed nodes (their publishers and subscriptions existing now are linked).
-    max_batch : int
-        Deliveries in one go before the executor gets control back.
-    """
+    Deliveries are queued and run first in first out when the publishing executor callback (a
+    wrapped subscription callback) has returned, so no callback runs inside another; a publish
+    from elsewhere (timer, service), and a chain longer than ``max_batch``, is delivered by a
+    zero-period one-shot timer at the executor's next turn. ``nodes``: the composed nodes (their
+    current publishers and subscriptions are linked)."""
 
     def __init__(self, nodes, max_batch: int = 500) -> None:
         self.queue: Deque[Tuple[List[Callable], Any]] = collections.deque()

@@ -1,26 +1,9 @@
-"""The graph of ``adcs run`` for the standard ROS 2 launch file (``adcs.launch.py``).
-
-``ros2 launch adcs_nodes adcs.launch.py scenario:=NAME [duration:=S] [record:=BAG]`` starts
-the nodes :func:`adcs_nodes.graph.build_graph` returns, each with its parameters from
-:func:`adcs_nodes.graph.params_file_text`: the same description ``adcs run`` starts. This
-module holds the part that needs no ``launch`` package (not on PyPI), so it is tested here.
-
-What ``ros2 launch`` does not do that ``adcs run`` does: a private ``ROS_DOMAIN_ID`` with
-localhost discovery, the progress bar, the run manifest for ``adcs switch``/``adcs status``,
-stopping the run when a world node dies, the dynamics result file, and driving the lifecycle
-of the managed nodes (:data:`MANAGED_CLASSES`): ``adcs run`` starts them with ``autostart:
-false`` and calls configure and activate; the launch file gives no ``autostart``, so they
-configure and activate themselves (the default ``autostart: true``), as there is no
-lifecycle manager here. The launch ends when the clock master (``dynamics``) exits at the
-end of the scenario.
-
-Stopping (:func:`stop_timeouts`): ``ros2 launch`` sends SIGINT to every node at the end or on
-Ctrl-C, SIGTERM ``sigterm_timeout`` later, SIGKILL ``sigkill_timeout`` after that. A node
-exits within 2 s of SIGINT (``tests/node/test_shutdown.py``); the launch file gives the
-longer stops their time, so nothing is escalated to SIGTERM and no process is left behind.
-
-Pure Python; no rclpy.
-"""
+"""The graph of ``adcs run`` for the standard ROS 2 launch file (``ros2 launch adcs_nodes
+adcs.launch.py scenario:=NAME [duration:=S] [record:=BAG]``): the nodes of
+:func:`adcs_nodes.graph.build_graph` and their parameters, without ``adcs run``'s private
+domain, progress, manifest, stop on a world node's death and lifecycle driving (the managed
+nodes activate themselves). Stopping (:func:`stop_timeouts`): SIGINT, SIGTERM, SIGKILL, each
+node its time."""
 from __future__ import annotations
 
 import os
@@ -69,14 +52,8 @@ def installed_scenario_dir() -> Optional[str]:
 
 
 def scenario_path(name: str) -> str:
-    """A scenario file: ``name`` itself when it exists, else ``<name>`` or ``<name>.yaml`` in
-    the installed scenarios (``share/adcs_nodes/scenarios``).
-
-    Raises
-    ------
-    ValueError
-        When neither exists (the message lists the installed scenarios).
-    """
+    """A scenario file: ``name`` when it exists, else ``<name>`` or ``<name>.yaml`` in the
+    installed scenarios; ValueError (listing them) when neither exists."""
     if os.path.isfile(name):
         return os.path.abspath(name)
     share = installed_scenario_dir()
@@ -89,22 +66,25 @@ def scenario_path(name: str) -> str:
     raise ValueError(f'scenario {name!r} not found (installed: {", ".join(known) or "none"})')
 
 
+def with_duration(sc: dict, duration_s: Optional[float]) -> dict:
+    """Scenario ``sc`` (validated) with ``duration_s`` (``--duration``), validated again as
+    the file would be (a fault after the end, frames, the epoch; ScenarioError)."""
+    if duration_s is None or duration_s == sc['duration_s']:
+        return sc
+    from adcs_nodes.scenario import ScenarioError, apply_overrides
+    try:
+        return apply_overrides(sc, {'duration_s': float(duration_s)})
+    except ScenarioError as exc:
+        raise ScenarioError(str(exc).replace(f'--set duration_s={float(duration_s)!r}',
+                                             f'--duration {duration_s:g}', 1)) from None
+
+
 def launch_graph(scenario: str, duration_s: Optional[float] = None,
                  record: Optional[str] = None) -> Tuple[List[NodeSpec], str]:
-    """Nodes and parameter-file text of ``scenario``, as ``adcs run`` builds them.
-
-    Parameters
-    ----------
-    scenario : str
-        Path or installed scenario name (see :func:`scenario_path`).
-    duration_s : float, optional
-        Simulated seconds (default: the scenario's ``duration_s``).
-    record : str, optional
-        Bag directory to record to (adds the recorder, as ``adcs run --record``).
-    """
-    sc = load_scenario(scenario_path(scenario))
-    duration = float(duration_s) if duration_s is not None else float(sc['duration_s'])
-    nodes = build_graph(sc, duration, record=bool(record))
+    """Nodes and parameter-file text of ``scenario`` (a path or an installed name) as ``adcs
+    run`` builds them, for ``duration_s`` (default the scenario's), recording to ``record``."""
+    sc = with_duration(load_scenario(scenario_path(scenario)), duration_s)
+    nodes = build_graph(sc, float(sc['duration_s']), record=bool(record))
     if record:
         next(n for n in nodes if n.name == 'recorder').params['output'] = \
             os.path.abspath(record)

@@ -1,11 +1,7 @@
-"""Talk to a running graph started by ``adcs run``: ``adcs switch``, ``adcs status [--watch]``
-and ``adcs fault``.
-
-A run announces itself in ``~/.cache/adcs/runs/active-<launcher pid>.json`` (domain id,
-scenario, bag, node PIDs). These commands join that ROS domain with a short-lived node, call
-the controller manager's services, read the latched status or publish a live fault, and
-leave; ``adcs status --watch`` stays, refreshing its view once a second until the run ends.
-"""
+"""Talk to a running graph started by ``adcs run``: ``adcs switch``, ``adcs status [--watch]``,
+``adcs fault``. A run announces itself in ``~/.cache/adcs/runs/active-<pid>.json`` (domain,
+scenario, bag, node PIDs); these commands join its domain with a short-lived node, call the
+manager's services, read the latched status or publish a live fault, and leave."""
 from __future__ import annotations
 
 import glob
@@ -63,13 +59,10 @@ def pick_run(pid: Optional[int]) -> Dict:
     return runs[0]
 
 
-#: Wall seconds a command on a running graph (status, switch, ...) may take in all: a process
-#: that joined a busy domain was once seen never to return (``adcs status`` beside a graph
-#: running flat out after a controller was killed); it then exits 1 with a message.
+#: Wall seconds a command on a running graph may take in all (then exit 1 with a message: a
+#: process that joined a busy domain may never return).
 SESSION_DEADLINE_S = 60.0
-#: Wall seconds a command waits for a service or action server, then as long for its answer:
-#: discovery of a new process on a domain took 10-13 s at load 18; both fit in the session
-#: deadline.
+#: Wall seconds a command waits for a service or action server, then as long for its answer.
 SERVER_WAIT_S = 25.0
 
 
@@ -151,14 +144,8 @@ def finish(code: int) -> int:
 
 
 def switch(name: str, pid: Optional[int] = None) -> str:
-    """Switch the active controller of a running graph; returns the manager's answer.
-
-    Raises
-    ------
-    LiveError
-        No run, no manager, or the manager refused (unknown name: the message lists the
-        known controllers).
-    """
+    """Switch the active controller of a running graph; the manager's answer. LiveError: no
+    run or manager, or refused (an unknown name: the message lists the known ones)."""
     from adcs_nodes.scenario import shorten_message
     if not CONTROLLER_NAME.fullmatch(name):
         raise LiveError(shorten_message(
@@ -203,7 +190,7 @@ def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
     if ctrl:
         c = ctrl[-1]
         if run.get('epoch'):
-            from adcs_nodes.nodes.convert import stamp_ns
+            from adcs_nodes.msgs.fields import stamp_ns
             from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
             t = (stamp_ns(c.header.stamp) - epoch_to_ns(parse_epoch(run['epoch']))) / 1e9
             lines.append(f'sim time: {t:.1f} s (last controller frame)')
@@ -220,31 +207,25 @@ def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
 
 
 # ---------------------------------------------------------------------- adcs fault
-#: Where a running graph takes live faults (``sim_node.faults.INJECT_TOPIC``; the tools do not
-#: import the simulator).
+#: Where a running graph takes live faults (``sim_node.faults.INJECT_TOPIC``).
 INJECT_TOPIC = 'sim/inject_fault'
 #: Wall seconds ``adcs fault`` waits for the fault's announcement on ``sim/faults``.
 ANNOUNCE_WAIT_S = 15.0
 #: Without ``--at`` a live fault starts at the first frame this much wall time ahead (at the
-#: run's measured pace): every node has the message by then, so the sensors and the dynamics
-#: agree on the frame (with "each node's next frame" they did not: in a composed run the
-#: dynamics announced a magnetometer fault 25 frames before the magnetometer applied it).
+#: run's pace): every node has the message by then and they agree on the frame.
 LEAD_WALL_S = 1.0
 
 
 def _run_scenario(run: Dict) -> Dict:
     """The run's scenario as YAML gives it: the bag's ``scenario.yaml`` (the effective one)
     when the run records, else the scenario file ({} when neither reads)."""
-    import yaml
+    from adcs_nodes.scenario import read_yaml
     paths = ([os.path.join(run['bag'], 'scenario.yaml')] if run.get('bag') else []) \
         + [run.get('scenario') or '']
     for path in paths:
         try:
-            with open(path, encoding='utf-8') as fh:
-                data = yaml.safe_load(fh)
-        except (OSError, ValueError):
-            continue
-        except Exception:                 # yaml.YAMLError: try the next one
+            data = read_yaml(path)
+        except ValueError:                # (ScenarioError) try the next one
             continue
         if isinstance(data, dict):
             return data
@@ -269,35 +250,14 @@ def parse_params(items: List[str]) -> Dict:
 def check_fault(kind: str, target: str, params: Dict, at_s: Optional[float],
                 sc: Dict) -> Dict:
     """The fault's parameters validated with its registry specs, its target against the
-    run's scenario (``sc``: sensors, wheels, magnetorquer), ``at_s`` inside the run; LiveError
-    with the reason (``adcs fault`` exits 2), as the scenario validator checks a scripted one
-    (``sim_node.faults.check`` is the receivers' same check)."""
-    from adcs_nodes import registry
+    run's scenario ``sc``, ``at_s`` inside the run, as a scripted fault is
+    (:func:`adcs_nodes.scenario.check_fault`); LiveError with the reason (exit 2)."""
+    from adcs_nodes.scenario import check_fault, fault_targets
     try:
-        entry = registry.get('fault', kind)
+        params = check_fault(kind, target, params, fault_targets(sc) if sc else {
+            'sensor': [target], 'wheel': [target], 'magnetorquer': [target]}, scripted=False)
     except ValueError as exc:
-        raise LiveError(str(exc)) from None
-    craft = sc.get('spacecraft') or {}
-    if 'node' in entry.targets:
-        raise LiveError(f'{kind} is a scripted fault only (a scenario\'s faults:); to kill a '
-                        'node of a running graph, kill its process (adcs status shows the pids)')
-    if 'sensor' in entry.targets:
-        known = [k for k, cfg in (sc.get('sensors') or {}).items()
-                 if not (isinstance(cfg, dict) and cfg.get('external'))]
-        what = 'simulated sensors'
-    elif 'wheel' in entry.targets:
-        known = [w.get('name') for w in craft.get('wheels') or [] if isinstance(w, dict)]
-        what = 'wheels'
-    else:
-        known = ['x', 'y', 'z'] if 'magnetorquer' in craft else []
-        what = 'magnetorquer axes'
-    if sc and target not in known:
-        raise LiveError(f'{kind} cannot strike {target!r}: the run\'s {what} are '
-                        f'{", ".join(known) or "none"}')
-    try:
-        params = entry.validate(params)
-    except ValueError as exc:
-        raise LiveError(f'{kind} parameters: {exc}') from None
+        raise LiveError(getattr(exc, 'why', str(exc))) from None
     if at_s is not None:
         duration = float(sc.get('duration_s') or math.inf)
         if not (math.isfinite(at_s) and 0.0 <= at_s <= duration):
@@ -310,24 +270,15 @@ def fault(kind: str, target: str, at_s: Optional[float] = None,
           wait_s: float = ANNOUNCE_WAIT_S) -> str:
     """Inject one fault into a running graph (``adcs fault``); returns what happened.
 
-    The fault goes as JSON on ``sim/inject_fault`` (reliable) to the sensor nodes and the
-    dynamics, once they all listen; the one it strikes applies it from ``at_s`` (default: the
-    first frame :data:`LEAD_WALL_S` of wall time ahead at the run's pace, measured on
-    ``/clock``; a node that gets it late starts it at its next frame), the dynamics announces
-    it on ``sim/faults``, which this waits for. Not deterministic: the frame depends on wall
-    time.
-
-    Raises
-    ------
-    LiveError
-        No run, a fault the run cannot take (kind, target, parameters, a time already past or
-        outside the run), or nobody listening.
+    JSON on ``sim/inject_fault`` (reliable) to the sensor nodes and the dynamics once they all
+    listen; the one it strikes applies it from ``at_s`` (default: the first frame
+    :data:`LEAD_WALL_S` of wall time ahead at the run's pace on ``/clock``). Returns once every
+    listener acknowledged; a fault due within ``wait_s`` is awaited on ``sim/faults``. Not
+    deterministic (wall time). LiveError: no run, a fault the run cannot take, nobody
+    listening, not acknowledged.
     """
     from rclpy.duration import Duration
     from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rosgraph_msgs.msg import Clock
     from std_msgs.msg import String
     run = pick_run(pid)
     sc = _run_scenario(run)
@@ -336,66 +287,104 @@ def fault(kind: str, target: str, at_s: Optional[float] = None,
                          if not (isinstance(cfg, dict) and cfg.get('external'))])
     item = {'index': 1000 + int(time.time() * 1000) % 10**6, 'kind': kind, 'target': target,
             'at_s': at_s, 'params': params}
-    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
     session = _Session(run)
-    from adcs_nodes.nodes.convert import stamp_ns
-    from adcs_nodes.nodes.lockstep_node import QOS_DATA, epoch_to_ns, parse_epoch
-    epoch_ns = epoch_to_ns(parse_epoch(run['epoch']))
-    clock: List = []          # (wall s, sim s): the first and the latest /clock
-    seen: List = []
-
-    def on_clock(m) -> None:
-        sample = (time.monotonic(), (stamp_ns(m.clock) - epoch_ns) / 1e9)
-        clock[1:] = [sample] if clock else []
-        if not clock:
-            clock.append(sample)
     try:
-        session.node.create_subscription(Clock, '/clock', on_clock, QOS_DATA)
-        session.node.create_subscription(DiagnosticArray, 'sim/faults', seen.append, QOS_DATA)
-        pub = session.node.create_publisher(String, INJECT_TOPIC, reliable)
-        deadline = time.monotonic() + SERVER_WAIT_S
-        while (pub.get_subscription_count() < listeners or len(clock) < 2
-               or clock[-1][0] - clock[0][0] < 0.3) and time.monotonic() < deadline:
-            session.spin(0.05)
-        if pub.get_subscription_count() == 0:
-            raise LiveError(f'nobody listens on {INJECT_TOPIC} after {SERVER_WAIT_S:g} s (is '
-                            'the run a graph with simulated sensors and dynamics?)')
-        now = clock[-1][1] if clock else None
+        watch = _FaultWatch(session, run)
+        pub = session.node.create_publisher(
+            String, INJECT_TOPIC, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        now, pace = watch.wait_listeners(pub, listeners)
         if at_s is not None and now is not None and at_s < now:
             raise LiveError(f'--at {at_s:g} s has passed: the run is at t = {now:.1f} s')
         if at_s is None and now is not None:       # the frame LEAD_WALL_S ahead
-            pace = 1.0
-            if len(clock) > 1 and clock[-1][0] > clock[0][0]:
-                pace = max(pace, (clock[-1][1] - clock[0][1]) / (clock[-1][0] - clock[0][0]))
             frame = float((sc.get('timing') or {}).get('frame_s') or 1.0)
-            ahead = now + pace * (time.monotonic() - clock[-1][0] + LEAD_WALL_S)
+            ahead = now + pace * (time.monotonic() - watch.clock[-1][0] + LEAD_WALL_S)
             item['at_s'] = math.ceil(ahead / frame - 1e-9) * frame
             if sc.get('duration_s') and item['at_s'] > float(sc['duration_s']):
                 raise LiveError(f'the run ends (t = {float(sc["duration_s"]):g} s) before a '
                                 f'fault could start (t = {item["at_s"]:g} s)')
         pub.publish(String(data=json.dumps(item, sort_keys=True)))
-        pub.wait_for_all_acked(Duration(seconds=5.0))
-        deadline = time.monotonic() + wait_s
-        found = None
-        while found is None and time.monotonic() < deadline:
-            session.spin(0.05)
-            for msg in seen:
-                for st in msg.status:
-                    if st.name == f'fault/{item["index"]}' and st.message.startswith('active'):
-                        found = (stamp_ns(msg.header.stamp) - epoch_ns) / 1e9, st.message
+        acked = pub.wait_for_all_acked(Duration(seconds=5.0))
+        due_s = (item['at_s'] - now) / pace if None not in (now, item['at_s']) else 0.0
+        found = watch.announcement(item['index'], wait_s) if acked and due_s <= wait_s \
+            else None
     finally:
         session.close()
+    return _fault_text(kind, target, params, run, at_s, item['at_s'], now, acked, due_s,
+                       found, wait_s)
+
+
+class _FaultWatch:
+    """``/clock`` (the first and the latest sample: (wall s, sim s)) and ``sim/faults`` as
+    ``adcs fault`` sees them."""
+
+    def __init__(self, session: '_Session', run: Dict) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rosgraph_msgs.msg import Clock
+
+        from adcs_nodes.msgs.fields import stamp_ns
+        from adcs_nodes.nodes.lockstep_node import QOS_DATA, epoch_to_ns, parse_epoch
+        self.session, self.stamp_ns = session, stamp_ns
+        self.epoch_ns = epoch_to_ns(parse_epoch(run['epoch']))
+        self.clock: List = []
+        self.seen: List = []
+        session.node.create_subscription(Clock, '/clock', self._on_clock, QOS_DATA)
+        session.node.create_subscription(DiagnosticArray, 'sim/faults', self.seen.append,
+                                         QOS_DATA)
+
+    def _on_clock(self, m) -> None:
+        sample = (time.monotonic(), (self.stamp_ns(m.clock) - self.epoch_ns) / 1e9)
+        self.clock[1:] = [sample] if self.clock else []
+        if not self.clock:
+            self.clock.append(sample)
+
+    def wait_listeners(self, pub, listeners: int):
+        """Until ``listeners`` subscribe to ``pub`` and 0.3 s of ``/clock`` were seen; the
+        run's time [s] (None without a clock) and pace [sim s per wall s, at least 1]."""
+        clock = self.clock
+        deadline = time.monotonic() + SERVER_WAIT_S
+        while (pub.get_subscription_count() < listeners or len(clock) < 2
+               or clock[-1][0] - clock[0][0] < 0.3) and time.monotonic() < deadline:
+            self.session.spin(0.05)
+        if pub.get_subscription_count() == 0:
+            raise LiveError(f'nobody listens on {INJECT_TOPIC} after {SERVER_WAIT_S:g} s (is '
+                            'the run a graph with simulated sensors and dynamics?)')
+        pace = 1.0
+        if len(clock) > 1 and clock[-1][0] > clock[0][0]:
+            pace = max(pace, (clock[-1][1] - clock[0][1]) / (clock[-1][0] - clock[0][0]))
+        return (clock[-1][1] if clock else None), pace
+
+    def announcement(self, index: int, wait_s: float):
+        """``(t [s], text)`` of the fault's ``active`` announcement, None after ``wait_s``."""
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            self.session.spin(0.05)
+            for msg in self.seen:
+                for st in msg.status:
+                    if st.name == f'fault/{index}' and st.message.startswith('active'):
+                        return ((self.stamp_ns(msg.header.stamp) - self.epoch_ns) / 1e9,
+                                st.message)
+        return None
+
+
+def _fault_text(kind, target, params, run, at_s, start_s, now, acked, due_s, found,
+                wait_s) -> str:
     when = f'at t = {at_s:g} s' if at_s is not None else (
-        f'from t = {item["at_s"]:g} s, about {LEAD_WALL_S:g} s of wall time ahead'
-        if item['at_s'] is not None else 'at the next frame')
+        f'from t = {start_s:g} s, about {LEAD_WALL_S:g} s of wall time ahead'
+        if start_s is not None else 'at the next frame')
     sent = (f'fault {kind} {target} {params} sent to run {run["pid"]} ({when}'
             + (f'; the run was at t = {now:.1f} s' if now is not None else '') + ')')
-    if found is None:
-        raise LiveError(f'{sent}, but no announcement on sim/faults within {wait_s:g} s (the '
-                        'run may have ended, or a node refused it: see the node logs in '
-                        f'{run.get("run_dir", "the run directory")})')
-    return (f'{sent}; announced on sim/faults at t = {found[0]:g} s: {found[1]} '
-            '(a live fault is not deterministic: its frame depends on wall time)')
+    if not acked:
+        raise LiveError(f'{sent}, but not every listener acknowledged it within 5 s (see the '
+                        f'node logs in {run.get("run_dir", "the run directory")})')
+    if found is not None:
+        return (f'{sent}; announced on sim/faults at t = {found[0]:g} s: {found[1]} '
+                '(a live fault is not deterministic: its frame depends on wall time)')
+    if due_s > wait_s:
+        return (f'{sent}; scheduled from t = {start_s:g} s (the first frame at or after it, '
+                f'about {due_s:.0f} s of wall time from now); sim/faults announces it then')
+    raise LiveError(f'{sent}, but no announcement on sim/faults within {wait_s:g} s (the '
+                    'run may have ended, or a node refused it: see the node logs in '
+                    f'{run.get("run_dir", "the run directory")})')
 
 
 # ---------------------------------------------------------------------- adcs status --watch
@@ -439,7 +428,7 @@ class _Watch:
                               craft.get('wheels') or [] if isinstance(w, dict)]
 
     def _time(self, stamp) -> float:
-        from adcs_nodes.nodes.convert import stamp_ns
+        from adcs_nodes.msgs.fields import stamp_ns
         return (stamp_ns(stamp) - self.epoch_ns) / 1e9
 
     def on_estimate(self, msg) -> None:
@@ -475,6 +464,7 @@ class _Watch:
         import numpy as np
 
         from adcs_nodes.core import attitude as att
+        from adcs_nodes.tools.analyse.papers.series import quat, vec
         run = self.run
         out = [f'adcs status --watch: run {run["pid"]} {os.path.basename(run["scenario"])} '
                f'(ROS_DOMAIN_ID={run["domain"]}), {time.strftime("%H:%M:%S")}; Ctrl-C ends']
@@ -488,26 +478,18 @@ class _Watch:
             out.append('controller:      (no adcs/controller_status yet)')
         est, tgt = self.estimate, self.target
         if est is not None:
-            q_o = [est.q_orbit_body.x, est.q_orbit_body.y, est.q_orbit_body.z,
-                   est.q_orbit_body.w]
-            q_i = [est.q_eci_body.x, est.q_eci_body.y, est.q_eci_body.z, est.q_eci_body.w]
             if tgt is not None:
-                q_ref = [tgt.q_ref_body.x, tgt.q_ref_body.y, tgt.q_ref_body.z,
-                         tgt.q_ref_body.w]
                 frame = tgt.header.frame_id or 'orbit'
                 try:
-                    err = math.degrees(att.angle_between(q_i if frame == 'eci' else q_o,
-                                                         q_ref))
+                    q_est = est.q_eci_body if frame == 'eci' else est.q_orbit_body
+                    err = math.degrees(att.angle_between(quat(q_est), quat(tgt.q_ref_body)))
                     out.append(f'attitude error:  {err:.3f} deg (estimate to the target, '
                                f'{frame} frame)')
                 except ValueError:
                     out.append('attitude error:  (estimate or target not finite)')
             else:
                 out.append('attitude error:  (no adcs/attitude_target)')
-            w_i = np.array([est.omega_body_eci_body.x, est.omega_body_eci_body.y,
-                            est.omega_body_eci_body.z])
-            w_o = np.array([est.omega_body_orbit_body.x, est.omega_body_orbit_body.y,
-                            est.omega_body_orbit_body.z])
+            w_i, w_o = vec(est.omega_body_eci_body), vec(est.omega_body_orbit_body)
             out.append(f'rates:           {math.degrees(np.linalg.norm(w_i)):.4f} deg/s '
                        f'inertial, {math.degrees(np.linalg.norm(w_o)):.4f} deg/s to the '
                        f'orbit frame (estimate)')
@@ -550,14 +532,9 @@ def _alive(run: Dict) -> bool:
 
 def watch(pid: Optional[int] = None, interval_s: float = 1.0, out=None,
           count: Optional[int] = None) -> int:
-    """``adcs status --watch``: the run's view refreshed every ``interval_s`` of wall time
-    until the run ends (or ``count`` refreshes, or Ctrl-C); returns 0.
-
-    On a terminal each refresh redraws the screen; otherwise the views follow each other,
-    separated by a blank line. It subscribes to the run's estimate, target, command,
-    tachometer, status and fault topics for as long as it watches (in a composed run this
-    sends them over DDS while it does: a little slower).
-    """
+    """``adcs status --watch``: the run's view every ``interval_s`` of wall time until the run
+    ends (or ``count`` views, or Ctrl-C); returns 0. A terminal is redrawn; otherwise the
+    views follow each other. (A composed run sends the watched topics over DDS meanwhile.)"""
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 

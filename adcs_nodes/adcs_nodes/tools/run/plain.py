@@ -12,8 +12,9 @@ class BagSink:
     """Writes frames to a rosbag2 MCAP bag, as the recorder does (message definitions
     embedded; log time = the message's sim time, so the bag reads like a recorded one).
 
-    The bytes are the project's CDR encoder's (:mod:`adcs_nodes.nodes.cdr`: byte-identical to
-    a typed publish, read back by ``rosbags``): no rclpy.
+    Each core sample becomes the message its topic's converter makes
+    (:func:`adcs_nodes.inputs.converter`, what the nodes publish), encoded by the project's
+    CDR encoder (:mod:`adcs_nodes.msgs.cdr`: byte-identical to a typed publish): no rclpy.
     """
 
     def __init__(self, path: str, scenario_text: Optional[str] = None,
@@ -40,29 +41,33 @@ class BagSink:
             with open(os.path.join(path, 'scenario.yaml'), 'w') as fh:
                 fh.write(scenario_text)
 
-    def _connection(self, topic: str, msg: Any) -> Tuple[Any, Any]:
+    def _connection(self, topic: str, sample: Any) -> Tuple[Any, Any, Any]:
         got = self._conns.get(topic)
         if got is None:
-            from adcs_nodes.nodes.cdr import codec
+            from adcs_nodes.bag import offered_qos
             from adcs_nodes.graph import topic_type
+            from adcs_nodes.inputs import converter
+            from adcs_nodes.msgs.cdr import codec
             msgtype = topic_type(topic)
             if not self._ensure_type(self._store, msgtype):
                 raise EngineError(f'no .msg definition found for {msgtype}')
             name = topic if topic.startswith('/') else '/' + topic    # resolved, as recorded
+            to_msg = converter(topic).to_msg
             got = self._conns[topic] = (
-                self._writer.add_connection(name, msgtype, typestore=self._store),
-                codec(type(msg)))
+                self._writer.add_connection(name, msgtype, typestore=self._store,
+                                            offered_qos_profiles=offered_qos(name)),
+                to_msg, codec(type(to_msg(sample, self._epoch_ns))).encode)
         return got
 
     def write(self, frame: Frame) -> None:
-        """Write one frame's messages (flushed to the file every ``flush_every_frames``)."""
+        """Write one frame's samples (flushed to the file every ``flush_every_frames``)."""
         from adcs_nodes.bag import flush_writer
         t_log = self._clock_ns(frame.t_ns)
-        for topic, msg in frame.outputs:
+        for topic, sample in frame.outputs:
             if self._only and topic.lstrip('/') not in self._only:
                 continue
-            conn, cdc = self._connection(topic, msg)
-            self._writer.write(conn, t_log, cdc.encode(msg))
+            conn, to_msg, encode = self._connection(topic, sample)
+            self._writer.write(conn, t_log, encode(to_msg(sample, self._epoch_ns)))
             self.messages += 1
         self._frames += 1
         if self._frames % self._flush_every == 0:
@@ -73,13 +78,14 @@ class BagSink:
 
     def bind(self, loop: FrameLoop) -> 'BagSink':
         """Log times from ``loop``'s epoch."""
-        self._epoch_ns = loop.clock.epoch_ns
+        self._epoch_ns = loop.epoch_ns
         return self
 
     def close(self) -> None:
         """Finish the bag (index, metadata)."""
         if self._writer is not None:
-            self._writer.close()
+            from adcs_nodes.distro import close_writer
+            close_writer(self._writer)      # the real ROS distro in the metadata
             self._writer = None
 
 

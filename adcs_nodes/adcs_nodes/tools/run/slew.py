@@ -1,9 +1,6 @@
-"""Client of the ``adcs/slew`` action (``adcs slew --to ROLL PITCH YAW [--frame ...]``).
-
-:func:`slew` joins a running graph (as ``adcs switch`` does), sends the goal, prints feedback
-and returns the result line; Ctrl-C cancels the goal (the spacecraft then holds its attitude).
-:func:`run_goal` does the exchange on a given node and executor (tests, other tools).
-"""
+"""Client of the ``adcs/slew`` action: :func:`slew` (``adcs slew``) joins a running graph,
+sends the goal, prints feedback, returns the result line (Ctrl-C cancels: the spacecraft
+holds); :func:`run_goal` does the exchange on a given node and executor."""
 from __future__ import annotations
 
 import math
@@ -51,15 +48,10 @@ _TERMINAL = (4, 5, 6)   # GoalStatus SUCCEEDED, CANCELED, ABORTED
 
 
 class _GoalExchange:
-    """The goal of one ``adcs/slew`` exchange, robust to dropped answers.
-
-    The goal is sent with one goal id every time: a resend reaching a server that already
-    accepted the first request is refused as a duplicate and never starts a second slew.
-    A refusal that answers a resend is checked with a result request for that id (an
-    unknown id: really refused). The goal's status topic tells an accepted goal whose
-    answer was lost, and a finished goal whose result answer was lost (the result request
-    is then sent again).
-    """
+    """The goal of one ``adcs/slew`` exchange, robust to dropped answers: always the same goal
+    id (a resend to a server that accepted it is refused as a duplicate, and a refusal of a
+    resend is checked with a result request); the goal's status topic tells an accepted goal or
+    a finished one whose answer was lost."""
 
     def __init__(self, node, client, goal, answer_s: float, on_feedback) -> None:
         import uuid as _uuid
@@ -142,24 +134,12 @@ class _GoalExchange:
 def run_goal(node, executor, goal, server_wait_s: float = SERVER_WAIT_S,
              on_feedback: Optional[Callable] = None, deadline_s: float = math.inf,
              answer_s: float = ANSWER_S):
-    """Send ``goal`` to ``adcs/slew`` and wait for the result.
-
-    A dropped answer (goal response or result) is survived: the request is sent again with
-    the same goal id after ``answer_s`` without an answer (:class:`_GoalExchange`), within
-    ``server_wait_s`` for the goal's answer and ``deadline_s`` for the result.
-
-    Returns
-    -------
-    (status, result)
-        ``status``: ``'rejected'``, ``'succeeded'``, ``'aborted'``, ``'canceled'`` or
-        ``'timeout'`` (no result within ``deadline_s`` of wall time); ``result``: the
-        ``Slew.Result`` or None. On KeyboardInterrupt the goal is canceled first.
-
-    Raises
-    ------
-    RuntimeError
-        When no action server appears within ``server_wait_s``.
-    """
+    """Send ``goal`` to ``adcs/slew`` and wait for the result, surviving a dropped answer (sent
+    again with the same goal id after ``answer_s``, :class:`_GoalExchange`) within
+    ``server_wait_s`` for the goal and ``deadline_s`` for the result. Returns ``(status,
+    result)``: ``'rejected'``, ``'succeeded'``, ``'aborted'``, ``'canceled'`` or ``'timeout'``,
+    and the ``Slew.Result`` or None; Ctrl-C cancels the goal first. RuntimeError: no server
+    within ``server_wait_s``."""
     from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
     from adcs_msgs.action import Slew
@@ -219,17 +199,9 @@ def format_result(status: str, result) -> str:
 def slew(roll_deg: float, pitch_deg: float, yaw_deg: float, frame: str = 'inertial',
          controller: str = '', tolerance_deg: float = 0.0, timeout_s: float = 0.0,
          pid: Optional[int] = None, quiet: bool = False) -> str:
-    """``adcs slew --to ROLL PITCH YAW [--frame inertial|orbit] [--controller NAME]``.
-
-    Slews a running graph (launcher ``pid`` when several) to the 3-2-1 attitude (deg) in
-    ``frame``; prints feedback about once a second unless ``quiet``; returns the result line.
-
-    Raises
-    ------
-    adcs_nodes.tools.run.live.LiveError
-        Bad goal (the reason, before anything is sent), no run, no server, rejected, not
-        succeeded.
-    """
+    """``adcs slew``: slew a running graph (launcher ``pid``) to the 3-2-1 attitude [deg] in
+    ``frame``, feedback once a second unless ``quiet``; the result line. LiveError for a bad goal
+    (before anything is sent), no run or server, a rejection or a failure."""
     from adcs_nodes import registry
     from adcs_nodes.nodes.slew_action import check_goal
     from adcs_nodes.tools.run.live import LiveError, _Session, pick_run

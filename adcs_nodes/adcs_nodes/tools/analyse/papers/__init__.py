@@ -1,23 +1,10 @@
-"""The papers' tables: one module per paper, metrics as pure functions of a run's series.
-
-A run is read into stamped messages by topic (:mod:`.series`: from a bag, whatever engine wrote
-it, or from FrameLoop frames), each paper module turns them into numpy series, computes its
-metrics from those arrays only, and states its rows ``(quantity, paper value, measured,
-verdict)``. ``adcs report BAG``, ``make reproduce``
-(:mod:`adcs_nodes.tools.analyse.reproductions`) and
-the studies (:mod:`adcs_nodes.tools.analyse.study`) print the same rows through :func:`rows_for`.
-
-Verdicts:
-
-* ``True`` (PASS) / ``False`` (FAIL): the row compares with a number or a claim of the paper;
-* ``None`` (``info``): no paper value; never counted;
-* :class:`NotComparable` (``not comparable: <reason>``): the paper states a value, but this
-  run cannot check it (the paper does not describe what it compared against, or the run ends
-  before the paper's window). Counted on its own, never as a pass.
-
-Modules: :mod:`.paper000` (estimation, closed-loop capture), :mod:`.paper001` (MPI, flexible
-spacecraft), :mod:`.paper003` (fuzzy eigenaxis slew), :mod:`.paper004` (yaw from horizon and
-field). Pure Python + numpy; no rclpy.
+"""The papers' tables: one module per paper (:mod:`.paper000`, :mod:`.paper001`,
+:mod:`.paper003`, :mod:`.paper004`), metrics as pure functions of a run's stamped messages
+(:mod:`.series`: a bag of any engine, or FrameLoop frames), rows ``(quantity, paper value,
+measured, verdict)`` printed alike by ``adcs report``, ``make reproduce`` and the studies.
+Verdicts: True/False (PASS/FAIL against a paper number or claim), None (``info``, never
+counted), :class:`NotComparable` (a paper claim this run cannot check: counted on its own,
+never as a pass).
 """
 from __future__ import annotations
 
@@ -84,8 +71,9 @@ def rows_for(sc: Dict[str, Any], topics: Dict[str, Dict[int, Any]]) -> List[Row]
 
 def rows_for_bag(bag: str) -> Tuple[Optional[str], List[Row]]:
     """``(scenario name, rows)`` of a bag, the paper picked from its ``scenario.yaml``."""
-    from adcs_nodes.tools.analyse.papers.series import from_bag, scenario_of
-    sc = scenario_of(bag)
+    from adcs_nodes.tools.analyse.papers.series import from_bag
+    from adcs_nodes.tools.bagfile import bag_scenario
+    sc = bag_scenario(bag)
     if sc is None:
         return None, []
     name = sc.get('name')
@@ -97,8 +85,9 @@ def rows_for_bag(bag: str) -> Tuple[Optional[str], List[Row]]:
 def figures_for_bag(bag: str, out_dir: str) -> List[str]:
     """The paper's figures of a bag's run written into ``out_dir`` (file paths; empty when the
     paper module draws none)."""
-    from adcs_nodes.tools.analyse.papers.series import from_bag, scenario_of
-    sc = scenario_of(bag)
+    from adcs_nodes.tools.analyse.papers.series import from_bag
+    from adcs_nodes.tools.bagfile import bag_scenario
+    sc = bag_scenario(bag)
     module = module_for((sc or {}).get('name'))
     if module is None or not hasattr(module, 'figures_of'):
         return []
@@ -129,7 +118,8 @@ def is_counted(ok: Any) -> bool:
     return ok is not None and not isinstance(ok, NotComparable)
 
 
-def _fmt(value: Any) -> str:
+def fmt(value: Any) -> str:
+    """A measured value as the tables print it (4 significant digits, yes/no)."""
     if isinstance(value, bool):
         return 'yes' if value else 'no'
     try:
@@ -149,7 +139,7 @@ def table_lines(rows: Sequence[Row]) -> List[str]:
     """The Markdown table of ``rows`` and its count line (what ``adcs report`` prints)."""
     lines = ['| quantity | paper | measured | verdict |', '|---|---|---|---|']
     for name, paper, measured, ok in rows:
-        lines.append('| ' + ' | '.join((_cell(name), _cell(paper), _cell(_fmt(measured)),
+        lines.append('| ' + ' | '.join((_cell(name), _cell(paper), _cell(fmt(measured)),
                                         _cell(verdict_text(ok)))) + ' |')
     lines += ['', summary_line(rows)]
     return lines

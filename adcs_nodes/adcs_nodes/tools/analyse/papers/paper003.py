@@ -2,24 +2,15 @@
 to a reference slew.
 
 Case (digest ``papers/fuzzy-eigenaxis-slew.md`` section 9, ``scenarios/paper003_slew.yaml``):
-principal inertias (250, 200, 180) kg m^2, from psi 34, theta -7.5, gamma 16.5 deg (3-2-1,
-eq. (1) with row 3 corrected) to the reference axes, at rest at both ends, ``|M_i| <= 1 N m``.
-
-Metrics (the paper defines neither; ASSUMPTIONS of the digest, section 10), pure functions of
-the run's series (:func:`series`: eigenangle ``phi`` to the target, the commanded torque):
-
-* settling time: first time after which ``phi`` stays within ``band`` x ``phi0`` (5 %) until
-  the end of the run (:func:`settling_time`);
-* energy: ``E = int_0^T_s sum_i |M_i| dt`` [N m s] up to the settling time, the torque of a
-  frame held until the next (also reported to the end of the run).
-
-Rows: settling time and energy against 25.73 s and 42.91 N m s within the tolerances fixed
-before any tuning (:data:`TOLERANCE`: 15 %, 20 %). The paper's ratios (the fuzzy slew 1.5x
-faster and 1.37x cheaper than its reference) are **not comparable**: the paper does not
-describe its reference controller. Ours (``reference_slew``, near time-optimal: 17.5 s against
-a bang-bang bound of 17.6 s) is run on the FrameLoop from the same scenario
-(``manager.initial=reference_slew``) and the ratios against it are shown in the row.
-"""
+inertias (250, 200, 180) kg m^2, from psi 34, theta -7.5, gamma 16.5 deg (3-2-1, eq. (1) row 3
+corrected) to the reference axes, at rest at both ends, ``|M_i| <= 1 N m``. Metrics
+(ASSUMPTIONS of the digest, section 10; pure functions of :func:`series`): settling time, the
+first time after which ``phi`` stays within 5 % of ``phi0`` (:func:`settling_time`); energy
+``E = int_0^T_s sum_i |M_i| dt`` [N m s], each frame's torque held to the next. Rows: against
+25.73 s and 42.91 N m s within :data:`TOLERANCE` (15 %, 20 %, fixed before any tuning). The
+paper's ratios to its reference (1.5x faster, 1.37x cheaper) are **not comparable** (its
+reference controller is not described); ours (``reference_slew``, near time-optimal: 17.5 s
+against a bang-bang bound of 17.6 s) runs on the FrameLoop and the ratios are shown."""
 from __future__ import annotations
 
 import math
@@ -58,18 +49,10 @@ def initial_quaternion(euler_deg=EULER0_DEG) -> np.ndarray:
 
 # ---------------------------------------------------------------------- series
 def series(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
-    """Per frame with a state and a target.
-
-    Returns
-    -------
-    dict
-        ``t`` (n,) [s]; ``phi`` (n,) eigenangle of the error rotation ``q_target^* q_body``
-        [rad] (in the target's frame: ``orbit`` or ``eci``); ``e_phi`` (n, 3) its eigenaxis
-        (sign kept continuous); ``q`` (n, 4) the body attitude in that frame; ``omega`` (n, 3)
-        body rate w.r.t. that frame [rad/s]; ``torque`` (n, 3) the commanded body torque held
-        from that frame on [N m] (the last command until a new one); ``source`` (n,) the
-        controller that produced it.
-    """
+    """Per frame with a state and a target: ``t`` (n,) [s]; ``phi`` (n,) eigenangle of
+    ``q_target^* q_body`` [rad] in the target's frame and ``e_phi`` (n, 3) its eigenaxis (sign
+    kept continuous); ``q`` (n, 4) and ``omega`` (n, 3) [rad/s] the body in that frame;
+    ``torque`` (n, 3) the commanded torque held from that frame on [N m]; ``source`` (n,)."""
     from adcs_nodes.core import attitude
     from adcs_nodes.core.control.eigenaxis import eigen_from_quaternion
     e0 = epoch_ns(sc)
@@ -126,21 +109,11 @@ def settling_time(t: np.ndarray, phi: np.ndarray, threshold: float) -> float:
 
 def metrics(t: np.ndarray, phi: np.ndarray, torque: np.ndarray,
             band: float = BAND) -> Dict[str, float]:
-    """Settling time, energy, torque and overshoot of one slew (pure).
-
-    Parameters
-    ----------
-    t : (n,) [s], increasing; phi : (n,) eigenangle to the target [rad];
-    torque : (n, 3) torque held over ``[t_k, t_k+1)`` [N m]; band : settling band (of phi0).
-
-    Returns
-    -------
-    dict
-        ``settling_s`` (NaN: not settled); ``energy_Nms`` (to settling; NaN if not settled);
-        ``energy_total_Nms`` (to the end); ``max_abs_torque_Nm``; ``overshoot_deg`` (largest
-        phi after the first entry into the band; NaN if never in it); ``phi0_deg``;
-        ``final_deg``; ``t_end_s``.
-    """
+    """Settling time, energy, torque and overshoot of one slew (pure): ``t`` (n,) [s],
+    ``phi`` (n,) [rad], ``torque`` (n, 3) held over ``[t_k, t_k+1)`` [N m], ``band`` (of phi0).
+    Returns ``settling_s``, ``energy_Nms`` (to settling; NaN: not settled),
+    ``energy_total_Nms``, ``max_abs_torque_Nm``, ``overshoot_deg`` (largest phi after the first
+    entry into the band), ``phi0_deg``, ``final_deg``, ``t_end_s``."""
     t = np.asarray(t, float)
     phi = np.asarray(phi, float)
     m = np.abs(np.asarray(torque, float).reshape(-1, 3)).sum(axis=1)

@@ -1,15 +1,10 @@
 """Paper 004 (yaw from a horizon sensor and a magnetometer): formula (3) against TRIAD.
 
-Claims and criteria: the yaw errors of formula (3) and of TRIAD are "close" -> their RMS within
-0.5 deg of each other; the estimate degrades near u = 90/270 deg (near-polar orbit) -> the
-largest error of formula (3) within 30 deg of u = 90 or 270 deg is above the largest
-elsewhere. A run that never reaches one of the two regions cannot check the second claim.
-
-:func:`yaw_errors` computes both yaws from the recorded sensor messages with the flight code
-(:mod:`adcs_nodes.core.estimation.horizon_yaw`) and the flight software's own reference field,
-so the comparison uses exactly what the estimator saw; :func:`metrics` and :func:`rows` are
-pure functions of its arrays.
-"""
+Claims: the two yaw errors are "close" (RMS within 0.5 deg of each other); the estimate
+degrades near u = 90/270 deg (the largest formula-(3) error within 30 deg of them above the
+largest elsewhere; a run that reaches only one region cannot check it). :func:`yaw_errors`
+computes both yaws from the recorded sensor messages with the flight code and reference field;
+:func:`metrics` and :func:`rows` are pure."""
 from __future__ import annotations
 
 import math
@@ -69,16 +64,10 @@ def yaw_errors(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
 
 
 def metrics(u_deg: np.ndarray, eq3_deg: np.ndarray, triad_deg: np.ndarray) -> Dict[str, Any]:
-    """Max and RMS of both errors, where the largest formula-(3) error lies (pure).
-
-    Returns
-    -------
-    dict
-        ``eq3_max_deg``, ``eq3_rms_deg``, ``triad_max_deg``, ``triad_rms_deg``,
-        ``peak_u_deg`` (u of the largest formula-(3) error), ``near_max_deg`` / ``far_max_deg``
-        (largest formula-(3) error within 30 deg of u = 90/270, and elsewhere; NaN without a
-        sample there), ``samples``.
-    """
+    """Max and RMS of both errors and where the largest formula-(3) error lies (pure):
+    ``eq3_max_deg``, ``eq3_rms_deg``, ``triad_max_deg``, ``triad_rms_deg``, ``peak_u_deg``,
+    ``near_max_deg`` / ``far_max_deg`` (within 30 deg of u = 90/270, and elsewhere; NaN
+    without a sample there), ``samples``."""
     u = np.asarray(u_deg, float)
     e3 = np.asarray(eq3_deg, float)
     et = np.asarray(triad_deg, float)

@@ -1,11 +1,7 @@
-"""A run's stamped messages by topic, from a bag or from FrameLoop frames.
-
-``Topics`` = ``{topic: {header stamp [ns]: message}}`` with topic names as the FrameLoop
-publishes them (no leading ``/``: ``sim/state``, ``adcs/attitude_estimate``, ...). A bag's
-messages (``rosbags`` objects) and the FrameLoop's (generated message classes) have the same
-field names, so the paper modules read both alike. Stamps are the messages' header stamps:
-the scenario's epoch plus the sim time, whatever engine made the run.
-"""
+"""A run's stamped messages by topic, ``Topics`` = ``{topic: {header stamp [ns]: message}}``
+(FrameLoop names: ``sim/state``, ...), from a bag or from FrameLoop frames (samples made
+messages by their topics' converters): the same field names either way, so the paper modules
+read both alike."""
 from __future__ import annotations
 
 import os
@@ -26,13 +22,8 @@ def _stamp(msg: Any) -> Optional[int]:
 
 
 def from_bag(bag: str, topics: Sequence[str]) -> Topics:
-    """The messages of ``topics`` in ``bag`` (any engine's), keyed by header stamp.
-
-    Raises
-    ------
-    FileNotFoundError, ValueError
-        No bag there, or not a readable one (:func:`adcs_nodes.bag.read_messages`).
-    """
+    """The messages of ``topics`` in ``bag`` (any engine's) by header stamp;
+    FileNotFoundError or ValueError for no bag or an unreadable one."""
     from adcs_nodes.bag import read_messages
     names = tuple(t.lstrip('/') for t in topics)
     try:
@@ -54,28 +45,18 @@ def from_bag(bag: str, topics: Sequence[str]) -> Topics:
     return out
 
 
-def from_frames(frames: Iterable[Any], topics: Sequence[str]) -> Topics:
-    """The messages of ``topics`` in FrameLoop frames (:class:`sim_node.engine.Frame`)."""
-    names = tuple(t.lstrip('/') for t in topics)
-    out: Topics = {t: {} for t in names}
+def from_frames(frames: Iterable[Any], topics: Sequence[str], epoch_ns: int) -> Topics:
+    """The messages of ``topics`` in FrameLoop frames (:class:`sim_node.engine.Frame`) of a
+    run with epoch ``epoch_ns`` (the samples' converters, :func:`adcs_nodes.inputs.converter`)."""
+    from adcs_nodes.inputs import converter
+    out: Topics = {t.lstrip('/'): {} for t in topics}
+    to_msg = {t: converter(t).to_msg for t in out}
     for frame in frames:
-        for topic, msg in frame.outputs:
+        for topic, x in frame.outputs:
             got = out.get(topic)
             if got is not None:
-                stamp = _stamp(msg)
-                if stamp is not None:
-                    got[stamp] = msg
+                got[epoch_ns + x.t_ns] = to_msg[topic](x, epoch_ns)
     return out
-
-
-def scenario_of(bag: str) -> Optional[Dict[str, Any]]:
-    """The effective scenario stored beside the bag (``scenario.yaml``), or None."""
-    import yaml
-    path = os.path.join(bag, 'scenario.yaml')
-    if not os.path.isfile(path):
-        return None
-    with open(path, encoding='utf-8') as fh:
-        return yaml.safe_load(fh)
 
 
 def epoch_ns(sc: Dict[str, Any]) -> int:
@@ -84,11 +65,13 @@ def epoch_ns(sc: Dict[str, Any]) -> int:
     return epoch_to_ns(parse_epoch(str(sc['epoch'])))
 
 
-def orbit_period_s(sc: Dict[str, Any]) -> float:
-    """Period of the scenario's circular orbit (Kepler) [s]."""
+def orbit_period_s(sc: Dict[str, Any]) -> Optional[float]:
+    """Period of the scenario's circular orbit (Kepler) [s]; None for another orbit type."""
     import math
 
     from adcs_nodes.core.orbit import MU_EARTH, R_EARTH
+    if (sc.get('orbit') or {}).get('type', 'circular') != 'circular':
+        return None
     a = R_EARTH + 1e3 * float(sc['orbit']['altitude_km'])
     return 2.0 * math.pi * math.sqrt(a ** 3 / MU_EARTH)
 
@@ -110,25 +93,20 @@ def sorted_items(topic: Dict[int, Any]) -> list:
 
 def scenario_dict(sc: Dict[str, Any]) -> Dict[str, Any]:
     """A validated scenario: ``sc`` itself when it was loaded (it has ``_path``), else the
-    effective scenario of a bag (``scenario.yaml``) validated again."""
+    effective scenario of a bag (``scenario.yaml``) validated again, without its plugins (a
+    bag is data)."""
     from adcs_nodes.scenario import apply_overrides
-    return sc if '_path' in sc else apply_overrides(sc, {})
+    return sc if '_path' in sc else apply_overrides({**sc, 'plugins': []}, {})
 
 
 def run_topics(sc: Dict[str, Any], topics: Sequence[str], duration_s: Optional[float] = None,
                overrides: Any = None, ideal: bool = False) -> Topics:
-    """Run scenario ``sc`` (validated) with ``overrides`` on the FrameLoop and return the
-    stamped messages of ``topics`` (:mod:`adcs_nodes.tools.analyse.papers.series`).
-
-    Raises
-    ------
-    ScenarioError
-        A bad override; ``sim_node.engine.EngineError`` for a scenario the plain engine
-        cannot run (both are ``ValueError``).
-    """
+    """The stamped messages of ``topics`` of a FrameLoop run of the validated scenario ``sc``
+    with ``overrides``; ScenarioError or EngineError (ValueErrors) for a bad override or a
+    scenario the plain engine cannot run."""
     from adcs_nodes.scenario import apply_overrides
     from sim_node.engine import FrameLoop
     if overrides:
         sc = apply_overrides(sc, overrides)
     loop = FrameLoop.from_scenario(sc, duration_s, ideal_estimate=ideal)
-    return from_frames(loop.run(), topics)
+    return from_frames(loop.run(), topics, loop.epoch_ns)

@@ -1,14 +1,13 @@
-"""The magnetometer covariance to body axes (``adcs_nodes.nodes.tf.covariance_to_body``):
+"""The magnetometer covariance to body axes (``adcs_nodes.components.base.covariance_to_body``):
 rotated as ``R C R^T`` (scipy's rotation, the truth), and the ROS conventions (all zeros:
-unknown; -1 first: not provided) give None. (Was in ``tests/unit/test_measurement_covariance.py``;
-the module imports rclpy: node tier.)"""
+unknown; -1 first: not provided) give None."""
 import numpy as np
-import pytest
 from scipy.spatial.transform import Rotation
+
+from adcs_nodes.components import base as tf
 
 
 def test_covariance_to_body_rotates_and_follows_the_ros_conventions():
-    tf = pytest.importorskip('adcs_nodes.nodes.tf')
     q = Rotation.from_euler('zyx', [90.0, 20.0, -30.0], degrees=True).as_quat()
     c_sensor = np.diag([375e-9, 25e-9, 65e-9]) ** 2
     c_body = tf.covariance_to_body(c_sensor.reshape(-1), q)
