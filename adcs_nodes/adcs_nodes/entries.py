@@ -38,7 +38,7 @@ def _build_magnetic(p: Dict[str, Any], ctx: Dict[str, Any]):
         mode=p['mode'], alpha=p['alpha_per_s'], k=p['k_Nms'],
         max_dipole_Am2=ctx['max_dipole_Am2'], beta=p['beta'] if p['beta'] > 0 else None,
         switch_angle_deg=p['switch_angle_deg'], switch_rate_deg_s=p['switch_rate_deg_s'],
-        n_wheels=_n_wheels(ctx))
+        n_wheels=_n_wheels(ctx), inertia=ctx['inertia_kgm2'] if p['feedforward'] else None)
 
 
 def _magnetic_gains(p: Dict[str, Any]) -> None:
@@ -60,7 +60,9 @@ register(Entry(
      Param('switch_angle_deg', 'float', 15.0, 'deg', 'two_stage: switch below this angle',
            positive=True, max=180.0),
      Param('switch_rate_deg_s', 'float', 0.2, 'deg/s', 'two_stage: and below this rate',
-           positive=True)),
+           positive=True),
+     Param('feedforward', 'bool', False, '-', 'beyond paper 000: add the gyroscopic and '
+           'gravity-gradient torques of the estimate to M* (F1); false: the paper\'s law')),
     _build_magnetic, inputs=('estimate', 'target', 'magnetometer'),
     actuators=('magnetorquer',), check=_magnetic_gains))
 
@@ -243,7 +245,9 @@ def _filter_args(p: Dict[str, Any]) -> Dict[str, Any]:
                 substeps=p['substeps'], max_rate_rad_s=p['max_rate_rad_s'],
                 max_disturbance_rad_s2=p['max_disturbance_rad_s2'],
                 use_sensor_covariance=p['use_sensor_covariance'],
-                theta_interval_s=p['theta_interval_s'])
+                theta_interval_s=p['theta_interval_s'], hypotheses=p['hypotheses'],
+                hypothesis_window_s=p['hypothesis_window_s'],
+                misalignment_std0_rad=math.radians(p['misalignment_std0_deg']))
 
 
 def _build_magnetic_filter(p: Dict[str, Any], ctx: Dict[str, Any]):
@@ -272,6 +276,14 @@ MAGNETIC_FILTER_PARAMS = (
           'given for (paper 000: 10 s); a sample d < this after the last one updates with '
           'theta x this/d and tau x d/this (the noise model follows the sample interval); '
           '0: off', min=0.0),
+    Param('hypotheses', 'int', 1, '-', 'beyond paper 000: at the first lock, this many '
+          'hypotheses turned about the measured field run side by side and the likeliest goes '
+          "on (core/estimation/hypotheses.py); 1: the paper's single filter", min=1, max=12),
+    Param('hypothesis_window_s', 'float', 2000.0, 's', 'time from the start of the hypotheses '
+          'to the choice (scored over its second half)', positive=True),
+    Param('misalignment_std0_deg', 'float', 0.0, 'deg', 'beyond paper 000: prior std of a '
+          "magnetometer misalignment estimated in 3 more states; 0: the paper's 9 states",
+          min=0.0, max=15.0),
 )
 
 register(Entry(

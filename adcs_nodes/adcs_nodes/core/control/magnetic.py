@@ -74,16 +74,19 @@ Assumptions (not in the paper)
 * ``|B| < b_min_T`` (default 1e-9 T): zero dipole with a reason (guarded pseudo-inverse,
   pitfall 8). ``B`` is the measured field (digest 3.6).
 
-Compiled law (issue 13)
------------------------
-:meth:`MagneticController.law` checks its inputs in Python and computes (7), (10), (16) /
-(21), (29) / (32), (30), (31) in one call of :func:`law_kernel`, compiled by numba
-(``cache=True``, no fastmath: IEEE arithmetic in the order written). The kernel repeats the
-operations of the helper functions above (:func:`relative_rate`, :func:`target_rate_three_axis`,
-...) in the same order, so it gives their bits; a unit test compares them, and the kernel run
-uncompiled (``NUMBA_DISABLE_JIT=1``). The one-axis direction ``s = R(q_err)^T xi`` is summed in
-index order (it was a BLAS matrix-vector product, whose summation order depends on the CPU's
-BLAS kernel): the same bits for ``xi`` on a body axis (the default ``z``).
+Beyond the paper: feed-forward (``inertia`` given; DEPARTURE, off by default)
+------------------------------------------------------------------------------
+The paper's Lyapunov argument leaves out the gyroscopic and gravity-gradient torques (they
+vanish at the orbital frame for its I_x = I_y). On another inertia, or off the orbital frame,
+they are added to the demand from the estimate::
+
+    M* <- M* + omega x I omega - 3 omega0^2 e_R x I e_R                                      (F1)
+
+Compiled law
+------------
+:func:`law_kernel` (numba, ``cache=True``, no fastmath) repeats the helper functions'
+operations in their order, so it gives their bits (a unit test compares them, and the kernel
+run uncompiled).
 """
 from __future__ import annotations
 
@@ -266,7 +269,7 @@ def _normalized(q):
 
 @jit
 def law_kernel(q_orbit_body, omega_body_eci_body, omega0, q_ref, y_ref, b_body, xi, alpha, k,
-               max_dipole, three_axis, may_switch, switch_angle, switch_rate):
+               max_dipole, three_axis, may_switch, switch_angle, switch_rate, m_ff, use_ff):
     """Paper 000's magnetic law for one frame, compiled (see the module docstring).
 
     Parameters
@@ -293,6 +296,8 @@ def law_kernel(q_orbit_body, omega_body_eci_body, omega0, q_ref, y_ref, b_body, 
         Two-stage mode in the one-axis stage: switch to the three-axis law when the axis
         angle is below ``switch_angle`` [rad] and ``|y - y_ref|`` below ``switch_rate``
         [rad/s].
+    m_ff : numpy.ndarray, shape (3,)
+        Feed-forward torque (F1) [N m], added to ``M*`` when ``use_ff``.
 
     Returns
     -------
@@ -353,6 +358,8 @@ def law_kernel(q_orbit_body, omega_body_eci_body, omega0, q_ref, y_ref, b_body, 
     m_star = np.zeros(3)
     for i in range(3):
         m_star[i] = -k * (y[i] - y_star[i])                                      # (29) / (32)
+        if use_ff:
+            m_star[i] += m_ff[i]                                                          # (F1)
     bb = b_body[0] * b_body[0] + b_body[1] * b_body[1] + b_body[2] * b_body[2]
     l_star = cross(b_body, m_star)                                                    # (30)
     phi = 0.0
@@ -387,7 +394,8 @@ def warm_up() -> None:
     constructor: the first compilation (1-2 s) never falls inside a frame."""
     q, v = np.array([0.0, 0.0, 0.0, 1.0]), np.array([1e-5, 0.0, 2e-5])
     for three_axis in (True, False):
-        law_kernel(q, v, 1e-3, q, v, v, v, 1e-3, 0.2, v, three_axis, not three_axis, 0.1, 0.1)
+        law_kernel(q, v, 1e-3, q, v, v, v, 1e-3, 0.2, v, three_axis, not three_axis, 0.1, 0.1,
+                   v, three_axis)
 
 
 class MagneticController:
@@ -418,6 +426,8 @@ class MagneticController:
         Length of the (zero) wheel-torque vector in the command.
     b_min_T : float
         Field magnitude below which the dipole is zero [T], > 0. Default 1e-9.
+    inertia : array_like, shape (3, 3), or None
+        Inertia [kg m^2] for the feed-forward (F1); None: the paper's law.
 
     Raises
     ------
@@ -429,7 +439,8 @@ class MagneticController:
                  max_dipole_Am2: ArrayLike = 40.0, beta: Optional[float] = None,
                  sigma_star: float = 1.0, switch_angle_deg: float = 15.0,
                  switch_rate_deg_s: float = 0.2, xi_body: ArrayLike = (0.0, 0.0, 1.0),
-                 n_wheels: int = 0, b_min_T: float = B_MIN_DEFAULT_T) -> None:
+                 n_wheels: int = 0, b_min_T: float = B_MIN_DEFAULT_T,
+                 inertia: Optional[ArrayLike] = None) -> None:
         if mode not in MODES:
             raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
         check_gains(alpha, k, beta, sigma_star)
@@ -454,6 +465,7 @@ class MagneticController:
             raise ValueError(f'n_wheels must be an integer >= 0, got {n_wheels!r}')
         self.n_wheels = int(n_wheels)
         self.b_min = positive(b_min_T, 'b_min_T', 'T')
+        self.inertia = None if inertia is None else np.array(inertia, dtype=float).reshape(3, 3)
         warm_up()
         self.stage = ''
         self.reset()
@@ -481,6 +493,16 @@ class MagneticController:
             except ValueError as exc:
                 return self._zero(str(exc))
         return self.law(inputs.estimate, target, inputs.field_body(), t, dt)
+
+    def feedforward(self, q_orbit_body: np.ndarray, omega_body_eci_body: np.ndarray,
+                    omega0: float) -> np.ndarray:
+        """(F1) ``omega x I omega - 3 omega0^2 e_R x I e_R`` (3,) [N m] of the estimate
+        (zeros without an inertia)."""
+        if self.inertia is None:
+            return np.zeros(3)
+        e_r, _ = orbit_axes_in_body(q_orbit_body)
+        return (np.cross(omega_body_eci_body, self.inertia @ omega_body_eci_body)
+                - 3.0 * omega0 ** 2 * np.cross(e_r, self.inertia @ e_r))
 
     def law(self, estimate: Optional[Estimate], target: Optional[Target],
             b_body: Optional[ArrayLike], t: float, dt: float) -> Command:
@@ -530,7 +552,9 @@ class MagneticController:
         out = law_kernel(q_est, w_est, float(estimate.omega0), q_ref, y_ref, b, self.xi,
                          self.alpha, self.k, self.max_dipole, self.stage == 'three_axis',
                          self.stage == 'one_axis' and self.mode == 'two_stage',
-                         self.switch_angle, self.switch_rate)   # (7), (16)/(21), (29)-(31)
+                         self.switch_angle, self.switch_rate,       # (7), (16)/(21), (29)-(31)
+                         self.feedforward(q_est, w_est, float(estimate.omega0)),
+                         self.inertia is not None)
         angle = float(out[K_ANGLE])
         if out[K_THREE_AXIS] == 1.0:
             self.stage = 'three_axis'

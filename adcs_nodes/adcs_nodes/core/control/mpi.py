@@ -79,22 +79,11 @@ Assumptions (not in the paper)
 
 Beyond the paper: the two-wing variant (DEPARTURE, off by default)
 -----------------------------------------------------------------
-With two mirrored wings (``scenarios/paper001_mpi_two_wings.yaml``) the rate error is corrected
-at high frequency by the hub inertia ``I_b - F F^T``, about half of ``I_b`` about y and z
-(digest 2.2). Per axis, with ``A ~ [[0, E], [0, 0]]`` and horizon ``H`` (digest 3.6), the law
-is ``u = -(H^2/2 (e + H e_dot) + H e_dot) / (H^4/4 + H^2)`` (``Q^+ Phi x``); its rate gain
-per control period ``T`` on the full inertia is ``g = T (1 + H^2/2) / (H (1 + H^2/4))``, and
-the hub sees ``rho g`` with ``rho = I / I_hub ~ 2``. The paper's ``H = T = 0.2 s`` gives
-``g = 1.01``: ``rho g ~ 2``, a closed-loop pole at ``1 - rho g ~ -1.02`` (2.5 Hz, the torque
-chatter of P14, 62 % of frames at the limit). ``hold_horizon_s = 0.4`` (``H = 2 T``) gives
-``g = 0.52`` and ``rho g ~ 1.04``: dead-beat on the hub instead of on the whole craft
-(ASSUMPTION: chosen from this estimate, ``tests/unit/test_mpi.py``; not tuned by runs: 1.0 s
-held the stabilisation rows as well in one 1000 s run). A horizon of ``H`` aiming at the target
-of ``t0`` lags a moving target by ``H`` (P15), twice the paper's; the variant therefore also
-sets ``reference_time='t0_plus_tau'``. The variant is the pair ``hold_horizon_s: 0.4``,
-``reference_time: t0_plus_tau``; the defaults (0 and ``t0``) are the paper's law. Measured
-(5000 s, plain engine): the stabilisation and tracking rows within the paper's bounds with two
-wings (``docs/paper001.md``).
+With two mirrored wings the hub inertia ``I_b - F F^T`` is about half of ``I_b`` about y and z,
+so the one-period horizon's rate gain per period ``g = T (1 + H^2/2) / (H (1 + H^2/4)) = 1.01``
+becomes ~2 on the hub: a pole near -1 (2.5 Hz chatter, digest P14). ``hold_horizon_s = 0.4``
+gives ``g = 0.52`` (dead-beat on the hub) and ``reference_time='t0_plus_tau'`` removes the lag
+of a longer horizon (P15). Measured in ``docs/paper001.md``; the defaults are the paper's law.
 """
 from __future__ import annotations
 

@@ -16,22 +16,16 @@ Algorithms here:
   its covariance to the published 6x6 attitude-angle/rate covariance: for small angles the
   error angle is ``2 phi`` (or ``2 mu``), so ``P_angle = 4 P_phi``, ``P_angle,rate = 2 P_phi,w``.
   An interval ``dt`` longer than ``max_step_s`` (live mode: a late frame, samples lost) is
-  predicted in ``n = ceil(dt / max_step_s)`` equal steps of ``dt / n``, each with its own
-  RK4 step(s) and ``expm(A dt / n)`` (A re-linearised each step): one RK4 step and one frozen
-  ``A`` over tens of seconds of a body tumbling at ~5 deg/s diverged
-  (``tests/unit/test_live_gaps.py``). With ``dt = max_step_s`` (lockstep) nothing changes.
-  **Sample interval** (issue 23, item 5): the paper's ``theta`` and ``tau`` of (38) are given
-  for one sample every ``theta_interval_s`` (10 s in paper 000). The noise model follows the
-  actual interval ``d`` since the last accepted sample: with ``r = d / theta_interval_s < 1``
-  a sample updates with ``theta / r`` and ``tau * r`` (n samples of variance ``n theta``
-  carry the information of one of ``theta``; the ``sigma_j`` inflation stays per unit time),
-  ``r`` floored at 1e-3; ``d >= theta_interval_s`` (the paper's rate, a lost sample) leaves
-  both unchanged, so a 10 s run is bit for bit what it was. Measured on paper000_estimation
-  (plain engine, one sample per interval, median / 95th percentile over T/2..T [deg],
-  without -> with): 0.1 s 3.73 / 9.66 -> 2.53 / 4.04 (not converged for good either way),
-  0.5 s 9.32 / 34.3 -> 0.62 / 1.18, 2 s 1.66 / 5.98 -> 0.62 / 1.44, 6 s 0.80 / 1.60 ->
-  0.69 / 1.15, 10 s 0.70 / 1.09 both. ``theta_interval_s = 0``: off (the paper's numbers
-  per sample).
+  predicted in ``n = ceil(dt / max_step_s)`` equal steps of ``dt / n`` (A re-linearised each
+  step; one step over tens of seconds of a tumble diverged). **Sample interval**: theta and
+  tau of (38) are given for one sample every ``theta_interval_s`` (10 s in paper 000); a
+  sample ``d < theta_interval_s`` after the last accepted one updates with ``theta / r`` and
+  ``tau * r``, ``r = d / theta_interval_s`` floored at 1e-3 (n samples of variance ``n theta``
+  carry the information of one of ``theta``); ``theta_interval_s = 0``: off. Measurements in
+  ``docs/decisions.md``. **Hypotheses** (``hypotheses`` > 1, beyond the paper): a bank of
+  filters turned about the measured field, :mod:`~adcs_nodes.core.estimation.hypotheses`;
+  the misalignment states of the filter (``misalignment_std0_rad``) open when it decides
+  (without a bank: at the first lock), so that the attitude is acquired first.
 * :class:`GeometricEstimator`: TRIAD or paper 004's horizon + magnetometer yaw (formula (3)),
   with the rate as the finite difference of successive attitudes::
 
@@ -53,6 +47,7 @@ from adcs_nodes.core import attitude as att
 from adcs_nodes.core.estimation.horizon_yaw import (attitude_from_horizon_and_yaw,
                                                     triad_from_horizon_and_field,
                                                     yaw_from_horizon_and_field)
+from adcs_nodes.core.estimation.hypotheses import HypothesisBank, locked
 from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
 from adcs_nodes.core.estimation.onboard import OnboardState
 
@@ -152,7 +147,8 @@ class MagneticFilterEstimator:
 
     def __init__(self, inertia: ArrayLike, max_rate_rad_s: float = 1.0,
                  use_sensor_covariance: bool = True, max_step_s: float = MAX_STEP_S,
-                 theta_interval_s: float = THETA_INTERVAL_S, **filter_args) -> None:
+                 theta_interval_s: float = THETA_INTERVAL_S, hypotheses: int = 1,
+                 hypothesis_window_s: float = 2000.0, **filter_args) -> None:
         self.filter = MagneticFilter(inertia, max_rate_rad_s=max_rate_rad_s, **filter_args)
         self.use_sensor_covariance = bool(use_sensor_covariance)
         self.max_rate = float(max_rate_rad_s)
@@ -165,6 +161,8 @@ class MagneticFilterEstimator:
             raise ValueError(f'theta_interval_s must be finite and >= 0 [s], got '
                              f'{theta_interval_s}')
         self.theta_interval = theta_interval_s
+        self.bank = (HypothesisBank(hypotheses, hypothesis_window_s)
+                     if int(hypotheses) > 1 else None)
         self._t_sample: Optional[float] = None     # time of the last accepted sample [s]
         self.q0 = att.identity()
         self.omega_rel0 = np.zeros(3)
@@ -185,49 +183,99 @@ class MagneticFilterEstimator:
             return 1.0
         return min(1.0, max(MIN_INTERVAL_RATIO, (t - self._t_sample) / self.theta_interval))
 
+    def _filters(self) -> list:
+        """The filters stepped this frame: the bank's hypotheses while it runs, else one."""
+        return self.bank.members if self.bank is not None and self.bank.active else [self.filter]
+
+    def _reset(self, ref: OnboardState) -> None:
+        self.filter.reset(self.q0, omega_eci_from_orbit(self.q0, self.omega_rel0, ref.omega0))
+        if self.bank is not None:
+            self.bank.clear()
+
+    def _predict(self, f: MagneticFilter, inputs: EstimatorInputs, dt: float) -> bool:
+        """Predict ``f`` over ``dt`` in steps of at most ``max_step_s``; False: diverged."""
+        dipole = inputs.dipole_body if _finite(inputs.dipole_body) else np.zeros(3)
+        # steps of at most max_step_s (a long live-mode interval in one step diverged)
+        n = min(MAX_PREDICTION_STEPS, max(1, math.ceil(dt / self.max_step * (1.0 - 1e-9))))
+        for _ in range(n):
+            if not f.predict(dt / n, inputs.ref.omega0, dipole,
+                             b_orbit_for_torque=inputs.ref.b_orbit):
+                return False
+        w = f.omega_body_eci_body
+        return _finite(w) and float(np.linalg.norm(w)) <= self.max_rate
+
+    def _predict_all(self, inputs: EstimatorInputs, dt: float, out: Step) -> None:
+        filters = self._filters()
+        for k in reversed(range(len(filters))):
+            if self._predict(filters[k], inputs, dt):
+                continue
+            if len(filters) > 1:        # a diverged hypothesis leaves the bank
+                self.bank.drop(k)
+                self.filter = self.bank.best()
+                continue
+            self.resets += 1
+            out.rejections.append(
+                f"filter diverged (|omega'| beyond {self.max_rate:g} rad/s or not finite): "
+                f'reset to the initial estimate ({self.resets})')
+            self._reset(inputs.ref)
+
+    def _theta(self, inputs: EstimatorInputs, t: float) -> tuple:
+        """``(theta (3,) [T^2] or None for the filter's own, r)`` of this reading: the
+        sample's variances when given (never below theta), over the interval ratio ``r``."""
+        f = self.filter
+        # ASSUMPTION: theta also covers what a covariance does not (bias, misalignment, models)
+        var = inputs.b_body_var if self.use_sensor_covariance else None
+        theta = None if var is None else np.maximum(f.theta, var)
+        r = self.interval_ratio(t)
+        if r < 1.0:         # samples closer than the paper's interval (module docstring)
+            theta = (np.full(3, f.theta) if theta is None else theta) / r
+        return theta, r
+
+    @staticmethod
+    def _update(f: MagneticFilter, inputs: EstimatorInputs, theta, r: float) -> dict:
+        tau = f.tau
+        f.tau = tau * r
+        try:
+            return f.update(inputs.b_body, inputs.ref.b_orbit, theta_axes=theta)
+        finally:
+            f.tau = tau
+
     def step(self, inputs: EstimatorInputs, t: float, dt: float) -> Step:
         """Predict over ``dt`` with the applied dipole, then update with a fresh sample."""
-        f, ref, out = self.filter, inputs.ref, Step(None)
+        out = Step(None)
         if not self._started:
-            f.reset(self.q0, omega_eci_from_orbit(self.q0, self.omega_rel0, ref.omega0))
+            self._reset(inputs.ref)
             self._started = True
         elif dt > 0:
-            dipole = inputs.dipole_body if _finite(inputs.dipole_body) else np.zeros(3)
-            # steps of at most max_step_s (a long live-mode interval in one step diverged)
-            n = min(MAX_PREDICTION_STEPS, max(1, math.ceil(dt / self.max_step * (1.0 - 1e-9))))
-            ok = True
-            for _ in range(n):
-                ok = f.predict(dt / n, ref.omega0, dipole, b_orbit_for_torque=ref.b_orbit)
-                if not ok:
-                    break
-            w = f.omega_body_eci_body
-            if not ok or not _finite(w) or float(np.linalg.norm(w)) > self.max_rate:
-                self.resets += 1
-                out.rejections.append(
-                    f"filter diverged (|omega'| beyond {self.max_rate:g} rad/s or not finite): "
-                    f'reset to the initial estimate ({self.resets})')
-                f.reset(self.q0, omega_eci_from_orbit(self.q0, self.omega_rel0, ref.omega0))
-        if inputs.b_body is not None:
-            # the sample's own variances when given, floored at theta (ASSUMPTION: theta also
-            # covers what a covariance does not: bias, misalignment, model errors)
-            var = inputs.b_body_var if self.use_sensor_covariance else None
-            theta = None if var is None else np.maximum(f.theta, var)
-            r = self.interval_ratio(t)
-            if r < 1.0:         # samples closer than the paper's interval (module docstring)
-                theta = (np.full(3, f.theta) if theta is None else theta) / r
-                tau, f.tau = f.tau, f.tau * r
-                try:
-                    res = f.update(inputs.b_body, ref.b_orbit, theta_axes=theta)
-                finally:
-                    f.tau = tau
-            else:
-                res = f.update(inputs.b_body, ref.b_orbit, theta_axes=theta)
-            if res.get('accepted', False):
-                self._t_sample = t
-                out.updates = 1
-                out.innovation = [float(v) for v in res['innovation']]
-            else:
-                out.rejections.append(str(res.get('reason', 'update refused')))
+            self._predict_all(inputs, dt, out)
+        if inputs.b_body is None:
+            return self._publish(out)
+        theta, r = self._theta(inputs, t)
+        if self.bank is not None:
+            self.bank.score(inputs.b_body, inputs.ref.b_orbit,
+                            np.full(3, self.filter.theta) if theta is None else theta, t)
+        res = [self._update(f, inputs, theta, r) for f in self._filters()][0]
+        if not res.get('accepted', False):
+            out.rejections.append(str(res.get('reason', 'update refused')))
+            return self._publish(out)
+        self._t_sample = t
+        out.updates = 1
+        out.innovation = [float(v) for v in res['innovation']]
+        if self.bank is None:
+            if locked(self.filter):
+                self.filter.open_misalignment()
+        else:
+            won = self.bank.decide(t)
+            if won is not None:
+                self.filter = won
+                won.open_misalignment()
+            self.bank.maybe_start(self.filter, inputs.b_body, t)
+            if self.bank.active:
+                self.filter = self.bank.best()
+        return self._publish(out)
+
+    def _publish(self, out: Step) -> Step:
+        f = self.filter
         q, omega, p = f.q_orbit_body, f.omega_body_eci_body, f.P
         out.covariance_trace = float(np.trace(p))
         if not _finite(q, omega):

@@ -99,6 +99,25 @@ compiled with numba (``cache=True``, no fastmath: IEEE arithmetic in the order w
 same functions run uncompiled with ``NUMBA_DISABLE_JIT=1`` or without numba; a test checks both
 give the same numbers. Input checks and guards stay in Python around them.
 
+Misalignment states (beyond the paper; ``misalignment_std0_rad`` > 0)
+--------------------------------------------------------------------
+The paper leaves the magnetometer misalignment (up to 10 deg) out of the filter. A reading
+``n = R(delta) C B* + v`` of a sensor turned by the small constant ``delta`` (body axes) reads
+like an attitude error, ``n - C B* ~ delta x n`` against ``-(n + n*) x phi`` (36), so one
+reading cannot tell them apart; the dynamics can: the attitude error turns with the body
+(``dmu/dt = -Phi(omega) mu + ...``, (34)) while ``delta`` stays in it. Three states
+``d_delta = delta^ - delta`` extend ``w`` (12,), with ``dd_delta/dt = 0``, and::
+
+    z = R(delta^)^T n - n*,   H = [-Phi(n + n*), 0_3, 0_3, 1/2 Phi(n + n*)]                 (M2)
+    delta^+ = delta^ - d_delta                                                             (M3)
+    P <- S (P - K H^T P) S,  S^2 = diag(sigma_j I_9, I_3)                                  (M4)
+
+(M4): ``sigma_j`` of (38) stands for process noise of the dynamic states; a constant does not
+get it (inflated, a weakly observed ``delta`` wandered in a slow hold). A sensor turned about
+an axis of symmetry of the inertia reads and moves like the body turned about it: that
+direction is left out of the prior (:func:`observable_misalignment`). The block starts at zero
+and is opened by :meth:`MagneticFilter.open_misalignment` once the attitude is acquired.
+
 Guards (not in the paper)
 -------------------------
 A reading or reference that is not a finite (3,) vector with magnitude in [1e-6, 1e-3] T is
@@ -106,12 +125,10 @@ rejected (state and ``P`` unchanged, reason returned, nothing raised); so is a c
 is not finite or gives ``|omega'|`` > 1 rad/s or ``|m'|`` > 1e-4 rad/s^2 (limits configurable).
 The quaternion is renormalised after every RK4 step and correction; ``P`` is symmetrised.
 
-Behaviour measured in ``tests/unit/test_magnetic_filter.py`` (paper example: 690 km, 98 deg,
-aligned dipole, I = diag(118, 118, 19.6), tumbling at (-3, 3, 3) deg/s, updates every 10 s,
-predictions every 2 s, defaults below): from ``N = {1, 0, 0, 0}`` (138 deg off) the error is
-under 2 deg for good after ~850 s (0.14 orbit). ``P`` is an ellipsoid matrix, not a Kalman
-covariance: with the paper's noise it is conservative (mean NEES ~4 for 6 dof); without noise
-``sigma_j ~ 1`` and it becomes overconfident. The literal (38) diverges from that start.
+Measured (``tests/unit/test_magnetic_filter.py``, the paper's example tumble, defaults below):
+from ``N = {1, 0, 0, 0}`` (138 deg off) the error is under 2 deg for good after ~850 s. ``P`` is
+an ellipsoid matrix, not a covariance (mean NEES ~4 for 6 dof with the paper's noise). The
+literal (38) diverges from that start.
 """
 from __future__ import annotations
 
@@ -139,12 +156,30 @@ B_MAX_T = 1e-3
 MAX_RATE_DEFAULT = 1.0
 """Default largest accepted ``|omega'|`` [rad/s] after a correction (sanity guard, not paper)."""
 MAX_DISTURBANCE_DEFAULT = 1e-2
-"""Default largest accepted ``|m'|`` [rad/s^2] after a correction (sanity guard, not paper).
-
-A divergence guard only: 1e-4 rejected every reading during the transient of paper 000's
-case (the launched graph never converged with it)."""
+"""Default largest accepted ``|m'|`` [rad/s^2] after a correction (divergence guard only)."""
+MAX_MISALIGNMENT_RAD = math.radians(15.0)
+"""Largest accepted misalignment estimate and prior std [rad] (paper 000: up to 10 deg)."""
 MU_CLAMP = 0.999
 """Largest ``|mu|`` recovered from form (37) (digest pitfall 7)."""
+
+
+def observable_misalignment(inertia: ArrayLike, rel_tol: float = 1e-6) -> np.ndarray:
+    """Projector (3, 3) onto the misalignment directions the dynamics can tell from attitude.
+
+    A sensor turned about an axis of symmetry of the inertia ellipsoid reads like the body
+    turned about it (same readings, same dynamics): with two principal moments equal (within
+    ``rel_tol``) the distinct principal axis ``a`` is removed, ``I - a a^T``; with three equal,
+    nothing is observable (zero); else the identity.
+    """
+    moments, axes = np.linalg.eigh(np.asarray(inertia, dtype=float))
+    close = [abs(moments[i] - moments[j]) <= rel_tol * moments[2]
+             for i, j in ((0, 1), (1, 2), (0, 2))]
+    if all(close):
+        return np.zeros((3, 3))
+    if close[0] or close[1] or close[2]:
+        a = axes[:, 2 if close[0] else 0 if close[1] else 1]
+        return np.eye(3) - np.outer(a, a)
+    return np.eye(3)
 
 
 # ------------------------------------------------------------------- convention boundary
@@ -395,32 +430,10 @@ def _rates_k(q, omega, m, inertia, inertia_inv, omega0, dipole, field, field_mod
 @jit(loads_numba=True)
 def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, field_mode,
                    h, substeps):
-    """``substeps`` RK4 steps of (33) of ``h`` seconds and ``P <- F P F^T`` (34).
-
-    Parameters
-    ----------
-    q, omega, m : numpy.ndarray
-        ``N`` (4,), ``omega'`` (3,) [rad/s], ``m'`` (3,) [rad/s^2].
-    p : numpy.ndarray
-        ``P`` (9, 9).
-    inertia, inertia_inv : numpy.ndarray
-        ``I`` and ``I^-1`` (3, 3).
-    omega0 : float
-        Orbit rate [rad/s].
-    dipole, field : numpy.ndarray
-        ``L`` (3,) [A m^2]; field (3,) [T] in body (``field_mode`` 1) or orbit (2) axes.
-    field_mode : int
-        0: no magnetic torque; 1: ``L x field``; 2: ``L x C(N) field``.
-    h : float
-        Substep [s].
-    substeps : int
-        Number of substeps.
-
-    Returns
-    -------
-    tuple of numpy.ndarray
-        ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (9, 9) (symmetrised); may be non-finite.
-    """
+    """``substeps`` RK4 steps of (33) of ``h`` [s] and ``P <- F P F^T`` (34); the arguments
+    are :meth:`MagneticFilter.predict`'s on arrays (``field_mode`` 0: no magnetic torque, 1:
+    ``L x field`` with ``field`` in body axes, 2: ``L x C(N) field``, orbit axes). Returns
+    ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (symmetrised); may be non-finite."""
     f = np.eye(9)
     for _ in range(substeps):
         a = error_matrix_kernel(inertia, inertia_inv, omega0, q, omega)  # (34), frozen
@@ -436,6 +449,11 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
         q = q + h / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
         omega = omega + h / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
         q = q / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    ns = p.shape[0]
+    if ns > 9:    # constant misalignment states: F = blockdiag(F_9, I)
+        f_full = np.eye(ns)
+        f_full[:9, :9] = f
+        f = f_full
     p = matmul(matmul(f, p), f.T.copy())
     p = 0.5 * (p + p.T)
     return q, omega, p
@@ -444,53 +462,37 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
 @jit(loads_numba=True)
 def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_innovation,
                   form_phi):
-    """(36)/(37), the sequential update (38) and the correction (39) on arrays.
-
-    Parameters
-    ----------
-    q, omega, m, p : numpy.ndarray
-        ``N`` (4,), ``omega'`` (3,), ``m'`` (3,), ``P`` (9, 9).
-    n : numpy.ndarray
-        Measured field (3,) [T], body axes.
-    b_ref : numpy.ndarray
-        Model field ``B*`` (3,) [T], orbit axes.
-    theta : numpy.ndarray
-        ``theta_j`` of (38) per body axis (3,) [T^2].
-    tau : float
-        ``tau`` of (38).
-    literal, sigma_from_innovation, form_phi : bool
-        As :class:`MagneticFilter`'s options (``form_phi``: (36), else (37)).
-
-    Returns
-    -------
-    tuple
-        ``N+`` (4,) (not normalised when degenerate), ``omega'+`` (3,), ``m'+`` (3,),
-        ``P+`` (9, 9), ``z`` (3,), ``w`` (9,), ``sigma`` (3,); may be non-finite.
-    """
+    """(36)/(37) (and (M2)), the sequential update (38) and the correction (39) on arrays:
+    the arguments of :meth:`MagneticFilter.update` (``theta`` (3,) [T^2] per body axis,
+    ``form_phi``: (36)). Returns ``N+`` (4,), ``omega'+`` (3,), ``m'+`` (3,), ``P+``, ``z``
+    (3,), ``w`` and ``sigma`` (3,); may be non-finite."""
     r = dcm(q)
     n_star = np.empty(3)
     for i in range(3):   # n* = C(N) B* = R(N)^T B*
         n_star[i] = r[0, i] * b_ref[0] + r[1, i] * b_ref[1] + r[2, i] * b_ref[2]
     z = n - n_star
-    h_mat = np.zeros((3, 9))
+    ns = p.shape[0]
+    h_mat = np.zeros((3, ns))
     sk = skew(n + n_star)
     for i in range(3):
         for j in range(3):
             h_mat[i, j] = -sk[i, j]              # (36)/(37)
+            if ns > 9:
+                h_mat[i, 9 + j] = 0.5 * sk[i, j]    # (M2): misalignment error
     p = p.copy()
-    w = np.zeros(9)
+    w = np.zeros(ns)
     sigma = np.ones(3)
     for j in range(3):   # (38), sequential
         hj = h_mat[j]
-        ph = np.zeros(9)
-        for a in range(9):
+        ph = np.zeros(ns)
+        for a in range(ns):
             acc = 0.0
-            for b in range(9):
+            for b in range(ns):
                 acc += p[a, b] * hj[b]
             ph[a] = acc
         hph = 0.0
         hw = 0.0
-        for a in range(9):
+        for a in range(ns):
             hph += hj[a] * ph[a]
             hw += hj[a] * w[a]
         s = theta[j] + hph
@@ -498,9 +500,15 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
         nu = z[j] if literal else z[j] - hw
         r_sig = nu if (sigma_from_innovation and not literal) else z[j]
         sigma[j] = 1.0 + tau * r_sig * r_sig / s
-        for a in range(9):
-            for b in range(9):
+        for a in range(ns):
+            for b in range(ns):
                 p[a, b] = sigma[j] * (p[a, b] - k[a] * ph[b])
+        if ns > 9:   # (M4): P <- S P S, S^2 = diag(sigma, 1): no inflation of a constant
+            root = 1.0 / math.sqrt(sigma[j])
+            for a in range(9, ns):
+                for b in range(ns):
+                    p[a, b] *= root
+                    p[b, a] *= root
         w = w + k * nu
     p = 0.5 * (p + p.T)
     q_new, omega_new, m_new = correct_kernel(q, omega, m, w, form_phi)
@@ -547,6 +555,9 @@ def warm_up() -> None:
     for literal in (False, True):
         update_kernel(q, z3, z3, np.eye(9), np.ones(3), np.ones(3), np.ones(3), 0.01,
                       literal, False, True)
+    update_kernel(q, z3, z3, np.eye(12), np.ones(3), np.ones(3), np.ones(3), 0.01, False,
+                  False, True)
+    predict_kernel(q, z3, z3, np.eye(12), eye3, eye3, 1e-3, z3, z3, 2, 1.0, 1)
     correct_kernel(q, z3, z3, np.zeros(9), False)
     _WARM['done'] = True
 
@@ -582,6 +593,8 @@ class MagneticFilter:
         divergence, not in the paper; the paper's tumbling is up to 3 deg/s per axis).
     max_disturbance_rad_s2 : float
         Same guard for ``|m'|`` [rad/s^2] (the paper's example has ``|m| = 3.3e-8``).
+    misalignment_std0_rad : float
+        Prior std [rad] of the misalignment states (M2)-(M4); 0: the paper's 9 states.
 
     Raises
     ------
@@ -595,7 +608,8 @@ class MagneticFilter:
                  sigma_from_innovation: bool = False,
                  b_limits_T: tuple[float, float] = (B_MIN_T, B_MAX_T),
                  max_rate_rad_s: float = MAX_RATE_DEFAULT,
-                 max_disturbance_rad_s2: float = MAX_DISTURBANCE_DEFAULT) -> None:
+                 max_disturbance_rad_s2: float = MAX_DISTURBANCE_DEFAULT,
+                 misalignment_std0_rad: float = 0.0) -> None:
         inertia = np.asarray(inertia, dtype=float)
         theta, tau = float(theta), float(tau)
         max_rate_rad_s = float(max_rate_rad_s)
@@ -637,6 +651,15 @@ class MagneticFilter:
             raise ValueError('max_disturbance_rad_s2 must be finite and > 0, got '
                              f'{max_disturbance_rad_s2}')
         self.max_disturbance = float(max_disturbance_rad_s2)
+        mis = float(misalignment_std0_rad)
+        if not (math.isfinite(mis) and 0.0 <= mis <= MAX_MISALIGNMENT_RAD):
+            raise ValueError(f'misalignment_std0_rad must be in [0, {MAX_MISALIGNMENT_RAD}], '
+                             f'got {misalignment_std0_rad}')
+        self._p0 = np.diag(p0)
+        if mis > 0.0:
+            self._p0 = np.zeros((12, 12))
+            self._p0[:9, :9] = np.diag(p0)
+            self._p_mis = mis ** 2 * observable_misalignment(inertia)
         warm_up()   # compiled kernels ready before the first step (numba cache)
         self.reset(attitude.identity(), np.zeros(3))
 
@@ -662,8 +685,17 @@ class MagneticFilter:
         self._q = attitude.normalize(q_orbit_body0)
         self._omega = finite_vector(omega_body_eci_body0, 'omega_body_eci_body0', (3,)).copy()
         self._m = finite_vector(m0, 'm0', (3,)).copy()
-        self._p = np.diag(self.p0_diag)
+        self._p = self._p0.copy()
+        self._delta = np.zeros(3)
         self._last_b_meas: Optional[np.ndarray] = None
+
+    def set_state(self, q_orbit_body: ArrayLike, omega_body_eci_body: ArrayLike, m: ArrayLike,
+                  p: ArrayLike) -> None:
+        """Set ``N`` (4,), ``omega'`` (3,) [rad/s], ``m'`` (3,) [rad/s^2] and ``P`` (9 or 12)."""
+        self._q = attitude.normalize(q_orbit_body)
+        self._omega = finite_vector(omega_body_eci_body, 'omega_body_eci_body', (3,)).copy()
+        self._m = finite_vector(m, 'm', (3,)).copy()
+        self._p = np.array(p, dtype=float).reshape(self._p0.shape)
 
     @property
     def q_orbit_body(self) -> np.ndarray:
@@ -685,9 +717,36 @@ class MagneticFilter:
         """``m'`` (3,) [rad/s^2]: estimated disturbance acceleration ``I^-1 M_r``, body axes."""
         return self._m.copy()
 
+    def open_misalignment(self) -> bool:
+        """Open the misalignment block of ``P`` (prior ``misalignment_std0_rad``, observable
+        directions only); the states start closed (zero) so that the attitude is acquired
+        first. False when there are no such states or they are already open."""
+        if self._p.shape[0] == 9 or self._p[9:, 9:].any():
+            return False
+        self._p[9:, 9:] = self._p_mis
+        return True
+
+    @property
+    def misalignment_rad(self) -> np.ndarray:
+        """``delta^`` (3,) [rad]: estimated sensor misalignment, ``n = R(delta) C B*`` (zero
+        unless ``misalignment_std0_rad`` > 0)."""
+        return self._delta.copy()
+
+    def corrected(self, b_meas_body: ArrayLike) -> np.ndarray:
+        """``R(delta^)^T n`` (3,) [T]: the reading with the estimated misalignment removed."""
+        n = np.asarray(b_meas_body, dtype=float)
+        if self._p0.shape[0] == 9:
+            return n
+        return attitude.to_matrix(attitude.from_rotation_vector(self._delta)).T @ n
+
+    def residual(self, b_meas_body: ArrayLike, b_ref_orbit: ArrayLike) -> np.ndarray:
+        """``z = n - n*`` (3,) [T] of a reading before the update (misalignment removed)."""
+        return self.corrected(b_meas_body) - predicted_field_body(self._q, b_ref_orbit)
+
     @property
     def P(self) -> np.ndarray:
-        """``P`` (9, 9): ellipsoid matrix of ``[phi or mu, d_omega, d_m]`` (not a covariance)."""
+        """``P`` (9, 9) or (12, 12): ellipsoid matrix of ``[phi or mu, d_omega, d_m(, d_delta)]``
+        (not a covariance)."""
         return self._p.copy()
 
     def omega_body_orbit_body(self, omega0: float) -> np.ndarray:
@@ -763,7 +822,7 @@ class MagneticFilter:
             return False
         self._q, self._omega = q, omega
         if not np.all(np.isfinite(p)):
-            self._p = np.diag(self.p0_diag)
+            self._p = self._p0.copy()
             return False
         self._p = p
         return True
@@ -817,7 +876,7 @@ class MagneticFilter:
         with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
             # n* = conj(N) . B* . N, (36)/(37), (38) sequential, correction (39)
             q, omega, m, p, z, w, sigma = update_kernel(
-                self._q, self._omega, self._m, self._p, np.ascontiguousarray(n),
+                self._q, self._omega, self._m, self._p, np.ascontiguousarray(self.corrected(n)),
                 np.ascontiguousarray(b_ref), np.ascontiguousarray(theta, dtype=float),
                 self.tau, self.literal_update, self.sigma_from_innovation,
                 self.measurement_form == 'phi')
@@ -833,7 +892,12 @@ class MagneticFilter:
                              f'rad/s^2, beyond ({self.max_rate:.3g}, {self.max_disturbance:.3g}); '
                              'reading ignored')
             return out
-        self._q, self._omega, self._m, self._p = q, omega, m, p
+        delta = self._delta - w[9:12] if w.size > 9 else self._delta    # (M3)
+        if not math.sqrt(float(delta @ delta)) <= MAX_MISALIGNMENT_RAD:
+            out['reason'] = (f'correction gives a misalignment of {np.degrees(delta)} deg, '
+                             f'beyond {math.degrees(MAX_MISALIGNMENT_RAD):.3g}; reading ignored')
+            return out
+        self._q, self._omega, self._m, self._p, self._delta = q, omega, m, p, delta
         self._last_b_meas = n.copy()
         out['accepted'], out['correction'], out['sigma'] = True, w, sigma
         return out

@@ -34,37 +34,11 @@ two estimators exchange only ``b^``. Model error in ``|B*|`` (e.g. a dipole onbo
 against the full field) enters (B1) like a bias along ``n`` and must be covered by
 ``sigma_m``; a filter reset (divergence) keeps ``b^`` (it does not depend on the attitude).
 
-Constructor parameters (for the registry entry ``magnetic_filter_bias``)
-----------------------------------------------------------------------------
-Every parameter of :class:`~adcs_nodes.core.estimation.magnetic_filter.MagneticFilter`
-(``inertia``, ``theta`` [T^2], ``tau``, ``p0_diag``, ``measurement_form``, ``literal_update``,
-``substeps``, ``sigma_from_innovation``, ``b_limits_T``, ``max_rate_rad_s``,
-``max_disturbance_rad_s2``; same meaning and defaults), plus:
-
-=====================  =========  ========  ========  ===================  =====================
-name                   type       default   unit      range                meaning
-=====================  =========  ========  ========  ===================  =====================
-``bias0_T``            float[3]   [0,0,0]   T         each abs <= max      initial bias estimate
-                                                      bias                 (body axes)
-``bias_std0_T``        float      2e-7      T         > 0, <= 1e-4         prior std of each
-                                                                           bias component
-                                                                           (paper: up to 120 nT)
-``magnitude_std_T``    float      3e-7      T         > 0, <= 1e-4         sigma_m of (B3): std
-                                                                           of the field-
-                                                                           magnitude residual
-                                                                           (sensor noise along
-                                                                           the field + model
-                                                                           error); default
-                                                                           sqrt(theta)
-``bias_walk_T_sqrt_s`` float      0.0       T/sqrt(s) >= 0                 q_b: random-walk
-                                                                           drift of the bias
-                                                                           (0: constant)
-``max_bias_T``         float      5e-6      T         > 0                  guard: an update
-                                                                           giving a larger
-                                                                           |b^| is refused
-``bias_gate_sigma``    float      5.0       -         > 0                  innovation gate of
-                                                                           (B4) in std of S
-=====================  =========  ========  ========  ===================  =====================
+Parameters: those of :class:`~adcs_nodes.core.estimation.magnetic_filter.MagneticFilter`,
+plus ``bias0_T`` (3,) [T] (initial estimate), ``bias_std0_T`` [T] (prior std per axis),
+``magnitude_std_T`` [T] (sigma_m of (B3)), ``bias_walk_T_sqrt_s`` [T/sqrt(s)] (q_b),
+``max_bias_T`` [T] (an update giving a larger component is refused) and ``bias_gate_sigma``
+(the gate of (B4)); units, ranges and defaults in the registry entry.
 
 Wrapped for the estimator node by :class:`MagneticFilterBiasEstimator` (the interface of
 :mod:`adcs_nodes.core.estimation.algorithms`, like ``magnetic_filter``).
@@ -246,6 +220,10 @@ class MagneticFilterBias(MagneticFilter):
         out.update({'bias': self.bias_body_T, 'bias_updated': updated})
         return out
 
+    def residual(self, b_meas_body: ArrayLike, b_ref_orbit: ArrayLike) -> np.ndarray:
+        """``z`` (3,) [T] of a reading before the update, bias and misalignment removed."""
+        return super().residual(np.asarray(b_meas_body, dtype=float) - self._b, b_ref_orbit)
+
     def _paper_update(self, b_meas_body, b_ref_orbit, theta_axes) -> dict:
         """The paper's update (36)-(39) (``theta_axes`` passed only when given)."""
         if theta_axes is None:
@@ -265,10 +243,11 @@ class MagneticFilterBiasEstimator(MagneticFilterEstimator):
         super().__init__(inertia, max_rate_rad_s=max_rate_rad_s,
                          **{k: v for k, v in filter_args.items()
                             if k not in _BIAS_KEYS})
-        filter_args.pop('use_sensor_covariance', None)     # the wrapper's options
-        filter_args.pop('theta_interval_s', None)
+        for key in _WRAPPER_KEYS:                          # the wrapper's options
+            filter_args.pop(key, None)
         self.filter = MagneticFilterBias(inertia, max_rate_rad_s=max_rate_rad_s, **filter_args)
 
 
 _BIAS_KEYS = ('bias0_T', 'bias_std0_T', 'magnitude_std_T', 'bias_walk_T_sqrt_s', 'max_bias_T',
               'bias_gate_sigma')
+_WRAPPER_KEYS = ('use_sensor_covariance', 'theta_interval_s', 'hypotheses', 'hypothesis_window_s')
