@@ -95,9 +95,7 @@ NODE_MODULES = ('adcs_nodes.nodes.recorder', 'adcs_nodes.nodes.estimator',
                 'adcs_nodes.nodes.controller', 'adcs_nodes.nodes.guidance',
                 'adcs_nodes.nodes.controller_manager', 'adcs_nodes.nodes.tf',
                 'adcs_nodes.nodes.slew_action', 'sim_node.nodes.dynamics',
-                'sim_node.nodes.environment', 'sim_node.nodes.magnetometer',
-                'sim_node.nodes.horizon_sensor', 'sim_node.nodes.star_tracker',
-                'sim_node.nodes.gyro', 'sim_node.nodes.wheel_tachometer')
+                'sim_node.nodes.environment', 'sim_node.nodes.sensor_node')
 
 
 def test_node_modules_import_no_numba_scipy_or_plotting():

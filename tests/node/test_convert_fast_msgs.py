@@ -10,7 +10,7 @@ from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import Quaternion, Vector3  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 
-from adcs_nodes.nodes import convert  # noqa: E402
+from adcs_nodes.msgs import fields as convert  # noqa: E402
 
 VALUES = [np.array([1.0, -2.5, 3e-300]), np.array([np.nan, np.inf, -0.0]),
           [0.1, 0.2, 0.3], np.array([1e308, -1e308, 5e-324], dtype=np.float64)]

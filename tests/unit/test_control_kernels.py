@@ -213,7 +213,8 @@ def sample(compile_now=True):
             r = magnetic.law_kernel(q, w, omega0, q_ref, y_ref, b, np.array([0.0, 0.0, 1.0]),
                                     3e-3, 0.2, np.array([40.0, 30.0, 20.0]),
                                     mode == 'three_axis', mode == 'two_stage',
-                                    math.radians(60.0), math.radians(2.0))
+                                    math.radians(60.0), math.radians(2.0), np.zeros(3),
+                                    False)
             out.extend(r.tolist())
     for _ in range(200):
         v = rng.normal(0.0, 30.0, 3)
