@@ -25,14 +25,17 @@ GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, reco
               'without bags.')
 
 
-def add_campaign_arguments(parser: argparse.ArgumentParser, what: str = 'campaign') -> None:
-    """What ``adcs montecarlo`` and ``adcs sweep`` share: the scenario, runs, where they run,
-    the output directory (``what``: a campaign or a sweep there is resumed)."""
+def add_campaign_arguments(parser: argparse.ArgumentParser, what: str = 'campaign',
+                           runs: Optional[int] = None) -> None:
+    """What ``adcs montecarlo``, ``sweep`` and ``compare`` share: the scenario, runs (``runs``:
+    the default, None: required), where they run, the output directory (``what``: a campaign,
+    sweep or compare there is resumed)."""
     parser.add_argument('scenario', help='base scenario YAML (closed loop, e.g. '
                         'scenarios/paper000_control.yaml)')
-    parser.add_argument('--runs', type=int, required=True, metavar='N',
-                        help='number of runs' + (' per grid point' if what == 'sweep' else '')
-                        + f' (at most {MAX_RUNS})')
+    parser.add_argument('--runs', type=int, required=runs is None, default=runs, metavar='N',
+                        help='number of runs' + {'sweep': ' per grid point', 'compare':
+                                                 f' per controller (default {runs})'}.get(
+                                                     what, '') + f' (at most {MAX_RUNS})')
     parser.add_argument('--jobs', type=int, default=1, metavar='J',
                         help='runs at once on this machine: J worker processes, started '
                         'once and fed runs (default 1; with --dask-local: the number of Dask '

@@ -359,7 +359,6 @@ def _point_text(point: Dict[str, Any]) -> str:
 def run_from_args(args: argparse.Namespace, log=None) -> int:
     """``adcs sweep``: run or resume every grid point, then print the table; exit code
     (0 done, 1 a run failed, 2 bad arguments, 130 interrupted)."""
-    from adcs_nodes.tools.campaigns.campaign import Campaign
     from adcs_nodes.scenario import ScenarioError
     log = log or (lambda text: print(text, flush=True))
     try:
@@ -377,26 +376,10 @@ def run_from_args(args: argparse.Namespace, log=None) -> int:
     log(f'[sweep] {len(points)} grid point(s) x {args.runs} runs of {base["name"]} '
         f'({cfg0.duration_s:g} s each, seed {cfg0.seed}, engine plain), output in {out}'
         + (' (--table: nothing runs)' if table_only else ''))
-    code = 0
-    t0 = time.monotonic()
-    for n, p in enumerate([] if table_only else points, 1):
-        log(f'[sweep] point {n}/{len(points)}: {_point_text(p["point"])} '
-            f'(sweep {time.monotonic() - t0:.0f} s)')
-        try:
-            c = Campaign(p['cfg'], p['scenario'], p['out'], log=log).run(
-                jobs=args.jobs, scheduler=args.scheduler,
-                dask_local=bool(getattr(args, 'dask_local', False)))
-        except CampaignError as exc:
-            print(f'adcs sweep: point {_point_text(p["point"])}: {exc}', file=sys.stderr)
-            return 2
-        except KeyboardInterrupt:
-            c = 130
-        if c == 130:
-            code = 130
-            log('[sweep] interrupted: finished runs are kept; run the same command again to '
-                'resume')
-            break
-        code = max(code, c)
+    code = 0 if table_only else run_campaigns(
+        [{**p, 'label': 'point ' + _point_text(p['point'])} for p in points], args, log)
+    if code == 2:
+        return 2
     rows = [{'point': p['point'], **collect_point(p['out'], args.runs, period)}
             for p in points]
     write_outputs(out, rows, keys, [k for k, _ in grid])
@@ -408,6 +391,33 @@ def run_from_args(args: argparse.Namespace, log=None) -> int:
         log('Captured within 4 orbits:\n')
         log(gain_map)
     log(f'[sweep] table in {os.path.join(out, "sweep.md")} and sweep.csv')
+    return code
+
+
+def run_campaigns(points: Sequence[Dict[str, Any]], args: argparse.Namespace, log: Any,
+                  command: str = 'sweep') -> int:
+    """Run or resume the campaign of each point in turn (``label``, ``cfg``, ``scenario``,
+    ``out``; ``args.jobs``, ``scheduler``, ``dask_local``): the exit code (0, 1 a run failed,
+    2 a refused campaign, 130 interrupted: the later points do not start)."""
+    from adcs_nodes.tools.campaigns.campaign import Campaign
+    code, t0 = 0, time.monotonic()
+    for n, p in enumerate(points, 1):
+        log(f'[{command}] {p["label"]} ({n}/{len(points)}, {command} '
+            f'{time.monotonic() - t0:.0f} s)')
+        try:
+            c = Campaign(p['cfg'], p['scenario'], p['out'], log=log).run(
+                jobs=args.jobs, scheduler=args.scheduler,
+                dask_local=bool(getattr(args, 'dask_local', False)))
+        except CampaignError as exc:
+            print(f'adcs {command}: {p["label"]}: {exc}', file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            c = 130
+        if c == 130:
+            log(f'[{command}] interrupted: finished runs are kept; run the same command again '
+                'to resume')
+            return 130
+        code = max(code, c)
     return code
 
 
