@@ -29,9 +29,9 @@ DEMO = os.path.join(SCENARIOS, 'demo_mission.yaml')
 # ---------------------------------------------------------------------- bad input: exit 2
 @pytest.mark.parametrize('argv, message', [
     (['--controllers', 'magnetic,mpii'], "unknown controller 'mpii' (did you mean 'mpi'?)"),
-    (['--controllers', ''], 'an empty name'),
-    (['--controllers', 'mpi,,fuzzy'], 'an empty name'),
-    (['--controllers', 'mpi,mpi'], 'given twice'),
+    (['--controllers', ''], "--controllers '': give each name once"),
+    (['--controllers', 'mpi,,fuzzy'], 'give each name once'),
+    (['--controllers', 'mpi,mpi'], 'give each name once'),
     (['--controllers', 'mpi', '--runs', '0'], '--runs must be in [1, 100000], got 0'),
     (['--controllers', 'mpi', '--duration', '0.3'], 'whole number'),
     (['--controllers', 'mpi', '--jobs', '0'], '--jobs must be in'),

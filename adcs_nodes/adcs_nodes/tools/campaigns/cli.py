@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from typing import Any, Dict, List, Optional
 
@@ -134,6 +135,18 @@ def config_from_args(args: argparse.Namespace) -> tuple:
                             'scenario')
     check_dispersion(cfg, base)
     return cfg, base, out
+
+
+def plain_config(args: argparse.Namespace, command: str) -> tuple:
+    """:func:`config_from_args`'s checks for ``adcs sweep`` and ``compare`` (the plain engine,
+    no detumble): ``(cfg, base, out)``, ``out`` absolute (default ``<command>_<name>``)."""
+    cfg, base, _ = config_from_args(argparse.Namespace(**{
+        **vars(args), 'engine': 'plain', 'compose': False, 'auto_detumble': False,
+        'bdot_gain': None}))
+    problem = plain_engine_problem(base)
+    if problem is not None:
+        raise CampaignError(f'adcs {command} runs on the plain engine only: {problem}')
+    return cfg, base, os.path.abspath(args.out or f'{command}_{base["name"]}')
 
 
 def campaign_config(args: argparse.Namespace, base: Dict[str, Any], sc: Dict[str, Any],

@@ -1,12 +1,7 @@
-"""``adcs compare``: controllers side by side on one scenario and the same Monte Carlo draws.
-
-One campaign per controller (the plain engine, local or Dask, resumable: :mod:`.sweep`'s
-:func:`~.sweep.run_campaigns`) in ``OUT/controllers/<name>``, all with the same seed, so run
-*i* starts from the same attitude, rate and noise seeds for every controller; then one table
-(``compare.md``, ``compare.json``) and one figure (``compare.png``). How a controller is made
-the one that flies, the metrics and their windows: ``docs/montecarlo.md``, "Controllers
-compared".
-"""
+"""``adcs compare``: controllers side by side on one scenario and the same Monte Carlo draws:
+a campaign per controller in ``OUT/controllers/<name>`` (:func:`~.sweep.run_campaigns`, the
+same seed), one table (``compare.md``, ``compare.json``) and one figure (``compare.png``).
+Who flies, the metrics and their windows: ``docs/montecarlo.md``, "Controllers compared"."""
 from __future__ import annotations
 
 import argparse
@@ -27,15 +22,13 @@ SATURATED = 0.999
 
 
 def parse_controllers(text: str) -> List[str]:
-    """``--controllers a,b,c``: registered names, each once; CampaignError otherwise."""
+    """``--controllers a,b,c``: registered names, each once; else CampaignError."""
     from adcs_nodes import registry
     names = [n.strip() for n in str(text).split(',')]
-    if not all(names):
-        raise CampaignError(f'--controllers {text!r}: an empty name (give a comma-separated '
-                            'list, e.g. magnetic,mpi,fuzzy)')
-    for i, name in enumerate(names):
-        if name in names[:i]:
-            raise CampaignError(f'--controllers: {name!r} is given twice')
+    if not all(names) or len(set(names)) < len(names):
+        raise CampaignError(f'--controllers {text!r}: give each name once, comma-separated '
+                            '(e.g. magnetic,mpi,fuzzy)')
+    for name in names:
         try:
             registry.get('controller', name)
         except ValueError as exc:
@@ -54,17 +47,16 @@ def flying(base: Dict[str, Any], name: str) -> Tuple[Optional[Dict[str, Any]], s
     if problems:
         return None, '; '.join(p for p in problems if not any(
             q != p and q.endswith(p) for q in problems))
-    man, how, sets = base.get('manager'), [], {}
+    man = base.get('manager') or {}
+    phase = 'initial' if not man.get('auto') else (
+        'auto.point' if man['auto'].get('point') else 'auto.acquire')
+    sets, how = {f'manager.{phase}': name}, [f'manager.{phase}']
     if name not in base['controllers']:
         sets[f'controllers.{name}'] = {}
         how.append('registry defaults (not in the scenario)')
-    if man is None:
+    if not man:
         sets['manager.safe'] = default_safe(controller_names(base))
-    phase = 'initial' if not (man or {}).get('auto') else (
-        'auto.point' if man['auto'].get('point') else 'auto.acquire')
-    sets[f'manager.{phase}'] = name
-    how.insert(0, f'manager.{phase}')
-    if (man or {}).get('schedule'):
+    if man.get('schedule'):
         sets['manager.schedule'] = []
         how.append('scripted switches removed')
     try:
@@ -83,8 +75,7 @@ def run_metrics(run_dir: str, result: Dict[str, Any], name: str,
     ``saturated_s`` the time any coil, wheel torque or wheel momentum is at :data:`SATURATED`
     of its limit [s]; ``flown_s`` the time ``name``'s command was forwarded [s]; ``lost``
     another controller forwarded after ``name``'s first frame."""
-    with np.load(os.path.join(run_dir, SERIES_FILE)) as s:
-        s = dict(s)
+    s = dict(np.load(os.path.join(run_dir, SERIES_FILE)))
     t = s['t_s']
     dt = np.append(np.diff(t), 0.0)                 # each sample holds to the next
     angle = s['angle_deg'] if result.get('capture_reference') == ORBIT_FRAME else \
@@ -92,23 +83,21 @@ def run_metrics(run_dir: str, result: Dict[str, Any], name: str,
     window = s['target_judged'] & (t >= t[0] + 0.5 * (t[-1] - t[0]))
     craft = sc['spacecraft']
     wheels = craft.get('wheels') or []
-    m_max = np.array(craft.get('magnetorquer', {}).get('max_dipole_Am2') or [np.inf] * 3)
     tau_w, h_w, dipole = s['wheel_torque_Nm'], s['wheel_momentum_Nms'], s['dipole_body_Am2']
-    effort = np.sum(np.abs(tau_w), axis=1) + np.sum(np.abs(np.cross(dipole, s['b_body_T'])),
-                                                     axis=1)
-    sat = np.any(np.abs(dipole) >= SATURATED * m_max, axis=1)
-    if wheels:
-        sat |= np.any(np.abs(tau_w) >= SATURATED * np.array(
-            [w['max_torque_Nm'] for w in wheels]), axis=1)
-        sat |= np.any(np.abs(h_w) >= SATURATED * np.array(
-            [w['max_momentum_Nms'] for w in wheels]), axis=1)
+    tau_m = np.cross(dipole, s['b_body_T'])          # magnetic torque, body axes [N m]
+    effort = np.sum(np.abs(tau_w), axis=1) + np.sum(np.abs(tau_m), axis=1)
+    limits = [(dipole, craft.get('magnetorquer', {}).get('max_dipole_Am2') or [np.inf] * 3),
+              (tau_w, [w['max_torque_Nm'] for w in wheels]),
+              (h_w, [w['max_momentum_Nms'] for w in wheels])]
+    sat = np.any([np.any(np.abs(x) >= SATURATED * np.asarray(lim, float), axis=1)
+                  for x, lim in limits], axis=0)
     mine = s['active'] == name
-    first = int(np.argmax(mine)) if mine.any() else t.size
-    return {'t_s': t, 'angle_deg': angle, 'pointing_deg': angle[window], 'settle_s': result.get('capture_time_s'),
+    return {'t_s': t, 'angle_deg': angle, 'pointing_deg': angle[window],
+            'settle_s': result.get('capture_time_s'),
             'effort_Nms': float(np.sum(effort * dt)),
             'peak_h_Nms': float(np.max(np.abs(h_w))) if wheels else None,
             'saturated_s': float(np.sum(dt[sat])), 'flown_s': float(np.sum(dt[mine])),
-            'lost': bool(np.any(~mine[first:]))}
+            'lost': bool(np.any(mine[:-1] & ~mine[1:]))}
 
 
 def summarise(name: str, runs: Sequence[Dict[str, Any]], n_runs: int, errors: int,
@@ -119,13 +108,12 @@ def summarise(name: str, runs: Sequence[Dict[str, Any]], n_runs: int, errors: in
         return float(f(v)) if v else None
     pooled = np.concatenate([r['pointing_deg'] for r in runs]) if runs else np.zeros(0)
     pooled = pooled[np.isfinite(pooled)]
-    settled = [r for r in runs if r['settle_s'] is not None]
     return {'controller': name, 'runs': n_runs, 'done': len(runs), 'errors': errors,
             'pointing_median_deg': float(np.median(pooled)) if pooled.size else None,
             'pointing_p95_deg': float(np.percentile(pooled, 95)) if pooled.size else None,
-            'settled': len(settled), 'settle_median_s': med('settle_s'),
-            'settle_max_s': med('settle_s', np.max), 'effort_median_Nms': med('effort_Nms'),
-            'peak_h_max_Nms': med('peak_h_Nms', np.max),
+            'settled': sum(r['settle_s'] is not None for r in runs),
+            'settle_median_s': med('settle_s'), 'settle_max_s': med('settle_s', np.max),
+            'effort_median_Nms': med('effort_Nms'), 'peak_h_max_Nms': med('peak_h_Nms', np.max),
             'saturated_median_s': med('saturated_s'),
             'flown_median_pct': None if not runs else 100.0 * med('flown_s') / duration_s,
             'lost': sum(r['lost'] for r in runs), 'reason': None}
@@ -134,14 +122,9 @@ def summarise(name: str, runs: Sequence[Dict[str, Any]], n_runs: int, errors: in
 def collect(out: str, name: str, sc: Dict[str, Any], n_runs: int,
             duration_s: float) -> Tuple[Dict[str, Any], List[Dict[str, Any]]]:
     """``(row, per-run metrics)`` of the campaign of controller ``name`` in ``out``."""
-    runs, errors = [], 0
-    for i in range(n_runs):
-        run_dir = run_dir_of(out, i)
-        result = load_result(run_dir)
-        if result is not None:
-            runs.append(run_metrics(run_dir, result, name, sc))
-        else:
-            errors += os.path.isfile(os.path.join(run_dir, FAILED_FILE))
+    done = [(d, load_result(d)) for d in (run_dir_of(out, i) for i in range(n_runs))]
+    runs = [run_metrics(d, r, name, sc) for d, r in done if r is not None]
+    errors = sum(r is None and os.path.isfile(os.path.join(d, FAILED_FILE)) for d, r in done)
     return summarise(name, runs, n_runs, errors, duration_s), runs
 
 
@@ -175,9 +158,8 @@ def table_markdown(rows: Sequence[Dict[str, Any]]) -> str:
 
 
 def plot(path: str, series: Dict[str, List[Tuple[np.ndarray, np.ndarray]]]) -> None:
-    """``compare.png``: the angle to the target over time, per controller the median over
-    its runs and the 5-95 % band (the report's colours); ``series``: ``{name: [(t_s,
-    angle_deg)]}`` of its finished runs."""
+    """``compare.png`` of ``{name: [(t_s, angle_deg)] of its runs}``: per controller the
+    median angle to the target over time and the 5-95 % band (the report's colours)."""
     from matplotlib.figure import Figure
     from adcs_nodes.tools.analyse.report_html import _colours, _time_axis
     fig = Figure(figsize=(10.0, 4.5))
@@ -186,20 +168,16 @@ def plot(path: str, series: Dict[str, List[Tuple[np.ndarray, np.ndarray]]]) -> N
     t_end = max((t[-1] for runs in series.values() for t, _ in runs), default=1.0)
     axis = _time_axis(t_end)
     for name, runs in series.items():
-        n = min(t.size for t, _ in runs)
-        t, a = runs[0][0][:n] / axis.scale, np.array([a[:n] for _, a in runs])
-        lo, mid, hi = np.nanpercentile(a, [5, 50, 95], axis=0)
+        lo, mid, hi = np.nanpercentile([a for _, a in runs], [5, 50, 95], axis=0)
+        t = runs[0][0] / axis.scale
         ax.fill_between(t, lo, hi, color=colours[name], alpha=0.2, lw=0)
         ax.plot(t, mid, color=colours[name], lw=1.2, label=f'{name} (median of {len(runs)})')
-    ax.set_yscale('log')
-    ax.set_xlabel(f'sim time [{axis.unit}]')
-    ax.set_ylabel('angle to the target [deg]', fontsize=8)
+    ax.set(yscale='log', xlabel=f'sim time [{axis.unit}]', ylabel='angle to the target [deg]')
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.savefig(path, dpi=90, bbox_inches='tight')
 
 
-# ---------------------------------------------------------------------- command
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``adcs compare`` arguments to ``parser``."""
     from adcs_nodes.tools.campaigns.cli import add_campaign_arguments
@@ -209,66 +187,52 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         '); each holds the pointing phase in turn on the same draws')
 
 
-def prepare(args: argparse.Namespace, log: Any) -> Tuple[Dict[str, Any], str, List[Dict], Dict]:
-    """Validate everything before a run: ``(base, out, points, refused)``, a point per
-    controller that can fly (:func:`~.sweep.run_campaigns`), ``refused`` ``{name: why}``;
-    CampaignError or ScenarioError (exit 2)."""
-    from adcs_nodes.scenario import load_scenario
-    from adcs_nodes.tools.campaigns.cli import campaign_config, config_from_args
-    from adcs_nodes.tools.campaigns.engine import plain_engine_problem
+def prepare(args: argparse.Namespace, log: Any) -> Tuple[Dict, Any, str, List[Dict]]:
+    """Check everything before a run: ``(base, cfg, out, entries)``, per controller ``name``,
+    ``how`` it flies or why not (``scenario`` None), ``scenario``, ``label``, ``cfg``, ``out``
+    (:func:`~.sweep.run_campaigns`); CampaignError or ScenarioError (exit 2)."""
+    from adcs_nodes.tools.campaigns.cli import campaign_config, plain_config
     names = parse_controllers(args.controllers)
-    base = load_scenario(args.scenario)
-    problem = plain_engine_problem(base)
-    if problem is not None:
-        raise CampaignError(f'adcs compare runs on the plain engine only: {problem}')
-    out = os.path.abspath(args.out or f'compare_{base["name"]}')
-    cfg = config_from_args(argparse.Namespace(**{
-        **vars(args), 'out': os.path.join(out, '.check'), 'engine': 'plain',
-        'compose': False, 'auto_detumble': False, 'bdot_gain': None}))[0]
-    points, refused = [], {}
+    cfg, base, out = plain_config(args, 'compare')
+    entries = []
     for name in names:
         sc, how = flying(base, name)
         if sc is None:
-            refused[name] = how
             log(f'[compare] {name} cannot fly {base["name"]}: {how}')
-            continue
-        points.append({'name': name, 'label': f'controller {name} ({how})', 'how': how,
-                       'scenario': sc, 'out': os.path.join(out, 'controllers', name),
-                       'cfg': campaign_config(args, base, sc, cfg.duration_s, 'plain')})
-    return base, out, points, refused
+        entries.append({'name': name, 'how': how, 'scenario': sc,
+                        'label': f'controller {name} ({how})',
+                        'out': os.path.join(out, 'controllers', name),
+                        'cfg': sc and campaign_config(args, base, sc, cfg.duration_s, 'plain')})
+    if not any(e['scenario'] for e in entries):
+        raise CampaignError(f'no controller of {args.controllers} can fly {base["name"]}')
+    return base, cfg, out, entries
 
 
 def run_from_args(args: argparse.Namespace, log: Any = None) -> int:
-    """``adcs compare``: run or resume each controller's campaign, then write and print the
-    table; exit code (0 done, 1 a run failed, 2 bad arguments or no controller can fly, 130
-    interrupted)."""
+    """``adcs compare``: run or resume each controller's campaign, write and print the table;
+    exit code (0, 1 a run failed, 2 bad arguments or nothing can fly, 130 interrupted)."""
     from adcs_nodes.scenario import ScenarioError
     from adcs_nodes.tools.campaigns.sweep import run_campaigns
     log = log or (lambda text: print(text, flush=True))
     try:
-        base, out, points, refused = prepare(args, log)
+        base, cfg, out, entries = prepare(args, log)
     except (CampaignError, ScenarioError) as exc:
         print(f'adcs compare: {exc}', file=sys.stderr)
         return 2
-    if not points:
-        print(f'adcs compare: no controller of {args.controllers} can fly {base["name"]}',
-              file=sys.stderr)
-        return 2
-    cfg = points[0]['cfg']
-    log(f'[compare] {len(points)} controller(s) x {cfg.runs} runs of {base["name"]} '
+    flown = [e for e in entries if e['scenario'] is not None]
+    log(f'[compare] {len(flown)} controller(s) x {cfg.runs} runs of {base["name"]} '
         f'({cfg.duration_s:g} s each, seed {cfg.seed}, engine plain), output in {out}')
-    code = run_campaigns(points, args, log, 'compare')
+    code = run_campaigns(flown, args, log, 'compare')
     if code == 2:
         return 2
     rows, series = [], {}
-    for name in parse_controllers(args.controllers):
-        p = next((p for p in points if p['name'] == name), None)
-        if p is None:
-            rows.append({'controller': name, 'reason': refused[name]})
+    for e in entries:
+        if e['scenario'] is None:
+            rows.append({'controller': e['name'], 'reason': e['how']})
             continue
-        row, runs = collect(p['out'], name, p['scenario'], cfg.runs, cfg.duration_s)
-        rows.append({**row, 'how': p['how']})
-        series[name] = [(r['t_s'], r['angle_deg']) for r in runs]
+        row, runs = collect(e['out'], e['name'], e['scenario'], cfg.runs, cfg.duration_s)
+        rows.append({**row, 'how': e['how']})
+        series[e['name']] = [(r['t_s'], r['angle_deg']) for r in runs]
     text = (f'{base["name"]}, {cfg.runs} runs per controller, seed {cfg.seed}, '
             f'{cfg.duration_s:g} s:\n\n' + table_markdown(rows) + '\n' + ''.join(
                 f'* {r["controller"]}: {r["how"]}\n' for r in rows if r.get('how')))

@@ -324,19 +324,10 @@ def prepare(args: argparse.Namespace) -> Prepared:
     """Validate everything before a run: ``(base scenario, grid, points, out)``, each point
     ``{'point', 'scenario', 'cfg', 'out'}``; SweepError, CampaignError or ScenarioError (exit
     2)."""
-    from adcs_nodes.tools.campaigns.cli import config_from_args
-    from adcs_nodes.tools.campaigns.engine import plain_engine_problem
-    from adcs_nodes.scenario import apply_overrides, load_scenario
-    base = load_scenario(args.scenario)
+    from adcs_nodes.tools.campaigns.cli import plain_config
+    from adcs_nodes.scenario import apply_overrides
     grid = parse_grid(args.set)
-    problem = plain_engine_problem(base)
-    if problem is not None:
-        raise SweepError(f'adcs sweep runs on the plain engine only: {problem}')
-    out = os.path.abspath(args.out or f'sweep_{base["name"]}')
-    # the montecarlo checks of --runs, --jobs, the bounds and the duration (on the base)
-    config_from_args(argparse.Namespace(**{**vars(args), 'out': os.path.join(out, '.check'),
-                                           'engine': 'plain', 'compose': False,
-                                           'auto_detumble': False, 'bdot_gain': None}))
+    base, out = plain_config(args, 'sweep')[1:]
     points = []
     for point in grid_points(grid):
         sc = apply_overrides(base, point)   # its message names the point's overrides
