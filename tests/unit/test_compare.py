@@ -72,8 +72,10 @@ def test_each_controller_holds_the_pointing_phase_or_says_why_not():
     demo = load_scenario(DEMO)
     for name in ('magnetic', 'mpi', 'fuzzy'):
         sc, how = compare.flying(demo, name)
-        assert sc['manager']['auto']['point'] == name and sc['manager']['schedule'] == []
-        assert how == 'manager.auto.point, scripted switches removed'
+        auto = sc['manager']['auto']
+        assert auto['acquire'] == auto['point'] == name and auto['detumble'] == 'bdot'
+        assert sc['manager']['schedule'] == []
+        assert how == 'manager.auto.acquire, manager.auto.point, scripted switches removed'
         # the rest of the scenario, its draws' inputs included, is the demo's
         assert {k: v for k, v in sc.items() if k not in ('manager', '_path')} == \
             {k: v for k, v in demo.items() if k not in ('manager', '_path')}

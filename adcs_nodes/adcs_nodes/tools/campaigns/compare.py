@@ -37,8 +37,8 @@ def parse_controllers(text: str) -> List[str]:
 
 
 def flying(base: Dict[str, Any], name: str) -> Tuple[Optional[Dict[str, Any]], str]:
-    """``(scenario, how)``: ``base`` with controller ``name`` holding the pointing phase, or
-    ``(None, why it cannot fly this scenario)``."""
+    """``(scenario, how)``: ``base`` with controller ``name`` flying from t = 0 or after the
+    automatic sequence's detumble, or ``(None, why it cannot fly this scenario)``."""
     from adcs_nodes.scenario import (ScenarioError, apply_overrides, controller_names,
                                      controller_problems, default_safe)
     if 'controllers' not in base:
@@ -48,9 +48,10 @@ def flying(base: Dict[str, Any], name: str) -> Tuple[Optional[Dict[str, Any]], s
         return None, '; '.join(p for p in problems if not any(
             q != p and q.endswith(p) for q in problems))
     man = base.get('manager') or {}
-    phase = 'initial' if not man.get('auto') else (
-        'auto.point' if man['auto'].get('point') else 'auto.acquire')
-    sets, how = {f'manager.{phase}': name}, [f'manager.{phase}']
+    auto = man.get('auto') or {}            # after B-dot's detumble, all is the controller's
+    phases = ['manager.' + p for p in ('auto.acquire', 'auto.point') if auto.get(p[5:])] or \
+        ['manager.initial']
+    sets, how = dict.fromkeys(phases, name), phases[:]
     if name not in base['controllers']:
         sets[f'controllers.{name}'] = {}
         how.append('registry defaults (not in the scenario)')
