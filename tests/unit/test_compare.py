@@ -126,11 +126,13 @@ def test_the_row_of_hand_made_runs():
 # ---------------------------------------------------------------------- a compare, in process
 def _short_demo(tmp_path):
     """The demo's spacecraft for 20 s: no automatic sequence (the compared controller flies
-    from t = 0), no faults (they come later)."""
+    from t = 0), no faults (they come later), no wheel tachometer and so no MPI."""
     sc = raw('demo_mission')
     sc['duration_s'] = 20.0
-    del sc['manager']['auto'], sc['faults']
-    sc['manager']['initial'] = 'mpi'
+    del sc['manager']['auto'], sc['faults'], sc['sensors']['wheel_tachometer']
+    del sc['controllers']['mpi']
+    sc['manager']['initial'] = 'fuzzy'
+    sc['manager']['schedule'] = []
     path = tmp_path / 'demo_short.yaml'
     path.write_text(yaml.safe_dump(sc))
     return str(path)
@@ -181,18 +183,23 @@ def test_an_interrupted_compare_resumes_on_the_same_draws_and_its_table_is_the_s
     cut = _InProcessBackend(interrupt_after=1)
     code, text = _compare(path, out, [cut], monkeypatch, capsys)
     assert code == 130 and 'interrupted' in text and len(cut.ran) == 1, text
-    assert '| magnetic | 1/2 |' in text and '| mpi | 0/2 |' in text
+    assert '| magnetic | 1/2 |' in text and '| fuzzy | 0/2 |' in text
+    assert '| mpi | cannot fly this scenario: needs sensors.wheel_tachometer (input ' \
+        'wheel_speeds) |' in text
     # the same command again: only the missing runs run
-    rest = [_InProcessBackend() for _ in range(4)]
+    rest = [_InProcessBackend() for _ in range(3)]
     code, text = _compare(path, out, rest, monkeypatch, capsys)
     assert code == 0, text
-    assert [len(b.ran) for b in rest] == [1, 2, 2, 2]
+    assert [len(b.ran) for b in rest] == [1, 2, 2]
+    assert not (out / 'controllers' / 'mpi').exists()
     assert 'resuming: 1 of 2 runs already done, 1 to run' in text
     with open(out / 'compare.json') as fh:
         rows = {r['controller']: r for r in json.load(fh)['rows']}
     assert (out / 'compare.png').is_file() and (out / 'compare.md').is_file()
     sc = load_scenario(path)
-    for name in ('magnetic', 'mpi', 'fuzzy', 'reference_slew'):
+    assert rows['mpi'] == {'controller': 'mpi', 'reason': 'needs sensors.wheel_tachometer '
+                           '(input wheel_speeds)'}
+    for name in ('magnetic', 'fuzzy', 'reference_slew'):
         row, pooled, ind = rows[name], [], []
         assert (row['done'], row['errors']) == (2, 0)
         for i in range(2):
@@ -220,6 +227,6 @@ def test_an_interrupted_compare_resumes_on_the_same_draws_and_its_table_is_the_s
         assert row['flown_median_pct'] == 100.0 * np.median([r['flown'] for r in ind]) / 20.0
         assert row['lost'] == sum(r['lost'] for r in ind) and row['settled'] == 0
     # the runs differ by controller: coils only for the magnetic law, wheels for the others
-    assert rows['magnetic']['peak_h_max_Nms'] == 0.0 < rows['mpi']['peak_h_max_Nms']
+    assert rows['magnetic']['peak_h_max_Nms'] == 0.0 < rows['fuzzy']['peak_h_max_Nms']
     # manager.initial: each flies from frame 0 to the end
-    assert {r['flown_median_pct'] for r in rows.values()} == {100.0}
+    assert {r['flown_median_pct'] for r in rows.values() if r['reason'] is None} == {100.0}
