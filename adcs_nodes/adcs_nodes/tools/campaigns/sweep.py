@@ -373,14 +373,9 @@ def run_from_args(args: argparse.Namespace, log=None) -> int:
         return 2
     rows = [{'point': p['point'], **collect_point(p['out'], args.runs, period)}
             for p in points]
-    write_outputs(out, rows, keys, [k for k, _ in grid])
-    log('')
-    log(f'[sweep] {base["name"]}, {args.runs} runs per point, seed {cfg0.seed}:')
-    log(table_markdown(rows, keys))
-    gain_map = map_markdown(rows, keys)
-    if gain_map:
-        log('Captured within 4 orbits:\n')
-        log(gain_map)
+    text = write_outputs(out, rows, keys, [k for k, _ in grid])
+    log(f'\n[sweep] {base["name"]}, {args.runs} runs per point, seed {cfg0.seed}:')
+    log(text)
     log(f'[sweep] table in {os.path.join(out, "sweep.md")} and sweep.csv')
     return code
 
@@ -426,8 +421,8 @@ def _write_sweep_json(out: str, base: Dict[str, Any], grid: Any,
 
 
 def write_outputs(out: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str],
-                  all_keys: Sequence[str]) -> None:
-    """``sweep.csv``, ``sweep.md`` and ``sweep.png`` of the rows."""
+                  all_keys: Sequence[str]) -> str:
+    """``sweep.csv``, ``sweep.md`` and ``sweep.png`` of the rows; the text of ``sweep.md``."""
     write_csv(os.path.join(out, 'sweep.csv'), rows, all_keys)
     text = table_markdown(rows, keys)
     gain_map = map_markdown(rows, keys)
@@ -435,6 +430,7 @@ def write_outputs(out: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str],
         text += '\nCaptured within 4 orbits:\n\n' + gain_map
     write_text_atomic(os.path.join(out, 'sweep.md'), text)
     plot_map(os.path.join(out, 'sweep.png'), rows, keys)
+    return text
 
 
 def _command(args: argparse.Namespace) -> str:
