@@ -24,6 +24,7 @@ OPTIONS = {
                '--stall-timeout', '--plugin'},
     'montecarlo': CAMPAIGN | {'--auto-detumble', '--bdot-gain', '--engine', '--compose'},
     'sweep': CAMPAIGN | {'--set', '--table'},
+    'compare': CAMPAIGN | {'--controllers'},
     'list': {'--dir'}, 'validate': set(), 'schema': set(),
 }
 

@@ -347,6 +347,12 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_arguments(p)
     p.set_defaults(func=sweep.run_from_args)
 
+    from adcs_nodes.tools.campaigns import compare
+    p = sub.add_parser('compare', help='controllers side by side: a Monte Carlo campaign per '
+                       'controller on the same draws (plain engine, resumable), one table')
+    compare.add_arguments(p)
+    p.set_defaults(func=compare.run_from_args)
+
     from adcs_nodes.tools import replay
     p = sub.add_parser('replay', help='publish recorded sensor topics as a driver would')
     replay.add_arguments(p)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from typing import Any, Dict, List, Optional
 
@@ -25,14 +26,17 @@ GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, reco
               'without bags.')
 
 
-def add_campaign_arguments(parser: argparse.ArgumentParser, what: str = 'campaign') -> None:
-    """What ``adcs montecarlo`` and ``adcs sweep`` share: the scenario, runs, where they run,
-    the output directory (``what``: a campaign or a sweep there is resumed)."""
+def add_campaign_arguments(parser: argparse.ArgumentParser, what: str = 'campaign',
+                           runs: Optional[int] = None) -> None:
+    """What ``adcs montecarlo``, ``sweep`` and ``compare`` share: the scenario, runs (``runs``:
+    the default, None: required), where they run, the output directory (``what``: a campaign,
+    sweep or compare there is resumed)."""
     parser.add_argument('scenario', help='base scenario YAML (closed loop, e.g. '
                         'scenarios/paper000_control.yaml)')
-    parser.add_argument('--runs', type=int, required=True, metavar='N',
-                        help='number of runs' + (' per grid point' if what == 'sweep' else '')
-                        + f' (at most {MAX_RUNS})')
+    parser.add_argument('--runs', type=int, required=runs is None, default=runs, metavar='N',
+                        help='number of runs' + {'sweep': ' per grid point', 'compare':
+                                                 f' per controller (default {runs})'}.get(
+                                                     what, '') + f' (at most {MAX_RUNS})')
     parser.add_argument('--jobs', type=int, default=1, metavar='J',
                         help='runs at once on this machine: J worker processes, started '
                         'once and fed runs (default 1; with --dask-local: the number of Dask '
@@ -131,6 +135,18 @@ def config_from_args(args: argparse.Namespace) -> tuple:
                             'scenario')
     check_dispersion(cfg, base)
     return cfg, base, out
+
+
+def plain_config(args: argparse.Namespace, command: str) -> tuple:
+    """:func:`config_from_args`'s checks for ``adcs sweep`` and ``compare`` (the plain engine,
+    no detumble): ``(cfg, base, out)``, ``out`` absolute (default ``<command>_<name>``)."""
+    cfg, base, _ = config_from_args(argparse.Namespace(**{
+        **vars(args), 'engine': 'plain', 'compose': False, 'auto_detumble': False,
+        'bdot_gain': None}))
+    problem = plain_engine_problem(base)
+    if problem is not None:
+        raise CampaignError(f'adcs {command} runs on the plain engine only: {problem}')
+    return cfg, base, os.path.abspath(args.out or f'{command}_{base["name"]}')
 
 
 def campaign_config(args: argparse.Namespace, base: Dict[str, Any], sc: Dict[str, Any],

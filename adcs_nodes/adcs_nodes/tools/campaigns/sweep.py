@@ -324,19 +324,10 @@ def prepare(args: argparse.Namespace) -> Prepared:
     """Validate everything before a run: ``(base scenario, grid, points, out)``, each point
     ``{'point', 'scenario', 'cfg', 'out'}``; SweepError, CampaignError or ScenarioError (exit
     2)."""
-    from adcs_nodes.tools.campaigns.cli import config_from_args
-    from adcs_nodes.tools.campaigns.engine import plain_engine_problem
-    from adcs_nodes.scenario import apply_overrides, load_scenario
-    base = load_scenario(args.scenario)
+    from adcs_nodes.tools.campaigns.cli import plain_config
+    from adcs_nodes.scenario import apply_overrides
     grid = parse_grid(args.set)
-    problem = plain_engine_problem(base)
-    if problem is not None:
-        raise SweepError(f'adcs sweep runs on the plain engine only: {problem}')
-    out = os.path.abspath(args.out or f'sweep_{base["name"]}')
-    # the montecarlo checks of --runs, --jobs, the bounds and the duration (on the base)
-    config_from_args(argparse.Namespace(**{**vars(args), 'out': os.path.join(out, '.check'),
-                                           'engine': 'plain', 'compose': False,
-                                           'auto_detumble': False, 'bdot_gain': None}))
+    base, out = plain_config(args, 'sweep')[1:]
     points = []
     for point in grid_points(grid):
         sc = apply_overrides(base, point)   # its message names the point's overrides
@@ -359,7 +350,6 @@ def _point_text(point: Dict[str, Any]) -> str:
 def run_from_args(args: argparse.Namespace, log=None) -> int:
     """``adcs sweep``: run or resume every grid point, then print the table; exit code
     (0 done, 1 a run failed, 2 bad arguments, 130 interrupted)."""
-    from adcs_nodes.tools.campaigns.campaign import Campaign
     from adcs_nodes.scenario import ScenarioError
     log = log or (lambda text: print(text, flush=True))
     try:
@@ -377,37 +367,43 @@ def run_from_args(args: argparse.Namespace, log=None) -> int:
     log(f'[sweep] {len(points)} grid point(s) x {args.runs} runs of {base["name"]} '
         f'({cfg0.duration_s:g} s each, seed {cfg0.seed}, engine plain), output in {out}'
         + (' (--table: nothing runs)' if table_only else ''))
-    code = 0
-    t0 = time.monotonic()
-    for n, p in enumerate([] if table_only else points, 1):
-        log(f'[sweep] point {n}/{len(points)}: {_point_text(p["point"])} '
-            f'(sweep {time.monotonic() - t0:.0f} s)')
+    code = 0 if table_only else run_campaigns(
+        [{**p, 'label': 'point ' + _point_text(p['point'])} for p in points], args, log)
+    if code == 2:
+        return 2
+    rows = [{'point': p['point'], **collect_point(p['out'], args.runs, period)}
+            for p in points]
+    text = write_outputs(out, rows, keys, [k for k, _ in grid])
+    log(f'\n[sweep] {base["name"]}, {args.runs} runs per point, seed {cfg0.seed}:')
+    log(text)
+    log(f'[sweep] table in {os.path.join(out, "sweep.md")} and sweep.csv')
+    return code
+
+
+def run_campaigns(points: Sequence[Dict[str, Any]], args: argparse.Namespace, log: Any,
+                  command: str = 'sweep') -> int:
+    """Run or resume the campaign of each point in turn (``label``, ``cfg``, ``scenario``,
+    ``out``; ``args.jobs``, ``scheduler``, ``dask_local``): the exit code (0, 1 a run failed,
+    2 a refused campaign, 130 interrupted: the later points do not start)."""
+    from adcs_nodes.tools.campaigns.campaign import Campaign
+    code, t0 = 0, time.monotonic()
+    for n, p in enumerate(points, 1):
+        log(f'[{command}] {p["label"]} ({n}/{len(points)}, {command} '
+            f'{time.monotonic() - t0:.0f} s)')
         try:
             c = Campaign(p['cfg'], p['scenario'], p['out'], log=log).run(
                 jobs=args.jobs, scheduler=args.scheduler,
                 dask_local=bool(getattr(args, 'dask_local', False)))
         except CampaignError as exc:
-            print(f'adcs sweep: point {_point_text(p["point"])}: {exc}', file=sys.stderr)
+            print(f'adcs {command}: {p["label"]}: {exc}', file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             c = 130
         if c == 130:
-            code = 130
-            log('[sweep] interrupted: finished runs are kept; run the same command again to '
-                'resume')
-            break
+            log(f'[{command}] interrupted: finished runs are kept; run the same command again '
+                'to resume')
+            return 130
         code = max(code, c)
-    rows = [{'point': p['point'], **collect_point(p['out'], args.runs, period)}
-            for p in points]
-    write_outputs(out, rows, keys, [k for k, _ in grid])
-    log('')
-    log(f'[sweep] {base["name"]}, {args.runs} runs per point, seed {cfg0.seed}:')
-    log(table_markdown(rows, keys))
-    gain_map = map_markdown(rows, keys)
-    if gain_map:
-        log('Captured within 4 orbits:\n')
-        log(gain_map)
-    log(f'[sweep] table in {os.path.join(out, "sweep.md")} and sweep.csv')
     return code
 
 
@@ -425,8 +421,8 @@ def _write_sweep_json(out: str, base: Dict[str, Any], grid: Any,
 
 
 def write_outputs(out: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str],
-                  all_keys: Sequence[str]) -> None:
-    """``sweep.csv``, ``sweep.md`` and ``sweep.png`` of the rows."""
+                  all_keys: Sequence[str]) -> str:
+    """``sweep.csv``, ``sweep.md`` and ``sweep.png`` of the rows; the text of ``sweep.md``."""
     write_csv(os.path.join(out, 'sweep.csv'), rows, all_keys)
     text = table_markdown(rows, keys)
     gain_map = map_markdown(rows, keys)
@@ -434,6 +430,7 @@ def write_outputs(out: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str],
         text += '\nCaptured within 4 orbits:\n\n' + gain_map
     write_text_atomic(os.path.join(out, 'sweep.md'), text)
     plot_map(os.path.join(out, 'sweep.png'), rows, keys)
+    return text
 
 
 def _command(args: argparse.Namespace) -> str:

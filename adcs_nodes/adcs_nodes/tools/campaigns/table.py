@@ -42,10 +42,7 @@ def table_row(result: Dict[str, Any]) -> Dict[str, Any]:
     _put(row, 'disp_mag_misalignment_{}_deg', _VEC, disp.get('mag_misalignment_deg'))
     _put(row, 'bag_q_orbit_body_{}', _QUAT, init.get('q_orbit_body_xyzw'))
     _put(row, 'bag_omega_body_eci_body_{}_deg_s', _VEC, init.get('omega_body_eci_body_deg_s'))
-    for key in ('capture_reference', 'capture_time_s', 'captured_in_time', 'last_exit_s',
-                'hold_rms_deg', 'hold_median_deg', 'hold_p95_deg', 'final_angle_deg',
-                'final_rate_deg_s', 'max_rate_deg_s', 'engine', 'sim_time_s', 'wall_time_s',
-                'missed_frames', 'host', 'supervisor_pid', 'message'):
+    for key in (k for k in CSV_COLUMNS if k not in row):      # the result's own values
         value = result.get(key)
         row[key] = '' if value is None else (repr(value) if isinstance(value, float)
                                              else value)

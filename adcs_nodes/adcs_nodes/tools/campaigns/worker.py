@@ -11,24 +11,20 @@ from sim_node.engine import FrameLoop
 
 
 def run_series(loop: FrameLoop) -> Dict[str, Any]:
-    """Run ``loop`` to the end and return the per-frame series a study or a Monte Carlo run
-    needs (numpy arrays, one row per frame).
+    """Run ``loop`` to the end: the per-frame series of a study or a Monte Carlo run (numpy
+    arrays, one row per frame; NaN before a topic's first sample).
 
-    ``t_s`` [s]; ``q_orbit_body`` (n, 4) truth; ``w_eci``, ``w_orbit`` (n, 3) true
-    ``omega_body_eci_body``, ``omega_body_orbit_body`` [rad/s]; ``q_est`` (n, 4) and
-    ``w_est`` (n, 3) the latest estimate (NaN before the first); ``angle_deg`` truth angle
-    body to orbit frame; ``est_err_deg``, ``rate_err_deg_s`` estimate errors; ``active``
-    the controller whose command was forwarded (``source`` of ``adcs/actuator_command``);
-    ``period_s`` the orbital period at the end.
-
-    ``q_orbit_target`` (n, 4): the guidance target the run published (``q_ref_body`` of the
-    latest ``adcs/attitude_target``, held between guidance frames; NaN before the first, and
-    throughout a run without guidance) in the orbit frame: a target in the ECI frame
-    (``header.frame_id`` ``'eci'``) is converted with the frame's truth,
-    ``q_orbit_target = q_orbit_body (x) q_eci_body^* (x) q_eci_target``. ``target_judged``
-    (n,) bool: False while that target is a paper 001 maneuver's end state (``profile``
-    ``'maneuver'``; the capture test leaves those samples out,
-    :mod:`adcs_nodes.tools.campaigns.capture`), else True.
+    ``t_s`` [s]; truth ``q_orbit_body`` (n, 4), ``w_eci``, ``w_orbit`` (n, 3)
+    ``omega_body_eci_body``, ``omega_body_orbit_body`` [rad/s]; the latest estimate ``q_est``
+    (n, 4), ``w_est`` (n, 3); ``angle_deg`` body to orbit frame; ``est_err_deg``,
+    ``rate_err_deg_s``; ``active`` the forwarded controller (``source`` of
+    ``adcs/actuator_command``); ``period_s`` the orbital period at the end;
+    ``q_orbit_target`` (n, 4) the latest published guidance target in the orbit frame (an ECI
+    one converted with the frame's truth, ``q_orbit_body (x) q_eci_body^* (x)
+    q_eci_target``); ``target_judged`` (n,) False while it is a maneuver's end state
+    (:mod:`.capture`); ``dipole_body_Am2`` (n, 3) the forwarded dipole (zero before the
+    first); ``b_body_T`` (n, 3) the true field, body axes; ``wheel_momentum_Nms``,
+    ``wheel_torque_Nm`` (n, wheels) the true momentum and applied motor torque.
     """
     import math
 
@@ -38,8 +34,10 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
     from adcs_nodes.tools.analyse import metrics
     rows: Dict[str, List[Any]] = {k: [] for k in ('t_s', 'q_orbit_body', 'w_eci', 'w_orbit',
                                                   'q_est', 'w_est', 'active', 'q_orbit_target',
-                                                  'target_judged')}
-    q_est, w_est = np.full(4, np.nan), np.full(3, np.nan)
+                                                  'target_judged', 'dipole_body_Am2',
+                                                  'b_body_T', 'wheel_momentum_Nms',
+                                                  'wheel_torque_Nm')}
+    q_est, w_est, dipole = np.full(4, np.nan), np.full(3, np.nan), np.zeros(3)
     q_target, eci, judged = np.full(4, np.nan), False, True    # the latest target
     active, rate = 'zero', 0.0
     for frame in loop.run():
@@ -50,9 +48,11 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
             elif topic == 'adcs/attitude_estimate':
                 q_est, w_est = x.q_orbit_body, x.omega_body_eci_body
             elif topic == 'adcs/actuator_command':
-                active = x.source
+                active, dipole = x.source, x.dipole_body_Am2
             elif topic == 'sim/environment':
-                rate = float(x.orbit_rate_rad_s)
+                rate, b_eci = float(x.orbit_rate_rad_s), x.b_eci_T
+            elif topic == 'sim/wheels':
+                wheels = x
             elif topic == 'adcs/attitude_target':
                 q_target, eci = x.q_ref_body, x.frame == 'eci'
                 judged = x.profile != 'maneuver'
@@ -67,6 +67,10 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
         rows['q_orbit_target'].append(attitude.multiply(attitude.multiply(
             q_body, attitude.conjugate(state.q_eci_body)), q_target) if eci else q_target)
         rows['target_judged'].append(judged)
+        rows['dipole_body_Am2'].append(dipole)
+        rows['b_body_T'].append(attitude.to_matrix(state.q_eci_body).T @ b_eci)
+        rows['wheel_momentum_Nms'].append(wheels.momentum_Nms)
+        rows['wheel_torque_Nm'].append(wheels.torque_Nm)
     out = {k: np.asarray(v) for k, v in rows.items()}
     out['angle_deg'] = metrics.angle_to_identity_deg(out['q_orbit_body'])
     out['est_err_deg'] = metrics.angle_between_deg(out['q_est'], out['q_orbit_body'])
@@ -78,14 +82,11 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
 def mc_worker(run_dir: str) -> int:
     """One Monte Carlo run on the plain engine (``adcs montecarlo``, any scenario).
 
-    Reads ``job.json`` and ``scenario.yaml`` of the prepared run directory, runs the
-    FrameLoop, writes ``series.npz`` (per-frame truth, estimate error and the guidance target
-    the run published, :func:`run_series`) and ``result.json`` with
-    :func:`adcs_nodes.tools.campaigns.results.series_metrics` (the same result as a graph
-    run): capture judged against the recorded target, or the orbit frame, as the scenario's
-    ``capture_reference`` says (:mod:`adcs_nodes.tools.campaigns.capture`); or
-    ``failed.json``. Exit code 130 on SIGINT (nothing written). ``frameloop_cpu_s``: the CPU
-    time of building and stepping the FrameLoop (:class:`CpuTimed`); ``cpu_s``: the run's.
+    The prepared run directory's ``job.json`` and ``scenario.yaml`` run on the FrameLoop:
+    ``series.npz`` (:func:`run_series`) and ``result.json`` (:func:`.results.series_metrics`,
+    capture to the ``capture_reference``, :mod:`.capture`), or ``failed.json``; exit code 130
+    on SIGINT (nothing written). ``frameloop_cpu_s``: building and stepping the FrameLoop
+    (:class:`CpuTimed`) [s]; ``cpu_s``: the run's.
     """
     import json
     import uuid
@@ -94,9 +95,9 @@ def mc_worker(run_dir: str) -> int:
 
     from adcs_nodes.tools.analyse import metrics
     from adcs_nodes.tools.campaigns.capture import ORBIT_FRAME, capture_reference
-    from adcs_nodes.tools.campaigns.files import RESULT_FILE, SERIES_FILE, write_json_atomic
+    from adcs_nodes.tools.campaigns.files import (RESULT_FILE, SERIES_FILE, fail, result_head,
+                                                  write_json_atomic)
     from adcs_nodes.tools.campaigns.results import angle_to_target_deg, series_metrics
-    from adcs_nodes.tools.campaigns.files import fail, result_head
     from adcs_nodes.scenario import ScenarioError, load_scenario
 
     t0, cpu0 = time.monotonic(), time.process_time()
@@ -114,7 +115,8 @@ def mc_worker(run_dir: str) -> int:
     tmp = os.path.join(run_dir, f'series.tmp-{uuid.uuid4().hex}.npz')   # unique per attempt
     np.savez(tmp, **{k: s[k] for k in ('t_s', 'q_orbit_body', 'angle_deg', 'est_err_deg',
                                        'rate_err_deg_s', 'w_eci', 'w_orbit', 'q_orbit_target',
-                                       'target_judged')})   # uncompressed: 35 % larger, no CPU
+                                       'target_judged', 'active', 'dipole_body_Am2',
+                                       'b_body_T', 'wheel_momentum_Nms', 'wheel_torque_Nm')})
     os.replace(tmp, os.path.join(run_dir, SERIES_FILE))
     angle = judged = None                 # the orbit frame
     if reference != ORBIT_FRAME:          # the target the run published
