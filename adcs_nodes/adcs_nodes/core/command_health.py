@@ -1,8 +1,9 @@
 """The controller manager's command health check and fallback chain (no ROS).
 
-A controller's command is usable only if it is fresh (stamp equal to the frame time, or older
-by at most ``stale_after_s``; never from the future), has the right shapes, is finite and is
-inside the actuator limits (``|v_i| <= l_i (1 + 1e-9) + 1e-12``) and, when the controller uses
+A controller's command is usable only if the controller did not refuse it (``Command.refused``,
+with its reason), is fresh (stamp equal to the frame time, or older by at most
+``stale_after_s``; never from the future), has the right shapes, is finite and is inside the
+actuator limits (``|v_i| <= l_i (1 + 1e-9) + 1e-12``) and, when the controller uses
 the estimate (``estimate_users``) and the estimate is monitored (``estimate_period_s``), the
 estimate is fresh (stamped at the estimator's last frame at or before ``t``, or older by at
 most ``stale_after_s``) and usable. An unusable active command hands over to the ``fallback``
@@ -159,6 +160,8 @@ class CommandHealth:
         if t - stamp > self.stale_after + TIME_TOL_S:
             return None, (f'stale: stamp {stamp:.9g} s is {t - stamp:.9g} s older than the '
                           f'frame {t:.9g} s (limit {self.stale_after:g} s)')
+        if getattr(cmd, 'refused', False):
+            return None, str(getattr(cmd, 'reason', '') or 'refused')
         try:
             fields = (('dipole_body', cmd.dipole_body, self.max_dipole, 'A m^2'),
                       ('wheel_torque', cmd.wheel_torque, self.max_wheel, 'N m'),
@@ -177,9 +180,7 @@ class CommandHealth:
                 return None, f'malformed {name}: shape {arr.shape}, expected {limit.shape}'
             i = limit_violation(arr, limit, _LIMIT_RTOL)
             if i <= -2:
-                why = str(getattr(cmd, 'reason', '') or '')      # the controller's own word
-                return None, f'non-finite (NaN or inf) {name}: {arr}' + (f' ({why})' if why
-                                                                         else '')
+                return None, f'non-finite (NaN or inf) {name}: {arr}'
             if i >= 0:
                 return None, (f'out of range: {name}[{i}] = {arr[i]:.6g} {unit} exceeds the '
                               f'limit {limit[i]:.6g} {unit}')

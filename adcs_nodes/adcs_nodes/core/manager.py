@@ -22,6 +22,8 @@ health check and fallback chain in :mod:`adcs_nodes.core.command_health`.
 * **Fallback**: an unusable active command is replaced in the same frame by the first usable
   fallback (``missed_frames``, ``last_fault``). With ``latch_fallback`` the controller used
   becomes the active one (a counted switch, no zero frame) and the sequence is suspended.
+  A usable command with a ``note`` in its ``info`` (a failed wheel the controller flies
+  without) is forwarded, the note in ``last_fault``.
   Status key ``active`` is the selected controller, ``source`` the one forwarded.
 * **Start**: the first frame forwards the initial controller (no zero frame).
 """
@@ -299,6 +301,8 @@ class ControllerManagerCore:
         cmd, why = self.health.usable(commands, self.active, t, est_fault)
         if cmd is not None:
             self._forwarded = True
+            if cmd.info.get('note'):              # usable, degraded (e.g. a failed wheel)
+                self.last_fault = f'{self.active}: {cmd.info["note"]}'
         elif (self.startup_s > 0.0 and not self._forwarded
               and t - self._t_first <= self.startup_s + TIME_TOL_S):
             self.startup_frames += 1                 # the chain's first command on its way

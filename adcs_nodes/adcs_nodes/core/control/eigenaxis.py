@@ -290,5 +290,8 @@ def realise(torque: np.ndarray, omega: np.ndarray, inputs: ControlInputs, ctrl,
         h = np.asarray(h, dtype=float)
         if h.shape == (ctrl.A_w.shape[1],) and np.all(np.isfinite(h)):
             demand = demand + np.cross(omega, ctrl.A_w @ h)   # cancel omega x h_wheels
-    tau_w, _, _ = ctrl.wheels.allocate(-demand)                                  # (A1), (A2)
-    return Command(wheel_torque=tau_w, info=info)
+    tau_w, dipole, _, _, refusal = ctrl.wheels.allocate_healthy(                 # (A1)-(A5)
+        -demand, None, inputs.wheel_ok, inputs.field_body(), inputs.backup_dipole_Am2)
+    if refusal:
+        return Command.zero(ctrl.A_w.shape[1], refusal, refused=True)
+    return Command(dipole_body=dipole, wheel_torque=tau_w, info=info)

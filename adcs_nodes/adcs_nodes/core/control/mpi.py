@@ -520,11 +520,13 @@ class MPIController:
                                 'period: zero command')
         h_dot = wheel_momentum_rate(u, x, inertia_t, h_t, omega0, self.literal)           # (27)
         h_dot_b = c_of @ h_dot                                                            # (28)
-        tau_w = self.wheels.torques(h_dot_b)                                             # (A1)
-        if not np.all(np.isfinite(tau_w)):
+        if not np.all(np.isfinite(h_dot_b)):
             return Command.zero(n, 'non-finite wheel torque demand: zero command')
-        out, sigma = self.wheels.limit(tau_w, h_w)                                   # (A2)-(A4)
+        out, dipole, sigma, tau_w, refusal = self.wheels.allocate_healthy(      # (A1)-(A5)
+            h_dot_b, h_w, inputs.wheel_ok, inputs.field_body(), inputs.backup_dipole_Am2)
+        if refusal:
+            return Command.zero(n, refusal, refused=True)
         info = {'horizon_s': tau, 'x': x, 'x_star': x_star, 'u': u,
                 'h_dot_body_demand': h_dot_b, 'sigma': sigma,
                 'saturated': bool(np.any(np.abs(out - tau_w) > 1e-12))}
-        return Command(np.zeros(3), out, np.zeros(3), reason, info)
+        return Command(dipole, out, np.zeros(3), reason, info)
