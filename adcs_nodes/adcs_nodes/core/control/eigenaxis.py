@@ -249,9 +249,7 @@ def error_state(inputs: ControlInputs):
         if q_t.shape != (4,) or w_t.shape != (3,) or not (
                 np.all(np.isfinite(q_t)) and np.all(np.isfinite(w_t))):
             return 'bad target'
-        nq = float(np.linalg.norm(q_t))
-        if not nq > 1e-9:
-            return 'bad target'
+        q_t = attitude.normalize(q_t)                  # ValueError: zero (said below)
         w = np.asarray(est.omega_body_eci_body, dtype=float)
         if tgt.frame == 'eci':
             if est.q_eci_body is None:
@@ -266,7 +264,7 @@ def error_state(inputs: ControlInputs):
             w_frame = w - float(est.omega0) * j2_body
         else:
             return f'unknown target frame {tgt.frame!r}'
-        q_err = attitude.multiply(attitude.conjugate(q_t / nq), attitude.normalize(q_b))
+        q_err = attitude.multiply(attitude.conjugate(q_t), attitude.normalize(q_b))
     except (TypeError, ValueError):
         return 'bad estimate or target'
     return q_err, w_frame - w_t, w
