@@ -22,8 +22,8 @@ def test_a_raising_node_is_marked_dead_and_the_others_go_on(ros_context, spin, c
         sent.append(len(sent))
         pub.publish(String(data=str(sent[-1])))
     talker.create_timer(0.01, tick)
-    crasher, listener = Node('crasher', context=ros_context), Node('listener',
-                                                                     context=ros_context)
+    crasher = Node('crasher', context=ros_context)
+    listener = Node('listener', context=ros_context)
     calls, heard = [], []
 
     def crash(msg):

@@ -1,6 +1,6 @@
 """The manager's fallback list (issue 21): a wheel controller whose command is unusable (a
-refusal: its wheels left cannot cover the demand) hands over to the magnetic law, which needs no wheel,
-before the safe B-dot; each step is said in the fault."""
+refusal: its wheels left cannot cover the demand) hands over to the magnetic law, which needs
+no wheel, before the safe B-dot; each step is said in the fault."""
 import numpy as np
 import pytest
 

@@ -266,7 +266,8 @@ class ControllerManagerCore:
             command was forwarded, '' for zero), ``pending``, ``switch_count``,
             ``missed_frames``, ``startup_frames``, ``last_fault``, ``fault`` (this frame),
             ``fallback`` (bool), ``zero_frame`` (bool), ``estimate_fault`` (this frame),
-            ``estimate_stale_frames``, ``replaced_requests``.
+            ``estimate_stale_frames``, ``replaced_requests``, ``note`` (the forwarded
+            command's, e.g. a failed wheel it flies without).
         """
         t = float(t)
         if not math.isfinite(t):
@@ -297,12 +298,13 @@ class ControllerManagerCore:
 
     def _forward(self, t: float, commands: Mapping, est_fault: str) -> tuple[Command, dict]:
         """The active command if usable, else the fallback chain's (or zero)."""
-        fault, source = '', self.active
+        fault, source, note = '', self.active, ''
         cmd, why = self.health.usable(commands, self.active, t, est_fault)
         if cmd is not None:
             self._forwarded = True
-            if cmd.info.get('note'):              # usable, degraded (e.g. a failed wheel)
-                self.last_fault = f'{self.active}: {cmd.info["note"]}'
+            note = cmd.info.get('note', '')       # usable, degraded (e.g. a failed wheel)
+            if note:
+                self.last_fault = f'{self.active}: {note}'
         elif (self.startup_s > 0.0 and not self._forwarded
               and t - self._t_first <= self.startup_s + TIME_TOL_S):
             self.startup_frames += 1                 # the chain's first command on its way
@@ -321,6 +323,7 @@ class ControllerManagerCore:
                self.health.sanitize(cmd, fault))
         self._status = self._make_status(t, source, fault, bool(fault) and bool(source),
                                          estimate_fault=est_fault)
+        self._status['note'] = note
         return out, self.status()
 
     def _due_request(self, t: float) -> Optional[str]:
