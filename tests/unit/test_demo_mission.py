@@ -149,6 +149,7 @@ def test_the_stuck_wheel_is_seen_and_mpi_flies_on_with_two_wheels_and_the_magnet
     for t in range(int(t_seen), int(END_S)):
         assert abs(act[float(t)].wheel_torque[0]) == pytest.approx(probe, rel=1e-12)
         assert wheels[float(t + 1)].torque[0] == 0.0                   # stuck: no torque
+
     def dipole(t):
         return np.linalg.norm(v(act[float(t)].dipole_body))
     assert max(dipole(t) for t in range(int(t_seen), int(END_S))) > 0.5   # x on the rods
