@@ -3,7 +3,7 @@ reference_slew, mpi, and any plugin's) driven with degenerate inputs on three sp
 (three axis wheels and magnetorquers, a four-wheel pyramid, magnetorquers only): a controller
 either refuses (``Command.refused`` with a reason, or ``ValueError`` at construction for a
 spacecraft it cannot fly) or returns a finite command inside the actuator limits, checked by
-the same boundary check the controller component applies (:func:`check_output`); an exception
+the same boundary check the controller component applies (:func:`command_fields`); an exception
 escaping ``update`` or a NaN out fails. The target quaternion is also checked where it enters
 (:func:`target_of`: normalised, or refused when zero, NaN or not finite)."""
 import math
@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from adcs_nodes import registry
-from adcs_nodes.components.controller import check_output, target_of
+from adcs_nodes.components.controller import target_of
+from adcs_nodes.core.command_health import command_fields
 from adcs_nodes.core.control import Command, ControlInputs, Estimate, Target
 from adcs_nodes.core.samples import AttitudeTarget
 
@@ -103,7 +104,8 @@ def test_degenerate_inputs_give_a_bounded_finite_command_or_a_stated_refusal(nam
                 assert cmd.reason, (name, case)
                 refusals.append(case)
                 continue
-            why = check_output(cmd, n_cmd, np.array(MAX_DIPOLE), np.full(n_cmd, 0.01))
+            why = command_fields(cmd, np.array(MAX_DIPOLE), np.full(n_cmd, 0.01),
+                                 np.full(3, np.inf))[1]
             assert why == '', (name, craft, case, why)
             assert np.all(np.isfinite(np.asarray(cmd.torque_body, float))), (name, case)
     # only the allocation can refuse, and only when the wheels left cannot be covered
@@ -125,3 +127,34 @@ def test_the_target_quaternion_is_normalised_or_refused_where_it_enters(q, ok):
     expected = np.array(q, float) / np.max(np.abs(q))
     np.testing.assert_allclose(target.q_ref_body, expected / np.linalg.norm(expected),
                                atol=1e-15)
+
+
+class _Malformed:
+    """A plugin core with a bug: its dipole has shape (0,) (issue 38 item 3), then a NaN."""
+
+    def __init__(self, dipole):
+        self.dipole = dipole
+
+    def update(self, inputs, t, dt):
+        return Command(np.asarray(self.dipole, float), np.zeros(0), np.zeros(3))
+
+
+@pytest.mark.parametrize('dipole,why', [
+    ([], 'malformed dipole_body: shape (0,), expected (3,)'),
+    ([np.nan, 0.0, 0.0], 'non-finite (NaN or inf) dipole_body: [nan  0.  0.]'),
+    ([9.0, 0.0, 0.0], 'out of range: dipole_body[0] = 9 A m^2 exceeds the limit 5 A m^2')])
+def test_a_malformed_output_is_stopped_at_the_controller_and_the_manager_falls_back(dipole,
+                                                                                    why):
+    from adcs_nodes.components.controller import ControllerComponent, command_of
+    from adcs_nodes.core.manager import ControllerManagerCore
+    comp = ControllerComponent(_Malformed(dipole), 'plug', {'max_dipole_Am2': MAX_DIPOLE,
+                                                            'reference': None}, None)
+    out = comp.step(0, {}, lambda key: True)
+    assert out.source == f'plug: {why}'
+    assert out.dipole_body_Am2.shape == (3,) and np.all(out.dipole_body_Am2 == 0.0)
+    manager = ControllerManagerCore(['bdot', 'plug'], 'bdot', initial='plug',
+                                    max_dipole_Am2=MAX_DIPOLE)
+    bdot = Command(np.array([0.1, 0.0, 0.0]), np.zeros(0), np.zeros(3))
+    cmd, status = manager.step(0.0, {'plug': (0.0, command_of(out)), 'bdot': (0.0, bdot)})
+    assert status['source'] == 'bdot' and status['fault'] == f'plug: {why}; fallback to bdot'
+    np.testing.assert_array_equal(cmd.dipole_body, bdot.dipole_body)

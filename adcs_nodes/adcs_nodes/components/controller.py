@@ -21,8 +21,8 @@ the core (``ControlInputs.wheel_ok``; with magnetorquers, their limits and the o
 field for the axis the wheels left no longer cover); a failed wheel gets its probe torque.
 The source of a command with a failed wheel is ``'<name>; <each failed wheel and why>'``.
 
-The output is checked where it leaves the controller (:func:`check_output`: shapes, finite,
-limits): a bad one, or a core's refusal (``Command.refused``), goes out as a zero command
+The output is checked where it leaves the controller (shapes, finite, limits:
+:func:`~adcs_nodes.core.command_health.command_fields`): a bad one, or a core's refusal (``Command.refused``), goes out as a zero command
 with the source ``'<name>: <reason>'``, and the manager falls back as for a stale command.
 """
 from __future__ import annotations
@@ -35,7 +35,7 @@ import numpy as np
 from adcs_nodes import inputs
 from adcs_nodes.components import conditioning as cond
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.command_health import limit_violation
+from adcs_nodes.core.command_health import command_fields
 from adcs_nodes.core.control import Command, ControlInputs, Estimate, Target
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
@@ -174,33 +174,7 @@ def command_of(x: ActuatorCommand) -> Command:
                    src[j + 2:] if refused else '', {'note': note} if note else {}, refused)
 
 
-def check_output(cmd: Any, n_wheels: int, max_dipole: Any, max_wheel: Any) -> str:
-    """Why a controller's output cannot leave it ('' when it can): each field a float array
-    of its shape (``wheel_torque`` (n,) or (0,)), finite, inside the limits (``max_dipole``
-    (3,) [A m^2] or None: no magnetorquer; ``max_wheel`` (n,) [N m])."""
-    if not isinstance(cmd, Command):
-        return f'output is a {type(cmd).__name__}, not a Command'
-    limits = (('dipole_body', np.zeros(3) if max_dipole is None else max_dipole, 'A m^2'),
-              ('wheel_torque', max_wheel, 'N m'), ('torque_body', np.full(3, np.inf), 'N m'))
-    for name, limit, unit in limits:
-        try:
-            v = np.asarray(getattr(cmd, name), dtype=float)
-        except (TypeError, ValueError):
-            return f'output {name} is not numeric'
-        limit = np.asarray(limit, dtype=float)
-        if name == 'wheel_torque' and v.shape == (0,):
-            continue
-        if v.shape != limit.shape:
-            return f'output {name} has shape {v.shape}, expected {limit.shape}'
-        i = limit_violation(v, limit, 1e-9)
-        if i <= -2:
-            return f'output {name}[{-2 - i}] is not finite ({v[-2 - i]})'
-        if i >= 0:
-            return (f'output {name}[{i}] = {v[i]:.6g} {unit} exceeds the limit '
-                    f'{limit[i]:.6g} {unit}')
-    return ''
-
-
+_NO_LIMIT = np.full(3, np.inf)
 #: Input keys of the built-in records (a plugin's kinds reach its controller as ``samples``).
 _BUILTIN = frozenset(rec.key for rec in inputs.INPUTS)
 
@@ -236,7 +210,8 @@ class ControllerComponent:
                                             ctx['wheel_max_momentum_Nms'], ctx['period_s'],
                                             max_torque_Nm=ctx['wheel_max_torque_Nm'])
         dipole = ctx.get('max_dipole_Am2')
-        self.max_dipole = None if dipole is None else np.asarray(dipole, dtype=float)
+        self.backup_dipole = None if dipole is None else np.asarray(dipole, dtype=float)
+        self.max_dipole = np.zeros(3) if dipole is None else self.backup_dipole
         self.max_wheel = np.asarray(ctx.get('wheel_max_torque_Nm') or [], dtype=float)
 
     def inputs_for(self, t_ns: int, inputs: Dict[str, Any],
@@ -272,7 +247,7 @@ class ControllerComponent:
             applied_dipole_body=cond.applied_dipole(inputs['cmd']) if 'cmd' in inputs else None,
             samples={k: v for k, v in inputs.items() if k not in _BUILTIN and fresh(k)},
             wheel_ok=wheel_ok,
-            backup_dipole_Am2=None if wheel_ok is None else self.max_dipole)
+            backup_dipole_Am2=None if wheel_ok is None else self.backup_dipole)
 
     def step(self, t_ns: int, inputs: Dict[str, Any],
              fresh: Callable[[str], bool]) -> ActuatorCommand:
@@ -281,14 +256,14 @@ class ControllerComponent:
         self._last_t = t_ns
         self._check_wheels(inputs)
         cmd = self.core.update(self.inputs_for(t_ns, inputs, fresh), t_ns / NS_PER_S, dt)
-        why = check_output(cmd, self.n_wheels, self.max_dipole, self.max_wheel)
+        why = command_fields(cmd, self.max_dipole, self.max_wheel, _NO_LIMIT)[1]
         health = self.wheel_health
         if not why and health is not None and not all(health.ok) \
                 and np.shape(cmd.wheel_torque) == (self.n_wheels,):
             bad = [n for n, ok, v in zip(health.names, health.ok, cmd.wheel_torque)
                    if not ok and v != 0.0]
             why = f'commands torque on the failed wheel {", ".join(bad)}' if bad else ''
-        if why or cmd.refused:
+        if why or getattr(cmd, 'refused', False):
             wheels = health.reason() if health is not None else ''
             why = '; '.join(r for r in (wheels, why or cmd.reason or 'refused') if r)
             return command_sample(Command.zero(self.n_wheels), t_ns, f'{self.name}: {why}')

@@ -63,6 +63,36 @@ def warm_up() -> None:
         clip_finite(v, v)
 
 
+def command_fields(cmd, max_dipole: np.ndarray, max_wheel: np.ndarray,
+                   max_torque: np.ndarray) -> tuple[dict, str]:
+    """``({field: float array}, '')`` when ``cmd``'s fields have their limits' shapes (an empty
+    ``wheel_torque``: zero on every wheel), are finite and inside the limits (module
+    docstring), else ``({}, why)`` naming the field (the manager's check and the controller
+    component's, at its boundary)."""
+    values = {}
+    for name, limit, unit in (('dipole_body', max_dipole, 'A m^2'),
+                              ('wheel_torque', max_wheel, 'N m'),
+                              ('torque_body', max_torque, 'N m')):
+        try:
+            arr = np.asarray(getattr(cmd, name), dtype=float)
+        except AttributeError:
+            return {}, f'malformed command {type(cmd).__name__}'
+        except (TypeError, ValueError):
+            return {}, f'malformed {name}: {getattr(cmd, name)!r}'
+        if name == 'wheel_torque' and arr.shape == (0,):
+            arr = np.zeros(limit.shape)
+        if arr.shape != limit.shape:
+            return {}, f'malformed {name}: shape {arr.shape}, expected {limit.shape}'
+        i = limit_violation(arr, limit, _LIMIT_RTOL)
+        if i <= -2:
+            return {}, f'non-finite (NaN or inf) {name}: {arr}'
+        if i >= 0:
+            return {}, (f'out of range: {name}[{i}] = {arr[i]:.6g} {unit} exceeds the limit '
+                        f'{limit[i]:.6g} {unit}')
+        values[name] = arr
+    return values, ''
+
+
 class CommandHealth:
     """Limits, staleness and estimate checks of the commands (see the module docstring).
 
@@ -162,29 +192,9 @@ class CommandHealth:
                           f'frame {t:.9g} s (limit {self.stale_after:g} s)')
         if getattr(cmd, 'refused', False):
             return None, str(getattr(cmd, 'reason', '') or 'refused')
-        try:
-            fields = (('dipole_body', cmd.dipole_body, self.max_dipole, 'A m^2'),
-                      ('wheel_torque', cmd.wheel_torque, self.max_wheel, 'N m'),
-                      ('torque_body', cmd.torque_body, self.max_torque, 'N m'))
-        except AttributeError:
-            return None, f'malformed command {type(cmd).__name__}'
-        values = {}
-        for name, value, limit, unit in fields:
-            try:
-                arr = np.asarray(value, dtype=float)
-            except (TypeError, ValueError):
-                return None, f'malformed {name}: {value!r}'
-            if name == 'wheel_torque' and arr.shape == (0,):
-                arr = np.zeros(self.n_wheels)
-            if arr.shape != limit.shape:
-                return None, f'malformed {name}: shape {arr.shape}, expected {limit.shape}'
-            i = limit_violation(arr, limit, _LIMIT_RTOL)
-            if i <= -2:
-                return None, f'non-finite (NaN or inf) {name}: {arr}'
-            if i >= 0:
-                return None, (f'out of range: {name}[{i}] = {arr[i]:.6g} {unit} exceeds the '
-                              f'limit {limit[i]:.6g} {unit}')
-            values[name] = arr
+        values, why = command_fields(cmd, self.max_dipole, self.max_wheel, self.max_torque)
+        if why:
+            return None, why
         info = getattr(cmd, 'info', None)
         return Command(values['dipole_body'], values['wheel_torque'], values['torque_body'],
                        str(getattr(cmd, 'reason', '')), dict(info) if info else {}), ''
