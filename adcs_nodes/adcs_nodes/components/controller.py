@@ -22,8 +22,9 @@ field for the axis the wheels left no longer cover); a failed wheel gets its pro
 The source of a command with a failed wheel is ``'<name>; <each failed wheel and why>'``.
 
 The output is checked where it leaves the controller (shapes, finite, limits:
-:func:`~adcs_nodes.core.command_health.command_fields`): a bad one, or a core's refusal (``Command.refused``), goes out as a zero command
-with the source ``'<name>: <reason>'``, and the manager falls back as for a stale command.
+:func:`~adcs_nodes.core.command_health.command_fields`): a bad one, or a core's refusal
+(``Command.refused``), goes out as a zero command with the source ``'<name>: <reason>'``,
+and the manager falls back as for a stale command.
 """
 from __future__ import annotations
 
