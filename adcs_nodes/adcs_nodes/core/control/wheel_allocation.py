@@ -65,7 +65,7 @@ class WheelAllocator:
         axes = np.array(wheel_axes_body, dtype=float).reshape(-1, 3) \
             if np.size(wheel_axes_body) else np.zeros((0, 3))
         if axes.shape[0] == 0 or not np.all(np.isfinite(axes)):
-            raise ValueError('wheel_axes_body is empty or not finite')
+            raise ValueError('wheel_axes_body is empty or not finite (no reaction wheels)')
         norms = np.linalg.norm(axes, axis=1)
         if np.any(norms < 1e-9) or np.linalg.matrix_rank(axes) < 3:
             raise ValueError('wheel axes must be non-zero and span three dimensions, got '
