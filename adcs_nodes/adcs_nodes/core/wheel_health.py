@@ -53,34 +53,12 @@ MOMENTUM_MARGIN = 0.95
 
 
 class WheelHealth:
-    """Per-wheel check of measured speed against applied torque (see module docstring).
-
-    Parameters
-    ----------
-    inertia_kgm2 : array_like, shape (n,)
-        Rotor inertias about the spin axes [kg m^2], > 0.
-    max_momentum_Nms : array_like, shape (n,)
-        Momentum limits [N m s], > 0 (``inf``: none).
-    period_s : float
-        The control period [s]: the interval over which an applied command is held.
-    confirm_frames : int
-        Bad informative frames in a row that declare a wheel failed (>= 1).
-    min_change_rad_s : float
-        Smallest expected speed change that is judged [rad/s] (> 0).
-    tolerance : float
-        Largest accepted ``|measured - expected| / |expected|`` (> 0).
-    names : sequence of str, optional
-        Wheel names for the reasons (default ``wheel0``, ``wheel1``, ...).
-    recover_frames : int
-        Good informative frames in a row that give a failed wheel back (>= 1).
-    max_torque_Nm : array_like, shape (n,), optional
-        Motor torque limits [N m]: the probe's bound (default none).
-
-    Raises
-    ------
-    ValueError
-        On inconsistent shapes or non-positive values.
-    """
+    """Per-wheel state (ok, stuck, lost torque) from measured speed against applied torque
+    (module docstring): rotor inertias ``inertia_kgm2`` (n,) [kg m^2] > 0, momentum limits
+    ``max_momentum_Nms`` (n,) [N m s] > 0, the control period ``period_s`` [s] (the hold of an
+    applied command), the thresholds (>= 1 frames, > 0 otherwise), wheel ``names`` (default
+    ``wheel0``, ...), motor limits ``max_torque_Nm`` (n,) [N m] bounding the probe.
+    ``ValueError`` on inconsistent shapes or non-positive values."""
 
     def __init__(self, inertia_kgm2: ArrayLike, max_momentum_Nms: ArrayLike, period_s: float,
                  confirm_frames: int = CONFIRM_FRAMES,
@@ -151,25 +129,10 @@ class WheelHealth:
 
     def update(self, t: float, speeds: Optional[ArrayLike], t_cmd: Optional[float],
                torque: Optional[ArrayLike]) -> str:
-        """Judge the interval ending at the tachometer sample ``(t, speeds)``.
-
-        Parameters
-        ----------
-        t : float
-            Stamp of the speeds [s].
-        speeds : array_like, shape (n,), or None
-            Measured speeds relative to the body [rad/s] (None: no sample; nothing judged).
-        t_cmd : float or None
-            Stamp of the applied command [s]; judged only when it equals the previous sample's
-            stamp and that sample is one period before ``t``.
-        torque : array_like, shape (n,) or (0,), or None
-            The applied motor torques [N m] (empty: zero on every wheel).
-
-        Returns
-        -------
-        str
-            :meth:`reason` after this interval.
-        """
+        """Judge the interval ending at the tachometer sample stamped ``t`` [s], ``speeds``
+        (n,) [rad/s] relative to the body (None: nothing judged), with the applied motor
+        ``torque`` (n,) or (0,): zero [N m] stamped ``t_cmd`` [s] (judged only when that is
+        the previous sample's stamp, one period before ``t``). Returns :meth:`reason`."""
         if speeds is None:
             return self.reason()
         w = np.asarray(speeds, dtype=float).reshape(-1)
