@@ -257,23 +257,22 @@ class ControllerComponent:
         self._last_t = t_ns
         self._check_wheels(inputs)
         cmd = self.core.update(self.inputs_for(t_ns, inputs, fresh), t_ns / NS_PER_S, dt)
-        why = command_fields(cmd, self.max_dipole, self.max_wheel, _NO_LIMIT)[1]
         health = self.wheel_health
-        if not why and health is not None and not all(health.ok) \
-                and np.shape(cmd.wheel_torque) == (self.n_wheels,):
+        failed = health is not None and not all(health.ok)
+        why = command_fields(cmd, self.max_dipole, self.max_wheel, _NO_LIMIT)[1]
+        if failed and not why and np.shape(cmd.wheel_torque) == (self.n_wheels,):
             bad = [n for n, ok, v in zip(health.names, health.ok, cmd.wheel_torque)
                    if not ok and v != 0.0]
             why = f'commands torque on the failed wheel {", ".join(bad)}' if bad else ''
         if why or getattr(cmd, 'refused', False):
-            wheels = health.reason() if health is not None else ''
-            why = '; '.join(r for r in (wheels, why or cmd.reason or 'refused') if r)
+            why = '; '.join(r for r in (health.reason() if failed else '',
+                                        why or cmd.reason or 'refused') if r)
             return command_sample(Command.zero(self.n_wheels), t_ns, f'{self.name}: {why}')
-        if health is not None and not all(health.ok):
-            if np.shape(cmd.wheel_torque) == (self.n_wheels,):
-                cmd = Command(cmd.dipole_body, cmd.wheel_torque + health.probe(),
-                              cmd.torque_body)
-            return command_sample(cmd, t_ns, f'{self.name}; {health.reason()}')
-        return command_sample(cmd, t_ns, self.name)
+        if not failed:
+            return command_sample(cmd, t_ns, self.name)
+        if np.shape(cmd.wheel_torque) == (self.n_wheels,):                  # its probe
+            cmd = Command(cmd.dipole_body, cmd.wheel_torque + health.probe(), cmd.torque_body)
+        return command_sample(cmd, t_ns, f'{self.name}; {health.reason()}')
 
     def _check_wheels(self, inputs: Dict[str, Any]) -> None:
         """This frame's wheel check (a controller reading both the tachometer and the
