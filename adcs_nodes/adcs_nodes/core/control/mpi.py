@@ -306,39 +306,17 @@ def error_state(c_or: np.ndarray, omega_r: np.ndarray, c_of: np.ndarray,
 class MPIController:
     """Paper 001's MPI law with reaction wheels (module docstring).
 
-    Parameters
-    ----------
-    inertia_kgm2 : array_like, shape (3, 3)
-        The controller's own (onboard) inertia, body axes [kg m^2] (paper (31): 5 % off).
-    wheel_axes_body : array_like, shape (n, 3)
-        Wheel spin axes, body axes; must span 3-D.
-    wheel_max_torque_Nm, wheel_max_momentum_Nms : array_like, shape (n,)
-        Per-wheel limits (``inf`` momentum: none).
-    period_s : float
-        Control period [s]: the horizon when stabilising or tracking (5.2).
-    series_order : int
-        ``N`` of (19), (21); the paper's 5.
-    literal_model : bool
-        Drop the derived constant ``c = [w0 hz, 0, -w0 hx]`` as the paper does.
-    min_horizon_s : float
-        Horizon floor in a maneuver [s] (ASSUMPTION); 0 means one control period.
-    hold_horizon_s : float
-        Horizon when stabilising or tracking [s]; 0 means one control period (the paper).
-        DEPARTURE from the paper when > 0: a longer one softens the near dead-beat rate loop
-        (digest P14: two mirrored wings give a 2.5 Hz limit cycle at one period); 0.4 s is the
-        two-wing variant (module docstring, with ``reference_time='t0_plus_tau'``).
-    saturation : {'scale', 'clip'}
-        One factor keeping the direction, or per-wheel clipping.
-    reference_time : {'t0', 't0_plus_tau'}
-        Desired state from the target at ``t0`` (paper, P15) or propagated to ``t0 + tau``
-        (DEPARTURE from the paper: no lag of ``tau`` behind a moving target).
-    exact_transition : bool
-        Use ``expm`` instead of the series (digest P6 study).
-
-    Raises
-    ------
-    ValueError
-        On a bad inertia, wheel geometry, limit, period or option.
+    ``inertia_kgm2`` (3, 3) [kg m^2] the controller's own, body axes (paper (31): 5 % off);
+    ``wheel_axes_body`` (n, 3) spanning 3-D; ``wheel_max_torque_Nm``,
+    ``wheel_max_momentum_Nms`` (n,) (``inf`` momentum: none); ``period_s`` [s] the control
+    period (the horizon when stabilising or tracking, 5.2); ``series_order`` N of (19), (21)
+    (the paper's 5); ``literal_model`` drops the derived ``c`` as the paper does;
+    ``min_horizon_s`` [s] the horizon floor in a maneuver (ASSUMPTION; 0: one period);
+    ``hold_horizon_s`` [s] the horizon when holding (0: one period, the paper's; DEPARTURE
+    when > 0, digest P14); ``saturation`` ``'scale'`` (one factor) or ``'clip'`` (per wheel);
+    ``reference_time`` ``'t0'`` (the paper, P15) or ``'t0_plus_tau'`` (DEPARTURE: no lag);
+    ``exact_transition``: ``expm`` instead of the series (digest P6). ``ValueError`` on a bad
+    inertia, wheel geometry, limit, period or option.
     """
 
     SATURATION = SATURATION
