@@ -14,17 +14,14 @@ Conditioning (the same for the node and the FrameLoop):
   them (:func:`adcs_nodes.entries.wheel_momentum`);
 * a plugin's input kinds (``inputs.register``): their fresh samples in ``ControlInputs.samples``.
 
-Wheel health: a controller that commands wheels and reads both the tachometer and the applied
-command (``actuator_command``, e.g. ``mpi``) keeps each wheel's state
-(:class:`adcs_nodes.core.wheel_health.WheelHealth`: ok, stuck, lost torque) and hands it to
-the core (``ControlInputs.wheel_ok``; with magnetorquers, their limits and the onboard-model
-field for the axis the wheels left no longer cover); a failed wheel gets its probe torque.
-The source of a command with a failed wheel is ``'<name>; <each failed wheel and why>'``.
-
-The output is checked where it leaves the controller (shapes, finite, limits:
-:func:`~adcs_nodes.core.command_health.command_fields`): a bad one, or a core's refusal
-(``Command.refused``), goes out as a zero command with the source ``'<name>: <reason>'``,
-and the manager falls back as for a stale command.
+Wheel health (a controller reading the tachometer and the applied command, e.g. ``mpi``):
+each wheel's state (:class:`adcs_nodes.core.wheel_health.WheelHealth`) goes to the core as
+``ControlInputs.wheel_ok``, with the magnetorquer limits and the onboard-model field for the
+axis the wheels left no longer cover; a failed wheel gets its probe torque, and the source is
+``'<name>; <each failed wheel and why>'``. The output is checked where it leaves the
+controller (:func:`~adcs_nodes.core.command_health.command_fields`): a bad one, or a refusal
+(``Command.refused``), goes out as a zero command from ``'<name>: <reason>'``, and the manager
+falls back as for a stale command.
 """
 from __future__ import annotations
 
@@ -147,11 +144,10 @@ def target_of(x: Optional[AttitudeTarget]) -> Optional[Target]:
         return None
     q, w, a = x.q_ref_body, x.omega_body_ref_body, x.omega_dot_body_ref_body
     frame = x.frame or 'orbit'
-    if frame not in ('orbit', 'eci') or not all_finite(q, w, a):
+    if frame not in ('orbit', 'eci') or not all_finite(q, w, a) or q.shape != (4,):
         return None
-    q_max = float(np.max(np.abs(q))) if q.shape == (4,) else 0.0
-    q = q / q_max if q_max > 0.0 else q           # |q| of 1e300 would overflow: scaled first
-    if q.shape != (4,) or math.sqrt(q.dot(q)) * q_max < 0.5:
+    q_max = float(np.max(np.abs(q)))              # |q| of 1e300 would overflow: scaled first
+    if q_max == 0.0 or math.sqrt((q / q_max).dot(q / q_max)) * q_max < 0.5:
         return None
     return Target(att.normalize(q), w, a, frame, float(x.time_to_go_s))
 
@@ -275,8 +271,7 @@ class ControllerComponent:
         return command_sample(cmd, t_ns, f'{self.name}; {health.reason()}')
 
     def _check_wheels(self, inputs: Dict[str, Any]) -> None:
-        """This frame's wheel check (a controller reading both the tachometer and the
-        applied command)."""
+        """This frame's wheel check (with both the tachometer and the applied command)."""
         if self.wheel_health is None or 'wheels' not in inputs or 'cmd' not in inputs:
             return
         wheels, cmd = inputs.get('wheels'), inputs.get('cmd')

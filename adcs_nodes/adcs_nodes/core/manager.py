@@ -22,9 +22,8 @@ health check and fallback chain in :mod:`adcs_nodes.core.command_health`.
 * **Fallback**: an unusable active command is replaced in the same frame by the first usable
   fallback (``missed_frames``, ``last_fault``). With ``latch_fallback`` the controller used
   becomes the active one (a counted switch, no zero frame) and the sequence is suspended.
-  A usable command with a ``note`` in its ``info`` (a failed wheel the controller flies
-  without) is forwarded, the note in ``last_fault``.
-  Status key ``active`` is the selected controller, ``source`` the one forwarded.
+  ``active`` is the selected controller, ``source`` the one forwarded; a usable command's
+  ``info['note']`` (a failed wheel it flies without) goes to ``last_fault``.
 * **Start**: the first frame forwards the initial controller (no zero frame).
 """
 from __future__ import annotations

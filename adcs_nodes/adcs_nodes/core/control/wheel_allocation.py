@@ -147,10 +147,9 @@ class WheelAllocator:
         if rank < 3:
             b = None if b_body is None else np.asarray(b_body, dtype=float)
             bb = float(b @ b) if b is not None and b.shape == (3,) else math.nan
-            if max_dipole_Am2 is None or not np.any(np.asarray(max_dipole_Am2) > 0.0) \
-                    or not (math.isfinite(bb) and bb > 0.0):
-                what = 'no magnetorquer' if max_dipole_Am2 is None or not np.any(
-                    np.asarray(max_dipole_Am2) > 0.0) else 'no usable magnetic field'
+            no_rods = max_dipole_Am2 is None or not np.any(np.asarray(max_dipole_Am2) > 0.0)
+            if no_rods or not (math.isfinite(bb) and bb > 0.0):
+                what = 'no magnetorquer' if no_rods else 'no usable magnetic field'
                 return (np.zeros(self.n), dipole, 0.0, tau_w,
                         f'the {int(ok.sum())} healthy wheels of {self.n} span {rank} axes, '
                         f'and {what} for the rest')

@@ -172,9 +172,9 @@ class InProcessBus:
 
 
 def guard_callbacks(nodes) -> Dict[str, str]:
-    """Each node's subscription and timer callbacks guarded: an exception marks that node dead
-    (its callbacks do nothing more, as a crashed process's; said once on stderr) and the others
-    go on (DESIGN section 6). Returns ``{node: why}`` of the dead ones, filled as they die."""
+    """Guards each node's subscription and timer callbacks: an exception marks that node dead
+    (said once; it does nothing more, as a crashed process) and the others go on. Returns
+    ``{node: why}``, filled as nodes die."""
     dead: Dict[str, str] = {}
 
     def guard(callback: Callable, name: str) -> Callable:
