@@ -133,3 +133,62 @@ def test_eigenaxis_realise_gives_the_body_the_demanded_torque():
     np.testing.assert_allclose(body / np.linalg.norm(body), want / np.linalg.norm(want),
                                atol=1e-12)
     assert np.max(np.abs(big.wheel_torque)) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize('axes,failed', [(PYRAMID, [0]), (PYRAMID, [2]),
+                                         (np.vstack([np.eye(3), [[1, 1, 1]]]), [1])])
+def test_failed_wheels_are_left_out_and_the_rest_is_the_lstsq_solution(axes, failed):
+    """Three healthy wheels of four still span 3-D: the healthy torques are numpy's
+    least-squares (minimum-norm) solution on the healthy axes, the body gets the whole demand,
+    the failed wheel 0 and no dipole."""
+    rng = np.random.default_rng(3)
+    alloc = WheelAllocator(axes, np.inf)
+    ok = np.ones(alloc.n, bool)
+    ok[failed] = False
+    a = np.asarray(axes, float)
+    a_h = (a / np.linalg.norm(a, axis=1)[:, None]).T[:, ok]
+    for _ in range(5):
+        h_dot = rng.normal(size=3)
+        tau, dipole, sigma, _, refusal = alloc.allocate_healthy(h_dot, ok=ok)
+        assert refusal == '' and sigma == 1.0 and np.all(dipole == 0.0)
+        assert np.all(tau[~ok] == 0.0)
+        np.testing.assert_allclose(tau[ok], np.linalg.lstsq(a_h, h_dot, rcond=None)[0],
+                                   atol=1e-13)
+        np.testing.assert_allclose(a_h @ tau[ok], h_dot, atol=1e-13)       # the whole demand
+
+
+def test_without_a_spanning_set_the_magnetorquers_take_the_rest_by_a5():
+    """Three axis wheels, wheel x failed: y and z take their part (lstsq), the dipole makes the
+    x body torque the wheels cannot, less its part along the field (m x b = T - (T.b^) b^)."""
+    alloc = WheelAllocator(np.eye(3), 0.01)
+    ok = np.array([False, True, True])
+    b = np.array([2e-5, -1e-5, 3e-5])
+    h_dot = np.array([1e-5, -2e-5, 4e-6])
+    tau, dipole, _, _, refusal = alloc.allocate_healthy(h_dot, ok=ok, b_body=b,
+                                                        max_dipole_Am2=[5.0] * 3)
+    assert refusal == ''
+    np.testing.assert_allclose(tau, [0.0, h_dot[1], h_dot[2]], atol=1e-18)
+    t_left = np.array([-h_dot[0], 0.0, 0.0])                  # the body feels -h_dot
+    b_hat = b / np.linalg.norm(b)
+    expected = t_left - (t_left @ b_hat) * b_hat
+    np.testing.assert_allclose(np.cross(dipole, b), expected, rtol=1e-12, atol=1e-20)
+    # saturated: the dipole is scaled onto the box, its direction kept (31)
+    _, big, _, _, _ = alloc.allocate_healthy(1e3 * h_dot, ok=ok, b_body=b,
+                                             max_dipole_Am2=[5.0] * 3)
+    assert np.max(np.abs(big)) == pytest.approx(5.0)
+    np.testing.assert_allclose(big / np.linalg.norm(big), dipole / np.linalg.norm(dipole),
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize('dipole,b,what', [(None, [1e-5, 0, 0], 'no magnetorquer'),
+                                           ([5.0] * 3, None, 'no usable magnetic field'),
+                                           ([5.0] * 3, [0.0, 0.0, 0.0],
+                                            'no usable magnetic field')])
+def test_without_a_spanning_set_nor_a_way_to_cover_it_the_allocation_refuses(dipole, b, what):
+    alloc = WheelAllocator(np.eye(3), 0.01)
+    tau, m, sigma, _, refusal = alloc.allocate_healthy(
+        [1e-3, 0, 0], ok=[True, False, True], b_body=b, max_dipole_Am2=dipole)
+    assert refusal == f'the 2 healthy wheels of 3 span 2 axes, and {what} for the rest'
+    assert np.all(tau == 0.0) and np.all(m == 0.0) and sigma == 0.0
+    _, _, _, _, refusal = alloc.allocate_healthy([1e-3, 0, 0], ok=[False] * 3)
+    assert refusal.startswith('the 0 healthy wheels of 3 span 0 axes')

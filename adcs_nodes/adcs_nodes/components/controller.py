@@ -14,12 +14,14 @@ Conditioning (the same for the node and the FrameLoop):
   them (:func:`adcs_nodes.entries.wheel_momentum`);
 * a plugin's input kinds (``inputs.register``): their fresh samples in ``ControlInputs.samples``.
 
-Wheel health: a controller that commands wheels and reads both the tachometer and the applied
-command (``actuator_command``, e.g. ``mpi``) checks that each wheel's measured speed follows
-the torque the manager applied (:class:`adcs_nodes.core.wheel_health.WheelHealth`). Once a
-wheel fails, its commands are invalid: every wheel torque NaN, and the reason after the name in
-``source`` (``'mpi: wheel wheel_x does not follow its torque: ...'``), so the manager falls
-back to the safe controller with that reason in its status.
+Wheel health (a controller reading the tachometer and the applied command, e.g. ``mpi``):
+each wheel's state (:class:`adcs_nodes.core.wheel_health.WheelHealth`) goes to the core as
+``ControlInputs.wheel_ok``, with the magnetorquer limits and the onboard-model field for the
+axis the wheels left no longer cover; a failed wheel gets its probe torque, and the source is
+``'<name>; <each failed wheel and why>'``. The output is checked where it leaves the
+controller (:func:`~adcs_nodes.core.command_health.command_fields`): a bad one, or a refusal
+(``Command.refused``), goes out as a zero command from ``'<name>: <reason>'``, and the manager
+falls back as for a stale command.
 """
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ import numpy as np
 from adcs_nodes import inputs
 from adcs_nodes.components import conditioning as cond
 from adcs_nodes.core import attitude as att
+from adcs_nodes.core.command_health import command_fields
 from adcs_nodes.core.control import Command, ControlInputs, Estimate, Target
 from adcs_nodes.core.estimation.onboard import make_onboard_reference
 from adcs_nodes.core.lockstep import NS_PER_S
@@ -112,6 +115,9 @@ def controller_context(entry: Any, ctx_p: Dict[str, Any], epoch: Any, seed: int,
         raise ValueError(f'controller {entry.name} commands wheels but none are configured')
     if {'estimate', 'magnetometer'} <= set(entry.inputs):
         ctx['reference'] = make_onboard_reference(onboard_orbit, onboard_field, epoch)
+    elif 'estimate' in entry.inputs and n_wheels and ctx['max_dipole_Am2'] is not None:
+        # the field for the magnetorquers' share when a wheel has failed (A5)
+        ctx['backup_reference'] = make_onboard_reference(onboard_orbit, onboard_field, epoch)
     return ctx
 
 
@@ -138,7 +144,10 @@ def target_of(x: Optional[AttitudeTarget]) -> Optional[Target]:
         return None
     q, w, a = x.q_ref_body, x.omega_body_ref_body, x.omega_dot_body_ref_body
     frame = x.frame or 'orbit'
-    if frame not in ('orbit', 'eci') or not all_finite(q, w, a) or math.sqrt(q.dot(q)) < 0.5:
+    if frame not in ('orbit', 'eci') or not all_finite(q, w, a) or q.shape != (4,):
+        return None
+    q_max = float(np.max(np.abs(q)))              # |q| of 1e300 would overflow: scaled first
+    if q_max == 0.0 or math.sqrt((q / q_max).dot(q / q_max)) * q_max < 0.5:
         return None
     return Target(att.normalize(q), w, a, frame, float(x.time_to_go_s))
 
@@ -152,13 +161,17 @@ def command_sample(cmd: Command, t_ns: int, source: str) -> ActuatorCommand:
 
 def command_of(x: ActuatorCommand) -> Command:
     """An ``ActuatorCommand`` sample -> core command (values as sent, unchecked); a
-    ``source`` ``'<name>: <reason>'`` (a controller saying why its command is invalid) gives
-    the ``reason``."""
-    _, sep, reason = str(x.source).partition(': ')
+    ``source`` ``'<name>: <reason>'`` is a refusal with its ``reason``, ``'<name>; <note>'``
+    a usable command with a ``note`` in ``info`` (e.g. a failed wheel)."""
+    src = str(x.source)
+    i, j = src.find('; '), src.find(': ')
+    refused = j >= 0 and not 0 <= i < j
+    note = src[i + 2:] if i >= 0 and not refused else ''
     return Command(x.dipole_body_Am2, x.wheel_torque_Nm, x.torque_body_Nm,
-                   reason if sep else '')
+                   src[j + 2:] if refused else '', {'note': note} if note else {}, refused)
 
 
+_NO_LIMIT = np.full(3, np.inf)
 #: Input keys of the built-in records (a plugin's kinds reach its controller as ``samples``).
 _BUILTIN = frozenset(rec.key for rec in inputs.INPUTS)
 
@@ -191,7 +204,12 @@ class ControllerComponent:
         if self.n_wheels and len(ctx.get('wheel_inertia_kgm2') or []) == self.n_wheels \
                 and len(ctx.get('wheel_max_momentum_Nms') or []) == self.n_wheels:
             self.wheel_health = WheelHealth(ctx['wheel_inertia_kgm2'],
-                                            ctx['wheel_max_momentum_Nms'], ctx['period_s'])
+                                            ctx['wheel_max_momentum_Nms'], ctx['period_s'],
+                                            max_torque_Nm=ctx['wheel_max_torque_Nm'])
+        dipole = ctx.get('max_dipole_Am2')
+        self.backup_dipole = None if dipole is None else np.asarray(dipole, dtype=float)
+        self.max_dipole = np.zeros(3) if dipole is None else self.backup_dipole
+        self.max_wheel = np.asarray(ctx.get('wheel_max_torque_Nm') or [], dtype=float)
 
     def inputs_for(self, t_ns: int, inputs: Dict[str, Any],
                    fresh: Callable[[str], bool]) -> ControlInputs:
@@ -208,7 +226,10 @@ class ControllerComponent:
         t = t_ns / NS_PER_S
         estimate = estimate_of(inputs.get('est'))
         b_model = None
-        ref = self.ctx['reference']
+        health = self.wheel_health
+        wheel_ok = None if health is None or all(health.ok) else health.ok
+        ref = self.ctx['reference'] or (None if wheel_ok is None else
+                                        self.ctx.get('backup_reference'))
         if ref is not None and estimate is not None and estimate.is_usable():
             b_model = att.to_matrix(estimate.q_orbit_body).T @ ref.at(t).b_orbit  # n* = R^T B*
         wheels = inputs.get('wheels')
@@ -221,31 +242,44 @@ class ControllerComponent:
             gyro_rate_body=sample('gyro', lambda x: cond.gyro_rate_body(x, self.mounts)),
             q_eci_body_meas=sample('star', cond.star_q_eci_body),
             applied_dipole_body=cond.applied_dipole(inputs['cmd']) if 'cmd' in inputs else None,
-            samples={k: v for k, v in inputs.items() if k not in _BUILTIN and fresh(k)})
+            samples={k: v for k, v in inputs.items() if k not in _BUILTIN and fresh(k)},
+            wheel_ok=wheel_ok,
+            backup_dipole_Am2=None if wheel_ok is None else self.backup_dipole)
 
     def step(self, t_ns: int, inputs: Dict[str, Any],
              fresh: Callable[[str], bool]) -> ActuatorCommand:
-        """This controller's command for frame ``t_ns``."""
+        """This controller's command for frame ``t_ns``, checked (module docstring)."""
         dt = 0.0 if self._last_t is None else (t_ns - self._last_t) / NS_PER_S
         self._last_t = t_ns
+        self._check_wheels(inputs)
         cmd = self.core.update(self.inputs_for(t_ns, inputs, fresh), t_ns / NS_PER_S, dt)
-        why = self._wheels_failed(inputs)
-        if why:        # invalid: the manager falls back with the reason
-            cmd = Command(cmd.dipole_body, np.full(self.n_wheels, np.nan), cmd.torque_body)
-            return command_sample(cmd, t_ns, f'{self.name}: {why}')
-        return command_sample(cmd, t_ns, self.name)
+        health = self.wheel_health
+        failed = health is not None and not all(health.ok)
+        why = command_fields(cmd, self.max_dipole, self.max_wheel, _NO_LIMIT)[1]
+        if failed and not why and np.shape(cmd.wheel_torque) == (self.n_wheels,):
+            bad = [n for n, ok, v in zip(health.names, health.ok, cmd.wheel_torque)
+                   if not ok and v != 0.0]
+            why = f'commands torque on the failed wheel {", ".join(bad)}' if bad else ''
+        if why or getattr(cmd, 'refused', False):
+            why = '; '.join(r for r in (health.reason() if failed else '',
+                                        why or cmd.reason or 'refused') if r)
+            return command_sample(Command.zero(self.n_wheels), t_ns, f'{self.name}: {why}')
+        if not failed:
+            return command_sample(cmd, t_ns, self.name)
+        if np.shape(cmd.wheel_torque) == (self.n_wheels,):                  # its probe
+            cmd = Command(cmd.dipole_body, cmd.wheel_torque + health.probe(), cmd.torque_body)
+        return command_sample(cmd, t_ns, f'{self.name}; {health.reason()}')
 
-    def _wheels_failed(self, inputs: Dict[str, Any]) -> str:
-        """The wheel check of this frame ('' when the wheels follow their torques or the
-        controller does not read both the tachometer and the applied command)."""
+    def _check_wheels(self, inputs: Dict[str, Any]) -> None:
+        """This frame's wheel check (with both the tachometer and the applied command)."""
         if self.wheel_health is None or 'wheels' not in inputs or 'cmd' not in inputs:
-            return ''
+            return
         wheels, cmd = inputs.get('wheels'), inputs.get('cmd')
         if wheels is None:
-            return self.wheel_health.reason()
+            return
         if len(wheels.names) == self.n_wheels:
             self.wheel_health.names = list(wheels.names)
         speeds = cond.wheel_speeds(wheels, self.n_wheels)[0]
-        return self.wheel_health.update(
+        self.wheel_health.update(
             wheels.t_ns / NS_PER_S, speeds, None if cmd is None else cmd.t_ns / NS_PER_S,
             None if cmd is None else cmd.wheel_torque_Nm)

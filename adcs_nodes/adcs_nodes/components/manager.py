@@ -129,10 +129,11 @@ class ManagerComponent:
         est = inputs.get('_estimate')
         cmd, status = self.core.step(t, commands, estimate_of(est),
                                      estimate_t=None if est is None else est.t_ns / NS_PER_S)
-        fault_kind = status.get('fault', '').split(' ', 2)[:2]   # e.g. ['magnetic:', 'stale:']
+        text = status.get('fault') or status.get('note', '')     # a fallback, or a note
+        fault_kind = text.split(' ', 2)[:2]                # e.g. ['magnetic:', 'stale:']
         if fault_kind != self._fault_kind:
-            if status.get('fault'):
-                self.log('warning', f't={t:g} s: {status["fault"]} (logged once)')
+            if text:
+                self.log('warning', f't={t:g} s: {text} (logged once)')
             else:
                 self.log('info', f't={t:g} s: fault cleared')
             self._fault_kind = fault_kind
@@ -149,7 +150,7 @@ class ManagerComponent:
 def status_key(status: Dict[str, Any], active: str) -> tuple:
     """What a status change is (the fault text carries times: not part of it)."""
     return (status.get('active', active), status.get('mode', ''),
-            status.get('switch_count', 0), status.get('source', ''))
+            status.get('switch_count', 0), status.get('source', ''), status.get('note', ''))
 
 
 def actuator_commands(cmd: ActuatorCommand, wheel_names: Sequence[str]) -> List[tuple]:

@@ -56,6 +56,9 @@ def normalize(q) -> np.ndarray:
     """
     q = _as_quat(q)
     n = math.sqrt(q.dot(q))             # what np.linalg.norm computes for a real vector
+    if n == math.inf:                   # |q| overflows (a finite q of ~1e300): scaled first
+        q = q / np.max(np.abs(q))
+        n = math.sqrt(q.dot(q))
     if n < _EPS_NORM:
         raise ValueError('quaternion has zero norm')
     return q / n

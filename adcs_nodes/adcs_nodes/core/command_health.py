@@ -1,8 +1,9 @@
 """The controller manager's command health check and fallback chain (no ROS).
 
-A controller's command is usable only if it is fresh (stamp equal to the frame time, or older
-by at most ``stale_after_s``; never from the future), has the right shapes, is finite and is
-inside the actuator limits (``|v_i| <= l_i (1 + 1e-9) + 1e-12``) and, when the controller uses
+A controller's command is usable only if the controller did not refuse it (``Command.refused``,
+with its reason), is fresh (stamp equal to the frame time, or older by at most
+``stale_after_s``; never from the future), has the right shapes, is finite and is inside the
+actuator limits (``|v_i| <= l_i (1 + 1e-9) + 1e-12``) and, when the controller uses
 the estimate (``estimate_users``) and the estimate is monitored (``estimate_period_s``), the
 estimate is fresh (stamped at the estimator's last frame at or before ``t``, or older by at
 most ``stale_after_s``) and usable. An unusable active command hands over to the ``fallback``
@@ -60,6 +61,36 @@ def warm_up() -> None:
         v = np.zeros(n)
         limit_violation(v, v, _LIMIT_RTOL)
         clip_finite(v, v)
+
+
+def command_fields(cmd, max_dipole: np.ndarray, max_wheel: np.ndarray,
+                   max_torque: np.ndarray) -> tuple[dict, str]:
+    """``({field: float array}, '')`` when ``cmd``'s fields have their limits' shapes (an empty
+    ``wheel_torque``: zero on every wheel), are finite and inside the limits (module
+    docstring), else ``({}, why)`` naming the field (the manager's check and the controller
+    component's, at its boundary)."""
+    values = {}
+    for name, limit, unit in (('dipole_body', max_dipole, 'A m^2'),
+                              ('wheel_torque', max_wheel, 'N m'),
+                              ('torque_body', max_torque, 'N m')):
+        try:
+            arr = np.asarray(getattr(cmd, name), dtype=float)
+        except AttributeError:
+            return {}, f'malformed command {type(cmd).__name__}'
+        except (TypeError, ValueError):
+            return {}, f'malformed {name}: {getattr(cmd, name)!r}'
+        if name == 'wheel_torque' and arr.shape == (0,):
+            arr = np.zeros(limit.shape)
+        if arr.shape != limit.shape:
+            return {}, f'malformed {name}: shape {arr.shape}, expected {limit.shape}'
+        i = limit_violation(arr, limit, _LIMIT_RTOL)
+        if i <= -2:
+            return {}, f'non-finite (NaN or inf) {name}: {arr}'
+        if i >= 0:
+            return {}, (f'out of range: {name}[{i}] = {arr[i]:.6g} {unit} exceeds the limit '
+                        f'{limit[i]:.6g} {unit}')
+        values[name] = arr
+    return values, ''
 
 
 class CommandHealth:
@@ -159,31 +190,11 @@ class CommandHealth:
         if t - stamp > self.stale_after + TIME_TOL_S:
             return None, (f'stale: stamp {stamp:.9g} s is {t - stamp:.9g} s older than the '
                           f'frame {t:.9g} s (limit {self.stale_after:g} s)')
-        try:
-            fields = (('dipole_body', cmd.dipole_body, self.max_dipole, 'A m^2'),
-                      ('wheel_torque', cmd.wheel_torque, self.max_wheel, 'N m'),
-                      ('torque_body', cmd.torque_body, self.max_torque, 'N m'))
-        except AttributeError:
-            return None, f'malformed command {type(cmd).__name__}'
-        values = {}
-        for name, value, limit, unit in fields:
-            try:
-                arr = np.asarray(value, dtype=float)
-            except (TypeError, ValueError):
-                return None, f'malformed {name}: {value!r}'
-            if name == 'wheel_torque' and arr.shape == (0,):
-                arr = np.zeros(self.n_wheels)
-            if arr.shape != limit.shape:
-                return None, f'malformed {name}: shape {arr.shape}, expected {limit.shape}'
-            i = limit_violation(arr, limit, _LIMIT_RTOL)
-            if i <= -2:
-                why = str(getattr(cmd, 'reason', '') or '')      # the controller's own word
-                return None, f'non-finite (NaN or inf) {name}: {arr}' + (f' ({why})' if why
-                                                                         else '')
-            if i >= 0:
-                return None, (f'out of range: {name}[{i}] = {arr[i]:.6g} {unit} exceeds the '
-                              f'limit {limit[i]:.6g} {unit}')
-            values[name] = arr
+        if getattr(cmd, 'refused', False):
+            return None, str(getattr(cmd, 'reason', '') or 'refused')
+        values, why = command_fields(cmd, self.max_dipole, self.max_wheel, self.max_torque)
+        if why:
+            return None, why
         info = getattr(cmd, 'info', None)
         return Command(values['dipole_body'], values['wheel_torque'], values['torque_body'],
                        str(getattr(cmd, 'reason', '')), dict(info) if info else {}), ''

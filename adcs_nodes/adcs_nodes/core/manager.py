@@ -22,7 +22,8 @@ health check and fallback chain in :mod:`adcs_nodes.core.command_health`.
 * **Fallback**: an unusable active command is replaced in the same frame by the first usable
   fallback (``missed_frames``, ``last_fault``). With ``latch_fallback`` the controller used
   becomes the active one (a counted switch, no zero frame) and the sequence is suspended.
-  Status key ``active`` is the selected controller, ``source`` the one forwarded.
+  ``active`` is the selected controller, ``source`` the one forwarded; a usable command's
+  ``info['note']`` (a failed wheel it flies without) goes to ``last_fault``.
 * **Start**: the first frame forwards the initial controller (no zero frame).
 """
 from __future__ import annotations
@@ -47,41 +48,18 @@ AUTO = 'auto'
 class ControllerManagerCore:
     """Selects, checks and forwards one controller's command per frame.
 
-    Parameters
-    ----------
-    controllers : sequence of str
-        Names of all controllers (unique, non-empty).
-    safe : str
-        Safe-mode controller (B-dot), one of ``controllers``.
-    initial : str, optional
-        Controller active at start; default the auto sequence's ``detumble`` controller, else
-        ``safe``. With ``auto`` it must be the ``detumble`` controller.
-    max_dipole_Am2, max_wheel_torque, max_torque : float or array_like
-        Actuator limits, shapes (3,) [A m^2], (n_wheels,) [N m] (default none), (3,) [N m]
-        (default 0: no ideal actuator); ``inf``: none.
-    stale_after_s : float
-        A command older than this (frame time minus stamp) [s] is stale; 0 = exact stamp only.
-    schedule : iterable of (float, str)
-        Scripted switches ``(t_s [s], name)``; ``name`` may be ``'auto'`` when ``auto`` is set.
-    auto : AutoSequence, optional
-        Automatic mode sequence (active from the start when given).
-    latch_fallback : bool
-        Make the fallback controller the active one after a fault (default: per frame).
-    estimate_period_s : float, optional
-        Period of the estimator [s]; given, the estimate's staleness is checked.
-    estimate_users : iterable of str, optional
-        Controllers whose command depends on the estimate (default: all but ``safe``).
-    fallback : sequence of str
-        Controllers tried in order, before ``safe``, when the active command is not usable.
-    startup_s : float
-        Until the first frame that forwards the active command, a frame at most this long [s]
-        after the first one that forwards nothing is a start-up frame (``startup_frames``),
-        not a missed one (default 0: lockstep).
-
-    Raises
-    ------
-    ValueError
-        On unknown or duplicate names, bad limits, a bad schedule or inconsistent ``auto``.
+    ``controllers``: the names (unique, non-empty); ``safe`` one of them (B-dot); ``initial``
+    active at start (default the ``auto`` sequence's ``detumble``, else ``safe``); actuator
+    limits ``max_dipole_Am2`` (3,) [A m^2], ``max_wheel_torque`` (n_wheels,) [N m] (default
+    none), ``max_torque`` (3,) [N m] (default 0: no ideal actuator; ``inf``: none);
+    ``stale_after_s`` [s] the oldest usable command (0: exact stamp); ``schedule`` of
+    ``(t_s [s], name)`` (``'auto'`` with ``auto``); ``auto`` an :class:`AutoSequence`;
+    ``latch_fallback``: the fallback becomes the active one; ``estimate_period_s`` [s]: the
+    estimate's staleness is checked; ``estimate_users`` (default all but ``safe``);
+    ``fallback`` tried in order before ``safe``; ``startup_s`` [s]: until the active command
+    is first forwarded, a frame this close to the first is a start-up frame, not a missed one
+    (default 0: lockstep). ``ValueError`` on unknown or duplicate names, bad limits, a bad
+    schedule or an inconsistent ``auto``.
     """
 
     def __init__(self, controllers: Sequence[str], safe: str, initial: Optional[str] = None,
@@ -240,31 +218,16 @@ class ControllerManagerCore:
              estimate: Optional[Estimate] = None,
              target: Optional[Target] = None,
              estimate_t: Optional[float] = None) -> tuple[Command, dict]:
-        """Decide and produce the actuator command of frame ``t``.
-
-        Parameters
-        ----------
-        t : float
-            Frame time [s].
-        commands : mapping str -> (float, Command or None)
-            Latest command of each controller with its stamp [s]; missing = none received.
-        estimate : Estimate, optional
-            Attitude estimate at ``t`` (automatic sequence, estimate check).
-        target : Target, optional
-            Target of the ``point`` mode's attitude error (default the orbital frame).
-        estimate_t : float, optional
-            Stamp of ``estimate`` [s] (checked when ``estimate_period_s`` is set).
-
-        Returns
-        -------
-        command : Command
-            Finite and inside the limits; ``reason`` says why it is zero or from the fallback.
-        status : dict
-            ``t``, ``mode``, ``active``, ``available``, ``safe``, ``source`` (controller whose
-            command was forwarded, '' for zero), ``pending``, ``switch_count``,
-            ``missed_frames``, ``startup_frames``, ``last_fault``, ``fault`` (this frame),
-            ``fallback`` (bool), ``zero_frame`` (bool), ``estimate_fault`` (this frame),
-            ``estimate_stale_frames``, ``replaced_requests``.
+        """``(command, status)`` of frame ``t`` [s] from the latest ``(stamp [s], Command or
+        None)`` of each controller (missing: none received), the ``estimate`` stamped
+        ``estimate_t`` [s] (the sequence, the estimate check) and the ``target`` of the point
+        mode (default the orbital frame). The command is finite and inside the limits
+        (``reason``: why zero or from the fallback); the status has ``t``, ``mode``,
+        ``active``, ``available``, ``safe``, ``source`` (forwarded, '' for zero), ``pending``,
+        ``switch_count``, ``missed_frames``, ``startup_frames``, ``last_fault``, ``fault`` and
+        ``estimate_fault`` (this frame), ``fallback``, ``zero_frame``,
+        ``estimate_stale_frames``, ``replaced_requests``, ``note`` (the forwarded command's,
+        e.g. a failed wheel it flies without).
         """
         t = float(t)
         if not math.isfinite(t):
@@ -295,10 +258,13 @@ class ControllerManagerCore:
 
     def _forward(self, t: float, commands: Mapping, est_fault: str) -> tuple[Command, dict]:
         """The active command if usable, else the fallback chain's (or zero)."""
-        fault, source = '', self.active
+        fault, source, note = '', self.active, ''
         cmd, why = self.health.usable(commands, self.active, t, est_fault)
         if cmd is not None:
             self._forwarded = True
+            note = cmd.info.get('note', '')       # usable, degraded (e.g. a failed wheel)
+            if note:
+                self.last_fault = f'{self.active}: {note}'
         elif (self.startup_s > 0.0 and not self._forwarded
               and t - self._t_first <= self.startup_s + TIME_TOL_S):
             self.startup_frames += 1                 # the chain's first command on its way
@@ -317,6 +283,7 @@ class ControllerManagerCore:
                self.health.sanitize(cmd, fault))
         self._status = self._make_status(t, source, fault, bool(fault) and bool(source),
                                          estimate_fault=est_fault)
+        self._status['note'] = note
         return out, self.status()
 
     def _due_request(self, t: float) -> Optional[str]:

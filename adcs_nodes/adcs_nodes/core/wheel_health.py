@@ -12,14 +12,18 @@ interval ``dt``. The motor torque ``tau`` held over ``dt`` changes the wheel's m
 A frame is *informative* for a wheel when ``|expected| >= min_change_rad_s`` (well above the
 tachometer's noise and resolution) and the wheel stays clear of its momentum limit (the
 motor's torque is cut there on purpose). An informative frame is *bad* when
-``|measured - expected| > tolerance |expected|``. ``confirm_frames`` bad informative frames in
-a row declare the wheel failed (stuck, or torque lost); a good informative frame clears the
-count, frames that are not informative leave it. A failed wheel stays failed (latched) until
-:meth:`WheelHealth.reset`: a stuck bearing does not heal, and a controller whose commands are
-refused makes no more torque to watch.
+``|measured - expected| > tolerance |expected|``. Each wheel's health is a state:
+
+* ``ok`` -> ``stuck`` (``|measured / expected| < STUCK_RATIO``) or ``lost torque`` after
+  ``confirm_frames`` bad informative frames in a row (a good one clears the count);
+* ``stuck`` / ``lost torque`` -> ``ok`` after ``recover_frames`` good informative frames in a
+  row. A failed wheel is left out of the allocation, so it is given a probe torque
+  (:meth:`WheelHealth.probe`: ``PROBE_FACTOR`` times the smallest judged change, its sign
+  alternating each frame, net momentum zero) to see whether it follows again.
 
 ASSUMPTION (not from a paper): the thresholds (defaults ``confirm_frames`` 5,
-``min_change_rad_s`` 0.2 rad/s, ``tolerance`` 0.5) are chosen against the default tachometer
+``recover_frames`` 5, ``min_change_rad_s`` 0.2 rad/s, ``tolerance`` 0.5, ``STUCK_RATIO`` 0.1,
+``PROBE_FACTOR`` 2) are chosen against the default tachometer
 (0.01 rad/s noise, 0.015 rad/s resolution) and paper 001's wheel momentum error (0.0033 N m s
 on a 0.1 kg m^2 rotor: 0.03 rad/s), not from a wheel's data sheet.
 
@@ -38,6 +42,10 @@ from numpy.typing import ArrayLike
 
 #: Defaults (ASSUMPTION, see module docstring).
 CONFIRM_FRAMES = 5
+RECOVER_FRAMES = 5
+STUCK_RATIO = 0.1
+PROBE_FACTOR = 2.0
+OK, STUCK, LOST = 'ok', 'stuck', 'lost torque'
 MIN_CHANGE_RAD_S = 0.2
 TOLERANCE = 0.5
 #: A wheel whose momentum after the interval would pass this share of its limit is not judged.
@@ -45,35 +53,18 @@ MOMENTUM_MARGIN = 0.95
 
 
 class WheelHealth:
-    """Per-wheel check of measured speed against applied torque (see module docstring).
-
-    Parameters
-    ----------
-    inertia_kgm2 : array_like, shape (n,)
-        Rotor inertias about the spin axes [kg m^2], > 0.
-    max_momentum_Nms : array_like, shape (n,)
-        Momentum limits [N m s], > 0 (``inf``: none).
-    period_s : float
-        The control period [s]: the interval over which an applied command is held.
-    confirm_frames : int
-        Bad informative frames in a row that declare a wheel failed (>= 1).
-    min_change_rad_s : float
-        Smallest expected speed change that is judged [rad/s] (> 0).
-    tolerance : float
-        Largest accepted ``|measured - expected| / |expected|`` (> 0).
-    names : sequence of str, optional
-        Wheel names for the reasons (default ``wheel0``, ``wheel1``, ...).
-
-    Raises
-    ------
-    ValueError
-        On inconsistent shapes or non-positive values.
-    """
+    """Per-wheel state (ok, stuck, lost torque) from measured speed against applied torque
+    (module docstring): rotor inertias ``inertia_kgm2`` (n,) [kg m^2] > 0, momentum limits
+    ``max_momentum_Nms`` (n,) [N m s] > 0, the control period ``period_s`` [s] (the hold of an
+    applied command), the thresholds (>= 1 frames, > 0 otherwise), wheel ``names`` (default
+    ``wheel0``, ...), motor limits ``max_torque_Nm`` (n,) [N m] bounding the probe.
+    ``ValueError`` on inconsistent shapes or non-positive values."""
 
     def __init__(self, inertia_kgm2: ArrayLike, max_momentum_Nms: ArrayLike, period_s: float,
                  confirm_frames: int = CONFIRM_FRAMES,
                  min_change_rad_s: float = MIN_CHANGE_RAD_S, tolerance: float = TOLERANCE,
-                 names: Optional[Sequence[str]] = None) -> None:
+                 names: Optional[Sequence[str]] = None, recover_frames: int = RECOVER_FRAMES,
+                 max_torque_Nm: Optional[ArrayLike] = None) -> None:
         self.inertia = np.asarray(inertia_kgm2, dtype=float).reshape(-1)
         self.max_momentum = np.asarray(max_momentum_Nms, dtype=float).reshape(-1)
         n = self.inertia.size
@@ -86,16 +77,18 @@ class WheelHealth:
                              'limits > 0')
         if not (math.isfinite(period_s) and period_s > 0.0):
             raise ValueError(f'wheel health: period_s must be > 0, got {period_s!r}')
-        if isinstance(confirm_frames, bool) or int(confirm_frames) != confirm_frames \
-                or confirm_frames < 1:
-            raise ValueError(f'wheel health: confirm_frames must be an integer >= 1, got '
-                             f'{confirm_frames!r}')
+        for key, v in (('confirm_frames', confirm_frames), ('recover_frames', recover_frames)):
+            if isinstance(v, bool) or int(v) != v or v < 1:
+                raise ValueError(f'wheel health: {key} must be an integer >= 1, got {v!r}')
         if not min_change_rad_s > 0.0 or not tolerance > 0.0:
             raise ValueError('wheel health: min_change_rad_s and tolerance must be > 0')
         self.period = float(period_s)
-        self.confirm = int(confirm_frames)
+        self.confirm, self.recover = int(confirm_frames), int(recover_frames)
         self.min_change = float(min_change_rad_s)
         self.tolerance = float(tolerance)
+        limit = np.inf if max_torque_Nm is None else np.asarray(max_torque_Nm, dtype=float)
+        self.probe_Nm = np.minimum(PROBE_FACTOR * self.min_change * self.inertia / self.period,
+                                   limit)
         self.names = list(names) if names else [f'wheel{i}' for i in range(n)]
         if len(self.names) != n:
             raise ValueError(f'wheel health: {len(self.names)} names for {n} wheels')
@@ -107,38 +100,39 @@ class WheelHealth:
         return self.inertia.size
 
     def reset(self) -> None:
-        """Forget the history and every failure."""
+        """Forget the history: every wheel ``ok``."""
         self._t: Optional[float] = None
         self._w: Optional[np.ndarray] = None
         self.bad = np.zeros(self.n, dtype=int)
-        self.failed: List[Optional[str]] = [None] * self.n
+        self.good = np.zeros(self.n, dtype=int)
+        self.state: List[str] = [OK] * self.n
+        self.reasons: List[str] = [''] * self.n
         self.judged_frames = 0
+        self.recoveries = 0
+        self._probes = 0
+
+    @property
+    def ok(self) -> np.ndarray:
+        """(n,) bool: True for a wheel in state ``ok``."""
+        return np.array([s == OK for s in self.state])
 
     def reason(self) -> str:
-        """Why the wheels cannot be trusted ('' when every wheel is healthy)."""
-        return '; '.join(r for r in self.failed if r)
+        """Each failed wheel, named first, with its reason ('' when every wheel is ok)."""
+        return '; '.join(r for r in self.reasons if r)
+
+    def probe(self) -> np.ndarray:
+        """(n,) [N m]: the probe torque of each failed wheel (0 for the others), its sign
+        alternating with each call."""
+        sign = 1.0 if self._probes % 2 == 0 else -1.0
+        self._probes += 1
+        return np.where(self.ok, 0.0, sign * self.probe_Nm)
 
     def update(self, t: float, speeds: Optional[ArrayLike], t_cmd: Optional[float],
                torque: Optional[ArrayLike]) -> str:
-        """Judge the interval ending at the tachometer sample ``(t, speeds)``.
-
-        Parameters
-        ----------
-        t : float
-            Stamp of the speeds [s].
-        speeds : array_like, shape (n,), or None
-            Measured speeds relative to the body [rad/s] (None: no sample; nothing judged).
-        t_cmd : float or None
-            Stamp of the applied command [s]; judged only when it equals the previous sample's
-            stamp and that sample is one period before ``t``.
-        torque : array_like, shape (n,) or (0,), or None
-            The applied motor torques [N m] (empty: zero on every wheel).
-
-        Returns
-        -------
-        str
-            :meth:`reason` after this interval.
-        """
+        """Judge the interval ending at the tachometer sample stamped ``t`` [s], ``speeds``
+        (n,) [rad/s] relative to the body (None: nothing judged), with the applied motor
+        ``torque`` (n,) or (0,): zero [N m] stamped ``t_cmd`` [s] (judged only when that is
+        the previous sample's stamp, one period before ``t``). Returns :meth:`reason`."""
         if speeds is None:
             return self.reason()
         w = np.asarray(speeds, dtype=float).reshape(-1)
@@ -161,19 +155,21 @@ class WheelHealth:
         h_after = np.abs(w * self.inertia)
         self.judged_frames += 1
         for i in range(self.n):
-            if self.failed[i] is not None or abs(expected[i]) < self.min_change \
-                    or h_after[i] > MOMENTUM_MARGIN * self.max_momentum[i] \
-                    or abs(prev_w[i] * self.inertia[i]) > MOMENTUM_MARGIN \
-                    * self.max_momentum[i]:
+            if abs(expected[i]) < self.min_change or max(
+                    h_after[i], abs(prev_w[i] * self.inertia[i])) \
+                    > MOMENTUM_MARGIN * self.max_momentum[i]:
                 continue
-            if abs(measured[i] - expected[i]) > self.tolerance * abs(expected[i]):
-                self.bad[i] += 1
-                if self.bad[i] >= self.confirm:
-                    self.failed[i] = (
-                        f'wheel {self.names[i]} does not follow its torque: speed change '
-                        f'{measured[i]:+.3g} rad/s for {expected[i]:+.3g} rad/s expected '
-                        f'({tau[i]:+.3g} N m over {dt:g} s), {self.bad[i]} frames in a row '
-                        f'(stuck or torque lost) at t = {float(t):g} s')
-            else:
-                self.bad[i] = 0
+            good = abs(measured[i] - expected[i]) <= self.tolerance * abs(expected[i])
+            self.bad[i], self.good[i] = (0, self.good[i] + 1) if good else \
+                (self.bad[i] + 1, 0)
+            if self.state[i] == OK and self.bad[i] >= self.confirm:
+                ratio = measured[i] / expected[i]
+                self.state[i] = STUCK if abs(ratio) < STUCK_RATIO else LOST
+                self.reasons[i] = (
+                    f'wheel {self.names[i]} {self.state[i]} since t = {float(t):g} s: speed '
+                    f'change {measured[i]:+.3g} rad/s for {expected[i]:+.3g} rad/s expected '
+                    f'({tau[i]:+.3g} N m over {dt:g} s), {self.bad[i]} frames in a row')
+            elif self.state[i] != OK and self.good[i] >= self.recover:
+                self.state[i], self.reasons[i] = OK, ''
+                self.recoveries += 1
         return self.reason()

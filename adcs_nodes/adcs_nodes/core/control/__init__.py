@@ -200,18 +200,21 @@ class Target:
 class Command:
     """Actuator command of a controller: ``dipole_body`` (3,) [A m^2], ``wheel_torque`` (n,)
     [N m] in scenario order ((0,): no wheels, zero torque), ``torque_body`` (3,) [N m] ideal,
-    body axes; ``reason`` why it is zero or degraded; ``info`` the law's diagnostics."""
+    body axes; ``reason`` why it is zero or degraded; ``info`` the law's diagnostics;
+    ``refused``: the controller cannot fly this frame (``reason`` says why; the manager falls
+    back as for a stale command)."""
 
     dipole_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
     wheel_torque: np.ndarray = field(default_factory=lambda: np.zeros(0))
     torque_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
     reason: str = ''
     info: dict = field(default_factory=dict)
+    refused: bool = False
 
     @classmethod
-    def zero(cls, n_wheels: int = 0, reason: str = '') -> 'Command':
+    def zero(cls, n_wheels: int = 0, reason: str = '', refused: bool = False) -> 'Command':
         """All-zero command with ``n_wheels`` wheel torques and a ``reason``."""
-        return cls(np.zeros(3), np.zeros(n_wheels), np.zeros(3), reason)
+        return cls(np.zeros(3), np.zeros(n_wheels), np.zeros(3), reason, refused=refused)
 
     def is_finite(self) -> bool:
         """True when every actuator field is finite."""
@@ -243,6 +246,10 @@ class ControlInputs:
     applied_dipole_body: Optional[np.ndarray] = None
     #: fresh samples of a plugin's input kinds, by input key (``adcs_nodes.inputs.register``)
     samples: Mapping[str, Any] = field(default_factory=dict)
+    #: (n,) bool, False for a wheel that does not follow its torque (None: all healthy)
+    wheel_ok: Optional[np.ndarray] = None
+    #: magnetorquer limits (3,) [A m^2] for the axis failed wheels leave uncovered (None: none)
+    backup_dipole_Am2: Optional[np.ndarray] = None
 
     def field_body(self) -> Optional[np.ndarray]:
         """The fresh measurement when there is one, else the onboard-model field."""

@@ -57,7 +57,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
-from adcs_nodes.core.control import Command, ControlInputs, Target
+from adcs_nodes.core.control import Command, ControlInputs, Target, finite_vector
 from adcs_nodes.core.control.wheel_allocation import WheelAllocator
 
 __all__ = ['dcm_euler_321', 'eigen_from_dcm', 'eigen_from_quaternion', 'torque_direction',
@@ -243,32 +243,20 @@ def error_state(inputs: ControlInputs):
     if est is None or not est.is_usable():
         return 'no valid estimate'
     tgt = inputs.target if inputs.target is not None else Target()
-    try:
-        q_t = np.asarray(tgt.q_ref_body, dtype=float)
-        w_t = np.asarray(tgt.omega_body_ref_body, dtype=float)
-        if q_t.shape != (4,) or w_t.shape != (3,) or not (
-                np.all(np.isfinite(q_t)) and np.all(np.isfinite(w_t))):
-            return 'bad target'
-        nq = float(np.linalg.norm(q_t))
-        if not nq > 1e-9:
-            return 'bad target'
-        w = np.asarray(est.omega_body_eci_body, dtype=float)
-        if tgt.frame == 'eci':
-            if est.q_eci_body is None:
-                return 'target in eci but no inertial attitude estimate'
-            q_b = np.asarray(est.q_eci_body, dtype=float)
-            if q_b.shape != (4,) or not np.all(np.isfinite(q_b)) or np.linalg.norm(q_b) < 1e-9:
-                return 'bad inertial attitude estimate'
-            w_frame = w
-        elif tgt.frame == 'orbit':
-            q_b = np.asarray(est.q_orbit_body, dtype=float)
-            j2_body = attitude.to_matrix(q_b).T @ np.array([0.0, 1.0, 0.0])
-            w_frame = w - float(est.omega0) * j2_body
-        else:
+    w = np.asarray(est.omega_body_eci_body, dtype=float)
+    try:               # attitude.normalize: ValueError on a zero or non-finite quaternion
+        q_t = attitude.normalize(tgt.q_ref_body)
+        w_t = finite_vector(tgt.omega_body_ref_body, 'omega_body_ref_body', (3,))
+        if tgt.frame not in ('eci', 'orbit'):
             return f'unknown target frame {tgt.frame!r}'
-        q_err = attitude.multiply(attitude.conjugate(q_t / nq), attitude.normalize(q_b))
-    except (TypeError, ValueError):
-        return 'bad estimate or target'
+        if tgt.frame == 'eci' and est.q_eci_body is None:
+            return 'target in eci but no inertial attitude estimate'
+        q_b = np.asarray(est.q_eci_body if tgt.frame == 'eci' else est.q_orbit_body, float)
+        w_frame = w if tgt.frame == 'eci' else \
+            w - float(est.omega0) * (attitude.to_matrix(q_b).T @ np.array([0.0, 1.0, 0.0]))
+        q_err = attitude.multiply(attitude.conjugate(q_t), attitude.normalize(q_b))
+    except (TypeError, ValueError) as exc:
+        return f'bad estimate or target: {exc}'
     return q_err, w_frame - w_t, w
 
 
@@ -290,5 +278,8 @@ def realise(torque: np.ndarray, omega: np.ndarray, inputs: ControlInputs, ctrl,
         h = np.asarray(h, dtype=float)
         if h.shape == (ctrl.A_w.shape[1],) and np.all(np.isfinite(h)):
             demand = demand + np.cross(omega, ctrl.A_w @ h)   # cancel omega x h_wheels
-    tau_w, _, _ = ctrl.wheels.allocate(-demand)                                  # (A1), (A2)
-    return Command(wheel_torque=tau_w, info=info)
+    tau_w, dipole, _, _, refusal = ctrl.wheels.allocate_healthy(                 # (A1)-(A5)
+        -demand, None, inputs.wheel_ok, inputs.field_body(), inputs.backup_dipole_Am2)
+    if refusal:
+        return Command.zero(ctrl.A_w.shape[1], refusal, refused=True)
+    return Command(dipole_body=dipole, wheel_torque=tau_w, info=info)

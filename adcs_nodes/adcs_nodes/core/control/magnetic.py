@@ -546,6 +546,8 @@ class MagneticController:
             if (q_ref.shape != (4,) or y_ref.shape != (3,) or not np.isfinite(q_ref).all()
                     or not np.isfinite(y_ref).all() or math.sqrt(q_ref @ q_ref) < 1e-9):
                 return self._zero('target not finite or malformed')
+            if not math.isfinite(q_ref @ q_ref):                 # |q| overflows: scaled first
+                q_ref = q_ref / np.max(np.abs(q_ref))
 
         q_est = np.asarray(estimate.q_orbit_body, dtype=float)
         w_est = np.asarray(estimate.omega_body_eci_body, dtype=float)

@@ -77,13 +77,8 @@ Assumptions (not in the paper)
 * ASSUMPTION: the desired state is the target at ``t0`` (digest P15, reproduces the paper's
   tracking lag); ``reference_time='t0_plus_tau'`` propagates it to ``t0 + tau``.
 
-Beyond the paper: the two-wing variant (DEPARTURE, off by default)
------------------------------------------------------------------
-With two mirrored wings the hub inertia ``I_b - F F^T`` is about half of ``I_b`` about y and z,
-so the one-period horizon's rate gain per period ``g = T (1 + H^2/2) / (H (1 + H^2/4)) = 1.01``
-becomes ~2 on the hub: a pole near -1 (2.5 Hz chatter, digest P14). ``hold_horizon_s = 0.4``
-gives ``g = 0.52`` (dead-beat on the hub) and ``reference_time='t0_plus_tau'`` removes the lag
-of a longer horizon (P15). Measured in ``docs/paper001.md``; the defaults are the paper's law.
+DEPARTURE (off by default), the two-wing variant: ``hold_horizon_s = 0.4`` with
+``reference_time='t0_plus_tau'`` (digest P14, P15; ``docs/paper001.md``).
 """
 from __future__ import annotations
 
@@ -127,18 +122,8 @@ def _rz(a: float) -> np.ndarray:
 
 
 def euler312_to_dcm(euler: ArrayLike) -> np.ndarray:
-    """Passive DCM ``R_o2b = Ry(theta) Rx(phi) Rz(psi)`` of 3-1-2 angles ``[phi, theta, psi]``.
-
-    Parameters
-    ----------
-    euler : array_like, shape (3,)
-        Roll ``phi``, pitch ``theta``, yaw ``psi`` [rad] (paper's order).
-
-    Returns
-    -------
-    numpy.ndarray, shape (3, 3)
-        ``v_body = R v_ref``.
-    """
+    """Passive DCM (3, 3) ``R_o2b = Ry(theta) Rx(phi) Rz(psi)`` (``v_body = R v_ref``) of the
+    3-1-2 angles ``[phi, theta, psi]`` (3,) [rad] (roll, pitch, yaw: the paper's order)."""
     phi, theta, psi = (float(v) for v in euler)
     return _ry(theta) @ _rx(phi) @ _rz(psi)
 
@@ -193,24 +178,9 @@ def body_accel_from_euler312(euler: ArrayLike, euler_rate: ArrayLike,
 # ------------------------------------------------------------------ the boundary (F1), (F2)
 def paper_state_from_project(q_orbit_body: ArrayLike,
                              omega_body_orbit_body: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """THE conversion from the project's frames to the paper's (module docstring, (F1)-(F2)).
-
-    Parameters
-    ----------
-    q_orbit_body : array_like, shape (4,)
-        Attitude, scalar last: rotates body vectors into the project's orbit frame
-        (x along-track, y orbit normal, z zenith).
-    omega_body_orbit_body : array_like, shape (3,)
-        Body rate w.r.t. the orbit frame, body axes [rad/s].
-
-    Returns
-    -------
-    c_bo : numpy.ndarray, shape (3, 3)
-        The paper's ``R_o2b``: ``v_body = c_bo v_lvlh`` (LVLH: z nadir, y -orbit normal).
-    omega_bo_body : numpy.ndarray, shape (3,)
-        Body rate w.r.t. LVLH, body axes [rad/s] (equal to the input: the frames are fixed to
-        each other).
-    """
+    """THE conversion from the project's frames to the paper's, (F1)-(F2): ``q_orbit_body``
+    (4,) and ``omega_body_orbit_body`` (3,) [rad/s, body axes] -> ``(c_bo (3, 3), the paper's
+    R_o2b: v_body = c_bo v_lvlh; omega_bo_body (3,) [rad/s], equal to the input)``."""
     c_bo = att.to_matrix(q_orbit_body).T @ D_ORBIT_LVLH                                  # (F1)
     return c_bo, np.array(omega_body_orbit_body, dtype=float)                            # (F2)
 
@@ -240,17 +210,9 @@ def _inertia_parts(inertia_t: np.ndarray) -> tuple:
 
 
 def model(inertia_t: np.ndarray, h_t: np.ndarray, omega0: float) -> np.ndarray:
-    """State matrix ``A`` (6, 6) of (10) with ``A1`` (13) and ``A2`` (14).
-
-    Parameters
-    ----------
-    inertia_t : numpy.ndarray, shape (3, 3)
-        Inertia in temporary axes [kg m^2], (2).
-    h_t : numpy.ndarray, shape (3,)
-        Wheel momentum in temporary axes [N m s], (7).
-    omega0 : float
-        Orbit rate [rad/s].
-    """
+    """State matrix ``A`` (6, 6) of (10) with ``A1`` (13) and ``A2`` (14): ``inertia_t``
+    (3, 3) [kg m^2] (2) and wheel momentum ``h_t`` (3,) [N m s] (7), temporary axes; orbit
+    rate ``omega0`` [rad/s]."""
     ix, iy, iz, ixy, ixz, iyz = _inertia_parts(inertia_t)
     hx, hy, hz = h_t
     w0 = omega0
@@ -290,15 +252,8 @@ def feedforward(x: np.ndarray, inertia_t: np.ndarray, h_t: np.ndarray, omega0: f
 
 
 def transition(a: np.ndarray, tau: float, order: int = 5) -> tuple[np.ndarray, np.ndarray]:
-    """Power-series ``Phi`` (19) and ``Q`` (20)-(21), truncated after ``tau^order``.
-
-    Returns
-    -------
-    phi : numpy.ndarray, shape (6, 6)
-        ``sum_{k=0..N} A^k tau^k / k!``.
-    q : numpy.ndarray, shape (6, 3)
-        ``[sum_{k=1..N} A^(k-1) tau^k / k!] B``.
-    """
+    """Power-series ``Phi`` (6, 6) (19) and ``Q`` (6, 3) (20)-(21), truncated after
+    ``tau^order``."""
     n = a.shape[0]
     phi = np.eye(n)
     integral = np.zeros((n, n))
@@ -339,15 +294,9 @@ def wheel_momentum_rate(u: np.ndarray, x: np.ndarray, inertia_t: np.ndarray, h_t
 
 def error_state(c_or: np.ndarray, omega_r: np.ndarray, c_of: np.ndarray,
                 omega_f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Temporary-frame state ``x`` and desired state ``x*`` (eqs. (1)-(4)).
-
-    Parameters
-    ----------
-    c_or, c_of : numpy.ndarray, shape (3, 3)
-        ``R_o2r`` (current) and ``R_o2f`` (desired), passive DCMs from LVLH.
-    omega_r, omega_f : numpy.ndarray, shape (3,)
-        Current and desired body rates w.r.t. LVLH, in their body axes [rad/s].
-    """
+    """Temporary-frame state ``x`` and desired state ``x*`` (6,) (eqs. (1)-(4)) of the current
+    and desired passive DCMs from LVLH ``c_or``, ``c_of`` (3, 3) and body rates w.r.t. LVLH
+    ``omega_r``, ``omega_f`` (3,) [rad/s], each in its body axes."""
     e = dcm_to_euler312(c_of.T @ c_or)                                      # R_t, (q_o2r q_o2f^-1)
     de = euler312_rates_from_body_rate(e, c_of.T @ omega_r)                             # (3), (4)
     return np.concatenate([e, de]), np.concatenate([np.zeros(3), c_of.T @ omega_f])
@@ -357,39 +306,17 @@ def error_state(c_or: np.ndarray, omega_r: np.ndarray, c_of: np.ndarray,
 class MPIController:
     """Paper 001's MPI law with reaction wheels (module docstring).
 
-    Parameters
-    ----------
-    inertia_kgm2 : array_like, shape (3, 3)
-        The controller's own (onboard) inertia, body axes [kg m^2] (paper (31): 5 % off).
-    wheel_axes_body : array_like, shape (n, 3)
-        Wheel spin axes, body axes; must span 3-D.
-    wheel_max_torque_Nm, wheel_max_momentum_Nms : array_like, shape (n,)
-        Per-wheel limits (``inf`` momentum: none).
-    period_s : float
-        Control period [s]: the horizon when stabilising or tracking (5.2).
-    series_order : int
-        ``N`` of (19), (21); the paper's 5.
-    literal_model : bool
-        Drop the derived constant ``c = [w0 hz, 0, -w0 hx]`` as the paper does.
-    min_horizon_s : float
-        Horizon floor in a maneuver [s] (ASSUMPTION); 0 means one control period.
-    hold_horizon_s : float
-        Horizon when stabilising or tracking [s]; 0 means one control period (the paper).
-        DEPARTURE from the paper when > 0: a longer one softens the near dead-beat rate loop
-        (digest P14: two mirrored wings give a 2.5 Hz limit cycle at one period); 0.4 s is the
-        two-wing variant (module docstring, with ``reference_time='t0_plus_tau'``).
-    saturation : {'scale', 'clip'}
-        One factor keeping the direction, or per-wheel clipping.
-    reference_time : {'t0', 't0_plus_tau'}
-        Desired state from the target at ``t0`` (paper, P15) or propagated to ``t0 + tau``
-        (DEPARTURE from the paper: no lag of ``tau`` behind a moving target).
-    exact_transition : bool
-        Use ``expm`` instead of the series (digest P6 study).
-
-    Raises
-    ------
-    ValueError
-        On a bad inertia, wheel geometry, limit, period or option.
+    ``inertia_kgm2`` (3, 3) [kg m^2] the controller's own, body axes (paper (31): 5 % off);
+    ``wheel_axes_body`` (n, 3) spanning 3-D; ``wheel_max_torque_Nm``,
+    ``wheel_max_momentum_Nms`` (n,) (``inf`` momentum: none); ``period_s`` [s] the control
+    period (the horizon when stabilising or tracking, 5.2); ``series_order`` N of (19), (21)
+    (the paper's 5); ``literal_model`` drops the derived ``c`` as the paper does;
+    ``min_horizon_s`` [s] the horizon floor in a maneuver (ASSUMPTION; 0: one period);
+    ``hold_horizon_s`` [s] the horizon when holding (0: one period, the paper's; DEPARTURE
+    when > 0, digest P14); ``saturation`` ``'scale'`` (one factor) or ``'clip'`` (per wheel);
+    ``reference_time`` ``'t0'`` (the paper, P15) or ``'t0_plus_tau'`` (DEPARTURE: no lag);
+    ``exact_transition``: ``expm`` instead of the series (digest P6). ``ValueError`` on a bad
+    inertia, wheel geometry, limit, period or option.
     """
 
     SATURATION = SATURATION
@@ -407,25 +334,17 @@ class MPIController:
             raise ValueError(f'inertia_kgm2 must be symmetric positive definite, got '
                              f'{inertia.tolist()}')
         self.inertia = 0.5 * (inertia + inertia.T)
-        if not np.size(wheel_axes_body) or not np.all(np.isfinite(
-                np.asarray(wheel_axes_body, dtype=float))):
-            raise ValueError('the MPI controller needs reaction wheels (wheel_axes_body is '
-                             'empty or not finite)')
         self.period = positive(period_s, 'period_s', 's')
         if isinstance(series_order, bool) or not isinstance(series_order, (int, np.integer)) \
                 or not 1 <= series_order <= 30:
             raise ValueError(f'series_order must be an integer in [1, 30], got {series_order!r}')
         self.order = int(series_order)
         self.literal = bool(literal_model)
-        mh = float(min_horizon_s)
-        if not (math.isfinite(mh) and mh >= 0.0):
-            raise ValueError(f'min_horizon_s must be finite and >= 0 [s], got {min_horizon_s!r}')
-        self.min_horizon = mh if mh > 0.0 else self.period
-        hh = float(hold_horizon_s)
-        if not (math.isfinite(hh) and hh >= 0.0):
-            raise ValueError(f'hold_horizon_s must be finite and >= 0 [s], got '
-                             f'{hold_horizon_s!r}')
-        self.hold_horizon = hh if hh > 0.0 else self.period
+        for key, v in (('min_horizon_s', min_horizon_s), ('hold_horizon_s', hold_horizon_s)):
+            if not (math.isfinite(float(v)) and float(v) >= 0.0):
+                raise ValueError(f'{key} must be finite and >= 0 [s], got {v!r}')
+        self.min_horizon = float(min_horizon_s) or self.period
+        self.hold_horizon = float(hold_horizon_s) or self.period
         if saturation not in self.SATURATION:
             raise ValueError(f'saturation must be one of {self.SATURATION}, got {saturation!r}')
         if reference_time not in self.REFERENCE_TIME:
@@ -520,11 +439,13 @@ class MPIController:
                                 'period: zero command')
         h_dot = wheel_momentum_rate(u, x, inertia_t, h_t, omega0, self.literal)           # (27)
         h_dot_b = c_of @ h_dot                                                            # (28)
-        tau_w = self.wheels.torques(h_dot_b)                                             # (A1)
-        if not np.all(np.isfinite(tau_w)):
+        if not np.all(np.isfinite(h_dot_b)):
             return Command.zero(n, 'non-finite wheel torque demand: zero command')
-        out, sigma = self.wheels.limit(tau_w, h_w)                                   # (A2)-(A4)
+        out, dipole, sigma, tau_w, refusal = self.wheels.allocate_healthy(      # (A1)-(A5)
+            h_dot_b, h_w, inputs.wheel_ok, inputs.field_body(), inputs.backup_dipole_Am2)
+        if refusal:
+            return Command.zero(n, refusal, refused=True)
         info = {'horizon_s': tau, 'x': x, 'x_star': x_star, 'u': u,
                 'h_dot_body_demand': h_dot_b, 'sigma': sigma,
                 'saturated': bool(np.any(np.abs(out - tau_w) > 1e-12))}
-        return Command(np.zeros(3), out, np.zeros(3), reason, info)
+        return Command(dipole, out, np.zeros(3), reason, info)

@@ -26,6 +26,13 @@ Optional momentum headroom over one hold period ``T`` (the plant's own rule), pe
 
 The MPI law (paper 001) offers both policies (the paper does not say which, digest P17) and
 (A4); the eigenaxis laws (paper 003: a torque limit only) scale (A2) without (A4).
+
+Failed wheels (:class:`adcs_nodes.core.wheel_health.WheelHealth`) are left out: (A1) on the
+healthy columns ``A_h`` only (failed wheels 0). When ``A_h`` does not span 3-D, the remainder
+``r = h_dot_b - A_h tau_h`` (orthogonal to their span) is the body torque ``T = -r`` asked of
+the magnetorquers in the field ``b`` (body axes), then scaled onto the dipole limits (31)::
+
+    m = b x T / |b|^2          (m x b = T - (T . b^) b^: all of T but its part along b)   (A5)
 """
 from __future__ import annotations
 
@@ -35,7 +42,7 @@ from typing import Optional, Tuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from adcs_nodes.core.control import limits_vector, scale_to_limits
+from adcs_nodes.core.control import cross3, limits_vector, scale_to_limits
 
 __all__ = ['WheelAllocator', 'SATURATION']
 
@@ -58,7 +65,7 @@ class WheelAllocator:
         axes = np.array(wheel_axes_body, dtype=float).reshape(-1, 3) \
             if np.size(wheel_axes_body) else np.zeros((0, 3))
         if axes.shape[0] == 0 or not np.all(np.isfinite(axes)):
-            raise ValueError('wheel_axes_body is empty or not finite')
+            raise ValueError('wheel_axes_body is empty or not finite (no reaction wheels)')
         norms = np.linalg.norm(axes, axis=1)
         if np.any(norms < 1e-9) or np.linalg.matrix_rank(axes) < 3:
             raise ValueError('wheel axes must be non-zero and span three dimensions, got '
@@ -116,3 +123,37 @@ class WheelAllocator:
         tau_w = self.torques(h_dot_body)
         out, sigma = self.limit(tau_w, h_w)
         return out, sigma, tau_w
+
+    def allocate_healthy(self, h_dot_body: ArrayLike, h_w: Optional[ArrayLike] = None,
+                         ok: Optional[ArrayLike] = None, b_body: Optional[ArrayLike] = None,
+                         max_dipole_Am2: Optional[ArrayLike] = None) -> tuple:
+        """:meth:`allocate` on the wheels ``ok`` (n,) bool (None: all), the rest by (A5).
+
+        Returns ``(tau_out (n,) [N m], dipole (3,) [A m^2], sigma, tau_unlimited (n,),
+        refusal)``; ``refusal`` (all zero) when the healthy wheels do not span 3-D and there is
+        no magnetorquer (``max_dipole_Am2`` (3,), None: none) or no field ``b_body`` (3,) [T].
+        """
+        if ok is None or all(ok):
+            out, sigma, tau_w = self.allocate(h_dot_body, h_w)
+            return out, np.zeros(3), sigma, tau_w, ''
+        ok = np.asarray(ok, dtype=bool)
+        h_dot = np.asarray(h_dot_body, dtype=float)
+        a_h = self.A_w[:, ok]
+        tau_w = np.zeros(self.n)
+        if a_h.shape[1]:
+            tau_w[ok] = np.linalg.pinv(a_h) @ h_dot                                   # (A1)
+        dipole = np.zeros(3)
+        rank = int(np.linalg.matrix_rank(a_h)) if a_h.shape[1] else 0
+        if rank < 3:
+            b = None if b_body is None else np.asarray(b_body, dtype=float)
+            bb = float(b @ b) if b is not None and b.shape == (3,) else math.nan
+            no_rods = max_dipole_Am2 is None or not np.any(np.asarray(max_dipole_Am2) > 0.0)
+            if no_rods or not (math.isfinite(bb) and bb > 0.0):
+                what = 'no magnetorquer' if no_rods else 'no usable magnetic field'
+                return (np.zeros(self.n), dipole, 0.0, tau_w,
+                        f'the {int(ok.sum())} healthy wheels of {self.n} span {rank} axes, '
+                        f'and {what} for the rest')
+            t_body = -(h_dot - self.A_w @ tau_w)                # the body torque left over
+            dipole, _ = scale_to_limits(cross3(b, t_body) / bb, max_dipole_Am2)  # (A5), (31)
+        out, sigma = self.limit(tau_w, h_w)                                      # (A2)-(A4)
+        return out, dipole, sigma, tau_w, ''

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import functools
 import importlib
 import json
 import os
@@ -170,6 +171,32 @@ class InProcessBus:
                 self._timer.reset()   # more to deliver: after the executor's other work
 
 
+def guard_callbacks(nodes) -> Dict[str, str]:
+    """Guards each node's subscription and timer callbacks: an exception marks that node dead
+    (said once; it does nothing more, as a crashed process) and the others go on. Returns
+    ``{node: why}``, filled as nodes die."""
+    dead: Dict[str, str] = {}
+
+    def guard(callback: Callable, name: str) -> Callable:
+        @functools.wraps(callback)      # the same signature: rclpy reads it (message info)
+        def guarded(*args):
+            if name in dead:
+                return None
+            try:
+                return callback(*args)
+            except Exception as exc:    # noqa: BLE001 - any node bug: that node only
+                dead[name] = f'{type(exc).__name__}: {exc}'
+                print(f'[compose] node {name} died ({dead[name]}): marked dead as a crashed '
+                      'process would be; the other nodes go on', file=sys.stderr)
+                return None
+        return guarded
+
+    for node in nodes:
+        for entity in (*node.subscriptions, *node.timers):
+            entity.callback = guard(entity.callback, node.get_name())
+    return dead
+
+
 def drive_lifecycle(nodes) -> str:
     """Configure, then activate, every managed node that is unconfigured (in process).
 
@@ -239,6 +266,7 @@ def main(argv=None) -> int:
             print(f'[compose] configuration error: {refused}', file=sys.stderr)
             return 2
         limit_blas_threads()   # again after the node modules' imports (idempotent)
+        guard_callbacks(nodes)
         bus = InProcessBus(nodes) if inproc_enabled(args.inproc, args.dds) and nodes else None
         if bus is not None:
             print(f'[compose] in-process path on {len(bus.topics)} topics: '
