@@ -60,23 +60,10 @@ SwitchController = Callable[[str], Tuple[bool, str]]
 def check_goal(q_xyzw, frame: str, controller: str, known_controllers: Iterable[str],
                tolerance_deg: float = 0.0, timeout_s: float = 0.0,
                can_switch: bool = True) -> str:
-    """Why a slew goal is refused ('' when it is acceptable).
-
-    Parameters
-    ----------
-    q_xyzw : array_like, shape (4,)
-        Target attitude, scalar last (rotates body vectors into ``frame``).
-    frame : str
-        ``'orbit'``, ``'eci'`` or ``''`` (orbit).
-    controller : str
-        Controller to switch to, ``''`` for none.
-    known_controllers : iterable of str
-        Names the controller may take.
-    tolerance_deg, timeout_s : float
-        Goal tolerance [deg] and timeout [s]; 0 for the server default.
-    can_switch : bool
-        Whether the host can switch controllers.
-    """
+    """Why a slew goal is refused ('' when it is acceptable): ``q_xyzw`` (4,) the target,
+    scalar last, body -> ``frame`` ('orbit', 'eci', '' = orbit); ``controller`` to switch to
+    ('' none) among ``known_controllers``; ``tolerance_deg`` [deg], ``timeout_s`` [s] (0: the
+    server's default); ``can_switch``: whether the host can switch controllers."""
     try:
         q = np.asarray(q_xyzw, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -103,17 +90,9 @@ def check_goal(q_xyzw, frame: str, controller: str, known_controllers: Iterable[
 
 
 class SlewProgress:
-    """Bookkeeping of one slew (pure: no ROS). Times are sim seconds.
-
-    Parameters
-    ----------
-    q_target : ndarray, shape (4,)
-        Target attitude in the goal frame, scalar last (normalised here).
-    tolerance_rad, rate_tolerance_rad_s, hold_s : float
-        Done when ``angle < tolerance`` and ``rate < rate tolerance`` for ``hold_s``.
-    band : float
-        Settling band as a fraction of the initial angle (paper 003: 5 %).
-    """
+    """Bookkeeping of one slew (pure: no ROS; sim seconds) toward ``q_target`` (4,) in the
+    goal frame: done when ``angle < tolerance_rad`` and ``rate < rate_tolerance_rad_s`` for
+    ``hold_s``; ``band``: the settling band, a fraction of the initial angle (paper 003: 5 %)."""
 
     def __init__(self, q_target, tolerance_rad: float, rate_tolerance_rad_s: float,
                  hold_s: float, band: float = 0.05) -> None:
@@ -186,21 +165,10 @@ def _state_in_frame(msg: AttitudeState, frame: str):
 class SlewActionServer:
     """The ``adcs/slew`` action server, hosted by ``node`` (see the module docstring).
 
-    Parameters
-    ----------
-    node : rclpy.node.Node
-        Host node (subscriptions and the action server are created on it).
-    set_target : callable
-        ``set_target(q_xyzw (4,), frame)``: guidance holds this attitude from now on.
-    switch_controller : callable, optional
-        ``switch_controller(name) -> (ok, message)``; without it, goals naming a controller
-        are rejected.
-    known_controllers : iterable of str, optional
-        Names accepted in goals (default: every registered controller).
-    default_tolerance_deg, rate_tolerance_deg_s, hold_s, default_timeout_s : float
-        Done criterion and timeout defaults (sim time).
-    estimate_topic, command_topic, action_name : str
-        Names (defaults: ``adcs/attitude_estimate``, ``adcs/actuator_command``, ``adcs/slew``).
+    ``set_target(q_xyzw (4,), frame)`` makes guidance hold that attitude;
+    ``switch_controller(name) -> (ok, message)`` (without it, goals naming a controller are
+    rejected); ``known_controllers`` default to every registered one; the done criterion and
+    timeout defaults are in sim time.
     """
 
     def __init__(self, node: Node, set_target: SetTarget,

@@ -47,19 +47,9 @@ ECI, ECEF, ORBIT = 'eci', 'ecef', 'orbit'
 
 def transform(parent: str, child: str, q_parent_child: Sequence[float], stamp: Any,
               translation: Optional[Sequence[float]] = None) -> TransformStamped:
-    """One ``TransformStamped`` ``parent -> child``.
-
-    Parameters
-    ----------
-    parent, child : str
-        ``header.frame_id`` and ``child_frame_id``.
-    q_parent_child : array_like, shape (4,)
-        Rotation [x, y, z, w] taking ``child`` components into ``parent`` (normalised here).
-    stamp : builtin_interfaces.msg.Time
-        Time the transform holds at.
-    translation : array_like, shape (3,), optional
-        Child origin in ``parent`` [m]; zero when omitted.
-    """
+    """One ``TransformStamped`` ``parent -> child`` at ``stamp``: ``q_parent_child`` (4,)
+    takes ``child`` components into ``parent`` (normalised here); ``translation`` (3,) [m] the
+    child origin in ``parent`` (zero when omitted)."""
     t = TransformStamped()
     t.header.stamp = stamp
     t.header.frame_id = parent
