@@ -353,21 +353,6 @@ def test_applied_telemetry_is_consistent():
                                rtol=0, atol=tol)
 
 
-def test_diagnostics_match_hand_formulas():
-    wheels = WheelCluster(PYRAMID, max_torque=1.0, max_momentum=55.0, inertia=0.1)
-    sc = Spacecraft(INERTIA, wheels=wheels)
-    h_w = np.array([1.0, 2.0, -1.0, 0.5])
-    state = SpacecraftState(Q0, W0, h_w)
-    # both form I w + A h (3- and 4-term sums) and rotate it by R(q) (entries ~3 eps): each
-    # errs by ~14 eps |R| (|I| |w| + |A|^T |h|) <= 14 eps sqrt(3) (||I|| |w| + |h|_1), per
-    # axis (was rtol 1e-14: cancellation in an axis makes relative error unbounded)
-    scale = np.abs(INERTIA).sum(axis=1).max() * np.abs(W0).max() + np.abs(h_w).sum()
-    np.testing.assert_allclose(sc.angular_momentum_eci(state),
-                               h_eci(Q0, INERTIA, W0, PYRAMID, h_w), rtol=0,
-                               atol=2 * 14 * np.sqrt(3) * np.finfo(float).eps * scale)
-    assert sc.kinetic_energy(state) == pytest.approx(0.5 * W0 @ INERTIA @ W0, rel=1e-14)
-
-
 # ----------------------------------------------------------------------------- bad inputs
 @pytest.mark.parametrize('inertia', [
     [[10.0, 1.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 10.0]],      # not symmetric

@@ -224,8 +224,8 @@ def test_correction_39_recovers_truth_when_w_is_exact(form):
     w, m = np.array([0.01, 0.02, -0.03]), np.array([1e-8, 2e-8, 3e-8])
     d_w, d_m = np.array([1e-3, -2e-3, 5e-4]), np.array([3e-9, -1e-9, 2e-9])
     block = big_m[1:] / big_m[0] if form == 'phi' else big_m[1:]
-    q, w_new, m_new = mf.correct_state(mf.q_orbit_body_from_lambda(qmul_sf(lam, big_m)),
-                                       w + d_w, m + d_m, np.r_[block, d_w, d_m], form)
+    q, w_new, m_new = mf.correct_kernel(mf.q_orbit_body_from_lambda(qmul_sf(lam, big_m)),
+                                        w + d_w, m + d_m, np.r_[block, d_w, d_m], form == 'phi')
     assert angle(q, mf.q_orbit_body_from_lambda(lam)) < 1e-12
     np.testing.assert_allclose(w_new, w, atol=1e-17)
     np.testing.assert_allclose(m_new, m, atol=1e-22)

@@ -21,13 +21,9 @@ QoS: a topic is subscribed once it has a publisher: reliable (best effort if any
 is), KEEP_LAST 1000, transient local when every publisher is (latched topics); the publishers'
 QoS are stored as ``offered_qos_profiles``.
 
-Time stamps (DESIGN section 8): the log time of a message is its own stamp: ``header.stamp``,
-the ``clock`` of ``rosgraph_msgs/Clock``, or the first element's header stamp of a sequence of
-stamped messages (``tf2_msgs/TFMessage``). A message without a stamp (or stamped 0) is logged
-at the latest ``/clock``; before the first ``/clock`` of a simulation it is held (at most
-:data:`MAX_HELD` messages) and logged at the first ``/clock``. Without any ``/clock`` publisher
-it is logged at its receive time (system time), as ``ros2 bag record`` does. The bag's
-duration is then the run's.
+Log times (``docs/topics.md``, "Bags"): a message's own stamp, else the latest ``/clock``
+(held, at most :data:`MAX_HELD`, until the first one), else without a ``/clock`` publisher
+its receive time.
 
 Crash safety: the pending chunk is closed and flushed every ``flush_sim_s`` of log time or
 ``flush_period_s`` of wall time (:func:`adcs_nodes.bag.flush_writer`), so a killed recorder

@@ -174,14 +174,6 @@ def _vec(value, name: str, n: int = 3) -> np.ndarray:
     return arr
 
 
-def _body_from_eci(qx: float, qy: float, qz: float, qw: float) -> tuple:
-    """``R(q / |q|)^T`` as a row-major 9-tuple: ECI components to body components."""
-    k = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)
-    return (1.0 - k * (qy * qy + qz * qz), k * (qx * qy + qz * qw), k * (qx * qz - qy * qw),
-            k * (qx * qy - qz * qw), 1.0 - k * (qx * qx + qz * qz), k * (qy * qz + qx * qw),
-            k * (qx * qz + qy * qw), k * (qy * qz - qx * qw), 1.0 - k * (qx * qx + qy * qy))
-
-
 _kernel_loaded = False
 
 
@@ -533,31 +525,6 @@ class Spacecraft:
             applied['torque_limited'] = np.abs(cmd_w) > self._wheel_max_torque
             applied['momentum_limited'] = limited != clipped
         return applied
-
-    # ------------------------------------------------------------------ diagnostics
-    def angular_momentum_eci(self, state: SpacecraftState) -> np.ndarray:
-        """Total angular momentum ``R(q) (I omega + F eta_dot + A h_w)`` [N m s], ECI,
-        shape (3,)."""
-        self.check_state(state)
-        h_body = (self.inertia @ state.omega_body_eci_body + self._A @ state.h_wheels
-                  + self._coupling_c @ state.eta_dot)
-        c = np.array(_body_from_eci(*state.q_eci_body.tolist())).reshape(3, 3)
-        return c.T @ h_body
-
-    def kinetic_energy(self, state: SpacecraftState) -> float:
-        """Rotational kinetic energy of the body without rotors ``1/2 w . I w`` [J]."""
-        self.check_state(state)
-        w = state.omega_body_eci_body
-        return 0.5 * float(w @ self.inertia @ w)
-
-    def mechanical_energy(self, state: SpacecraftState) -> float:
-        """Kinetic + modal strain energy [J] (rotor spin excluded), conserved by (E2f), (E9)
-        without damping and torques: ``1/2 v^T M v + 1/2 eta^T Lambda^2 eta``,
-        ``v = [omega; eta_dot]``."""
-        self.check_state(state)
-        v = np.concatenate((state.omega_body_eci_body, state.eta_dot))
-        strain = state.eta @ (self._modal_k * state.eta)
-        return 0.5 * float(v @ self.mass @ v) + 0.5 * float(strain)
 
 
 def steps_per_second(n: int = 2000, substeps: int = 1) -> float:

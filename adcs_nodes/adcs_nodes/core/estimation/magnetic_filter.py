@@ -255,21 +255,6 @@ def _check_field(b: np.ndarray, name: str, b_min: float, b_max: float) -> str:
     return ''
 
 
-def correct_state(q_orbit_body: ArrayLike, omega_body_eci_body: ArrayLike, m: ArrayLike,
-                  w: ArrayLike, measurement_form: str = 'phi'
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Correction (39): ``N-`` (4,), ``omega'-`` (3,) [rad/s] and ``m'-`` (3,) [rad/s^2]
-    (body axes) less the error estimate ``w`` (9,) ``[phi or mu, d_omega, d_m]`` (estimate
-    minus truth; ``measurement_form`` 'phi': (36), 'mu': (37)). Returns ``N+`` (4,) (unit,
-    not sign-normalised), ``omega'+`` (3,), ``m'+`` (3,)."""
-    w = np.ascontiguousarray(w, dtype=float)
-    if w.shape != (9,):
-        raise ValueError(f'w must have shape (9,), got {w.shape}')
-    return correct_kernel(np.ascontiguousarray(q_orbit_body, dtype=float),
-                          np.ascontiguousarray(omega_body_eci_body, dtype=float),
-                          np.ascontiguousarray(m, dtype=float), w, measurement_form == 'phi')
-
-
 # ------------------------------------------------------------------------ kernels
 # Plain loops on float64 arrays: compiled by numba, or run as Python (NUMBA_DISABLE_JIT=1).
 _TAYLOR_ORDER = 12
@@ -439,7 +424,9 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
 
 @jit(loads_numba=True)
 def correct_kernel(q, omega, m, w, form_phi):
-    """Correction (39) on arrays; see :func:`correct_state` (``form_phi``: form (36))."""
+    """Correction (39): ``N-`` (4,), ``omega'-`` (3,) [rad/s], ``m'-`` (3,) [rad/s^2] less the
+    error estimate ``w`` ``[phi or mu, d_omega, d_m]`` (estimate minus truth; ``form_phi``:
+    form (36), else (37)). Returns ``N+`` (unit, not sign-normalised), ``omega'+``, ``m'+``."""
     v = w[0:3].copy()
     vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
     if form_phi:   # (36): the block is phi
