@@ -43,15 +43,8 @@ def _text(value: Any) -> str:
 
 
 class Diagnostics:
-    """``/diagnostics`` of one node (see module docstring).
-
-    Parameters
-    ----------
-    node : rclpy.node.Node
-        The node; its ``publisher`` method is used when it has one (start handshake).
-    period_s : float
-        Sim-time period of the published status [s] (> 0).
-    """
+    """``/diagnostics`` of one ``node`` (see module docstring; its ``publisher`` method when it
+    has one), every ``period_s`` > 0 of sim time."""
 
     def __init__(self, node: Any, period_s: float = 1.0) -> None:
         if not period_s > 0:

@@ -116,13 +116,8 @@ def default_output() -> str:
 
 
 def import_message_class(msgtype: str):
-    """Python class of the ROS interface ``pkg/msg/Name`` (no ``rosidl_runtime_py`` needed).
-
-    Raises
-    ------
-    ValueError
-        If the name is malformed; ``ImportError`` / ``AttributeError`` if not installed.
-    """
+    """Python class of the ROS interface ``pkg/msg/Name`` (no ``rosidl_runtime_py`` needed):
+    ``ValueError`` for a malformed name, ``ImportError``/``AttributeError`` if not installed."""
     parts = msgtype.split('/')
     if len(parts) != 3:
         raise ValueError(f'message type must look like pkg/msg/Name, got {msgtype!r}')

@@ -37,16 +37,16 @@ import threading
 from typing import Callable, Iterable, Optional, Tuple
 
 import numpy as np
-import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
 from adcs_msgs.action import Slew
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, AttitudeTarget
 from adcs_nodes.core import attitude
 from adcs_nodes.msgs.fields import quat, stamp_ns, to_quat, to_vec3, vec3
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.adapter import QOS_DATA, QOS_LATCHED
 
 ACTION_NAME = 'adcs/slew'
 FRAMES = ('orbit', 'eci')
@@ -200,10 +200,8 @@ class SlewActionServer:
         # (``subscription``); a plain Node creates them directly.
         subscribe = getattr(node, 'subscription', None)
         if subscribe is None:
-            qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-
             def subscribe(msg_type, topic, callback):
-                return node.create_subscription(msg_type, topic, callback, qos)
+                return node.create_subscription(msg_type, topic, callback, QOS_DATA)
         subscribe(AttitudeState, estimate_topic, self._on_estimate)
         subscribe(ActuatorCommand, command_topic, self._on_command)
         self.server = ActionServer(node, Slew, action_name, execute_callback=self._execute,
@@ -328,10 +326,7 @@ class SlewActionNode(Node):
     def __init__(self, name: str = 'slew_action', target_topic: str = 'adcs/slew/target',
                  **kwargs) -> None:
         super().__init__(name, **kwargs)
-        qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
-        from rclpy.qos import DurabilityPolicy
-        qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
-        self.target_pub = self.create_publisher(AttitudeTarget, target_topic, qos)
+        self.target_pub = self.create_publisher(AttitudeTarget, target_topic, QOS_LATCHED)
         self.slew = SlewActionServer(self, self.publish_target)
 
     def publish_target(self, q_xyzw: np.ndarray, frame: str) -> None:
@@ -348,17 +343,7 @@ class SlewActionNode(Node):
 
 def main(args=None) -> int:
     """``ros2 run adcs_nodes slew_action`` (stand-alone host)."""
-    rclpy.init(args=args)
-    node = SlewActionNode()
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    return runtime.run(SlewActionNode, args)
 
 
 if __name__ == '__main__':

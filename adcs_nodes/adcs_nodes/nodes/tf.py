@@ -1,14 +1,8 @@
 """tf for the ADCS graph: ``/tf`` and ``/tf_static`` (``tf2_msgs/TFMessage``) as tf2 expects them.
 
-Frames and who publishes them (``docs/topics.md`` has the table)::
-
-    eci ─┬─ orbit ── body          /tf, dynamics (truth; eci -> orbit carries r_eci [m])
-         ├─ body_estimate          /tf, estimator (onboard orbit position, estimated attitude)
-         └─ ecef                   /tf, environment (Earth rotation, same origin)
-    body ─── magnetometer, gyro, star_tracker, horizon_sensor, ...
-                                   /tf_static, the sensor nodes (or the driver): the mounts
-
-A ``TransformStamped`` from ``parent`` to ``child`` carries ``q_parent_child`` (rotates
+Frames and who publishes them: ``docs/topics.md``, "Frames" (``eci -> orbit -> body`` truth
+from dynamics, ``eci -> body_estimate`` from the estimator, ``eci -> ecef`` from the
+environment, the sensor mounts ``body -> <sensor>`` on ``/tf_static``). A ``TransformStamped`` from ``parent`` to ``child`` carries ``q_parent_child`` (rotates
 ``child`` components into ``parent``, the project's convention and tf2's) and the position of
 the child's origin in the parent frame [m].
 

@@ -176,18 +176,8 @@ def observable_misalignment(inertia: ArrayLike, rel_tol: float = 1e-6) -> np.nda
 
 # ------------------------------------------------------------------- convention boundary
 def q_orbit_body_from_lambda(lam: ArrayLike) -> np.ndarray:
-    """``q_orbit_body`` ``[x, y, z, w]`` of the paper's ``Lambda = {lambda0, lambda1..3}``.
-
-    Parameters
-    ----------
-    lam : array_like
-        Paper 000's quaternion (4,), scalar FIRST, mapping body to orbit.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``q_orbit_body`` (4,), scalar last (not renormalised).
-    """
+    """``q_orbit_body`` (4,), scalar last (not renormalised), of the paper's ``Lambda =
+    {lambda0, lambda1..3}`` (4,), scalar FIRST, mapping body to orbit."""
     return attitude.from_scalar_first(lam)
 
 
