@@ -2,9 +2,9 @@
 
 Frames and who publishes them: ``docs/topics.md``, "Frames" (``eci -> orbit -> body`` truth
 from dynamics, ``eci -> body_estimate`` from the estimator, ``eci -> ecef`` from the
-environment, the sensor mounts ``body -> <sensor>`` on ``/tf_static``). A ``TransformStamped`` from ``parent`` to ``child`` carries ``q_parent_child`` (rotates
-``child`` components into ``parent``, the project's convention and tf2's) and the position of
-the child's origin in the parent frame [m].
+environment, the sensor mounts ``body -> <sensor>`` on ``/tf_static``). A ``TransformStamped``
+``parent -> child`` carries ``q_parent_child`` (``child`` components into ``parent``, the
+project's convention and tf2's) and the child's origin in the parent frame [m].
 
 Sensor mounts are defined once, by whoever publishes the sensor's samples (the simulated sensor
 node from its ``q_body_sensor`` parameter, or a driver / ``static_transform_publisher``), and
