@@ -40,7 +40,6 @@ at each substep's midpoint. Inputs are validated once per frame.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
@@ -457,25 +456,3 @@ class Spacecraft:
             applied['torque_limited'] = np.abs(cmd_w) > self._wheel_max_torque
             applied['momentum_limited'] = limited != clipped
         return applied
-
-
-def steps_per_second(n: int = 2000, substeps: int = 1) -> float:
-    """Wall-clock RK4 substeps per second of :meth:`Spacecraft.step` (free body + gravity
-    gradient, 0.1 s frames), a plain Python loop; a benchmark, not a test."""
-    sc = Spacecraft(np.diag([118.0, 100.0, 19.6]))
-    state = SpacecraftState(np.array([0.36, 0.48, -0.48, 0.64]), np.radians([-3.0, 3.0, 3.0]))
-    env = FrameEnvironment(r_eci=np.array([7068.137e3, 0.0, 0.0]),
-                           v_eci=np.array([0.0, 1035.0, 7436.0]))
-    command = sc.zero_command()
-    t, dt = 0.0, 0.1
-    sc.step(state, t, dt, env, command, substeps)     # compile (or load the cache) first
-    start = time.perf_counter()
-    for _ in range(n):
-        state, _ = sc.step(state, t, dt, env, command, substeps)
-        t += dt
-    return n * substeps / (time.perf_counter() - start)
-
-
-if __name__ == '__main__':
-    print(f'{steps_per_second():.0f} RK4 steps/s (one substep per frame, frame overhead incl.)')
-    print(f'{steps_per_second(200, 10):.0f} RK4 steps/s (ten substeps per frame)')
