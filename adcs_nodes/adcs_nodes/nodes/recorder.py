@@ -1,9 +1,7 @@
 """Recorder node: every topic (or a list), raw CDR, into a rosbag2 MCAP bag via ``rosbags``.
 
-``ros2 bag`` is not available as a PyPI wheel (DESIGN section 3), so this node is the
-project's recorder. It subscribes with ``raw=True`` and writes the serialized bytes unchanged
-into a rosbag2 directory (``metadata.yaml`` version 8, one ``.mcap`` file with the full
-``ros2msg`` definitions and RIHS01 hashes of the installed interfaces).
+``ros2 bag`` is no PyPI wheel, so this node is the project's recorder: ``raw=True``
+subscriptions, the bytes written unchanged into a rosbag2 directory (``docs/topics.md``).
 
 Parameters: :data:`PARAMS` (all read-only). ``topics`` entries may carry their type,
 ``topic=pkg/msg/Name``; empty records every topic found on the graph (re-scanned every

@@ -55,9 +55,7 @@ from sim_node.models.spacecraft_config import INITIAL, SPACECRAFT
 
 QOS_CLOCK = QOS_DATA
 #: The recorder may lag no further than the lockstep nodes: what it has not received must
-#: still be in the publishers' history (QOS_DATA keeps 100 per topic) to be resent. Its deeper
-#: reader queues do not help against a recorder stalled at the DDS level (with 400, a stopped
-#: recorder lost tens to hundreds of frames of every world topic: test_free_tumble).
+#: still be in the publishers' history (QOS_DATA keeps 100 per topic) to be resent.
 RECORDER_LAG_FRAMES = MAX_LAG_FRAMES
 
 

@@ -223,17 +223,6 @@ def measurement_matrix(b_meas_body: ArrayLike, n_star_body: ArrayLike) -> np.nda
     return h
 
 
-def linearised_matrices(inertia: ArrayLike, omega0: float, q_orbit_body: ArrayLike,
-                        omega_body_eci_body: ArrayLike, b_meas_body: ArrayLike,
-                        b_ref_orbit: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """``A`` (9, 9) of (34)-(35) and ``H`` (3, 9) [T] of (36) at one state and measurement:
-    :func:`error_matrix` arguments, the reading ``n`` (3,) [T] in body axes and the model
-    field ``B*`` (3,) [T] in orbit axes."""
-    n_star = predicted_field_body(q_orbit_body, b_ref_orbit)
-    return (error_matrix(inertia, omega0, q_orbit_body, omega_body_eci_body),
-            measurement_matrix(b_meas_body, n_star))
-
-
 def _check_field(b: np.ndarray, name: str, b_min: float, b_max: float) -> str:
     if b.shape != (3,):
         return f'{name} must have shape (3,), got {b.shape}'
@@ -561,11 +550,6 @@ class MagneticFilter:
         return self._q.copy()
 
     @property
-    def lambda_estimate(self) -> np.ndarray:
-        """``N`` (4,) in the paper's scalar-first form."""
-        return lambda_from_q_orbit_body(self._q)
-
-    @property
     def omega_body_eci_body(self) -> np.ndarray:
         """``omega'`` (3,) [rad/s]: estimated rate of body w.r.t. ECI, body axes."""
         return self._omega.copy()
@@ -606,16 +590,6 @@ class MagneticFilter:
         """``P`` (9, 9) or (12, 12): ellipsoid matrix of ``[phi or mu, d_omega, d_m(, d_delta)]``
         (not a covariance)."""
         return self._p.copy()
-
-    def omega_body_orbit_body(self, omega0: float) -> np.ndarray:
-        """``y' = omega' - omega0 e_N(N)`` (3,) [rad/s] (7): body rate w.r.t. orbit, body axes."""
-        return self._omega - float(omega0) * e_n_body(self._q)
-
-    def linearised_matrices(self, omega0: float, b_meas_body: ArrayLike,
-                            b_ref_orbit: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """``A`` (9, 9) and ``H`` (3, 9) at the current estimate (:func:`linearised_matrices`)."""
-        return linearised_matrices(self.inertia, omega0, self._q, self._omega, b_meas_body,
-                                   b_ref_orbit)
 
     # ------------------------------------------------------------------ prediction
     def predict(self, dt: float, omega0: float, dipole_body: ArrayLike = (0.0, 0.0, 0.0),
