@@ -154,7 +154,8 @@ def test_error_matrix_34_against_finite_differences_of_33():
     lam = random_lambda(np.random.default_rng(3))
     w = np.array([0.05, -0.03, 0.08])
     m = np.array([1e-6, -2e-6, 3e-6])
-    a = mf.error_matrix(I_TEST, omega0, mf.q_orbit_body_from_lambda(lam), w)
+    a = mf.error_matrix_kernel(I_TEST, np.linalg.inv(I_TEST), omega0,
+                               mf.q_orbit_body_from_lambda(lam), np.asarray(w, dtype=float))
     fd = {dt: _transition_by_finite_differences(lam, w, m, omega0, dt) for dt in (0.2, 0.1)}
     # F = expm(A dt) freezes A over dt, so in every block the mismatch must shrink as dt^2 (or
     # faster); a wrong entry of A would leave an O(dt) mismatch (ratio 2 instead of 4).
@@ -183,7 +184,8 @@ def test_measurement_matrix_against_finite_differences():
         return n - orbit_to_body_sf(lam_est, B_ORBIT)
 
     q = mf.q_orbit_body_from_lambda(lam)
-    h = mf.measurement_matrix(n, mf.predicted_field_body(q, B_ORBIT))
+    h = np.zeros((3, 9))                                  # H of (36), as printed
+    h[:, :3] = -attitude.skew(n + mf.predicted_field_body(q, B_ORBIT))
     eps = 1e-6
     jac = np.column_stack([(z_of(eps * e) - z_of(-eps * e)) / (2 * eps) for e in np.eye(3)])
     np.testing.assert_allclose(h[:, :3], jac, atol=1e-12 * np.linalg.norm(B_ORBIT) / 1e-5)

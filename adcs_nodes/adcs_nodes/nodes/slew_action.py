@@ -7,11 +7,9 @@ does the slew toward the target that guidance publishes.
 
 Behaviour
 ---------
-* **Goal check** (:func:`check_goal`): the goal is rejected (and the reason logged) when the
-  quaternion is not finite or not unit (``| |q| - 1 | > 1e-3``), the frame is not ``orbit`` /
-  ``eci`` (``''`` = ``orbit``), the controller name is not known, tolerance or timeout are
-  negative or not finite, or a controller is named and the host gave no way to switch.
-  :func:`check_goal` is public so clients (``adcs slew``) give the same reason up front.
+* **Goal check** (:func:`check_goal`, public so that ``adcs slew`` gives the same reason up
+  front): a quaternion not finite or not unit (1e-3), a frame not ``orbit``/``eci``, an
+  unknown controller, a bad tolerance or timeout, or no way to switch: rejected, logged.
 * **Accepted**: the server sets the target (``set_target(q_xyzw, frame)``), switches the
   controller if one is named (``switch_controller(name) -> (ok, message)``), and follows the
   attitude estimate ``adcs/attitude_estimate`` (``AttitudeState``): feedback per estimate with

@@ -203,26 +203,6 @@ def predicted_field_body(q_orbit_body: ArrayLike, b_orbit: ArrayLike) -> np.ndar
     return dcm(np.asarray(q_orbit_body, dtype=float)).T @ np.asarray(b_orbit, float)
 
 
-def error_matrix(inertia: ArrayLike, omega0: float, q_orbit_body: ArrayLike,
-                 omega_body_eci_body: ArrayLike) -> np.ndarray:
-    """Error-model matrix ``A`` (9, 9) of (34), ``dw/dt = A w``, ``w = [mu, d_omega, d_m]``.
-
-    ``inertia`` (3, 3) [kg m^2] and ``omega_body_eci_body`` (``omega_E``, (3,) [rad/s]) in
-    body axes; ``omega0`` the orbit rate [rad/s]; ``q_orbit_body`` ``N`` (4,) gives ``e_R`` (10).
-    """
-    inertia = np.ascontiguousarray(inertia, dtype=float)
-    return error_matrix_kernel(inertia, np.linalg.inv(inertia), float(omega0),
-                               np.ascontiguousarray(q_orbit_body, dtype=float),
-                               np.ascontiguousarray(omega_body_eci_body, dtype=float))
-
-
-def measurement_matrix(b_meas_body: ArrayLike, n_star_body: ArrayLike) -> np.ndarray:
-    """``H = [-Phi(n + n*), 0_3, 0_3]`` (3, 9) [T] of (36)/(37)."""
-    h = np.zeros((3, 9))
-    h[:, 0:3] = -skew(np.asarray(b_meas_body, float) + np.asarray(n_star_body, float))
-    return h
-
-
 def _check_field(b: np.ndarray, name: str, b_min: float, b_max: float) -> str:
     if b.shape != (3,):
         return f'{name} must have shape (3,), got {b.shape}'
@@ -275,7 +255,9 @@ def _g_k(inertia, inertia_inv, v):
 
 @jit
 def error_matrix_kernel(inertia, inertia_inv, omega0, q, omega):
-    """``A`` (9, 9) of (34) at ``(N = q, omega_E = omega)``; see :func:`error_matrix`."""
+    """Error-model matrix ``A`` (9, 9) of (34), ``dw/dt = A w``, ``w = [mu, d_omega, d_m]``, at
+    ``N = q`` (4,) (``e_R`` (10)) and ``omega_E = omega`` (3,) [rad/s]; ``inertia`` (3, 3)
+    [kg m^2] and its inverse, body axes; ``omega0`` the orbit rate [rad/s]."""
     e_r = dcm(q)[2, :].copy()
     a = np.zeros((9, 9))
     sk_w = skew(omega)
