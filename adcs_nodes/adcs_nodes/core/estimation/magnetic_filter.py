@@ -187,16 +187,7 @@ def lambda_from_q_orbit_body(q_orbit_body: ArrayLike) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- helpers
-
-def e_r_body(q_orbit_body: ArrayLike) -> np.ndarray:
-    """Zenith ``e_R`` (3,), unit, body axes, of ``q_orbit_body`` (4,) (10): ``C(N) j3``."""
-    return dcm(np.asarray(q_orbit_body, dtype=float))[2, :].copy()
-
-
-def e_n_body(q_orbit_body: ArrayLike) -> np.ndarray:
-    """Orbit normal ``e_N`` (3,), unit, body axes, of ``q_orbit_body`` (4,) (10): ``C(N) j2``."""
-    return dcm(np.asarray(q_orbit_body, dtype=float))[1, :].copy()
-
+# e_R = C(N) j3 and e_N = C(N) j2 of (10) are the rows 2 and 1 of ``dcm(N)`` in the kernels.
 
 def predicted_field_body(q_orbit_body: ArrayLike, b_orbit: ArrayLike) -> np.ndarray:
     """``n* = conj(N) . B* . N = C(N) B*`` (3,) [T], body axes, of ``b_orbit`` (3,) [T], orbit."""
