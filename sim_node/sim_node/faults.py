@@ -1,23 +1,15 @@
 """Faults of the simulated world: the registered kinds (``adcs list``, ``docs/scenarios.md``:
 each kind's description and parameters) and how a component applies them.
 
-A scenario's ``faults:`` (``{at_s, kind, target, params}``, validated by
-:func:`adcs_nodes.scenario.check_fault`) happen at exact sim time ``at_s``, last
-``params.duration_s`` (0: to the end), are seeded (``derive_seed(seed, 'fault/<index>')``) and
-announced on ``sim/faults`` (one ``DiagnosticArray`` status per fault starting, WARN, or
-ending, OK). The components apply them, so the plain, composed and graph engines see the same
-faults: a sensor's to the sample it publishes (:class:`SensorFaults`; a star tracker's bias is
-a rotation vector applied to its attitude), an actuator's to the held command in the dynamics
-(:class:`ActuatorFaults`). ``node_killed`` stops the node for good at ``at_s`` in every engine
-(no frame, no message, as a crashed process; a graph run then SIGKILLs its process, after the
-node went silent at ``at_s``, so the series do not depend on when the signal lands): the graph
-reacts as to any crash and the run ends degraded naming the node (:func:`lost_text`). The
-simulated world and the recorder cannot be killed; it is a scripted fault only.
-
-Live faults (``adcs fault KIND TARGET``): one fault as JSON on :data:`INJECT_TOPIC`
-(``{index, kind, target, at_s, params}``, ``at_s`` null: the next frame), checked as a
-scenario's (:func:`injected`), applied by the sensor nodes and the dynamics from ``at_s`` or
-their next frame: not deterministic, its frame depends on wall time.
+A scenario's ``faults:`` (validated by :func:`adcs_nodes.scenario.check_fault`) strike at
+exact sim time ``at_s`` for ``params.duration_s`` (0: to the end), seeded
+(``derive_seed(seed, 'fault/<index>')``), announced on ``sim/faults`` (``docs/topics.md``).
+The components apply them, so every engine sees the same faults: a sensor's to its sample
+(:class:`SensorFaults`; a star tracker's bias is a rotation vector), an actuator's to the held
+command (:class:`ActuatorFaults`). ``node_killed`` silences a node for good at ``at_s`` (a
+graph run then SIGKILLs it) and the run ends degraded naming it (:func:`lost_text`); the world
+and the recorder cannot be killed. Live faults (``adcs fault``): JSON on :data:`INJECT_TOPIC`,
+checked as a scenario's (:func:`injected`), from ``at_s`` or the next frame: not deterministic.
 """
 from __future__ import annotations
 
@@ -252,16 +244,11 @@ def check(kind: str, target: str, params: Optional[Dict[str, Any]], sensors: Seq
 
 def injected(text: str, earliest_ns: int, sensors: Optional[Sequence[str]] = (),
              wheels: Sequence[str] = (), magnetorquer: bool = False) -> Optional[Fault]:
-    """The live fault of an :data:`INJECT_TOPIC` message for a node that can apply faults to
+    """The live fault of an :data:`INJECT_TOPIC` message for a node that applies faults to
     ``sensors`` (None: any sensor, the dynamics, which announces them all), ``wheels`` and
-    (``magnetorquer``) the coils.
-
-    Returns None when the fault is not this node's (another sensor's; an actuator's for a
-    sensor node, which strikes no wheel and no coil); raises ``ValueError``
-    with the reason for a malformed or invalid one. It starts at ``at_s``, but no earlier than
-    ``earliest_ns`` (the receiver's next frame; also when ``at_s`` is null), and lasts
-    ``params.duration_s`` from its start (0: to the end of the run).
-    """
+    (``magnetorquer``) the coils; None when it is not this node's, ``ValueError`` with the
+    reason when malformed. It starts at ``at_s``, no earlier than ``earliest_ns`` (the next
+    frame; also when ``at_s`` is null), and lasts ``params.duration_s`` (0: to the end)."""
     try:
         item = json.loads(text)
     except ValueError as exc:

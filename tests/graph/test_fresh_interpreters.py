@@ -56,8 +56,8 @@ def test_compile_cache_serves_a_second_process(tmp_path):
     """First process compiles into an empty cache; a second one loads it without compiling."""
     code = ('import json, time; t0 = time.perf_counter(); '
             'from sim_node.models import kernels; '
-            'from sim_node.models.dynamics import steps_per_second; '
-            'steps_per_second(1, 10); '
+            'import numpy as np; from sim_node.models.dynamics import Spacecraft; '
+            'Spacecraft(np.eye(3)); '
             'st = kernels.frame_step.stats; '
             'print(json.dumps([sum(st.cache_hits.values()), sum(st.cache_misses.values()), '
             'time.perf_counter() - t0]))')

@@ -264,7 +264,9 @@ class FlexibleSpacecraft:
         h_w = x[7 + 2 * self.m:]
         if self.wheels is not None:
             tau_w = self.wheels.apply(cmd, h_w, dt)
-            status = self.wheels.saturation_status(cmd, h_w, dt)
+            clipped = np.clip(cmd, -self.wheels.max_torque, self.wheels.max_torque)
+            status = {'torque_limited': np.abs(cmd) > self.wheels.max_torque,     # (W4)
+                      'momentum_limited': np.abs(tau_w - clipped) > 0.0}
             if self.wheel_error is not None:       # (W5), still inside the torque limit
                 tau_w = np.clip(tau_w + self.wheel_error.torque(t), -self.wheels.max_torque,
                                 self.wheels.max_torque)

@@ -198,7 +198,8 @@ def test_expm_taylor_on_the_filter_matrices():
     for _ in range(50):
         q = rng.normal(size=4)
         w = rng.normal(size=3) * 0.1
-        a = mf.error_matrix(I_FULL, OMEGA0, q / np.linalg.norm(q), w)
+        a = mf.error_matrix_kernel(I_FULL, np.linalg.inv(I_FULL), OMEGA0,
+                                   q / np.linalg.norm(q), w)
         # G(v) = I^-1 [Phi(I v) - Phi(v) I], kernel through the inverse, here a LAPACK solve:
         # both err by ~eps cond(I) |I^-1| |I| |v| = eps cond(I)^2 |v|, v = omega (the G block)
         # or e_R times 6 omega0^2 (the gravity block); -Phi(omega), 0.5, 1 are exact copies

@@ -93,9 +93,7 @@ def test_energy_and_angular_momentum_are_conserved_without_damping_and_torque():
         st, _ = sc.step(st, 0.1 * k, 0.1, ENV, sc.zero_command(), 20)
     e1 = _energy(PAPER001_INERTIA, f, lam, st.omega_body_eci_body, st.eta, st.eta_dot)
     assert e0 > 0 and abs(e1 - e0) / e0 < 1e-6, (e0, e1)
-    assert sc.mechanical_energy(st) == pytest.approx(e1, rel=1e-12)
     assert np.linalg.norm(h_eci(st) - h0) / np.linalg.norm(h0) < 1e-9
-    np.testing.assert_allclose(sc.angular_momentum_eci(st), h_eci(st), rtol=1e-12)
     np.testing.assert_array_equal(st.h_wheels, h_w)          # no motor torque
     assert np.max(np.abs(st.eta)) > 1e-3                      # still oscillating
 
@@ -108,7 +106,8 @@ def test_damping_dissipates_energy():
     energies = []
     for k in range(50):
         st, _ = sc.step(st, 0.2 * k, 0.2, ENV, sc.zero_command(), 20)
-        energies.append(sc.mechanical_energy(st))
+        energies.append(_energy(PAPER001_INERTIA, f, 2 * math.pi * freq,
+                                st.omega_body_eci_body, st.eta, st.eta_dot))
     assert np.all(np.diff(energies) < 0.0) and energies[-1] < 0.5 * energies[0]
 
 

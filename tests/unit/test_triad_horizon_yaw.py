@@ -10,10 +10,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from adcs_nodes.core.estimation import (OnboardReference, attitude_from_horizon_and_yaw,
-                                        b_orbit_direct_dipole, make_onboard_reference, triad,
-                                        triad_from_horizon_and_field, yaw_from_horizon_and_field)
-from adcs_nodes.core.estimation.horizon_yaw import yaw_conditioning, zenith_body
+from adcs_nodes.core.estimation.horizon_yaw import (attitude_from_horizon_and_yaw,
+                                                    triad_from_horizon_and_field,
+                                                    yaw_conditioning, yaw_from_horizon_and_field,
+                                                    zenith_body)
+from adcs_nodes.core.estimation.onboard import (OnboardReference, b_orbit_direct_dipole,
+                                                make_onboard_reference)
+from adcs_nodes.core.estimation.triad import triad
 from adcs_nodes.core.geomag import DipoleField
 from adcs_nodes.core.orbit import CircularOrbit
 

@@ -47,13 +47,8 @@ def as_vec3(v, name: str = 'vector') -> np.ndarray:
 
 
 def normalize(q) -> np.ndarray:
-    """Return the unit quaternion ``q / |q|`` (shape (4,), scalar last).
-
-    Raises
-    ------
-    ValueError
-        If ``q`` is not finite or has (near) zero norm.
-    """
+    """The unit quaternion ``q / |q|`` (4,), scalar last; ``ValueError`` if ``q`` is not
+    finite or has (near) zero norm."""
     q = _as_quat(q)
     n = math.sqrt(q.dot(q))             # what np.linalg.norm computes for a real vector
     if n == math.inf:                   # |q| overflows (a finite q of ~1e300): scaled first
@@ -107,13 +102,8 @@ def to_matrix(q) -> np.ndarray:
 
 
 def from_matrix(dcm) -> np.ndarray:
-    """Quaternion (scalar last, ``w >= 0``) of a rotation matrix ``R_A_B`` (Shepperd's method).
-
-    Raises
-    ------
-    ValueError
-        If ``dcm`` is not a finite proper rotation (orthonormal to 1e-6, det +1).
-    """
+    """Quaternion (scalar last, ``w >= 0``) of a rotation matrix ``R_A_B`` (Shepperd's method);
+    ``ValueError`` unless ``dcm`` is a finite proper rotation (orthonormal to 1e-6, det +1)."""
     m = np.asarray(dcm, dtype=float)
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
         raise ValueError('rotation matrix must be a finite (3, 3) array')

@@ -40,25 +40,11 @@ def timing_mode(name: str, given: str, simulated_world: bool, launched: bool,
 
 
 class FrameSchedule:
-    """Which frame of a lockstep consumer is next and when it may fire.
-
-    Parameters
-    ----------
-    sync : FrameSync
-        The node's inputs.
-    period_ns : int
-        The node's own period P [ns] (> 0).
-    timeout_s : float
-        Wall seconds a due input is waited for.
-    wait_inputs : bool
-        False: fire as soon as time has reached the frame, with the latest values (flight
-        software in real-time mode).
-    rejoin : bool
-        The node joins a run already going (see the module docstring).
-    margin_ns : int
-        A rejoin skips the inputs stamped up to this after the time seen (a producer may
-        run that far ahead of ``/clock``: the environment, one base frame).
-    """
+    """Which frame of a lockstep consumer is next and when it may fire: ``sync`` its inputs,
+    ``period_ns`` P > 0, ``timeout_s`` the wall wait for a due input; ``wait_inputs`` False:
+    fire with the latest values as soon as time reaches the frame (real-time flight software);
+    ``rejoin``: join a run already going, skipping the inputs stamped up to ``margin_ns`` after
+    the time seen (a producer may run that far ahead of ``/clock``)."""
 
     def __init__(self, sync: FrameSync, period_ns: int, timeout_s: float,
                  wait_inputs: bool = True, rejoin: bool = False, margin_ns: int = 0) -> None:

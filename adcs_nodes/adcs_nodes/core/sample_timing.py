@@ -140,19 +140,10 @@ class ExternalInputs:
     instant) is taken by the next frame, at its own stamp, instead of being late. A sample
     that arrives after the frame that covered its stamp is late: refused, never used.
 
-    Parameters
-    ----------
-    periods_ns : dict
-        ``{name: producer period [ns]}`` of the inputs in sample timing.
-    topics : dict
-        ``{name: topic}`` (for the log lines).
-    own_period_ns, dead_after, epoch_ns : int
-        The node's period P [ns], misses before starvation, the run's epoch [ns].
-    max_future_ns, max_age_ns : int
-        The arrival limits (:func:`admit`; the future limit is widened by one own period: a
-        producer may be one frame ahead of this node's view of the clock).
-    counts : SampleCounts
-        Where samples used and superseded are counted.
+    ``periods_ns`` ``{name: producer period [ns]}``, ``topics`` ``{name: topic}`` (log lines);
+    ``own_period_ns`` P, ``dead_after`` misses, ``epoch_ns``; ``max_future_ns`` (widened by P:
+    a producer may be a frame ahead) and ``max_age_ns``, the limits of :func:`admit`;
+    ``counts`` counts the samples used and superseded.
     """
 
     def __init__(self, periods_ns: Dict[str, int], topics: Dict[str, str], own_period_ns: int,

@@ -4,22 +4,12 @@ Wraps :class:`adcs_nodes.core.manager.ControllerManagerCore` (switching at frame
 with one zero frame, schedule, automatic mode sequence, fallback to the safe controller on a
 stale, NaN or out-of-range command; the command sent is always finite and inside the limits).
 
-Subscribes ``adcs/controllers/<name>/command`` of every controller (awaited each command
-frame) and, when ``estimator_period_s > 0``, ``adcs/attitude_estimate`` (awaited each estimator
-frame): a stale or invalid estimate makes the manager fall back to the safe controller when the
-active one uses the estimate (``estimate_users``, default all but ``safe``), and holds the
-automatic sequence. Publishes
-``adcs/actuator_command`` (stamped with the frame) and the latched
-``adcs/controller_status``. Services ``adcs/switch_controller`` and ``adcs/list_controllers``
-(the project's namespace: never ros2_control's ``/controller_manager/...`` names, whose types
-differ, so the two can share a graph).
-
-A controller (or the estimator) that misses ``dead_after_frames`` frames in a row (its process
-died) stops being waited for (``LockstepNode``), so the graph goes on at full speed on the
-fallback; it is awaited again as soon as it publishes.
-
-Switch requests: one pending request, the last one before a frame boundary wins; every answer
-says what will happen (see :mod:`adcs_nodes.core.manager`).
+Awaits ``adcs/controllers/<name>/command`` of every controller each command frame and, when
+``estimator_period_s > 0``, ``adcs/attitude_estimate`` (a stale or invalid one: the safe
+controller for the controllers in ``estimate_users``, and the automatic sequence holds).
+Publishes ``adcs/actuator_command`` and the latched ``adcs/controller_status``; serves
+``adcs/switch_controller`` and ``adcs/list_controllers``. Topics, services, safe mode and
+switch requests: ``docs/topics.md``. A dead producer stops being awaited (``LockstepNode``).
 
 Live mode (``timing_mode: live``): stamps are not on a frame grid, so ``stale_after_s``
 defaults to 1.5 x the longest of the manager, controller and estimator periods (ASSUMPTION).

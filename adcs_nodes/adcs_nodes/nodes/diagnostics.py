@@ -43,15 +43,8 @@ def _text(value: Any) -> str:
 
 
 class Diagnostics:
-    """``/diagnostics`` of one node (see module docstring).
-
-    Parameters
-    ----------
-    node : rclpy.node.Node
-        The node; its ``publisher`` method is used when it has one (start handshake).
-    period_s : float
-        Sim-time period of the published status [s] (> 0).
-    """
+    """``/diagnostics`` of one ``node`` (see module docstring; its ``publisher`` method when it
+    has one), every ``period_s`` > 0 of sim time."""
 
     def __init__(self, node: Any, period_s: float = 1.0) -> None:
         if not period_s > 0:
@@ -137,15 +130,11 @@ class Diagnostics:
 
 
 class StatusTopics:
-    """``lockstep/status`` and ``lockstep/progress`` of a lockstep node, and its
+    """``lockstep/status`` (frames, missed frames, wall time: for the launcher and a user) and
+    ``lockstep/progress`` (the clock master's flow control) of a lockstep node, and its
     ``/diagnostics`` (:attr:`diagnostics`); when each is due is
-    :class:`~adcs_nodes.core.run_status.StatusPacer`'s decision.
-
-    Progress (every ``PROGRESS_EVERY`` frames of sim time seen, and at the last frame) is the
-    clock master's flow control; status (frames, missed frames, wall time; once per
-    ``status_period_ns`` of sim time, at the last frame, and once a wall second while the
-    node is stalled) is what the launcher and a user read. After the final status, or once
-    :meth:`stop` (a ``node_killed`` fault), nothing more is published.
+    :class:`~adcs_nodes.core.run_status.StatusPacer`'s decision (also once a wall second while
+    the node is stalled). Nothing after the final status or :meth:`stop` (``node_killed``).
     """
 
     def __init__(self, node: Any, status_period_ns: int) -> None:

@@ -7,11 +7,9 @@ records' converters), and the component checks them and steps the core
 (:mod:`adcs_nodes.components.estimator`). Never ``sim/*``: the reference field and orbit are
 the flight software's own models (``onboard_orbit.*``, ``onboard_field.*``).
 
-Publishes ``adcs/attitude_estimate`` (``adcs_msgs/AttitudeState``: q to the orbit frame and to
-ECI, rates, 6x6 covariance), ``adcs/estimator/diagnostics`` (``adcs_msgs/FilterDiagnostics``)
-and ``/tf`` (``eci -> body_estimate``). Bad input (NaN, zero or implausible field, stale or
-invalid sensor) is rejected with a warning and counted; a non-finite estimate is never
-published.
+Publishes ``adcs/attitude_estimate``, ``adcs/estimator/diagnostics`` and ``/tf`` (``eci ->
+body_estimate``; ``docs/topics.md``). Bad input is rejected with a warning and counted; a
+non-finite estimate is never published.
 """
 from __future__ import annotations
 

@@ -9,11 +9,9 @@ or, with ``euler312_profile`` (JSON text), paper 001's maneuvers, holds and sine
 its LVLH 3-1-2 Euler angles (:mod:`adcs_nodes.core.guidance_profiles`, converted to the orbit
 frame at that module's boundary).
 
-It also hosts the ``adcs/slew`` action (:class:`~adcs_nodes.nodes.slew_action.SlewActionServer`):
-an accepted goal replaces the profile by a hold of the goal attitude from the next frame on
-(and asks the manager to switch to the goal's controller, if one is named); a cancel holds
-the current attitude. Goals arrive in wall time, so a run with slew goals is not
-deterministic (a scripted profile is).
+It hosts the ``adcs/slew`` action (:class:`~adcs_nodes.nodes.slew_action.SlewActionServer`):
+a goal replaces the profile by a hold of its attitude from the next frame (not deterministic:
+goals arrive in wall time).
 """
 from __future__ import annotations
 

@@ -48,13 +48,8 @@ NODE_OPTIONS = {'allow_undeclared_parameters': False,
 
 class LockstepNode(node_params.SpecParameters, Node):
     """rclpy node with the project's parameter, handshake, timing and status conventions.
-
-    Common parameters (``nodes.params.COMMON``): ``epoch``, ``frame_period_s``,
-    ``timeout_s``, ``seed``, ``expected_matches``, ``real_time``, ``timing_mode``,
-    ``dead_after_frames``, ``status_period_s``, ``external_inputs``, and in live mode
-    ``max_sample_age_s``, ``max_future_s``, ``live_latency_s``. All are read-only at run time,
-    ``use_sim_time`` too (it would change the clock under a running node).
-    """
+    Its common parameters (``nodes.params.COMMON``) are read-only at run time, ``use_sim_time``
+    too (it would change the clock under a running node)."""
 
     #: True for the simulator's own nodes: they run in lockstep only.
     SIMULATED_WORLD = False

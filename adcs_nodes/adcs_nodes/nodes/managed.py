@@ -1,24 +1,11 @@
 """Managed (lifecycle) flight-software nodes: :class:`ManagedLockstepNode`.
 
 The estimator, the controllers, the controller manager and guidance are ROS 2 managed nodes
-(``rclpy.lifecycle``: the standard state machine and services); the simulated world and the
-recorder stay plain nodes.
-
-* ``unconfigured``: the node, its parameters as given and the lifecycle services; no topic.
-* ``configure`` reads and validates every parameter, builds the core and creates every
-  endpoint, timer, service and action (a bad value: the transition fails with the reason
-  logged as ``configuration error: ...``, the node stays ``unconfigured``). -> ``inactive``:
-  frames are processed (an activation is bumpless) but the outputs (lifecycle publishers)
-  drop what is published; ``lockstep/status``, ``progress`` and ``/diagnostics`` go on.
-* ``activate`` enables the outputs; only then does the handshake say ``lockstep/ready``.
-* ``cleanup`` destroys what ``configure`` created; a new ``configure`` reads the parameters
-  again and, during a lockstep run, rejoins it at the world's frame
-  (:mod:`adcs_nodes.core.frame_schedule`). ``shutdown`` ends the process (exit code 0).
-
-``autostart`` (default true) configures and activates in the constructor, so a node started
-alone runs at once (a bad parameter: exit code 2); ``adcs run`` starts them with
-``autostart: false`` and drives the transitions (``ros2 lifecycle set /estimator configure``
-does the same by hand).
+(``rclpy.lifecycle``); the states, ``autostart`` and how ``adcs run`` drives them are in
+``docs/topics.md``, "Lifecycle". ``configure`` reads the parameters and builds the core and
+every endpoint; ``cleanup`` destroys them, and a new ``configure`` during a lockstep run
+rejoins it at the world's frame (:mod:`adcs_nodes.core.frame_schedule`). Inactive: frames are
+processed, the lifecycle publishers drop the outputs; status, progress and diagnostics go on.
 
 Run-time parameter changes: only a registered controller's own parameters are writable
 (:data:`REBUILT_AT_RUN_TIME`): validated when set, applied at the next frame boundary by

@@ -1,25 +1,15 @@
 """Publisher identity of lockstep inputs: only the launched node's publisher is used.
 
-Any process on the run's domain can publish on any topic (``docs/security.md``). A consumer
-given ``expected_publishers`` (``"<topic>=<node name>"`` per guarded input; the launcher sets
-it for ``dynamics`` and ``controller_manager``) checks who sent each message:
-
-* it is not ready until the named node's publisher is discovered on every guarded topic; at
-  the end of the handshake each topic is **locked** to that publisher's GID(s); others present
-  are reported (``second_publisher``);
-* after the lock a message is dropped when its publisher GID is not a locked one
-  (``foreign_publisher``), its stamp was received already (``duplicate_stamp``) or is older
-  than the last :data:`HISTORY` (``old_stamp``), or it came before the lock
-  (``before_handshake``); a publisher joining later is reported once (``second_publisher``),
-  except the expected node's own new one once none of the locked ones is left (a lifecycle
-  cleanup and configure): the topic is locked to it (``relocks``, ``last_relock``);
-* every event is logged (throttled), counted on ``/diagnostics`` and published on
-  ``adcs/security_events`` (at most :data:`MAX_EVENTS_PER_S` a second, the rest counted).
-
-In-process deliveries (composed runs) carry no message info: only their stamps are checked.
-Not prevented: a stranger under the expected name before the handshake, forged ``/clock``,
-services, unguarded topics (SROS2 is the real answer). :class:`PublisherGuard` is the pure
-bookkeeping; :class:`NodeGuard` the rclpy glue.
+A consumer given ``expected_publishers`` (``"<topic>=<node name>"`` per guarded input) locks
+each guarded topic at the end of the start handshake to the named node's publisher GID(s) and
+then drops a message of another publisher (``foreign_publisher``), a stamp already received
+(``duplicate_stamp``) or older than the last :data:`HISTORY` (``old_stamp``), or one before
+the lock (``before_handshake``); a later publisher is reported once (``second_publisher``),
+except the expected node's own new one once none of the locked ones is left (a lifecycle
+cleanup and configure: a relock). Events are logged (throttled), counted on ``/diagnostics``
+and published on :data:`EVENTS_TOPIC`. In-process deliveries carry no message info: only
+their stamps are checked. What it does not prevent: ``docs/security.md``.
+:class:`PublisherGuard` is the pure bookkeeping; :class:`NodeGuard` the rclpy glue.
 """
 from __future__ import annotations
 
@@ -40,13 +30,8 @@ PARAM = 'expected_publishers'      # (its spec: ``nodes.params.COMMON``)
 
 
 def parse_expected(entries: Iterable[str]) -> Dict[str, str]:
-    """``["<topic>=<node>", ...]`` -> ``{topic: node}`` (empty entries skipped).
-
-    Raises
-    ------
-    ValueError
-        For an entry without ``=``, an empty topic or node, or a topic given twice.
-    """
+    """``["<topic>=<node>", ...]`` -> ``{topic: node}`` (empty entries skipped); ``ValueError``
+    for an entry without ``=``, an empty topic or node, or a topic given twice."""
     out: Dict[str, str] = {}
     for entry in entries:
         entry = str(entry).strip()
@@ -68,15 +53,8 @@ def gid_hex(gid: Optional[bytes]) -> str:
 
 
 class PublisherGuard:
-    """Which publisher may feed each guarded topic, and which stamps it has sent.
-
-    Parameters
-    ----------
-    expected : dict
-        ``{topic: node name}`` of the guarded topics (resolved topic names).
-    history : int
-        Stamps remembered per topic for the duplicate check (>= 1).
-    """
+    """Which publisher may feed each guarded topic (``expected``: ``{resolved topic: node
+    name}``), and which stamps it has sent (``history`` remembered per topic, >= 1)."""
 
     def __init__(self, expected: Dict[str, str], history: int = HISTORY) -> None:
         if int(history) < 1:
@@ -108,15 +86,8 @@ class PublisherGuard:
         return sum(self.counts.values())
 
     def lock(self, topic: str, gids: Iterable[bytes]) -> None:
-        """Accept ``topic`` only from the publishers ``gids`` from now on.
-
-        Raises
-        ------
-        KeyError
-            If ``topic`` is not guarded.
-        ValueError
-            If ``gids`` is empty (the expected node has no publisher there).
-        """
+        """Accept ``topic`` only from the publishers ``gids`` from now on (``KeyError``: not
+        guarded; ``ValueError``: no gids, the expected node has no publisher there)."""
         if topic not in self.expected:
             raise KeyError(topic)
         allowed = {bytes(g) for g in gids}

@@ -1,9 +1,7 @@
 """Recorder node: every topic (or a list), raw CDR, into a rosbag2 MCAP bag via ``rosbags``.
 
-``ros2 bag`` is not available as a PyPI wheel (DESIGN section 3), so this node is the
-project's recorder. It subscribes with ``raw=True`` and writes the serialized bytes unchanged
-into a rosbag2 directory (``metadata.yaml`` version 8, one ``.mcap`` file with the full
-``ros2msg`` definitions and RIHS01 hashes of the installed interfaces).
+``ros2 bag`` is no PyPI wheel, so this node is the project's recorder: ``raw=True``
+subscriptions, the bytes written unchanged into a rosbag2 directory (``docs/topics.md``).
 
 Parameters: :data:`PARAMS` (all read-only). ``topics`` entries may carry their type,
 ``topic=pkg/msg/Name``; empty records every topic found on the graph (re-scanned every
@@ -21,13 +19,9 @@ QoS: a topic is subscribed once it has a publisher: reliable (best effort if any
 is), KEEP_LAST 1000, transient local when every publisher is (latched topics); the publishers'
 QoS are stored as ``offered_qos_profiles``.
 
-Time stamps (DESIGN section 8): the log time of a message is its own stamp: ``header.stamp``,
-the ``clock`` of ``rosgraph_msgs/Clock``, or the first element's header stamp of a sequence of
-stamped messages (``tf2_msgs/TFMessage``). A message without a stamp (or stamped 0) is logged
-at the latest ``/clock``; before the first ``/clock`` of a simulation it is held (at most
-:data:`MAX_HELD` messages) and logged at the first ``/clock``. Without any ``/clock`` publisher
-it is logged at its receive time (system time), as ``ros2 bag record`` does. The bag's
-duration is then the run's.
+Log times (``docs/topics.md``, "Bags"): a message's own stamp, else the latest ``/clock``
+(held, at most :data:`MAX_HELD`, until the first one), else without a ``/clock`` publisher
+its receive time.
 
 Crash safety: the pending chunk is closed and flushed every ``flush_sim_s`` of log time or
 ``flush_period_s`` of wall time (:func:`adcs_nodes.bag.flush_writer`), so a killed recorder
@@ -120,13 +114,8 @@ def default_output() -> str:
 
 
 def import_message_class(msgtype: str):
-    """Python class of the ROS interface ``pkg/msg/Name`` (no ``rosidl_runtime_py`` needed).
-
-    Raises
-    ------
-    ValueError
-        If the name is malformed; ``ImportError`` / ``AttributeError`` if not installed.
-    """
+    """Python class of the ROS interface ``pkg/msg/Name`` (no ``rosidl_runtime_py`` needed):
+    ``ValueError`` for a malformed name, ``ImportError``/``AttributeError`` if not installed."""
     parts = msgtype.split('/')
     if len(parts) != 3:
         raise ValueError(f'message type must look like pkg/msg/Name, got {msgtype!r}')

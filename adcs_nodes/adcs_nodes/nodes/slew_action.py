@@ -7,11 +7,9 @@ does the slew toward the target that guidance publishes.
 
 Behaviour
 ---------
-* **Goal check** (:func:`check_goal`): the goal is rejected (and the reason logged) when the
-  quaternion is not finite or not unit (``| |q| - 1 | > 1e-3``), the frame is not ``orbit`` /
-  ``eci`` (``''`` = ``orbit``), the controller name is not known, tolerance or timeout are
-  negative or not finite, or a controller is named and the host gave no way to switch.
-  :func:`check_goal` is public so clients (``adcs slew``) give the same reason up front.
+* **Goal check** (:func:`check_goal`, public so that ``adcs slew`` gives the same reason up
+  front): a quaternion not finite or not unit (1e-3), a frame not ``orbit``/``eci``, an
+  unknown controller, a bad tolerance or timeout, or no way to switch: rejected, logged.
 * **Accepted**: the server sets the target (``set_target(q_xyzw, frame)``), switches the
   controller if one is named (``switch_controller(name) -> (ok, message)``), and follows the
   attitude estimate ``adcs/attitude_estimate`` (``AttitudeState``): feedback per estimate with
@@ -37,16 +35,16 @@ import threading
 from typing import Callable, Iterable, Optional, Tuple
 
 import numpy as np
-import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
 from adcs_msgs.action import Slew
 from adcs_msgs.msg import ActuatorCommand, AttitudeState, AttitudeTarget
 from adcs_nodes.core import attitude
 from adcs_nodes.msgs.fields import quat, stamp_ns, to_quat, to_vec3, vec3
+from adcs_nodes.nodes import runtime
+from adcs_nodes.nodes.adapter import QOS_DATA, QOS_LATCHED
 
 ACTION_NAME = 'adcs/slew'
 FRAMES = ('orbit', 'eci')
@@ -60,23 +58,10 @@ SwitchController = Callable[[str], Tuple[bool, str]]
 def check_goal(q_xyzw, frame: str, controller: str, known_controllers: Iterable[str],
                tolerance_deg: float = 0.0, timeout_s: float = 0.0,
                can_switch: bool = True) -> str:
-    """Why a slew goal is refused ('' when it is acceptable).
-
-    Parameters
-    ----------
-    q_xyzw : array_like, shape (4,)
-        Target attitude, scalar last (rotates body vectors into ``frame``).
-    frame : str
-        ``'orbit'``, ``'eci'`` or ``''`` (orbit).
-    controller : str
-        Controller to switch to, ``''`` for none.
-    known_controllers : iterable of str
-        Names the controller may take.
-    tolerance_deg, timeout_s : float
-        Goal tolerance [deg] and timeout [s]; 0 for the server default.
-    can_switch : bool
-        Whether the host can switch controllers.
-    """
+    """Why a slew goal is refused ('' when it is acceptable): ``q_xyzw`` (4,) the target,
+    scalar last, body -> ``frame`` ('orbit', 'eci', '' = orbit); ``controller`` to switch to
+    ('' none) among ``known_controllers``; ``tolerance_deg`` [deg], ``timeout_s`` [s] (0: the
+    server's default); ``can_switch``: whether the host can switch controllers."""
     try:
         q = np.asarray(q_xyzw, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -103,17 +88,9 @@ def check_goal(q_xyzw, frame: str, controller: str, known_controllers: Iterable[
 
 
 class SlewProgress:
-    """Bookkeeping of one slew (pure: no ROS). Times are sim seconds.
-
-    Parameters
-    ----------
-    q_target : ndarray, shape (4,)
-        Target attitude in the goal frame, scalar last (normalised here).
-    tolerance_rad, rate_tolerance_rad_s, hold_s : float
-        Done when ``angle < tolerance`` and ``rate < rate tolerance`` for ``hold_s``.
-    band : float
-        Settling band as a fraction of the initial angle (paper 003: 5 %).
-    """
+    """Bookkeeping of one slew (pure: no ROS; sim seconds) toward ``q_target`` (4,) in the
+    goal frame: done when ``angle < tolerance_rad`` and ``rate < rate_tolerance_rad_s`` for
+    ``hold_s``; ``band``: the settling band, a fraction of the initial angle (paper 003: 5 %)."""
 
     def __init__(self, q_target, tolerance_rad: float, rate_tolerance_rad_s: float,
                  hold_s: float, band: float = 0.05) -> None:
@@ -186,21 +163,10 @@ def _state_in_frame(msg: AttitudeState, frame: str):
 class SlewActionServer:
     """The ``adcs/slew`` action server, hosted by ``node`` (see the module docstring).
 
-    Parameters
-    ----------
-    node : rclpy.node.Node
-        Host node (subscriptions and the action server are created on it).
-    set_target : callable
-        ``set_target(q_xyzw (4,), frame)``: guidance holds this attitude from now on.
-    switch_controller : callable, optional
-        ``switch_controller(name) -> (ok, message)``; without it, goals naming a controller
-        are rejected.
-    known_controllers : iterable of str, optional
-        Names accepted in goals (default: every registered controller).
-    default_tolerance_deg, rate_tolerance_deg_s, hold_s, default_timeout_s : float
-        Done criterion and timeout defaults (sim time).
-    estimate_topic, command_topic, action_name : str
-        Names (defaults: ``adcs/attitude_estimate``, ``adcs/actuator_command``, ``adcs/slew``).
+    ``set_target(q_xyzw (4,), frame)`` makes guidance hold that attitude;
+    ``switch_controller(name) -> (ok, message)`` (without it, goals naming a controller are
+    rejected); ``known_controllers`` default to every registered one; the done criterion and
+    timeout defaults are in sim time.
     """
 
     def __init__(self, node: Node, set_target: SetTarget,
@@ -232,10 +198,8 @@ class SlewActionServer:
         # (``subscription``); a plain Node creates them directly.
         subscribe = getattr(node, 'subscription', None)
         if subscribe is None:
-            qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-
             def subscribe(msg_type, topic, callback):
-                return node.create_subscription(msg_type, topic, callback, qos)
+                return node.create_subscription(msg_type, topic, callback, QOS_DATA)
         subscribe(AttitudeState, estimate_topic, self._on_estimate)
         subscribe(ActuatorCommand, command_topic, self._on_command)
         self.server = ActionServer(node, Slew, action_name, execute_callback=self._execute,
@@ -360,10 +324,7 @@ class SlewActionNode(Node):
     def __init__(self, name: str = 'slew_action', target_topic: str = 'adcs/slew/target',
                  **kwargs) -> None:
         super().__init__(name, **kwargs)
-        qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
-        from rclpy.qos import DurabilityPolicy
-        qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
-        self.target_pub = self.create_publisher(AttitudeTarget, target_topic, qos)
+        self.target_pub = self.create_publisher(AttitudeTarget, target_topic, QOS_LATCHED)
         self.slew = SlewActionServer(self, self.publish_target)
 
     def publish_target(self, q_xyzw: np.ndarray, frame: str) -> None:
@@ -380,17 +341,7 @@ class SlewActionNode(Node):
 
 def main(args=None) -> int:
     """``ros2 run adcs_nodes slew_action`` (stand-alone host)."""
-    rclpy.init(args=args)
-    node = SlewActionNode()
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    return runtime.run(SlewActionNode, args)
 
 
 if __name__ == '__main__':

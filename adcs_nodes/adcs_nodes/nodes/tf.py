@@ -1,16 +1,10 @@
 """tf for the ADCS graph: ``/tf`` and ``/tf_static`` (``tf2_msgs/TFMessage``) as tf2 expects them.
 
-Frames and who publishes them (``docs/topics.md`` has the table)::
-
-    eci ─┬─ orbit ── body          /tf, dynamics (truth; eci -> orbit carries r_eci [m])
-         ├─ body_estimate          /tf, estimator (onboard orbit position, estimated attitude)
-         └─ ecef                   /tf, environment (Earth rotation, same origin)
-    body ─── magnetometer, gyro, star_tracker, horizon_sensor, ...
-                                   /tf_static, the sensor nodes (or the driver): the mounts
-
-A ``TransformStamped`` from ``parent`` to ``child`` carries ``q_parent_child`` (rotates
-``child`` components into ``parent``, the project's convention and tf2's) and the position of
-the child's origin in the parent frame [m].
+Frames and who publishes them: ``docs/topics.md``, "Frames" (``eci -> orbit -> body`` truth
+from dynamics, ``eci -> body_estimate`` from the estimator, ``eci -> ecef`` from the
+environment, the sensor mounts ``body -> <sensor>`` on ``/tf_static``). A ``TransformStamped``
+``parent -> child`` carries ``q_parent_child`` (``child`` components into ``parent``, the
+project's convention and tf2's) and the child's origin in the parent frame [m].
 
 Sensor mounts are defined once, by whoever publishes the sensor's samples (the simulated sensor
 node from its ``q_body_sensor`` parameter, or a driver / ``static_transform_publisher``), and
@@ -47,19 +41,9 @@ ECI, ECEF, ORBIT = 'eci', 'ecef', 'orbit'
 
 def transform(parent: str, child: str, q_parent_child: Sequence[float], stamp: Any,
               translation: Optional[Sequence[float]] = None) -> TransformStamped:
-    """One ``TransformStamped`` ``parent -> child``.
-
-    Parameters
-    ----------
-    parent, child : str
-        ``header.frame_id`` and ``child_frame_id``.
-    q_parent_child : array_like, shape (4,)
-        Rotation [x, y, z, w] taking ``child`` components into ``parent`` (normalised here).
-    stamp : builtin_interfaces.msg.Time
-        Time the transform holds at.
-    translation : array_like, shape (3,), optional
-        Child origin in ``parent`` [m]; zero when omitted.
-    """
+    """One ``TransformStamped`` ``parent -> child`` at ``stamp``: ``q_parent_child`` (4,)
+    takes ``child`` components into ``parent`` (normalised here); ``translation`` (3,) [m] the
+    child origin in ``parent`` (zero when omitted)."""
     t = TransformStamped()
     t.header.stamp = stamp
     t.header.frame_id = parent

@@ -140,15 +140,6 @@ class WheelCluster:
         lower = np.minimum((-self.max_momentum - h) / dt, 0.0)
         return np.clip(tau, lower, upper)
 
-    def saturation_status(self, torque_cmd, h_wheels, dt: float | None = None) -> dict:
-        """Which wheels :meth:`apply` limits: ``{'torque_limited', 'momentum_limited'}``, each
-        (n,) bool (W4; the momentum limit), as a wheel driver reports."""
-        cmd = self._per_wheel(torque_cmd, 'torque_cmd')
-        clipped = np.clip(cmd, -self.max_torque, self.max_torque)
-        applied = self.apply(cmd, h_wheels, dt)
-        return {'torque_limited': np.abs(cmd) > self.max_torque,
-                'momentum_limited': np.abs(applied - clipped) > 0.0}
-
     def h_body(self, h_wheels) -> np.ndarray:
         """Total wheel momentum in body axes ``A h_w`` (W1) [N m s], shape (3,)."""
         return self.A @ self._per_wheel(h_wheels, 'h_wheels')

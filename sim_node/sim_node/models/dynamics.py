@@ -40,7 +40,6 @@ at each substep's midpoint. Inputs are validated once per frame.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
@@ -174,14 +173,6 @@ def _vec(value, name: str, n: int = 3) -> np.ndarray:
     return arr
 
 
-def _body_from_eci(qx: float, qy: float, qz: float, qw: float) -> tuple:
-    """``R(q / |q|)^T`` as a row-major 9-tuple: ECI components to body components."""
-    k = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)
-    return (1.0 - k * (qy * qy + qz * qz), k * (qx * qy + qz * qw), k * (qx * qz - qy * qw),
-            k * (qx * qy - qz * qw), 1.0 - k * (qx * qx + qz * qz), k * (qy * qz + qx * qw),
-            k * (qx * qz + qy * qw), k * (qy * qz - qx * qw), 1.0 - k * (qx * qx + qy * qy))
-
-
 _kernel_loaded = False
 
 
@@ -204,28 +195,12 @@ def _load_kernel() -> None:
 class Spacecraft:
     """Spacecraft with optional magnetorquers, reaction wheels, flexible modes, disturbances.
 
-    Parameters
-    ----------
-    inertia : array_like, shape (3, 3)
-        Inertia about the centre of mass, body axes [kg m^2], without the rotors' axial
-        inertia, symmetric positive definite; with ``flexible`` the whole ``I_b``, and
-        ``I_b - F F^T`` must be positive definite.
-    magnetorquer, wheels : optional
-        :class:`Magnetorquer` (without it the dipole is zero), :class:`WheelCluster`.
-    disturbances : sequence of Disturbance
-        ``torque(t) -> (3,)`` [N m], body axes.
-    gravity_gradient : bool
-        Include the gravity-gradient torque (D1).
-    mu : float
-        Gravitational parameter [m^3/s^2] for (D1) and the orbit (E6).
-    field_history : bool
-        Use the previous frame's field for the cubic (E8); ``False``: always the line.
-    flexible : FlexibleModes, optional
-        Modes of flexible appendages (E2f), (E9).
-    wheel_error : WheelMomentumError, optional
-        Momentum control error (W5), one entry per wheel.
-
-    ``ValueError`` on an invalid argument or a coupling too large for the inertia.
+    ``inertia`` (3, 3) [kg m^2] about the centre of mass, body axes, SPD, without the rotors'
+    axial inertia (with ``flexible``, (E2f), (E9), the whole ``I_b``, and ``I_b - F F^T`` SPD);
+    ``magnetorquer`` (none: zero dipole), ``wheels``, ``wheel_error`` (W5) per wheel;
+    ``disturbances``: ``torque(t) -> (3,)`` [N m] body axes; ``gravity_gradient``: (D1) on;
+    ``mu`` [m^3/s^2] of (D1) and (E6); ``field_history``: the previous frame's field for the
+    cubic (E8), else the line. ``ValueError`` on an invalid argument.
     """
 
     def __init__(self, inertia, magnetorquer: Magnetorquer | None = None,
@@ -339,18 +314,6 @@ class Spacecraft:
             return np.zeros(self.n_wheels)
         return _vec(cmd_w, 'wheel_torque', self.n_wheels)
 
-    def _kernel_state(self, state: SpacecraftState, r_eci, v_eci) -> np.ndarray:
-        """Kernel state (``kernels`` layout) of ``state`` at the position ``r_eci``, ``v_eci``."""
-        x = np.empty(self._x_shape[0])
-        x[kernels.Q] = state.q_eci_body
-        x[kernels.W] = state.omega_body_eci_body
-        x[kernels.R] = r_eci
-        x[kernels.V] = v_eci
-        x[kernels.H0:kernels.H0 + self.n_wheels] = state.h_wheels
-        x[self._eta_sl] = state.eta
-        x[self._eta_dot_sl] = state.eta_dot
-        return x
-
     def _state_of(self, x: np.ndarray) -> SpacecraftState:
         """:class:`SpacecraftState` of a kernel state (copies)."""
         return SpacecraftState(x[kernels.Q].copy(), x[kernels.W].copy(),
@@ -431,38 +394,6 @@ class Spacecraft:
                     table[i] += d.torque(t + i * h + 0.5 * h)
         return table
 
-    def _disturbance_torque(self, t: float) -> np.ndarray:
-        tau = np.zeros(3)
-        for d in self.disturbances:
-            tau += d.torque(t)
-        return tau
-
-    # ---------------------------------------------------------------------- the model
-    def derivative(self, t: float, state: SpacecraftState, env_at_t: tuple,
-                   applied: ActuatorCommand) -> SpacecraftState:
-        """Right-hand side (E1)-(E4), (E9) at ``t`` [s] for ``env_at_t = (r_eci [m], b_eci
-        [T])`` (ECI) and the actuation ``applied`` as given (no saturation).
-
-        Returns the derivative as a :class:`SpacecraftState`: ``dq/dt`` [1/s],
-        ``domega/dt`` [rad/s^2], ``dh_w/dt`` [N m], ``d eta/dt``, ``d^2 eta/dt^2``.
-        """
-        self.check_state(state)
-        r_eci, b_eci = env_at_t
-        r_eci, _, b_eci, _ = self._check_env(r_eci, np.zeros(3), b_eci, np.zeros(3))
-        tau_w = self._wheel_command(applied)
-        tau_held = (_vec(applied.torque_body, 'torque_body') + self._disturbance_torque(t)
-                    - self._A @ tau_w)
-        dipole = _vec(applied.dipole_body, 'dipole_body')
-        coef = np.zeros((4, 3))
-        coef[0] = b_eci
-        x = self._kernel_state(state, r_eci, np.zeros(3))
-        x_dot = np.empty_like(x)
-        kernels.rhs(0.0, x, self._inertia_c, self._mass_inv_c, self._A, self._coupling_c,
-                    self._modal_c, self._modal_k, self.mu, self.gravity_gradient,
-                    bool(dipole.any()), dipole, coef, tau_held, tau_w,
-                    np.empty(9 + self.n_modes), x_dot)
-        return self._state_of(x_dot)
-
     def step(self, state: SpacecraftState, t: float, dt: float, env: FrameEnvironment,
              command: ActuatorCommand, substeps: int = 1) -> tuple[SpacecraftState, dict]:
         """Integrate one frame from ``t`` to ``t + dt`` [s] (``> 0``) with ``command`` held.
@@ -471,20 +402,12 @@ class Spacecraft:
         momentum limit within ``dt``); the orbit follows (E6), the field (E7), (E8); RK4 with
         ``substeps`` (>= 1) substeps. ``env`` is the environment at ``t``.
 
-        Returns
-        -------
-        state : SpacecraftState
-            State at ``t + dt``.
-        applied : dict of numpy.ndarray
-            What acted during the frame, body axes: ``dipole_body`` (3,) [A m^2] and
-            ``wheel_torque`` (n,) [N m] after the limits, held; ``torque_ideal_body``,
-            ``torque_wheels_body`` (``-A tau_w``) held, ``torque_disturbance_body`` (held over
-            the first substep), and at ``t``: ``torque_gg_body``, ``torque_magnetic_body``,
-            ``torque_external_body`` (all but the wheels) and ``torque_body`` (total) [N m].
-            With wheels also the driver status (n,) bool: ``torque_limited`` (the command
-            exceeds the torque limit (W4)) and ``momentum_limited`` (the torque is cut at the
-            momentum limit: the wheel is at, or would pass within ``dt``, ``max_momentum``);
-            ``wheel_torque`` includes the momentum control error (W5) if modelled.
+        Returns the state at ``t + dt`` and what acted, body axes: ``dipole_body`` (3,)
+        [A m^2] and ``wheel_torque`` (n,) [N m] (with (W5)) after the limits, held;
+        ``torque_ideal_body``, ``torque_wheels_body`` (``-A tau_w``), ``torque_disturbance_body``
+        (the first substep's); at ``t``: ``torque_gg_body``, ``torque_magnetic_body``,
+        ``torque_external_body`` (all but the wheels), ``torque_body`` [N m]; with wheels the
+        driver status (n,) bool ``torque_limited`` (W4) and ``momentum_limited``.
         """
         t, dt = float(t), float(dt)
         if not (math.isfinite(t) and math.isfinite(dt) and dt > 0.0):
@@ -533,50 +456,3 @@ class Spacecraft:
             applied['torque_limited'] = np.abs(cmd_w) > self._wheel_max_torque
             applied['momentum_limited'] = limited != clipped
         return applied
-
-    # ------------------------------------------------------------------ diagnostics
-    def angular_momentum_eci(self, state: SpacecraftState) -> np.ndarray:
-        """Total angular momentum ``R(q) (I omega + F eta_dot + A h_w)`` [N m s], ECI,
-        shape (3,)."""
-        self.check_state(state)
-        h_body = (self.inertia @ state.omega_body_eci_body + self._A @ state.h_wheels
-                  + self._coupling_c @ state.eta_dot)
-        c = np.array(_body_from_eci(*state.q_eci_body.tolist())).reshape(3, 3)
-        return c.T @ h_body
-
-    def kinetic_energy(self, state: SpacecraftState) -> float:
-        """Rotational kinetic energy of the body without rotors ``1/2 w . I w`` [J]."""
-        self.check_state(state)
-        w = state.omega_body_eci_body
-        return 0.5 * float(w @ self.inertia @ w)
-
-    def mechanical_energy(self, state: SpacecraftState) -> float:
-        """Kinetic + modal strain energy [J] (rotor spin excluded), conserved by (E2f), (E9)
-        without damping and torques: ``1/2 v^T M v + 1/2 eta^T Lambda^2 eta``,
-        ``v = [omega; eta_dot]``."""
-        self.check_state(state)
-        v = np.concatenate((state.omega_body_eci_body, state.eta_dot))
-        strain = state.eta @ (self._modal_k * state.eta)
-        return 0.5 * float(v @ self.mass @ v) + 0.5 * float(strain)
-
-
-def steps_per_second(n: int = 2000, substeps: int = 1) -> float:
-    """Wall-clock RK4 substeps per second of :meth:`Spacecraft.step` (free body + gravity
-    gradient, 0.1 s frames), a plain Python loop; a benchmark, not a test."""
-    sc = Spacecraft(np.diag([118.0, 100.0, 19.6]))
-    state = SpacecraftState(np.array([0.36, 0.48, -0.48, 0.64]), np.radians([-3.0, 3.0, 3.0]))
-    env = FrameEnvironment(r_eci=np.array([7068.137e3, 0.0, 0.0]),
-                           v_eci=np.array([0.0, 1035.0, 7436.0]))
-    command = sc.zero_command()
-    t, dt = 0.0, 0.1
-    sc.step(state, t, dt, env, command, substeps)     # compile (or load the cache) first
-    start = time.perf_counter()
-    for _ in range(n):
-        state, _ = sc.step(state, t, dt, env, command, substeps)
-        t += dt
-    return n * substeps / (time.perf_counter() - start)
-
-
-if __name__ == '__main__':
-    print(f'{steps_per_second():.0f} RK4 steps/s (one substep per frame, frame overhead incl.)')
-    print(f'{steps_per_second(200, 10):.0f} RK4 steps/s (ten substeps per frame)')

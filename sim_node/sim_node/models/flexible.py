@@ -53,14 +53,8 @@ DEFAULT_DAMPING = 0.005
 
 
 def paper001_modes(wings: str = 'two') -> tuple[np.ndarray, np.ndarray]:
-    """Coupling ``F`` (3, m) and frequencies (m,) [Hz] of paper 001's wings.
-
-    Parameters
-    ----------
-    wings : {'two', 'one'}
-        ``'two'``: both wings, the -X wing ``diag(-1, -1, 1) C_a`` (ASSUMPTION), m = 10;
-        ``'one'``: ``C_a`` only (the digest's replication option), m = 5.
-    """
+    """Coupling ``F`` (3, m) and frequencies (m,) [Hz] of paper 001's ``wings``: 'two' (m = 10,
+    the -X wing ``diag(-1, -1, 1) C_a``, ASSUMPTION) or 'one' (``C_a``, m = 5)."""
     ca = PAPER001_COUPLING_ONE_WING
     f = np.array(PAPER001_FREQUENCIES_HZ)
     if wings == 'one':

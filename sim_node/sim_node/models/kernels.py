@@ -233,49 +233,18 @@ def frame_step(x, dt, substeps, inertia, mass_inv, axes, coupling, modal_c, moda
                tau_dist, b_coef, b_prev, tau_prev, applied):
     """One frame ``t_k -> t_k + dt``: saturate the command once, hold it, RK4 in ``substeps``.
 
-    Parameters
-    ----------
-    x : numpy.ndarray, shape (N,)
-        Kernel state at ``t_k`` (layout in the module docstring); overwritten with the state
-        at ``t_k + dt``.
-    dt : float
-        Frame length [s], ``> 0``.
-    substeps : int
-        RK4 substeps, ``>= 1``; the quaternion is renormalised first and after each.
-    inertia : numpy.ndarray, shape (3, 3)
-        Inertia [kg m^2], body axes (with modes: the whole spacecraft's, ``I_b``).
-    mass_inv : numpy.ndarray, shape (3 + m, 3 + m)
-        ``[[I, F], [F^T, E_m]]^-1`` (``I^-1`` without modes).
-    axes : numpy.ndarray, shape (3, n)
-        Wheel spin axes (columns), body axes.
-    coupling : numpy.ndarray, shape (3, m)
-        Modal coupling ``F`` [kg^1/2 m], body axes (m = 0: rigid).
-    modal_c, modal_k : numpy.ndarray, shape (m,)
-        ``2 zeta Lambda`` [1/s] and ``Lambda^2`` [1/s^2] of (E9).
-    mu : float
-        Gravitational parameter [m^3/s^2].
-    use_gg : bool
-        Gravity gradient (D1) on.
-    dipole_max : numpy.ndarray, shape (3,)
-        Per-axis dipole limit [A m^2] (zero: no magnetorquer).
-    wheel_max_torque, wheel_max_momentum : numpy.ndarray, shape (n,)
-        Wheel limits [N m], [N m s] (``inf``: none).
-    u : numpy.ndarray, shape (6 + n,)
-        Command: requested dipole (3) [A m^2], ideal torque (3) [N m], motor torques (n)
-        [N m], body axes.
-    wheel_extra : numpy.ndarray, shape (n,)
-        Momentum control error torque (W5) [N m], added after (W4), the sum clipped to the
-        torque and momentum limits again (zeros: none).
-    tau_dist : numpy.ndarray, shape (substeps, 3)
-        Disturbance torque of each substep [N m], body axes.
-    b_coef : numpy.ndarray, shape (4, 3)
-        Field polynomial (E7) [T/s^j], ECI. Rows 2, 3 are replaced by (E8) if ``tau_prev > 0``.
-    b_prev : numpy.ndarray, shape (2, 3)
-        Field [T] and rate [T/s] at ``t_k - tau_prev``, ECI (read only if ``tau_prev > 0``).
-    tau_prev : float
-        Length of the previous frame [s] for (E8), or ``<= 0``: use ``b_coef`` as given.
-    applied : numpy.ndarray, shape (12 + 2 n,)
-        Written: see ``OUT_*``.
+    ``x`` (N,): the state at ``t_k`` (layout in the module docstring), overwritten with the
+    state at ``t_k + dt``; ``dt`` [s] > 0; ``substeps`` >= 1 (the quaternion is renormalised
+    first and after each). Body axes: ``inertia`` (3, 3) [kg m^2] (with modes ``I_b``),
+    ``mass_inv`` (3 + m, 3 + m) ``[[I, F], [F^T, E_m]]^-1``, ``axes`` (3, n) the wheel spin
+    axes, ``coupling`` ``F`` (3, m) [kg^1/2 m], ``modal_c``, ``modal_k`` (m,) ``2 zeta Lambda``
+    [1/s] and ``Lambda^2`` [1/s^2] of (E9). ``mu`` [m^3/s^2]; ``use_gg``: (D1) on; limits
+    ``dipole_max`` (3,) [A m^2], ``wheel_max_torque``, ``wheel_max_momentum`` (n,) [N m],
+    [N m s]. ``u`` (6 + n,): requested dipole [A m^2], ideal torque [N m], motor torques [N m];
+    ``wheel_extra`` (n,) [N m]: (W5); ``tau_dist`` (substeps, 3) [N m]. ``b_coef`` (4, 3)
+    [T/s^j] ECI: (E7), rows 2, 3 replaced by (E8) from ``b_prev`` (2, 3) (field [T] and rate
+    [T/s] at ``t_k - tau_prev``) if ``tau_prev`` [s] > 0. ``applied`` (12 + 2 n,) is written
+    (see ``OUT_*``).
     """
     n_x = x.shape[0]
     n_wheels = axes.shape[1]

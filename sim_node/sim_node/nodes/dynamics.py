@@ -9,20 +9,14 @@ Frame k (DESIGN section 6), lockstep mode::
        hold it (zero-order hold) and integrate t_k -> t_k+1 (fixed RK4 substeps)
     D. k += 1, back to A (after the last frame: done, the process exits 0)
 
-With ``spacecraft.flexible`` the same integrator carries the modal coordinates of the
-appendages (``sim_node.models.dynamics`` (E2f), (E9)); phase B then also publishes them on
-``sim/appendages``. Wheel driver status (torque limit, momentum limit) is in ``/diagnostics``
-(``wheels_torque_limited``, ``wheels_momentum_limited``: wheel names of the last frame, and
-frame counters) and logged when a wheel reaches or leaves its momentum limit.
-
-Missing input past ``timeout_s`` of wall time: log, count a missed frame, and go on with the last
-environment (extrapolated by its rates inside the frame) or a zero command. A command producer
-that missed ``dead_after_frames`` command frames in a row is dead: a zero command is applied
-without waiting until it publishes again. The state machine is the pure
-:class:`adcs_nodes.core.lockstep.ClockMaster`; this node executes its actions.
-
-Real-time mode (``real_time: true``): a wall timer at ``frame_period_s / rate_factor`` steps the
-same model with the latest inputs, without waiting.
+With ``spacecraft.flexible`` phase B also publishes the modal coordinates on
+``sim/appendages``; the wheel driver status is in ``/diagnostics`` (``wheels_torque_limited``,
+``wheels_momentum_limited``: the wheels limited in the last frame, and frame counters; a wheel
+reaching or leaving its momentum limit is logged). Missing input past ``timeout_s``: a missed
+frame, the last environment or a zero command; a dead command producer gets a zero command
+without waiting (DESIGN section 6). The state machine is the pure
+:class:`adcs_nodes.core.lockstep.ClockMaster`; this node executes its actions. Real-time
+mode: a wall timer at ``frame_period_s / rate_factor`` steps with the latest inputs.
 """
 from __future__ import annotations
 
@@ -55,9 +49,7 @@ from sim_node.models.spacecraft_config import INITIAL, SPACECRAFT
 
 QOS_CLOCK = QOS_DATA
 #: The recorder may lag no further than the lockstep nodes: what it has not received must
-#: still be in the publishers' history (QOS_DATA keeps 100 per topic) to be resent. Its deeper
-#: reader queues do not help against a recorder stalled at the DDS level (with 400, a stopped
-#: recorder lost tens to hundreds of frames of every world topic: test_free_tumble).
+#: still be in the publishers' history (QOS_DATA keeps 100 per topic) to be resent.
 RECORDER_LAG_FRAMES = MAX_LAG_FRAMES
 
 

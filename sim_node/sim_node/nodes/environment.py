@@ -3,14 +3,11 @@
 Subscribes ``/clock``; for every clock tick t_k publishes ``sim/environment`` stamped t_k:
 r, v (ECI), q_eci_orbit, orbit rate, argument of latitude, B (ECI) and dB/dt, q_eci_ecef.
 
-Runs one frame ahead in a launched lockstep run (``duration_s`` given, not real-time; issue
-13): the environment depends on time only, so on ``/clock`` t_k it also publishes t_k+1
-(never past the duration), and the clock master finds it waiting when it starts frame k+1
-instead of a ``/clock -> environment -> dynamics`` round trip. The messages are the same,
-each published once; consumers take them by stamp (``FrameSync``), so the trajectory and the
-bags do not change. Started alone (no duration) it answers each clock tick only.
-Models: ``adcs_nodes.core.orbit`` and ``adcs_nodes.core.geomag``, configured by the
-parameters ``orbit.*`` and ``field.*`` (same keys as the scenario YAML sections).
+In a launched lockstep run (``duration_s`` given, not real-time) it runs one frame ahead: the
+environment depends on time only, so on ``/clock`` t_k it also publishes t_k+1 (never past
+the duration), each message once; consumers take them by stamp (``FrameSync``). Started alone
+it answers each clock tick only. Models: ``core.orbit`` and ``core.geomag`` (parameters
+``orbit.*`` and ``field.*``, the scenario's sections).
 """
 from __future__ import annotations
 

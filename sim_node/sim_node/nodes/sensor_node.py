@@ -7,17 +7,8 @@ names are aliases. The node reads its parameters (its registry entry's, plus ``f
 draws its noise from ``derive_seed(seed, node name)``, and every ``period_s`` fires on the
 truth of that frame (``sim/state`` and ``sim/environment``, or ``sim/wheels`` for the
 tachometer): the sensor's component (:mod:`sim_node.components.sensors`, the FrameLoop's too)
-makes the sample, the topic's converter the message (:mod:`adcs_nodes.msgs.convert`):
-
-==================  =========================  ======================================
-sensor              topic                      message
-==================  =========================  ======================================
-magnetometer        ``sensors/magnetometer``   ``sensor_msgs/MagneticField`` (NaN: lost)
-gyro                ``sensors/gyro``           ``sensor_msgs/Imu`` (``angular_velocity``)
-star_tracker        ``sensors/star_tracker``   ``sensor_msgs/Imu`` (``orientation``)
-horizon_sensor      ``sensors/horizon``        ``adcs_msgs/HorizonSensor``
-wheel_tachometer    ``sensors/wheels``         ``sensor_msgs/JointState`` (``velocity``)
-==================  =========================  ======================================
+makes the sample, the topic's converter the message (:mod:`adcs_nodes.msgs.convert`; the
+topics and messages: ``docs/topics.md``).
 
 ``header.frame_id`` is ``frame_id`` (default: the sensor's name), whose mount
 (``q_body_sensor_xyzw``, identity when the model has none) the node puts on ``/tf_static``.

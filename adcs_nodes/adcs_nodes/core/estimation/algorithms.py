@@ -12,20 +12,16 @@ while there is nothing to publish; ``Step.rejections`` lists why samples were re
 Algorithms here:
 
 * :class:`MagneticFilterEstimator`: paper 000's filter (33)-(39) with its divergence reset
-  (a restart from the initial estimate, as the paper's filter does at t0) and the mapping of
-  its covariance to the published 6x6 attitude-angle/rate covariance: for small angles the
-  error angle is ``2 phi`` (or ``2 mu``), so ``P_angle = 4 P_phi``, ``P_angle,rate = 2 P_phi,w``.
-  An interval ``dt`` longer than ``max_step_s`` (live mode: a late frame, samples lost) is
-  predicted in ``n = ceil(dt / max_step_s)`` equal steps of ``dt / n`` (A re-linearised each
-  step; one step over tens of seconds of a tumble diverged). **Sample interval**: theta and
-  tau of (38) are given for one sample every ``theta_interval_s`` (10 s in paper 000); a
-  sample ``d < theta_interval_s`` after the last accepted one updates with ``theta / r`` and
-  ``tau * r``, ``r = d / theta_interval_s`` floored at 1e-3 (n samples of variance ``n theta``
-  carry the information of one of ``theta``); ``theta_interval_s = 0``: off. Measurements in
-  ``docs/decisions.md``. **Hypotheses** (``hypotheses`` > 1, beyond the paper): a bank of
-  filters turned about the measured field, :mod:`~adcs_nodes.core.estimation.hypotheses`;
-  the misalignment states of the filter (``misalignment_std0_rad``) open when it decides
-  (without a bank: at the first lock), so that the attitude is acquired first.
+  (a restart from the initial estimate) and its covariance mapped to the published 6x6
+  angle/rate one: the small error angle is ``2 phi`` (or ``2 mu``), so ``P_angle = 4 P_phi``,
+  ``P_angle,rate = 2 P_phi,w``. An interval longer than ``max_step_s`` is predicted in
+  ``n = ceil(dt / max_step_s)`` equal steps. **Sample interval**: theta and tau of (38) are
+  given for one sample every ``theta_interval_s`` (10 s in paper 000); a sample ``d`` after
+  the last accepted one updates with ``theta / r`` and ``tau * r``, ``r = d /
+  theta_interval_s`` in [1e-3, 1] (0: off). **Hypotheses** (``hypotheses`` > 1, beyond the
+  paper): a bank of filters turned about the measured field
+  (:mod:`~adcs_nodes.core.estimation.hypotheses`); the misalignment states open when it
+  decides (without a bank: at the first lock).
 * :class:`GeometricEstimator`: TRIAD or paper 004's horizon + magnetometer yaw (formula (3)),
   with the rate as the finite difference of successive attitudes::
 
@@ -54,36 +50,21 @@ from adcs_nodes.core.estimation.onboard import OnboardState
 MAX_STEP_S = 2.0
 """Longest single prediction of :class:`MagneticFilterEstimator` [s] (ASSUMPTION: paper 000's
 prediction interval, the one its tests validate)."""
+#: Most prediction steps per estimator step (bounds the work after a very long pause).
 MAX_PREDICTION_STEPS = 1000
 #: Paper 000's sample interval [s], for which its theta and tau of (38) are given.
 THETA_INTERVAL_S = 10.0
 #: Floor of the interval ratio (two samples at one instant do not make theta infinite).
 MIN_INTERVAL_RATIO = 1e-3
-"""Most prediction steps per estimator step (bounds the work after a very long pause)."""
 
 
 @dataclass(frozen=True)
 class EstimatorInputs:
-    """One frame of estimator input (fresh samples only; None = no new sample).
-
-    Attributes
-    ----------
-    ref : OnboardState
-        Onboard reference at t: ``q_eci_orbit``, ``b_orbit`` [T], ``omega0`` [rad/s].
-    b_body : ndarray (3,) or None
-        Fresh magnetometer sample rotated into body axes [T] (already range-checked).
-    horizon_roll_pitch : tuple of float or None
-        Fresh valid horizon-sensor roll and pitch [rad].
-    dipole_body : ndarray (3,)
-        Magnetorquer dipole applied over the last interval, body axes [A m^2].
-    gyro_rate_body : ndarray (3,) or None
-        Fresh gyro rate ``omega_body_eci_body`` [rad/s].
-    q_eci_body_meas : ndarray (4,) or None
-        Fresh star-tracker attitude, scalar last.
-    b_body_var : ndarray (3,) or None
-        Variances of ``b_body`` per body axis [T^2] from the sample's own covariance (rotated
-        into body axes), or None when the sample gives none.
-    """
+    """One frame of estimator input (fresh samples only; None = no new sample): the onboard
+    reference at t, the magnetometer sample ``b_body`` (3,) [T] body axes, horizon roll and
+    pitch [rad], the dipole applied over the last interval (3,) [A m^2] body axes, the gyro
+    ``omega_body_eci_body`` (3,) [rad/s], the star tracker ``q_eci_body`` (4,) and the
+    per-axis variances of ``b_body`` (3,) [T^2] from the sample's covariance."""
 
     ref: OnboardState
     b_body: Optional[np.ndarray] = None
@@ -137,12 +118,9 @@ def _finite(*arrays) -> bool:
 class MagneticFilterEstimator:
     """Paper 000's filter with a divergence reset and the 6x6 covariance (module docstring).
 
-    Parameters are those of :class:`~adcs_nodes.core.estimation.magnetic_filter.MagneticFilter`
-    plus ``max_rate_rad_s`` (an estimated rate beyond it is a divergence),
-    ``use_sensor_covariance`` (theta of (38) per axis from the sample's covariance when given,
-    never below ``theta``; False: the paper's single theta) and ``max_step_s`` [s], the
-    longest single prediction (longer intervals are split, module docstring; ASSUMPTION: 2 s,
-    the paper's prediction interval).
+    :class:`~adcs_nodes.core.estimation.magnetic_filter.MagneticFilter`'s parameters plus
+    ``max_rate_rad_s`` (beyond it: a divergence), ``use_sensor_covariance`` (theta per axis
+    from the sample's covariance, never below ``theta``) and ``max_step_s`` [s].
     """
 
     def __init__(self, inertia: ArrayLike, max_rate_rad_s: float = 1.0,
@@ -291,12 +269,7 @@ class MagneticFilterEstimator:
 
 
 class GeometricEstimator:
-    """TRIAD or horizon + magnetometer yaw, with a finite-difference rate.
-
-    Parameters
-    ----------
-    method : {'triad', 'horizon_mag_yaw'}
-    """
+    """TRIAD or horizon + magnetometer yaw (``method``), with a finite-difference rate."""
 
     METHODS = ('triad', 'horizon_mag_yaw')
 

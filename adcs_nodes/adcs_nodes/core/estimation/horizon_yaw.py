@@ -37,20 +37,14 @@ so besides (3) (digest section 4, not printed in the paper)::
 (Y3) is the default: the paper's ``psi = arcsin(sin psi)`` only recovers ``|psi| <= 90 deg``
 and is kept as ``method='asin'``.
 
-Degradation
------------
-The denominator ``ctheta (a_x0^2 + a_y0^2)`` vanishes when the model field has no horizontal
-(x0, y0) component, i.e. the field is along the vertical, or at ``theta = +-90 deg``. For the
-direct dipole (paper 004 eq. (2)), ``a_x0^2 + a_y0^2 = lambda^2 (cos^2 u sin^2 i + cos^2 i)``,
-which becomes small for near-polar orbits (``i -> 90 deg``) near ``u = 90`` and ``270 deg`` (over
-the magnetic poles): yaw is unobservable there, and magnetometer errors are amplified by about
-``|a0| / sqrt(a_x0^2 + a_y0^2)``. TRIAD on the vertical and the field degrades at the same place
-(the two vectors become parallel). :func:`yaw_conditioning` returns the normalised denominator
+Degradation: the denominator vanishes when the model field is vertical or at ``theta =
++-90 deg``; for the direct dipole (paper 004 (2)), ``a_x0^2 + a_y0^2 = lambda^2 (cos^2 u
+sin^2 i + cos^2 i)``, small in near-polar orbits near ``u = 90, 270 deg``, where TRIAD on the
+vertical and the field degrades too. :func:`yaw_conditioning` returns::
 
     kappa = |ctheta| (a_x0^2 + a_y0^2) / |a0|^2   in [0, 1]                               (Y4)
 
-and :func:`yaw_from_horizon_and_field` raises ``ValueError`` below a threshold, so the caller
-can hold or propagate yaw instead.
+and :func:`yaw_from_horizon_and_field` raises ``ValueError`` below a threshold.
 """
 from __future__ import annotations
 
@@ -74,38 +68,16 @@ def _angle(x: float, name: str) -> float:
 
 
 def zenith_body(roll: float, pitch: float) -> np.ndarray:
-    """Unit zenith (orbit z0) in body axes from the horizon sensor's angles (H1).
-
-    Parameters
-    ----------
-    roll, pitch : float
-        3-2-1 roll ``phi`` and pitch ``theta`` [rad] of the body w.r.t. the orbit frame.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``z_body`` (3,), body axes, unit norm (independent of yaw).
-    """
+    """Unit zenith ``z_body`` (3,), body axes, of the 3-2-1 ``roll``, ``pitch`` [rad] of the
+    body w.r.t. the orbit frame (H1)."""
     phi, theta = _angle(roll, 'roll'), _angle(pitch, 'pitch')
     return np.array([-math.sin(theta), math.cos(theta) * math.sin(phi),
                      math.cos(theta) * math.cos(phi)])  # (H1)
 
 
 def yaw_conditioning(pitch: float, b_orbit: ArrayLike) -> float:
-    """Normalised denominator ``kappa`` of formula (3), equation (Y4), in [0, 1].
-
-    Parameters
-    ----------
-    pitch : float
-        Pitch ``theta`` [rad].
-    b_orbit : array_like
-        Model field (3,) [T], orbit axes.
-
-    Returns
-    -------
-    float
-        ``|cos theta| (a_x0^2 + a_y0^2) / |a0|^2``; 0 means yaw is unobservable.
-    """
+    """``kappa`` (Y4) in [0, 1] of ``pitch`` [rad] and the model field ``b_orbit`` (3,) [T],
+    orbit axes; 0: yaw is unobservable."""
     a0 = attitude.as_vec3(b_orbit, 'b_orbit')
     n2 = float(a0 @ a0)
     if n2 == 0.0:
@@ -116,34 +88,13 @@ def yaw_conditioning(pitch: float, b_orbit: ArrayLike) -> float:
 def yaw_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike, b_orbit: ArrayLike,
                                method: str = 'atan2',
                                min_conditioning: float = MIN_YAW_CONDITIONING) -> float:
-    """Yaw from roll, pitch, measured and model field, paper 004 formula (3).
+    """Yaw ``psi`` [rad], paper 004 formula (3), of the horizon sensor's 3-2-1 ``roll`` and
+    ``pitch`` [rad], the reading ``b_body`` (3,) [T] in body axes and the model field
+    ``b_orbit`` (3,) [T] in orbit axes.
 
-    Parameters
-    ----------
-    roll, pitch : float
-        3-2-1 roll ``phi`` and pitch ``theta`` [rad] of the body w.r.t. the orbit frame
-        (from the horizon sensor).
-    b_body : array_like
-        Measured field (3,) [T], body axes (``a_x, a_y, a_z``).
-    b_orbit : array_like
-        Model field (3,) [T], orbit axes (``a_x0, a_y0, a_z0``); same unit as ``b_body``.
-    method : {'atan2', 'asin'}
-        ``'atan2'`` (default): (3) with its companion (Y2), yaw in (-pi, pi] (Y3).
-        ``'asin'``: the paper's literal ``arcsin`` of (3), clipped to [-1, 1], valid only for
-        ``|yaw| <= pi/2``.
-    min_conditioning : float
-        Smallest accepted ``kappa`` (Y4).
-
-    Returns
-    -------
-    float
-        Yaw ``psi`` [rad].
-
-    Raises
-    ------
-    ValueError
-        On non-finite input, an unknown ``method``, or ``kappa < min_conditioning`` (field
-        nearly vertical, e.g. a near-polar orbit near ``u = 90/270 deg``, or pitch near 90 deg).
+    ``method`` 'atan2' (default): (3) with (Y2), yaw in (-pi, pi] (Y3); 'asin': the paper's
+    literal ``arcsin`` of (3), valid only for ``|yaw| <= pi/2``. ``ValueError`` on non-finite
+    input, an unknown method, or ``kappa`` (Y4) below ``min_conditioning``.
     """
     if method not in ('atan2', 'asin'):
         raise ValueError(f"method must be 'atan2' or 'asin', got {method!r}")
@@ -169,20 +120,8 @@ def yaw_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike, b_o
 
 
 def attitude_from_horizon_and_yaw(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """``q_orbit_body`` of the 3-2-1 angles of paper 004 (1).
-
-    ``R(q)^T = C = R1(roll) R2(pitch) R3(yaw)`` (orbit -> body).
-
-    Parameters
-    ----------
-    roll, pitch, yaw : float
-        3-2-1 Euler angles [rad] of the body w.r.t. the orbit frame.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``q_orbit_body`` (4,), scalar last: ``v_orbit = R(q) v_body``.
-    """
+    """``q_orbit_body`` (4,), scalar last, of the 3-2-1 angles [rad] of paper 004 (1):
+    ``R(q)^T = C = R1(roll) R2(pitch) R3(yaw)`` (orbit -> body)."""
     return attitude.from_euler_321(_angle(roll, 'roll'), _angle(pitch, 'pitch'),
                                    _angle(yaw, 'yaw'))
 
@@ -190,28 +129,9 @@ def attitude_from_horizon_and_yaw(roll: float, pitch: float, yaw: float) -> np.n
 def triad_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike,
                                  b_orbit: ArrayLike,
                                  min_sin_angle: float = MIN_SIN_ANGLE) -> np.ndarray:
-    """TRIAD attitude from the horizon-sensor zenith (anchor, H1) and the field (paper 004).
-
-    Parameters
-    ----------
-    roll, pitch : float
-        3-2-1 roll and pitch [rad] of the body w.r.t. the orbit frame.
-    b_body : array_like
-        Measured field (3,) [T], body axes.
-    b_orbit : array_like
-        Model field (3,) [T], orbit axes.
-    min_sin_angle : float
-        Smallest accepted ``sin`` of the angle between the zenith and the field.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``q_orbit_body`` (4,), scalar last, ``w >= 0``.
-
-    Raises
-    ------
-    ValueError
-        On non-finite or zero input, or a field (nearly) along the vertical.
-    """
+    """TRIAD ``q_orbit_body`` (4,), ``w >= 0``, from the horizon-sensor zenith (anchor, H1)
+    of ``roll``, ``pitch`` [rad] and the field: ``b_body`` (3,) [T] body axes, ``b_orbit``
+    (3,) [T] orbit axes. ``ValueError`` on non-finite or zero input or when the sine of the
+    angle between zenith and field is below ``min_sin_angle``."""
     return triad(zenith_body(roll, pitch), b_body, np.array([0.0, 0.0, 1.0]), b_orbit,
                  min_sin_angle)

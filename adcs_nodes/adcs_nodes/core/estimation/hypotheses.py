@@ -1,15 +1,9 @@
 """Hypotheses about the rotation about the measured field: a filter bank beyond paper 000.
 
-Why (DEPARTURE from paper 000, whose filter is one hypothesis)
--------------------------------------------------------------
-One field reading ``n = C B*`` fixes the attitude up to a rotation about ``n``: every
-``N' = N . R(n_hat, psi)`` predicts the same ``n* = C(N') B* = n``. With the absolute rate
-``omega'`` kept in body axes, ``N'`` is the turn of the estimate by ``psi`` about the field in
-INERTIAL space: an exact motion of a torque-free body with the same readings for as long as
-the inertial field direction stands still. Only its turn (about ``2 omega0`` on a polar orbit)
-and the gravity gradient separate the two, so paper 000's filter, whose ``P`` collapses in
-100-300 s, can lock onto a wrong ``psi`` (the 180 deg mirror or any turn about the field) and
-follow it for an orbit (``docs/decisions.md``, "The filter's blind axis").
+DEPARTURE from paper 000 (whose filter is one hypothesis): one reading ``n = C B*`` fixes the
+attitude up to a rotation about ``n``; every ``N' = N . R(n_hat, psi)`` predicts the same
+``n*``, and only the turn of the inertial field and the gravity gradient separate them, so the
+filter can lock onto a wrong ``psi`` (``docs/decisions.md``, "The filter's blind axis").
 
 Remedy: multiple-model adaptive estimation (D. T. Magill, "Optimal adaptive estimation of
 sampled stochastic processes", IEEE TAC 10(4), 1965; P. S. Maybeck, "Stochastic Models,
@@ -27,9 +21,8 @@ its readings by the prediction error before its update::
 from ``window_s / 2`` after the start (the hypotheses first settle onto their branch) to
 ``window_s``; meanwhile the one with the smallest ``J_k`` is published (hypothesis 0 before
 the scoring). Then the smallest ``J_k`` goes on alone. DEPARTURE from MMAE: (H1) leaves out
-``H P H^T`` and ``ln det S`` of the Gaussian likelihood, since paper 000's ``P`` is an ellipsoid
-bound, not a covariance: a hypothesis still converging (``P`` re-opened by ``sigma_j``) lost to
-a collapsed wrong one in a test of that form.
+``H P H^T`` and ``ln det S`` of the Gaussian likelihood (paper 000's ``P`` is an ellipsoid
+bound, not a covariance).
 """
 from __future__ import annotations
 
@@ -44,8 +37,7 @@ from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
 
 LOCK_DEG = 3.0
 """Attitude ellipsoid ``2 sqrt(trace P_phi)`` [deg] below which the filter has locked onto a
-branch and the bank starts (ASSUMPTION: at 10 deg the bank started while the rate was still
-degrees per second off and every hypothesis fell onto one wrong branch)."""
+branch and the bank starts (ASSUMPTION)."""
 
 
 def locked(f: MagneticFilter) -> bool:
@@ -70,15 +62,8 @@ def prediction_error(f: MagneticFilter, b_body: np.ndarray, b_ref_orbit: np.ndar
 
 
 class HypothesisBank:
-    """The hypotheses' filters and scores (module docstring); it runs once, at the first lock.
-
-    Parameters
-    ----------
-    count : int
-        ``K`` >= 2, hypotheses started on the circle about the field.
-    window_s : float
-        Time [s] from the start of the bank to its decision, > 0.
-    """
+    """The hypotheses' filters and scores (module docstring); it runs once, at the first lock:
+    ``count`` ``K`` >= 2 hypotheses, decided ``window_s`` [s] > 0 after the start."""
 
     def __init__(self, count: int, window_s: float) -> None:
         if int(count) < 2:

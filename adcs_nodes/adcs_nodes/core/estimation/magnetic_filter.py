@@ -91,13 +91,9 @@ Recovery of the rotation part of ``w``: with (36) the first block is ``phi`` and
 ``N . conj(M) = Lambda . M . conj(M) = Lambda``: the correction recovers the truth when ``w``
 is exact.
 
-Compiled kernels
-----------------
-The arithmetic of :meth:`MagneticFilter.predict` and :meth:`MagneticFilter.update` is in the
-plain functions :func:`predict_kernel` and :func:`update_kernel` (explicit loops, no BLAS),
-compiled with numba (``cache=True``, no fastmath: IEEE arithmetic in the order written). The
-same functions run uncompiled with ``NUMBA_DISABLE_JIT=1`` or without numba; a test checks both
-give the same numbers. Input checks and guards stay in Python around them.
+Compiled kernels: :func:`predict_kernel` and :func:`update_kernel` hold the arithmetic (explicit
+loops, no BLAS, numba without fastmath; the same code runs uncompiled with
+``NUMBA_DISABLE_JIT=1``). Input checks and guards stay in Python around them.
 
 Misalignment states (beyond the paper; ``misalignment_std0_rad`` > 0)
 --------------------------------------------------------------------
@@ -124,11 +120,7 @@ A reading or reference that is not a finite (3,) vector with magnitude in [1e-6,
 rejected (state and ``P`` unchanged, reason returned, nothing raised); so is a correction that
 is not finite or gives ``|omega'|`` > 1 rad/s or ``|m'|`` > 1e-4 rad/s^2 (limits configurable).
 The quaternion is renormalised after every RK4 step and correction; ``P`` is symmetrised.
-
-Measured (``tests/unit/test_magnetic_filter.py``, the paper's example tumble, defaults below):
-from ``N = {1, 0, 0, 0}`` (138 deg off) the error is under 2 deg for good after ~850 s. ``P`` is
-an ellipsoid matrix, not a covariance (mean NEES ~4 for 6 dof with the paper's noise). The
-literal (38) diverges from that start.
+``P`` is an ellipsoid matrix, not a covariance.
 """
 from __future__ import annotations
 
@@ -184,18 +176,8 @@ def observable_misalignment(inertia: ArrayLike, rel_tol: float = 1e-6) -> np.nda
 
 # ------------------------------------------------------------------- convention boundary
 def q_orbit_body_from_lambda(lam: ArrayLike) -> np.ndarray:
-    """``q_orbit_body`` ``[x, y, z, w]`` of the paper's ``Lambda = {lambda0, lambda1..3}``.
-
-    Parameters
-    ----------
-    lam : array_like
-        Paper 000's quaternion (4,), scalar FIRST, mapping body to orbit.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``q_orbit_body`` (4,), scalar last (not renormalised).
-    """
+    """``q_orbit_body`` (4,), scalar last (not renormalised), of the paper's ``Lambda =
+    {lambda0, lambda1..3}`` (4,), scalar FIRST, mapping body to orbit."""
     return attitude.from_scalar_first(lam)
 
 
@@ -205,95 +187,11 @@ def lambda_from_q_orbit_body(q_orbit_body: ArrayLike) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- helpers
-
-def e_r_body(q_orbit_body: ArrayLike) -> np.ndarray:
-    """Zenith ``e_R`` (3,), unit, body axes, of ``q_orbit_body`` (4,) (10): ``C(N) j3``."""
-    return dcm(np.asarray(q_orbit_body, dtype=float))[2, :].copy()
-
-
-def e_n_body(q_orbit_body: ArrayLike) -> np.ndarray:
-    """Orbit normal ``e_N`` (3,), unit, body axes, of ``q_orbit_body`` (4,) (10): ``C(N) j2``."""
-    return dcm(np.asarray(q_orbit_body, dtype=float))[1, :].copy()
-
+# e_R = C(N) j3 and e_N = C(N) j2 of (10) are the rows 2 and 1 of ``dcm(N)`` in the kernels.
 
 def predicted_field_body(q_orbit_body: ArrayLike, b_orbit: ArrayLike) -> np.ndarray:
     """``n* = conj(N) . B* . N = C(N) B*`` (3,) [T], body axes, of ``b_orbit`` (3,) [T], orbit."""
     return dcm(np.asarray(q_orbit_body, dtype=float)).T @ np.asarray(b_orbit, float)
-
-
-def g_matrix(inertia: ArrayLike, omega: ArrayLike) -> np.ndarray:
-    """``G(omega) = I^-1 [Phi(I omega) - Phi(omega) I]`` (3, 3), Jacobian of the Euler term (35).
-
-    Units: those of ``omega`` ([rad/s] for a rate, [-] for the direction ``e_R``).
-
-    Parameters
-    ----------
-    inertia : array_like
-        Inertia matrix (3, 3) [kg m^2], body axes (diagonal in the paper; any SPD accepted).
-    omega : array_like
-        Rate or direction (3,), body axes.
-    """
-    inertia = np.asarray(inertia, dtype=float)
-    omega = np.asarray(omega, dtype=float)
-    return np.linalg.solve(inertia, skew(inertia @ omega) - skew(omega) @ inertia)  # (35)
-
-
-def error_matrix(inertia: ArrayLike, omega0: float, q_orbit_body: ArrayLike,
-                 omega_body_eci_body: ArrayLike) -> np.ndarray:
-    """Continuous error-model matrix ``A`` (9, 9) of (34) at ``(N, omega_E)``.
-
-    Parameters
-    ----------
-    inertia : array_like
-        Inertia (3, 3) [kg m^2], body axes.
-    omega0 : float
-        Orbit rate [rad/s].
-    q_orbit_body : array_like
-        ``N`` (4,), scalar last; gives ``e_R`` (10).
-    omega_body_eci_body : array_like
-        ``omega_E`` (3,) [rad/s], absolute rate in body axes.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``A`` with ``dw/dt = A w``, ``w = [mu, d_omega, d_m]``.
-    """
-    inertia = np.ascontiguousarray(inertia, dtype=float)
-    return error_matrix_kernel(inertia, np.linalg.inv(inertia), float(omega0),
-                               np.ascontiguousarray(q_orbit_body, dtype=float),
-                               np.ascontiguousarray(omega_body_eci_body, dtype=float))
-
-
-def measurement_matrix(b_meas_body: ArrayLike, n_star_body: ArrayLike) -> np.ndarray:
-    """``H = [-Phi(n + n*), 0_3, 0_3]`` (3, 9) [T] of (36)/(37)."""
-    h = np.zeros((3, 9))
-    h[:, 0:3] = -skew(np.asarray(b_meas_body, float) + np.asarray(n_star_body, float))
-    return h
-
-
-def linearised_matrices(inertia: ArrayLike, omega0: float, q_orbit_body: ArrayLike,
-                        omega_body_eci_body: ArrayLike, b_meas_body: ArrayLike,
-                        b_ref_orbit: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """``A`` (9, 9) of (34)-(35) and ``H`` (3, 9) [T] of (36) at one state and measurement.
-
-    Parameters
-    ----------
-    inertia : array_like
-        Inertia (3, 3) [kg m^2], body axes.
-    omega0 : float
-        Orbit rate [rad/s].
-    q_orbit_body : array_like
-        ``N`` (4,), scalar last.
-    omega_body_eci_body : array_like
-        ``omega'`` (3,) [rad/s], body axes.
-    b_meas_body : array_like
-        Measured field ``n`` (3,) [T], body axes.
-    b_ref_orbit : array_like
-        Model field ``B*`` (3,) [T], orbit axes.
-    """
-    n_star = predicted_field_body(q_orbit_body, b_ref_orbit)
-    return (error_matrix(inertia, omega0, q_orbit_body, omega_body_eci_body),
-            measurement_matrix(b_meas_body, n_star))
 
 
 def _check_field(b: np.ndarray, name: str, b_min: float, b_max: float) -> str:
@@ -307,37 +205,6 @@ def _check_field(b: np.ndarray, name: str, b_min: float, b_max: float) -> str:
     return ''
 
 
-def correct_state(q_orbit_body: ArrayLike, omega_body_eci_body: ArrayLike, m: ArrayLike,
-                  w: ArrayLike, measurement_form: str = 'phi'
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Apply the estimated error ``w`` to the state, correction (39).
-
-    Parameters
-    ----------
-    q_orbit_body : array_like
-        ``N-`` (4,), scalar last.
-    omega_body_eci_body : array_like
-        ``omega'-`` (3,) [rad/s], body axes.
-    m : array_like
-        ``m'-`` (3,) [rad/s^2], body axes.
-    w : array_like
-        Error estimate (9,): ``[phi or mu, d_omega, d_m]`` (estimate minus truth).
-    measurement_form : {'phi', 'mu'}
-        Whether the first block of ``w`` is ``phi = mu / mu0`` (36) or ``mu`` (37).
-
-    Returns
-    -------
-    tuple of numpy.ndarray
-        ``N+`` (4,) (unit, not sign-normalised), ``omega'+`` (3,), ``m'+`` (3,).
-    """
-    w = np.ascontiguousarray(w, dtype=float)
-    if w.shape != (9,):
-        raise ValueError(f'w must have shape (9,), got {w.shape}')
-    return correct_kernel(np.ascontiguousarray(q_orbit_body, dtype=float),
-                          np.ascontiguousarray(omega_body_eci_body, dtype=float),
-                          np.ascontiguousarray(m, dtype=float), w, measurement_form == 'phi')
-
-
 # ------------------------------------------------------------------------ kernels
 # Plain loops on float64 arrays: compiled by numba, or run as Python (NUMBA_DISABLE_JIT=1).
 _TAYLOR_ORDER = 12
@@ -346,18 +213,8 @@ _TAYLOR_NORM = 0.25
 
 @jit
 def expm_taylor(x):
-    """``expm(x)`` of a square matrix by Taylor series with scaling and squaring.
-
-    Parameters
-    ----------
-    x : numpy.ndarray
-        Square matrix (n, n), float64, finite.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``expm(x)`` (n, n): ``(T_12(x / 2^s))^(2^s)`` with ``||x / 2^s||_1 <= 1/4``.
-    """
+    """``expm(x)`` (n, n) of a finite float64 (n, n) matrix: ``(T_12(x / 2^s))^(2^s)`` with
+    ``||x / 2^s||_1 <= 1/4`` (Taylor series, scaling and squaring)."""
     n = x.shape[0]
     norm = 0.0
     for j in range(n):
@@ -389,7 +246,9 @@ def _g_k(inertia, inertia_inv, v):
 
 @jit
 def error_matrix_kernel(inertia, inertia_inv, omega0, q, omega):
-    """``A`` (9, 9) of (34) at ``(N = q, omega_E = omega)``; see :func:`error_matrix`."""
+    """Error-model matrix ``A`` (9, 9) of (34), ``dw/dt = A w``, ``w = [mu, d_omega, d_m]``, at
+    ``N = q`` (4,) (``e_R`` (10)) and ``omega_E = omega`` (3,) [rad/s]; ``inertia`` (3, 3)
+    [kg m^2] and its inverse, body axes; ``omega0`` the orbit rate [rad/s]."""
     e_r = dcm(q)[2, :].copy()
     a = np.zeros((9, 9))
     sk_w = skew(omega)
@@ -517,7 +376,9 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
 
 @jit(loads_numba=True)
 def correct_kernel(q, omega, m, w, form_phi):
-    """Correction (39) on arrays; see :func:`correct_state` (``form_phi``: form (36))."""
+    """Correction (39): ``N-`` (4,), ``omega'-`` (3,) [rad/s], ``m'-`` (3,) [rad/s^2] less the
+    error estimate ``w`` ``[phi or mu, d_omega, d_m]`` (estimate minus truth; ``form_phi``:
+    form (36), else (37)). Returns ``N+`` (unit, not sign-normalised), ``omega'+``, ``m'+``."""
     v = w[0:3].copy()
     vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
     if form_phi:   # (36): the block is phi
@@ -540,12 +401,8 @@ _WARM = {'done': False}
 
 
 def warm_up() -> None:
-    """Compile (or load from the numba cache) every kernel with the filter's argument types.
-
-    Called once per process by :class:`MagneticFilter`'s constructor, so the compilation
-    (about 20 s on a loaded 2-core machine the first time, about 1-2 s from the cache) happens
-    before a node joins the lockstep, never inside a frame.
-    """
+    """Compile (or load from the numba cache) every kernel with the filter's argument types,
+    once per process, so that compilation happens before a node joins the lockstep."""
     if _WARM['done']:
         return
     eye3, z3 = np.eye(3), np.zeros(3)
@@ -566,40 +423,16 @@ def warm_up() -> None:
 class MagneticFilter:
     """Paper 000's magnetometer-only estimator of ``q_orbit_body``, ``omega_body_eci_body``, ``m``.
 
-    Parameters
-    ----------
-    inertia : array_like
-        Inertia matrix (3, 3) [kg m^2], body axes, symmetric positive definite.
-    theta : float
-        ``theta`` > 0 of (38) [T^2] (digest: (0.3 uT)^2 = 9e-14 T^2).
-    tau : float
-        ``tau`` >= 0 of (38), dimensionless (digest: 0.01).
-    p0_diag : array_like or None
-        ``diag P(t0)`` (9,) for ``[phi or mu, d_omega, d_m]`` in [-], [(rad/s)^2],
-        [(rad/s^2)^2]; ``None`` gives :data:`P0_PHI_DEFAULT` or :data:`P0_MU_DEFAULT`.
-    measurement_form : {'phi', 'mu'}
-        (36) (default, the paper's example) or (37).
-    literal_update : bool
-        ``True``: the printed (38), ``w_j = K_j z_j`` with the raw ``z_j``, summed.
-        ``False`` (default): standard sequential innovations ``nu_j``.
-    substeps : int
-        RK4 steps (and ``expm`` factors) per :meth:`predict` call, >= 1.
-    sigma_from_innovation : bool
-        Use ``nu_j`` instead of the raw ``z_j`` in ``sigma_j`` (standard form only).
-    b_limits_T : tuple of float
-        Accepted field magnitude range ``(min, max)`` [T] for measurement and reference.
-    max_rate_rad_s : float
-        A correction (39) giving ``|omega'|`` above this [rad/s] is rejected (a guard against
-        divergence, not in the paper; the paper's tumbling is up to 3 deg/s per axis).
-    max_disturbance_rad_s2 : float
-        Same guard for ``|m'|`` [rad/s^2] (the paper's example has ``|m| = 3.3e-8``).
-    misalignment_std0_rad : float
-        Prior std [rad] of the misalignment states (M2)-(M4); 0: the paper's 9 states.
-
-    Raises
-    ------
-    ValueError
-        On a bad inertia, ``theta <= 0``, ``tau < 0``, a bad ``p0_diag``, form or ``substeps``.
+    ``inertia`` (3, 3) [kg m^2], body axes, SPD; ``theta`` > 0 [T^2] and ``tau`` >= 0 of (38);
+    ``p0_diag``: ``diag P(t0)`` (9,) of ``[phi or mu, d_omega, d_m]`` in [-], [(rad/s)^2],
+    [(rad/s^2)^2] (``None``: :data:`P0_PHI_DEFAULT` or :data:`P0_MU_DEFAULT`);
+    ``measurement_form`` 'phi' (36) or 'mu' (37); ``literal_update``: the printed (38) with the
+    raw ``z_j`` (default: sequential innovations ``nu_j``); ``substeps``: RK4 steps per
+    :meth:`predict`; ``sigma_from_innovation``: ``nu_j`` in ``sigma_j``; ``b_limits_T``: the
+    accepted field magnitudes [T]; ``max_rate_rad_s`` [rad/s] and ``max_disturbance_rad_s2``
+    [rad/s^2]: a correction beyond them is rejected (guards, not in the paper);
+    ``misalignment_std0_rad``: prior std [rad] of the states (M2)-(M4), 0: the paper's 9.
+    A bad value is a ``ValueError``.
     """
 
     def __init__(self, inertia: ArrayLike, theta: float = THETA_DEFAULT, tau: float = TAU_DEFAULT,
@@ -666,22 +499,9 @@ class MagneticFilter:
     # ----------------------------------------------------------------------- state
     def reset(self, q_orbit_body0: ArrayLike, omega_body_eci_body0: ArrayLike,
               m0: ArrayLike = (0.0, 0.0, 0.0)) -> None:
-        """Set the estimate and ``P = diag(p0_diag)``.
-
-        Parameters
-        ----------
-        q_orbit_body0 : array_like
-            ``N(t0)`` (4,), scalar last (paper: ``{1, 0, 0, 0}``, i.e. ``[0, 0, 0, 1]``).
-        omega_body_eci_body0 : array_like
-            ``omega'(t0)`` (3,) [rad/s], body axes (paper: ``(0, omega0, 0)``).
-        m0 : array_like
-            ``m'(t0)`` (3,) [rad/s^2], body axes.
-
-        Raises
-        ------
-        ValueError
-            On non-finite input or a zero quaternion.
-        """
+        """Set ``N(t0)`` (4,), ``omega'(t0)`` (3,) [rad/s], ``m'(t0)`` (3,) [rad/s^2] (body
+        axes) and ``P = diag(p0_diag)``; ``ValueError`` on non-finite input or a zero
+        quaternion."""
         self._q = attitude.normalize(q_orbit_body0)
         self._omega = finite_vector(omega_body_eci_body0, 'omega_body_eci_body0', (3,)).copy()
         self._m = finite_vector(m0, 'm0', (3,)).copy()
@@ -701,11 +521,6 @@ class MagneticFilter:
     def q_orbit_body(self) -> np.ndarray:
         """``N`` (4,), scalar last: estimate of ``q_orbit_body`` (``v_orbit = R(N) v_body``)."""
         return self._q.copy()
-
-    @property
-    def lambda_estimate(self) -> np.ndarray:
-        """``N`` (4,) in the paper's scalar-first form."""
-        return lambda_from_q_orbit_body(self._q)
 
     @property
     def omega_body_eci_body(self) -> np.ndarray:
@@ -749,47 +564,19 @@ class MagneticFilter:
         (not a covariance)."""
         return self._p.copy()
 
-    def omega_body_orbit_body(self, omega0: float) -> np.ndarray:
-        """``y' = omega' - omega0 e_N(N)`` (3,) [rad/s] (7): body rate w.r.t. orbit, body axes."""
-        return self._omega - float(omega0) * e_n_body(self._q)
-
-    def linearised_matrices(self, omega0: float, b_meas_body: ArrayLike,
-                            b_ref_orbit: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """``A`` (9, 9) and ``H`` (3, 9) at the current estimate (:func:`linearised_matrices`)."""
-        return linearised_matrices(self.inertia, omega0, self._q, self._omega, b_meas_body,
-                                   b_ref_orbit)
-
     # ------------------------------------------------------------------ prediction
     def predict(self, dt: float, omega0: float, dipole_body: ArrayLike = (0.0, 0.0, 0.0),
                 b_body_for_torque: Optional[ArrayLike] = None,
                 b_orbit_for_torque: Optional[ArrayLike] = None) -> bool:
         """Propagate the estimate by (33) (RK4) and ``P`` by ``F P F^T``, ``F = expm(A dt)`` (34).
 
-        Parameters
-        ----------
-        dt : float
-            Prediction interval [s], > 0 (paper: 2 s).
-        omega0 : float
-            Orbit rate [rad/s]; the orbit frame turns at ``omega0`` about its y axis.
-        dipole_body : array_like
-            Magnetorquer dipole ``L`` (3,) [A m^2], body axes, held over ``dt``.
-        b_body_for_torque : array_like or None
-            Field (3,) [T], body axes, for ``L x B``. ``None``: ``n*`` of ``b_orbit_for_torque``
-            if given, else the last accepted measurement.
-        b_orbit_for_torque : array_like or None
-            Model field (3,) [T], orbit axes, rotated by ``N`` at each RK4 stage.
-
-        Returns
-        -------
-        bool
-            ``True`` normally. ``False`` if a result was not finite: a non-finite ``N`` or
-            ``omega'`` leaves the state unchanged; a non-finite ``P`` is reset to
-            ``diag(p0_diag)``. Nothing non-finite is ever exposed.
-
-        Raises
-        ------
-        ValueError
-            On ``dt <= 0``, non-finite input, or a non-zero dipole with no field available.
+        ``dt`` [s] > 0; ``omega0`` the orbit rate [rad/s]; ``dipole_body`` ``L`` (3,) [A m^2]
+        held over ``dt``; the field of ``L x B``: ``b_body_for_torque`` (3,) [T] body axes, else
+        ``b_orbit_for_torque`` (3,) [T] orbit axes rotated by ``N`` at each RK4 stage, else the
+        last accepted reading. Returns ``False`` if a result was not finite (a non-finite ``N``
+        or ``omega'`` leaves the state unchanged, a non-finite ``P`` is reset to
+        ``diag(p0_diag)``). ``ValueError`` on ``dt <= 0``, non-finite input, or a non-zero
+        dipole with no field available.
         """
         dt, omega0 = float(dt), float(omega0)
         if not (math.isfinite(dt) and dt > 0.0):
@@ -832,25 +619,12 @@ class MagneticFilter:
                theta_axes: Optional[ArrayLike] = None) -> dict:
         """Process one magnetometer reading: (36)/(37), sequential (38), correction (39).
 
-        Parameters
-        ----------
-        b_meas_body : array_like
-            Measured field ``n`` (3,) [T], body axes.
-        b_ref_orbit : array_like
-            Onboard model field ``B*`` (3,) [T], ORBIT axes, at the same instant.
-        theta_axes : array_like, optional
-            ``theta`` of (38) per body axis j (3,) [T^2] for this reading only (e.g. the
-            sensor's covariance rotated into body axes, floored at ``theta``); ``None``: the
-            filter's ``theta`` on every axis. Not 3 finite positive values: reading rejected.
-
-        Returns
-        -------
-        dict
-            ``innovation`` (3,) [T]: ``z = n - n*`` before the update (NaN-free, zeros when
-            rejected); ``accepted`` (bool); ``reason`` (str, empty when accepted);
-            ``sigma`` (3,): the factors ``sigma_j``; ``correction`` (9,): ``w`` (ones and zeros
-            when rejected).
-            A rejected reading leaves the state and ``P`` unchanged; nothing raises.
+        ``b_meas_body`` ``n`` (3,) [T], body axes; ``b_ref_orbit`` the model field ``B*`` (3,)
+        [T], ORBIT axes, at the same instant; ``theta_axes`` (3,) [T^2]: ``theta`` of (38) per
+        body axis for this reading only (``None``: the filter's ``theta``). Returns a dict:
+        ``innovation`` ``z = n - n*`` (3,) [T], ``accepted``, ``reason`` (empty when accepted),
+        ``sigma`` (3,) and ``correction`` ``w``. A rejected reading leaves the state and ``P``
+        unchanged; nothing raises.
         """
         out = {'innovation': np.zeros(3), 'accepted': False, 'reason': '',
                'sigma': np.ones(3), 'correction': np.zeros(9)}

@@ -1,11 +1,9 @@
 """Paper 000's magnetometer-only filter plus an estimate of a constant magnetometer bias.
 
-Beyond the paper: D. V. Lebedev, A. I. Tkachenko, Yu. N. Shtepa (1996) list the magnetometer
-bias (up to 120 nT) among the errors "not accounted for in the estimation"; flight filters
-usually estimate it. This module composes the paper's filter
-(:class:`~adcs_nodes.core.estimation.magnetic_filter.MagneticFilter`, equations (33)-(39),
-unchanged) with an attitude-independent bias estimator on the field magnitude (the scalar
-checking of Gambhir 1975 and the TWOSTEP/Alonso-Shuster 2002 batch method, here recursive).
+Beyond the paper (which leaves the bias, up to 120 nT, out of the estimation): the paper's
+filter (:class:`~adcs_nodes.core.estimation.magnetic_filter.MagneticFilter`, (33)-(39),
+unchanged) on bias-corrected readings, with an attitude-independent recursive bias estimator on
+the field magnitude (scalar checking, Gambhir 1975; TWOSTEP, Alonso-Shuster 2002).
 
 Equations
 ---------
@@ -22,30 +20,12 @@ axes) ``|n - b|^2 = |B*|^2`` up to noise and model error, whatever the attitude:
     P_b += q_b^2 dt I   at each prediction            (slow bias drift, default q_b = 0)
 
 A reading with ``|nu| > gate sqrt(S)`` does not update ``b^`` (it still goes to the attitude
-filter). The bias is observable when ``n`` takes several directions: a tumble gives them
-within minutes, a held orbital attitude over an orbit (the field turns in the orbit plane).
-Then the paper's update (36)-(39) runs on the corrected reading ``n - b^``. The magnitude carries
-nothing about a rotation, so a misalignment stays unobservable here (a rigid rotation of the
-triad cannot be told from an attitude offset by the readings alone).
-
-The bias states are kept outside the paper's 9-state error vector (no cross-covariance): the
-magnitude measurement (B1) does not depend on the attitude, rate or disturbance states, so the
-two estimators exchange only ``b^``. Model error in ``|B*|`` (e.g. a dipole onboard model
-against the full field) enters (B1) like a bias along ``n`` and must be covered by
-``sigma_m``; a filter reset (divergence) keeps ``b^`` (it does not depend on the attitude).
-
-Parameters: those of :class:`~adcs_nodes.core.estimation.magnetic_filter.MagneticFilter`,
-plus ``bias0_T`` (3,) [T] (initial estimate), ``bias_std0_T`` [T] (prior std per axis),
-``magnitude_std_T`` [T] (sigma_m of (B3)), ``bias_walk_T_sqrt_s`` [T/sqrt(s)] (q_b),
-``max_bias_T`` [T] (an update giving a larger component is refused) and ``bias_gate_sigma``
-(the gate of (B4)); units, ranges and defaults in the registry entry.
-
-Wrapped for the estimator node by :class:`MagneticFilterBiasEstimator` (the interface of
-:mod:`adcs_nodes.core.estimation.algorithms`, like ``magnetic_filter``).
-
-Measured (``tests/unit/test_magnetic_filter_bias.py``: paper example tumble, (-3, 3, 3) deg/s,
-I = diag(118, 118, 19.6), 690 km / 98 deg, samples every 10 s with the paper's noise
-(375, 25, 65) nT, 20 nT LSB and a (120, -120, 120) nT bias): see that test's docstring.
+filter, which runs (36)-(39) on ``n - b^``). The bias is observable when ``n`` takes several
+directions (a tumble, or an orbit of a held attitude); a misalignment is not (the magnitude
+carries nothing about a rotation). The bias states stay outside the paper's 9-state error
+vector: (B1) does not depend on attitude, rate or disturbance, so the two exchange only ``b^``
+(a divergence reset keeps it). Model error in ``|B*|`` enters (B1) like a bias along ``n`` and
+must be covered by ``sigma_m``.
 """
 from __future__ import annotations
 
@@ -78,29 +58,11 @@ def _positive(value, name: str, unit: str, upper: float = math.inf) -> float:
 class MagneticFilterBias(MagneticFilter):
     """Paper 000's filter (33)-(39) on bias-corrected readings, bias from (B1)-(B4).
 
-    Parameters
-    ----------
-    inertia : array_like
-        Inertia (3, 3) [kg m^2], body axes (as :class:`MagneticFilter`).
-    bias0_T : array_like, shape (3,)
-        Initial bias estimate [T], body axes.
-    bias_std0_T : float
-        Prior std of each bias component [T], in (0, 1e-4].
-    magnitude_std_T : float
-        ``sigma_m`` of (B3) [T], in (0, 1e-4].
-    bias_walk_T_sqrt_s : float
-        Random-walk drift of the bias [T/sqrt(s)], >= 0.
-    max_bias_T : float
-        Guard on ``|b^|`` [T], > 0.
-    bias_gate_sigma : float
-        Innovation gate [std], > 0.
-    **filter_args
-        The other parameters of :class:`MagneticFilter`.
-
-    Raises
-    ------
-    ValueError
-        On a bad parameter (message names it).
+    Beside :class:`MagneticFilter`'s parameters (``**filter_args``): ``bias0_T`` (3,) [T] body
+    axes, the initial estimate; ``bias_std0_T`` [T] in (0, 1e-4], its prior std per axis;
+    ``magnitude_std_T`` [T] in (0, 1e-4], ``sigma_m`` of (B3); ``bias_walk_T_sqrt_s``
+    [T/sqrt(s)] >= 0, ``q_b``; ``max_bias_T`` [T], the guard on ``|b^|``; ``bias_gate_sigma``
+    [std], the gate of (B4). A bad value is a ``ValueError`` naming it.
     """
 
     def __init__(self, inertia: ArrayLike, bias0_T: ArrayLike = (0.0, 0.0, 0.0),
@@ -155,15 +117,8 @@ class MagneticFilterBias(MagneticFilter):
         return ok
 
     def update_bias(self, b_meas_body: ArrayLike, b_ref_orbit: ArrayLike) -> bool:
-        """One magnitude update (B1)-(B4) of the bias; True if applied.
-
-        Parameters
-        ----------
-        b_meas_body : array_like, shape (3,)
-            Reading ``n`` [T], body axes (range-checked by the caller).
-        b_ref_orbit : array_like, shape (3,)
-            Model field ``B*`` [T], orbit axes (only its magnitude is used).
-        """
+        """One magnitude update (B1)-(B4) of the bias from the reading ``n`` (3,) [T], body
+        axes, and the model field ``B*`` (3,) [T] (its magnitude); True if applied."""
         n = np.asarray(b_meas_body, dtype=float)
         b_ref = np.asarray(b_ref_orbit, dtype=float)
         finite = bool(np.all(np.isfinite(n)) and np.all(np.isfinite(b_ref)))
@@ -232,12 +187,9 @@ class MagneticFilterBias(MagneticFilter):
 
 
 class MagneticFilterBiasEstimator(MagneticFilterEstimator):
-    """:class:`MagneticFilterBias` behind the estimator interface (``magnetic_filter_bias``).
-
-    Parameters are those of :class:`MagneticFilterBias` (see the module docstring), with
-    ``max_rate_rad_s`` also the divergence limit of the wrapper (as ``magnetic_filter``). A
-    divergence reset restarts the attitude filter and keeps the bias estimate.
-    """
+    """:class:`MagneticFilterBias` behind the estimator interface (``magnetic_filter_bias``);
+    ``max_rate_rad_s`` is also the wrapper's divergence limit. A divergence reset restarts the
+    attitude filter and keeps the bias estimate."""
 
     def __init__(self, inertia: ArrayLike, max_rate_rad_s: float = 1.0, **filter_args) -> None:
         super().__init__(inertia, max_rate_rad_s=max_rate_rad_s,

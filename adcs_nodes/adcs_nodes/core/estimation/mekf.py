@@ -78,27 +78,10 @@ def _finite(a) -> bool:
 
 
 class MEKF:
-    """Star tracker + gyro MEKF with bias states (module docstring).
-
-    Parameters
-    ----------
-    star_tracker_std_rad : float
-        ``s_st`` per axis [rad], > 0.
-    gyro_noise_std_rad_s : float
-        ``s_v`` per sample [rad/s], >= 0.
-    gyro_bias_walk_rad_s_sqrt_s : float
-        ``s_u`` [rad/s/sqrt(s)], >= 0.
-    p0_bias_rad_s : float
-        Initial bias std per axis [rad/s], > 0.
-    gate_nis : float
-        Largest accepted ``z^T S^-1 z`` (chi-square, 3 dof), > 0.
-    max_rejections : int
-        Refusals in a row that restart the filter, >= 1.
-
-    Raises
-    ------
-    ValueError
-        On a negative, zero (where positive is needed) or non-finite parameter.
+    """Star tracker + gyro MEKF with bias states (module docstring): ``s_st`` per axis [rad]
+    > 0, ``s_v`` per sample [rad/s] >= 0, ``s_u`` [rad/s/sqrt(s)] >= 0, the initial bias std per
+    axis [rad/s] > 0, the largest accepted NIS ``z^T S^-1 z`` (3 dof) and the refusals in a row
+    that restart the filter (>= 1). A bad value is a ``ValueError`` naming it.
     """
 
     def __init__(self, star_tracker_std_rad: float = STAR_TRACKER_STD_RAD,

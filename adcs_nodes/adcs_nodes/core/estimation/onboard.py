@@ -22,12 +22,9 @@ with ``u`` the argument of latitude, ``i`` the inclination, ``r`` the orbit radi
 pins it). The dipole moment points to the geographic south (``b`` points north on the
 equator, down at the north pole).
 
-One reference per stamp (issue 13): :meth:`OnboardReference.at` keeps its last result, and
-:func:`make_onboard_reference` returns one shared instance per configuration within a
-process, so the estimator and the controllers of a composed process compute (R1) once per
-stamp. ``at(t)`` is a pure function of ``t``, so sharing changes no number; every caller gets
-its own copies of the arrays. (R1) is the numba kernel :func:`to_orbit_axes` (``cache=True``,
-no fastmath; the bits of ``to_matrix(q).T @ b``, summed in index order).
+One reference per stamp: :meth:`OnboardReference.at` keeps its last result and
+:func:`make_onboard_reference` shares one instance per configuration in a process (``at(t)``
+is a pure function of ``t``; every caller gets its own copies of the arrays).
 """
 from __future__ import annotations
 
@@ -57,21 +54,9 @@ def to_orbit_axes(q_eci_orbit, v_eci):
 
 
 class OnboardState(NamedTuple):
-    """Onboard reference at one instant (unpacks as a 5-tuple).
-
-    Attributes
-    ----------
-    q_eci_orbit : numpy.ndarray
-        Orbit-frame attitude, shape (4,), scalar last: ``v_eci = R(q) v_orbit``.
-    b_orbit : numpy.ndarray
-        Model geomagnetic field, shape (3,) [T], ORBIT axes (paper 000's ``B*``).
-    omega0 : float
-        Orbit rate [rad/s]; the orbit frame turns at ``omega0`` about its y axis.
-    u : float
-        Argument of latitude [rad], in [0, 2 pi).
-    r_eci : numpy.ndarray
-        Position, shape (3,) [m], ECI.
-    """
+    """Onboard reference at one instant: ``q_eci_orbit`` (4,) (``v_eci = R(q) v_orbit``),
+    ``b_orbit`` (3,) [T] ORBIT axes (paper 000's ``B*``), ``omega0`` orbit rate [rad/s] about
+    the orbit y axis, ``u`` argument of latitude [rad] in [0, 2 pi), ``r_eci`` (3,) [m]."""
 
     q_eci_orbit: np.ndarray
     b_orbit: np.ndarray
@@ -82,19 +67,8 @@ class OnboardState(NamedTuple):
 
 class OnboardReference:
     """Orbit plus field model of the flight software, evaluated in the orbit frame (R1).
-
-    Parameters
-    ----------
-    orbit : OrbitModel
-        Anything with ``epoch`` and ``state(t)`` (:mod:`adcs_nodes.core.orbit`).
-    field : GeomagneticField
-        Field model with the same ``epoch`` (:mod:`adcs_nodes.core.geomag`).
-
-    Raises
-    ------
-    ValueError
-        If the two models have different epochs (their ``t`` would disagree).
-    """
+    ``orbit`` (:mod:`~adcs_nodes.core.orbit`) and ``field`` (:mod:`~adcs_nodes.core.geomag`)
+    must share their ``epoch`` (``ValueError``)."""
 
     def __init__(self, orbit: OrbitModel, field: GeomagneticField) -> None:
         if getattr(orbit, 'epoch', None) != getattr(field, 'epoch', None):
@@ -107,14 +81,8 @@ class OnboardReference:
         self._last: Optional[OnboardState] = None
 
     def at(self, t: float) -> OnboardState:
-        """Reference at ``t`` seconds after the epoch (the last stamp's result is reused).
-
-        Returns
-        -------
-        OnboardState
-            ``(q_eci_orbit (4,), b_orbit (3,) [T] orbit axes, omega0 [rad/s], u [rad],
-            r_eci (3,) [m])``; the arrays are the caller's own copies.
-        """
+        """:class:`OnboardState` at ``t`` seconds after the epoch (the last stamp's result is
+        reused; the arrays are the caller's own copies)."""
         t = float(t)
         if self._last is None or self._last_t != t:
             st = self.orbit.state(t)
@@ -135,27 +103,10 @@ _SHARED: Dict[str, OnboardReference] = {}
 
 def make_onboard_reference(orbit_cfg: Mapping, field_cfg: Mapping,
                            epoch: datetime) -> OnboardReference:
-    """Build the onboard reference from scenario mappings.
-
-    Parameters
-    ----------
-    orbit_cfg : mapping
-        As :func:`adcs_nodes.core.orbit.make_orbit`.
-    field_cfg : mapping
-        As :func:`adcs_nodes.core.geomag.make_field`.
-    epoch : datetime
-        Timezone-aware scenario epoch (``t = 0``).
-
-    Returns
-    -------
-    OnboardReference
-        The process's shared instance for this configuration (created on first use).
-
-    Raises
-    ------
-    ValueError
-        On a bad configuration (message from the model factories).
-    """
+    """The process's shared :class:`OnboardReference` of the scenario mappings ``orbit_cfg``
+    (:func:`~adcs_nodes.core.orbit.make_orbit`) and ``field_cfg``
+    (:func:`~adcs_nodes.core.geomag.make_field`) at the aware ``epoch`` (``t = 0``); a bad
+    configuration is the factories' ``ValueError``."""
     try:
         key = json.dumps([dict(orbit_cfg), dict(field_cfg), epoch.isoformat()],
                          sort_keys=True, default=repr)
@@ -172,29 +123,9 @@ def make_onboard_reference(orbit_cfg: Mapping, field_cfg: Mapping,
 
 
 def b_orbit_direct_dipole(u: float, i: float, r: float, mu_e: float = MU_E_DEFAULT) -> np.ndarray:
-    """Direct-dipole field in orbit axes, paper 004 eq. (2).
-
-    Parameters
-    ----------
-    u : float
-        Argument of latitude [rad].
-    i : float
-        Orbit inclination [rad].
-    r : float
-        Distance from the Earth's centre [m], > 0.
-    mu_e : float
-        Earth dipole moment ``B0 R^3`` [T m^3] (``lambda = mu_e / r^3`` in the paper).
-
-    Returns
-    -------
-    numpy.ndarray
-        ``b_orbit`` (3,) [T], orbit axes (x along-track, y orbit normal, z zenith).
-
-    Raises
-    ------
-    ValueError
-        On a non-finite input or ``r <= 0``.
-    """
+    """Direct-dipole ``b_orbit`` (3,) [T], orbit axes, paper 004 eq. (2), of the argument of
+    latitude ``u`` [rad], inclination ``i`` [rad], radius ``r`` [m] > 0 and dipole moment
+    ``mu_e = B0 R^3`` [T m^3] (``lambda = mu_e / r^3``); ``ValueError`` on a bad input."""
     vals = [float(u), float(i), float(r), float(mu_e)]
     if not all(math.isfinite(v) for v in vals) or vals[2] <= 0.0:
         raise ValueError(f'u, i, r, mu_e must be finite with r > 0, got {vals}')

@@ -44,28 +44,9 @@ def _triad_frame(v1: np.ndarray, v2: np.ndarray, which: str, min_sin: float) -> 
 
 def triad(v1_body: ArrayLike, v2_body: ArrayLike, v1_ref: ArrayLike, v2_ref: ArrayLike,
           min_sin_angle: float = MIN_SIN_ANGLE) -> np.ndarray:
-    """Attitude ``q_ref_body`` from two vectors seen in body and reference axes (T1, T2).
-
-    Parameters
-    ----------
-    v1_body, v2_body : array_like
-        Measured directions, shape (3,), body axes, any (common or not) units; ``v1`` is the
-        more accurate (anchor) vector.
-    v1_ref, v2_ref : array_like
-        The same directions, shape (3,), reference axes (e.g. orbit frame).
-    min_sin_angle : float
-        Smallest accepted ``sin`` of the angle between ``v1`` and ``v2`` in either frame (T3).
-
-    Returns
-    -------
-    numpy.ndarray
-        ``q_ref_body`` (4,), scalar last, ``w >= 0``: ``v_ref = R(q) v_body``.
-
-    Raises
-    ------
-    ValueError
-        On non-finite or zero vectors, or (nearly) parallel ``v1`` and ``v2``.
-    """
+    """``q_ref_body`` (4,), ``w >= 0`` (``v_ref = R(q) v_body``), from two directions (3,) seen
+    in body and reference axes (T1, T2), ``v1`` the anchor. ``ValueError`` on non-finite or
+    zero vectors, or when ``sin(angle(v1, v2))`` is below ``min_sin_angle`` in either frame."""
     vec = attitude.as_vec3
     m_body = _triad_frame(vec(v1_body, 'v1_body'), vec(v2_body, 'v2_body'), 'body',
                           min_sin_angle)
