@@ -1,33 +1,13 @@
-"""rosbag2 (MCAP) helpers on top of the ``rosbags`` library: typestore, reading, summaries.
-
-The bags written by :mod:`adcs_nodes.nodes.recorder` are rosbag2 directories (``metadata.yaml``
-plus one ``.mcap`` file) whose MCAP schemas carry the full ``ros2msg`` definition of every
-type, so ``rosbags``, Foxglove and ``ros2 bag`` read them without this package. The helpers
-here add what the analysis tools need:
-
-* :func:`make_typestore` -- the standard ROS 2 types of the running distribution plus every
-  ``adcs_msgs`` message (from the installed share directory, else the source tree);
-* :func:`ensure_type` -- load any other installed ``pkg/msg/Name`` from its ``.msg`` file;
-* :func:`read_messages`, :func:`topic_summary` -- deserialised reading with clear errors
-  (``FileNotFoundError`` for a missing bag, ``ValueError`` naming the path for a corrupt one);
-* :func:`flatten_message`, :func:`header_stamp_ns`, :func:`content_digest` -- the flat view used
-  by the CSV export, the report and determinism checks.
-
-Time: a message's log time is its own stamp (:func:`stamp_offset`), an unstamped one's the
-latest ``/clock`` (recorder and plain engine alike). The analysis tools use ``header.stamp``
-and fall back to the log time only for types without a header.
-
-The module imports neither ``rclpy`` nor any generated message package.
-"""
+"""rosbag2 (MCAP) helpers on ``rosbags``: the typestore, reading with clear errors, recovery
+of an unfinished MCAP file, the flat view of a message. No rclpy, no generated messages."""
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import os
 import struct
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any, Dict, Iterable, Iterator, List, Optional, Sequence, Tuple
+from typing import Any, Dict, Iterable, Iterator, List, Optional, Tuple
 
 import numpy as np
 from rosbags.highlevel import AnyReader
@@ -40,26 +20,19 @@ ADCS_PACKAGE = 'adcs_msgs'
 #: rosbag2 metadata version of the bags the recorder and the plain engine write.
 BAG_VERSION = 8
 
-#: Types whose content depends on the wall clock (``wall_time``, per-second publication), so
-#: two runs of the same deterministic simulation legitimately differ in them.
-NONDETERMINISTIC_TYPES = ('adcs_msgs/msg/LockstepStatus',)
-
-#: Header-like first fields: a message whose first field has one of these types is stamped.
+#: A message whose first field has one of these types is stamped.
 _STAMP_FIELD_TYPES = {
     'std_msgs/msg/Header': True,          # stamp inside the header
     'builtin_interfaces/msg/Time': False,  # the field itself is the stamp (rosgraph_msgs/Clock)
 }
 
-#: Topics the graph publishes latched (transient local): tf2's static broadcaster, the
-#: manager's status and the lockstep handshake. Every other topic is reliable and volatile.
+#: Topics the graph publishes latched (transient local); the others are reliable, volatile.
 LATCHED_TOPICS = ('/tf_static', '/adcs/controller_status', '/lockstep/ready')
 _INFINITE = QosTime(9223372036, 854775807)      # rmw's "infinite", as the graph reports it
 
 
 def offered_qos(topic: str) -> List[Qos]:
-    """``offered_qos_profiles`` of a topic in a bag written without a graph (plain engine):
-    the graph's publisher QoS as the recorder stores it (``ros2 bag play`` replays a latched
-    topic latched). ``topic``: resolved name."""
+    """``offered_qos_profiles`` of resolved ``topic`` as the recorder stores the graph's."""
     latched = topic in LATCHED_TOPICS
     return [Qos(history=QosHistory.UNKNOWN, depth=0, reliability=QosReliability.RELIABLE,
                 durability=QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
@@ -97,8 +70,7 @@ def _share_msg_dir(package: str) -> Optional[Path]:
 
 
 def adcs_msg_dir() -> Path:
-    """Directory of the ``adcs_msgs`` ``.msg`` files: the installed share directory, else the
-    source tree (``<repo>/adcs_msgs/msg``); ``FileNotFoundError`` if neither has them."""
+    """The ``adcs_msgs`` ``.msg`` directory: installed, else the source tree."""
     share = _share_msg_dir(ADCS_PACKAGE)
     if share is not None and any(share.glob('*.msg')):
         return share
@@ -110,9 +82,7 @@ def adcs_msg_dir() -> Path:
 
 
 def make_typestore() -> Typestore:
-    """A new rosbags typestore: the standard types of ``$ROS_DISTRO`` when rosbags ships it,
-    else Kilted (the PyPI wheels'), else Jazzy, plus every ``adcs_msgs`` message. Its RIHS01
-    hashes are the installed interfaces', as ``ros2 bag`` would write them."""
+    """A typestore: the standard types of ``$ROS_DISTRO`` (else Kilted) plus ``adcs_msgs``."""
     store = get_typestore(_store_for_distro())
     types: Dict[str, Any] = {}
     for path in sorted(adcs_msg_dir().glob('*.msg')):
@@ -131,17 +101,7 @@ def _referenced_types(fielddef: Any) -> Iterator[str]:
 
 
 def ensure_type(store: Typestore, msgtype: str) -> bool:
-    """Make ``msgtype`` (``pkg/msg/Name``) and its dependencies known to ``store``.
-
-    Types missing from the store are parsed from the installed ``share/<pkg>/msg/<Name>.msg``
-    (ament index), recursively for the types they reference.
-
-    Returns
-    -------
-    bool
-        ``True`` when the type (and all it references) is now in the store, ``False`` when a
-        definition cannot be found (not installed, or not a ``msg`` type).
-    """
+    """Load ``msgtype`` and what it references into ``store``; False: no definition found."""
     if msgtype in store.fielddefs:
         return True
     parts = msgtype.split('/')
@@ -168,15 +128,7 @@ def ensure_type(store: Typestore, msgtype: str) -> bool:
 
 
 def stamp_kind(store: Typestore, msgtype: str) -> Optional[str]:
-    """How a CDR message of ``msgtype`` carries its time stamp.
-
-    Returns
-    -------
-    str or None
-        ``'header'`` when the first field is a ``std_msgs/Header``, ``'time'`` when it is a
-        ``builtin_interfaces/Time`` (``rosgraph_msgs/Clock``), ``None`` otherwise. In both stamped
-        cases the stamp is the first member of the CDR payload (see :func:`cdr_stamp_ns`).
-    """
+    """How ``msgtype`` carries its stamp: ``'header'``, ``'time'`` (``Clock``) or None."""
     fielddef = store.fielddefs.get(msgtype)
     if not fielddef or not fielddef[1]:
         return None
@@ -187,16 +139,8 @@ def stamp_kind(store: Typestore, msgtype: str) -> Optional[str]:
 
 
 def stamp_offset(store: Typestore, msgtype: str) -> Optional[int]:
-    """Byte offset of the stamp a CDR message of ``msgtype`` is logged at in a bag.
-
-    Returns
-    -------
-    int or None
-        4 when :func:`stamp_kind` is not ``None`` (the stamp opens the payload); 8 when the
-        first field is a sequence of messages that open with a ``std_msgs/Header``
-        (``tf2_msgs/TFMessage``: the first element's ``header.stamp``, after the sequence
-        length); ``None`` otherwise.
-    """
+    """Byte offset of the stamp a CDR message of ``msgtype`` is logged at: 4 (it opens the
+    payload), 8 (``TFMessage``: the first element's ``header.stamp``) or None."""
     if stamp_kind(store, msgtype) is not None:
         return 4
     fields = (store.fielddefs.get(msgtype) or (None, ()))[1]
@@ -209,11 +153,7 @@ def stamp_offset(store: Typestore, msgtype: str) -> Optional[int]:
 
 
 def cdr_stamp_ns(raw: bytes, offset: int = 4) -> Optional[int]:
-    """Time stamp [ns] at ``offset`` (:func:`stamp_offset`) of a serialised CDR message.
-
-    ``None`` if the message is too short, or (offset 8) its sequence is empty. The payload
-    after the 4-byte encapsulation header holds ``int32 sec, uint32 nanosec`` there.
-    """
+    """Stamp [ns] at ``offset`` of a CDR message; None: too short, or an empty sequence."""
     if len(raw) < offset + 8:
         return None
     order = '<' if raw[1] & 0x01 else '>'
@@ -252,12 +192,7 @@ def _scalar(value: Any) -> Any:
 
 
 def flatten_message(msg: Any, prefix: str = '') -> List[Tuple[str, Any]]:
-    """Flatten a deserialised rosbags message into ``(dotted_name, scalar)`` pairs.
-
-    Nested messages give ``r_eci.x``; arrays (fixed and variable) give ``name[0]``,
-    ``name[1]``, ..., recursively (``poses[2].position.x``). Values are Python scalars
-    (``float``, ``int``, ``bool``, ``str``); ``uint8[]`` stays one element per column.
-    """
+    """A deserialised message as ``(dotted_name, scalar)`` pairs (``poses[2].position.x``)."""
     out: List[Tuple[str, Any]] = []
     for name, value in _message_fields(msg):
         key = f'{prefix}{name}'
@@ -281,13 +216,7 @@ MCAP_MAGIC = b'\x89MCAP0\r\n'
 
 
 def flush_writer(writer: Any, fsync: bool = False) -> bool:
-    """Write the pending MCAP chunk of an open rosbags ``Writer`` (up to 1 MiB kept in memory)
-    and flush the file: in the page cache, it survives a killed process; ``fsync=True``: on
-    the disk, a machine crash. :func:`recover_mcap` reads a file cut after any complete record.
-
-    Relies on rosbags 0.11's MCAP storage (``storage.chunk``, ``close_chunk``, ``bio``); with
-    another storage a no-op. Returns whether a chunk was written; raises ``OSError`` from the
-    file system (``ENOSPC``: disk full)."""
+    """Flush the pending MCAP chunk of a rosbags 0.11 ``Writer``; whether one was written."""
     storage = getattr(writer, 'storage', None)
     chunk = getattr(storage, 'chunk', None)
     bio = getattr(storage, 'bio', None)
@@ -339,25 +268,8 @@ def _complete_records_end(fh, size: int) -> int:
 
 
 def recover_mcap(src: os.PathLike | str, dst: os.PathLike | str) -> Tuple[int, int]:
-    """Copy every complete record of a possibly unfinished MCAP file into a finished one.
-
-    A recorder killed (SIGKILL, power loss) or stopped by a full disk leaves an MCAP file
-    without its summary and footer, possibly cut inside a record. The MCAP stream format is a
-    sequence of length-prefixed records, so everything up to the last complete record is read
-    (``mcap.stream_reader.StreamReader``, the non-seeking reader of the ``mcap`` package), and
-    schemas, channels and messages are written, in the original order, into ``dst`` with a
-    summary and footer (readable by rosbags, Foxglove, ``ros2 bag``).
-
-    Returns
-    -------
-    (int, int)
-        Messages recovered, bytes of the source after its last complete record (lost).
-
-    Raises
-    ------
-    ValueError
-        If ``src`` is not an MCAP file (wrong magic) or a complete record is corrupt.
-    """
+    """Copy every complete record of an unfinished MCAP file into a finished one ``dst``;
+    ``(messages recovered, bytes lost)``. ``ValueError``: not MCAP, or a corrupt record."""
     from mcap.exceptions import EndOfFile, McapError
     from mcap.records import Channel, Message, Schema
     from mcap.stream_reader import StreamReader
@@ -434,21 +346,8 @@ def _resolve(bag_path: os.PathLike | str) -> Path:
 
 @contextmanager
 def open_bag(bag_path: os.PathLike | str) -> Iterator[AnyReader]:
-    """Open a rosbag2 bag (directory or ``.mcap`` file) as an open rosbags ``AnyReader``.
-
-    Types come from the definitions embedded in the bag; :func:`make_typestore` serves bags
-    without embedded definitions. An unfinished bag (its recorder was killed, or the disk was
-    full: no ``metadata.yaml``, no MCAP footer) is read through :func:`recover_mcap` into a
-    temporary file, with a warning on the ``adcs_nodes.bag`` logger naming how much was
-    recovered; the bag itself is not modified.
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``bag_path`` does not exist.
-    ValueError
-        If it is not a readable bag (message names the path and the reason).
-    """
+    """A bag (directory or ``.mcap``) as an open ``AnyReader``; an unfinished one through
+    :func:`recover_mcap`, with a warning. ``FileNotFoundError``, ``ValueError`` naming it."""
     path = _resolve(bag_path)
     with ExitStack() as stack:
         mcap = _mcap_of(path)
@@ -497,25 +396,7 @@ def _recovered(stack: ExitStack, mcap: Path, bag_path: os.PathLike | str) -> Pat
 
 def read_messages(bag_path: os.PathLike | str, topics: Optional[Iterable[str]] = None
                   ) -> Iterator[Tuple[str, int, Any]]:
-    """Yield ``(topic, log_time_ns, message)`` in log-time order, messages deserialised.
-
-    Parameters
-    ----------
-    bag_path : path-like
-        Bag directory (``metadata.yaml`` + ``.mcap``) or a ``.mcap`` file.
-    topics : iterable of str, optional
-        Only these topics (absolute names, e.g. ``/sim/state``); all when ``None``.
-
-    Notes
-    -----
-    Within one topic the order is the recording order: the recorder keeps log times
-    non-decreasing per topic. Use :func:`header_stamp_ns` for the simulated time.
-
-    Raises
-    ------
-    FileNotFoundError, ValueError
-        See :func:`open_bag`; ``ValueError`` also for a corrupt chunk found while reading.
-    """
+    """``(topic, log_time_ns, message)`` of ``topics`` (None: all) in log-time order."""
     wanted = None if topics is None else set(topics)
     stack = ExitStack()
     reader = stack.enter_context(open_bag(bag_path))  # errors raise here, not on first next()
@@ -526,30 +407,25 @@ def _iterate(stack: ExitStack, reader: AnyReader, wanted: Optional[set],
              bag_path: os.PathLike | str) -> Iterator[Tuple[str, int, Any]]:
     with stack:
         conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
-        if not conns:
-            return
-        try:
-            for conn, t_ns, raw in reader.messages(connections=conns):
-                yield conn.topic, t_ns, reader.deserialize(raw, conn.msgtype)
-        except Exception as exc:
-            raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
+        for conn, t_ns, raw in raw_messages(reader, conns, bag_path):
+            yield conn.topic, t_ns, reader.deserialize(raw, conn.msgtype)
+
+
+def raw_messages(reader: AnyReader, conns: list, bag_path: os.PathLike | str) -> Iterator:
+    """``reader.messages`` of ``conns``; a failure: ``ValueError`` naming the bag."""
+    if not conns:
+        return
+    try:
+        yield from reader.messages(connections=conns)
+    except Exception as exc:
+        raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
 
 
 def stamped_messages(bag_path: os.PathLike | str, topics: Iterable[str],
                      untimed: Iterable[str] = (), decode: Iterable[str] = (),
                      header_only: bool = False) -> Iterator[Tuple[str, int, bytes, Any]]:
-    """Yield ``(topic, stamp_ns, raw CDR bytes, message)`` of ``topics`` (those in the bag)
-    in recording order: ``stamp_ns`` the message's leading time stamp (``header.stamp``,
-    ``clock``; 0 for the ``untimed`` topics), ``message`` deserialised for the ``decode``
-    topics only (else None).
-
-    Raises
-    ------
-    FileNotFoundError, ValueError
-        See :func:`open_bag`; ``ValueError`` also for a topic without a time stamp (not in
-        ``untimed``; ``header_only``: without a ``header.stamp``), an unreadable message or a
-        corrupt chunk.
-    """
+    """``(topic, stamp_ns, raw CDR, message)`` of ``topics`` in recording order (stamp 0 for
+    ``untimed`` ones, ``message`` for ``decode`` ones); ``ValueError``: a topic unstamped."""
     untimed, decode = set(untimed), set(decode)
     need = ('header',) if header_only else ('header', 'time')
     with open_bag(bag_path) as reader:
@@ -558,82 +434,16 @@ def stamped_messages(bag_path: os.PathLike | str, topics: Iterable[str],
             if c.topic not in untimed and stamp_kind(reader.typestore, c.msgtype) not in need:
                 raise ValueError(f'{c.topic} [{c.msgtype}] has no '
                                  + ('header.stamp' if header_only else 'time stamp'))
-        try:
-            for conn, _, raw in reader.messages(connections=conns):
-                raw = bytes(raw)
-                stamp = 0 if conn.topic in untimed else cdr_stamp_ns(raw)
-                if stamp is None:
-                    raise ValueError(f'unreadable message on {conn.topic}')
-                yield conn.topic, stamp, raw, (reader.deserialize(raw, conn.msgtype)
-                                               if conn.topic in decode else None)
-        except ValueError:
-            raise
-        except Exception as exc:
-            raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
+        for conn, _, raw in raw_messages(reader, conns, bag_path):
+            raw = bytes(raw)
+            stamp = 0 if conn.topic in untimed else cdr_stamp_ns(raw)
+            if stamp is None:
+                raise ValueError(f'unreadable message on {conn.topic}')
+            yield conn.topic, stamp, raw, (reader.deserialize(raw, conn.msgtype)
+                                           if conn.topic in decode else None)
 
 
 def list_topics(bag_path: os.PathLike | str) -> Dict[str, str]:
     """``{topic: msgtype}`` of the bag's connections (no message is read)."""
     with open_bag(bag_path) as reader:
         return {c.topic: c.msgtype for c in sorted(reader.connections, key=lambda c: c.topic)}
-
-
-def topic_summary(bag_path: os.PathLike | str) -> Dict[str, Tuple[str, int, int, int]]:
-    """Per topic: ``(msgtype, count, first_log_ns, last_log_ns)`` (times 0 when empty).
-
-    Counts and times come from reading every record (not deserialised), so they are exact
-    even for a bag whose metadata is missing.
-    """
-    out: Dict[str, List[Any]] = {}
-    with open_bag(bag_path) as reader:
-        for conn in reader.connections:
-            out.setdefault(conn.topic, [conn.msgtype, 0, 0, 0])
-        try:
-            for conn, t_ns, _ in reader.messages():
-                entry = out[conn.topic]
-                if entry[1] == 0:
-                    entry[2] = entry[3] = t_ns
-                entry[1] += 1
-                entry[2] = min(entry[2], t_ns)
-                entry[3] = max(entry[3], t_ns)
-        except Exception as exc:
-            raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
-    return {topic: tuple(entry) for topic, entry in sorted(out.items())}
-
-
-def content_digest(bag_path: os.PathLike | str,
-                   exclude_types: Sequence[str] = NONDETERMINISTIC_TYPES
-                   ) -> Dict[str, Tuple[int, str]]:
-    """Per topic ``(count, sha256)`` of the message contents, independent of log times.
-
-    Two runs of the same deterministic simulation give equal digests for every topic whose
-    type is not in ``exclude_types`` (by default the wall-clock status types of
-    :data:`NONDETERMINISTIC_TYPES`). Each message is hashed from its flattened, deserialised
-    values (``repr`` of floats is exact; raw CDR padding bytes are unspecified), and the
-    per-message hashes are combined in canonical order: sorted by header stamp, then by
-    content. Within a single-publisher topic with increasing stamps that is the recording
-    order; on topics with several publishers (``lockstep/ready``) the interleaving of
-    publishers, which DDS does not fix, does not change the digest.
-    """
-    excluded = set(exclude_types)
-    items: Dict[str, List[Tuple[int, bytes]]] = {}
-    with open_bag(bag_path) as reader:
-        conns = [c for c in reader.connections if c.msgtype not in excluded]
-        for conn in conns:
-            items.setdefault(conn.topic, [])
-        if conns:
-            try:
-                for conn, _, raw in reader.messages(connections=conns):
-                    msg = reader.deserialize(raw, conn.msgtype)
-                    stamp = header_stamp_ns(msg)
-                    digest = hashlib.sha256(repr(flatten_message(msg)).encode()).digest()
-                    items[conn.topic].append((-1 if stamp is None else stamp, digest))
-            except Exception as exc:
-                raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
-    out: Dict[str, Tuple[int, str]] = {}
-    for topic in sorted(items):
-        total = hashlib.sha256()
-        for stamp, digest in sorted(items[topic]):
-            total.update(stamp.to_bytes(8, 'little', signed=True) + digest)
-        out[topic] = (len(items[topic]), total.hexdigest())
-    return out

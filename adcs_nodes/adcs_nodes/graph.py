@@ -1,12 +1,5 @@
-"""The node graph of a scenario: which nodes run, their parameters and their topics.
-
-The launcher and the composed runner both start what :func:`build_graph` returns, so the two
-deployments run exactly the same nodes with the same parameters. The graph also yields each
-node's start-handshake expectations (how many DDS endpoints must be matched, see
-``adcs_nodes.nodes.lockstep_node``) and the ROS 2 parameter file.
-
-Pure Python; no rclpy.
-"""
+"""The node graph of a scenario (nodes, parameters, topics, handshake expectations) and its
+ROS 2 parameter file; every deployment starts what :func:`build_graph` returns. No rclpy."""
 from __future__ import annotations
 
 import copy
@@ -28,23 +21,8 @@ from adcs_nodes.spec import CHAIN_TIMEOUT, HOLD, PROFILE, SCHEDULE
 
 @dataclass
 class NodeSpec:
-    """One node of the graph.
-
-    Attributes
-    ----------
-    name : str
-        Node name (also the process name shown by the launcher).
-    package, executable : str
-        For ``ros2 run package executable``.
-    module, cls : str
-        Python module and class (composed mode builds the class in-process).
-    params : dict
-        ROS parameters (flat; dotted names for sections).
-    publishes, subscribes : list of str
-        Topics, for the handshake expectations and the recorder.
-    lockstep : bool
-        Takes part in the start handshake (the clock master waits for it).
-    """
+    """One node (``ros2 run package executable``, or ``module.cls`` composed), flat ROS
+    ``params``, its topics; ``lockstep``: the clock master waits for it at the start."""
 
     name: str
     package: str
@@ -108,11 +86,6 @@ def _rad(values) -> List[float]:
     return [math.radians(v) if type(v) in (int, float) else v for v in values]
 
 
-def _sensor_params(cfg: Dict[str, Any]) -> Dict[str, Any]:
-    """Node parameters of a sensor: its registry parameters as the scenario gives them."""
-    return {k: v for k, v in cfg.items() if k != 'external'}
-
-
 def _estimator_params(sc: Dict[str, Any]) -> Dict[str, Any]:
     est = sc['estimator']
     entry = registry.get('estimator', est['algorithm'])
@@ -150,9 +123,7 @@ def _common(sc: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def _spacecraft_params(sc: Dict[str, Any]) -> Dict[str, Any]:
-    """``spacecraft.*`` of the dynamics, with the defaults that depend on other sections
-    filled in (the harmonic torques' period: the orbit's; the wheel error's: the control
-    period, else the frame)."""
+    """``spacecraft.*`` of the dynamics, with the defaults that depend on other sections."""
     craft = copy.deepcopy(sc['spacecraft'])
     dist = craft['disturbance']
     if any(any(dist[k]) for k in ('aerodynamic_Nm', 'solar_pressure_Nm',
@@ -165,8 +136,7 @@ def _spacecraft_params(sc: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def orbital_period_s(orbit: Dict[str, Any]) -> float:
-    """Period [s] of a validated ``orbit`` section (two-body: circular altitude, or the TLE's
-    mean motion)."""
+    """Two-body period [s] of a validated ``orbit`` section (circular, or the TLE's)."""
     if orbit.get('type', 'circular') == 'circular':
         a = R_EARTH + 1e3 * float(orbit['altitude_km'])
         return 2.0 * math.pi * math.sqrt(a ** 3 / MU_EARTH)
@@ -177,8 +147,7 @@ def _world_nodes(sc: Dict[str, Any], common: Dict[str, Any], rate_factor: float,
                  max_rate: float) -> List[NodeSpec]:
     """The environment and the dynamics (the clock master; it announces every fault)."""
     dynamics = {**common, 'substeps': sc['timing']['substeps'],
-                # the clock master waits longest, so a fallback upstream (manager -> safe
-                # controller after timeout_s) delivers its command before the master gives up
+                # the clock master waits longest: a fallback upstream arrives in time
                 'timeout_factor': CHAIN_TIMEOUT['dynamics'],
                 'rate_factor': float(rate_factor), 'lockstep_max_rate': float(max_rate),
                 **_spacecraft_params(sc),
@@ -200,16 +169,13 @@ def _world_nodes(sc: Dict[str, Any], common: Dict[str, Any], rate_factor: float,
 def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
                 rate_factor: float = 1.0, record: bool = False,
                 max_rate: float = 0.0) -> List[NodeSpec]:
-    """Node specs of a validated scenario (see :func:`adcs_nodes.scenario.load_scenario`);
-    ``max_rate``: a lockstep run paced to at most this many sim seconds per wall second (0:
-    unpaced)."""
+    """Node specs of a validated scenario; ``max_rate``: sim s per wall s at most (0: none)."""
     common = _common(sc)
     common['real_time'] = bool(real_time)
     common['duration_s'] = duration_s          # every node knows its last frame
     nodes = _world_nodes(sc, common, rate_factor, max_rate)
     flight = {**common, 'timing_mode': 'lockstep'}
-    # nodes that build registry components load the scenario's plugins too
-    # (an empty list has no type in a ROS parameter file)
+    # nodes that build registry components load the plugins (an empty list has no type)
     plugins = {'plugins': sc['plugins']} if sc.get('plugins') else {}
     for key, cfg in sc['sensors'].items():
         if cfg.get('external'):
@@ -220,7 +186,8 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
         mine = [f for f in sc.get('faults', []) if f['target'] == key
                 and 'sensor' in registry.get('fault', f['kind']).targets]
         nodes.append(NodeSpec(key, package, module.rsplit('.', 1)[1], module, cls,
-                              {**common, **plugins, **_sensor_params(cfg),
+                              {**common, **plugins,
+                               **{k: v for k, v in cfg.items() if k != 'external'},
                                'timeout_factor': CHAIN_TIMEOUT['sensor'],
                                **({'faults': json.dumps(mine, sort_keys=True)} if mine else {})},
                               publishes=[topic, '/tf_static'], subscribes=['/clock'] + inputs))
@@ -260,9 +227,7 @@ def build_graph(sc: Dict[str, Any], duration_s: float, real_time: bool = False,
 
 
 def _mounts(sc: Dict[str, Any], names) -> Dict[str, Any]:
-    """``expected_mounts`` of a consumer: the frames of the simulated sensors it reads whose
-    samples are rotated by a mount (a node waits for their ``/tf_static`` mounts before it is
-    ready)."""
+    """``expected_mounts`` of a consumer: its simulated mounted sensors' frames."""
     frames = []
     for name in names:
         rec = input_records.get(name)
@@ -273,9 +238,8 @@ def _mounts(sc: Dict[str, Any], names) -> Dict[str, Any]:
 
 
 def _sample_timing(sc: Dict[str, Any], names, real_time: bool) -> Dict[str, Any]:
-    """``external_inputs`` of a consumer: the sensor inputs it takes in sample timing (each
-    sample once, at its own stamp; never awaited): a driver's (``external: true``), or every
-    sensor's in real-time mode (DESIGN section 6: one timing rule outside lockstep)."""
+    """``external_inputs`` of a consumer, taken in sample timing (never awaited): a driver's,
+    or every sensor's in real-time mode (DESIGN section 6)."""
     keys = []
     for name in names:
         rec = input_records.get(name)
@@ -286,8 +250,7 @@ def _sample_timing(sc: Dict[str, Any], names, real_time: bool) -> Dict[str, Any]
 
 
 def _input_periods(sc: Dict[str, Any], names) -> Dict[str, float]:
-    """The producer periods of inputs ``names`` in this scenario, by their period parameter
-    (inputs whose producer the scenario lacks are left out: the node's default applies)."""
+    """The producer periods of inputs ``names`` in this scenario, by period parameter."""
     ctrl = sc.get('controllers') or {}
     producers = {
         'estimate': (sc.get('estimator') or {}).get('period_s'),
@@ -400,16 +363,14 @@ def _control_nodes(sc: Dict[str, Any], flight: Dict[str, Any],
     return nodes
 
 
-#: Consumers that accept each lockstep input only from the graph's producer of it
-#: (``expected_publishers``: ``adcs_nodes.nodes.publisher_guard``, ``docs/security.md``).
+#: Consumers that accept each input only from its producer (``docs/security.md``).
 GUARDED_NODES = ('dynamics', 'controller_manager')
 #: Where a guarded node reports refused messages (recorded with the graph's topics).
 SECURITY_EVENTS = 'adcs/security_events'
 
 
 def _add_publisher_guard(nodes: List[NodeSpec]) -> None:
-    """``expected_publishers`` of the guarded nodes: ``<topic>=<node>`` for each subscribed
-    topic with exactly one producer in the graph (``/clock`` and tf are not guarded)."""
+    """``expected_publishers`` (``<topic>=<node>``) of the guarded nodes' one-producer topics."""
     for node in nodes:
         if node.name not in GUARDED_NODES:
             continue
@@ -451,8 +412,7 @@ class _NoAliasDumper(yaml.SafeDumper):
 
 
 def params_file_text(nodes: List[NodeSpec]) -> str:
-    """ROS 2 parameter file (``--params-file``) for every node of the graph (an empty list,
-    untyped in a parameter file, is left out: the node's default applies)."""
+    """ROS 2 parameter file of the graph (an empty list, untyped there, is left out)."""
     doc = {f'/{n.name}': {'ros__parameters': _nest({k: v for k, v in n.params.items()
                                                     if not (isinstance(v, list) and not v)})}
            for n in nodes}

@@ -1,18 +1,5 @@
-"""The input vocabulary: every kind of input a registered estimator or controller may declare,
-as one record each (DESIGN section 6, "one engine").
-
-An :class:`Input` names the input (the registry's word, e.g. ``'gyro'``), the key under which
-a component finds its sample in a frame, the topic and message type, the converter between
-the message and the core sample (:mod:`adcs_nodes.msgs.convert`; a dotted reference,
-resolved on first use), the simulated sensor that provides it (its scenario section under
-``sensors:``), the node parameter that holds the producer's period, whether it is awaited for
-the frame or taken from the previous producer frame, and whether its samples are rotated
-into body axes by the sensor mount from ``/tf_static``. Everything that wires inputs
-iterates these records: the graph builder, the scenario validator, the nodes, the components
-and the FrameLoop. A plugin adds a kind with :func:`register`.
-
-Pure Python: no rclpy, no message import.
-"""
+"""The input vocabulary: one record per kind of input (DESIGN section 6), iterated by all
+that wires inputs; a plugin adds one with :func:`register`. No rclpy, no message import."""
 from __future__ import annotations
 
 import importlib
@@ -22,32 +9,10 @@ from typing import Any, Dict, Optional, Tuple
 
 @dataclass(frozen=True)
 class Input:
-    """One kind of input (see the module docstring).
-
-    Attributes
-    ----------
-    name : str
-        The registry's name (``Entry.inputs``).
-    key : str
-        Key of its message in a component's frame inputs.
-    topic : str
-        Topic (relative: under the node's namespace).
-    msg_type : str
-        ``pkg/msg/Name``.
-    sensor : str or None
-        Registry name (and scenario section) of the simulated sensor that provides it.
-    period_param : str
-        Node parameter with the producer's period [s].
-    default_period_s : float
-        That parameter's default (a node started alone).
-    convert : str
-        ``'module:NAME'`` of its :class:`adcs_nodes.msgs.convert.Converter`.
-    kind : str
-        ``'frame'`` (awaited with the frame's stamp when due) or ``'previous'`` (exactly the
-        producer's message of its last frame before ``t``: the estimator's applied command).
-    mounted : bool
-        Its samples carry a sensor ``frame_id`` whose ``/tf_static`` mount a consumer needs.
-    """
+    """One kind of input: ``key`` of its sample in a frame, the simulated ``sensor`` providing
+    it (None: a flight node), the producer's period parameter [s], ``convert``
+    (``'module:NAME'``), ``kind`` ``'frame'`` (awaited) or ``'previous'`` (the producer's last
+    frame before ``t``), ``mounted`` (rotated by its ``/tf_static`` mount)."""
 
     name: str
     key: str
@@ -126,8 +91,7 @@ def register(record: Input) -> Input:
 
 
 def converter(topic: str) -> Any:
-    """The converter of ``topic``: its input record's, else the message layer's
-    (:func:`adcs_nodes.msgs.convert.for_topic`); ``KeyError`` for an unknown topic."""
+    """The converter of ``topic``: its input record's, else the message layer's; KeyError."""
     name = topic.lstrip('/') if topic != '/clock' else topic
     for rec in BY_NAME.values():
         if rec.topic == name:
@@ -147,8 +111,7 @@ def get(name: str) -> Input:
 
 
 def period_params(names) -> Tuple:
-    """Registry ``Param`` specs of the producer periods of inputs ``names`` (for a node's
-    declared parameters: one name per input, the same in every consumer)."""
+    """Registry ``Param`` specs of the producer periods of inputs ``names``."""
     from adcs_nodes.spec import Param
     out = []
     for name in names:
@@ -164,9 +127,7 @@ def period_params(names) -> Tuple:
 
 
 def lockstep_inputs(names, periods: Dict[str, float]) -> Dict[str, tuple]:
-    """A consumer's inputs ``{key: (message class, topic, period_s, kind)}`` for
-    ``LockstepNode.lockstep_inputs``, from the declared input ``names`` and the values of
-    their period parameters ``periods`` (:func:`period_params`)."""
+    """``{key: (message class, topic, period_s, kind)}`` of inputs ``names``."""
     out = {}
     for name in names:
         rec = get(name)

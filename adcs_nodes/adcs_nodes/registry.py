@@ -1,15 +1,6 @@
-"""The registry: every controller, estimator algorithm, sensor model and fault kind, declared
-once as an :class:`Entry` (name, core class, :class:`Param` specs, inputs, actuators), and the
-world's scenario sections (:func:`register_section`). The node declarations
-(:mod:`adcs_nodes.nodes.params`), the scenario schema (:mod:`adcs_nodes.scenario`), the graph
-(:mod:`adcs_nodes.graph`), ``adcs list`` and ``adcs schema`` are generated from them (compare
-ros2_controllers' generated parameters and pluginlib registration).
-
-Built-in entries: :mod:`adcs_nodes.entries` and ``sim_node.entries`` (loaded when the simulator
-is installed; the flight software never imports it). Plugins: a module or ``.py`` file named
-in a scenario's ``plugins`` (or the node parameter ``plugins``), or an entry point in group
-``adcs.registry``; a plugin module calls :func:`register`. Pure Python; no rclpy.
-"""
+"""The registry: every controller, estimator, sensor model and fault kind as an
+:class:`Entry`, and the world's scenario sections. Plugins (a scenario's ``plugins`` or an
+``adcs.registry`` entry point) call :func:`register`. No rclpy."""
 from __future__ import annotations
 
 import importlib
@@ -25,8 +16,7 @@ from adcs_nodes.spec import (TYPES, Param, Section, SpecError, did_you_mean,  # 
 
 KINDS = ('controller', 'estimator', 'sensor', 'fault')
 
-#: What a controller may read or an estimator may take: the input records' names
-#: (:mod:`adcs_nodes.inputs`: topic, type, providing sensor, period parameter).
+#: What a controller may read or an estimator may take (:mod:`adcs_nodes.inputs`).
 INPUTS = _inputs.NAMES
 #: What a controller may command.
 ACTUATORS = ('magnetorquer', 'wheels', 'torque')
@@ -34,38 +24,9 @@ ACTUATORS = ('magnetorquer', 'wheels', 'torque')
 
 @dataclass(frozen=True)
 class Entry:
-    """One registered component.
-
-    Attributes
-    ----------
-    kind : str
-        ``'controller'``, ``'estimator'``, ``'sensor'`` or ``'fault'`` (a fault kind of the world).
-    name : str
-        Unique within its kind (scenario key, node-name stem, topic segment).
-    description : str
-        One line, shown by ``adcs list``.
-    core : str
-        ``'module:Class'`` of the core class (imported only when built).
-    params : tuple of Param
-        The component's own parameters.
-    build : callable
-        ``build(params, context) -> core object``; ``params`` are validated values by name,
-        ``context`` a dict of what the graph knows (spacecraft, periods, onboard models,
-        seed); see :mod:`adcs_nodes.entries`.
-    inputs : tuple of str
-        What it reads (:data:`INPUTS`).
-    actuators : tuple of str
-        What a controller commands (:data:`ACTUATORS`).
-    node : tuple or None
-        Sensors: ``(package, module, class, topic, message type)`` of the node publishing it.
-    requires : tuple of str
-        Scenario sections it needs besides its inputs, e.g. ``'spacecraft.wheels'``.
-    targets : tuple of str
-        Faults: what it may strike (``'sensor'``, ``'wheel'``, ``'magnetorquer'``).
-    check : callable or None
-        ``check(values)``: a rule across its own parameters (``ValueError``), checked
-        wherever they are validated (the scenario, the node, the plain engine's build).
-    """
+    """One registered component of ``kind``, ``name`` unique in its kind: ``build(params,
+    context) -> core object``; sensors' ``node`` = ``(package, module, class, topic, type)``;
+    ``requires``: sections besides its inputs; ``check(values)``: a cross-parameter rule."""
 
     kind: str
     name: str
@@ -125,9 +86,7 @@ class Entry:
 
 # ---------------------------------------------------------------------- the registry
 _ENTRIES: Dict[str, Dict[str, Entry]] = {k: {} for k in KINDS}
-#: Scenario sections of the simulated world (``spacecraft``, ``initial``): registered by
-#: ``sim_node.entries``, so the scenario schema has them without the flight software
-#: importing the simulator.
+#: Scenario sections of the simulated world, registered by ``sim_node.entries``.
 _SECTIONS: Dict[str, Section] = {}
 _LOADED: List[str] = []
 #: Modules with the built-in entries; a missing optional one (the simulator) is skipped.
@@ -152,8 +111,7 @@ def register_section(section: Section) -> Section:
 
 
 def section(name: str) -> Section:
-    """The registered world section ``name`` (``ValueError`` if the simulator, which
-    registers it, is not installed)."""
+    """The registered world section ``name`` (``ValueError``: sim_node not installed)."""
     _load_builtin()
     if name not in _SECTIONS:
         raise ValueError(f'no section {name!r} is registered (is sim_node installed?)')
@@ -179,10 +137,7 @@ def _load_builtin() -> None:
 
 
 def load_plugins(specs: Iterable[str], base_dir: str = '') -> None:
-    """Import plugin modules (dotted names or ``.py`` paths, relative to ``base_dir``).
-
-    Raises ``ValueError`` naming the plugin when it cannot be imported.
-    """
+    """Import plugin modules (dotted names or ``.py`` paths from ``base_dir``); ValueError."""
     _load_builtin()
     for spec in specs:
         spec = str(spec)

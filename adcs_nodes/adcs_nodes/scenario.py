@@ -1,15 +1,5 @@
-"""Scenario files: read (YAML with line numbers, size and alias guards, ``--set`` overrides)
-and validate.
-
-The schema (:func:`schema`) is generated from the specs of the values (:mod:`adcs_nodes.core.
-spec`), each declared beside its consumer: orbit (``core/orbit.py``), field
-(``core/geomag.py``), spacecraft and initial state (``sim_node/models/spacecraft_config.py``,
-registered by the simulator), timing, guidance and schedule (:mod:`adcs_nodes.spec`), the
-automatic sequence (``core/manager.py``), sensors, estimators, controllers and fault kinds (their
-registry entries). Written here are only the cross-field checks.
-
-Pure Python + PyYAML; no rclpy.
-"""
+"""Scenario files: read (YAML with line numbers and guards, ``--set`` overrides) and validate
+against the schema generated from the specs; written here are only the cross-field checks."""
 from __future__ import annotations
 
 import copy
@@ -110,8 +100,7 @@ FAULTS = Param('faults', 'table', [], '-', 'scripted faults of the world; kinds:
 
 
 def schema() -> Section:
-    """The whole scenario schema; ``sensors.<name>``, ``estimator`` (per algorithm) and
-    ``controllers.<name>`` come from the registry entries (a plugin's too)."""
+    """The whole scenario schema, the components' sections from their registry entries."""
     sensors = Section('sensors', tuple(replace(e.section(), params=e.params + (_EXTERNAL,))
                                        for e in registry.entries('sensor').values()))
     estimators = registry.entries('estimator')
@@ -162,8 +151,7 @@ class _Map(dict):
 
 
 def _check_expansion(root) -> None:
-    """``ScenarioError`` if the YAML node graph (a DAG of aliases) expands to more than
-    ``MAX_NODES`` nodes or contains itself; each node's size is counted once."""
+    """``ScenarioError`` if the YAML node graph expands to more than ``MAX_NODES`` or loops."""
     size: Dict[int, int] = {}
     inside = set()
 
@@ -234,8 +222,7 @@ def _read_text(path: str) -> str:
 
 
 def read_yaml(path: str) -> Any:
-    """The YAML data of ``path`` through the guards (size, UTF-8, alias expansion, nesting,
-    syntax: ``ScenarioError`` naming the file and line); nothing is validated or imported."""
+    """The YAML data of ``path`` through the guards (``ScenarioError``), nothing validated."""
     text = _read_text(path)
     try:
         return yaml.load(text, Loader=_LineLoader)  # noqa: S506 - SafeLoader subclass
@@ -251,8 +238,7 @@ def read_yaml(path: str) -> Any:
 
 
 def shorten_message(text: str, max_run: int = MAX_SHOWN, max_len: int = MAX_MESSAGE) -> str:
-    """``text`` with every run of more than ``max_run`` non-space characters cut in its middle,
-    and the whole cut to ``max_len`` characters (a rejected 100 kB value is not echoed)."""
+    """``text`` with long runs of non-space characters and the whole cut in their middle."""
     def cut(match) -> str:
         run = match.group(0)
         return f'{run[:max_run // 2]}...<{len(run)} characters>...{run[-(max_run // 4):]}'
@@ -265,18 +251,8 @@ def shorten_message(text: str, max_run: int = MAX_SHOWN, max_len: int = MAX_MESS
 
 # ---------------------------------------------------------------------- loading
 def load_scenario(path: str, plugins: Optional[List[str]] = None) -> Dict[str, Any]:
-    """Read and validate a scenario file: its values with every default filled in, plus
-    ``_path`` (absolute). ``plugins``, when given, are imported instead of the file's own
-    ``plugins:`` (a bag's ``scenario.yaml``: a bag is data, never code).
-
-    Raises
-    ------
-    ScenarioError
-        A missing, too large (``MAX_FILE_BYTES``) or non-UTF-8 file, a YAML syntax error, an
-        alias bomb (``MAX_NODES``), an unknown or missing key, a value its spec refuses or a
-        combination the cross-field checks refuse; the message names the file, the line and
-        the key, with long values cut (``MAX_SHOWN``).
-    """
+    """A scenario file's values, validated, defaults filled in, plus ``_path``; ``plugins``
+    replace the file's own (a bag). ``ScenarioError`` naming the file, line and key."""
     try:
         data = read_yaml(path)
         if isinstance(data, dict) and plugins is not None:
@@ -292,8 +268,7 @@ def load_scenario(path: str, plugins: Optional[List[str]] = None) -> Dict[str, A
 
 
 def check_scenario(sc: Dict[str, Any]) -> Dict[str, Any]:
-    """A scenario given as a dict (a loaded one, edited) validated as a file is: the same
-    checks and messages, without file and line (``ScenarioError``); ``_path`` is kept."""
+    """A scenario dict validated as a file is, without file and line; ``_path`` is kept."""
     data = plain({k: v for k, v in sc.items() if not str(k).startswith('_')})
     base = os.path.dirname(sc.get('_path') or os.path.abspath('scenario.yaml'))
     out = _validated(data, base, '')
@@ -302,8 +277,7 @@ def check_scenario(sc: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def _validated(data: Any, base: str, path: str) -> Dict[str, Any]:
-    """``data`` validated: plugins loaded, the schema's values, the onboard models' defaults,
-    the cross-field checks (``ScenarioError``: ``path:line: key: why``)."""
+    """``data`` validated (``ScenarioError``: ``path:line: key: why``)."""
     def fail(line: Optional[int], key: str, why: str) -> None:
         where = f'{path}:{line}' if path and line else path
         raise ScenarioError(f'{where}: {key}: {why}' if where else f'{key}: {why}')
@@ -429,8 +403,7 @@ def _check_tle(orbit: Dict[str, Any], key: str, epoch: datetime.datetime) -> Non
 
 
 def _check_flight(sc: Dict[str, Any]) -> None:
-    """A sensor for every input, controllers the spacecraft can run, a manager that names
-    configured controllers and a consistent automatic sequence."""
+    """A sensor for every input, runnable controllers, a consistent manager."""
     sensors = sc['sensors']
     if 'estimator' in sc:
         entry = registry.get('estimator', sc['estimator']['algorithm'])
@@ -478,9 +451,8 @@ def _check_flight(sc: Dict[str, Any]) -> None:
 
 
 def _check_spacecraft(sc: Dict[str, Any]) -> None:
-    """A rigid body's inertia (symmetric, positive definite, the triangle inequality), wheels
-    with a spin axis and an initial momentum within their capacity, unloading pulses inside
-    their period, a momentum error only with wheels."""
+    """A rigid body's inertia, wheels with a spin axis and ``h0`` within their capacity,
+    unloading pulses inside their period, a momentum error only with wheels."""
     craft, key = sc['spacecraft'], 'spacecraft.inertia_kgm2'
     inertia = np.array(craft['inertia_kgm2'])
     if not np.allclose(inertia, inertia.T, rtol=1e-9, atol=1e-9):
@@ -515,8 +487,7 @@ _ROS_TIME = (datetime.datetime(1970, 1, 1, tzinfo=datetime.timezone.utc),
 
 
 def epoch_range(epoch: Any, duration_s: float) -> datetime.datetime:
-    """The aware UTC ``epoch`` (ISO text; naive means UTC); ``ValueError`` unless it parses
-    and ``[epoch, epoch + duration_s]`` fits ROS time stamps (1970 to 2038-01-19T03:14:07Z)."""
+    """The UTC ``epoch``; ``ValueError`` unless the run fits ROS time stamps (1970-2038)."""
     start = datetime.datetime.fromisoformat(iso_time(epoch).strip().replace('Z', '+00:00'))
     start = (start if start.tzinfo else start.replace(tzinfo=datetime.timezone.utc)
              ).astimezone(datetime.timezone.utc)
@@ -532,20 +503,9 @@ def epoch_range(epoch: Any, duration_s: float) -> datetime.datetime:
     return start
 
 
-def check_epoch(epoch: Any, duration_s: float, line: Optional[int] = None,
-                path: str = 'scenario') -> datetime.datetime:
-    """:func:`epoch_range`, a ``ScenarioError`` naming ``path``, ``line`` and ``epoch``."""
-    try:
-        return epoch_range(epoch, duration_s)
-    except ValueError as exc:
-        raise ScenarioError(f'{path}{f":{line}" if line else ""}: epoch: {exc}') from None
-
-
 # ---------------------------------------------------------------------- faults
 def node_targets(sc: Dict[str, Any]) -> List[str]:
-    """The nodes of scenario ``sc`` (validated or raw) a ``node_killed`` fault may strike:
-    its simulated sensors, the estimator, guidance, each ``<name>_controller`` and the
-    controller manager."""
+    """The nodes of ``sc`` (validated or raw) a ``node_killed`` fault may strike."""
     out = fault_targets(sc, nodes=False)['sensor'] + ['estimator'] * bool(sc.get('estimator'))
     ctrl = sc.get('controllers')
     if isinstance(ctrl, dict):
@@ -555,8 +515,7 @@ def node_targets(sc: Dict[str, Any]) -> List[str]:
 
 
 def fault_targets(sc: Dict[str, Any], nodes: bool = True) -> Dict[str, List[str]]:
-    """What a fault of scenario ``sc`` (validated or raw) may strike, by target kind: its
-    simulated sensors, wheels, magnetorquer axes and (``nodes``) nodes."""
+    """What a fault of ``sc`` (validated or raw) may strike, by target kind."""
     craft = sc.get('spacecraft') or {}
     out = {'sensor': [k for k, cfg in (sc.get('sensors') or {}).items()
                       if not (isinstance(cfg, dict) and cfg.get('external'))],
@@ -567,11 +526,8 @@ def fault_targets(sc: Dict[str, Any], nodes: bool = True) -> Dict[str, List[str]
 
 def check_fault(kind: str, target: str, params: Any, targets: Dict[str, List[str]],
                 scripted: bool = True) -> Dict[str, Any]:
-    """The parameters of fault ``kind`` striking ``target`` (among ``targets``:
-    :func:`fault_targets`), validated with the kind's registry specs and filled with their
-    defaults: the one check of a scenario's fault, ``adcs fault`` and the nodes that apply a
-    live fault (``scripted`` false: no ``node_killed``). ``SpecError`` naming ``kind``,
-    ``target`` or ``params``."""
+    """The validated parameters of fault ``kind`` striking ``target``: the one check of a
+    scripted or live fault. ``SpecError`` naming ``kind``, ``target`` or ``params``."""
     try:
         entry = registry.get('fault', kind)
     except ValueError as exc:
@@ -658,10 +614,8 @@ def schema_markdown() -> str:
 
 # ---------------------------------------------------------------------- overrides (--set)
 def parse_overrides(items: Any) -> Dict[str, Any]:
-    """``--set`` arguments: ``['a.b=3', 'x=[1, 2]']`` -> ``{'a.b': 3, 'x': [1, 2]}`` (a dict
-    is returned as is). The key is dotted (a list element by its index:
-    ``spacecraft.wheels.0.max_torque_Nm``), the value YAML as a scenario file reads it;
-    ``null`` removes the key. ``ScenarioError`` naming a malformed item."""
+    """``--set`` arguments ``['a.b=3', 'wheels.0.x=[1, 2]']`` -> ``{'a.b': 3, ...}`` (YAML
+    values; a dict as is). ``ScenarioError`` naming a malformed item."""
     if isinstance(items, dict):
         return dict(items)
     out: Dict[str, Any] = {}
@@ -683,12 +637,8 @@ def parse_overrides(items: Any) -> Dict[str, Any]:
 
 
 def apply_overrides(sc: Dict[str, Any], overrides: Any) -> Dict[str, Any]:
-    """A copy of the validated scenario ``sc`` with ``overrides`` (``{dotted key: value}``,
-    ``None`` removes the key, or ``KEY=VALUE`` strings) set, validated again as the file is;
-    ``_path`` stays the file's. The onboard models are their own keys
-    (``estimator.onboard_orbit.*``): a change of the truth ``orbit`` leaves them as they were
-    (a model error), unless set too. ``ScenarioError``: ``--set KEY=VALUE: key: why``.
-    """
+    """A copy of the validated ``sc`` with ``overrides`` (``{dotted key: value or None}`` or
+    ``KEY=VALUE`` strings), validated again. ``ScenarioError``: ``--set KEY=VALUE: key: why``."""
     changes = parse_overrides(overrides)
     data = copy.deepcopy({k: v for k, v in sc.items() if not str(k).startswith('_')})
     for key, value in changes.items():

@@ -1,13 +1,6 @@
 """The specs every node, the graph and the plain engine share: the run's timing, the common
-node parameters (:data:`COMMON`), the guidance profile and the manager's schedule.
-
-The spec language itself (:class:`Param`, :class:`Section`) is :mod:`adcs_nodes.core.spec`;
-the world's sections are declared beside their models (orbit: ``core/orbit.py``, field:
-``core/geomag.py``, the automatic sequence: ``core/manager.py``, spacecraft and initial state:
-``sim_node/models/spacecraft_config.py``), the components' in their registry entries.
-
-Pure Python; no rclpy.
-"""
+node parameters (:data:`COMMON`), the guidance profile and the manager's schedule (the spec
+language: :mod:`adcs_nodes.core.spec`). No rclpy."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -29,12 +22,9 @@ EPOCH = Param('epoch', 'time', '2026-01-01T00:00:00Z', '-', 'UTC date-time of si
 SEED = Param('seed', 'int', 0, '-', 'scenario seed; every node derives its own random stream '
              'from it', min=0, max=2**63 - 1)
 
-#: Wall-clock wait for a missing input, in units of ``timing.timeout_s``, by depth in the
-#: frame's chain (estimator -> controllers -> manager -> dynamics): a node waits longer than
-#: its producers, so a missing input upstream times out there first and the consumers get
-#: the fallback instead of timing out themselves at the same moment. A sensor waits for the
-#: truth of the next frame, which comes only once the world has stepped: after the clock
-#: master's own wait.
+#: Wall-clock wait for a missing input [``timing.timeout_s``] by depth in the frame's chain:
+#: a node waits longer than its producers, so a missing input times out upstream first; a
+#: sensor waits for the next frame's truth, after the clock master's own wait.
 CHAIN_TIMEOUT = {'estimator': 1.0, 'controller': 2.0, 'manager': 3.0, 'dynamics': 4.0,
                  'sensor': 5.0}
 

@@ -56,7 +56,7 @@ NOT_DATA = ('/tf', '/tf_static', '/diagnostics', '/adcs/security_events',
 def data_digest(bag):
     """Per data topic with messages: (count, hash of the values in stamp order). A topic the
     recorder subscribed to but no message came on has no connection in a plain bag."""
-    from adcs_nodes.bag import content_digest
+    from bag_digest import content_digest
     return {t: d for t, d in content_digest(bag).items() if t not in NOT_DATA and d[0] > 0}
 
 

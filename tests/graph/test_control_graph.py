@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from adcs_launch import StatusWatch, adcs, control_scenario, start_adcs, wait_manifest
-from adcs_nodes.bag import header_stamp_ns, read_messages, topic_summary
+from adcs_nodes.bag import header_stamp_ns, read_messages
+from bag_digest import topic_summary
 
 EPOCH_NS = 1767225600 * 10**9
 

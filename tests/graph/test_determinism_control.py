@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from adcs_launch import SCENARIOS, adcs, plain_run
-from adcs_nodes.bag import content_digest
+from bag_digest import content_digest
 
 DURATION = '300'
 DATA_TOPICS = ('/adcs/attitude_estimate', '/adcs/actuator_command',

@@ -7,7 +7,7 @@ estimator, controller and the manager fire at least twice; the estimator's
 previous-frame command is used). The plain bags are written in this process
 (:func:`adcs_nodes.tools.run.plain.run_plain`, what ``adcs run --engine plain`` calls), one of them
 (:data:`PLAIN_CLI`) through the command itself; the bags are compared with
-:func:`adcs_nodes.bag.content_digest` (per topic: count and a hash of every message's
+``tests/bag_digest.content_digest`` (per topic: count and a hash of every message's
 values in stamp order).
 
 Not compared: ``/tf``, ``/tf_static`` and ``/diagnostics`` (the plain engine does not publish

@@ -13,7 +13,8 @@ import signal
 
 import pytest
 
-from adcs_nodes.bag import content_digest, header_stamp_ns, read_messages, topic_summary
+from adcs_nodes.bag import header_stamp_ns, read_messages
+from bag_digest import content_digest, topic_summary
 
 from adcs_launch import SCENARIOS, adcs, start_adcs, wait_manifest
 

@@ -30,7 +30,8 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
 from adcs_nodes.nodes.recorder import OutputExistsError, RecorderNode  # noqa: E402
-from adcs_nodes.bag import read_messages, topic_summary  # noqa: E402
+from adcs_nodes.bag import read_messages  # noqa: E402
+from bag_digest import topic_summary  # noqa: E402
 from domains import worker_domain  # noqa: E402
 
 N = 40

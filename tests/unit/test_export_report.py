@@ -17,8 +17,8 @@ pytest.importorskip('rosbags')
 
 from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
 
-from adcs_nodes.bag import (content_digest, make_typestore, read_messages,  # noqa: E402
-                            topic_summary)
+from adcs_nodes.bag import make_typestore, read_messages  # noqa: E402
+from bag_digest import content_digest, topic_summary  # noqa: E402
 from adcs_nodes.tools.analyse.export import export_csv, topic_file_name  # noqa: E402
 from adcs_nodes.tools.analyse.report import make_report  # noqa: E402
 

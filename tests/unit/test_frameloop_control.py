@@ -56,7 +56,9 @@ def test_paper004_yaw_reproduction(tmp_path, reproductions_without_rclpy):
 
     The bag is the plain engine's (``adcs run --engine plain``), read as a recorded one."""
     from adcs_nodes.bag import header_stamp_ns, read_messages
-    from adcs_nodes.tools.analyse.reproductions import expectations_for, yaw_errors_paper004
+    from adcs_nodes.tools.analyse.papers import paper004
+    from adcs_nodes.tools.analyse.papers.series import from_bag
+    from adcs_nodes.tools.analyse.reproductions import expectations_for
     from adcs_nodes.tools.run.plain import run_plain
     bag = str(tmp_path / 'paper004')
     res = run_plain(validated(tmp_path, raw('paper004_yaw')), None, bag, progress=False)
@@ -65,7 +67,7 @@ def test_paper004_yaw_reproduction(tmp_path, reproductions_without_rclpy):
     assert name == 'paper004_yaw' and all(ok for *_, ok in rows if ok is not None), rows
     with open(tmp_path / 'paper004' / 'scenario.yaml') as fh:
         sc = yaml.safe_load(fh)
-    e = yaw_errors_paper004(bag, sc)
+    e = paper004.yaw_errors(from_bag(bag, paper004.TOPICS), sc)
     rms3 = float(np.sqrt(np.mean(e['eq3_deg'] ** 2)))
     rmst = float(np.sqrt(np.mean(e['triad_deg'] ** 2)))
     assert abs(rms3 - 0.94) < 0.1 and abs(rmst - 0.92) < 0.1

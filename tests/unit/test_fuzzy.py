@@ -300,7 +300,7 @@ def test_slews_to_any_inertial_target_including_180_deg(angle_deg):
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     sc = load_scenario(os.path.join(root, 'scenarios', 'paper003_slew.yaml'))
     axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
-    q0 = paper003.initial_quaternion()
+    q0 = initial_quaternion(paper003.EULER0_DEG)
     np.testing.assert_allclose(q0, sc['initial']['q_orbit_body_xyzw'], atol=1e-8)
     q_t = attitude.multiply(q0, attitude.from_axis_angle(axis, math.radians(angle_deg)))
     defaults = {f'controllers.fuzzy.{k}': v for k, v in
@@ -315,3 +315,11 @@ def test_slews_to_any_inertial_target_including_180_deg(angle_deg):
     assert math.degrees(run['phi'][-1]) < 0.05
     assert np.abs(run['omega'][-1]).max() < math.radians(0.01)   # w.r.t. the target frame
     assert np.abs(run['torque']).max() <= 1.0 + 1e-12
+
+
+def initial_quaternion(euler_deg) -> np.ndarray:
+    """``q_ref_body`` (scalar last) of paper 003's Euler-Krylov angles (psi, theta, gamma)
+    [deg] (3-2-1)."""
+    from adcs_nodes.core.control.eigenaxis import dcm_euler_321
+    psi, theta, gamma = (math.radians(a) for a in euler_deg)
+    return attitude.from_matrix(dcm_euler_321(psi, theta, gamma).T)

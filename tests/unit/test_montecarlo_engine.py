@@ -7,7 +7,7 @@ import os
 import pytest
 
 from adcs_nodes.tools.campaigns.cli import main
-from adcs_nodes.tools.campaigns.engine import plain_engine_problem, resolve_engine
+from adcs_nodes.tools.campaigns.config import plain_engine_problem, resolve_engine
 from adcs_nodes.scenario import load_scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

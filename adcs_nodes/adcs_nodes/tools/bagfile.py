@@ -1,7 +1,5 @@
-"""A recorded bag is data, never code (``docs/security.md``): its ``scenario.yaml`` is read
-through the scenario file's guards (size, alias expansion, nesting, syntax), its problems said
-in one line (:class:`BagError`); the plugins it names are never imported: a tool that needs
-them (``adcs replay --lockstep``) takes them from the user."""
+"""A recorded bag is data, never code (``docs/security.md``): its ``scenario.yaml`` goes
+through the scenario file's guards; the plugins it names are never imported."""
 from __future__ import annotations
 
 import os
@@ -28,8 +26,7 @@ def scenario_path(bag: str) -> str:
 
 def bag_scenario(bag: str) -> Optional[Dict[str, Any]]:
     """The bag's stored scenario as data (nothing validated or imported), None without one;
-    BagError when it is too large, not UTF-8, an alias bomb, bad YAML, not a mapping, or its
-    ``plugins`` is not a list of names."""
+    BagError when the scenario file's guards refuse it or ``plugins`` is not a list."""
     path = scenario_path(bag)
     if not os.path.isfile(path):
         return None
@@ -61,10 +58,8 @@ def plugin_note(bag: str, sc: Optional[Dict[str, Any]]) -> str:
 
 
 def validated_scenario(bag: str, plugins: Sequence[str] = ()) -> Dict[str, Any]:
-    """The bag's scenario validated as a scenario file, importing the user's ``plugins``
-    (module names or ``.py`` paths relative to the working directory), never the bag's own;
-    BagError without a scenario, for a run that used plugins when none are given, or for a
-    refused scenario."""
+    """The bag's scenario validated, importing the user's ``plugins``, never the bag's own;
+    BagError without one, for a run that used plugins none are given for, or refused."""
     sc, path = bag_scenario(bag), scenario_path(bag)
     if sc is None:
         raise BagError(f'{bag}: no scenario.yaml beside the bag (adcs run --record writes it)')

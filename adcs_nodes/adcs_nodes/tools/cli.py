@@ -103,8 +103,7 @@ def cmd_run(args) -> int:
     print(f'[adcs] {result.sim_time_s:g} s sim in {result.wall_time_s:.1f} s wall '
           f'({rtf:.1f}x real time), missed frames {result.missed_frames}')
     rate = args.rate or 1.0
-    # the pace from frame 0 (the clock master's frames a second; the wall time above also
-    # counts the start-up)
+    # the pace from frame 0 (the wall time above also counts the start-up)
     kept = result.frames_per_s * float(sc['timing']['frame_s'])
     if args.real_time and kept and kept < REAL_TIME_KEPT * rate:
         print(f'[adcs] WARNING: real time at rate {rate:g} asked for {rate:g}x; this run kept '
@@ -146,8 +145,7 @@ def cmd_validate(args) -> int:
 
 
 def _live(command: str, action) -> int:
-    """Run ``action()`` on a running graph (``adcs switch``, ``status``, ``fault``): print its
-    text, or the LiveError (exit 2)."""
+    """Run ``action()`` on a running graph: print its text, or the LiveError (exit 2)."""
     from adcs_nodes.tools.run.live import LiveError, finish
     try:
         text = action()
@@ -195,8 +193,7 @@ def cmd_schema(args) -> int:
 
 
 def bag_checked(bag: str, command: str) -> bool:
-    """The bag's stored scenario is usable as data (a hostile one: one line, False); a note
-    names the plugins its run used, which are not imported."""
+    """The bag's stored scenario is usable as data (else one line, False); plugins noted."""
     from adcs_nodes.tools.bagfile import BagError, bag_scenario, plugin_note
     try:
         note = plugin_note(bag, bag_scenario(bag))
@@ -392,9 +389,7 @@ CTRL_C_COMMANDS = ('status', 'slew', 'switch', 'fault', 'replay')
 
 
 def ctrl_c_stops() -> None:
-    """Python's own SIGINT handling (``KeyboardInterrupt``) where SIGINT was inherited ignored
-    (bash's background jobs, pytest-xdist workers), as the nodes do
-    (``nodes/runtime.stop_handler_from_start``)."""
+    """``KeyboardInterrupt`` on SIGINT even where it was inherited ignored (as the nodes)."""
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
 

@@ -1,9 +1,5 @@
-"""Bag to CSV (``adcs export``): one file per topic (``/sim/state`` -> ``sim__state.csv``), one
-row per message in recording order, first column ``t`` [s] from ``header.stamp`` (a Clock's
-``clock``; else the log time), so a deterministic simulation exports identical files. Other
-fields flattened with dotted names (``r_eci.x``, ``covariance[35]``, variable arrays up to the
-longest seen), booleans ``1``/``0``, floats with ``repr``.
-"""
+"""Bag to CSV (``adcs export``): a file per topic, a row per message, ``t`` [s] from
+``header.stamp`` (else the log time) first, then the flattened fields."""
 from __future__ import annotations
 
 import csv
@@ -21,8 +17,7 @@ def topic_file_name(topic: str) -> str:
 
 
 class _ColumnOrder:
-    """Ordered union of the rows' column names, a new name after its predecessor
-    (``momentum[3]`` right after ``momentum[2]`` even when the first rows are shorter)."""
+    """Ordered union of the rows' column names, a new name right after its predecessor."""
 
     def __init__(self) -> None:
         self.names: List[str] = []
@@ -61,10 +56,7 @@ def flatten_row(msg: Any, log_time_ns: int) -> List[tuple]:
 
 def export_csv(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
                topics: Optional[Sequence[str]] = None) -> List[Path]:
-    """Write one CSV per topic (all, or ``topics``) of the bag into ``out_dir`` (created;
-    files of the same names replaced); the files, sorted by topic (a topic without messages:
-    the header ``t`` only). FileNotFoundError without a bag; ValueError for an unreadable bag
-    or a file that cannot be written."""
+    """One CSV per topic (all, or ``topics``) of the bag in ``out_dir``; the files."""
     rows: Dict[str, List[Dict[str, Any]]] = {}
     columns: Dict[str, _ColumnOrder] = {}
     messages = read_messages(bag_path, topics)  # raises before out_dir is touched

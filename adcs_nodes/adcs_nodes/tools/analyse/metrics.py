@@ -1,21 +1,6 @@
-"""End-of-run metrics of an attitude-error signal as the papers word them (pure numpy), one
-definition for ``adcs report``, the Monte Carlo campaigns and the studies.
-
-Paper 000, section 4: the satellite "reaches the required attitude within 3-4 orbits" and is
-"held with accuracy of the order of 1 deg". For ``t`` [s] increasing and ``e`` [deg]:
-
-* capture time (:func:`capture_index`): ``j`` = the last index with ``e >= hold_band``, the
-  capture is the first ``i > j`` with ``e[i] < band``; ``band`` 5 deg, ``hold_band`` 10 deg
-  (ASSUMPTION: the paper gives no band; twice the band separates a wobbling captured
-  satellite from a tumbling one);
-* last exit (:func:`last_exit_time`): the same with ``hold_band = band``, so ``t_exit >=
-  t_cap``; first entry (:func:`first_entry_time`): the first ``e < band``;
-* hold accuracy (:func:`hold_stats`): RMS, median, 95th percentile and max over ``t >= t_hold``
-  (default 4 orbits, the end of the paper's 3-4).
-
-Samples count alike (fixed frames); a non-finite error is outside every band and out of the
-hold statistics.
-"""
+"""End-of-run metrics of an attitude error ``e`` [deg] at ``t`` [s] as paper 000 (section 4)
+words them, for the report, the campaigns and the studies: capture = the first ``e < band``
+after the last ``e >= hold_band``; a non-finite error is outside every band."""
 from __future__ import annotations
 
 import math
@@ -25,7 +10,7 @@ from typing import Any, Dict, Optional
 import numpy as np
 from numpy.typing import ArrayLike
 
-#: Capture band [deg] (ASSUMPTION, see the module docstring).
+#: Capture band [deg] (ASSUMPTION: the paper gives none).
 CAPTURE_BAND_DEG = 5.0
 #: Hold band [deg] the error must stay within after capture (ASSUMPTION: 2 x the band).
 HOLD_BAND_DEG = 10.0
@@ -49,15 +34,7 @@ def _outside(e: np.ndarray, limit: float) -> np.ndarray:
 def capture_index(e: ArrayLike, band: float = CAPTURE_BAND_DEG,
                   hold_band: Optional[float] = HOLD_BAND_DEG) -> Optional[int]:
     """Index of the first entry into ``band`` after which ``e < hold_band`` (>= ``band``;
-    None: ``band``, the last exit) to the end; None when the run never captures.
-
-    Examples
-    --------
-    >>> capture_index([50.0, 4.0, 6.0, 3.0, 2.0], 5.0, 10.0)
-    1
-    >>> capture_index([50.0, 4.0, 6.0, 3.0, 2.0], 5.0, None)
-    3
-    """
+    None: ``band``, the last exit) to the end; None when the run never captures."""
     e = np.asarray(e, dtype=float).reshape(-1)
     hold = band if hold_band is None else float(hold_band)
     if hold < band:
@@ -78,13 +55,7 @@ def capture_time(t: ArrayLike, e: ArrayLike, band: float = CAPTURE_BAND_DEG,
 
 def last_exit_time(t: ArrayLike, e: ArrayLike, band: float = CAPTURE_BAND_DEG
                    ) -> Optional[float]:
-    """Start of the final stay below ``band`` (after the last exit from it), or None.
-
-    Examples
-    --------
-    >>> last_exit_time([0.0, 1.0, 2.0, 3.0], [9.0, 1.0, 9.0, 1.0], 5.0)
-    3.0
-    """
+    """Start of the final stay below ``band`` (after the last exit from it), or None."""
     return capture_time(t, e, band, None)
 
 
@@ -98,17 +69,8 @@ def first_entry_time(t: ArrayLike, e: ArrayLike, band: float = CAPTURE_BAND_DEG
 
 @dataclass(frozen=True)
 class HoldStats:
-    """Error statistics over the hold window [deg]; NaN when the window holds no sample.
-
-    Attributes
-    ----------
-    rms, median, p95, max : float
-        Root mean square, median, 95th percentile and maximum of the error.
-    samples : int
-        Finite samples in the window.
-    t_from_s : float
-        Start of the window [s].
-    """
+    """RMS, median, 95th percentile and max of the error over the hold window [deg] (NaN: no
+    sample), its finite ``samples`` and start ``t_from_s`` [s]."""
 
     rms: float
     median: float
@@ -119,14 +81,7 @@ class HoldStats:
 
 
 def hold_stats(t: ArrayLike, e: ArrayLike, t_from: float) -> HoldStats:
-    """RMS, median, 95th percentile and max of ``e`` over ``t >= t_from`` to the end.
-
-    Examples
-    --------
-    >>> s = hold_stats([0., 1., 2., 3.], [10., 3., 4., 0.], 1.0)
-    >>> round(s.rms, 6), s.median, s.max, s.samples
-    (2.886751, 3.0, 4.0, 3)
-    """
+    """:class:`HoldStats` of ``e`` over ``t >= t_from`` to the end."""
     t, e = _arrays(t, e)
     w = e[(t >= t_from) & np.isfinite(e)]
     if w.size == 0:
@@ -140,17 +95,7 @@ def run_metrics(t: ArrayLike, e: ArrayLike, period_s: Optional[float],
                 band: float = CAPTURE_BAND_DEG, hold_band: float = HOLD_BAND_DEG,
                 hold_from_orbits: float = HOLD_FROM_ORBITS,
                 capture_within_orbits: float = HOLD_FROM_ORBITS) -> Dict[str, Any]:
-    """All end-of-run metrics of one error signal, as a flat JSON-ready dict.
-
-    ``t`` (n,) [s since the start], ``e`` (n,) the angle between body and target [deg];
-    ``period_s`` the orbit period [s] (None: no orbit-based values, the hold window is the
-    last half of the run); bands [deg]; the hold window's start and the deadline of
-    ``captured_in_time`` [orbits]. Returns ``capture_time_s``, ``capture_orbits``,
-    ``captured_in_time``, ``last_exit_s``, ``last_exit_orbits``, ``first_entry_s``,
-    ``hold_rms_deg``, ``hold_median_deg``, ``hold_p95_deg``, ``hold_max_deg``,
-    ``hold_samples``, ``hold_from_s``, ``hold_complete`` (the run reaches past the window
-    start), ``final_deg``, ``band_deg``, ``hold_band_deg``, ``period_s`` (None: never).
-    """
+    """End-of-run metrics of ``e`` (n,) [deg] at ``t`` (n,) [s] (no period: hold = 2nd half)."""
     t, e = _arrays(t, e)
     if t.size == 0:
         raise ValueError('run_metrics needs at least one sample')
@@ -181,13 +126,7 @@ def run_metrics(t: ArrayLike, e: ArrayLike, period_s: Optional[float],
 
 
 def angle_to_identity_deg(q_xyzw: ArrayLike) -> np.ndarray:
-    """Rotation angle of each quaternion [deg], ``2 atan2(|v|, |w|)`` (sign-free), shape (n,).
-
-    Parameters
-    ----------
-    q_xyzw : array_like, shape (n, 4)
-        Quaternions, scalar last (need not be unit).
-    """
+    """Rotation angle [deg] ``2 atan2(|v|, |w|)`` of each of ``q_xyzw`` (n, 4); shape (n,)."""
     q = np.asarray(q_xyzw, dtype=float).reshape(-1, 4)
     return np.degrees(2.0 * np.arctan2(np.linalg.norm(q[:, :3], axis=1), np.abs(q[:, 3])))
 
@@ -206,12 +145,8 @@ def angle_between_deg(q_a: ArrayLike, q_b: ArrayLike) -> np.ndarray:
 
 
 def slerp_at(t_src: ArrayLike, q_src: ArrayLike, t: ArrayLike) -> np.ndarray:
-    """Quaternions ``q_src`` (n, 4) sampled at increasing times ``t_src`` (n,), at times ``t``
-    (m,): spherical linear interpolation between the two samples around each time,
-    ``q_i (q_i^* q_j)^u`` with ``u = (t - t_i) / (t_j - t_i)`` on the shorter arc; a time
-    equal to a sample's gives that sample exactly. Times outside ``[t_src[0], t_src[-1]]``
-    are clamped to the ends (use :func:`estimate_errors_deg` to leave them out). Scalar last,
-    shape (m, 4)."""
+    """``q_src`` (n, 4) at increasing ``t_src`` slerped to ``t`` (m,), ``q_i (q_i^* q_j)^u``
+    on the shorter arc, clamped to the ends; (m, 4)."""
     ts = np.asarray(t_src, dtype=float).reshape(-1)
     qs = np.asarray(q_src, dtype=float).reshape(-1, 4)
     t = np.asarray(t, dtype=float).reshape(-1)
@@ -241,15 +176,8 @@ def slerp_at(t_src: ArrayLike, q_src: ArrayLike, t: ArrayLike) -> np.ndarray:
 
 def estimate_errors_deg(t_truth: ArrayLike, q_truth: ArrayLike, t_est: ArrayLike,
                         q_est: ArrayLike) -> Dict[str, Any]:
-    """Attitude error of estimates against the truth interpolated at each estimate's own
-    stamp (:func:`slerp_at`): an estimate off the truth's grid is judged at its time.
-
-    ``t_truth`` (n,) increasing and ``q_truth`` (n, 4), ``t_est`` (m,) and ``q_est`` (m, 4):
-    stamps in one unit, quaternions scalar last in the same frames. Returns ``t`` (k,) the
-    estimate stamps inside the truth's span (no extrapolation), ``deg`` (k,) the angle of
-    ``q_est^* q_truth(t)`` [deg], ``on_grid`` (stamps equal to a truth stamp) and
-    ``outside`` (left out).
-    """
+    """Estimates against the truth slerped to each stamp: ``t``, ``deg`` (of ``q_est^*
+    q_truth(t)``) inside the truth's span, ``on_grid``, ``outside``."""
     tt = np.asarray(t_truth, dtype=float).reshape(-1)
     te = np.asarray(t_est, dtype=float).reshape(-1)
     qe = np.asarray(q_est, dtype=float).reshape(-1, 4)

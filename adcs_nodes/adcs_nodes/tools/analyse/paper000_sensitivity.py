@@ -1,13 +1,5 @@
 """Paper 000's hold accuracy against the random torque's correlation time and the magnetometer
-misalignment: the study on the FrameLoop and its last measurement (shown by ``adcs report`` for
-``paper000_control`` and its misaligned variant).
-
-``python -m adcs_nodes.tools.analyse.study sensitivity scenarios/paper000_control.yaml --out FILE``
-runs :func:`sensitivity` (one parameter changed at a time through scenario overrides, each
-case twice: from the paper's initial state, and started on the target) and prints
-:func:`sensitivity_markdown`; :data:`MEASURED` is the JSON of the last run (``--out`` writes
-it). A measurement, not a paper value: refresh it when the cores change.
-"""
+misalignment (``study sensitivity``); :data:`MEASURED`: the last run, shown by the report."""
 from __future__ import annotations
 
 import json
@@ -20,11 +12,9 @@ MEASURED = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'paper000_se
 #: Sensitivity cases: the random torque's correlation time [s] and the misalignment [deg].
 CORRELATION_S = (0.1, 0.5, 2.0)
 MISALIGNMENT_DEG = (0.0, 0.5, 1.0, 2.0)
-#: Hold-only runs: start on the target (body on the orbit axes, zero relative rate), run this
-#: many orbits, hold statistics from HOLD_ONLY_FROM orbits on. The filter starts on the truth
-#: with a converged covariance (1e-4 on phi: ~1 deg; (1e-4 rad/s)^2 on the rate): with the
-#: acquisition P0 (10 on phi) its first updates throw the estimate tens of degrees off and the
-#: law tumbles the satellite, which is the acquisition again, not the hold.
+#: Hold-only runs: on the target, the filter on the truth with a converged covariance (the
+#: acquisition P0 would tumble the satellite again), this many orbits, hold statistics from
+#: HOLD_ONLY_FROM orbits on.
 HOLD_ONLY_ORBITS = 3.0
 HOLD_ONLY_FROM = 1.0
 ON_TARGET = {'initial.q_orbit_body_wxyz': [1.0, 0.0, 0.0, 0.0], 'initial.q_orbit_body_xyzw': None,
@@ -34,9 +24,7 @@ ON_TARGET = {'initial.q_orbit_body_wxyz': [1.0, 0.0, 0.0, 0.0], 'initial.q_orbit
 
 
 def summarize(s: Dict[str, Any]) -> Dict[str, Any]:
-    """Capture and hold (:func:`adcs_nodes.tools.analyse.metrics.run_metrics`) and the estimation
-    error
-    from half an orbit on, of a :func:`adcs_nodes.tools.campaigns.worker.run_series` series."""
+    """``run_metrics`` and the estimation error from half an orbit on, of a ``run_series``."""
     from adcs_nodes.tools.analyse import metrics
     out = metrics.run_metrics(s['t_s'], s['angle_deg'], s['period_s'])
     est = metrics.hold_stats(s['t_s'], s['est_err_deg'], s['t_s'][0] + 0.5 * s['period_s'])
@@ -53,8 +41,7 @@ def _series(sc: Dict[str, Any], changes: Dict[str, Any], duration_s: Optional[fl
 
 
 def hold_only(sc: Dict[str, Any], changes: Dict[str, Any]) -> Dict[str, Any]:
-    """Hold accuracy started on the target (:data:`ON_TARGET`): no acquisition, so no chaotic
-    capture phase."""
+    """Hold accuracy started on the target (:data:`ON_TARGET`): no chaotic acquisition."""
     from adcs_nodes.tools.analyse import metrics
     from adcs_nodes.tools.analyse.papers.series import orbit_period_s
     period = orbit_period_s(sc)
@@ -68,14 +55,7 @@ def hold_only(sc: Dict[str, Any], changes: Dict[str, Any]) -> Dict[str, Any]:
 
 def sensitivity(sc: Dict[str, Any], duration_s: Optional[float] = None,
                 log=print) -> Dict[str, Any]:
-    """Hold accuracy against random-torque correlation time and magnetometer misalignment.
-
-    One parameter changes at a time from the scenario's values (same seed), through scenario
-    overrides on the FrameLoop. Each case runs twice: from the scenario's initial state
-    (capture, then hold from 4 orbits: the paper's numbers, but a single acquisition is
-    chaotic) and started on the target (:func:`hold_only`: the hold alone). Returns a
-    JSON-ready dict (the shape of :data:`MEASURED`).
-    """
+    """Hold accuracy, one parameter changed at a time (the shape of :data:`MEASURED`)."""
     import time
 
     import numpy as np
@@ -127,8 +107,7 @@ _PARAM_NAMES = {'random_period_s': 'random torque correlation [s]',
 
 
 def sensitivity_markdown(data: Optional[Dict[str, Any]] = None) -> str:
-    """Markdown table of the study (``data``: :func:`sensitivity`'s result; default the stored
-    measurement, :data:`MEASURED`)."""
+    """Markdown table of :func:`sensitivity`'s ``data`` (default :data:`MEASURED`)."""
     from adcs_nodes.tools.analyse.papers.paper000 import orbits_text
     if data is None:
         with open(MEASURED, encoding='utf-8') as fh:

@@ -1,10 +1,5 @@
-"""Bag to report: metrics, PNG plots (matplotlib, Agg) and ``summary.md``.
-
-Times are ``header.stamp`` (sim time; log times only for types without a header), so two runs
-of one simulation give one report: per topic the count and rate; from ``/sim/state`` the angle
-between body and orbit frame and the rates; the field [uT]; wheel momentum; the estimate's
-error against the truth at its own stamp; the paper table (:mod:`.papers`) with its figures
-and extra sections. Time axes in orbits for a run of at least half an orbit, else seconds."""
+"""Bag to report: metrics, PNG plots and ``summary.md``, on ``header.stamp`` (sim time; the
+log time only for types without a header), so two runs of one simulation give one report."""
 from __future__ import annotations
 
 import json
@@ -19,7 +14,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from adcs_nodes.tools.analyse import papers
-from adcs_nodes.bag import cdr_stamp_ns, open_bag, stamp_kind
+from adcs_nodes.bag import cdr_stamp_ns, open_bag, raw_messages, stamp_kind
 from adcs_nodes.tools.analyse.metrics import (angle_to_identity_deg, estimate_errors_deg,
                                               run_metrics)
 
@@ -87,14 +82,11 @@ def _collect(bag_path) -> _Data:
             kinds[conn.topic] = stamp_kind(reader.typestore, conn.msgtype)
             data.stats.setdefault(conn.topic, _TopicStats(conn.msgtype,
                                                           from_header=bool(kinds[conn.topic])))
-        try:
-            for conn, t_log, raw in reader.messages():
-                stamp = cdr_stamp_ns(raw) if kinds[conn.topic] else None
-                data.stats[conn.topic].add(stamp if stamp is not None else t_log)
-                if conn.topic in _FIELDS or conn.topic == WHEELS_TOPIC:
-                    _store(data, conn.topic, reader.deserialize(raw, conn.msgtype))
-        except Exception as exc:
-            raise ValueError(f'{bag_path}: corrupt bag: {exc}') from exc
+        for conn, t_log, raw in raw_messages(reader, reader.connections, bag_path):
+            stamp = cdr_stamp_ns(raw) if kinds[conn.topic] else None
+            data.stats[conn.topic].add(stamp if stamp is not None else t_log)
+            if conn.topic in _FIELDS or conn.topic == WHEELS_TOPIC:
+                _store(data, conn.topic, reader.deserialize(raw, conn.msgtype))
     return data
 
 
@@ -129,8 +121,7 @@ class _TimeAxis:
 
 def _plot(out: Path, name: str, plots: List[str], axis: '_TimeAxis', panels,
           height: float = 3.0) -> None:
-    """One PNG of stacked panels sharing the time axis: each panel ``(ylabel, lines,
-    legend columns)``, each line ``(t, y, label, style)``."""
+    """One PNG of panels ``(ylabel, lines, legend columns)``, lines ``(t, y, label, style)``."""
     fig = Figure(figsize=(8, height * len(panels) + (0 if len(panels) > 1 else 1)))
     axes = np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))
     for ax, (ylabel, lines, ncol) in zip(axes, panels):
@@ -189,10 +180,7 @@ def _plot_wheels(data, axis, out, plots) -> None:
 
 
 def _estimate_errors(data) -> Optional[Tuple[List[int], np.ndarray, np.ndarray]]:
-    """Estimate errors against the truth interpolated at each estimate's own stamp
-    (attitude: slerp of ``q_eci_body``; rate: linear), estimates outside the truth's span
-    left out: ``(stamps [ns], angle [rad], rate error [rad/s])`` and, on ``data``,
-    ``est_on_grid`` (stamps equal to a truth stamp)."""
+    """``(stamps [ns], angle [rad], rate error [rad/s])`` of the estimates at their stamps."""
     ts = np.asarray(data.state['t'], dtype=np.int64)
     te = np.asarray(data.est['t'], dtype=np.int64)
     t0 = ts[0]
@@ -289,19 +277,8 @@ def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expect
 def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
                 expectations: Optional[Sequence[Expectation]] = None,
                 sections: Optional[Sequence[Tuple[str, str]]] = None) -> Dict[str, Any]:
-    """Analyse a bag (directory or ``.mcap``): PNG plots, ``summary.md`` and ``metrics.json``
-    in ``out_dir`` (created; files of the same names replaced).
-
-    ``expectations``: the paper rows ``(name, paper value, measured, verdict)`` (verdict None:
-    information, not counted); ``sections``: extra markdown ``(title, text)``, default the
-    bag's scenario's (:func:`adcs_nodes.tools.analyse.reproductions.sections_for`). Returns
-    the metrics: ``duration_s``, ``start_utc``, ``orbit_period_s``, ``topics`` (``type``,
-    ``count``, ``rate_hz``, ``rate_source``), the truth's angles and rates, the estimate's
-    errors, wheel and field figures when those topics exist, the run metrics of
-    :func:`~adcs_nodes.tools.analyse.metrics.run_metrics` with a known orbit period,
-    ``expectations``, ``all_pass`` (None without a counted row), ``plots``, ``summary`` and
-    ``metrics_file``. FileNotFoundError without a bag, ValueError for an unreadable one.
-    """
+    """PNG plots, ``summary.md`` and ``metrics.json`` of a bag in ``out_dir``, with the paper
+    rows ``expectations`` and markdown ``sections``; the metrics."""
     expectations = list(expectations or [])
     if sections is None:
         from adcs_nodes.tools.analyse.reproductions import sections_for
@@ -342,9 +319,7 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
 
 
 def _bag_metrics(data: _Data, bag_path) -> Tuple[Dict[str, Any], '_TimeAxis', Any]:
-    """The numbers of :func:`make_report` (no files): per-topic counts and rates, the time
-    span and orbit period, the truth's angle and rates, field, wheel and estimate metrics.
-    Returns ``(metrics, time axis of the plots, estimate errors or None)``."""
+    """``(metrics, time axis of the plots, estimate errors or None)`` of :func:`make_report`."""
     metrics: Dict[str, Any] = {'bag': str(bag_path), 'topics': {}}
     for topic in sorted(data.stats):
         st = data.stats[topic]
@@ -393,8 +368,7 @@ def _bag_metrics(data: _Data, bag_path) -> Tuple[Dict[str, Any], '_TimeAxis', An
 
 
 def _truth_metrics(data: _Data, t0: int, period: Optional[float]) -> Dict[str, Any]:
-    """Angle to the orbit frame and rates of the truth (``/sim/state``), and with a known
-    orbit period the run metrics of :func:`adcs_nodes.tools.analyse.metrics.run_metrics`."""
+    """The truth's angle to the orbit frame and rates (with a period, its ``run_metrics``)."""
     angles = angle_to_identity_deg(np.array(data.state['q_orbit_body']))
     w = np.linalg.norm(np.array(data.state['w_eci']), axis=1) * _RAD2DEG
     w_orb = np.linalg.norm(np.array(data.state['w_orbit']), axis=1) * _RAD2DEG
@@ -414,8 +388,7 @@ def _truth_metrics(data: _Data, t0: int, period: Optional[float]) -> Dict[str, A
 
 def _draw_plots(data: _Data, axis: '_TimeAxis', errors, out: Path,
                 wheels: bool) -> List[str]:
-    """The PNG plots of the series the bag has (``wheels``: wheel momenta were found);
-    their file names."""
+    """The file names of the PNG plots of the series the bag has."""
     plots: List[str] = []
     if data.state['t']:
         _plot_truth(data, axis, out, plots)

@@ -1,9 +1,6 @@
-"""``report.html``: one self-contained page of a run for people (``adcs report``): no network,
-no script, inline PNG plots, plain tables, from any engine's bag (a section without its topics
-is left out, saying so): the timeline (forwarded, active controller and manager mode as
-bands, faults, attitude error to the target, body rates; also ``overview.png``), wheels,
-dipole, the estimator's per-axis error with its 3-sigma bound and rejections, switches and
-fallbacks with their reasons, faults, and the paper table of ``metrics.json``."""
+"""``report.html``: one self-contained page of a run (no network, no script, inline PNGs) from
+any engine's bag: timeline, wheels, dipole, estimator error with its 3-sigma bound, switches,
+fallbacks, faults and the paper table of ``metrics.json``."""
 from __future__ import annotations
 
 import base64
@@ -157,8 +154,7 @@ def _pointing_error(s: _Series) -> Optional[Tuple[np.ndarray, np.ndarray]]:
 
 
 def _estimate_error(s: _Series) -> Optional[Dict[str, np.ndarray]]:
-    """Per-axis error [deg] (body axes) and 3-sigma [deg] at the estimate's stamps (within
-    the truth's time span)."""
+    """Per-axis error and 3-sigma [deg] (body axes) at the estimate's stamps."""
     if not s.est['t'] or len(s.state['t']) < 2:
         return None
     t = np.asarray(s.est['t'])
@@ -247,8 +243,7 @@ def _png(fig: Figure) -> bytes:
 
 
 def _mark_faults(ax, s: _Series, axis: _Axis, label: bool = False) -> None:
-    """Dashed lines at each fault (red: starts, green: ends); ``label``: their names above
-    the axes, staggered when close."""
+    """Dashed lines at each fault's start (red) and end (green), ``label``: named."""
     span = max(ax.get_xlim()[1] - ax.get_xlim()[0], 1e-9) if label else 1.0
     last_x, level = None, 0
     for f in s.faults:
@@ -426,8 +421,7 @@ def _scenario(bag_path) -> Dict[str, Any]:
 
 
 def _paper_rows(out_dir: Path) -> Optional[List[Dict[str, Any]]]:
-    """The paper table of :mod:`adcs_nodes.tools.analyse.report` (its ``metrics.json``), or
-    None."""
+    """The paper table of the report's ``metrics.json``, or None."""
     try:
         with open(out_dir / 'metrics.json', encoding='utf-8') as fh:
             rows = json.load(fh).get('expectations')
@@ -441,10 +435,7 @@ def _fmt_t(t: float, axis: _Axis) -> str:
 
 
 def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -> str:
-    """Write ``report.html`` (and ``overview.png``) of the bag (any engine's) into ``out_dir``
-    (created if needed; a :func:`adcs_nodes.tools.analyse.report.make_report` ``metrics.json``
-    there gives the paper table). Returns its path; FileNotFoundError or ValueError as
-    :func:`adcs_nodes.bag.read_messages` (no bag, not a bag)."""
+    """Write ``report.html`` and ``overview.png`` of the bag into ``out_dir``; its path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     s = _collect(bag_path)

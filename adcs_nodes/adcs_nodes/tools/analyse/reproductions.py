@@ -5,12 +5,10 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-from typing import Any, Dict, List, Optional, Sequence, Tuple
-
-import numpy as np
+from typing import List, Optional, Sequence, Tuple
 
 from adcs_nodes.tools.analyse import papers
-from adcs_nodes.tools.analyse.papers import INFO, NotComparable, Row  # noqa: F401 - re-exported
+from adcs_nodes.tools.analyse.papers import Row
 
 #: Scenario name -> extra report sections ``[(title, markdown)]``.
 SECTIONS = {'paper000_control', 'paper000_control_misaligned'}
@@ -22,21 +20,12 @@ def expectations_for(bag: str) -> Tuple[Optional[str], List[Row]]:
 
 
 def sections_for(bag: str) -> List[Tuple[str, str]]:
-    """Extra report sections for the scenario of ``bag``: paper 000's sensitivity study for
-    its closed-loop scenarios (empty otherwise)."""
+    """Extra report sections of ``bag``'s scenario (paper 000's sensitivity study)."""
     from adcs_nodes.tools.bagfile import bag_scenario
     if (bag_scenario(bag) or {}).get('name') not in SECTIONS:
         return []
     from adcs_nodes.tools.analyse.paper000_sensitivity import sensitivity_markdown
     return [('Sensitivity of the hold accuracy', sensitivity_markdown())]
-
-
-def yaw_errors_paper004(bag: str, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
-    """Paper 004's yaw errors of a bag
-    (:func:`adcs_nodes.tools.analyse.papers.paper004.yaw_errors`)."""
-    from adcs_nodes.tools.analyse.papers import paper004
-    from adcs_nodes.tools.analyse.papers.series import from_bag
-    return paper004.yaw_errors(from_bag(bag, paper004.TOPICS), sc)
 
 
 def table_text(name: Optional[str], rows: Sequence[Row]) -> str:
@@ -57,14 +46,8 @@ def record(scenario: str, bag: str, engine: str = 'graph', cwd: Optional[str] = 
 def reproduce(scenario: str, bag: str, engine: str = 'graph', figures: Optional[str] = None,
               cwd: Optional[str] = None, log=print, sets: Sequence[str] = ()
               ) -> Tuple[Optional[str], List[Row]]:
-    """Record ``scenario`` (with the ``--set`` overrides ``sets``) into ``bag``, print its
-    paper table (and write the paper's figures into ``figures``); returns ``(name, rows)``.
-
-    Raises
-    ------
-    RuntimeError
-        The run failed (exit code and output in the message).
-    """
+    """Record ``scenario`` (with ``--set`` ``sets``) into ``bag``, print its paper table (and
+    draw its figures); ``(name, rows)``, RuntimeError when the run failed."""
     proc = record(scenario, bag, engine, cwd, sets)
     if proc.returncode != 0:
         raise RuntimeError(f'adcs run {os.path.basename(scenario)} exited '

@@ -25,9 +25,7 @@ SUMMARY_TOPICS = ('sim/state', 'adcs/attitude_estimate')
 
 def run_rows(sc: Dict[str, Any], duration_s: Optional[float] = None, overrides: Any = None,
              ideal: bool = False) -> Tuple[Dict[str, Any], List[papers.Row], Dict[str, Any]]:
-    """One FrameLoop run: ``(effective scenario, paper rows, run summary)``: the rows ``adcs
-    report`` prints for its bag, the run metrics of the angle to the orbit frame and the median
-    estimation error from half an orbit on."""
+    """One FrameLoop run: ``(effective scenario, paper rows, :func:`summary`)``."""
     from adcs_nodes.scenario import apply_overrides
     if overrides:
         sc = apply_overrides(sc, overrides)
@@ -119,8 +117,7 @@ def cmd_run(args) -> int:
 
 def sweep(sc: Dict[str, Any], key: str, values: Sequence[Any], duration_s=None,
           ideal: bool = False, log=print) -> List[Tuple[Any, List[papers.Row], Dict]]:
-    """One FrameLoop run per value of ``key``: ``[(value, rows, summary)]``; every value is
-    validated before the first run."""
+    """One FrameLoop run per value of ``key`` (validated first): ``[(value, rows, summary)]``."""
     from adcs_nodes.scenario import apply_overrides
     edited = [apply_overrides(sc, {key: value}) for value in values]
     out = []
@@ -163,8 +160,7 @@ def cmd_table1(args) -> int:
 
 def table1(sc: Dict[str, Any], duration_s: Optional[float] = None, ideal: bool = False,
            log=print) -> Tuple[Dict[str, Dict[str, float]], Dict[str, Dict[str, Any]]]:
-    """Paper 003's study runs (:func:`adcs_nodes.tools.analyse.papers.paper003.cases`) on the
-    FrameLoop: ``({name: metrics}, {name: series})``."""
+    """Paper 003's ``cases`` on the FrameLoop: ``({name: metrics}, {name: series})``."""
     from adcs_nodes.tools.analyse.papers import paper003
     runs, series = {}, {}
     for name, overrides in paper003.cases().items():

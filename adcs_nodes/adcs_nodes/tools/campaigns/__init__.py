@@ -1,11 +1,5 @@
-"""``adcs montecarlo``: dispersed closed-loop campaigns, local or on a Dask cluster, resumable
-(``docs/montecarlo.md``). Modules: :mod:`.config` (identity, dispersions), :mod:`.capture`,
-:mod:`.results` (metrics of one run), :mod:`.files`, :mod:`.runner` (worker processes and
-their supervisors), :mod:`.worker` (the plain engine's run), :mod:`.backends` (thread pool,
-Dask), :mod:`.campaign`, :mod:`.table` (``campaign.csv``), :mod:`.summary`, :mod:`.cli`,
-:mod:`.sweep`.
-"""
-# the names used as ``from adcs_nodes.tools import campaigns as mc``
+"""``adcs montecarlo`` and ``adcs sweep``: dispersed closed-loop campaigns, local or on a Dask
+cluster, resumable (``docs/montecarlo.md``)."""
 from adcs_nodes.tools.campaigns.backends import DaskBackend  # noqa: F401
 from adcs_nodes.tools.campaigns.capture import GUIDANCE_TARGET  # noqa: F401
 from adcs_nodes.tools.campaigns.cli import add_arguments, run_from_args  # noqa: F401

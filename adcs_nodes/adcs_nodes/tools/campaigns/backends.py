@@ -1,6 +1,4 @@
-"""Where the runs execute: a local thread pool of supervisors, each feeding its worker process,
-or a Dask cluster (an existing scheduler, or a ``LocalCluster`` started for the campaign) whose
-workers do the same."""
+"""Where the runs execute: a local thread pool of supervisors, or a Dask cluster."""
 from __future__ import annotations
 
 import contextlib
@@ -44,9 +42,8 @@ class LocalBackend:
 
 
 class DaskBackend:
-    """Runs submitted to a Dask scheduler: at ``address`` (``--scheduler``), or a
-    ``LocalCluster`` of ``local_workers`` single-thread processes this backend starts and stops
-    (``--dask-local``); ``session`` is part of the task keys."""
+    """Runs submitted to the Dask scheduler at ``address``, or to a ``LocalCluster`` of
+    ``local_workers`` processes started and stopped here; ``session`` is in the task keys."""
 
     def __init__(self, address: Optional[str], session: str,
                  local_workers: Optional[int] = None) -> None:
@@ -92,9 +89,7 @@ class DaskBackend:
                        'message': f'Dask task failed: {exc!r}'}
 
     def drain(self, timeout_s: float) -> List[Dict[str, Any]]:
-        # the client cannot tell running from queued tasks, and cancelling does not stop a
-        # running one: with the stop file present, running runs end and queued ones return
-        # at once, so wait for all of them, then cancel what is left
+        # cancelling does not stop a running task: with the stop file there, all end soon
         from distributed import wait as dask_wait
         try:
             dask_wait(self.futures, timeout=timeout_s)
@@ -123,9 +118,7 @@ class DaskBackend:
 
 @contextlib.contextmanager
 def sigint_ignored() -> Iterator[None]:
-    """SIGINT ignored meanwhile (main thread only), inherited so by the processes started here:
-    a terminal's Ctrl-C reaches the whole process group, and the ``LocalCluster`` workers keep
-    supervising their runs while the campaign stops them through its stop file."""
+    """SIGINT ignored meanwhile (main thread): workers started here stop by the stop file."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

@@ -29,8 +29,7 @@ _FINISHED = ('captured', 'not_captured', 'error')
 
 
 class Campaign:
-    """One invocation of a campaign (``cfg``, the validated ``base`` scenario) in ``out``:
-    check, prepare, execute, tabulate; ``log`` gets one progress line at a time."""
+    """One invocation of a campaign in ``out``: check, prepare, execute, tabulate."""
 
     def __init__(self, cfg: CampaignConfig, base: Dict[str, Any], out: str,
                  log: Callable[[str], None] = print) -> None:
@@ -93,9 +92,7 @@ class Campaign:
     # -------------------------------------------------------------- execution
     def run(self, jobs: int = 1, scheduler: Optional[str] = None,
             dask_local: bool = False) -> int:
-        """Execute every run not done yet; write the table, summary and plot; the exit code.
-        ``jobs`` at once from a local thread pool, or on the Dask ``scheduler``, or
-        (``dask_local``) on a ``LocalCluster`` of ``jobs`` single-thread workers."""
+        """Execute every run not done yet; write the table, summary and plot; the exit code."""
         check_layout(self.out)
         os.makedirs(self.out, exist_ok=True)
         with campaign_lock(self.out):
@@ -132,8 +129,7 @@ class Campaign:
         return todo
 
     def _collect_written(self, todo: Sequence[int]) -> None:
-        # A run whose result.json is on disk has finished, even when the interrupt came
-        # between its write and its delivery through the backend (the row would say pending).
+        # a run whose result.json is on disk has finished, delivered or not
         for i in todo:
             if self.rows.get(i, {}).get('status') in _FINISHED:
                 continue

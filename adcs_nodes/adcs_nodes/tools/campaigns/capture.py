@@ -1,7 +1,5 @@
-"""What a run's capture is measured against: the attitude the scenario's guidance commands,
-``angle(t_k) = 2 atan2(|v|, |w|)`` of ``q_orbit_target(t_k)^* (x) q_orbit_body(t_k)`` [deg]
-with the target published last at or before ``t_k`` (``docs/montecarlo.md``, "What captured
-means")."""
+"""What a run's capture is measured against: the guidance target last published
+(``docs/montecarlo.md``, "What captured means")."""
 from __future__ import annotations
 
 import os
@@ -17,10 +15,8 @@ _GUIDANCE_MODULE = 'adcs_nodes.nodes.guidance'
 
 
 def capture_reference(sc: Dict[str, Any]) -> str:
-    """:data:`ORBIT_FRAME` when the validated scenario ``sc``'s guidance holds the identity in
-    the orbit frame from start to end (or there is no guidance: no controller), else
-    :data:`GUIDANCE_TARGET`. The guidance is the component the run steps, built from the
-    parameters :func:`~adcs_nodes.graph.build_graph` gives the guidance node."""
+    """:data:`ORBIT_FRAME` when the scenario's guidance (or none) holds the identity in the
+    orbit frame from start to end, else :data:`GUIDANCE_TARGET`."""
     from adcs_nodes.components.base import param_values
     from adcs_nodes.components.guidance import PARAMS, GuidanceComponent
     from adcs_nodes.core.guidance import Guidance
@@ -38,10 +34,7 @@ def capture_reference(sc: Dict[str, Any]) -> str:
 
 
 def label_old_result(run_dir: str, result: Dict[str, Any]) -> Dict[str, Any]:
-    """A run's result as a resumed campaign reads it: a plain ``result.json`` without
-    ``capture_reference`` (it measured to the orbit frame) labelled so when that is its
-    scenario's reference, else ValueError (run again); OSError, KeyError or ScenarioError for
-    an unreadable scenario."""
+    """An old plain result (to the orbit frame) labelled so if right, else ValueError."""
     from adcs_nodes.scenario import load_scenario
 
     if result.get('engine') != 'plain' or 'capture_reference' in result:

@@ -11,8 +11,8 @@ from adcs_nodes.tools.campaigns.campaign import Campaign
 from adcs_nodes.tools.campaigns.capture import capture_reference
 from adcs_nodes.tools.campaigns.config import (ENGINES, CampaignConfig, CampaignError,
                                                Dispersion, apply_dispersion,
-                                               default_max_rate_deg_s, scenario_hash)
-from adcs_nodes.tools.campaigns.engine import plain_engine_problem, resolve_engine
+                                               default_max_rate_deg_s, plain_engine_problem,
+                                               resolve_engine, scenario_hash)
 from adcs_nodes.tools.campaigns.runner import serve
 
 #: The most runs of one campaign (one directory each under ``runs/``) and runs at once.
@@ -28,9 +28,8 @@ GRAPH_HINT = ('[montecarlo] engine graph: every run is the whole ROS graph, reco
 
 def add_campaign_arguments(parser: argparse.ArgumentParser, what: str = 'campaign',
                            runs: Optional[int] = None) -> None:
-    """What ``adcs montecarlo``, ``sweep`` and ``compare`` share: the scenario, runs (``runs``:
-    the default, None: required), where they run, the output directory (``what``: a campaign,
-    sweep or compare there is resumed)."""
+    """The arguments ``adcs montecarlo``, ``sweep`` and ``compare`` (``what``) share; ``runs``:
+    the default (None: required)."""
     parser.add_argument('scenario', help='base scenario YAML (closed loop, e.g. '
                         'scenarios/paper000_control.yaml)')
     parser.add_argument('--runs', type=int, required=runs is None, default=runs, metavar='N',
@@ -76,8 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_dispersion_arguments(parser: argparse.ArgumentParser) -> None:
-    """The run length, seed, capture threshold and dispersion options of a campaign (``adcs
-    montecarlo``; ``adcs sweep`` gives them to every grid point)."""
+    """The run length, seed, capture threshold and dispersion options of a campaign."""
     parser.add_argument('--duration', type=float, metavar='S',
                         help='simulated seconds per run (default: the scenario duration_s)')
     parser.add_argument('--seed', type=int, metavar='S',
@@ -98,15 +96,13 @@ def add_dispersion_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def max_rate_deg_s(args: argparse.Namespace, base: Dict[str, Any]) -> float:
-    """``--max-rate-deg-s``, else the scenario's default
-    (:func:`~adcs_nodes.tools.campaigns.config.default_max_rate_deg_s`) [deg/s]."""
+    """``--max-rate-deg-s``, else the scenario's default [deg/s]."""
     value = getattr(args, 'max_rate_deg_s', None)
     return float(value) if value is not None else default_max_rate_deg_s(base)
 
 
 def config_from_args(args: argparse.Namespace) -> tuple:
-    """Validate the arguments: ``(CampaignConfig, base scenario, out dir)``; the engine's
-    reason in ``args.engine_reason``; CampaignError or ScenarioError on a bad value."""
+    """Validate the arguments: ``(CampaignConfig, base scenario, out dir)``."""
     from adcs_nodes.scenario import load_scenario
 
     base = load_scenario(args.scenario)
@@ -163,8 +159,7 @@ def campaign_config(args: argparse.Namespace, base: Dict[str, Any], sc: Dict[str
 
 
 def check_dispersion(cfg: CampaignConfig, base: Dict[str, Any]) -> None:
-    """The widest run ``cfg`` can draw (every rate component, bias and misalignment at its
-    bound) validated as each run's scenario is: CampaignError up front, not every run failed."""
+    """The widest run ``cfg`` can draw validated up front (CampaignError)."""
     from adcs_nodes.scenario import ScenarioError, apply_overrides
     w, b, m = cfg.max_rate_deg_s, cfg.mag_bias_nT, cfg.misalignment_deg
     worst = Dispersion(0, 0, [0.0, 0.0, 0.0, 1.0], [w] * 3,
@@ -212,8 +207,7 @@ def run_from_args(args: argparse.Namespace) -> int:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    """``python -m adcs_nodes.tools.campaigns``: the campaign command, or (``_worker
-    STOP_FILE``, internal) a worker process of :func:`~.runner.execute_run`."""
+    """The campaign command, or (``_worker STOP_FILE``) a worker process."""
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ['_worker'] and len(argv) == 2:
         return serve(argv[1])

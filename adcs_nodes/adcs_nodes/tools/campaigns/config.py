@@ -1,29 +1,26 @@
-"""Campaign definition and the dispersion of each run (see the package docstring)."""
+"""Campaign definition, the dispersion of each run, the engine it runs on."""
 from __future__ import annotations
 
 import copy
 import hashlib
 import json
+import os
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
-#: Keys of ``campaign.json`` that must match for a restart to resume the campaign (one without
-#: ``capture_reference`` measured to the orbit frame).
+#: Keys of ``campaign.json`` that must match for a restart to resume the campaign.
 IDENTITY_KEYS = ('scenario_sha256', 'seed', 'duration_s', 'max_rate_deg_s', 'capture_deg',
                  'mag_bias_nT', 'misalignment_deg', 'auto_detumble', 'bdot_gain', 'engine',
                  'capture_reference')
-#: Default bound of each initial rate component [deg/s] by the first 3 characters of the
-#: scenario's ``paper:`` key: paper 000's "up to 3 deg/s"; 0.3 deg/s for paper 001, an
-#: ASSUMPTION (its wheels would saturate at 3 deg/s): ``docs/montecarlo.md``.
+#: Default bound of each initial rate component [deg/s] by the scenario's ``paper:``: paper
+#: 000's "up to 3 deg/s"; 0.3 for paper 001 (ASSUMPTION: ``docs/montecarlo.md``).
 MAX_RATE_BY_PAPER_DEG_S = {'000': 3.0, '001': 0.3}
 #: Default bound for a scenario of another paper or of none [deg/s] (paper 000's).
 DEFAULT_MAX_RATE_DEG_S = 3.0
 ENGINES = ('graph', 'plain')
-#: Automatic sequence written by ``--auto-detumble`` (``manager.auto``; the scenario schema's
-#: defaults): B-dot until ``|omega_body_eci_body|`` < 0.5 deg/s for 10 frames, then magnetic;
-#: back to B-dot above 1 deg/s.
+#: ``manager.auto`` of ``--auto-detumble``: B-dot below 0.5 deg/s, then magnetic.
 AUTO_DETUMBLE = {'detumble': 'bdot', 'acquire': 'magnetic', 'rate_enter_deg_s': 0.5,
                  'rate_exit_deg_s': 1.0, 'confirm_frames': 10, 'exit_confirm_frames': 1,
                  'rate_frame': 'eci'}
@@ -35,35 +32,8 @@ class CampaignError(ValueError):
 
 @dataclass(frozen=True)
 class CampaignConfig:
-    """What defines a campaign (its identity, :data:`IDENTITY_KEYS`) and its number of runs.
-
-    Attributes
-    ----------
-    scenario_path, scenario_sha256 : str
-        The base scenario YAML (absolute path) and the hash of its validated dict.
-    runs, seed : int
-        Runs ``0 .. runs - 1``; run ``i`` draws from ``default_rng([seed, i])``.
-    duration_s : float
-        Simulated duration of every run [s].
-    max_rate_deg_s, capture_deg : float
-        Bound of each initial rate component [deg/s] (:func:`default_max_rate_deg_s`);
-        capture threshold on the angle between the body and the guidance target [deg].
-    mag_bias_nT, misalignment_deg : float or None
-        Bound of each magnetometer bias component [nT] and misalignment rotation-vector
-        component [deg]; None: the scenario's (not dispersed).
-    auto_detumble : bool
-        Each run gets the automatic sequence :data:`AUTO_DETUMBLE` (``manager.auto``).
-    bdot_gain : float or None
-        B-dot gain of the detumble [A m^2 s/T]; None: the scenario's.
-    engine : str
-        ``'graph'`` (the ROS graph, a bag per run) or ``'plain'`` (the FrameLoop).
-    compose : bool
-        Each graph composed in one process (not part of the identity).
-    capture_reference : str
-        ``'orbit frame'`` or ``'guidance target'``
-        (:func:`~adcs_nodes.tools.campaigns.capture.capture_reference`): a campaign measured
-        to one is not resumed as one measured to the other.
-    """
+    """A campaign: its identity (:data:`IDENTITY_KEYS`; run ``i`` draws from
+    ``default_rng([seed, i])``; bounds [deg/s], [nT], [deg]) and its number of runs."""
 
     scenario_path: str
     scenario_sha256: str
@@ -87,20 +57,7 @@ class CampaignConfig:
 
 @dataclass(frozen=True)
 class Dispersion:
-    """Dispersed values of one run (:func:`draw_dispersion`).
-
-    Attributes
-    ----------
-    index, seed : int
-        Run index in the campaign; the run's scenario seed.
-    q_orbit_body_xyzw : list of float, shape (4,)
-        Initial attitude, body -> orbit, scalar last, ``w >= 0``.
-    omega_body_eci_body_deg_s : list of float, shape (3,)
-        Initial rate of body w.r.t. ECI, body axes [deg/s].
-    mag_bias_T, mag_misalignment_deg : list of float, shape (3,), or None
-        Magnetometer bias, sensor axes [T], and misalignment, body -> sensor rotation vector
-        [deg] (None: the scenario's).
-    """
+    """Dispersed values of run ``index``: rate [deg/s], bias [T], misalignment [deg]."""
 
     index: int
     seed: int
@@ -111,8 +68,7 @@ class Dispersion:
 
 
 def default_max_rate_deg_s(scenario: Dict[str, Any]) -> float:
-    """Default bound of each initial rate component [deg/s] of a campaign of ``scenario``
-    (:data:`MAX_RATE_BY_PAPER_DEG_S`, else :data:`DEFAULT_MAX_RATE_DEG_S`)."""
+    """Default bound of each initial rate component [deg/s] of a campaign of ``scenario``."""
     paper = str(scenario.get('paper') or '')[:3]
     return MAX_RATE_BY_PAPER_DEG_S.get(paper, DEFAULT_MAX_RATE_DEG_S)
 
@@ -124,9 +80,7 @@ def scenario_hash(scenario: Dict[str, Any]) -> str:
 
 
 def draw_dispersion(cfg: CampaignConfig, index: int) -> Dispersion:
-    """The dispersion of run ``index``, deterministic in ``cfg.seed`` and ``index``: attitude
-    uniform on SO(3), rate components uniform in ``+-max_rate_deg_s``, magnetometer bias and
-    misalignment uniform per axis, the run's scenario seed (``docs/montecarlo.md``)."""
+    """The dispersion of run ``index``: attitude uniform on SO(3), the rest per axis."""
     rng = np.random.default_rng([cfg.seed, index])
     q = rng.standard_normal(4)
     q /= np.linalg.norm(q)
@@ -144,10 +98,7 @@ def draw_dispersion(cfg: CampaignConfig, index: int) -> Dispersion:
 
 def apply_dispersion(base: Dict[str, Any], disp: Dispersion, duration_s: float,
                      cfg: Optional[CampaignConfig] = None) -> Dict[str, Any]:
-    """Deep copy of the validated scenario ``base`` with the run's dispersion written in: the
-    initial attitude and rate (replacing ``initial``'s alternative keys), the magnetometer
-    errors when dispersed, with ``cfg.auto_detumble`` the manager's :data:`AUTO_DETUMBLE`
-    (and ``cfg.bdot_gain``)."""
+    """Deep copy of the validated ``base`` with the run's dispersion (and ``cfg``) in."""
     sc = copy.deepcopy({k: v for k, v in base.items() if not k.startswith('_')})
     sc['seed'] = disp.seed
     sc['duration_s'] = float(duration_s)
@@ -169,3 +120,42 @@ def apply_dispersion(base: Dict[str, Any], disp: Dispersion, duration_s: float,
         if cfg.bdot_gain is not None and 'bdot' in sc.get('controllers', {}):
             sc['controllers']['bdot']['gain_Am2s_per_T'] = float(cfg.bdot_gain)
     return sc
+
+
+# ---------------------------------------------------------------------- engine (--engine)
+def plain_engine_problem(sc: Dict[str, Any]) -> Optional[str]:
+    """Why the plain engine cannot run the validated ``sc``; None when it can."""
+    external = sorted(k for k, cfg in (sc.get('sensors') or {}).items() if cfg.get('external'))
+    if external:
+        return f'external sensors ({", ".join(external)}) need their drivers: a graph'
+    return None
+
+
+def recorded_engine(out: str) -> Optional[str]:
+    """The engine in ``out/campaign.json`` (default ``'graph'``), or None (no campaign)."""
+    path = os.path.join(out, 'campaign.json')
+    if not os.path.isfile(path):
+        return None
+    try:
+        with open(path, encoding='utf-8') as fh:
+            data = json.load(fh)
+    except (OSError, ValueError):
+        return None   # unreadable: the identity check reports it
+    engine = data.get('engine', 'graph') if isinstance(data, dict) else None
+    return engine if engine in ENGINES else None
+
+
+def resolve_engine(requested: Optional[str], sc: Dict[str, Any],
+                   out: str) -> Tuple[str, str]:
+    """``(engine, reason)`` of a campaign of ``sc`` in ``out`` for ``--engine`` ``requested``."""
+    if requested in ENGINES:
+        return requested, '--engine'
+    if requested not in (None, 'auto'):
+        raise ValueError(f'--engine must be auto, {" or ".join(ENGINES)}, got {requested!r}')
+    old = recorded_engine(out)
+    if old is not None:
+        return old, 'auto: the engine of the campaign being resumed'
+    problem = plain_engine_problem(sc)
+    if problem is None:
+        return 'plain', 'auto: the plain engine runs this scenario'
+    return 'graph', f'auto: {problem}'

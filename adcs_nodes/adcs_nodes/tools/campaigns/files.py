@@ -23,8 +23,7 @@ def write_json_atomic(path: str, data: Any) -> None:
 
 
 def write_text_atomic(path: str, text: str, fsync: bool = False) -> None:
-    """Write ``text`` to ``path`` atomically: a temporary file unique per writer and attempt,
-    then ``os.replace``."""
+    """Write ``text`` to ``path`` atomically (a unique temporary file, ``os.replace``)."""
     tmp = f'{path}.tmp-{uuid.uuid4().hex}'
     with open(tmp, 'w', encoding='utf-8', newline='') as fh:
         fh.write(text)
@@ -57,10 +56,7 @@ def run_dir_of(out: str, index: int) -> str:
 
 
 def load_result(run_dir: str) -> Optional[Dict[str, Any]]:
-    """The run's ``result.json`` when the run is done (its data there: the bag's
-    ``metadata.yaml`` or ``series.npz``), else None. An old plain result is labelled
-    (:func:`~adcs_nodes.tools.campaigns.capture.label_old_result`) or, when it cannot be, the
-    reason goes to ``failed.json`` and the run is run again."""
+    """The run's ``result.json`` when it is done, else None (an unlabelled old one: failed)."""
     from adcs_nodes.tools.campaigns.capture import label_old_result
 
     path = os.path.join(run_dir, RESULT_FILE)
@@ -81,8 +77,7 @@ def load_result(run_dir: str) -> Optional[Dict[str, Any]]:
         return None
 
 
-#: What a campaign directory holds (``True``: a directory); anything else in their place is
-#: refused in one line before the campaign starts.
+#: What a campaign directory holds (``True``: a directory); anything else there is refused.
 LAYOUT = {'campaign.json': False, 'campaign.csv': False, 'summary.md': False,
           'capture_vs_rate.png': False, '.lock': False, 'runs': True}
 

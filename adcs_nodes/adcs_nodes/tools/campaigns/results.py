@@ -15,12 +15,8 @@ TARGET_TOPIC = '/adcs/attitude_target'
 
 
 def read_truth(bag: str) -> Dict[str, np.ndarray]:
-    """``/sim/state`` of a bag as arrays, one per sim-time stamp (repeats dropped): ``t_s``
-    (n,) [s since the first], ``q`` (n, 4) ``q_orbit_body``, ``w_eci``, ``w_orbit`` (n, 3)
-    [rad/s]; ``target_angle_deg`` (n,) the angle to the latest ``/adcs/attitude_target`` at or
-    before the sample in its frame (``orbit`` or ``eci``; NaN before the first) and
-    ``target_judged`` (n,) False where that target is a maneuver's end state. ValueError
-    without ``/sim/state``."""
+    """``/sim/state`` of a bag, a row per stamp (rates [rad/s]), with the angle to the latest
+    target (NaN: none yet); ValueError without ``/sim/state``."""
     from adcs_nodes.bag import header_stamp_ns, read_messages
 
     stamps: List[int] = []
@@ -66,8 +62,7 @@ def _xyzw(o: Any) -> tuple:
 
 
 def angle_to_target_deg(q_frame_body: np.ndarray, q_frame_target: np.ndarray) -> np.ndarray:
-    """Angle between body and target [deg], both in the same frame, shape (n,): ``2 atan2(|v|,
-    |w|)`` of ``[v, w] = q_frame_target^* (x) q_frame_body``."""
+    """Angle [deg] of ``q_frame_target^* (x) q_frame_body``, shape (n,)."""
     return metrics.angle_between_deg(q_frame_target, q_frame_body)
 
 
@@ -75,14 +70,8 @@ def series_metrics(t_s: np.ndarray, q_orbit_body: np.ndarray, w_eci: np.ndarray,
                    w_orbit: np.ndarray, capture_deg: float, period_s: Optional[float],
                    angle_deg: Optional[np.ndarray] = None,
                    judged: Optional[np.ndarray] = None) -> Dict[str, Any]:
-    """Run metrics and status from the truth series of one run: ``t_s`` (n,) [s since the
-    start], ``q_orbit_body`` (n, 4), ``w_eci`` and ``w_orbit`` (n, 3) [rad/s]; ``capture_deg``
-    the band [deg] (the hold band twice it); ``period_s`` [s] or None; ``angle_deg`` (n,) to the
-    guidance target (default the orbit frame's); ``judged`` (n,) the samples judged (default
-    all; none: not captured). Returns ``status`` (``captured``/``not_captured``), the keys of
-    :func:`~adcs_nodes.tools.analyse.metrics.run_metrics` over the judged samples,
-    ``final_angle_deg``, ``final_rate_deg_s`` (to the orbit frame), ``max_rate_deg_s`` (to ECI),
-    ``samples`` and ``bag_initial`` (the first sample); non-finite values None."""
+    """``status`` and ``run_metrics`` over the ``judged`` samples of one run's truth (rates
+    [rad/s]); ``capture_deg`` the band; ``angle_deg`` to the target (default: orbit frame)."""
     t = np.asarray(t_s, dtype=float)
     angle = (metrics.angle_to_identity_deg(q_orbit_body) if angle_deg is None
              else np.asarray(angle_deg, dtype=float))
@@ -113,9 +102,7 @@ def series_metrics(t_s: np.ndarray, q_orbit_body: np.ndarray, w_eci: np.ndarray,
 
 def bag_metrics(bag: str, capture_deg: float, period_s: Optional[float] = None,
                 reference: str = ORBIT_FRAME) -> Dict[str, Any]:
-    """:func:`series_metrics` of a run's bag (its ``/sim/state``, the truth): the angle to the
-    orbit frame, or with ``reference`` :data:`~.capture.GUIDANCE_TARGET` to the recorded
-    ``/adcs/attitude_target``. Adds ``capture_reference``."""
+    """:func:`series_metrics` of a run's bag, to the orbit frame or the recorded target."""
     truth = read_truth(bag)
     target = reference != ORBIT_FRAME
     return {**series_metrics(truth['t_s'], truth['q'], truth['w_eci'], truth['w_orbit'],

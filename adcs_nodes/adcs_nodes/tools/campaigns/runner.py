@@ -1,6 +1,5 @@
-"""One run: the worker process that runs it and the supervisor that feeds and watches it. A
-campaign starts its workers once and feeds them runs (numpy, numba and the packages imported
-once per worker); a graph run, whose nodes are processes anyway, gets a worker of its own."""
+"""One run: the worker process that runs it (started once per campaign thread; a graph run's
+its own) and the supervisor that feeds and watches it."""
 from __future__ import annotations
 
 import fcntl
@@ -31,9 +30,7 @@ SERVER_COMMAND = ['-m', 'adcs_nodes.tools.campaigns', '_worker']
 #: Prefix of a worker's reply line (the rest is JSON ``{"code", "message"}``).
 REPLY = '@adcs-run-ended '
 #: Set in every worker's environment: one BLAS/OpenMP/numba thread per worker (J workers share
-#: J cores; the models make only tiny LAPACK calls, where extra threads cost CPU and give the
-#: same bits: :mod:`adcs_nodes.nodes.runtime`). The numba kernels use their on-disk cache
-#: (``cache=True``), so a worker loads them instead of compiling.
+#: J cores: :mod:`adcs_nodes.nodes.runtime`).
 ONE_THREAD_ENV = {key: '1' for key in (
     'OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'BLIS_NUM_THREADS',
     'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS', 'NUMBA_NUM_THREADS')}
@@ -45,9 +42,7 @@ def worker_env() -> Dict[str, str]:
 
 
 def worker_main(run_dir: str) -> int:
-    """A graph-engine run: launch the dispersed scenario, record it, write ``result.json``
-    (capture judged from the bag, :mod:`.capture`) or ``failed.json``; nothing when
-    interrupted (exit code 130)."""
+    """A graph-engine run recorded to a bag: ``result.json`` or ``failed.json``."""
     from adcs_nodes.tools.run.launcher import LaunchError, Launcher
     from adcs_nodes.scenario import ScenarioError, load_scenario
 
@@ -83,11 +78,8 @@ def worker_main(run_dir: str) -> int:
 
 
 class RunOwner:
-    """One run in one worker process at a time: an exclusive ``flock`` on ``RUN_DIR.owner``
-    (beside the run directory, which a new attempt recreates) held for the run by the process
-    named in it (host, pid). A previous holder still alive on this host is ended (its process
-    group: SIGTERM, SIGKILL after :data:`STOP_GRACE_S`) first; on another host the run is
-    refused (CampaignError)."""
+    """One run in one worker process at a time: a ``flock`` on ``RUN_DIR.owner``; a holder
+    alive on this host is ended first, one on another host refuses the run."""
 
     def __init__(self, run_dir: str) -> None:
         self.path = run_dir.rstrip('/') + '.owner'
@@ -144,10 +136,7 @@ class RunOwner:
 
 
 class RunServer:
-    """A worker process (:func:`serve`) seen from its supervisor: a run goes as its directory
-    (a line on the worker's stdin), its exit code comes back (a :data:`REPLY` line). The
-    worker has its own session, a parent-death signal (it ends with the thread that started
-    it) and one BLAS thread."""
+    """A worker process (:func:`serve`) seen from its supervisor."""
 
     def __init__(self, stop_file: str) -> None:
         from adcs_nodes.tools.run.launcher.processes import with_parent_death_signal
@@ -161,10 +150,7 @@ class RunServer:
         return self.proc.poll() is None
 
     def run(self, run_dir: str, stop_file: str) -> Tuple[int, str]:
-        """Exit code and message of the run in ``run_dir``. When ``stop_file`` appears the
-        run gets SIGINT, repeated every :data:`SIGINT_REPEAT_S` (a worker of ``--dask-local``
-        starts with SIGINT ignored until :func:`serve` installs its handler), and SIGKILL
-        after :data:`STOP_GRACE_S`."""
+        """Exit code and message of the run in ``run_dir`` (SIGINT once ``stop_file`` is)."""
         try:
             self.proc.stdin.write(run_dir + '\n')
             self.proc.stdin.flush()
@@ -207,8 +193,7 @@ class RunServer:
         self.proc.stdout.close()
 
 
-#: The workers of this process by (supervising thread, campaign stop file): one thread's
-#: plain-engine runs of one campaign go to one worker; a graph run gets a worker of its own.
+#: The plain-engine workers of this process by (supervising thread, campaign stop file).
 _SERVERS: Dict[Tuple[int, str], RunServer] = {}
 _SERVERS_LOCK = threading.Lock()
 
@@ -234,14 +219,7 @@ def close_servers(stop_file: Optional[str] = None) -> int:
 
 
 def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
-    """Run one prepared run directory (``job``: ``index``, ``run_dir``, ``stop_file``,
-    ``engine``) in this thread's worker process for the campaign and return its result
-    (``result.json``, or ``{'index', 'status': 'error' | 'interrupted', 'message', ...}``).
-
-    The unit of work of the local thread pool and of Dask workers. A plain-engine worker whose
-    run ended well is kept for the thread's next run. When ``stop_file`` appears (Ctrl-C on
-    the campaign) the run gets SIGINT and is reported ``interrupted``.
-    """
+    """Run one prepared run directory in this thread's worker process; its result dict."""
     run_dir, index = job['run_dir'], job['index']
     if os.path.exists(job['stop_file']):
         return {'index': index, 'status': 'interrupted', 'message': 'not started'}
@@ -264,14 +242,8 @@ def execute_run(job: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def serve(stop_file: str, run: Optional[Callable[[str], int]] = None) -> int:
-    """Body of a worker process: the run directories read from stdin, one at a time until end
-    of input, each answered with :data:`REPLY` and ``{"code", "message"}``.
-
-    A run holds its :class:`RunOwner` lock, starts clean, writes stdout and stderr to
-    ``worker.log``; ``run(run_dir)`` (default :func:`run_job`) gives the exit code (130:
-    interrupted; an exception: 1, its traceback in the log). Nothing starts once the
-    campaign's ``stop_file`` exists.
-    """
+    """Body of a worker process: each run directory from stdin run by ``run`` (its
+    :class:`RunOwner` held) and answered with :data:`REPLY` ``{"code", "message"}``."""
     signal.signal(signal.SIGINT, signal.default_int_handler)   # inherited ignored (Dask)
     replies = os.fdopen(os.dup(1), 'w', buffering=1)
     quiet = os.open(os.devnull, os.O_WRONLY)
@@ -316,8 +288,7 @@ def _serve_one(run_dir: str, stop_file: str, run: Callable[[str], int],
 
 
 def run_job(run_dir: str) -> int:
-    """One run on its engine (``job.json``): the FrameLoop
-    (:func:`adcs_nodes.tools.campaigns.worker.mc_worker`) or a graph (:func:`worker_main`)."""
+    """One run on its engine (``job.json``): the FrameLoop or a graph."""
     with open(os.path.join(run_dir, 'job.json'), encoding='utf-8') as fh:
         engine = json.load(fh).get('engine', 'graph')
     if engine == 'plain':

@@ -1,10 +1,4 @@
-"""``adcs sweep``: one Monte Carlo campaign per point of a parameter grid, on the plain engine.
-
-The grid (dotted scenario keys of ``adcs run --set``, YAML values separated by the commas
-outside brackets; the product of the keys' values, every point validated before the first
-run), the same draws at every point (one campaign per point in ``OUT/points/``, resumable),
-the table and the heat map: ``docs/montecarlo.md``, "Parameter sweeps".
-"""
+"""``adcs sweep``: a Monte Carlo campaign per grid point, plain engine (``docs/montecarlo.md``)."""
 from __future__ import annotations
 
 import argparse
@@ -44,8 +38,7 @@ class SweepError(CampaignError):
 
 # ---------------------------------------------------------------------- the grid
 def split_values(text: str) -> List[str]:
-    """Split ``V1,V2,...`` at the commas outside brackets, braces and quotes; SweepError for an
-    empty value or unbalanced brackets or quotes."""
+    """Split ``V1,V2,...`` at the commas outside brackets and quotes; SweepError."""
     parts, depth, quote, cur = [], 0, '', ''
     for ch in text:
         if quote:
@@ -77,9 +70,7 @@ def split_values(text: str) -> List[str]:
 
 
 def parse_grid(items: Sequence[str]) -> List[Tuple[str, List[Any]]]:
-    """``--set KEY=V1,V2`` items to ``[(key, [values])]`` (YAML values, as ``adcs run --set``);
-    SweepError for no ``--set`` or a key or value given twice, ScenarioError for an item
-    without ``=`` or a value that is not YAML."""
+    """``--set KEY=V1,V2`` items to ``[(key, [values])]`` (YAML values)."""
     from adcs_nodes.scenario import parse_overrides
     if not items:
         raise SweepError('give at least one --set KEY=V1,V2,... (the grid)')
@@ -112,8 +103,7 @@ def swept_keys(grid: Sequence[Tuple[str, Sequence[Any]]]) -> List[str]:
 
 
 def point_name(point: Dict[str, Any]) -> str:
-    """Directory name of a grid point: its overrides made file-safe, plus a short hash of the
-    exact overrides (two points never share a name)."""
+    """Directory name of a grid point: its overrides made file-safe, plus their short hash."""
     text = '__'.join(f'{k.rsplit(".", 1)[-1]}={_value_text(v)}' for k, v in point.items())
     safe = re.sub(r'[^A-Za-z0-9._=+-]+', '_', text)[:120]
     digest = hashlib.sha256(json.dumps(point, sort_keys=True).encode()).hexdigest()[:8]
@@ -126,12 +116,8 @@ def _value_text(v: Any) -> str:
 
 # ---------------------------------------------------------------------- metrics of a point
 def run_convergence(run_dir: str, period_s: Optional[float]) -> Dict[str, Any]:
-    """Filter convergence of one finished plain-engine run (its ``series.npz``), two readings
-    of the paper's "the estimates converge within half an orbit": ``converged_s``, the
-    paper-000 table's criterion (error below ``CONVERGED_DEG`` = 2 deg for good) over the
-    first orbit (the paper's estimation run; later capture maneuvers push a converged filter
-    to 2-4 deg), and ``converged_5deg_s``, below 5 deg for good over the whole run [s since the
-    start; None: never, or no estimate]; ``has_estimate``."""
+    """Filter convergence of a finished plain run [s; None: never]: below ``CONVERGED_DEG``
+    for good in the first orbit (paper 000), and below 5 deg for good over the run."""
     path = os.path.join(run_dir, SERIES_FILE)
     none = {'converged_s': None, 'converged_5deg_s': None, 'has_estimate': False}
     if not os.path.isfile(path):
@@ -148,9 +134,7 @@ def run_convergence(run_dir: str, period_s: Optional[float]) -> Dict[str, Any]:
 
 def point_metrics(results: Sequence[Dict[str, Any]], runs: int,
                   period_s: Optional[float]) -> Dict[str, Any]:
-    """The row of one grid point (pure): the keys of :data:`COLUMNS` but ``out`` from the
-    ``result.json`` of its finished runs (with :func:`run_convergence` added), ``runs`` in all
-    and the orbit period [s]; None where nothing can be said."""
+    """The row of one grid point (:data:`COLUMNS` but ``out``) from its finished runs."""
     done = [r for r in results if r.get('status') in ('captured', 'not_captured')]
     cap = [r for r in done if r['status'] == 'captured']
     in_time = sum(1 for r in done if r.get('captured_in_time'))
@@ -262,8 +246,7 @@ def write_csv(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) ->
 
 
 def plot_map(path: str, rows: Sequence[Dict[str, Any]], keys: Sequence[str]) -> bool:
-    """``sweep.png``: captured within 4 orbits [%] over one or two swept keys; False (nothing
-    written) for another number of keys."""
+    """``sweep.png`` over one or two swept keys (else False, nothing written)."""
     if len(keys) not in (1, 2) or not rows:
         return False
     import matplotlib
@@ -321,9 +304,7 @@ Prepared = Tuple[Dict[str, Any], List[Tuple[str, List[Any]]], List[Dict[str, Any
 
 
 def prepare(args: argparse.Namespace) -> Prepared:
-    """Validate everything before a run: ``(base scenario, grid, points, out)``, each point
-    ``{'point', 'scenario', 'cfg', 'out'}``; SweepError, CampaignError or ScenarioError (exit
-    2)."""
+    """Validate everything first: ``(base scenario, grid, points, out)``."""
     from adcs_nodes.tools.campaigns.cli import plain_config
     from adcs_nodes.scenario import apply_overrides
     grid = parse_grid(args.set)
@@ -348,8 +329,7 @@ def _point_text(point: Dict[str, Any]) -> str:
 
 
 def run_from_args(args: argparse.Namespace, log=None) -> int:
-    """``adcs sweep``: run or resume every grid point, then print the table; exit code
-    (0 done, 1 a run failed, 2 bad arguments, 130 interrupted)."""
+    """``adcs sweep``: run or resume every grid point, print the table; the exit code."""
     from adcs_nodes.scenario import ScenarioError
     log = log or (lambda text: print(text, flush=True))
     try:

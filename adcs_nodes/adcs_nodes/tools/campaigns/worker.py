@@ -11,21 +11,11 @@ from sim_node.engine import FrameLoop
 
 
 def run_series(loop: FrameLoop) -> Dict[str, Any]:
-    """Run ``loop`` to the end: the per-frame series of a study or a Monte Carlo run (numpy
-    arrays, one row per frame; NaN before a topic's first sample).
-
-    ``t_s`` [s]; truth ``q_orbit_body`` (n, 4), ``w_eci``, ``w_orbit`` (n, 3)
-    ``omega_body_eci_body``, ``omega_body_orbit_body`` [rad/s]; the latest estimate ``q_est``
-    (n, 4), ``w_est`` (n, 3); ``angle_deg`` body to orbit frame; ``est_err_deg``,
-    ``rate_err_deg_s``; ``active`` the forwarded controller (``source`` of
-    ``adcs/actuator_command``); ``period_s`` the orbital period at the end;
-    ``q_orbit_target`` (n, 4) the latest published guidance target in the orbit frame (an ECI
-    one converted with the frame's truth, ``q_orbit_body (x) q_eci_body^* (x)
-    q_eci_target``); ``target_judged`` (n,) False while it is a maneuver's end state
-    (:mod:`.capture`); ``dipole_body_Am2`` (n, 3) the forwarded dipole (zero before the
-    first); ``b_body_T`` (n, 3) the true field, body axes; ``wheel_momentum_Nms``,
-    ``wheel_torque_Nm`` (n, wheels) the true momentum and applied motor torque.
-    """
+    """Run ``loop`` to the end: its per-frame series (NaN before a topic's first sample): truth
+    ``q_orbit_body``, ``w_eci``, ``w_orbit`` [rad/s]; latest estimate ``q_est``, ``w_est``;
+    ``angle_deg``, ``est_err_deg``, ``rate_err_deg_s``; ``active``; ``period_s``; the latest
+    target in the orbit frame ``q_orbit_target`` and ``target_judged``; ``dipole_body_Am2``,
+    ``b_body_T`` (body axes), ``wheel_momentum_Nms``, ``wheel_torque_Nm`` (n, wheels)."""
     import math
 
     import numpy as np
@@ -80,14 +70,7 @@ def run_series(loop: FrameLoop) -> Dict[str, Any]:
 
 
 def mc_worker(run_dir: str) -> int:
-    """One Monte Carlo run on the plain engine (``adcs montecarlo``, any scenario).
-
-    The prepared run directory's ``job.json`` and ``scenario.yaml`` run on the FrameLoop:
-    ``series.npz`` (:func:`run_series`) and ``result.json`` (:func:`.results.series_metrics`,
-    capture to the ``capture_reference``, :mod:`.capture`), or ``failed.json``; exit code 130
-    on SIGINT (nothing written). ``frameloop_cpu_s``: building and stepping the FrameLoop
-    (:class:`CpuTimed`) [s]; ``cpu_s``: the run's.
-    """
+    """One plain-engine Monte Carlo run in a prepared run directory; 130 on SIGINT."""
     import json
     import uuid
 
@@ -138,9 +121,7 @@ def mc_worker(run_dir: str) -> int:
 
 
 class CpuTimed:
-    """The FrameLoop ``build()`` returns, with the CPU time [s] of its building and of its
-    frame steps (not of the code that consumes its frames) in ``cpu_s``. The frames are made
-    :data:`CHUNK` at a time, so that the CPU clock (a system call) is read twice a chunk."""
+    """The FrameLoop ``build()`` returns, with the CPU time [s] of building and stepping it."""
 
     CHUNK = 64
 

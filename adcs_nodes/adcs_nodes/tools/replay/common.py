@@ -46,9 +46,8 @@ def bag_topics(bag: str) -> Dict[str, str]:
 def read_samples(bag: str, topics: Iterable[str], decode: Sequence[str] = (),
                  header_only: bool = False
                  ) -> Tuple[List[Sample], List[Sample], List[Tuple[str, int, object]]]:
-    """The recorded messages of ``topics``: ``(timed in stamp order (recording order within a
-    stamp), static (``/tf_static``), decoded (topic, stamp, message) of the ``decode``
-    topics)``. ReplayError for a topic without a time stamp or an unreadable bag."""
+    """``(timed samples in stamp order, static ones, decoded (topic, stamp, message))`` of
+    ``topics``; ReplayError for a topic without a stamp or an unreadable bag."""
     timed: List[Sample] = []
     static: List[Sample] = []
     decoded: List[Tuple[str, int, object]] = []
@@ -83,8 +82,7 @@ def restamp(raw: bytes, stamp_ns: int) -> bytes:
 
 
 def latched_qos():
-    """``/tf_static`` as tf2's static listener takes it: depth 100, transient local (every
-    sensor node's mount must reach a late reader)."""
+    """``/tf_static`` as tf2's static listener takes it: depth 100, transient local."""
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     return QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                       history=HistoryPolicy.KEEP_LAST,

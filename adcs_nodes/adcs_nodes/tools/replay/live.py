@@ -11,16 +11,13 @@ from adcs_nodes.tools.replay.common import (NS_PER_S, SENSOR_PREFIX, STATIC_TOPI
                                             message_class, read_samples, restamp, topic_name)
 
 CLOCK_TICK_S = 0.01
-#: After every replayed topic has a subscriber [s]: the subscriber's side matches our writer
-#: on its own schedule, and a best-effort sample sent before it did is dropped. ASSUMPTION:
-#: 1 s covers that lag on one machine, also under load.
+#: After every replayed topic has a subscriber [s], for its side to match (ASSUMPTION).
 MATCH_SETTLE_S = 1.0
 
 
 def load_samples(bag: str, topics: Optional[Sequence[str]] = None
                  ) -> Tuple[Dict[str, str], List[Sample], List[Sample]]:
-    """Read the bag: ``(types, timed samples in stamp order, static samples)``; ReplayError
-    for a missing or unreadable bag, a topic not in it, no sensor topic, no ``header.stamp``."""
+    """``(types, timed samples in stamp order, static samples)`` of the bag; ReplayError."""
     available = bag_topics(bag)
     wanted = [topic_name(t) for t in topics] if topics else sorted(
         t for t in available if t.startswith(SENSOR_PREFIX))
@@ -65,11 +62,7 @@ def replay(bag: str, topics: Optional[Sequence[str]] = None, rate: float = 1.0,
            time_offset_s: float = 0.0, now: bool = False, clock: Optional[bool] = None,
            wait_s: float = 0.0, start_s: float = 0.0, duration_s: Optional[float] = None,
            log=print) -> int:
-    """Publish the bag's sensor topics (``adcs replay``); the number of timed messages
-    published. ``rate``: sim seconds per wall second; ``time_offset_s`` added to every stamp
-    and to ``/clock``; ``now``: stamps shifted to the wall clock (``rate`` 1); ``clock``:
-    publish ``/clock`` (default: unless ``now``); ``wait_s``: for a subscriber on every topic
-    first; only stamps in ``[first + start_s, first + start_s + duration_s]``."""
+    """Publish the bag's sensor topics as ``adcs replay`` says; the timed messages sent."""
     _check(rate, time_offset_s, now, wait_s, start_s, duration_s)
     epoch = bag_epoch(bag)
     types, timed, static = load_samples(bag, topics)

@@ -1,9 +1,5 @@
-"""Lockstep replay: nodes started alone in ``timing_mode: lockstep`` (the launcher's
-parameters, :func:`write_params`) get what they awaited in the recorded run (the ``sub:``
-entries of their handshake; reliable, depth 100, ``/tf_static`` latched), frame by frame
-(every message up to a recorded ``/clock`` tick, then the tick), paced by their
-``lockstep/ready`` (at most ``MAX_LAG_FRAMES`` ahead), until each processed its last
-recorded frame: they publish the recorded outputs again, bit for bit."""
+"""Lockstep replay: nodes started alone get what they awaited in the run, frame by frame, and
+publish the recorded outputs again, bit for bit."""
 from __future__ import annotations
 
 import dataclasses
@@ -21,12 +17,7 @@ STATUS_TOPIC = '/lockstep/status'
 
 @dataclass
 class LockstepPlan:
-    """What a lockstep replay publishes and when it is done (:func:`lockstep_plan`):
-    replayed topic -> ``types`` and number of ``subscribers`` among the followed nodes; the
-    recorded ``/clock`` ticks (``clocks``, one frame each), the other stamped inputs
-    (``timed``) and ``/tf_static`` (``static``); the base frame ``frame_ns``; node ->
-    ``last_done`` (stamp [ns] of the last frame it processed in the recording) and ``params``
-    (for a lockstep run alone)."""
+    """What a lockstep replay publishes, and when each node is done (``last_done`` [ns])."""
 
     types: Dict[str, str]
     subscribers: Dict[str, int]
@@ -39,8 +30,7 @@ class LockstepPlan:
 
 
 def graph_nodes(bag: str, nodes: Sequence[str], plugins: Sequence[str] = ()):
-    """Node specs of ``nodes`` in the graph of the bag's scenario (validated, importing only
-    the given ``plugins``)."""
+    """Node specs of ``nodes`` in the graph of the bag's scenario (with the given plugins)."""
     from adcs_nodes.graph import build_graph
     from adcs_nodes.tools.bagfile import BagError, validated_scenario
     if 'dynamics' in nodes:
@@ -62,9 +52,7 @@ def graph_nodes(bag: str, nodes: Sequence[str], plugins: Sequence[str] = ()):
 
 
 def lockstep_params(spec) -> Dict:
-    """The launcher's parameters of ``spec`` for a lockstep run alone: ``timing_mode:
-    lockstep``, the handshake waiting only for its inputs, no ``expected_publishers`` (the
-    replay publishes) and no ``autostart`` (it activates itself)."""
+    """The launcher's parameters of ``spec`` for a lockstep run alone, fed by the replay."""
     params = dict(spec.params, timing_mode='lockstep')
     for key in ('expected_publishers', 'autostart'):
         params.pop(key, None)
@@ -77,9 +65,7 @@ def lockstep_params(spec) -> Dict:
 def lockstep_plan(bag: str, nodes: Sequence[str] = ('estimator',),
                   topics: Optional[Sequence[str]] = None,
                   plugins: Sequence[str] = ()) -> LockstepPlan:
-    """What a lockstep replay for ``nodes`` needs from ``bag``: the inputs each awaited in the
-    recorded run, or ``topics`` plus ``/clock`` and ``/tf_static``. ReplayError for a missing or
-    unreadable bag or scenario, an unknown node, a missing topic, no ``/clock``, no stamp."""
+    """What a lockstep replay for ``nodes`` needs from ``bag``; ReplayError."""
     if not nodes:
         raise ReplayError('--nodes: name at least one node to follow')
     params = {s.name: lockstep_params(s) for s in graph_nodes(bag, nodes, plugins)}
@@ -133,8 +119,7 @@ def write_params(bag: str, nodes: Sequence[str], path: str, log=print,
 
 
 class _Follower:
-    """The followed nodes as the replay sees them: ready, read up to, processed up to
-    (stamps [ns]), final; spun by one rclpy executor."""
+    """The followed nodes as the replay sees them (stamps [ns])."""
 
     def __init__(self, node, executor, nodes: Sequence[str], first_ns: int, frame_ns: int,
                  stall_s: float, log) -> None:
@@ -211,10 +196,7 @@ class _Follower:
 def replay_lockstep(bag: str, nodes: Sequence[str] = ('estimator',),
                     topics: Optional[Sequence[str]] = None, wait_s: float = 60.0,
                     stall_s: float = 30.0, log=print, plugins: Sequence[str] = ()) -> int:
-    """Feed ``nodes`` (running alone in lockstep) frame by frame from ``bag``; the number of
-    messages published (``/clock`` included). ReplayError as :func:`lockstep_plan` or for a bad
-    ``wait_s``/``stall_s``; LockstepStall for a node not ready within ``wait_s`` or without
-    progress for ``stall_s``."""
+    """Feed ``nodes`` frame by frame from ``bag``; the messages published. LockstepStall."""
     if not (wait_s > 0 and stall_s > 0 and math.isfinite(wait_s) and math.isfinite(stall_s)):
         raise ReplayError('--wait and --stall-timeout must be positive')
     plan = lockstep_plan(bag, nodes, topics, plugins)
@@ -263,8 +245,7 @@ def replay_lockstep(bag: str, nodes: Sequence[str] = ('estimator',),
 
 
 def _feed(plan: LockstepPlan, pubs: Dict, follow: _Follower) -> int:
-    """Publish frame by frame, never more than ``MAX_LAG_FRAMES`` ahead of the slowest
-    reader; wait until each node has processed its recorded last frame."""
+    """Publish frame by frame, at most ``MAX_LAG_FRAMES`` ahead, until every node is done."""
     from adcs_nodes.nodes.lockstep_node import MAX_LAG_FRAMES
     lag_ns = MAX_LAG_FRAMES * plan.frame_ns
     i = 0

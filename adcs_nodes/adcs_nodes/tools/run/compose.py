@@ -1,16 +1,8 @@
-"""Composed deployment (``adcs run --engine composed``): the graph's node classes and
-parameters in one process on one ``EventsExecutor``, like a component container, the same
-trajectory (tested)::
-
-    python -m adcs_nodes.tools.run.compose --params-file params.yaml \\
-        --nodes environment=sim_node.nodes.environment:EnvironmentNode ...
-
-It ends when the clock master is done (after a short drain for the recorder) or on
-SIGINT/SIGTERM; unconfigured managed nodes are configured and activated in process first (a
-refusal: exit 2 with its reason). The in-process path (default; ``--dds`` or
-``ADCS_COMPOSE_INPROC=0``: all over DDS) delivers a volatile topic's message straight to the
-local subscriptions while no outside subscription is matched, else over DDS only
-(:class:`InProcessBus`)."""
+"""Composed deployment (``adcs run --engine composed``): the graph's nodes in one process on
+one ``EventsExecutor``, the same trajectory. Ends when the clock master is done or on
+SIGINT/SIGTERM; managed nodes are configured and activated in process (a refusal: exit 2).
+Volatile topics go straight to the local subscriptions while no outside one is matched
+(:class:`InProcessBus`; ``--dds`` or ``ADCS_COMPOSE_INPROC=0``: all over DDS)."""
 from __future__ import annotations
 
 import argparse
@@ -63,13 +55,8 @@ def build_nodes(specs: List[str], params_doc: Dict[str, Any]):
 
 
 class InProcessBus:
-    """Direct delivery between the nodes of this process (see the module docstring).
-
-    Deliveries are queued and run first in first out when the publishing executor callback (a
-    wrapped subscription callback) has returned, so no callback runs inside another; a publish
-    from elsewhere (timer, service), and a chain longer than ``max_batch``, is delivered by a
-    zero-period one-shot timer at the executor's next turn. ``nodes``: the composed nodes (their
-    current publishers and subscriptions are linked)."""
+    """Direct delivery between the composed ``nodes``, first in first out after the
+    publishing callback (else by a one-shot timer): no callback runs inside another."""
 
     def __init__(self, nodes, max_batch: int = 500) -> None:
         self.queue: Deque[Tuple[List[Callable], Any]] = collections.deque()
@@ -92,10 +79,7 @@ class InProcessBus:
                 subs[key].append(sub)
                 cb = sub.callback
                 if sub.raw and getattr(cb, 'raw_codec', None) is None:
-                    # (a node's raw CDR input, nodes/cdr.py, also takes message objects)
-                    # a raw subscription (a composed recorder) records the bytes DDS gives;
-                    # serialize_message pads empty float64 sequences differently (rosbags
-                    # then refuses the message), so such a topic stays on DDS
+                    # a raw subscription (a composed recorder) records DDS's bytes: on DDS
                     skip.add(key)
                 originals[id(sub)] = (lambda m, cb=cb: cb(m, None)) if info else cb
                 sub.callback = self._wrap(cb, info)
@@ -131,9 +115,7 @@ class InProcessBus:
     def _link(self, pub, callbacks: List[Callable]) -> None:
         dds_publish = pub.publish
         n_local = len(callbacks)
-        # the rcl call itself: rclpy's get_subscription_count() wraps it in a `with handle`
-        # guard against destruction from another thread (0.47 us against 0.09 us; this
-        # executor is the only thread; a destroyed publisher raises RCLError either way)
+        # the rcl call itself, without rclpy's cross-thread guard (this is the only thread)
         subscription_count = pub.handle.get_subscription_count
 
         def publish(msg) -> None:
@@ -198,9 +180,7 @@ def guard_callbacks(nodes) -> Dict[str, str]:
 
 
 def drive_lifecycle(nodes) -> str:
-    """Configure, then activate, every managed node that is unconfigured (in process).
-
-    Returns ``''``, or why a node refused (``<node>: <reason>``)."""
+    """Configure, activate every unconfigured managed node; ``''`` or ``<node>: <reason>``."""
     from rclpy.lifecycle import TransitionCallbackReturn
 
     managed = [n for n in nodes if getattr(n, 'lifecycle_state', '') == 'unconfigured']
@@ -229,8 +209,7 @@ def write_state(state: Any, path: str) -> None:
 
 
 def inproc_enabled(flag: bool, dds: bool = False) -> bool:
-    """The in-process path: on unless ``--dds`` is given or ``ADCS_COMPOSE_INPROC`` is
-    0/false/no/off (``--inproc`` wins over the environment)."""
+    """The in-process path: on unless ``--dds`` or ``ADCS_COMPOSE_INPROC`` off (0/false/no)."""
     if dds:
         return False
     env = os.environ.get('ADCS_COMPOSE_INPROC', '').strip().lower()

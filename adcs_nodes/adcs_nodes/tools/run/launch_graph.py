@@ -1,9 +1,4 @@
-"""The graph of ``adcs run`` for the standard ROS 2 launch file (``ros2 launch adcs_nodes
-adcs.launch.py scenario:=NAME [duration:=S] [record:=BAG]``): the nodes of
-:func:`adcs_nodes.graph.build_graph` and their parameters, without ``adcs run``'s private
-domain, progress, manifest, stop on a world node's death and lifecycle driving (the managed
-nodes activate themselves). Stopping (:func:`stop_timeouts`): SIGINT, SIGTERM, SIGKILL, each
-node its time."""
+"""The graph of ``adcs run`` for ``ros2 launch adcs_nodes adcs.launch.py scenario:=NAME``."""
 from __future__ import annotations
 
 import os
@@ -14,17 +9,12 @@ from adcs_nodes.scenario import load_scenario
 
 PACKAGE = 'adcs_nodes'
 CLOCK_MASTER = 'dynamics'
-#: Node classes of the graph that are managed (lifecycle) nodes
-#: (:class:`adcs_nodes.nodes.managed.ManagedLockstepNode`); the world nodes and the recorder
-#: are plain nodes.
+#: Node classes of the graph that are managed (lifecycle) nodes.
 MANAGED_CLASSES = ('EstimatorNode', 'ControllerNode', 'ControllerManagerNode', 'GuidanceNode')
-#: ``sigterm_timeout`` [s] of a lockstep node: it exits within 2 s of SIGINT, but a node whose
-#: reader lags (a stalled recorder) waits up to ``runtime.FLUSH_BUDGET_S`` (4 s) for its last
-#: samples to be acknowledged, then up to ``runtime.TEARDOWN_BUDGET_S`` (1 s) for rclpy.
+#: ``sigterm_timeout`` [s] of a lockstep node (``runtime.FLUSH_BUDGET_S`` and
+#: ``TEARDOWN_BUDGET_S`` after SIGINT).
 NODE_SIGTERM_TIMEOUT_S = 6.0
-#: ``sigterm_timeout`` [s] of the recorder: it closes its bag (last chunk, summary,
-#: ``metadata.yaml``) after SIGINT; 0.6-3 s of wall time beside a CPU burner here (load
-#: 15-18), more for a long bag on a slow disk.
+#: ``sigterm_timeout`` [s] of the recorder: it closes its bag after SIGINT.
 RECORDER_SIGTERM_TIMEOUT_S = 10.0
 #: ``sigkill_timeout`` [s] after SIGTERM (launch's default).
 SIGKILL_TIMEOUT_S = 5.0
@@ -52,8 +42,7 @@ def installed_scenario_dir() -> Optional[str]:
 
 
 def scenario_path(name: str) -> str:
-    """A scenario file: ``name`` when it exists, else ``<name>`` or ``<name>.yaml`` in the
-    installed scenarios; ValueError (listing them) when neither exists."""
+    """``name``, else ``<name>[.yaml]`` in the installed scenarios; ValueError listing them."""
     if os.path.isfile(name):
         return os.path.abspath(name)
     share = installed_scenario_dir()
@@ -67,8 +56,7 @@ def scenario_path(name: str) -> str:
 
 
 def with_duration(sc: dict, duration_s: Optional[float]) -> dict:
-    """Scenario ``sc`` (validated) with ``duration_s`` (``--duration``), validated again as
-    the file would be (a fault after the end, frames, the epoch; ScenarioError)."""
+    """Validated ``sc`` with ``duration_s`` (``--duration``), validated again."""
     if duration_s is None or duration_s == sc['duration_s']:
         return sc
     from adcs_nodes.scenario import ScenarioError, apply_overrides
@@ -81,8 +69,7 @@ def with_duration(sc: dict, duration_s: Optional[float]) -> dict:
 
 def launch_graph(scenario: str, duration_s: Optional[float] = None,
                  record: Optional[str] = None) -> Tuple[List[NodeSpec], str]:
-    """Nodes and parameter-file text of ``scenario`` (a path or an installed name) as ``adcs
-    run`` builds them, for ``duration_s`` (default the scenario's), recording to ``record``."""
+    """Nodes and parameter-file text of ``scenario`` (path or installed name) as ``adcs run``'s."""
     sc = with_duration(load_scenario(scenario_path(scenario)), duration_s)
     nodes = build_graph(sc, float(sc['duration_s']), record=bool(record))
     if record:

@@ -1,7 +1,5 @@
-"""Talk to a running graph started by ``adcs run``: ``adcs switch``, ``adcs status [--watch]``,
-``adcs fault``. A run announces itself in ``~/.cache/adcs/runs/active-<pid>.json`` (domain,
-scenario, bag, node PIDs); these commands join its domain with a short-lived node, call the
-manager's services, read the latched status or publish a live fault, and leave."""
+"""``adcs switch``, ``adcs status [--watch]``, ``adcs fault``: join a running graph's domain
+(from its ``active-<pid>.json``) with a short-lived node, and leave."""
 from __future__ import annotations
 
 import glob
@@ -16,7 +14,6 @@ from typing import Dict, List, Optional
 
 from adcs_nodes.tools.run.launcher import RUNS_DIR
 
-MANAGER = 'controller_manager'
 #: What a controller name can be (the registry's names); anything else is refused unsent.
 CONTROLLER_NAME = re.compile(r'[A-Za-z0-9_.-]{1,100}')
 
@@ -59,8 +56,7 @@ def pick_run(pid: Optional[int]) -> Dict:
     return runs[0]
 
 
-#: Wall seconds a command on a running graph may take in all (then exit 1 with a message: a
-#: process that joined a busy domain may never return).
+#: Wall seconds a command on a running graph may take in all (then exit 1).
 SESSION_DEADLINE_S = 60.0
 #: Wall seconds a command waits for a service or action server, then as long for its answer.
 SERVER_WAIT_S = 25.0
@@ -74,8 +70,7 @@ def _give_up() -> None:
 
 
 class _Session:
-    """A short-lived rclpy context on the run's domain (the process exits 1 if the whole
-    command takes longer than :data:`SESSION_DEADLINE_S`)."""
+    """A short-lived rclpy context on the run's domain (exit 1 after the deadline)."""
 
     def __init__(self, run: Dict, deadline: bool = True) -> None:
         if deadline:       # (not for a long action: adcs slew has its own timeout)
@@ -116,8 +111,7 @@ class _Session:
             self.executor.spin_once(timeout_sec=0.05)
 
     def close(self, wait_s: float = 5.0) -> None:
-        """Shut the session down, waiting at most ``wait_s``; a shutdown still blocked then
-        (a flooded domain) is left to the process's end: :func:`finish` exits at once."""
+        """Shut the session down, waiting at most ``wait_s`` (then :func:`finish` exits)."""
         def _close() -> None:
             self.executor.shutdown()
             self.node.destroy_node()
@@ -134,8 +128,7 @@ _STUCK = False
 
 
 def finish(code: int) -> int:
-    """Exit code of a command that used a session; exits the process at once (output
-    flushed) when a session's shutdown is stuck, instead of hanging at interpreter exit."""
+    """Exit code of a command; exits at once when a session's shutdown is stuck."""
     if _STUCK:
         sys.stdout.flush()
         sys.stderr.flush()
@@ -144,8 +137,7 @@ def finish(code: int) -> int:
 
 
 def switch(name: str, pid: Optional[int] = None) -> str:
-    """Switch the active controller of a running graph; the manager's answer. LiveError: no
-    run or manager, or refused (an unknown name: the message lists the known ones)."""
+    """Switch the active controller of a running graph; the manager's answer, or LiveError."""
     from adcs_nodes.scenario import shorten_message
     if not CONTROLLER_NAME.fullmatch(name):
         raise LiveError(shorten_message(
@@ -164,10 +156,7 @@ def switch(name: str, pid: Optional[int] = None) -> str:
 
 
 def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
-    """Human-readable status of a running graph: controllers and lockstep health.
-
-    Listens ``wait_s`` (discovery of a new participant takes up to ~3 s).
-    """
+    """Controllers and lockstep health of a running graph, after listening ``wait_s``."""
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
     from adcs_msgs.msg import ControllerStatus, LockstepStatus
@@ -211,14 +200,12 @@ def status(pid: Optional[int] = None, wait_s: float = 3.0) -> str:
 INJECT_TOPIC = 'sim/inject_fault'
 #: Wall seconds ``adcs fault`` waits for the fault's announcement on ``sim/faults``.
 ANNOUNCE_WAIT_S = 15.0
-#: Without ``--at`` a live fault starts at the first frame this much wall time ahead (at the
-#: run's pace): every node has the message by then and they agree on the frame.
+#: Without ``--at`` a live fault starts this much wall time ahead: every node has it then.
 LEAD_WALL_S = 1.0
 
 
 def _run_scenario(run: Dict) -> Dict:
-    """The run's scenario as YAML gives it: the bag's ``scenario.yaml`` (the effective one)
-    when the run records, else the scenario file ({} when neither reads)."""
+    """The run's scenario as data: the bag's, else the scenario file's ({}: neither)."""
     from adcs_nodes.scenario import read_yaml
     paths = ([os.path.join(run['bag'], 'scenario.yaml')] if run.get('bag') else []) \
         + [run.get('scenario') or '']
@@ -249,9 +236,7 @@ def parse_params(items: List[str]) -> Dict:
 
 def check_fault(kind: str, target: str, params: Dict, at_s: Optional[float],
                 sc: Dict) -> Dict:
-    """The fault's parameters validated with its registry specs, its target against the
-    run's scenario ``sc``, ``at_s`` inside the run, as a scripted fault is
-    (:func:`adcs_nodes.scenario.check_fault`); LiveError with the reason (exit 2)."""
+    """The fault checked against the run's scenario ``sc`` as a scripted one is; LiveError."""
     from adcs_nodes.scenario import check_fault, fault_targets
     try:
         params = check_fault(kind, target, params, fault_targets(sc) if sc else {
@@ -268,15 +253,8 @@ def check_fault(kind: str, target: str, params: Dict, at_s: Optional[float],
 def fault(kind: str, target: str, at_s: Optional[float] = None,
           params: Optional[Dict] = None, pid: Optional[int] = None,
           wait_s: float = ANNOUNCE_WAIT_S) -> str:
-    """Inject one fault into a running graph (``adcs fault``); returns what happened.
-
-    JSON on ``sim/inject_fault`` (reliable) to the sensor nodes and the dynamics once they all
-    listen; the one it strikes applies it from ``at_s`` (default: the first frame
-    :data:`LEAD_WALL_S` of wall time ahead at the run's pace on ``/clock``). Returns once every
-    listener acknowledged; a fault due within ``wait_s`` is awaited on ``sim/faults``. Not
-    deterministic (wall time). LiveError: no run, a fault the run cannot take, nobody
-    listening, not acknowledged.
-    """
+    """``adcs fault``: JSON on ``sim/inject_fault`` from ``at_s`` (default: soon), awaited on
+    ``sim/faults`` when due within ``wait_s``; what happened, or LiveError."""
     from rclpy.duration import Duration
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from std_msgs.msg import String
@@ -314,8 +292,7 @@ def fault(kind: str, target: str, at_s: Optional[float] = None,
 
 
 class _FaultWatch:
-    """``/clock`` (the first and the latest sample: (wall s, sim s)) and ``sim/faults`` as
-    ``adcs fault`` sees them."""
+    """``/clock`` (first and latest (wall s, sim s)) and ``sim/faults`` for ``adcs fault``."""
 
     def __init__(self, session: '_Session', run: Dict) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
@@ -338,8 +315,7 @@ class _FaultWatch:
             self.clock.append(sample)
 
     def wait_listeners(self, pub, listeners: int):
-        """Until ``listeners`` subscribe to ``pub`` and 0.3 s of ``/clock`` were seen; the
-        run's time [s] (None without a clock) and pace [sim s per wall s, at least 1]."""
+        """Wait for ``listeners`` and 0.3 s of ``/clock``: the run's time [s] and pace."""
         clock = self.clock
         deadline = time.monotonic() + SERVER_WAIT_S
         while (pub.get_subscription_count() < listeners or len(clock) < 2
@@ -389,8 +365,7 @@ def _fault_text(kind, target, params, run, at_s, start_s, now, acked, due_s, fou
 
 # ---------------------------------------------------------------------- adcs status --watch
 def _sc_faults(sc: Dict) -> List[Dict]:
-    """The scenario's faults as ``{name, text, start, end}`` (times [s]; end None: to the end
-    of the run), to show those that started before the watch did."""
+    """The scenario's faults as ``{name, text, start, end}`` [s] (end None: to the end)."""
     out = []
     for i, f in enumerate(sc.get('faults') or []):
         if not isinstance(f, dict):
@@ -407,8 +382,7 @@ def _sc_faults(sc: Dict) -> List[Dict]:
 
 
 class _Watch:
-    """What ``adcs status --watch`` shows, from the run's topics (the flight software's view:
-    the estimate against the target, the tachometer; the world's fault announcements)."""
+    """What ``adcs status --watch`` shows, from the run's topics."""
 
     def __init__(self, run: Dict, sc: Dict) -> None:
         from adcs_nodes.nodes.lockstep_node import epoch_to_ns, parse_epoch
@@ -519,8 +493,7 @@ class _Watch:
 
 
 def _alive(run: Dict) -> bool:
-    """The run's launcher is running: its manifest is there (it removes it at the end) and
-    its process exists."""
+    """The run's launcher is running: its manifest is there and its process exists."""
     if not os.path.exists(os.path.join(RUNS_DIR, f'active-{run["pid"]}.json')):
         return False
     try:
@@ -532,9 +505,7 @@ def _alive(run: Dict) -> bool:
 
 def watch(pid: Optional[int] = None, interval_s: float = 1.0, out=None,
           count: Optional[int] = None) -> int:
-    """``adcs status --watch``: the run's view every ``interval_s`` of wall time until the run
-    ends (or ``count`` views, or Ctrl-C); returns 0. A terminal is redrawn; otherwise the
-    views follow each other. (A composed run sends the watched topics over DDS meanwhile.)"""
+    """``adcs status --watch``: the run's view every ``interval_s`` until it ends; 0."""
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 

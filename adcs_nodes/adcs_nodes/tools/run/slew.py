@@ -1,6 +1,4 @@
-"""Client of the ``adcs/slew`` action: :func:`slew` (``adcs slew``) joins a running graph,
-sends the goal, prints feedback, returns the result line (Ctrl-C cancels: the spacecraft
-holds); :func:`run_goal` does the exchange on a given node and executor."""
+"""Client of the ``adcs/slew`` action: :func:`slew` (``adcs slew``), :func:`run_goal`."""
 from __future__ import annotations
 
 import math
@@ -37,21 +35,17 @@ def make_goal(q_xyzw: Sequence[float], frame: str, controller: str = '',
     return goal
 
 
-#: Wall seconds to wait for one answer of the action server (goal accepted or rejected, a
-#: finished goal's result) before the same request is sent again: under load Fast DDS now
-#: and then drops a service answer (docs/reliability.md, "Dropped answers").
+#: Wall seconds to wait for an answer before the request is sent again (docs/reliability.md,
+#: "Dropped answers").
 ANSWER_S = 3.0
-#: Wall seconds between result requests while the goal runs and its status says nothing
-#: (a lost status message must not leave the command waiting for ever).
+#: Wall seconds between result requests while the goal runs and its status says nothing.
 RESULT_RESEND_S = 30.0
 _TERMINAL = (4, 5, 6)   # GoalStatus SUCCEEDED, CANCELED, ABORTED
 
 
 class _GoalExchange:
-    """The goal of one ``adcs/slew`` exchange, robust to dropped answers: always the same goal
-    id (a resend to a server that accepted it is refused as a duplicate, and a refusal of a
-    resend is checked with a result request); the goal's status topic tells an accepted goal or
-    a finished one whose answer was lost."""
+    """One ``adcs/slew`` goal, robust to dropped answers: resent with the same goal id, its
+    status topic telling an accepted or finished goal whose answer was lost."""
 
     def __init__(self, node, client, goal, answer_s: float, on_feedback) -> None:
         import uuid as _uuid
@@ -86,9 +80,8 @@ class _GoalExchange:
         return ClientGoalHandle(self.client, self.uuid, response)
 
     def send(self, executor, deadline: float):
-        """Send the goal until it is answered. Returns ``(handle, result_future)``: the
-        accepted handle, or ``(None, future)`` of a result request that decides a refusal
-        seen after a resend, or ``(None, None)``: refused (or no answer by ``deadline``)."""
+        """Send the goal until answered: ``(handle, None)``, ``(None, result future)`` (a
+        resend refused: the result decides) or ``(None, None)`` (refused, or no answer)."""
         futures, next_send = [], 0.0
         while time.monotonic() < deadline:
             now = time.monotonic()
@@ -112,10 +105,8 @@ class _GoalExchange:
         return None, None
 
     def result(self, executor, handle, first, end: float):
-        """Wait for the goal's result until ``end`` (monotonic); result requests are sent
-        again when the goal's status says it finished and no answer came within
-        ``answer_s``, and every :data:`RESULT_RESEND_S` anyway. The first done future, or
-        None."""
+        """The first done result future by ``end`` (monotonic), or None; requests resent
+        after ``answer_s`` once finished, else every :data:`RESULT_RESEND_S`."""
         futures = [first if first is not None else handle.get_result_async()]
         sent = time.monotonic()
         while time.monotonic() < end:
@@ -134,12 +125,8 @@ class _GoalExchange:
 def run_goal(node, executor, goal, server_wait_s: float = SERVER_WAIT_S,
              on_feedback: Optional[Callable] = None, deadline_s: float = math.inf,
              answer_s: float = ANSWER_S):
-    """Send ``goal`` to ``adcs/slew`` and wait for the result, surviving a dropped answer (sent
-    again with the same goal id after ``answer_s``, :class:`_GoalExchange`) within
-    ``server_wait_s`` for the goal and ``deadline_s`` for the result. Returns ``(status,
-    result)``: ``'rejected'``, ``'succeeded'``, ``'aborted'``, ``'canceled'`` or ``'timeout'``,
-    and the ``Slew.Result`` or None; Ctrl-C cancels the goal first. RuntimeError: no server
-    within ``server_wait_s``."""
+    """Send ``goal`` to ``adcs/slew``: ``(status, Slew.Result or None)``; dropped answers
+    resent (:class:`_GoalExchange`), Ctrl-C cancels. RuntimeError: no server."""
     from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
     from adcs_msgs.action import Slew
@@ -199,9 +186,7 @@ def format_result(status: str, result) -> str:
 def slew(roll_deg: float, pitch_deg: float, yaw_deg: float, frame: str = 'inertial',
          controller: str = '', tolerance_deg: float = 0.0, timeout_s: float = 0.0,
          pid: Optional[int] = None, quiet: bool = False) -> str:
-    """``adcs slew``: slew a running graph (launcher ``pid``) to the 3-2-1 attitude [deg] in
-    ``frame``, feedback once a second unless ``quiet``; the result line. LiveError for a bad goal
-    (before anything is sent), no run or server, a rejection or a failure."""
+    """``adcs slew`` to the 3-2-1 attitude [deg] in ``frame``; the result line, LiveError."""
     from adcs_nodes import registry
     from adcs_nodes.nodes.slew_action import check_goal
     from adcs_nodes.tools.run.live import LiveError, _Session, pick_run

@@ -1,11 +1,5 @@
-"""The papers' tables: one module per paper (:mod:`.paper000`, :mod:`.paper001`,
-:mod:`.paper003`, :mod:`.paper004`), metrics as pure functions of a run's stamped messages
-(:mod:`.series`: a bag of any engine, or FrameLoop frames), rows ``(quantity, paper value,
-measured, verdict)`` printed alike by ``adcs report``, ``make reproduce`` and the studies.
-Verdicts: True/False (PASS/FAIL against a paper number or claim), None (``info``, never
-counted), :class:`NotComparable` (a paper claim this run cannot check: counted on its own,
-never as a pass).
-"""
+"""The papers' tables, a module per paper: rows ``(quantity, paper value, measured, verdict)``;
+verdict True/False, None (info) or :class:`NotComparable` (counted on its own)."""
 from __future__ import annotations
 
 import importlib
@@ -18,10 +12,7 @@ INFO = None
 
 @dataclass(frozen=True)
 class NotComparable:
-    """Verdict of a paper claim this run cannot check; ``reason`` says why.
-
-    False in a boolean context, so it is never taken for a pass.
-    """
+    """Verdict of a paper claim this run cannot check (``reason``); False, never a pass."""
 
     reason: str
 
@@ -63,8 +54,7 @@ def topics_for(name: Optional[str]) -> Tuple[str, ...]:
 
 
 def rows_for(sc: Dict[str, Any], topics: Dict[str, Dict[int, Any]]) -> List[Row]:
-    """The paper rows of scenario ``sc`` from a run's stamped messages (empty list when the
-    scenario reproduces no paper)."""
+    """The paper rows of scenario ``sc`` from a run's stamped messages (or none)."""
     check = check_for(sc.get('name'))
     return list(check(topics, sc)) if check is not None else []
 
@@ -83,8 +73,7 @@ def rows_for_bag(bag: str) -> Tuple[Optional[str], List[Row]]:
 
 
 def figures_for_bag(bag: str, out_dir: str) -> List[str]:
-    """The paper's figures of a bag's run written into ``out_dir`` (file paths; empty when the
-    paper module draws none)."""
+    """The paths of the paper's figures of a bag's run, written into ``out_dir``."""
     from adcs_nodes.tools.analyse.papers.series import from_bag
     from adcs_nodes.tools.bagfile import bag_scenario
     sc = bag_scenario(bag)

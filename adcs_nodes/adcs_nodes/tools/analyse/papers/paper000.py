@@ -1,24 +1,8 @@
 """Paper 000 (magnetometer-only estimation and three-axis magnetic control): its table.
 
-Claims (paper section 4) and the criteria that turn their words into numbers:
-
-* estimation: "estimates converge within half an orbit", accuracy "about 1 deg" -> converged
-  (attitude error below 2 deg for good) by T/2; median error over T/2..T below 1.5 deg;
-* control: "reaches the required attitude within 3-4 orbits", "held with accuracy of the order
-  of 1 deg" -> captured (entered the 5 deg band and stayed within 10 deg to the end,
-  :mod:`adcs_nodes.tools.analyse.metrics`) within 4 orbits; RMS of the angle to the orbit frame
-  from 4
-  orbits to the end below 2 deg (median, 95th percentile and max for information);
-* ``paper000_control_misaligned`` (a stress case, not a paper claim): the same rows, all
-  information.
-
-A run that ends before the paper's deadline or window cannot check the claim: its row is
-:class:`~adcs_nodes.tools.analyse.papers.NotComparable` unless the run already met it (a capture
-within the run is a capture within 4 orbits).
-
-Series (:func:`estimation_series`, :func:`control_series`) come from the stamped messages; the
-metrics (:func:`estimation_metrics`, :func:`control_metrics`) and rows are pure functions of
-numpy arrays.
+Claims (section 4) as numbers: "converge within half an orbit", "about 1 deg" -> below 2 deg
+for good by T/2, median over T/2..T below 1.5 deg; "within 3-4 orbits", "of the order of 1
+deg" -> captured within 4 orbits, RMS to the orbit frame from 4 orbits on below 2 deg.
 """
 from __future__ import annotations
 
@@ -41,11 +25,8 @@ HOLD_RMS_LIMIT_DEG = 2.0     # "of the order of 1 deg"
 
 # ---------------------------------------------------------------------- series
 def estimate_errors(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
-    """Estimate against truth interpolated at the estimator's own stamps (attitude: slerp,
-    :func:`adcs_nodes.tools.analyse.metrics.estimate_errors_deg`; rate: linear): ``t_s`` (n,) [s],
-    ``att_deg`` (n,) angle between estimated and true ``q_orbit_body``, ``rate_deg_s`` (n,)
-    ``|omega_est - omega_true|`` (ECI rates). Estimates outside the truth's span are left
-    out; on the truth's grid the truth sample itself is used."""
+    """Estimate against the truth at its stamps: ``t_s`` [s], ``att_deg`` (``q_orbit_body``),
+    ``rate_deg_s`` (``|omega_est - omega_true|``, ECI)."""
     truth = sorted_items(topics.get('sim/state', {}))
     est = sorted_items(topics.get('adcs/attitude_estimate', {}))
     e0 = epoch_ns(sc)
@@ -77,9 +58,7 @@ def estimation_series(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarra
 
 
 def control_series(topics: Topics, sc: Dict[str, Any]) -> Dict[str, Any]:
-    """``t_s`` (n,), ``angle_deg`` (n,) true angle body to orbit frame; ``dipole`` (m, 3)
-    commanded dipoles [A m^2]; ``dipole_limit`` (3,); estimate errors (``est_t_s``,
-    ``est_deg``); ``period_s``."""
+    """True angle to the orbit frame, dipoles [A m^2] and estimate errors of a run."""
     e0 = epoch_ns(sc)
     truth = sorted_items(topics.get('sim/state', {}))
     cmds = [m for _, m in sorted_items(topics.get('adcs/actuator_command', {}))]
@@ -96,16 +75,8 @@ def control_series(topics: Topics, sc: Dict[str, Any]) -> Dict[str, Any]:
 # ---------------------------------------------------------------------- metrics
 def estimation_metrics(t_s: np.ndarray, att_deg: np.ndarray, rate_deg_s: np.ndarray,
                        period_s: float, t_end_s: Optional[float] = None) -> Dict[str, Any]:
-    """Convergence and accuracy of the estimate (pure).
-
-    Returns
-    -------
-    dict
-        ``converged_s`` (first time after which the error stays below 2 deg, or None);
-        ``median_deg``, ``p95_deg`` of the attitude error and ``rate_median_deg_s`` over
-        ``T/2 <= t <= T`` (NaN without samples there); ``window_samples``; ``period_s``;
-        ``t_end_s``.
-    """
+    """Convergence (``converged_s``: below 2 deg for good from then) and accuracy over
+    ``T/2 <= t <= T`` (NaN: no sample) of the estimate."""
     t = np.asarray(t_s, float)
     e = np.asarray(att_deg, float)
     r = np.asarray(rate_deg_s, float)
@@ -123,10 +94,7 @@ def estimation_metrics(t_s: np.ndarray, att_deg: np.ndarray, rate_deg_s: np.ndar
 def control_metrics(t_s: np.ndarray, angle_deg: np.ndarray, period_s: float,
                     dipole: np.ndarray, dipole_limit: Sequence[float],
                     est_t_s: np.ndarray, est_deg: np.ndarray) -> Dict[str, Any]:
-    """Capture and hold (:func:`adcs_nodes.tools.analyse.metrics.run_metrics`) plus the estimation
-    error over the hold (``est_median_deg``, None without samples), the mean dipole norm
-    ``dipole_mean_Am2`` and the fraction of commands with a coil at 99.9 % of its limit
-    ``dipole_saturated_fraction`` (pure)."""
+    """``run_metrics`` plus the estimation error over the hold and the dipole use."""
     m = metrics.run_metrics(t_s, angle_deg, period_s)
     dip = np.asarray(dipole, float).reshape(-1, 3)
     limit = np.asarray(dipole_limit, float)
@@ -168,20 +136,7 @@ def estimation_rows(m: Dict[str, Any]) -> List[Row]:
 
 def control_rows(m: Dict[str, Any], est_median_deg: Optional[float], dipole_text: str,
                  claim: bool = True) -> List[Row]:
-    """Paper 000 closed-loop rows from :func:`adcs_nodes.tools.analyse.metrics.run_metrics` output.
-
-    Parameters
-    ----------
-    m : dict
-        ``run_metrics`` of the angle between body and orbit frame (period known).
-    est_median_deg : float or None
-        Median attitude-estimation error over the hold [deg].
-    dipole_text : str
-        Dipole use, for information.
-    claim : bool
-        True: the capture and accuracy rows compare with the paper; False (a stress scenario):
-        every row is information.
-    """
+    """Closed-loop rows of ``run_metrics`` ``m`` (``claim`` False: information only)."""
     def orbits(x: Optional[float]) -> str:
         return 'never' if x is None else f'{x:.2f} orbits'
 
@@ -252,8 +207,7 @@ def check_control_stress(topics: Topics, sc: Dict[str, Any]) -> List[Row]:
 
 
 def misalignment_vector(deg: float) -> List[float]:
-    """Rotation vector [deg] of magnitude ``deg`` along (0.6, -0.6, 0.5) (the sensitivity
-    study's magnetometer misalignment direction)."""
+    """Rotation vector [deg] of magnitude ``deg`` along (0.6, -0.6, 0.5)."""
     d = np.array([0.6, -0.6, 0.5])
     return [float(x) for x in d / np.linalg.norm(d) * deg]
 

@@ -1,38 +1,6 @@
-"""Paper 001 (MPI control of a flexible spacecraft with reaction wheels): its tables.
-
-Definitions (digest sections 5 and 8): attitude error = true minus desired LVLH 3-1-2 Euler
-angles, rate error = their Euler rates, per axis; stabilisation windows 500-1000 s and
-4200-5000 s, tracking 1100-3500 s; the errors at the ends of the two maneuvers (200 s and
-3700 s) and the time after them until the error stays below 0.1 deg.
-
-The rows' bounds are the paper's own (no margin): stabilisation 0.005 deg and 0.004 deg/s
-3-sigma, rate 0.004 deg/s 3-sigma while tracking too, < 0.2 deg at the maneuver ends, back
-within 0.1 deg about 40 s / 70 s after them (checked at <= 50 s / <= 80 s), wheel momentum
-within 55 N m s, torque within 1 N m. A window the run does not reach is
-:class:`~adcs_nodes.tools.analyse.papers.NotComparable`.
-
-Tracking error: the maximum, not the 3-sigma
---------------------------------------------
-The paper: "the tracking error grows with the maximum attitude rate; at most it reaches about
-0.02 deg (3-sigma)". The error is the one-period lag ``e(t) = -tau * rate_d(t)`` (digest
-P15), a sine of peak ``tau * max rate`` = 0.019 / 0.018 / 0.014 deg whose 3-sigma is 2.1x its
-peak; the row compares the per-axis maximum ``|e|`` with < 0.025 deg (ASSUMPTION: "about
-0.02" to one significant figure), the 3-sigma and the fitted lag are information
-(``docs/paper001.md``). The 3700 s row is :class:`NotComparable` (:data:`END_ERROR_REASON`).
-
-Robustness case and variant
----------------------------
-``paper001_mpi`` is the digest's replication model (F = C_a, one wing): its rows compare with
-the paper. ``paper001_mpi_two_wings`` (two mirrored wings) is a robustness case, like paper
-000's misaligned one: the same rows, each with the paper's bound beside it, all information
-(the paper claims nothing for that model). A run whose MPI uses an option that departs from
-the paper (:data:`DEPARTURES`: the longer stabilisation horizon of digest P14, the propagated
-reference of P15) is information as well, and a row names the departure.
-
-:func:`series` joins the truth (``sim/state``), target, command, wheels, appendages and
-estimate on the header stamp; :func:`metrics` and :func:`rows` are pure functions of its
-arrays.
-"""
+"""Paper 001 (MPI control of a flexible spacecraft with reaction wheels): its tables. Error =
+true minus desired LVLH 3-1-2 Euler angles, per axis (digest sections 5 and 8); the paper's own
+bounds; the tracking row and the robustness case: ``docs/paper001.md``."""
 from __future__ import annotations
 
 import math
@@ -59,18 +27,8 @@ _KEYS = ('t', 'e', 'e_d', 'de', 'de_d', 'tau_cmd', 'tau', 'h', 'eta', 'est_err_d
 
 
 def series(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
-    """One row per frame with truth, target, command, wheels and estimate all present.
-
-    Returns
-    -------
-    dict of numpy arrays
-        ``t`` (n,) [s]; ``e``, ``e_d`` (n, 3) true and desired LVLH 3-1-2 Euler angles [rad];
-        ``de``, ``de_d`` (n, 3) their rates [rad/s]; ``tau_cmd`` (n, k) commanded and ``tau``
-        (n, k) applied wheel torque [N m] (the torque over [t, t + dt] is published with the
-        state at t + dt); ``h`` (n, k) wheel momentum [N m s]; ``eta`` (n, m) modal
-        coordinates (m = 0 for a rigid body); ``est_err_deg`` (n,); ``w_bo`` (n, 3) true
-        ``omega_body_orbit_body`` [rad/s].
-    """
+    """One row per frame with every topic: ``e``, ``e_d`` true and desired LVLH 3-1-2 angles
+    [rad], their rates [rad/s]; wheel torques [N m], momenta [N m s]; ``eta``; ``w_bo``."""
     from adcs_nodes.core import attitude as att
     from adcs_nodes.core.control import mpi
     e0 = epoch_ns(sc)
@@ -116,16 +74,8 @@ def _wrap_deg(a: np.ndarray) -> np.ndarray:
 
 
 def tracking_lag_s(err_deg: np.ndarray, rate_d_deg_s: np.ndarray) -> List[Optional[float]]:
-    """Per axis, the lag ``L`` [s] of the least-squares fit ``err = -L rate_d + c``.
-
-    A controller that aims at the target of ``t0`` one period ahead lags by that period
-    (digest P15: ``L = tau``). None on an axis whose desired rate does not vary.
-
-    Parameters
-    ----------
-    err_deg, rate_d_deg_s : numpy.ndarray, shape (n, 3)
-        Attitude error [deg] and desired Euler rate [deg/s] over the tracking window.
-    """
+    """Per axis, the lag ``L`` [s] of the fit ``err = -L rate_d + c`` (digest P15: ``L =
+    tau``); None where the desired rate does not vary."""
     out: List[Optional[float]] = []
     for k in range(err_deg.shape[1]):
         x = rate_d_deg_s[:, k] - rate_d_deg_s[:, k].mean()
@@ -136,16 +86,8 @@ def tracking_lag_s(err_deg: np.ndarray, rate_d_deg_s: np.ndarray) -> List[Option
 
 
 def metrics(r: Dict[str, np.ndarray]) -> Dict[str, Any]:
-    """The paper's numbers from :func:`series` (pure; per axis x/y/z where a list).
-
-    Keys present only when the run reaches their window: ``stab_angle_3sigma_deg``,
-    ``stab_angle_max_deg``, ``stab_rate_3sigma_deg_s`` (500-1000 s and 4200-5000 s);
-    ``track_angle_3sigma_deg``, ``track_angle_max_deg``, ``track_rate_3sigma_deg_s``
-    (1100-3500 s); ``error_at_200s_deg``, ``back_within_0.1deg_after_200s_s`` (None: never
-    back), ``overshoot_after_200s_deg`` and the same for 3700 s. Always: ``max_abs_h_Nms``,
-    ``max_abs_wheel_torque_Nm``, ``torque_at_limit_fraction``, ``max_abs_eta``,
-    ``estimate_error_median_deg``, ``torque_limit_episodes_start_s``, ``t_end_s``.
-    """
+    """The paper's numbers from :func:`series` (per axis where a list); window statistics
+    only when the run reaches their window."""
     t = np.asarray(r['t'], float)
     err = _wrap_deg(np.degrees(r['e'] - r['e_d']))
     derr = np.degrees(r['de'] - r['de_d'])
@@ -250,8 +192,7 @@ DEPARTURES: Dict[str, tuple] = {
 
 
 def departures(sc: Dict[str, Any]) -> List[str]:
-    """What the scenario's ``mpi`` controller does that the paper does not (empty: the
-    paper's law; see :data:`DEPARTURES`)."""
+    """What the scenario's ``mpi`` does that the paper does not (:data:`DEPARTURES`)."""
     p = ((sc.get('controllers') or {}).get('mpi') or {})
     out = []
     for key, (paper, text) in DEPARTURES.items():
@@ -272,20 +213,7 @@ def _measured(key: str, value: Any) -> str:
 
 def rows(m: Dict[str, Any], claim: bool = True, departed: Sequence[str] = (),
          label: str = 'robustness') -> List[Row]:
-    """The table of :func:`metrics` (the paper's bounds, then information rows).
-
-    Parameters
-    ----------
-    claim : bool
-        True: the rows compare with the paper (the replication scenario, the paper's law).
-        False (the robustness case, or an MPI that departs from the paper): every row is
-        information, its paper column ``(<label>; paper: <bound>)`` and its measured
-        column saying whether the paper's bound is met.
-    departed : sequence of str
-        The departures from the paper (:func:`departures`), named in a row.
-    label : str
-        What the run is when not a claim: ``robustness`` (two wings) or ``variant``.
-    """
+    """The table of :func:`metrics` (``claim`` False: information rows, ``departed`` named)."""
     out: List[Row] = []
     for key, quantity, paper, check, window in ROWS:
         if key not in m:
@@ -326,8 +254,7 @@ def rows(m: Dict[str, Any], claim: bool = True, departed: Sequence[str] = (),
 
 
 def check(topics: Topics, sc: Dict[str, Any]) -> List[Row]:
-    """Paper 001's table from a run's messages (the replication scenario): the rows compare
-    with the paper unless the MPI departs from it (:func:`departures`)."""
+    """Paper 001's table of a run (information where the MPI departs from the paper)."""
     r = series(topics, sc)
     if r['t'].size == 0:
         return [('truth, target, command, wheels and estimate', 'recorded', 'none', False)]
@@ -345,8 +272,7 @@ def check_two_wings(topics: Topics, sc: Dict[str, Any]) -> List[Row]:
 
 # ---------------------------------------------------------------------- figures
 def plots(r: Dict[str, np.ndarray], out_dir: str) -> List[str]:
-    """PNG figures like the paper's (Figs. 4-9): attitude error, rate error, wheel torque and
-    momentum, modal amplitudes, against time. Returns the file paths."""
+    """PNG figures like the paper's Figs. 4-9; the file paths."""
     from matplotlib.figure import Figure
     os.makedirs(out_dir, exist_ok=True)
     t = r['t']

@@ -1,16 +1,5 @@
-"""Paper 003 (fuzzy eigenaxis slew) against its numbers: settling time, energy, and the ratios
-to a reference slew.
-
-Case (digest ``papers/fuzzy-eigenaxis-slew.md`` section 9, ``scenarios/paper003_slew.yaml``):
-inertias (250, 200, 180) kg m^2, from psi 34, theta -7.5, gamma 16.5 deg (3-2-1, eq. (1) row 3
-corrected) to the reference axes, at rest at both ends, ``|M_i| <= 1 N m``. Metrics
-(ASSUMPTIONS of the digest, section 10; pure functions of :func:`series`): settling time, the
-first time after which ``phi`` stays within 5 % of ``phi0`` (:func:`settling_time`); energy
-``E = int_0^T_s sum_i |M_i| dt`` [N m s], each frame's torque held to the next. Rows: against
-25.73 s and 42.91 N m s within :data:`TOLERANCE` (15 %, 20 %, fixed before any tuning). The
-paper's ratios to its reference (1.5x faster, 1.37x cheaper) are **not comparable** (its
-reference controller is not described); ours (``reference_slew``, near time-optimal: 17.5 s
-against a bang-bang bound of 17.6 s) runs on the FrameLoop and the ratios are shown."""
+"""Paper 003 (fuzzy eigenaxis slew; digest sections 9, 10): settling when ``phi`` stays within
+5 % of ``phi0``; energy ``E = int_0^T_s sum_i |M_i| dt`` [N m s], each frame's torque held."""
 from __future__ import annotations
 
 import math
@@ -38,21 +27,10 @@ NO_REFERENCE = ("the paper's reference controller is not described; ours (refere
                 'near time-optimal (17.5 s against a bang-bang bound of 17.6 s)')
 
 
-def initial_quaternion(euler_deg=EULER0_DEG) -> np.ndarray:
-    """``q_ref_body`` (scalar last) of the paper's Euler-Krylov angles (psi, theta, gamma)
-    [deg] (3-2-1)."""
-    from adcs_nodes.core import attitude
-    from adcs_nodes.core.control.eigenaxis import dcm_euler_321
-    psi, theta, gamma = (math.radians(a) for a in euler_deg)
-    return attitude.from_matrix(dcm_euler_321(psi, theta, gamma).T)
-
-
 # ---------------------------------------------------------------------- series
 def series(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
-    """Per frame with a state and a target: ``t`` (n,) [s]; ``phi`` (n,) eigenangle of
-    ``q_target^* q_body`` [rad] in the target's frame and ``e_phi`` (n, 3) its eigenaxis (sign
-    kept continuous); ``q`` (n, 4) and ``omega`` (n, 3) [rad/s] the body in that frame;
-    ``torque`` (n, 3) the commanded torque held from that frame on [N m]; ``source`` (n,)."""
+    """Per frame: ``phi`` [rad], ``e_phi`` of ``q_target^* q_body``, ``q``, ``omega`` [rad/s]
+    in the target's frame, ``torque`` commanded [N m], ``source``."""
     from adcs_nodes.core import attitude
     from adcs_nodes.core.control.eigenaxis import eigen_from_quaternion
     e0 = epoch_ns(sc)
@@ -91,14 +69,7 @@ def series(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
 
 # ---------------------------------------------------------------------- metrics
 def settling_time(t: np.ndarray, phi: np.ndarray, threshold: float) -> float:
-    """First sample time after which ``phi <= threshold`` for the rest of the run (NaN if the
-    last sample is outside).
-
-    Examples
-    --------
-    >>> settling_time(np.array([0., 1., 2., 3.]), np.array([5., 0.1, 2., 0.1]), 1.0)
-    3.0
-    """
+    """First sample time after which ``phi <= threshold`` to the end (NaN: the last is out)."""
     outside = np.nonzero(np.asarray(phi) > threshold)[0]
     if outside.size == 0:
         return float(t[0])
@@ -109,11 +80,8 @@ def settling_time(t: np.ndarray, phi: np.ndarray, threshold: float) -> float:
 
 def metrics(t: np.ndarray, phi: np.ndarray, torque: np.ndarray,
             band: float = BAND) -> Dict[str, float]:
-    """Settling time, energy, torque and overshoot of one slew (pure): ``t`` (n,) [s],
-    ``phi`` (n,) [rad], ``torque`` (n, 3) held over ``[t_k, t_k+1)`` [N m], ``band`` (of phi0).
-    Returns ``settling_s``, ``energy_Nms`` (to settling; NaN: not settled),
-    ``energy_total_Nms``, ``max_abs_torque_Nm``, ``overshoot_deg`` (largest phi after the first
-    entry into the band), ``phi0_deg``, ``final_deg``, ``t_end_s``."""
+    """Settling time, energy (NaN: not settled), torque and overshoot of one slew; ``torque``
+    (n, 3) [N m] held over ``[t_k, t_k+1)``."""
     t = np.asarray(t, float)
     phi = np.asarray(phi, float)
     m = np.abs(np.asarray(torque, float).reshape(-1, 3)).sum(axis=1)
@@ -132,8 +100,7 @@ def metrics(t: np.ndarray, phi: np.ndarray, torque: np.ndarray,
 
 
 def ratios(fuzzy: Dict[str, float], reference: Dict[str, float]) -> Dict[str, float]:
-    """``speed_ratio`` = T_s(reference) / T_s(fuzzy), ``energy_ratio`` = E(reference) /
-    E(fuzzy) (the paper's 1.5 and 1.37; NaN when either did not settle)."""
+    """T_s and E of the reference over the fuzzy slew's (paper: 1.5, 1.37; NaN: unsettled)."""
     return {'speed_ratio': reference['settling_s'] / fuzzy['settling_s'],
             'energy_ratio': reference['energy_Nms'] / fuzzy['energy_Nms']}
 
@@ -145,11 +112,7 @@ def _within(value: float, key: str) -> bool:
 
 def rows(m: Dict[str, float], reference: Optional[Dict[str, float]] = None,
          active: str = 'fuzzy', no_reference: str = '') -> List[Row]:
-    """The table of one fuzzy slew's :func:`metrics`, with the reference slew's when given.
-
-    ``active``: the controller that flew the run; the paper's numbers are the fuzzy
-    controller's, so another one's run is not comparable with them.
-    """
+    """The table of one slew's :func:`metrics` (and the ``reference`` slew's)."""
     def s(x: float, unit: str) -> str:
         return 'not settled' if not math.isfinite(x) else f'{x:.2f} {unit}'
 
@@ -193,8 +156,7 @@ def active_controller(r: Dict[str, np.ndarray]) -> str:
 
 
 def check(topics: Topics, sc: Dict[str, Any]) -> List[Row]:
-    """Paper 003's table of a run; the reference slew of the ratio rows runs on the FrameLoop
-    from the same scenario for the same time (``manager.initial=reference_slew``)."""
+    """Paper 003's table of a run, with the reference slew flown on the FrameLoop."""
     r = series(topics, sc)
     if r['t'].size < 2:
         return [('state and target', 'recorded', 'none', False)]
@@ -210,8 +172,7 @@ def check(topics: Topics, sc: Dict[str, Any]) -> List[Row]:
 
 
 def reference_metrics(sc: Dict[str, Any], duration_s: float) -> Dict[str, float]:
-    """:func:`metrics` of the reference slew flown from scenario ``sc`` (effective or loaded)
-    for ``duration_s`` on the FrameLoop."""
+    """:func:`metrics` of the reference slew flown from ``sc`` on the FrameLoop."""
     from adcs_nodes.tools.analyse.papers.series import run_topics, scenario_dict
     ref = run_topics(scenario_dict(sc), TOPICS, duration_s=duration_s, overrides=REFERENCE)
     rr = series(ref, sc)
@@ -220,11 +181,7 @@ def reference_metrics(sc: Dict[str, Any], duration_s: float) -> Dict[str, float]
 
 # ---------------------------------------------------------------------- the Table 1 study
 def cases() -> Dict[str, Dict[str, Any]]:
-    """The study's runs (``python -m adcs_nodes.tools.analyse.study table1``): name -> overrides.
-
-    Both readings of Table 1 (the text's row order, which settles, and the table as printed),
-    the smoother breakpoint set, no compensation controller (the paper's motivation), and the
-    reference slew."""
+    """The runs of ``study table1``: name -> overrides."""
     from adcs_nodes.core.control.fuzzy import SMOOTH
     return {
         'fuzzy (Table 1 reversed)': {'controllers.fuzzy.table1_rows': 'reversed'},
@@ -253,11 +210,7 @@ def format_runs(runs: Dict[str, Dict[str, float]]) -> str:
 
 # ---------------------------------------------------------------------- figures
 def figures(runs: Dict[str, Dict[str, np.ndarray]], out_dir: str) -> List[str]:
-    """PNG equivalents of the paper's Figs. 6-9, one panel per run (:func:`series` each).
-
-    Fig. 6: eigenangle phi(t); Fig. 7: Euler-Krylov angles psi, theta, gamma (t); Fig. 8: body
-    rates (t); Fig. 9: torques M_i(t). Returns the written paths.
-    """
+    """Figs. 6-9 as PNGs, a panel per run (:func:`series`); the paths."""
     from matplotlib.figure import Figure
 
     from adcs_nodes.core import attitude

@@ -1,10 +1,6 @@
 """Paper 004 (yaw from a horizon sensor and a magnetometer): formula (3) against TRIAD.
-
-Claims: the two yaw errors are "close" (RMS within 0.5 deg of each other); the estimate
-degrades near u = 90/270 deg (the largest formula-(3) error within 30 deg of them above the
-largest elsewhere; a run that reaches only one region cannot check it). :func:`yaw_errors`
-computes both yaws from the recorded sensor messages with the flight code and reference field;
-:func:`metrics` and :func:`rows` are pure."""
+Claims: the two yaw errors are "close" (RMS within 0.5 deg); formula (3) degrades near u =
+90/270 deg (its largest error within 30 deg of them above the largest elsewhere)."""
 from __future__ import annotations
 
 import math
@@ -26,9 +22,8 @@ def _wrap(a: float) -> float:
 
 
 def yaw_errors(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
-    """Yaw error of formula (3) and of TRIAD against the truth, per magnetometer sample with a
-    valid horizon sample of the same stamp: ``t_s``, ``u_deg`` (argument of latitude of the
-    onboard reference), ``eq3_deg``, ``triad_deg`` (each (n,))."""
+    """Yaw errors of formula (3) and TRIAD per magnetometer sample with a horizon sample:
+    ``t_s``, ``u_deg`` (argument of latitude), ``eq3_deg``, ``triad_deg``, (n,) each."""
     from adcs_nodes.components.base import parse_epoch
     from adcs_nodes.core import attitude as att
     from adcs_nodes.core.estimation.horizon_yaw import (triad_from_horizon_and_field,
@@ -64,10 +59,7 @@ def yaw_errors(topics: Topics, sc: Dict[str, Any]) -> Dict[str, np.ndarray]:
 
 
 def metrics(u_deg: np.ndarray, eq3_deg: np.ndarray, triad_deg: np.ndarray) -> Dict[str, Any]:
-    """Max and RMS of both errors and where the largest formula-(3) error lies (pure):
-    ``eq3_max_deg``, ``eq3_rms_deg``, ``triad_max_deg``, ``triad_rms_deg``, ``peak_u_deg``,
-    ``near_max_deg`` / ``far_max_deg`` (within 30 deg of u = 90/270, and elsewhere; NaN
-    without a sample there), ``samples``."""
+    """Max and RMS of both errors, formula (3)'s largest near u = 90/270 and elsewhere."""
     u = np.asarray(u_deg, float)
     e3 = np.asarray(eq3_deg, float)
     et = np.asarray(triad_deg, float)

@@ -1,7 +1,5 @@
-"""A run's stamped messages by topic, ``Topics`` = ``{topic: {header stamp [ns]: message}}``
-(FrameLoop names: ``sim/state``, ...), from a bag or from FrameLoop frames (samples made
-messages by their topics' converters): the same field names either way, so the paper modules
-read both alike."""
+"""A run's stamped messages, ``Topics`` = ``{topic: {header stamp [ns]: message}}``, from a bag
+or from FrameLoop frames (through the topics' converters): the same fields either way."""
 from __future__ import annotations
 
 import os
@@ -11,20 +9,13 @@ import numpy as np
 
 Topics = Dict[str, Dict[int, Any]]
 
-#: One bag read, kept for the next reader of the same bag (the report reads the paper's topics
-#: for its table and again for its figures): ``(path, mtime, topics) -> Topics``.
+#: The last bag read, for the next reader of it: ``(path, mtime, topics) -> Topics``.
 _LAST: Dict[tuple, Topics] = {}
 
 
-def _stamp(msg: Any) -> Optional[int]:
-    from adcs_nodes.bag import header_stamp_ns
-    return header_stamp_ns(msg)
-
-
 def from_bag(bag: str, topics: Sequence[str]) -> Topics:
-    """The messages of ``topics`` in ``bag`` (any engine's) by header stamp;
-    FileNotFoundError or ValueError for no bag or an unreadable one."""
-    from adcs_nodes.bag import read_messages
+    """The messages of ``topics`` in ``bag`` by header stamp; FileNotFoundError, ValueError."""
+    from adcs_nodes.bag import header_stamp_ns, read_messages
     names = tuple(t.lstrip('/') for t in topics)
     try:
         mtime = max(os.stat(os.path.join(bag, f)).st_mtime_ns for f in os.listdir(bag)) \
@@ -36,7 +27,7 @@ def from_bag(bag: str, topics: Sequence[str]) -> Topics:
         return _LAST[key]
     out: Topics = {t: {} for t in names}
     for topic, _, msg in read_messages(bag, ['/' + t for t in names]):
-        stamp = _stamp(msg)
+        stamp = header_stamp_ns(msg)
         if stamp is not None:
             out[topic.lstrip('/')][stamp] = msg
     _LAST.clear()
@@ -46,8 +37,7 @@ def from_bag(bag: str, topics: Sequence[str]) -> Topics:
 
 
 def from_frames(frames: Iterable[Any], topics: Sequence[str], epoch_ns: int) -> Topics:
-    """The messages of ``topics`` in FrameLoop frames (:class:`sim_node.engine.Frame`) of a
-    run with epoch ``epoch_ns`` (the samples' converters, :func:`adcs_nodes.inputs.converter`)."""
+    """The messages of ``topics`` in FrameLoop frames of a run with epoch ``epoch_ns``."""
     from adcs_nodes.inputs import converter
     out: Topics = {t.lstrip('/'): {} for t in topics}
     to_msg = {t: converter(t).to_msg for t in out}
@@ -92,18 +82,14 @@ def sorted_items(topic: Dict[int, Any]) -> list:
 
 
 def scenario_dict(sc: Dict[str, Any]) -> Dict[str, Any]:
-    """A validated scenario: ``sc`` itself when it was loaded (it has ``_path``), else the
-    effective scenario of a bag (``scenario.yaml``) validated again, without its plugins (a
-    bag is data)."""
+    """``sc`` when loaded, else a bag's scenario validated without its plugins."""
     from adcs_nodes.scenario import apply_overrides
     return sc if '_path' in sc else apply_overrides({**sc, 'plugins': []}, {})
 
 
 def run_topics(sc: Dict[str, Any], topics: Sequence[str], duration_s: Optional[float] = None,
                overrides: Any = None, ideal: bool = False) -> Topics:
-    """The stamped messages of ``topics`` of a FrameLoop run of the validated scenario ``sc``
-    with ``overrides``; ScenarioError or EngineError (ValueErrors) for a bad override or a
-    scenario the plain engine cannot run."""
+    """The stamped messages of ``topics`` of a FrameLoop run of ``sc`` with ``overrides``."""
     from adcs_nodes.scenario import apply_overrides
     from sim_node.engine import FrameLoop
     if overrides:

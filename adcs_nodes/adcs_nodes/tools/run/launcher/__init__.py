@@ -1,7 +1,4 @@
-"""The launcher behind ``adcs run``, by concern: run isolation and the DDS environment
-(:mod:`.isolation`), the node processes (:mod:`.processes`), the rclpy monitor
-(:mod:`.monitor`), the lifecycle client (:mod:`.lifecycle`), self-healing (:mod:`.healing`),
-supervision (:mod:`.supervise`: :class:`Launcher`) and the result text (:mod:`.result`)."""
+"""The launcher behind ``adcs run``, a module per concern; its public names."""
 from adcs_nodes.tools.run.launcher.isolation import (DDS_ENV_KEYS, FASTDDS_PROFILES,  # noqa: F401
                                                      RUNS_DIR, LaunchError, acquire_domain,
                                                      child_env, profile_env, use_dds_env)

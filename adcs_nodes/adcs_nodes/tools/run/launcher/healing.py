@@ -1,8 +1,5 @@
-"""Self-healing before frame 0 (one process per node): a node whose expected endpoints stay
-unmatched for :data:`HEAL_WAIT_S` while every other node is ready, or a managed node whose
-lifecycle requests go unanswered for :data:`HEAL_UNANSWERED_S` while it uses no CPU, is
-stopped and started again, at most :data:`MAX_RESTARTS` times (nothing has happened yet, so
-the run stays deterministic); a node stuck again fails the run with the reason."""
+"""Self-healing before frame 0: a node stuck at the handshake or in its lifecycle is restarted,
+at most :data:`MAX_RESTARTS` times (nothing has happened yet: still deterministic)."""
 from __future__ import annotations
 
 import re
@@ -10,15 +7,11 @@ from typing import Callable, Dict, Iterable, List, Tuple
 
 import adcs_nodes.tools.run.launcher.processes as processes
 
-#: Wall seconds a node's handshake may wait for its endpoints (its ``still waiting for
-#: endpoints after N s`` log line) while every other node is ready, before it is restarted.
+#: Wall seconds a node may wait for its endpoints while every other is ready.
 HEAL_WAIT_S = 30.0
-#: ... seconds a managed node's lifecycle requests (change_state, get_state) may go
-#: unanswered before it is restarted (a lost answer is asked again after 5 s).
+#: ... seconds a managed node's lifecycle requests may go unanswered.
 HEAL_UNANSWERED_S = 30.0
-#: A node that used at least this much CPU time [s] over :data:`HEAL_BUSY_WINDOW_S` while
-#: its lifecycle requests went unanswered is busy (configuring, compiling a kernel), not
-#: stuck: it is given another :data:`HEAL_UNANSWERED_S` instead of a restart.
+#: CPU time [s] over :data:`HEAL_BUSY_WINDOW_S` of a busy, not stuck, unanswering node.
 HEAL_BUSY_CPU_S = 1.0
 HEAL_BUSY_WINDOW_S = 10.0
 #: Restarts per node before frame 0; a node stuck again after them fails the run.
@@ -29,15 +22,8 @@ _WAITING = re.compile(r'still waiting for endpoints after ([0-9.]+) s: (.*)')
 def heal_decision(expected: List[str], ready: Iterable[str], waiting: Dict[str, Tuple[float, str]],
                   master: str, restarts: Dict[str, int], guards: Dict[str, List[str]],
                   wait_s: float = HEAL_WAIT_S, max_restarts: int = MAX_RESTARTS):
-    """Which nodes to restart before frame 0, from the start handshake's state: ``expected``
-    (the nodes that say ``lockstep/ready``), ``ready``, ``waiting`` (per node ``(seconds,
-    unmatched)`` of its last "still waiting for endpoints" line), ``restarts`` so far, ``guards``
-    (per node, those accepting its messages only from its identity).
-
-    Nothing is decided while a node not ready has waited less than ``wait_s``; a node is
-    restarted when its endpoints stay unmatched after all its peers matched, the clock master
-    only when it is the only one stuck. Returns None, ``('restart', [(node, reason), ...])`` or
-    ``('fail', node, reason)`` after ``max_restarts``."""
+    """Which nodes to restart before frame 0 (``waiting``: per node ``(seconds, unmatched)``):
+    None, ``('restart', [(node, reason), ...])`` or ``('fail', node, reason)``."""
     ready = set(ready)
     unready = [n for n in expected if n not in ready]
     if not unready or any(waiting.get(n, (0.0, ''))[0] < wait_s for n in unready):
@@ -54,10 +40,7 @@ def heal_decision(expected: List[str], ready: Iterable[str], waiting: Dict[str, 
 
 def restart_plan(targets: List[Tuple[str, str]], ready: Iterable[str], master: str,
                  guards: Dict[str, List[str]]) -> List[Tuple[str, str]]:
-    """``targets`` ``(node, reason)`` and the nodes to restart with them: each ready consumer
-    that accepts a target's messages only from the publisher identity it locked at its
-    handshake (it would refuse the new process), and the clock master when a node that had
-    said ready is restarted (the master must wait for its new ready)."""
+    """``targets`` ``(node, reason)`` plus the guarding consumers and the clock master."""
     ready = set(ready)
     out = list(targets)
     names = {n for n, _ in targets}
@@ -74,9 +57,7 @@ def restart_plan(targets: List[Tuple[str, str]], ready: Iterable[str], master: s
 
 
 class Healer:
-    """The launcher's self-healing state (restarts per node, their notes, the CPU-time windows
-    of unanswered managed nodes) over the graph's ``nodes``, the run's ``procs`` and
-    ``respawn(name, note)``."""
+    """The launcher's self-healing state over the graph's ``nodes`` and the run's ``procs``."""
 
     def __init__(self, nodes, procs: processes.Processes, master: str,
                  respawn: Callable[[str, str], None], log=print) -> None:
@@ -92,17 +73,14 @@ class Healer:
                 self.guards.setdefault(str(item).rsplit('=', 1)[-1], []).append(node.name)
 
     def waiting(self, name: str) -> Tuple[float, str]:
-        """``(seconds, unmatched)`` of the last ``still waiting for endpoints`` line that the
-        node's current process logged (``(0.0, '')`` if none)."""
+        """``(seconds, unmatched)`` of the node's last ``still waiting`` log line."""
         last = (0.0, '')
         for m in _WAITING.finditer(self.procs.current_log(name)):
             last = (float(m.group(1)), m.group(2).strip())
         return last
 
     def check(self, monitor, transitions=None):
-        """The start handshake's check (before frame 0, about once a second): restarts what
-        :func:`heal_decision` says; ``(1, message)`` when a node is stuck again after its
-        restarts, else None."""
+        """Restart what :func:`heal_decision` says; ``(1, message)``: stuck again."""
         expected = [n.name for n in self.nodes if n.lockstep and n.name in self.procs.procs]
         waiting = {n: self.waiting(n) for n in expected if n not in monitor.ready}
         verdict = heal_decision(expected, monitor.ready, waiting, self.master, self.restarts,
@@ -118,9 +96,7 @@ class Healer:
         return None
 
     def lifecycle(self, monitor, transitions, name: str):
-        """A managed node whose lifecycle requests went unanswered: restarted (with what
-        :func:`restart_plan` adds) unless it is busy, or ``(name, 'unanswered')`` after its
-        restarts."""
+        """Restart an unanswering managed node unless busy; ``(name, 'unanswered')``."""
         proc = self.procs.procs.get(name)
         cpu = processes.cpu_seconds(proc.pid) if proc is not None else None
         if cpu is not None:

@@ -14,8 +14,7 @@ import stat
 import tempfile
 from typing import Dict, Iterable, List
 
-#: Run directories and active-run manifests: ``$ADCS_RUNS_DIR`` when set (the test suite sets
-#: its own temporary directory), else ``~/.cache/adcs/runs``.
+#: Run directories and active-run manifests: ``$ADCS_RUNS_DIR``, else ``~/.cache/adcs/runs``.
 RUNS_DIR = os.environ.get('ADCS_RUNS_DIR') or os.path.join(os.path.expanduser('~'), '.cache',
                                                            'adcs', 'runs')
 #: ``ROS_DOMAIN_ID`` values a run draws from, at random among the free ones (docs/security.md,
@@ -30,8 +29,7 @@ RUN_DIR_PATTERN = re.compile(r'\d{8}T\d{6}-[A-Za-z0-9_.-]+-\d+')
 FASTDDS_PROFILES = os.path.join(
     os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(
         __file__))))), 'config', 'fastdds_profiles.xml')
-#: The middleware settings of a run: :func:`child_env` sets them, :func:`use_dds_env` copies
-#: them into the calling process (its own rclpy node: the launcher's monitor, ``adcs switch``).
+#: The middleware settings of a run (:func:`child_env`, :func:`use_dds_env`).
 DDS_ENV_KEYS = ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE', 'FASTDDS_BUILTIN_TRANSPORTS',
                 'FASTDDS_DEFAULT_PROFILES_FILE')
 
@@ -41,8 +39,7 @@ class LaunchError(RuntimeError):
 
 
 def private_dir(path: str) -> str:
-    """Create ``path`` (mode 0700) or check an existing one: a real directory (not a symlink)
-    owned by this user and not writable by others; ``LaunchError`` otherwise."""
+    """Create ``path`` (0700) or check it is this user's own real directory; LaunchError."""
     try:
         os.makedirs(path, mode=0o700, exist_ok=True)
         st = os.lstat(path)
@@ -57,8 +54,7 @@ def private_dir(path: str) -> str:
 
 
 def domain_lock_dir() -> str:
-    """Per-user directory of the domain lock files: ``$XDG_RUNTIME_DIR/adcs-domain-locks``,
-    else ``<tmp>/adcs-domain-locks-<uid>`` (created 0700, ownership checked)."""
+    """Per-user directory (0700, ownership checked) of the domain lock files."""
     runtime = os.environ.get('XDG_RUNTIME_DIR', '')
     if runtime and os.path.isabs(runtime) and os.path.isdir(runtime):
         return os.path.join(runtime, 'adcs-domain-locks')
@@ -66,9 +62,8 @@ def domain_lock_dir() -> str:
 
 
 def acquire_domain(domains: Iterable[int] = RUN_DOMAINS):
-    """Claim a free ROS_DOMAIN_ID of ``domains`` at random with an exclusive lock file
-    (``O_NOFOLLOW``, no truncation: a planted symlink is refused); ``(id, handle)``, claimed
-    until the handle is closed."""
+    """Claim a free ROS_DOMAIN_ID of ``domains`` at random with an exclusive lock file (no
+    symlink followed); ``(id, handle)``, claimed until the handle is closed."""
     lock_dir = private_dir(domain_lock_dir())
     ids = list(domains)
     random.shuffle(ids)
@@ -90,8 +85,7 @@ def acquire_domain(domains: Iterable[int] = RUN_DOMAINS):
 
 def prune_runs(runs_dir: str = RUNS_DIR, keep: int = KEEP_RUNS,
                protect: Iterable[str] = ()) -> List[str]:
-    """Remove the oldest run directories (named ``<time>-<scenario>-<pid>``) beyond the newest
-    ``keep``, never one in ``protect`` or of a live launcher; the removed paths."""
+    """Remove the run directories beyond the newest ``keep`` (not ``protect``, not live)."""
     try:
         names = [n for n in os.listdir(runs_dir) if RUN_DIR_PATTERN.fullmatch(n)]
     except OSError:
@@ -147,21 +141,16 @@ def disk_full(exc: OSError) -> bool:
 
 
 def child_env(domain: int) -> Dict[str, str]:
-    """Environment of every child: the run's domain, localhost discovery, unbuffered output,
-    the project's Fast DDS profile (unless the user set a profiles file of their own)."""
+    """Environment of every child: the run's domain, localhost, the Fast DDS profile."""
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(domain)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['PYTHONUNBUFFERED'] = '1'
     env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
-    # UDP on loopback only, set by the profile (docs/decisions.md): FASTDDS_BUILTIN_TRANSPORTS
-    # would change nothing (the profile declares its transport; with LOCALHOST rmw_fastrtps
-    # chooses its own)
-    env.update(profile_env(env))
+    env.update(profile_env(env))      # UDP on loopback only (docs/decisions.md)
     if env.get('FASTDDS_DEFAULT_PROFILES_FILE') == FASTDDS_PROFILES:
-        # the profile binds discovery and traffic to loopback itself; with LOCALHOST
-        # rmw_fastrtps would replace its transports by UDP plus shared memory, whose ports
-        # every run on the host shares (docs/reliability.md, "Shared memory between runs")
+        # the profile binds to loopback; LOCALHOST would add shared memory, shared by every
+        # run on the host (docs/reliability.md, "Shared memory between runs")
         env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'SYSTEM_DEFAULT'
     if env.get('FASTDDS_DEFAULT_PROFILES_FILE') == '':   # "no file": Fast DDS would log an
         del env['FASTDDS_DEFAULT_PROFILES_FILE']         # error for the empty path
@@ -169,16 +158,14 @@ def child_env(domain: int) -> Dict[str, str]:
 
 
 def profile_env(environ) -> Dict[str, str]:
-    """``{'FASTDDS_DEFAULT_PROFILES_FILE': FASTDDS_PROFILES}``, or ``{}`` when ``environ``
-    names a profiles file of the user's own (an empty value too: Fast DDS then loads none)."""
+    """The project's Fast DDS profile, or ``{}`` when ``environ`` names one (even empty)."""
     if 'FASTDDS_DEFAULT_PROFILES_FILE' in environ or 'FASTRTPS_DEFAULT_PROFILES_FILE' in environ:
         return {}
     return {'FASTDDS_DEFAULT_PROFILES_FILE': FASTDDS_PROFILES}
 
 
 def use_dds_env(env: Dict[str, str]) -> None:
-    """Give this process the run's middleware settings (:data:`DDS_ENV_KEYS` of ``env``);
-    before its first rclpy node, since Fast DDS reads its profiles file once per process."""
+    """Give this process the run's middleware settings, before its first rclpy node."""
     for key in DDS_ENV_KEYS:
         if key in env:
             os.environ[key] = env[key]

@@ -5,17 +5,13 @@ import math
 import time
 from typing import Dict, List, Optional, Tuple
 
-#: Wall-clock limit for a managed node to become active after it was started [s]: process
-#: start (imports), service discovery, configure (parameters, core, endpoints), activate.
+#: Wall-clock limit for a managed node to become active after it was started [s].
 LIFECYCLE_DEADLINE_S = 120.0
 
 
 class Transitions:
-    """Drives ``configure`` then ``activate`` of the managed nodes through their
-    ``/<node>/change_state`` services, without blocking: :meth:`poll` sends ``configure`` once
-    a node's service appeared, the answer sends ``activate``. A request unanswered for
-    :data:`RESEND_S` is followed by ``/<node>/get_state``, whose state says what to send next (a
-    transition is never sent twice; late answers are ignored)."""
+    """Drives ``configure`` then ``activate`` of the managed nodes without blocking; after
+    :data:`RESEND_S` unanswered, ``get_state`` says what to send (never a transition twice)."""
 
     #: seconds without an answer before the node's state is asked
     RESEND_S = 5.0
@@ -55,8 +51,7 @@ class Transitions:
         self._heard[name] = time.monotonic() - self.unanswered_s + seconds
 
     def reset(self, name: str) -> None:
-        """Forget ``name``'s progress (its process was restarted): start again from
-        'starting', late answers of the old process ignored, a full deadline."""
+        """Start ``name`` again from 'starting' (its process was restarted), a full deadline."""
         self._token[name] += 1
         self.step[name] = 'starting'
         self._heard.pop(name, None)
@@ -69,9 +64,7 @@ class Transitions:
         return not self.failed and any(s != 'active' for s in self.step.values())
 
     def poll(self) -> Optional[Tuple[str, str]]:
-        """Send what is due. Returns ``(node, transition)`` of the first refused transition,
-        ``(node, 'deadline')`` for a node not active in time, ``(node, 'unanswered')`` for a
-        node whose requests got no answer for ``unanswered_s``, else None."""
+        """Send what is due; ``(node, transition | 'deadline' | 'unanswered')`` or None."""
         if self.failed:
             return next(iter(self.failed.items()))
         now = time.monotonic()

@@ -6,9 +6,8 @@ from typing import Dict
 
 
 class Monitor:
-    """Launcher-side rclpy node: progress from ``lockstep/status`` and ``recorder/status``,
-    reading no topic a node of the graph reads (a composed run stays on its in-process path); a
-    content filter keeps the clock master's status and those reporting missed frames."""
+    """Launcher-side rclpy node: progress from ``lockstep/status`` (content-filtered) and
+    ``recorder/status``, no topic a node of the graph reads."""
 
     def __init__(self, epoch_ns: int, watch_ready: bool = False) -> None:
         import rclpy
@@ -75,8 +74,7 @@ class Monitor:
         self.executor.add_node(self.node)
 
     def _on_status_msg(self, msg) -> None:
-        """``lockstep/status``: missed frames, and the sim time of the node's last frame
-        (a status with no frame processed yet is the start-up watchdog's)."""
+        """``lockstep/status``: missed frames, and the sim time of the node's last frame."""
         self._on_status(msg)
         if msg.frames > 0:
             self.clock_seen = True
@@ -105,9 +103,7 @@ class Monitor:
         self.executor.spin_until_future_complete(Future(), timeout_sec=seconds)
 
     def wait_recorder_settled(self, deadline: float) -> bool:
-        """Spin until two recorder statuses in a row (its 0.5 s wall timer once the graph
-        stopped) carry the same message count, the bag then has everything, or until ``deadline``
-        (monotonic); True if settled."""
+        """Spin until two recorder statuses carry the same count (True) or ``deadline``."""
         seen, last = self.recorder_statuses, None
         while time.monotonic() < deadline:
             self.spin(0.1)

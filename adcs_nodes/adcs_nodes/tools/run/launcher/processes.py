@@ -19,9 +19,7 @@ PDEATHSIG_SHIM = (
     'if os.getppid() != int(sys.argv[1]):\n'
     '    sys.exit(0)\n'  # the launcher died before prctl: do not start an orphan
     'os.execv(sys.argv[2], sys.argv[2:])\n')
-#: Test only: ``<node>[@<starts>]:<ros args>[;...]`` appended to that node's command (e.g.
-#: ``guidance:-r /clock:=/nowhere``: a node that never matches; ``guidance@1:...``: only its
-#: first process), to test the self-healing.
+#: Test only: ``<node>[@<starts>]:<ros args>[;...]`` appended to that node's command.
 TEST_NODE_ARGS_ENV = 'ADCS_TEST_NODE_ROS_ARGS'
 
 
@@ -113,8 +111,7 @@ class Processes:
                 proc.wait()
 
     def stop_all(self, monitor=None, grace_s: float = 10.0) -> None:
-        """Stop every child: the graph first, then the recorder once it has written
-        everything that was published (its message count stops growing)."""
+        """Stop the graph, then the recorder once it has written everything."""
         self.signal_and_wait([n for n in self.procs if n != 'recorder'], grace_s)
         if 'recorder' in self.procs:
             if monitor is not None and self.procs['recorder'].poll() is None:
@@ -122,9 +119,7 @@ class Processes:
             self.signal_and_wait(['recorder'], grace_s)
 
     def dump_stack(self, name: str, wait_s: float = 5.0) -> str:
-        """Ask a live node process for its Python stacks (SIGUSR1: ``faulthandler`` in
-        ``runtime.run`` writes every thread's stack to its log); the log's last lines once
-        the dump is there (``''`` if the process is gone or wrote none within ``wait_s``)."""
+        """A live node's Python stacks (SIGUSR1): its log's last lines (``''``: none)."""
         proc = self.procs.get(name)
         if proc is None or proc.poll() is not None or not hasattr(signal, 'SIGUSR1'):
             return ''

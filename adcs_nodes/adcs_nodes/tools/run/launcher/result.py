@@ -13,8 +13,7 @@ import yaml
 
 from adcs_nodes.tools.run.launcher.isolation import disk_full
 
-#: Exit code of ``adcs run`` for a run that completed but lost its controller or estimator for
-#: part of the time (a flight-software node died, or the controller manager fell back).
+#: Exit code of a run that completed but lost its controller or estimator for a while.
 EXIT_DEGRADED = 3
 
 
@@ -54,8 +53,7 @@ _SUMMARY = re.compile(r'\[([A-Za-z0-9_./]+)\]: run summary (\{.*\})\s*$', re.M)
 
 
 def node_summaries(run_dir: str) -> Dict[str, Dict[str, Any]]:
-    """Each flight-software node's run summary (the JSON it logs at its last frame,
-    ``LockstepNode.run_summary``), by node name, from the run's logs (either deployment)."""
+    """Each flight node's run summary (the JSON it logs at its last frame), by node name."""
     out: Dict[str, Dict[str, Any]] = {}
     for path in sorted(glob.glob(os.path.join(run_dir, 'logs', '*.log'))):
         try:
@@ -72,8 +70,7 @@ def node_summaries(run_dir: str) -> Dict[str, Dict[str, Any]]:
 
 
 def summary_lines(summaries: Dict[str, Dict[str, Any]]) -> List[str]:
-    """One line per node with inputs: samples used per topic, rejected by reason,
-    superseded, filter resets."""
+    """One line per node with inputs: samples used, rejected, superseded, filter resets."""
     lines = []
     for name, s in sorted(summaries.items()):
         used = s.get('samples_used') or {}
@@ -88,8 +85,7 @@ def summary_lines(summaries: Dict[str, Dict[str, Any]]) -> List[str]:
 
 
 def starved_text(summaries: Dict[str, Dict[str, Any]]) -> str:
-    """The degraded reason of the nodes that got nothing usable from a topic for too long
-    ('' if none)."""
+    """The degraded reason of nodes starved of a topic for too long ('' if none)."""
     return '; '.join(
         f'{name} got nothing usable from {topic} (external or sample-timed input) for '
         f'{e["frames"]} of its frames from sim t = {e["since_s"]:g} s'
@@ -104,9 +100,7 @@ def write_failed_text(error: str, bag: Optional[str]) -> str:
 
 def degraded_text(sc: Dict[str, Any], lost: Dict[str, float], kills: Dict[str, Any],
                   sim_s: float, controller_status) -> str:
-    """Why the run lost its controller or estimator for part of the time ('' if not):
-    ``lost`` nodes (by the sim time they were seen dead [s]), the scenario's node kills, and
-    the manager's latched status."""
+    """Why the run lost its controller or estimator for part of the time ('' if not)."""
     from sim_node.faults import lost_text
     why = []
     names = [f'{n} (died at sim t = {t:g} s)' for n, t in sorted(lost.items()) if n not in kills]
@@ -123,9 +117,7 @@ def degraded_text(sc: Dict[str, Any], lost: Dict[str, float], kills: Dict[str, A
 
 def closing_text(code: int, message: str, monitor, run_dir: str, bag: Optional[str],
                  security_events: int, restart_notes: List[str], degraded: str):
-    """``(exit code, message)`` at the end of a run: the recorder's failure, refused
-    messages, messages lost to the bag, restarts, the degraded reason and the per-node
-    sample summaries added to what the watch loop ended with."""
+    """``(exit code, message)`` at the end of a run, with what the watch loop ended with."""
     if monitor.recorder_error and code == 0:
         code, message = 1, write_failed_text(monitor.recorder_error, bag)
     if security_events:
@@ -170,8 +162,7 @@ def transition_failed_text(name: str, transition: str, log: str, tail: str, stac
 
 
 def save_scenario(sc: Dict[str, Any], record: Optional[str], duration_s: float) -> str:
-    """Store the effective scenario beside the bag's files (``<bag>/scenario.yaml``: the
-    report's paper table, a campaign's check); ``''``, or why it could not be written."""
+    """Store the effective scenario as ``<bag>/scenario.yaml``; ``''``, or why not."""
     if not record or not os.path.isdir(record):
         return ''
     data = {k: v for k, v in sc.items() if not k.startswith('_')}

@@ -1,13 +1,5 @@
-"""The launcher behind ``adcs run``: start the scenario's graph, watch it, stop it cleanly.
-
-One process per node, or all in one (``--compose``), in a private domain (:mod:`.isolation`);
-managed nodes configured and activated through their lifecycle services (:mod:`.lifecycle`;
-a refusal: exit 2 with the node's reason); progress (:mod:`.monitor`); self-healing before
-frame 0 (:mod:`.healing`). The run ends when the clock master exits 0 after the last frame
-and the recorder has everything; then (or on Ctrl-C) every child gets SIGINT, SIGKILL after a
-grace period, the bag closed. An essential child (world, recorder) that dies stops the run
-with its log's tail; a flight-software node that dies is reported and the run goes on.
-``RUNS_DIR/active-<pid>.json`` (owner-only) names the run's domain, directory, bag and PIDs."""
+"""The launcher behind ``adcs run``: start the scenario's graph, watch it (an essential child
+that dies stops the run; a flight node's death is reported), stop it cleanly."""
 from __future__ import annotations
 
 import json
@@ -42,8 +34,7 @@ STALL_NOTICE_S = 30.0
 #: Nodes whose death ends the run: the simulated world, the recorder, the composed process.
 #: Any other node (flight software) may die; the run goes on and its consumers fall back.
 ESSENTIAL = {'dynamics', 'environment', 'recorder', 'composed'}
-#: The clock master's start limit (``start_timeout_s``) in a launched run: the launcher's own
-#: deadlines (lifecycle, restarts) end a stuck start first and say why.
+#: The clock master's ``start_timeout_s``: the launcher's own deadlines come first.
 START_TIMEOUT_S = 180.0
 #: The largest ``--rate`` [sim seconds per wall second].
 MAX_RATE = 1e6
@@ -58,9 +49,7 @@ def check_rate(rate: float) -> float:
 
 
 def pace(rate: Optional[float], real_time: bool) -> Tuple[float, float]:
-    """``adcs run``'s ``--rate`` as the launcher's ``(rate_factor, max_rate)``: with
-    ``--real-time`` the sim seconds per wall second (default 1), without it the lockstep's
-    pace limit (default 0: none). A rate outside (0, :data:`MAX_RATE`] is a LaunchError."""
+    """``--rate`` as ``(rate_factor, max_rate)`` (real time's pace, else lockstep's limit)."""
     if rate is not None:
         check_rate(rate)
     if real_time:
@@ -122,8 +111,7 @@ class Launcher:
 
     # ------------------------------------------------------------------ processes
     def _started_nodes(self) -> List[NodeSpec]:
-        """The graph as started: the managed nodes with ``autostart: false`` (the launcher,
-        or the composed process, drives their transitions)."""
+        """The graph as started: managed nodes with ``autostart: false`` (driven from here)."""
         out = []
         for n in self.nodes:
             if is_managed(n):
@@ -262,10 +250,7 @@ class Launcher:
                 f'{k}={env[k]}' for k in DDS_ENV_KEYS if env.get(k)))
 
     def _kill_due(self, monitor: Monitor) -> None:
-        """A ``node_killed`` fault (graph runs): SIGKILL the node's process once the run's
-        clock has reached its time; the node went silent at that frame already
-        (``LockstepNode._stops_at``), so the series do not depend on when the signal lands.
-        Composed, the node only stops (one process for all)."""
+        """SIGKILL a ``node_killed`` fault's node once the clock reached it (it is silent)."""
         for name, f in self.kills.items():
             proc = self.processes.procs.get(name)
             if self.compose or proc is None or name in self.killed \
@@ -280,8 +265,7 @@ class Launcher:
                      f'at sim t = {float(f["at_s"]):g} s')
 
     def _master_result(self, key: str) -> float:
-        """A value of the clock master's result file (``frames_per_s``,
-        ``security_events``, ...), 0 if none."""
+        """A value of the clock master's result file, 0 if none."""
         try:
             with open(self.result_file) as fh:
                 return float(json.load(fh)[key])
