@@ -181,7 +181,8 @@ def test_state_packing_and_bad_modal_state_are_refused():
     with pytest.raises(ValueError, match='hub inertia'):
         Spacecraft(np.diag([100.0, 100.0, 100.0]), flexible=FlexibleModes(f, freq))
     with pytest.raises(ValueError, match='damping'):
-        FlexibleModes(f, freq, 1.0)
+        FlexibleModes(f, freq, 1.5)
+    FlexibleModes(f, freq, 1.0)        # critical damping: the spec's [0, 1] range
     with pytest.raises(ValueError, match='frequencies'):
         FlexibleModes(f, freq[:4])
 

@@ -101,8 +101,8 @@ class FlexibleModes:
             zeta = np.broadcast_to(zeta, (m,)).astype(float)
         except ValueError:
             raise ValueError(f'damping must be a scalar or {m} values, got {zeta}') from None
-        if not np.all(np.isfinite(zeta)) or np.any(zeta < 0.0) or np.any(zeta >= 1.0):
-            raise ValueError(f'damping must be in [0, 1), got {zeta}')
+        if not np.all(np.isfinite(zeta)) or np.any(zeta < 0.0) or np.any(zeta > 1.0):
+            raise ValueError(f'damping must be in [0, 1], got {zeta}')
         self.coupling, self.frequencies_hz, self.damping = f, freq, zeta
 
     @property
