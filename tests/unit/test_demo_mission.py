@@ -7,9 +7,9 @@ composed graph gives the same series (the engine parity contract, tests/graph/
 test_engine_parity.py).
 
 Truth: the scenario's timeline (its header): auto sequence detumble (B-dot) -> acquire
-(magnetic) -> point (MPI), scheduled fuzzy slew at SLEW_S and MPI hold at HOLD_S, star tracker
-NaN from BLIND_S for 300 s, wheel_x stuck from STUCK_S, after which MPI flies on with the two
-wheels left and the magnetorquers (no fallback).
+(magnetic), scheduled fuzzy capture at CAPTURE_S and MPI at POINT_S, fuzzy slew at SLEW_S and
+MPI hold at HOLD_S, star tracker NaN from BLIND_S for 300 s, wheel_x stuck from STUCK_S, after
+which MPI flies on with the two wheels left and the magnetorquers (no fallback).
 """
 import collections
 import math
@@ -28,6 +28,7 @@ KEPT = ('sim/state', 'sim/wheels', 'sim/faults', 'adcs/attitude_estimate',
         'adcs/controller_status')
 EPOCH_NS = 1773964800 * 10**9          # the scenario's epoch, 2026-03-20T00:00:00Z
 #: The scenario's scripted times [s] (its header).
+CAPTURE_S, POINT_S = 4400.0, 5040.0
 BLIND_S, SLEW_S, HOLD_S, STUCK_S, END_S = 5400.0, 6600.0, 7200.0, 8400.0, 9600.0
 
 
@@ -74,13 +75,14 @@ def test_every_phase_is_reached_in_order(mission):
     seq = [(mode, active) for _, mode, active in modes]
     # the automatic sequence, then the schedule (which suspends it: mode '')
     firsts = [seq.index(p) for p in (('detumble', 'bdot'), ('acquire', 'magnetic'),
-                                     ('point', 'mpi'), ('', 'fuzzy'), ('', 'mpi'))]
+                                     ('', 'fuzzy'), ('', 'mpi'))]
     assert firsts == sorted(firsts)
-    when = {p: next(t for t, mode, active in modes if (mode, active) == p)
-            for p in (('acquire', 'magnetic'), ('point', 'mpi'), ('', 'fuzzy'), ('', 'mpi'))}
-    assert 1000.0 < when[('acquire', 'magnetic')] < 4000.0
-    assert when[('acquire', 'magnetic')] < when[('point', 'mpi')] < BLIND_S - 300.0
-    assert when[('', 'fuzzy')] == SLEW_S and when[('', 'mpi')] == HOLD_S
+    starts = [(t, (mode, active)) for i, (t, mode, active) in enumerate(modes)
+              if i == 0 or modes[i - 1][1:] != (mode, active)]
+    when = {p: [t for t, x in starts if x == p]
+            for p in (('acquire', 'magnetic'), ('', 'fuzzy'), ('', 'mpi'))}
+    assert 1000.0 < when[('acquire', 'magnetic')][0] < CAPTURE_S
+    assert when[('', 'fuzzy')] == [CAPTURE_S, SLEW_S] and when[('', 'mpi')] == [POINT_S, HOLD_S]
     sources = [s for _, s in _sources(out)]
     for name in ('bdot', 'magnetic', 'mpi', 'fuzzy'):
         assert name in sources                  # each controller drove the actuators
@@ -90,9 +92,10 @@ def test_every_phase_is_reached_in_order(mission):
         return math.degrees(att.angle_between(q(truth[t].q_orbit_body),
                                               q(target[t].q_ref_body)))
     rate0 = math.degrees(np.linalg.norm(v(truth[0.0].omega_body_eci_body)))
-    rate_acq = math.degrees(np.linalg.norm(v(truth[when[('acquire', 'magnetic')]]
+    rate_acq = math.degrees(np.linalg.norm(v(truth[when[('acquire', 'magnetic')][0]]
                                              .omega_body_eci_body)))
     assert rate0 > 3.0 and rate_acq < 0.6            # detumbled
+    assert max(err(float(t)) for t in range(int(POINT_S) - 600, int(POINT_S))) < 10.0  # captured
     assert err(BLIND_S - 100.0) < 0.1                # MPI fine pointing on the orbital frame
     assert err(SLEW_S) > 40.0                        # the new attitude is 45 deg away ...
     assert max(err(t) for t in range(int(SLEW_S) + 300, int(HOLD_S))) < 0.5   # ... reached

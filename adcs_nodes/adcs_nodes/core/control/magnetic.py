@@ -37,10 +37,8 @@ Magnetorquers only realise the part of ``M*`` perpendicular to ``B`` (body, meas
     Phi(B) L* = -M*  (pseudo-solution)  ->  L* = (B x M*) / |B|^2                         (30)
     L = sigma L*,  sigma = min(1, 1 / max_i(|L*_i| / l_i))                                (31)
 
-**Sign of (30).** The paper prints ``L* = -k Phi^+(B) Y``; with ``Phi^+(B) = -Phi(B)/|B|^2`` and
-``M* = -k Y`` that is ``L* x B = -(M* - b b^T M*)``: positive feedback (digest 3.4, pitfall 1).
-This module implements the pseudo-solution of (30) itself, ``L* = B x M* / |B|^2``, so
-``M_u . M* = |M* - b b^T M*|^2 >= 0``; a unit test pins it.
+**Sign of (30).** The printed ``L* = -k Phi^+(B) Y`` is positive feedback (digest 3.4); this
+module solves (30) itself, ``L* = B x M* / |B|^2``, so ``M_u . M* >= 0`` (a unit test pins it).
 
 Gain condition
 --------------
@@ -49,10 +47,8 @@ With ``V = 1/2 Y^T I Y + beta |lambda|^2`` (25), ``beta > 0``, the paper needs::
     k > beta / (2 alpha)                                                                  (28)
     k > beta / (2 alpha Sigma*),   Sigma* = min_t sigma(t)   with the scaling (31)
 
-``beta`` appears only in the proof and is free, so the condition restricts nothing by itself:
-the start-up check is about the *configured* ``beta`` (and ``Sigma*``, default 1). Without a
-configured ``beta`` only ``alpha > 0`` and ``k > 0`` are checked. The same check is applied in
-every mode (the paper states it for the three-axis law).
+``beta`` is free (it appears only in the proof): the start-up check uses a configured ``beta``
+(and ``Sigma*``, default 1), else only ``alpha > 0``, ``k > 0``; in every mode.
 
 Assumptions (not in the paper)
 ------------------------------
@@ -76,11 +72,13 @@ Assumptions (not in the paper)
 
 Beyond the paper: feed-forward (``inertia`` given; DEPARTURE, off by default)
 ------------------------------------------------------------------------------
-The paper's Lyapunov argument leaves out the gyroscopic and gravity-gradient torques (they
-vanish at the orbital frame for its I_x = I_y). On another inertia, or off the orbital frame,
-they are added to the demand from the estimate::
+The gyroscopic and gravity-gradient torques, left out of the paper's Lyapunov argument, added
+to the demand from the estimate::
 
     M* <- M* + omega x I omega - 3 omega0^2 e_R x I e_R                                      (F1)
+
+The loop is periodic (``1 - b b^T`` turns with the field): unstable once ``sqrt(k alpha / 2I)``
+exceeds about ``omega0`` (Floquet; ``docs/decisions.md``, magnetic acquisition).
 
 Compiled law
 ------------
