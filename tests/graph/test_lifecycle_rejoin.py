@@ -62,7 +62,8 @@ def test_bdot_cleaned_up_and_configured_during_a_run_rejoins_at_the_worlds_frame
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
-    assert cli.returncode == 0, cli.stdout + cli.stderr
+    assert cli.returncode == 0, (cli.stdout + cli.stderr
+                                 + node_log(latest_run_dir(), 'bdot_controller')[-3000:])
     assert proc.returncode in (0, 3), out + err     # 3: degraded by the frames B-dot missed
     run_dir = latest_run_dir()
     log = node_log(run_dir, 'bdot_controller')

@@ -62,7 +62,7 @@ def _console(stderr):
 @pytest.fixture(scope='module')
 def report(tmp_path_factory):
     """report.html of a 90 s plain run of the demo mission (MPI, a scheduled fuzzy slew, the
-    star tracker NaN for 10 s, wheel_x stuck: a fallback)."""
+    star tracker NaN for 10 s, wheel_x stuck (MPI flies on), MPI killed at 75 s: a fallback)."""
     tmp = tmp_path_factory.mktemp('page')
     with open(os.path.join(ROOT, 'scenarios', 'demo_mission.yaml')) as fh:
         sc = yaml.safe_load(fh)
@@ -77,7 +77,8 @@ def report(tmp_path_factory):
                                   'q_xyzw': [0.0871557, 0.0, 0.0, 0.9961947]}]
     sc['faults'] = [{'at_s': 5.0, 'kind': 'wheel_stuck', 'target': 'wheel_x'},
                     {'at_s': 20.0, 'kind': 'nan', 'target': 'star_tracker',
-                     'params': {'duration_s': 10.0}}]
+                     'params': {'duration_s': 10.0}},
+                    {'at_s': 75.0, 'kind': 'node_killed', 'target': 'mpi_controller'}]
     path = tmp / 'variant.yaml'
     path.write_text(yaml.safe_dump(sc))
     bag = str(tmp / 'bag')
