@@ -301,11 +301,7 @@ class FrameLoop:
     def _fire(self, c: _Consumer, t_ns: int, frame: Frame) -> None:
         """A consumer's frame, as its node fires it (``LockstepNode._fire``): the inputs due
         and absent are missed (and counted), then the frame's samples."""
-        missing = c.sync.missing(t_ns)
-        if missing:
-            c.sync.record_misses(t_ns)
-        samples = {k: c.sync.value(k, t_ns) for k in c.sync.names}
-        c.sync.prune(t_ns)
+        samples, missing = c.sync.take(t_ns)
         for topic, x in c.fire(t_ns, samples, missing):
             self._publish(frame, topic, x)
 

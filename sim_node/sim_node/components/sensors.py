@@ -14,7 +14,6 @@ field that faults change) runs in :class:`SensorComponent` itself.
 """
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, Dict, Optional, Tuple, Type
 
 import numpy as np
@@ -90,7 +89,7 @@ class SensorComponent:
 
     def with_values(self, x: Any, values: np.ndarray) -> Any:
         """``x`` with its measured values replaced."""
-        return dataclasses.replace(x, **{self.values: _f(values)})
+        return x._replace(**{self.values: _f(values)})
 
 
 class MagnetometerComponent(SensorComponent):
@@ -176,7 +175,7 @@ class HorizonSensorComponent(SensorComponent):
         return np.array([x.roll_rad, x.pitch_rad])
 
     def with_values(self, x: s.HorizonSample, values: np.ndarray) -> s.HorizonSample:
-        return dataclasses.replace(x, roll_rad=float(values[0]), pitch_rad=float(values[1]),
+        return x._replace(roll_rad=float(values[0]), pitch_rad=float(values[1]),
                                    valid=bool(x.valid and np.all(np.isfinite(values))))
 
 
