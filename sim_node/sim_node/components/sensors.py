@@ -63,7 +63,7 @@ class SensorComponent:
 
     def truth_ok(self, t_ns: int, what: str, *arrays: np.ndarray) -> bool:
         """True when every truth array is finite and non-zero; else warn (no sample)."""
-        if all_finite(*arrays) and all(np.any(a) for a in arrays):
+        if all_finite(*arrays) and all(np.asarray(a).any() for a in arrays):
             return True
         self.log('warning', f't={t_ns / NS_PER_S:.3f} s: non-finite truth ({what}), no sample')
         return False
@@ -176,7 +176,7 @@ class HorizonSensorComponent(SensorComponent):
 
     def with_values(self, x: s.HorizonSample, values: np.ndarray) -> s.HorizonSample:
         return x._replace(roll_rad=float(values[0]), pitch_rad=float(values[1]),
-                                   valid=bool(x.valid and np.all(np.isfinite(values))))
+                          valid=bool(x.valid and np.all(np.isfinite(values))))
 
 
 class WheelTachometerComponent(SensorComponent):
