@@ -298,17 +298,6 @@ class FrameLoop:
         for sync, key in self._subs.get(topic, ()):
             sync.add(key, sample.t_ns, sample)
 
-    def _fire(self, c: _Consumer, t_ns: int, frame: Frame) -> None:
-        """A consumer's frame, as its node fires it (``LockstepNode._fire``): the inputs due
-        and absent are missed (and counted), then the frame's samples."""
-        missing = c.sync.missing(t_ns)
-        if missing:
-            c.sync.record_misses(t_ns)
-        samples = {k: c.sync.value(k, t_ns) for k in c.sync.names}
-        c.sync.prune(t_ns)
-        for topic, x in c.fire(t_ns, samples, missing):
-            self._publish(frame, topic, x)
-
     def _stopped(self, name: str, t_ns: int) -> bool:
         """True from the frame of node ``name``'s ``node_killed`` fault on (it publishes
         nothing more, as the node in a graph: ``LockstepNode._stops_at``)."""
@@ -323,7 +312,7 @@ class FrameLoop:
         """Run frame k (see module docstring) and return what it published."""
         if self.done:
             raise RuntimeError('the run is over')
-        t = self.t_ns
+        t = self.k * self.frame_ns
         frame = Frame(t)
         self._publish(frame, '/clock', Tick(t))
         env = self.environment.step(t)
@@ -344,9 +333,11 @@ class FrameLoop:
                 x = comp.step(t, truth)
                 if x is not None:
                     self._publish(frame, topic, x)
-        for c in self.consumers:
-            if t % c.period_ns == 0 and not self._stopped(c.name, t):
-                self._fire(c, t, frame)
+        for c in self.consumers:      # as its node fires (``LockstepNode._fire``): the
+            if t % c.period_ns == 0 and not self._stopped(c.name, t):   # misses, the samples
+                samples, missing = c.sync.take(t)
+                for topic, x in c.fire(t, samples, missing):
+                    self._publish(frame, topic, x)
         if t >= self.duration_ns:
             self.done = True
             return frame

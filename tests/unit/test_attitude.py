@@ -105,3 +105,18 @@ def test_paper000_lambda_is_q_orbit_body_scalar_first():
 def test_bad_inputs_raise_value_error(bad):
     with pytest.raises(ValueError):
         bad()
+
+
+def test_finiteness_checks_accept_finite_values_whose_sum_overflows():
+    """The fast check sums the values; a sum that overflows falls back to the exact one."""
+    from adcs_nodes.core.samples import all_finite
+    big = [1e308, 1e308, -1e308]
+    np.testing.assert_array_equal(att.as_vec3(big), big)
+    assert all_finite(np.array(big), np.array([1e308, 1e308, 0.0, 1.0]))
+    assert att.conjugate([1e308, 1e308, 0.0, 1.0])[3] == 1.0
+    for bad in ([1.0, np.inf, -np.inf], [1e308, 1e308, np.nan]):
+        assert not all_finite(np.array(bad))
+        with pytest.raises(ValueError, match='not finite'):
+            att.as_vec3(bad)
+    with pytest.raises(ValueError, match='not finite'):
+        att.normalize([np.inf, -np.inf, 0.0, 1.0])       # inf - inf: the sum is NaN

@@ -169,3 +169,21 @@ def test_dead_after_zero_never_gives_up():
     for k in range(10):
         assert sync.record_misses(k * S) == []
     assert sync.missing(10 * S) == ['a']
+
+
+def test_take_is_a_frame_of_a_consumer_that_never_waits():
+    """take: the missing inputs (misses counted), the values, then the older messages pruned,
+    by hand: env every 10, the command of the frame before (period 20), dead after 2."""
+    s = FrameSync({'env': 10, 'cmd': (20, 'previous')}, dead_after=2)
+    s.add('env', 0, 'e0')
+    assert s.take(0) == ({'env': 'e0', 'cmd': None}, [])       # no command before t = 0
+    s.add('cmd', 0, 'c0')
+    s.add('env', 10, 'e1')
+    assert s.take(10) == ({'env': 'e1', 'cmd': 'c0'}, [])
+    s.add('cmd', 20, 'c1')
+    assert s.take(20) == ({'env': 'e1', 'cmd': 'c0'}, ['env'])  # env(20) absent: latest
+    assert s.take(30) == ({'env': 'e1', 'cmd': 'c1'}, ['env'])  # second miss in a row
+    assert s.is_dead('env') and not s.is_dead('cmd')
+    assert s.take(40) == ({'env': 'e1', 'cmd': 'c1'}, [])       # dead env not awaited
+    assert s.take(50) == ({'env': 'e1', 'cmd': None}, ['cmd'])  # no cmd(40): None, missed
+    assert s._inputs['env'].stamps == [10]                      # pruned to the newest older

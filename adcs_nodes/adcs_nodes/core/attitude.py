@@ -31,7 +31,7 @@ def _as_quat(q) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     if q.shape != (4,):
         raise ValueError(f'quaternion must have shape (4,), got {q.shape}')
-    if not np.isfinite(q).all():        # the method: no np.all dispatch (hot path)
+    if not math.isfinite(sum(q.tolist())) and not np.isfinite(q).all():   # finite sum: fast
         raise ValueError(f'quaternion is not finite: {q}')
     return q
 
@@ -41,7 +41,7 @@ def as_vec3(v, name: str = 'vector') -> np.ndarray:
     v = np.asarray(v, dtype=float)
     if v.shape != (3,):
         raise ValueError(f'{name} must have shape (3,), got {v.shape}')
-    if not np.isfinite(v).all():
+    if not math.isfinite(sum(v.tolist())) and not np.isfinite(v).all():
         raise ValueError(f'{name} is not finite: {v}')
     return v
 

@@ -116,9 +116,10 @@ def warm_up() -> None:
 
 def _position(r_eci: ArrayLike) -> np.ndarray:
     r = np.asarray(r_eci, dtype=float)
-    if r.shape != (3,) or not np.isfinite(r).all():
+    v = r.tolist() if r.shape == (3,) else None      # a finite sum: all finite (hot path)
+    if v is None or not (math.isfinite(sum(v)) or np.isfinite(r).all()):
         raise ValueError(f'r_eci must be a finite array of shape (3,), got {r_eci!r}')
-    if not r.any():
+    if not any(v):
         raise ValueError('r_eci must be non-zero')
     return r
 

@@ -338,6 +338,23 @@ class FrameSync:
             return inp.latest[1]
         return None
 
+    def take(self, t_ns: int) -> Tuple[Dict[str, Any], List[str]]:
+        """Frame ``t_ns`` of a consumer that never waits (the FrameLoop), in one pass: the
+        inputs missing then (their misses recorded), each input's :meth:`value`, then
+        :meth:`prune`. Returns ``(values, missing)``."""
+        missing = self.missing(t_ns)
+        if missing:
+            self.record_misses(t_ns)
+        values = {}
+        for name, inp in self._inputs.items():
+            by = inp.by_stamp
+            if t_ns in by and inp.kind is not InputKind.PREVIOUS:
+                values[name] = by[t_ns]           # the usual case: stamped with the frame
+            else:
+                values[name] = self.value(name, t_ns)
+        self.prune(t_ns)
+        return values, missing
+
     def prune(self, t_ns: int) -> None:
         """Forget messages stamped before ``t_ns`` except the newest such one of each input."""
         t_ns = int(t_ns)

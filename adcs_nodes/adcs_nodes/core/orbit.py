@@ -253,7 +253,7 @@ class CircularOrbit:
             attitude.from_axis_angle([0.0, 0.0, 1.0], self.raan),
             attitude.from_axis_angle([1.0, 0.0, 0.0], inc)))
         self._omega = self._n * self._p[:, 2]
-        self._p1, self._p2 = self._p[:, 0].copy(), self._p[:, 1].copy()
+        self._p_cols = self._p.T.tolist()          # Python floats: the same IEEE operations
 
     @property
     def mean_motion(self) -> float:
@@ -269,17 +269,18 @@ class CircularOrbit:
         """:class:`OrbitState` at ``t`` seconds after :attr:`epoch`."""
         u = (self.arg_latitude0 + self._n * float(t)) % _TWO_PI
         c, s = math.cos(u), math.sin(u)
-        p1, p2 = self._p1, self._p2
-        zen = c * p1 + s * p2
-        along = c * p2 - s * p1
-        normal = self._p[:, 2]
-        return OrbitState(self.radius * zen, self.radius * self._n * along,
+        p1, p2, normal = self._p_cols
+        zen = [c * a + s * b for a, b in zip(p1, p2)]
+        along = [c * b - s * a for a, b in zip(p1, p2)]
+        r, rn = self.radius, self.radius * self._n
+        return OrbitState(np.array([r * v for v in zen]), np.array([rn * v for v in along]),
                           _quat_from_axes(along, normal, zen), self._omega.copy(), self._n, u)
 
     def position(self, t: float) -> np.ndarray:
         """``state(t).r_eci`` [m] alone (the same operations)."""
         u = (self.arg_latitude0 + self._n * float(t)) % _TWO_PI
-        return self.radius * (math.cos(u) * self._p1 + math.sin(u) * self._p2)
+        c, s, r = math.cos(u), math.sin(u), self.radius
+        return np.array([r * (c * a + s * b) for a, b in zip(*self._p_cols[:2])])
 
 
 class Sgp4Orbit:

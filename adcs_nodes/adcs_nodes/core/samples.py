@@ -1,4 +1,5 @@
-"""The data that flows between components, one frozen type per topic (DESIGN section 6).
+"""The data that flows between components, one immutable type per topic (DESIGN section 6):
+named tuples, the lightest immutable record in Python (a frame makes a dozen).
 
 Every sample carries ``t_ns``: elapsed sim time [ns] of its stamp (a message's stamp is the
 run's epoch plus ``t_ns``). Arrays are float64, quaternions ``[x, y, z, w]`` (scalar last),
@@ -10,8 +11,7 @@ ways). Pure Python: no message type here.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Tuple
+from typing import NamedTuple, Tuple
 
 import numpy as np
 
@@ -27,19 +27,19 @@ def all_finite(*arrays) -> bool:
         if a.size > 16:
             if not np.isfinite(a).all():
                 return False
-        elif not all(map(isfinite, a.ravel().tolist())):
-            return False
+        else:
+            v = a.ravel().tolist()               # a finite sum: all finite
+            if not isfinite(sum(v)) and not all(map(isfinite, v)):
+                return False
     return True
 
 
-@dataclass(frozen=True, slots=True)
-class Tick:
+class Tick(NamedTuple):
     """``/clock``: the frame's sim time."""
     t_ns: int
 
 
-@dataclass(frozen=True, slots=True)
-class EnvironmentSample:
+class EnvironmentSample(NamedTuple):
     """``sim/environment``: orbit state and geomagnetic field (truth models), ECI axes."""
     t_ns: int
     r_eci_m: Array                      #: (3,) position [m]
@@ -53,8 +53,7 @@ class EnvironmentSample:
     q_eci_ecef: Array                   #: (4,) Earth rotation
 
 
-@dataclass(frozen=True, slots=True)
-class AttitudeState:
+class AttitudeState(NamedTuple):
     """``sim/state`` (truth) and ``adcs/attitude_estimate``: attitude and rate of the body."""
     t_ns: int
     q_eci_body: Array                   #: (4,)
@@ -64,8 +63,7 @@ class AttitudeState:
     covariance: Array                   #: (36,) row-major 6x6 of (attitude, rate); 0: truth
 
 
-@dataclass(frozen=True, slots=True)
-class FaultEvent:
+class FaultEvent(NamedTuple):
     """One fault starting (``active``) or ending in a frame."""
     index: int
     active: bool
@@ -75,15 +73,13 @@ class FaultEvent:
     params: Tuple[Tuple[str, str], ...] = ()    #: sorted ``(name, str(value))``
 
 
-@dataclass(frozen=True, slots=True)
-class FaultEvents:
+class FaultEvents(NamedTuple):
     """``sim/faults``: the faults that start or end in frame ``t_ns``."""
     t_ns: int
     events: Tuple[FaultEvent, ...]
 
 
-@dataclass(frozen=True, slots=True)
-class WheelState:
+class WheelState(NamedTuple):
     """``sim/wheels``: the reaction wheels (truth)."""
     t_ns: int
     names: Tuple[str, ...]
@@ -93,8 +89,7 @@ class WheelState:
     h_wheels_body_Nms: Array            #: (3,) total wheel momentum, body axes
 
 
-@dataclass(frozen=True, slots=True)
-class AppendageState:
+class AppendageState(NamedTuple):
     """``sim/appendages``: modal coordinates of the flexible appendages."""
     t_ns: int
     eta: Array
@@ -102,8 +97,7 @@ class AppendageState:
     frequency_hz: Array
 
 
-@dataclass(frozen=True, slots=True)
-class MagnetometerSample:
+class MagnetometerSample(NamedTuple):
     """``sensors/magnetometer``: the field in sensor axes (NaN: a lost sample)."""
     t_ns: int
     frame_id: str
@@ -111,8 +105,7 @@ class MagnetometerSample:
     covariance_T2: Array                #: (9,) row-major, sensor axes; zeros: unknown
 
 
-@dataclass(frozen=True, slots=True)
-class GyroSample:
+class GyroSample(NamedTuple):
     """``sensors/gyro``: measured body rate w.r.t. ECI in sensor axes."""
     t_ns: int
     frame_id: str
@@ -120,8 +113,7 @@ class GyroSample:
     covariance: Array                   #: (9,) row-major [rad^2/s^2]
 
 
-@dataclass(frozen=True, slots=True)
-class StarTrackerSample:
+class StarTrackerSample(NamedTuple):
     """``sensors/star_tracker``: measured inertial attitude."""
     t_ns: int
     frame_id: str
@@ -129,8 +121,7 @@ class StarTrackerSample:
     covariance: Array                   #: (9,) row-major [rad^2]
 
 
-@dataclass(frozen=True, slots=True)
-class HorizonSample:
+class HorizonSample(NamedTuple):
     """``sensors/horizon``: roll and pitch of the body w.r.t. the orbit frame."""
     t_ns: int
     frame_id: str
@@ -141,8 +132,7 @@ class HorizonSample:
     valid: bool                         #: False: the Earth out of view
 
 
-@dataclass(frozen=True, slots=True)
-class WheelSpeeds:
+class WheelSpeeds(NamedTuple):
     """``sensors/wheels``: measured wheel speeds (a tachometer)."""
     t_ns: int
     frame_id: str
@@ -150,8 +140,7 @@ class WheelSpeeds:
     speed_rad_s: Array
 
 
-@dataclass(frozen=True, slots=True)
-class FilterDiagnostics:
+class FilterDiagnostics(NamedTuple):
     """``adcs/estimator/diagnostics`` of the estimate stamped ``t_ns``."""
     t_ns: int
     algorithm: str
@@ -162,8 +151,7 @@ class FilterDiagnostics:
     last_rejection: str
 
 
-@dataclass(frozen=True, slots=True)
-class AttitudeTarget:
+class AttitudeTarget(NamedTuple):
     """``adcs/attitude_target`` as guidance published it (a consumer checks it)."""
     t_ns: int
     frame: str                          #: ``orbit`` or ``eci``
@@ -174,8 +162,7 @@ class AttitudeTarget:
     profile: str
 
 
-@dataclass(frozen=True, slots=True)
-class ActuatorCommand:
+class ActuatorCommand(NamedTuple):
     """``adcs/actuator_command`` and ``adcs/controllers/<name>/command``: a command as sent
     (``source``: the controller, ``'<name>: <why>'`` for an invalid one)."""
     t_ns: int
@@ -185,23 +172,20 @@ class ActuatorCommand:
     source: str
 
 
-@dataclass(frozen=True, slots=True)
-class MagnetorquerCommand:
+class MagnetorquerCommand(NamedTuple):
     """``actuators/magnetorquer/command``: the commanded dipole, body axes."""
     t_ns: int
     dipole_body_Am2: Array
 
 
-@dataclass(frozen=True, slots=True)
-class WheelCommand:
+class WheelCommand(NamedTuple):
     """``actuators/wheels/command``: the commanded motor torques by wheel name."""
     t_ns: int
     names: Tuple[str, ...]
     torque_Nm: Tuple[float, ...]
 
 
-@dataclass(frozen=True, slots=True)
-class ControllerStatus:
+class ControllerStatus(NamedTuple):
     """``adcs/controller_status``: what the manager forwards."""
     t_ns: int
     active: str

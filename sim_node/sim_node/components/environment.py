@@ -17,7 +17,7 @@ from adcs_nodes.core.samples import EnvironmentSample
 
 
 def _f(a: Any) -> np.ndarray:
-    return np.array(a, dtype=float)
+    return np.asarray(a, dtype=float)     # the models return fresh arrays: no copy
 
 
 class EnvironmentComponent:

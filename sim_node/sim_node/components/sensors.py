@@ -14,7 +14,6 @@ field that faults change) runs in :class:`SensorComponent` itself.
 """
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, Dict, Optional, Tuple, Type
 
 import numpy as np
@@ -64,7 +63,7 @@ class SensorComponent:
 
     def truth_ok(self, t_ns: int, what: str, *arrays: np.ndarray) -> bool:
         """True when every truth array is finite and non-zero; else warn (no sample)."""
-        if all_finite(*arrays) and all(np.any(a) for a in arrays):
+        if all_finite(*arrays) and all(np.asarray(a).any() for a in arrays):
             return True
         self.log('warning', f't={t_ns / NS_PER_S:.3f} s: non-finite truth ({what}), no sample')
         return False
@@ -90,7 +89,7 @@ class SensorComponent:
 
     def with_values(self, x: Any, values: np.ndarray) -> Any:
         """``x`` with its measured values replaced."""
-        return dataclasses.replace(x, **{self.values: _f(values)})
+        return x._replace(**{self.values: _f(values)})
 
 
 class MagnetometerComponent(SensorComponent):
@@ -176,8 +175,8 @@ class HorizonSensorComponent(SensorComponent):
         return np.array([x.roll_rad, x.pitch_rad])
 
     def with_values(self, x: s.HorizonSample, values: np.ndarray) -> s.HorizonSample:
-        return dataclasses.replace(x, roll_rad=float(values[0]), pitch_rad=float(values[1]),
-                                   valid=bool(x.valid and np.all(np.isfinite(values))))
+        return x._replace(roll_rad=float(values[0]), pitch_rad=float(values[1]),
+                          valid=bool(x.valid and np.all(np.isfinite(values))))
 
 
 class WheelTachometerComponent(SensorComponent):
