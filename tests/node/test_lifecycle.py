@@ -250,3 +250,28 @@ def test_launcher_reports_a_node_refusing_configure(tmp_path):
     assert 'stale_after_s' in result.message.splitlines()[0], result.message
     with open(tmp_path / 'run' / 'params.yaml') as fh:
         assert 'autostart: false' in fh.read()
+
+
+def test_a_delivery_taken_before_a_cleanup_is_dropped(ros_context):
+    """The executor may hold a message or a timer call of a subscription that a cleanup has
+    just destroyed: its callback runs on a node whose configuration is gone. It is dropped
+    (it killed B-dot in a graph run: ``'ControllerNode' object has no attribute
+    'epoch_ns'``)."""
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import MagneticField
+    node = ControllerNode(controller='bdot', context=ros_context, parameter_overrides=[
+        Parameter('autostart', value=False)])
+    try:
+        assert node.trigger_configure() == SUCCESS
+        timing = node.timing
+        name = next(iter(timing.topics))
+        stale = (timing.input_cb(name), timing.on_clock_tick, timing.watchdog)
+        assert node.trigger_cleanup() == SUCCESS
+        msg = MagneticField()
+        msg.header.stamp.sec = 1_774_000_000
+        stale[0](msg)
+        stale[1](Clock())
+        stale[2]()
+        assert node.trigger_configure() == SUCCESS      # and it configures again
+    finally:
+        node.destroy_node()

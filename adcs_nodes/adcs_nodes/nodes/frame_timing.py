@@ -100,7 +100,14 @@ class FrameTiming:
                 f'{self.schedule.rejoined_at / NS_PER_S:g} s (its inputs all come after)')
             self.schedule.rejoined_at = None
 
+    def detached(self) -> bool:
+        """True once a lifecycle cleanup undid the configure that made this timing: a delivery
+        or a timer call the executor had already taken is dropped."""
+        return self.node.__dict__.get('timing') is not self
+
     def on_clock_tick(self, msg: Clock) -> None:
+        if self.detached():
+            return
         self.see(self.node.elapsed_ns(stamp_ns(msg.clock)))
         self.try_fire()
         # an input stamped ahead of the clock may have moved the seen time past a mark
@@ -110,6 +117,8 @@ class FrameTiming:
         node = self.node
 
         def cb(msg: Any) -> None:
+            if self.detached():
+                return
             node.input_arrived(name)
             t = node.elapsed_ns(stamp_ns(msg.header.stamp))
             if self.sync.add(name, t, msg):
@@ -129,6 +138,8 @@ class FrameTiming:
         node = self.node
 
         def cb(msg: Any) -> None:
+            if self.detached():
+                return
             node.input_arrived(name)
             s = stamp_ns(msg.header.stamp)
             why = self.external.offer(name, s, self.schedule.seen_ns, msg)
@@ -144,6 +155,8 @@ class FrameTiming:
 
     def watchdog(self) -> None:
         """A frame waited ``timeout_s``: a missed frame, fired without its missing inputs."""
+        if self.detached():
+            return
         out = self.schedule.timed_out(time.monotonic())
         if out is None:
             return
@@ -196,6 +209,8 @@ class FrameTiming:
         node = self.node
 
         def cb(msg: Any) -> None:
+            if self.detached():
+                return
             node.input_arrived(name)
             why = self.live_samples.offer(name, stamp_ns(msg.header.stamp),
                                           node.get_clock().now().nanoseconds, msg)
@@ -205,6 +220,8 @@ class FrameTiming:
 
     def live_tick(self) -> None:
         """Live mode: one frame with the newest samples (:class:`LiveSamples`)."""
+        if self.detached():
+            return
         node = self.node
         now = node.get_clock().now().nanoseconds
         t, late = self.live_samples.choose(now)
