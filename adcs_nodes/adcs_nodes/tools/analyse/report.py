@@ -15,14 +15,20 @@ from matplotlib.figure import Figure
 
 from adcs_nodes.tools.analyse import papers
 from adcs_nodes.bag import cdr_stamp_ns, open_bag, raw_messages, stamp_kind
-from adcs_nodes.tools.analyse.metrics import (angle_to_identity_deg, estimate_errors_deg,
-                                              run_metrics)
+from adcs_nodes.tools.analyse.metrics import (angle_between_deg, angle_to_identity_deg,
+                                              estimate_errors_deg, run_metrics)
 
 STATE_TOPIC = '/sim/state'
 ENV_TOPIC = '/sim/environment'
 MAG_TOPIC = '/sensors/magnetometer'
 WHEELS_TOPIC = '/sim/wheels'
 ESTIMATE_TOPIC = '/adcs/attitude_estimate'
+TARGET_TOPIC = '/adcs/attitude_target'
+STATUS_TOPIC = '/adcs/controller_status'
+#: A controller phase is "settled" when the truth stays within this angle of the target over
+#: its last ``SETTLED_WINDOW_S`` or its second half if shorter (ASSUMPTION: 10 deg for the last
+#: 10 minutes, issue 36).
+SETTLED_DEG, SETTLED_WINDOW_S = 10.0, 600.0
 
 Expectation = Tuple[str, str, Any, Any]   # verdict: True, False, None (info), NotComparable
 
@@ -60,6 +66,8 @@ class _Data:
     mag: Dict[str, list] = field(default_factory=lambda: {'t': [], 'b': []})
     wheels: Dict[str, list] = field(default_factory=lambda: {'t': [], 'h': [], 'names': []})
     est: Dict[str, list] = field(default_factory=lambda: {'t': [], 'q_eci_body': [], 'w_eci': []})
+    target: Dict[str, list] = field(default_factory=lambda: {'t': [], 'q': [], 'frame': []})
+    status: Dict[str, list] = field(default_factory=lambda: {'t': [], 'active': []})
 
 
 def _xyz(v) -> List[float]:
@@ -85,13 +93,22 @@ def _collect(bag_path) -> _Data:
         for conn, t_log, raw in raw_messages(reader, reader.connections, bag_path):
             stamp = cdr_stamp_ns(raw) if kinds[conn.topic] else None
             data.stats[conn.topic].add(stamp if stamp is not None else t_log)
-            if conn.topic in _FIELDS or conn.topic == WHEELS_TOPIC:
+            if conn.topic in _FIELDS or conn.topic in (WHEELS_TOPIC, TARGET_TOPIC, STATUS_TOPIC):
                 _store(data, conn.topic, reader.deserialize(raw, conn.msgtype))
     return data
 
 
 def _store(data: _Data, topic: str, msg) -> None:
     t = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+    if topic == TARGET_TOPIC:
+        data.target['t'].append(t)
+        data.target['q'].append(_xyz(msg.q_ref_body))
+        data.target['frame'].append(msg.header.frame_id)
+        return
+    if topic == STATUS_TOPIC:
+        data.status['t'].append(t)
+        data.status['active'].append(msg.active)
+        return
     if topic == WHEELS_TOPIC:
         data.wheels['t'].append(t)
         data.wheels['h'].append([float(x) for x in msg.momentum])
@@ -261,6 +278,15 @@ def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expect
                   for label, key, unit in present]
     else:
         lines.append(f'No `{STATE_TOPIC}` in the bag.')
+    if metrics.get('controller_phases'):
+        lines += ['', '## Pointing by controller phase', '',
+                  f'Angle body to guidance target; settled: within {SETTLED_DEG:g} deg over the '
+                  f"phase's last {SETTLED_WINDOW_S:g} s (or its second half).", '',
+                  '| controller | from [s] | to [s] | angle at the end [deg] | max over the '
+                  'last window [deg] | settled |', '|---|---:|---:|---:|---:|---|']
+        lines += [f"| {p['controller']} | {p['from_s']:.6g} | {p['to_s']:.6g} | "
+                  f"{papers.fmt(p['end_angle_deg'])} | {papers.fmt(p['last_window_max_deg'])} | "
+                  f"{'yes' if p['settled'] else 'no'} |" for p in metrics['controller_phases']]
     lines += ['', '## Paper comparison', '']
     if not expectations:
         lines += ['| quantity | paper | measured | verdict |', '|---|---|---|---|', '',
@@ -342,6 +368,7 @@ def _bag_metrics(data: _Data, bag_path) -> Tuple[Dict[str, Any], '_TimeAxis', An
         metrics['orbit_period_s'] = period
     if data.state['t']:
         metrics.update(_truth_metrics(data, t0, period))
+        metrics['controller_phases'] = controller_phases(data, t0)
     if data.env['t']:
         metrics['field_mean_norm_uT'] = float(
             np.linalg.norm(np.array(data.env['b_eci']), axis=1).mean() * _T2UT)
@@ -383,6 +410,38 @@ def _truth_metrics(data: _Data, t0: int, period: Optional[float]) -> Dict[str, A
             'capture_orbits', 'last_exit_orbits', 'hold_rms_deg', 'hold_median_deg',
             'hold_p95_deg', 'hold_max_deg', 'hold_samples')
             if run[k] is not None and math.isfinite(run[k])})
+    return out
+
+
+def controller_phases(data: _Data, t0: int) -> List[Dict[str, Any]]:
+    """Per span of one forwarded controller (``controller_status.active``): its times [s from
+    ``t0``], the truth's angle to the guidance target at its end and its largest over the
+    span's last ``SETTLED_WINDOW_S`` (or second half) [deg], within ``SETTLED_DEG`` or not."""
+    if not (data.status['t'] and data.target['t'] and data.state['t']):
+        return []
+    t = np.asarray(data.state['t'], dtype=np.int64)
+    k = np.searchsorted(np.asarray(data.target['t'], dtype=np.int64), t, side='right') - 1
+    ok = k >= 0                                   # the target held since its last sample
+    k = np.maximum(k, 0)
+    frames = np.asarray(data.target['frame'])[k]
+    truth = np.where((frames == 'eci')[:, None], np.asarray(data.state['q_eci_body']),
+                     np.asarray(data.state['q_orbit_body']))
+    angle = np.where(ok, angle_between_deg(truth, np.asarray(data.target['q'])[k]), np.nan)
+    starts = [(ts, a) for i, (ts, a) in enumerate(zip(data.status['t'], data.status['active']))
+              if i == 0 or a != data.status['active'][i - 1]]
+    out = []
+    for i, (start, name) in enumerate(starts):
+        end = starts[i + 1][0] if i + 1 < len(starts) else int(t[-1]) + 1
+        span = (t >= start) & (t < end) & ok
+        if not span.any():
+            continue
+        window_ns = min(SETTLED_WINDOW_S * 1e9, (t[span][-1] - t[span][0]) / 2)
+        last = span & (t >= t[span][-1] - window_ns)
+        worst = float(np.max(angle[last]))
+        out.append({'controller': name or '(none)', 'from_s': (start - t0) / 1e9,
+                    'to_s': (min(end, int(t[-1])) - t0) / 1e9,
+                    'end_angle_deg': float(angle[span][-1]), 'last_window_max_deg': worst,
+                    'settled': worst <= SETTLED_DEG})
     return out
 
 
