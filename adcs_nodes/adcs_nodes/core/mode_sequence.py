@@ -140,7 +140,7 @@ class ModeSequencer:
 
     def update(self, estimate: Optional[Estimate], target: Optional[Target]) -> Optional[str]:
         """One frame: the controller of the new mode on a transition, else ``None``."""
-        a, c, mode = self.auto, self._counts, self.mode
+        a, mode = self.auto, self.mode
         if estimate is None or not estimate.is_usable():
             self._counts = {'enter': 0, 'exit': 0, 'angle_exit': 0}
             return None
@@ -151,12 +151,11 @@ class ModeSequencer:
             omega = omega - float(estimate.omega0) * e_n
         rate = float(np.linalg.norm(omega))
         if mode == 'detumble':
-            c['enter'] = c['enter'] + 1 if rate < a.rate_enter_rad_s else 0
-            return self.restart('acquire') if c['enter'] >= a.confirm_frames else None
-        if a.rate_exit_rad_s is not None:
-            c['exit'] = c['exit'] + 1 if rate > a.rate_exit_rad_s else 0
-            if c['exit'] >= a.exit_confirm_frames:
-                return self.restart('detumble')
+            entered = self._held('enter', rate < a.rate_enter_rad_s, a.confirm_frames)
+            return self.restart('acquire') if entered else None
+        if a.rate_exit_rad_s is not None and self._held(
+                'exit', rate > a.rate_exit_rad_s, a.exit_confirm_frames):
+            return self.restart('detumble')
         if a.point is None:
             return None
         q_ref = Target().q_orbit_body_ref if target is None else target.q_orbit_body_ref
@@ -165,10 +164,14 @@ class ModeSequencer:
         except ValueError:
             return None
         if mode == 'acquire':
-            c['enter'] = c['enter'] + 1 if angle < a.angle_enter_rad else 0
-            return self.restart('point') if c['enter'] >= a.confirm_frames else None
-        if a.angle_exit_rad is not None:
-            c['angle_exit'] = c['angle_exit'] + 1 if angle > a.angle_exit_rad else 0
-            if c['angle_exit'] >= a.exit_confirm_frames:
-                return self.restart('acquire')
+            entered = self._held('enter', angle < a.angle_enter_rad, a.confirm_frames)
+            return self.restart('point') if entered else None
+        if a.angle_exit_rad is not None and self._held(
+                'angle_exit', angle > a.angle_exit_rad, a.exit_confirm_frames):
+            return self.restart('acquire')
         return None
+
+    def _held(self, counter: str, condition: bool, frames: int) -> bool:
+        """``condition`` counted in a row on ``counter`` (reset when false): held ``frames``."""
+        self._counts[counter] = self._counts[counter] + 1 if condition else 0
+        return self._counts[counter] >= frames
