@@ -81,6 +81,19 @@ def adcs(*args, timeout=300, check=True):
     return proc
 
 
+def graph_and_plain_bags(sc, tmp_path, name, duration_s=2.0):
+    """A scenario dict (its ``_`` keys dropped) written as ``name``.yaml and run for
+    ``duration_s`` as a launched graph and on the plain engine, both recorded: the two bags."""
+    path = tmp_path / f'{name}.yaml'
+    path.write_text(yaml.safe_dump({k: v for k, v in sc.items() if not k.startswith('_')}))
+    graph, plain = str(tmp_path / 'graph'), str(tmp_path / 'plain')
+    adcs('run', str(path), '--record', graph, '--duration', f'{duration_s:g}', '--quiet',
+         timeout=600)
+    adcs('run', str(path), '--engine', 'plain', '--record', plain, '--duration',
+         f'{duration_s:g}', '--quiet', timeout=600)
+    return graph, plain
+
+
 def start_adcs(*args):
     """Start ``adcs ARGS`` in the background; returns the Popen."""
     phase(f'adcs {args[0]} launched in the background')

@@ -11,9 +11,8 @@ import os
 import sys
 
 import numpy as np
-import yaml
 
-from adcs_launch import ROOT, adcs, data_digest
+from adcs_launch import ROOT, data_digest, graph_and_plain_bags
 from adcs_nodes.bag import read_messages
 
 sys.path.insert(0, os.path.join(ROOT, 'tests', 'unit'))
@@ -21,13 +20,7 @@ from test_frameloop_plugin_inputs import _forget_the_plugin, damper_scenario  # 
 
 
 def test_gyro_and_star_tracker_plugin_runs_in_a_launched_graph(tmp_path):
-    sc = damper_scenario(tmp_path)
-    path = tmp_path / 'damper_graph.yaml'
-    path.write_text(yaml.safe_dump({k: v for k, v in sc.items() if not k.startswith('_')}))
-    graph, plain = str(tmp_path / 'graph'), str(tmp_path / 'plain')
-    adcs('run', str(path), '--record', graph, '--duration', '2', '--quiet', timeout=600)
-    adcs('run', str(path), '--engine', 'plain', '--record', plain, '--duration', '2',
-         '--quiet', timeout=600)
+    graph, plain = graph_and_plain_bags(damper_scenario(tmp_path), tmp_path, 'damper_graph')
     torques = [np.array([m.torque_body.x, m.torque_body.y, m.torque_body.z])
                for _, _, m in read_messages(graph, ['/adcs/actuator_command'])
                if m.source == 'gyro_damper']
