@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from adcs_nodes.core import attitude as att
-from adcs_nodes.tools.analyse.report_html import slerp_at, write_report_html
+from adcs_nodes.tools.analyse.metrics import slerp_at
+from adcs_nodes.tools.analyse.report_html import write_report_html
 from frameloop_run import raw, validated
 from adcs_nodes.tools.run.plain import run_plain
 

@@ -9,20 +9,17 @@ import io
 import json
 import math
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
-from scipy.spatial.transform import Rotation
 
-from adcs_nodes.bag import header_stamp_ns, read_messages
-from adcs_nodes.tools.analyse.metrics import angle_between_deg, slerp_at
+from adcs_nodes.tools.analyse.bag_series import (RunData, TimeAxis, estimate_error,
+                                                 orbit_period_s, pointing_deg, ragged, read_run,
+                                                 samples, spans)
+from adcs_nodes.tools.analyse.bag_series import time_axis as _time_axis
 
-TOPICS = ('/sim/state', '/sim/wheels', '/sim/faults', '/adcs/attitude_estimate',
-          '/adcs/estimator/diagnostics', '/adcs/attitude_target', '/adcs/actuator_command',
-          '/adcs/controller_status')
 #: One colour per controller (others get the next free one); 'zero' and '' are grey.
 PALETTE = ('#4c72b0', '#dd8452', '#55a868', '#c44e52', '#8172b3', '#937860', '#da8bc3',
            '#8c8c8c', '#ccb974', '#64b5cd')
@@ -31,103 +28,6 @@ KNOWN_COLOURS = {'bdot': '#c44e52', 'magnetic': '#dd8452', 'mpi': '#4c72b0',
                  '': '#eeeeee', '-': '#eeeeee', 'detumble': '#f4b6b6', 'acquire': '#f8d3b0',
                  'point': '#b6cbe8'}
 _DEG = 180.0 / math.pi
-
-
-@dataclass
-class _Series:
-    """What the page draws, pulled from the bag (times [s] from ``t0``)."""
-
-    t0: Optional[int] = None
-    state: Dict[str, list] = field(default_factory=lambda: {
-        't': [], 'q_eci': [], 'q_orbit': [], 'w_eci': [], 'w_orbit': []})
-    target: Dict[str, list] = field(default_factory=lambda: {'t': [], 'q': [], 'frame': []})
-    est: Dict[str, list] = field(default_factory=lambda: {'t': [], 'q_eci': [], 'cov': []})
-    diag: Dict[str, list] = field(default_factory=lambda: {'t': [], 'rejected': [],
-                                                           'last': []})
-    wheels: Dict[str, list] = field(default_factory=lambda: {'t': [], 'speed': [],
-                                                             'momentum': [], 'names': []})
-    cmd: Dict[str, list] = field(default_factory=lambda: {'t': [], 'source': [],
-                                                          'dipole': []})
-    status: List[Dict[str, Any]] = field(default_factory=list)
-    faults: List[Dict[str, Any]] = field(default_factory=list)
-    topics: Dict[str, int] = field(default_factory=dict)
-
-
-def _xyz(v) -> List[float]:
-    return [v.x, v.y, v.z] + ([v.w] if hasattr(v, 'w') else [])
-
-
-#: The series of :class:`_Series` each topic fills: ``{topic: (series, {key: getter})}``.
-_FIELDS = {
-    '/sim/state': ('state', {'q_eci': lambda m: _xyz(m.q_eci_body),
-                             'q_orbit': lambda m: _xyz(m.q_orbit_body),
-                             'w_eci': lambda m: _xyz(m.omega_body_eci_body),
-                             'w_orbit': lambda m: _xyz(m.omega_body_orbit_body)}),
-    '/adcs/attitude_target': ('target', {'q': lambda m: _xyz(m.q_ref_body),
-                                         'frame': lambda m: m.header.frame_id or 'orbit'}),
-    '/adcs/attitude_estimate': ('est', {'q_eci': lambda m: _xyz(m.q_eci_body),
-                                        'cov': lambda m: list(m.covariance)}),
-    '/adcs/estimator/diagnostics': ('diag', {'rejected': lambda m: int(m.rejected_count),
-                                             'last': lambda m: str(m.last_rejection)}),
-    '/adcs/actuator_command': ('cmd', {'source': lambda m: str(m.source),
-                                       'dipole': lambda m: _xyz(m.dipole_body)}),
-}
-
-
-def _collect(bag_path) -> _Series:
-    raw: List[Tuple[str, int, Any]] = []
-    s = _Series()
-    for topic, _, msg in read_messages(bag_path, TOPICS):
-        stamp = header_stamp_ns(msg)
-        if stamp is None:
-            continue
-        raw.append((topic, stamp, msg))
-        s.topics[topic] = s.topics.get(topic, 0) + 1
-    stamps = [st for tp, st, _ in raw if tp == '/sim/state'] or [st for _, st, _ in raw]
-    s.t0 = min(stamps) if stamps else 0
-    for topic, stamp, m in raw:
-        t = (stamp - s.t0) * 1e-9
-        if topic in _FIELDS:
-            name, fields = _FIELDS[topic]
-            series = getattr(s, name)
-            series['t'].append(t)
-            for key, get in fields.items():
-                series[key].append(get(m))
-        elif topic == '/sim/wheels':
-            if len(m.speed) and len(m.speed) == len(m.momentum):
-                s.wheels['t'].append(t)
-                s.wheels['speed'].append(list(m.speed))
-                s.wheels['momentum'].append(list(m.momentum))
-                s.wheels['names'] = list(m.names)
-        elif topic == '/adcs/controller_status':
-            s.status.append({'t': t, 'active': m.active, 'mode': m.mode,
-                             'switch_count': int(m.switch_count),
-                             'missed_frames': int(m.missed_frames),
-                             'last_fault': m.last_fault})
-        elif topic == '/sim/faults':
-            for st in m.status:
-                values = {kv.key: kv.value for kv in st.values}
-                s.faults.append({'t': t, 'active': not str(st.message).startswith('cleared'),
-                                 'name': st.name, 'message': st.message,
-                                 'kind': values.get('kind', ''),
-                                 'target': values.get('target', st.hardware_id)})
-    s.status.sort(key=lambda e: e['t'])
-    s.faults.sort(key=lambda e: e['t'])
-    return s
-
-
-# ---------------------------------------------------------------------- derived series
-def _runs(t: Sequence[float], labels: Sequence[str], t_end: float
-          ) -> List[Tuple[float, float, str]]:
-    """``[(start, end, label)]`` of consecutive equal labels."""
-    out: List[Tuple[float, float, str]] = []
-    for i, (ti, lab) in enumerate(zip(t, labels)):
-        if out and out[-1][2] == lab:
-            continue
-        if out:
-            out[-1] = (out[-1][0], ti, out[-1][2])
-        out.append((ti, t_end, lab))
-    return out
 
 
 def _colours(names: Sequence[str]) -> Dict[str, str]:
@@ -139,49 +39,14 @@ def _colours(names: Sequence[str]) -> Dict[str, str]:
     return out
 
 
-def _pointing_error(s: _Series) -> Optional[Tuple[np.ndarray, np.ndarray]]:
-    """``(t, angle [deg])`` between the truth and the target, at the target's stamps."""
-    if not s.target['t'] or len(s.state['t']) < 1:
-        return None
-    t = np.asarray(s.target['t'])
-    ts = np.asarray(s.state['t'])
-    q_ref = np.asarray(s.target['q'], dtype=float)
-    frames = np.asarray(s.target['frame'])
-    q_orbit = slerp_at(ts, np.asarray(s.state['q_orbit'], dtype=float), t)
-    q_eci = slerp_at(ts, np.asarray(s.state['q_eci'], dtype=float), t)
-    q_true = np.where((frames == 'eci')[:, None], q_eci, q_orbit)
-    return t, angle_between_deg(q_ref, q_true)
-
-
-def _estimate_error(s: _Series) -> Optional[Dict[str, np.ndarray]]:
-    """Per-axis error and 3-sigma [deg] (body axes) at the estimate's stamps."""
-    if not s.est['t'] or len(s.state['t']) < 2:
-        return None
-    t = np.asarray(s.est['t'])
-    ts = np.asarray(s.state['t'])
-    keep = (t >= ts[0]) & (t <= ts[-1])
-    if not keep.any():
-        return None
-    t = t[keep]
-    q_est = np.asarray(s.est['q_eci'], dtype=float)[keep]
-    q_true = slerp_at(ts, np.asarray(s.state['q_eci'], dtype=float), t)
-    err = (Rotation.from_quat(q_est).inv() * Rotation.from_quat(q_true)).as_rotvec() * _DEG
-    cov = np.asarray(s.est['cov'], dtype=float)[keep]
-    sig = np.full(err.shape, np.nan)
-    if cov.ndim == 2 and cov.shape[1] == 36:
-        known = cov[:, 0] >= 0.0
-        diag = cov[:, [0, 7, 14]]
-        sig[known] = 3.0 * np.sqrt(np.clip(diag[known], 0.0, None)) * _DEG
-    return {'t': t, 'err': err, 'sigma3': sig}
-
-
-def _switches(s: _Series, schedule: Dict[float, str]) -> List[Dict[str, str]]:
+def _switches(s: RunData, schedule: Dict[float, str]) -> List[Dict[str, str]]:
     """Each switch and fallback with its reason, in time order."""
     rows: List[Dict[str, str]] = []
     prev: Optional[Dict[str, Any]] = None
-    for e in s.status:
+    status = samples(s.status)
+    for e in status:
         if prev is None:
-            rows.append({'t': e['t'], 'what': f'start: {e["active"]}'
+            rows.append({'t': e['s'], 'what': f'start: {e["active"]}'
                          + (f' (mode {e["mode"]})' if e['mode'] else ''),
                          'why': 'initial controller' + (', automatic sequence'
                                                         if e['mode'] else '')})
@@ -189,27 +54,26 @@ def _switches(s: _Series, schedule: Dict[float, str]) -> List[Dict[str, str]]:
             if e['switch_count'] != prev['switch_count'] or e['active'] != prev['active']:
                 if e['mode'] and e['mode'] != prev['mode']:
                     why = f'automatic sequence: {prev["mode"] or "-"} -> {e["mode"]}'
-                elif any(abs(e['t'] - ts) < 1e-6 and n in (e['active'], 'auto')
+                elif any(abs(e['s'] - ts) < 1e-6 and n in (e['active'], 'auto')
                          for ts, n in schedule.items()):
                     why = 'scheduled (manager.schedule)'
                 elif prev['active'] != e['active'] and e['last_fault'] != prev['last_fault']:
                     why = f'latched fallback: {e["last_fault"]}'
                 else:
                     why = 'operator request (adcs switch / adcs slew) or schedule'
-                rows.append({'t': e['t'], 'what': f'switch {prev["active"]} -> {e["active"]}'
+                rows.append({'t': e['s'], 'what': f'switch {prev["active"]} -> {e["active"]}'
                              + (f' (mode {e["mode"]})' if e['mode'] else ''), 'why': why})
             if e['last_fault'] and e['last_fault'] != prev['last_fault']:
-                rows.append({'t': e['t'], 'what': f'fallback from {e["active"]}',
+                rows.append({'t': e['s'], 'what': f'fallback from {e["active"]}',
                              'why': e['last_fault']})
         prev = e
-    t_end = s.state['t'][-1] if s.state['t'] else (s.cmd['t'][-1] if s.cmd['t'] else 0.0)
-    times = [e['t'] for e in s.status]
+    times = s.status['s']
 
     def active_at(t: float) -> str:
         i = int(np.searchsorted(times, t + 1e-6)) - 1
-        return s.status[i]['active'] if i >= 0 else ''
+        return s.status['active'][i] if i >= 0 else ''
     fell_back = False
-    for start, _, src in _runs(s.cmd['t'], s.cmd['source'], t_end)[1:]:
+    for start, _, src in spans(s.cmd['s'], s.cmd['source'], None)[1:]:
         if src == 'zero':
             continue
         if times and src != active_at(start):
@@ -226,28 +90,18 @@ def _switches(s: _Series, schedule: Dict[float, str]) -> List[Dict[str, str]]:
 
 
 # ---------------------------------------------------------------------- figures
-@dataclass
-class _Axis:
-    scale: float
-    unit: str
-
-
-def _time_axis(t_end: float) -> _Axis:
-    return _Axis(60.0, 'min') if t_end > 1200.0 else _Axis(1.0, 's')
-
-
 def _png(fig: Figure) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format='png', dpi=90)
     return buf.getvalue()
 
 
-def _mark_faults(ax, s: _Series, axis: _Axis, label: bool = False) -> None:
+def _mark_faults(ax, s: RunData, axis: TimeAxis, label: bool = False) -> None:
     """Dashed lines at each fault's start (red) and end (green), ``label``: named."""
     span = max(ax.get_xlim()[1] - ax.get_xlim()[0], 1e-9) if label else 1.0
     last_x, level = None, 0
-    for f in s.faults:
-        x = f['t'] / axis.scale
+    for f in samples(s.faults):
+        x = f['s'] / axis.scale
         colour = '#d62728' if f['active'] else '#2ca02c'
         ax.axvline(x, color=colour, lw=1.0, ls='--')
         if label and f['active']:
@@ -258,31 +112,31 @@ def _mark_faults(ax, s: _Series, axis: _Axis, label: bool = False) -> None:
                         ha='left', color=colour, annotation_clip=False)
 
 
-def _style(ax, s: _Series, axis: _Axis, ylabel: str, last: bool, label: bool = False) -> None:
+def _style(ax, s: RunData, axis: TimeAxis, ylabel: str, last: bool, label: bool = False) -> None:
     """Y label, grid and fault marks of one panel; the time label on the ``last`` one."""
     ax.set_ylabel(ylabel, fontsize=8)
     ax.grid(True, alpha=0.3)
     if last:
-        ax.set_xlabel(f'sim time [{axis.unit}]')
+        ax.set_xlabel(axis.label)
     else:
         ax.tick_params(labelbottom=False)
     _mark_faults(ax, s, axis, label=label)
 
 
-def _shade(ax, runs, colours, axis: _Axis, alpha: float = 0.12) -> None:
+def _shade(ax, runs, colours, axis: TimeAxis, alpha: float = 0.12) -> None:
     for a, b, lab in runs:
         if lab not in ('zero', ''):
             ax.axvspan(a / axis.scale, b / axis.scale, color=colours[lab], alpha=alpha, lw=0)
 
 
-def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
+def _overview(s: RunData, axis: TimeAxis, t_end: float, colours: Dict[str, str],
               pointing) -> Figure:
     fig = Figure(figsize=(11.0, 6.2))
     gs = fig.add_gridspec(3, 1, height_ratios=[1.1, 2.0, 1.5], hspace=0.12)
     band = fig.add_subplot(gs[0])
-    src_runs = _runs(s.cmd['t'], s.cmd['source'], t_end)
-    act_runs = _runs([e['t'] for e in s.status], [e['active'] for e in s.status], t_end)
-    mode_runs = _runs([e['t'] for e in s.status], [e['mode'] or '-' for e in s.status], t_end)
+    src_runs = spans(s.cmd['s'], s.cmd['source'], t_end)
+    act_runs = spans(s.status['s'], s.status['active'], t_end)
+    mode_runs = spans(s.status['s'], [m or '-' for m in s.status['mode']], t_end)
     rows = [('commanding', src_runs), ('active', act_runs), ('mode', mode_runs)]
     for k, (_, runs) in enumerate(rows):
         y = len(rows) - 1 - k
@@ -304,8 +158,7 @@ def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
     err_ax = fig.add_subplot(gs[1], sharex=band)
     _shade(err_ax, src_runs, colours, axis)
     if pointing is not None:
-        t, ang = pointing
-        err_ax.semilogy(t / axis.scale, np.maximum(ang, 1e-4), color='k', lw=0.8)
+        err_ax.semilogy(axis(s.state['s']), np.maximum(pointing, 1e-4), color='k', lw=0.8)
     else:
         err_ax.text(0.5, 0.5, 'no attitude target recorded', transform=err_ax.transAxes,
                     ha='center')
@@ -313,7 +166,7 @@ def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
     rate_ax = fig.add_subplot(gs[2], sharex=band)
     _shade(rate_ax, src_runs, colours, axis)
     if s.state['t']:
-        t = np.asarray(s.state['t']) / axis.scale
+        t = axis(s.state['s'])
         rate_ax.semilogy(t, np.maximum(np.linalg.norm(s.state['w_eci'], axis=1) * _DEG, 1e-5),
                          lw=0.8, label='|omega| w.r.t. ECI')
         rate_ax.semilogy(t, np.maximum(np.linalg.norm(s.state['w_orbit'], axis=1) * _DEG,
@@ -324,30 +177,28 @@ def _overview(s: _Series, axis: _Axis, t_end: float, colours: Dict[str, str],
     return fig
 
 
-def _wheels_fig(s: _Series, axis: _Axis) -> Figure:
+def _wheels_fig(s: RunData, axis: TimeAxis) -> Figure:
     fig = Figure(figsize=(11.0, 4.6))
-    t = np.asarray(s.wheels['t']) / axis.scale
-    names = s.wheels['names'] or [f'wheel{i}' for i in range(len(s.wheels['speed'][0]))]
-    ax1 = fig.add_subplot(2, 1, 1)
-    speed = np.asarray(s.wheels['speed']) * 60.0 / (2.0 * math.pi)
-    mom = np.asarray(s.wheels['momentum'])
-    for i, n in enumerate(names):
-        ax1.plot(t, speed[:, i], lw=0.8, label=n)
-    ax1.legend(fontsize=7, loc='upper left')
-    ax1.set_xlim(t[0], t[-1])
-    _style(ax1, s, axis, 'speed [rpm]', last=False, label=True)
-    ax2 = fig.add_subplot(2, 1, 2, sharex=ax1)
-    for i, n in enumerate(names):
-        ax2.plot(t, mom[:, i], lw=0.8, label=n)
-    _style(ax2, s, axis, 'momentum [N m s]', last=True)
+    t, names, first = axis(s.wheels['s']), s.wheel_names, None
+    for k, (ylabel, y) in enumerate((
+            ('speed [rpm]', ragged(s.wheels['speed']) * 60.0 / (2.0 * math.pi)),
+            ('momentum [N m s]', ragged(s.wheels['h'])))):
+        ax = fig.add_subplot(2, 1, k + 1, sharex=first)
+        for i in range(y.shape[1]):
+            ax.plot(t, y[:, i], lw=0.8, label=names[i] if i < len(names) else f'wheel{i}')
+        if first is None:
+            ax.legend(fontsize=7, loc='upper left')
+            ax.set_xlim(t[0], t[-1])
+            first = ax
+        _style(ax, s, axis, ylabel, last=k == 1, label=k == 0)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.9, bottom=0.12, hspace=0.1)
     return fig
 
 
-def _dipole_fig(s: _Series, axis: _Axis) -> Figure:
+def _dipole_fig(s: RunData, axis: TimeAxis) -> Figure:
     fig = Figure(figsize=(11.0, 2.8))
     ax = fig.add_subplot(1, 1, 1)
-    t = np.asarray(s.cmd['t']) / axis.scale
+    t = axis(s.cmd['s'])
     d = np.asarray(s.cmd['dipole'])
     for i, n in enumerate('xyz'):
         ax.plot(t, d[:, i], lw=0.6, label=f'm_{n}')
@@ -357,11 +208,11 @@ def _dipole_fig(s: _Series, axis: _Axis) -> Figure:
     return fig
 
 
-def _estimate_fig(s: _Series, axis: _Axis, e: Dict[str, np.ndarray]) -> Figure:
+def _estimate_fig(s: RunData, axis: TimeAxis, e: Dict[str, Any]) -> Figure:
     with_diag = bool(s.diag['t'])
     fig = Figure(figsize=(11.0, 6.2 if with_diag else 5.2))
     n_rows = 4 if with_diag else 3
-    t = e['t'] / axis.scale
+    t = axis(e['s'])
     first = None
     for i, n in enumerate('xyz'):
         ax = fig.add_subplot(n_rows, 1, i + 1, sharex=first)
@@ -382,7 +233,7 @@ def _estimate_fig(s: _Series, axis: _Axis, e: Dict[str, np.ndarray]) -> Figure:
                         1.15 * max(float(finite.max()), 1e-6))
     if with_diag:
         ax = fig.add_subplot(n_rows, 1, n_rows, sharex=first)
-        ax.step(np.asarray(s.diag['t']) / axis.scale, s.diag['rejected'], where='post',
+        ax.step(axis(s.diag['s']), s.diag['rejected'], where='post',
                 lw=0.8, color='#c44e52')
         _style(ax, s, axis, 'rejected\nsamples', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.92, bottom=0.1, hspace=0.1)
@@ -430,20 +281,18 @@ def _paper_rows(out_dir: Path) -> Optional[List[Dict[str, Any]]]:
     return rows if isinstance(rows, list) and rows else None
 
 
-def _fmt_t(t: float, axis: _Axis) -> str:
-    return f'{t:.0f} s' + (f' ({t / 60.0:.1f} min)' if axis.unit == 'min' else '')
+def _fmt_t(t: float, axis: TimeAxis) -> str:
+    return f'{t:.0f} s' + (f' ({t / axis.scale:.1f} {axis.unit})' if axis.unit != 's' else '')
 
 
 def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -> str:
     """Write ``report.html`` and ``overview.png`` of the bag into ``out_dir``; its path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    s = _collect(bag_path)
+    s = read_run(bag_path)
     sc = _scenario(bag_path)
-    ends = [s.state['t'][-1]] if s.state['t'] else []
-    ends += [s.cmd['t'][-1]] if s.cmd['t'] else []
-    t_end = max(ends + [1e-9])
-    axis = _time_axis(t_end)
+    t_end = max(s.state['s'][-1:] + s.cmd['s'][-1:] + [1e-9])
+    axis = _time_axis(t_end, orbit_period_s(s))
     title = str(sc.get('name') or Path(str(bag_path).rstrip('/')).name)
     parts = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
              f'<title>ADCS run {html.escape(title)}</title><style>{_CSS}</style></head><body>',
@@ -452,7 +301,8 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
         parts.append(f'<p>{html.escape(str(sc["description"]))}</p>')
     parts.append(f'<p class="note">bag {html.escape(str(bag_path))}; {_fmt_t(t_end, axis)} '
                  'of sim time; topics: ' + ', '.join(
-                     f'{html.escape(k)} ({v})' for k, v in sorted(s.topics.items())) + '</p>')
+                     f'{html.escape(k)} ({v.count})' for k, v in sorted(s.stats.items())
+                     if v.count) + '</p>')
     missing: List[str] = []
     parts += _timeline_sections(s, sc, axis, t_end, out, missing)
     parts += _plot_sections(s, axis, missing) + _paper_section(out)
@@ -465,14 +315,13 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
     return str(path)
 
 
-def _timeline_sections(s: _Series, sc: Dict[str, Any], axis: _Axis, t_end: float, out: Path,
+def _timeline_sections(s: RunData, sc: Dict[str, Any], axis: TimeAxis, t_end: float, out: Path,
                        missing: List[str]) -> List[str]:
     """The timeline figure (also ``overview.png``), the switches and the faults."""
     parts = ['<h2>Timeline</h2>']
-    if s.cmd['t'] or s.status or s.state['t']:
-        colours = _colours(sorted(set(s.cmd['source']) | {e['active'] for e in s.status}
-                                  | {e['mode'] for e in s.status}))
-        png = _png(_overview(s, axis, t_end, colours, _pointing_error(s)))
+    if s.cmd['t'] or s.status['t'] or s.state['t']:
+        colours = _colours(sorted(set(s.cmd['source'] + s.status['active'] + s.status['mode'])))
+        png = _png(_overview(s, axis, t_end, colours, pointing_deg(s)))
         (out / 'overview.png').write_bytes(png)
         parts.append(_img(png, 'timeline: controllers, modes, faults, attitude error, rates'))
     else:
@@ -488,16 +337,16 @@ def _timeline_sections(s: _Series, sc: Dict[str, Any], axis: _Axis, t_end: float
         'recorded</p>')
     parts.append('<h2>Faults</h2>')
     parts.append(_table(['t', 'fault', 'state'], [
-        (_fmt_t(f['t'], axis), html.escape(f['message'].split(': ', 1)[-1]),
-         'active' if f['active'] else 'cleared') for f in s.faults])
-        if s.faults else '<p class="note">no fault announced on sim/faults</p>')
+        (_fmt_t(f['s'], axis), html.escape(f['message'].split(': ', 1)[-1]),
+         'active' if f['active'] else 'cleared') for f in samples(s.faults)])
+        if s.faults['t'] else '<p class="note">no fault announced on sim/faults</p>')
     return parts
 
 
-def _plot_sections(s: _Series, axis: _Axis, missing: List[str]) -> List[str]:
+def _plot_sections(s: RunData, axis: TimeAxis, missing: List[str]) -> List[str]:
     """Wheels, dipole, and the estimator against the truth."""
     parts = ['<h2>Reaction wheels</h2>']
-    if s.wheels['t']:
+    if ragged(s.wheels['h']).size:
         parts.append(_img(_png(_wheels_fig(s, axis)), 'wheel speeds and momentum'))
     else:
         missing.append('reaction wheels (no sim/wheels with wheels)')
@@ -507,7 +356,7 @@ def _plot_sections(s: _Series, axis: _Axis, missing: List[str]) -> List[str]:
     else:
         missing.append('magnetorquer dipole (no adcs/actuator_command)')
     parts.append('<h2>Estimator against the truth</h2>')
-    est = _estimate_error(s)
+    est = estimate_error(s)
     if est is None:
         missing.append('estimator (no adcs/attitude_estimate with sim/state)')
         return parts
