@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -24,21 +24,15 @@ SETTLED_DEG, SETTLED_WINDOW_S = 10.0, 600.0
 
 @dataclass
 class TopicStats:
-    msgtype: str
-    count: int = 0
-    first_ns: Optional[int] = None
-    last_ns: Optional[int] = None
-    from_header: bool = True
+    """A topic's type and its messages' stamps [ns] (log times for a type without a header)."""
 
-    def add(self, t_ns: int) -> None:
-        self.count += 1
-        self.first_ns = t_ns if self.first_ns is None else min(self.first_ns, t_ns)
-        self.last_ns = t_ns if self.last_ns is None else max(self.last_ns, t_ns)
+    msgtype: str
+    from_header: bool
+    stamps: List[int] = field(default_factory=list)
 
     def rate_hz(self) -> Optional[float]:
-        if self.count < 2 or self.last_ns is None or self.last_ns <= self.first_ns:
-            return None
-        return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
+        span_s = (max(self.stamps) - min(self.stamps)) * 1e-9 if self.stamps else 0.0
+        return (len(self.stamps) - 1) / span_s if span_s > 0.0 else None
 
 
 def _series(*keys: str):
@@ -95,37 +89,42 @@ _FIELDS = {
                                        'dipole': _vec('dipole_body')}),
 }
 
-#: The last bag read, for the other report of it: ``{(path, mtime): RunData}``.
-_LAST: Dict[tuple, RunData] = {}
+#: The last result of each reader: ``{slot: ((bag path, its files' newest mtime, key), value)}``.
+_LAST: Dict[str, Tuple[tuple, Any]] = {}
+
+
+def cached(slot: str, bag, key: Any, read: Callable[[], Any]) -> Any:
+    """``read()``, or its last result in ``slot`` for the same ``key`` and unchanged ``bag``
+    (one read of a bag for both reports and the paper table and figures)."""
+    try:
+        mtime = max(os.stat(os.path.join(bag, f)).st_mtime_ns for f in os.listdir(bag)) \
+            if os.path.isdir(bag) else os.stat(bag).st_mtime_ns
+    except (OSError, ValueError):
+        return read()                    # the reader names what is wrong with the bag
+    full = (os.path.abspath(bag), mtime, key)
+    if _LAST.get(slot, ((),))[0] != full:
+        _LAST[slot] = (full, read())
+    return _LAST[slot][1]
 
 
 def read_run(bag_path) -> RunData:
-    """The series of ``bag_path`` in one pass (the last bag's are kept for the second report);
+    """The series of ``bag_path`` in one pass (kept for the next reader of the same bag);
     ``FileNotFoundError``, ``ValueError`` naming the bag."""
-    try:
-        mtime = max(os.stat(os.path.join(bag_path, f)).st_mtime_ns
-                    for f in os.listdir(bag_path)) if os.path.isdir(bag_path) \
-            else os.stat(bag_path).st_mtime_ns
-    except (OSError, ValueError):
-        mtime = None
-    key = (os.path.abspath(bag_path), mtime)
-    if mtime is not None and key in _LAST:
-        return _LAST[key]
+    return cached('run', bag_path, None, lambda: _read(bag_path))
+
+
+def _read(bag_path) -> RunData:
     data = RunData()
     with open_bag(bag_path) as reader:
         kinds = {c.topic: stamp_kind(reader.typestore, c.msgtype) for c in reader.connections}
         for conn in reader.connections:
-            data.stats.setdefault(conn.topic, TopicStats(conn.msgtype,
-                                                         from_header=bool(kinds[conn.topic])))
+            data.stats.setdefault(conn.topic, TopicStats(conn.msgtype, bool(kinds[conn.topic])))
         for conn, t_log, raw in raw_messages(reader, reader.connections, bag_path):
             stamp = cdr_stamp_ns(raw) if kinds[conn.topic] else None
-            data.stats[conn.topic].add(stamp if stamp is not None else t_log)
+            data.stats[conn.topic].stamps.append(stamp if stamp is not None else t_log)
             if stamp is not None and (conn.topic in _FIELDS or conn.topic == FAULTS_TOPIC):
                 _store(data, conn.topic, stamp, reader.deserialize(raw, conn.msgtype))
     _finish(data)
-    _LAST.clear()
-    if mtime is not None:
-        _LAST[key] = data
     return data
 
 
@@ -149,11 +148,8 @@ def _store(data: RunData, topic: str, t: int, msg) -> None:
 
 def _finish(data: RunData) -> None:
     """Every series in stamp order, ``t0`` and the seconds from it."""
-    stamped = [st for st in data.stats.values() if st.from_header and st.count]
-    if data.state['t']:
-        data.t0 = min(data.state['t'])
-    elif stamped:
-        data.t0 = min(st.first_ns for st in stamped)
+    stamped = [min(st.stamps) for st in data.stats.values() if st.from_header and st.stamps]
+    data.t0 = min(data.state['t'] or stamped or [0])
     for series in (data.state, data.env, data.mag, data.wheels, data.est, data.target,
                    data.status, data.diag, data.cmd, data.faults):
         order = np.argsort(np.asarray(series['t'], dtype=np.int64), kind='stable')

@@ -17,6 +17,7 @@ from adcs_nodes.tools.analyse.bag_series import (  # noqa: F401 (_Data: the seri
     SETTLED_DEG, SETTLED_WINDOW_S, STATE_TOPIC, RunData as _Data, TimeAxis, controller_phases,
     estimate_error, orbit_period_s, ragged, read_run, time_axis)
 from adcs_nodes.tools.analyse.metrics import angle_to_identity_deg, run_metrics
+from adcs_nodes.tools.analyse.papers.series import save_figure
 
 Expectation = Tuple[str, str, Any, Any]   # verdict: True, False, None (info), NotComparable
 
@@ -37,8 +38,7 @@ def _plot(out: Path, name: str, plots: List[str], axis: TimeAxis, panels,
             ax.legend(loc='best', ncol=ncol)
         ax.grid(True)
     axes[-1].set_xlabel(axis.label)
-    fig.tight_layout()
-    fig.savefig(out / name, dpi=110)
+    save_figure(fig, str(out), name, 110)
     plots.append(name)
 
 
@@ -173,7 +173,7 @@ def make_report(bag_path: os.PathLike | str, out_dir: os.PathLike | str,
         except (OSError, ValueError, ImportError):
             sections = []
     data = read_run(bag_path)
-    if not any(st.count for st in data.stats.values()):
+    if not any(st.stamps for st in data.stats.values()):
         raise ValueError(f'{bag_path}: nothing to report: no message could be read from it')
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -210,9 +210,9 @@ def _bag_metrics(data: _Data, bag_path) -> Tuple[Dict[str, Any], TimeAxis, Any]:
     for topic in sorted(data.stats):
         st = data.stats[topic]
         metrics['topics'][topic] = {
-            'type': st.msgtype, 'count': st.count, 'rate_hz': st.rate_hz(),
+            'type': st.msgtype, 'count': len(st.stamps), 'rate_hz': st.rate_hz(),
             'rate_source': 'header' if st.from_header else 'log_time'}
-    stamped = [st.last_ns for st in data.stats.values() if st.from_header and st.count]
+    stamped = [max(st.stamps) for st in data.stats.values() if st.from_header and st.stamps]
     t0, t1 = data.t0, (data.state['t'][-1] if data.state['t'] else max(stamped, default=0))
     metrics['duration_s'] = (t1 - t0) * 1e-9
     metrics['start_utc'] = _utc(t0) if t0 else None
@@ -222,17 +222,14 @@ def _bag_metrics(data: _Data, bag_path) -> Tuple[Dict[str, Any], TimeAxis, Any]:
     if data.state['t']:
         metrics.update(_truth_metrics(data, period))
         metrics['controller_phases'] = controller_phases(data, t0)
-    if data.env['t']:
-        metrics['field_mean_norm_uT'] = float(
-            np.linalg.norm(np.array(data.env['b_eci']), axis=1).mean() * _T2UT)
-    if data.mag['t']:
-        metrics['magnetometer_mean_norm_uT'] = float(
-            np.linalg.norm(np.array(data.mag['b']), axis=1).mean() * _T2UT)
-    if data.wheels['t']:
-        h = ragged(data.wheels['h'])
-        if h.size:
-            metrics['wheel_max_abs_momentum_Nms'] = float(np.nanmax(np.abs(h)))
-            metrics['wheel_final_momentum_Nms'] = [float(x) for x in h[-1]]
+    for key, b in (('field_mean_norm_uT', data.env['b_eci']),
+                   ('magnetometer_mean_norm_uT', data.mag['b'])):
+        if b:
+            metrics[key] = float(np.linalg.norm(np.array(b), axis=1).mean() * _T2UT)
+    h = ragged(data.wheels['h'])
+    if h.size:
+        metrics['wheel_max_abs_momentum_Nms'] = float(np.nanmax(np.abs(h)))
+        metrics['wheel_final_momentum_Nms'] = [float(x) for x in h[-1]]
     errors = estimate_error(data)
     if errors is not None:
         deg = errors['deg']

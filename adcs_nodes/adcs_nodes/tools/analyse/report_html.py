@@ -301,8 +301,8 @@ def write_report_html(bag_path: os.PathLike | str, out_dir: os.PathLike | str) -
         parts.append(f'<p>{html.escape(str(sc["description"]))}</p>')
     parts.append(f'<p class="note">bag {html.escape(str(bag_path))}; {_fmt_t(t_end, axis)} '
                  'of sim time; topics: ' + ', '.join(
-                     f'{html.escape(k)} ({v.count})' for k, v in sorted(s.stats.items())
-                     if v.count) + '</p>')
+                     f'{html.escape(k)} ({len(v.stamps)})' for k, v in sorted(s.stats.items())
+                     if v.stamps) + '</p>')
     missing: List[str] = []
     parts += _timeline_sections(s, sc, axis, t_end, out, missing)
     parts += _plot_sections(s, axis, missing) + _paper_section(out)
@@ -345,24 +345,21 @@ def _timeline_sections(s: RunData, sc: Dict[str, Any], axis: TimeAxis, t_end: fl
 
 def _plot_sections(s: RunData, axis: TimeAxis, missing: List[str]) -> List[str]:
     """Wheels, dipole, and the estimator against the truth."""
-    parts = ['<h2>Reaction wheels</h2>']
-    if ragged(s.wheels['h']).size:
-        parts.append(_img(_png(_wheels_fig(s, axis)), 'wheel speeds and momentum'))
-    else:
-        missing.append('reaction wheels (no sim/wheels with wheels)')
-    parts.append('<h2>Magnetorquer dipole</h2>')
-    if s.cmd['t']:
-        parts.append(_img(_png(_dipole_fig(s, axis)), 'magnetorquer dipole command'))
-    else:
-        missing.append('magnetorquer dipole (no adcs/actuator_command)')
-    parts.append('<h2>Estimator against the truth</h2>')
-    est = estimate_error(s)
-    if est is None:
-        missing.append('estimator (no adcs/attitude_estimate with sim/state)')
-        return parts
-    parts.append(_img(_png(_estimate_fig(s, axis, est)),
-                      'estimator error per body axis with its 3-sigma bound'))
-    if s.diag['t']:
+    parts, est = [], estimate_error(s)
+    for title, shown, draw, alt, why in (
+            ('Reaction wheels', ragged(s.wheels['h']).size, lambda: _wheels_fig(s, axis),
+             'wheel speeds and momentum', 'reaction wheels (no sim/wheels with wheels)'),
+            ('Magnetorquer dipole', s.cmd['t'], lambda: _dipole_fig(s, axis),
+             'magnetorquer dipole command', 'magnetorquer dipole (no adcs/actuator_command)'),
+            ('Estimator against the truth', est is not None, lambda: _estimate_fig(s, axis, est),
+             'estimator error per body axis with its 3-sigma bound',
+             'estimator (no adcs/attitude_estimate with sim/state)')):
+        parts.append(f'<h2>{title}</h2>')
+        if shown:
+            parts.append(_img(_png(draw()), alt))
+        else:
+            missing.append(why)
+    if est is not None and s.diag['t']:
         last = next((r for r in reversed(s.diag['last']) if r), '')
         parts.append(f'<p class="note">rejected samples: {s.diag["rejected"][-1]}'
                      + (f'; last: {html.escape(last)}' if last else '') + '</p>')

@@ -109,15 +109,10 @@ def is_counted(ok: Any) -> bool:
 
 def fmt(value: Any) -> str:
     """A measured value as the tables print it (4 significant digits, yes/no)."""
+    import numpy as np
     if isinstance(value, bool):
         return 'yes' if value else 'no'
-    try:
-        import numpy as np
-        if isinstance(value, (float, np.floating)):
-            return f'{float(value):.4g}'
-    except ImportError:   # pragma: no cover - numpy is a dependency
-        pass
-    return str(value)
+    return f'{float(value):.4g}' if isinstance(value, (float, np.floating)) else str(value)
 
 
 def _cell(text: Any) -> str:

@@ -4,13 +4,12 @@ bounds; the tracking row and the robustness case: ``docs/paper001.md``."""
 from __future__ import annotations
 
 import math
-import os
 from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
 from adcs_nodes.tools.analyse.papers import INFO, NotComparable, Row
-from adcs_nodes.tools.analyse.papers.series import Topics, epoch_ns, quat, vec
+from adcs_nodes.tools.analyse.papers.series import Topics, epoch_ns, quat, save_figure, vec
 
 TOPICS = ('sim/state', 'adcs/attitude_target', 'adcs/actuator_command', 'sim/wheels',
           'sim/appendages', 'adcs/attitude_estimate')
@@ -253,28 +252,27 @@ def rows(m: Dict[str, Any], claim: bool = True, departed: Sequence[str] = (),
     return out
 
 
-def check(topics: Topics, sc: Dict[str, Any]) -> List[Row]:
-    """Paper 001's table of a run (information where the MPI departs from the paper)."""
+def check(topics: Topics, sc: Dict[str, Any], two_wings: bool = False) -> List[Row]:
+    """Paper 001's table of a run (information where the MPI departs from the paper, and all
+    of it in the robustness case ``two_wings``)."""
     r = series(topics, sc)
     if r['t'].size == 0:
-        return [('truth, target, command, wheels and estimate', 'recorded', 'none', False)]
+        return [('truth, target, command, wheels and estimate', 'recorded', 'none',
+                 INFO if two_wings else False)]
     departed = departures(sc)
-    return rows(metrics(r), claim=not departed, departed=departed, label='variant')
+    return rows(metrics(r), claim=not (departed or two_wings), departed=departed,
+                label='robustness' if two_wings else 'variant')
 
 
 def check_two_wings(topics: Topics, sc: Dict[str, Any]) -> List[Row]:
     """The robustness case (two mirrored wings): the same rows, all information."""
-    r = series(topics, sc)
-    if r['t'].size == 0:
-        return [('truth, target, command, wheels and estimate', 'recorded', 'none', INFO)]
-    return rows(metrics(r), claim=False, departed=departures(sc))
+    return check(topics, sc, two_wings=True)
 
 
 # ---------------------------------------------------------------------- figures
 def plots(r: Dict[str, np.ndarray], out_dir: str) -> List[str]:
     """PNG figures like the paper's Figs. 4-9; the file paths."""
     from matplotlib.figure import Figure
-    os.makedirs(out_dir, exist_ok=True)
     t = r['t']
     err = _wrap_deg(np.degrees(r['e'] - r['e_d']))
     panels: List[tuple] = [
@@ -298,10 +296,7 @@ def plots(r: Dict[str, np.ndarray], out_dir: str) -> List[str]:
             ax.legend(legend, loc='upper right', fontsize=8)
         if name == 'attitude_error.png':    # the paper's figures zoom on the small errors
             ax.set_ylim(-0.3, 0.3)
-        fig.tight_layout()
-        path = os.path.join(out_dir, name)
-        fig.savefig(path, dpi=110)
-        paths.append(path)
+        paths.append(save_figure(fig, out_dir, name, 110))
     return paths
 
 

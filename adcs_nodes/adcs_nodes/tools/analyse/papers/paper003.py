@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
-import os
 from typing import Any, Dict, List, Optional
 
 import numpy as np
 
 from adcs_nodes.tools.analyse.papers import INFO, NotComparable, Row
-from adcs_nodes.tools.analyse.papers.series import Topics, epoch_ns, quat, sorted_items, vec
+from adcs_nodes.tools.analyse.papers.series import (Topics, epoch_ns, quat, save_figure,
+                                                    sorted_items, vec)
 
 TOPICS = ('sim/state', 'adcs/attitude_target', 'adcs/actuator_command')
 
@@ -214,7 +214,6 @@ def figures(runs: Dict[str, Dict[str, np.ndarray]], out_dir: str) -> List[str]:
     from matplotlib.figure import Figure
 
     from adcs_nodes.core import attitude
-    os.makedirs(out_dir, exist_ok=True)
     panels = [
         ('fig6_phi.png', 'eigenangle phi [deg] (Fig. 6)',
          lambda r: [('phi', np.degrees(r['phi']))]),
@@ -243,10 +242,7 @@ def figures(runs: Dict[str, Dict[str, np.ndarray]], out_dir: str) -> List[str]:
             ax.grid(True, lw=0.3)
             ax.legend(fontsize=7, loc='upper right')
         fig.axes[-1].set_xlabel('t [s]')
-        fig.tight_layout()
-        path = os.path.join(out_dir, name)
-        fig.savefig(path, dpi=90)
-        paths.append(path)
+        paths.append(save_figure(fig, out_dir, name, 90))
     return paths
 
 

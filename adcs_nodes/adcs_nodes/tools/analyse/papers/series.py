@@ -9,31 +9,31 @@ import numpy as np
 
 Topics = Dict[str, Dict[int, Any]]
 
-#: The last bag read, for the next reader of it: ``(path, mtime, topics) -> Topics``.
-_LAST: Dict[tuple, Topics] = {}
-
 
 def from_bag(bag: str, topics: Sequence[str]) -> Topics:
     """The messages of ``topics`` in ``bag`` by header stamp; FileNotFoundError, ValueError."""
-    from adcs_nodes.bag import header_stamp_ns, read_messages
+    from adcs_nodes.tools.analyse.bag_series import cached
     names = tuple(t.lstrip('/') for t in topics)
-    try:
-        mtime = max(os.stat(os.path.join(bag, f)).st_mtime_ns for f in os.listdir(bag)) \
-            if os.path.isdir(bag) else os.stat(bag).st_mtime_ns
-    except OSError:
-        mtime = None
-    key = (os.path.abspath(bag), mtime, names)
-    if mtime is not None and key in _LAST:
-        return _LAST[key]
+    return cached('topics', bag, names, lambda: _from_bag(bag, names))
+
+
+def _from_bag(bag: str, names: Sequence[str]) -> Topics:
+    from adcs_nodes.bag import header_stamp_ns, read_messages
     out: Topics = {t: {} for t in names}
     for topic, _, msg in read_messages(bag, ['/' + t for t in names]):
         stamp = header_stamp_ns(msg)
         if stamp is not None:
             out[topic.lstrip('/')][stamp] = msg
-    _LAST.clear()
-    if mtime is not None:
-        _LAST[key] = out
     return out
+
+
+def save_figure(fig: Any, out_dir: str, name: str, dpi: int) -> str:
+    """``fig`` laid out and written to ``out_dir/name`` (PNG); its path."""
+    os.makedirs(out_dir, exist_ok=True)
+    fig.tight_layout()
+    path = os.path.join(out_dir, name)
+    fig.savefig(path, dpi=dpi)
+    return path
 
 
 def from_frames(frames: Iterable[Any], topics: Sequence[str], epoch_ns: int) -> Topics:
