@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -58,12 +58,11 @@ class RunData:
     faults: Dict[str, list] = _series('active', 'message', 'kind', 'target')
 
 
-def _xyz(v) -> List[float]:
-    return [v.x, v.y, v.z] + ([v.w] if hasattr(v, 'w') else [])
-
-
-def _vec(name: str):
-    return lambda m: _xyz(getattr(m, name))
+def _vec(name: str) -> Callable[[Any], List[float]]:
+    def get(msg) -> List[float]:               # a Vector3 or Quaternion field as [x, y, z(, w)]
+        v = getattr(msg, name)
+        return [v.x, v.y, v.z] + ([v.w] if hasattr(v, 'w') else [])
+    return get
 
 
 #: What the pass keeps of each topic: ``{topic: (series of RunData, {key: getter})}``.
@@ -184,10 +183,8 @@ def spans(t: Sequence[Any], labels: Sequence[str], t_end: Any) -> List[Tuple[Any
     return out
 
 
-@dataclass(frozen=True)
-class TimeAxis:
+class TimeAxis(NamedTuple):
     """Sim time in ``unit`` (``scale`` seconds each) on a plot's x axis."""
-
     scale: float
     unit: str
 

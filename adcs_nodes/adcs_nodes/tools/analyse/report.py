@@ -83,11 +83,6 @@ def _plot_estimate(err, axis, out, plots) -> None:
         ('rate estimate error [deg/s]', [(t, err['rate'] * _RAD2DEG, None, '-')], 0)])
 
 
-def _utc(t_ns: int) -> str:
-    return datetime.fromtimestamp(t_ns * 1e-9, tz=timezone.utc).strftime(
-        '%Y-%m-%d %H:%M:%S.%f UTC')
-
-
 def _summary_md(bag_path, metrics: Dict[str, Any], expectations: Sequence[Expectation],
                 sections: Sequence[Tuple[str, str]] = ()) -> str:
     lines = [
@@ -215,7 +210,8 @@ def _bag_metrics(data: _Data, bag_path) -> Tuple[Dict[str, Any], TimeAxis, Any]:
     stamped = [max(st.stamps) for st in data.stats.values() if st.from_header and st.stamps]
     t0, t1 = data.t0, (data.state['t'][-1] if data.state['t'] else max(stamped, default=0))
     metrics['duration_s'] = (t1 - t0) * 1e-9
-    metrics['start_utc'] = _utc(t0) if t0 else None
+    metrics['start_utc'] = datetime.fromtimestamp(t0 * 1e-9, tz=timezone.utc).strftime(
+        '%Y-%m-%d %H:%M:%S.%f UTC') if t0 else None
     period = orbit_period_s(data)
     if period:
         metrics['orbit_period_s'] = period

@@ -134,10 +134,10 @@ def _overview(s: RunData, axis: TimeAxis, t_end: float, colours: Dict[str, str],
     fig = Figure(figsize=(11.0, 6.2))
     gs = fig.add_gridspec(3, 1, height_ratios=[1.1, 2.0, 1.5], hspace=0.12)
     band = fig.add_subplot(gs[0])
-    src_runs = spans(s.cmd['s'], s.cmd['source'], t_end)
-    act_runs = spans(s.status['s'], s.status['active'], t_end)
-    mode_runs = spans(s.status['s'], [m or '-' for m in s.status['mode']], t_end)
-    rows = [('commanding', src_runs), ('active', act_runs), ('mode', mode_runs)]
+    rows = [('commanding', spans(s.cmd['s'], s.cmd['source'], t_end)),
+            ('active', spans(s.status['s'], s.status['active'], t_end)),
+            ('mode', spans(s.status['s'], [m or '-' for m in s.status['mode']], t_end))]
+    src_runs = rows[0][1]
     for k, (_, runs) in enumerate(rows):
         y = len(rows) - 1 - k
         for a, b, lab in runs:
@@ -166,11 +166,10 @@ def _overview(s: RunData, axis: TimeAxis, t_end: float, colours: Dict[str, str],
     rate_ax = fig.add_subplot(gs[2], sharex=band)
     _shade(rate_ax, src_runs, colours, axis)
     if s.state['t']:
-        t = axis(s.state['s'])
-        rate_ax.semilogy(t, np.maximum(np.linalg.norm(s.state['w_eci'], axis=1) * _DEG, 1e-5),
-                         lw=0.8, label='|omega| w.r.t. ECI')
-        rate_ax.semilogy(t, np.maximum(np.linalg.norm(s.state['w_orbit'], axis=1) * _DEG,
-                                       1e-5), lw=0.8, label='|omega| w.r.t. the orbit frame')
+        for key, frame in (('w_eci', 'ECI'), ('w_orbit', 'the orbit frame')):
+            rate_ax.semilogy(axis(s.state['s']), np.maximum(
+                np.linalg.norm(s.state[key], axis=1) * _DEG, 1e-5), lw=0.8,
+                label=f'|omega| w.r.t. {frame}')
         rate_ax.legend(fontsize=7, loc='upper right')
     _style(rate_ax, s, axis, 'body rate\n[deg/s]', last=True)
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.08)
