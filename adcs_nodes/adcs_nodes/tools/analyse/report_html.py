@@ -137,7 +137,7 @@ def _overview(s: RunData, axis: TimeAxis, t_end: float, colours: Dict[str, str],
     rows = [('commanding', spans(s.cmd['s'], s.cmd['source'], t_end)),
             ('active', spans(s.status['s'], s.status['active'], t_end)),
             ('mode', spans(s.status['s'], [m or '-' for m in s.status['mode']], t_end))]
-    src_runs = rows[0][1]
+    phases = rows[1][1] or rows[0][1]       # the shading: the controller phases of summary.md
     for k, (_, runs) in enumerate(rows):
         y = len(rows) - 1 - k
         for a, b, lab in runs:
@@ -156,7 +156,7 @@ def _overview(s: RunData, axis: TimeAxis, t_end: float, colours: Dict[str, str],
     band.set_title('controllers: forwarded command, active, manager mode; faults dashed',
                    fontsize=9, loc='left', pad=14)
     err_ax = fig.add_subplot(gs[1], sharex=band)
-    _shade(err_ax, src_runs, colours, axis)
+    _shade(err_ax, phases, colours, axis)
     if pointing is not None:
         err_ax.semilogy(axis(s.state['s']), np.maximum(pointing, 1e-4), color='k', lw=0.8)
     else:
@@ -164,7 +164,7 @@ def _overview(s: RunData, axis: TimeAxis, t_end: float, colours: Dict[str, str],
                     ha='center')
     _style(err_ax, s, axis, 'attitude error\nto target [deg]', last=False)
     rate_ax = fig.add_subplot(gs[2], sharex=band)
-    _shade(rate_ax, src_runs, colours, axis)
+    _shade(rate_ax, phases, colours, axis)
     if s.state['t']:
         for key, frame in (('w_eci', 'ECI'), ('w_orbit', 'the orbit frame')):
             rate_ax.semilogy(axis(s.state['s']), np.maximum(
