@@ -179,8 +179,8 @@ class MagneticFilterEstimator:
             if not f.predict(dt / n, inputs.ref.omega0, dipole,
                              b_orbit_for_torque=inputs.ref.b_orbit):
                 return False
-        w = f.omega_body_eci_body
-        return _finite(w) and float(np.linalg.norm(w)) <= self.max_rate
+        w = f.omega_body_eci_body        # finite after a True predict
+        return math.sqrt(float(w @ w)) <= self.max_rate
 
     def _predict_all(self, inputs: EstimatorInputs, dt: float, out: Step) -> None:
         filters = self._filters()

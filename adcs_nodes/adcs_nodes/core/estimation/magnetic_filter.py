@@ -292,7 +292,8 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
     """``substeps`` RK4 steps of (33) of ``h`` [s] and ``P <- F P F^T`` (34); the arguments
     are :meth:`MagneticFilter.predict`'s on arrays (``field_mode`` 0: no magnetic torque, 1:
     ``L x field`` with ``field`` in body axes, 2: ``L x C(N) field``, orbit axes). Returns
-    ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (symmetrised); may be non-finite."""
+    ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (symmetrised), ``N`` and ``omega'`` finite,
+    ``P`` finite."""
     f = np.eye(9)
     for _ in range(substeps):
         a = error_matrix_kernel(inertia, inertia_inv, omega0, q, omega)  # (34), frozen
@@ -315,7 +316,8 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
         f = f_full
     p = matmul(matmul(f, p), f.T.copy())
     p = 0.5 * (p + p.T)
-    return q, omega, p
+    return (q, omega, p, np.isfinite(q).all() and np.isfinite(omega).all(),
+            np.isfinite(p).all())
 
 
 @jit(loads_numba=True)
@@ -600,15 +602,13 @@ class MagneticFilter:
             field_mode, field = 1, b_body
         elif b_orbit is not None:
             field_mode, field = 2, b_orbit
-        with np.errstate(over='ignore', invalid='ignore'):
-            q, omega, p = predict_kernel(
-                self._q, self._omega, self._m, self._p, self.inertia, self._inertia_inv,
-                omega0, np.ascontiguousarray(dipole), np.ascontiguousarray(field, dtype=float),
-                field_mode, dt / self.substeps, self.substeps)
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(omega))):
+        q, omega, p, finite_state, finite_p = predict_kernel(
+            self._q, self._omega, self._m, self._p, self.inertia, self._inertia_inv, omega0,
+            dipole, field, field_mode, dt / self.substeps, self.substeps)
+        if not finite_state:
             return False
         self._q, self._omega = q, omega
-        if not np.all(np.isfinite(p)):
+        if not finite_p:
             self._p = self._p0.copy()
             return False
         self._p = p
