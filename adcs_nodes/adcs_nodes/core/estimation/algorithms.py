@@ -46,6 +46,7 @@ from adcs_nodes.core.estimation.horizon_yaw import (attitude_from_horizon_and_ya
 from adcs_nodes.core.estimation.hypotheses import HypothesisBank, locked
 from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
 from adcs_nodes.core.estimation.onboard import OnboardState
+from adcs_nodes.core.kernels import jit
 
 MAX_STEP_S = 2.0
 """Longest single prediction of :class:`MagneticFilterEstimator` [s] (ASSUMPTION: paper 000's
@@ -259,13 +260,22 @@ class MagneticFilterEstimator:
         if not _finite(q, omega):
             out.rejections.append('filter state not finite: not published')
             return out
-        cov = np.zeros((6, 6))
-        cov[:3, :3] = 4.0 * p[:3, :3]     # small angle: error angle ~ 2 mu (or 2 phi)
-        cov[3:, 3:] = p[3:6, 3:6]
-        cov[:3, 3:] = 2.0 * p[:3, 3:6]
-        cov[3:, :3] = cov[:3, 3:].T
-        out.estimate = Estimate6(q, omega, cov)
+        out.estimate = Estimate6(q, omega, angle_rate_covariance(p))
         return out
+
+
+@jit
+def angle_rate_covariance(p):
+    """The published (6, 6) covariance of the filter's ``P`` (9, 9) or (12, 12): small angle,
+    error angle ~ ``2 phi`` (or ``2 mu``): ``[[4 P_phi, 2 P_phi,w], [2 P_w,phi, P_w]]``."""
+    cov = np.empty((6, 6))
+    for i in range(3):
+        for j in range(3):
+            cov[i, j] = 4.0 * p[i, j]
+            cov[3 + i, 3 + j] = p[3 + i, 3 + j]
+            cov[i, 3 + j] = 2.0 * p[i, 3 + j]
+            cov[3 + j, i] = cov[i, 3 + j]
+    return cov
 
 
 class GeometricEstimator:
