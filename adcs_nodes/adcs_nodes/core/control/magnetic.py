@@ -499,8 +499,8 @@ class MagneticController:
         if self.inertia is None:
             return np.zeros(3)
         e_r, _ = orbit_axes_in_body(q_orbit_body)
-        return (np.cross(omega_body_eci_body, self.inertia @ omega_body_eci_body)
-                - 3.0 * omega0 ** 2 * np.cross(e_r, self.inertia @ e_r))
+        return (cross(omega_body_eci_body, self.inertia @ omega_body_eci_body)
+                - 3.0 * omega0 ** 2 * cross(e_r, self.inertia @ e_r))
 
     def law(self, estimate: Optional[Estimate], target: Optional[Target],
             b_body: Optional[ArrayLike], t: float, dt: float) -> Command:
