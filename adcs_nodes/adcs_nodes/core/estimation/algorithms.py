@@ -96,18 +96,24 @@ class Step:
     covariance_trace: float = 0.0
 
 
+def _orbit_rate_body(q_orbit_body: ArrayLike, omega0: float) -> np.ndarray:
+    """``R(q)^T [0, omega0, 0]`` (3,) [rad/s]: ``omega0`` times row 2 of ``R(q)`` (the zero
+    terms of the product drop out exactly), in Python floats as :func:`att.to_matrix`."""
+    x, y, z, w = att.normalize(q_orbit_body).tolist()
+    return np.array([omega0 * (2 * (x * y + z * w)), omega0 * (1 - 2 * (x * x + z * z)),
+                     omega0 * (2 * (y * z - x * w))])
+
+
 def omega_eci_from_orbit(q_orbit_body: ArrayLike, omega_body_orbit_body: ArrayLike,
                          omega0: float) -> np.ndarray:
     """``omega_body_eci_body = omega_body_orbit_body + R(q)^T [0, omega0, 0]`` [rad/s]."""
-    return np.asarray(omega_body_orbit_body, float) + att.to_matrix(q_orbit_body).T @ np.array(
-        [0.0, omega0, 0.0])
+    return np.asarray(omega_body_orbit_body, float) + _orbit_rate_body(q_orbit_body, omega0)
 
 
 def omega_orbit_from_eci(q_orbit_body: ArrayLike, omega_body_eci_body: ArrayLike,
                          omega0: float) -> np.ndarray:
     """Inverse of :func:`omega_eci_from_orbit`."""
-    return np.asarray(omega_body_eci_body, float) - att.to_matrix(q_orbit_body).T @ np.array(
-        [0.0, omega0, 0.0])
+    return np.asarray(omega_body_eci_body, float) - _orbit_rate_body(q_orbit_body, omega0)
 
 
 def _finite(*arrays) -> bool:
