@@ -132,6 +132,7 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
 from adcs_nodes.core.kernels import cross, dcm, finite_vector, jit, matmul, mv, qmul, skew
+from adcs_nodes.core.samples import all_finite
 
 THETA_DEFAULT = (0.3e-6) ** 2
 """Default ``theta`` [T^2]: (0.3 uT)^2, about the largest magnetometer noise variance."""
@@ -197,9 +198,9 @@ def predicted_field_body(q_orbit_body: ArrayLike, b_orbit: ArrayLike) -> np.ndar
 def _check_field(b: np.ndarray, name: str, b_min: float, b_max: float) -> str:
     if b.shape != (3,):
         return f'{name} must have shape (3,), got {b.shape}'
-    if not np.all(np.isfinite(b)):
+    if not all_finite(b):
         return f'{name} is not finite'
-    mag = float(np.linalg.norm(b))
+    mag = math.sqrt(float(b @ b))
     if not b_min <= mag <= b_max:
         return f'|{name}| = {mag:.3g} T outside [{b_min:.3g}, {b_max:.3g}] T'
     return ''
@@ -326,7 +327,8 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
     """(36)/(37) (and (M2)), the sequential update (38) and the correction (39) on arrays:
     the arguments of :meth:`MagneticFilter.update` (``theta`` (3,) [T^2] per body axis,
     ``form_phi``: (36)). Returns ``N+`` (4,), ``omega'+`` (3,), ``m'+`` (3,), ``P+``, ``z``
-    (3,), ``w`` and ``sigma`` (3,); may be non-finite."""
+    (3,), ``w``, ``sigma`` (3,) (may be non-finite) and whether ``N+``, ``omega'+``, ``m'+``
+    and ``P+`` are finite."""
     r = dcm(q)
     n_star = np.empty(3)
     for i in range(3):   # n* = C(N) B* = R(N)^T B*
@@ -373,7 +375,9 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
         w = w + k * nu
     p = 0.5 * (p + p.T)
     q_new, omega_new, m_new = correct_kernel(q, omega, m, w, form_phi)
-    return q_new, omega_new, m_new, p, z, w, sigma
+    finite = (np.isfinite(q_new).all() and np.isfinite(omega_new).all()
+              and np.isfinite(m_new).all() and np.isfinite(p).all())
+    return q_new, omega_new, m_new, p, z, w, sigma, finite
 
 
 @jit(loads_numba=True)
@@ -647,17 +651,14 @@ class MagneticFilter:
         if reason:
             out['reason'] = reason
             return out
-        with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
-            # n* = conj(N) . B* . N, (36)/(37), (38) sequential, correction (39)
-            q, omega, m, p, z, w, sigma = update_kernel(
-                self._q, self._omega, self._m, self._p, np.ascontiguousarray(self.corrected(n)),
-                np.ascontiguousarray(b_ref), np.ascontiguousarray(theta, dtype=float),
-                self.tau, self.literal_update, self.sigma_from_innovation,
-                self.measurement_form == 'phi')
-        q_norm = math.sqrt(float(q @ q)) if np.all(np.isfinite(q)) else 0.0
+        # n* = conj(N) . B* . N, (36)/(37), (38) sequential, correction (39)
+        q, omega, m, p, z, w, sigma, finite = update_kernel(
+            self._q, self._omega, self._m, self._p, np.ascontiguousarray(self.corrected(n)),
+            np.ascontiguousarray(b_ref), np.ascontiguousarray(theta, dtype=float),
+            self.tau, self.literal_update, self.sigma_from_innovation,
+            self.measurement_form == 'phi')
         out['innovation'] = z
-        if q_norm < 1e-12 or not (np.all(np.isfinite(omega)) and np.all(np.isfinite(m))
-                                  and np.all(np.isfinite(p))):
+        if not finite or math.sqrt(float(q @ q)) < 1e-12:
             out['reason'] = 'update produced a non-finite state; reading ignored'
             return out
         rate, dist = math.sqrt(float(omega @ omega)), math.sqrt(float(m @ m))
