@@ -135,6 +135,7 @@ class MagneticFilterEstimator:
                  theta_interval_s: float = THETA_INTERVAL_S, hypotheses: int = 1,
                  hypothesis_window_s: float = 2000.0, **filter_args) -> None:
         self.filter = MagneticFilter(inertia, max_rate_rad_s=max_rate_rad_s, **filter_args)
+        angle_rate_covariance(np.eye(9))        # compiled (or loaded) before the first frame
         self.use_sensor_covariance = bool(use_sensor_covariance)
         self.max_rate = float(max_rate_rad_s)
         max_step_s = float(max_step_s)
