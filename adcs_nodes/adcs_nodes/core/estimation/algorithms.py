@@ -97,8 +97,8 @@ class Step:
 
 
 def _orbit_rate_body(q_orbit_body: ArrayLike, omega0: float) -> np.ndarray:
-    """``R(q)^T [0, omega0, 0]`` (3,) [rad/s]: ``omega0`` times row 2 of ``R(q)`` (the zero
-    terms of the product drop out exactly), in Python floats as :func:`att.to_matrix`."""
+    """``R(q)^T [0, omega0, 0]`` (3,) [rad/s]: ``omega0`` times the second row of ``R(q)`` (the
+    zero terms of the product drop out exactly), in Python floats as :func:`att.to_matrix`."""
     x, y, z, w = att.normalize(q_orbit_body).tolist()
     return np.array([omega0 * (2 * (x * y + z * w)), omega0 * (1 - 2 * (x * x + z * z)),
                      omega0 * (2 * (y * z - x * w))])

@@ -293,8 +293,8 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
     """``substeps`` RK4 steps of (33) of ``h`` [s] and ``P <- F P F^T`` (34); the arguments
     are :meth:`MagneticFilter.predict`'s on arrays (``field_mode`` 0: no magnetic torque, 1:
     ``L x field`` with ``field`` in body axes, 2: ``L x C(N) field``, orbit axes). Returns
-    ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (symmetrised), ``N`` and ``omega'`` finite,
-    ``P`` finite."""
+    ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (symmetrised), may be non-finite, and two flags:
+    ``N`` and ``omega'`` finite, ``P`` finite."""
     f = np.eye(9)
     for _ in range(substeps):
         a = error_matrix_kernel(inertia, inertia_inv, omega0, q, omega)  # (34), frozen
