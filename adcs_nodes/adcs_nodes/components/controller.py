@@ -146,8 +146,8 @@ def target_of(x: Optional[AttitudeTarget]) -> Optional[Target]:
     frame = x.frame or 'orbit'
     if frame not in ('orbit', 'eci') or not all_finite(q, w, a) or q.shape != (4,):
         return None
-    q_max = float(np.max(np.abs(q)))              # |q| of 1e300 would overflow: scaled first
-    if q_max == 0.0 or math.sqrt((q / q_max).dot(q / q_max)) * q_max < 0.5:
+    q_max = max(map(abs, q.tolist()))             # |q| of 1e300 would overflow: scaled first
+    if q_max == 0.0 or math.sqrt(sum((v / q_max) ** 2 for v in q.tolist())) * q_max < 0.5:
         return None
     return Target(att.normalize(q), w, a, frame, float(x.time_to_go_s))
 

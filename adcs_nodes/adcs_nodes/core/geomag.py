@@ -105,12 +105,23 @@ def dipole_eci(r_eci, theta, m_ecef, k):
     return to_eci(c, s, dipole_ecef(to_ecef(c, s, r_eci), m_ecef, k))
 
 
+@jit
+def dipole_eci_and_rate(r, r_plus, r_minus, theta, theta_plus, theta_minus, m_ecef, k, h):
+    """:func:`dipole_eci` at ``r`` (GMST ``theta``) and its central difference (G5) between
+    ``r_plus`` (``theta_plus``) and ``r_minus`` (``theta_minus``) over ``2 h`` [s]: ``(b_eci
+    (3,) [T], b_dot_eci (3,) [T/s])``."""
+    b_plus = dipole_eci(r_plus, theta_plus, m_ecef, k)
+    b_minus = dipole_eci(r_minus, theta_minus, m_ecef, k)
+    return dipole_eci(r, theta, m_ecef, k), (b_plus - b_minus) / (2.0 * h)
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the numba cache) the kernels once per process, from the model
     constructors: the first compilation never falls inside a frame."""
     v = np.array([7e6, 0.0, 0.0])
     dipole_eci(v, 0.1, v, 1.0)
+    dipole_eci_and_rate(v, v, v, 0.1, 0.1, 0.1, v, 1.0, 0.5)
     to_eci(1.0, 0.0, dipole_ecef(to_ecef(1.0, 0.0, v), v, 1.0))
 
 
@@ -158,10 +169,15 @@ class GeomagneticField(abc.ABC):
         t = float(t)
         h = self.rate_step_s
         position = getattr(orbit, 'position', None) or (lambda s: orbit.state(s).r_eci)
-        b = self.field_eci(position(t) if r_eci is None else r_eci, t)
-        b_plus = self.field_eci(position(t + h), t + h)
-        b_minus = self.field_eci(position(t - h), t - h)
-        return b, (b_plus - b_minus) / (2.0 * h)
+        return self._field_and_difference(
+            _position(position(t) if r_eci is None else r_eci), _position(position(t + h)),
+            _position(position(t - h)), t, h)
+
+    def _field_and_difference(self, r: np.ndarray, r_plus: np.ndarray, r_minus: np.ndarray,
+                              t: float, h: float) -> tuple[np.ndarray, np.ndarray]:
+        """``b(r, t)`` and (G5) ``(b(r_plus, t + h) - b(r_minus, t - h)) / 2 h`` (ECI)."""
+        b_plus, b_minus = self.field_eci(r_plus, t + h), self.field_eci(r_minus, t - h)
+        return self.field_eci(r, t), (b_plus - b_minus) / (2.0 * h)
 
 
 class DipoleField(GeomagneticField):
@@ -211,6 +227,13 @@ class DipoleField(GeomagneticField):
     def field_eci(self, r_eci: ArrayLike, t: float) -> np.ndarray:
         """Field ``b_eci`` (3,) [T], ECI, (G1) and (G2) in one compiled call (see the base)."""
         return dipole_eci(_position(r_eci), gmst(self.epoch, t), self.m_ecef, self._k)
+
+    def _field_and_difference(self, r: np.ndarray, r_plus: np.ndarray, r_minus: np.ndarray,
+                              t: float, h: float) -> tuple[np.ndarray, np.ndarray]:
+        """The base's three fields (G1), (G2) and (G5) in one compiled call."""
+        return dipole_eci_and_rate(r, r_plus, r_minus, gmst(self.epoch, t),
+                                   gmst(self.epoch, t + h), gmst(self.epoch, t - h),
+                                   self.m_ecef, self._k, h)
 
 
 class IgrfField(GeomagneticField):

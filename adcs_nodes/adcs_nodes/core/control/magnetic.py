@@ -99,6 +99,7 @@ from adcs_nodes.core import attitude
 from adcs_nodes.core.control import (Command, ControlInputs, Estimate, Target, cross3,
                                      finite_vector, limits_vector, positive)
 from adcs_nodes.core.kernels import cross, jit
+from adcs_nodes.core.samples import all_finite
 
 MODES = ('three_axis', 'one_axis', 'two_stage')
 """Accepted values of ``mode``."""
@@ -499,8 +500,8 @@ class MagneticController:
         if self.inertia is None:
             return np.zeros(3)
         e_r, _ = orbit_axes_in_body(q_orbit_body)
-        return (np.cross(omega_body_eci_body, self.inertia @ omega_body_eci_body)
-                - 3.0 * omega0 ** 2 * np.cross(e_r, self.inertia @ e_r))
+        return (cross(omega_body_eci_body, self.inertia @ omega_body_eci_body)
+                - 3.0 * omega0 ** 2 * cross(e_r, self.inertia @ e_r))
 
     def law(self, estimate: Optional[Estimate], target: Optional[Target],
             b_body: Optional[ArrayLike], t: float, dt: float) -> Command:
@@ -530,7 +531,7 @@ class MagneticController:
         if b_body is None:
             return self._zero('no magnetic field measurement')
         b = np.asarray(b_body, dtype=float)
-        if b.shape != (3,) or not np.isfinite(b).all():
+        if b.shape != (3,) or not all_finite(b):
             return self._zero(f'magnetic field measurement not finite or not (3,): {b}')
         b_norm = math.sqrt(b @ b)
         if b_norm < self.b_min:
@@ -541,8 +542,8 @@ class MagneticController:
         else:
             q_ref = np.asarray(target.q_orbit_body_ref, dtype=float)
             y_ref = np.asarray(target.omega_body_ref_body, dtype=float)
-            if (q_ref.shape != (4,) or y_ref.shape != (3,) or not np.isfinite(q_ref).all()
-                    or not np.isfinite(y_ref).all() or math.sqrt(q_ref @ q_ref) < 1e-9):
+            if (q_ref.shape != (4,) or y_ref.shape != (3,) or not all_finite(q_ref, y_ref)
+                    or math.sqrt(q_ref @ q_ref) < 1e-9):
                 return self._zero('target not finite or malformed')
             if not math.isfinite(q_ref @ q_ref):                 # |q| overflows: scaled first
                 q_ref = q_ref / np.max(np.abs(q_ref))

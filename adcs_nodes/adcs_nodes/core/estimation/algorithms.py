@@ -46,6 +46,7 @@ from adcs_nodes.core.estimation.horizon_yaw import (attitude_from_horizon_and_ya
 from adcs_nodes.core.estimation.hypotheses import HypothesisBank, locked
 from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
 from adcs_nodes.core.estimation.onboard import OnboardState
+from adcs_nodes.core.kernels import jit
 
 MAX_STEP_S = 2.0
 """Longest single prediction of :class:`MagneticFilterEstimator` [s] (ASSUMPTION: paper 000's
@@ -95,18 +96,24 @@ class Step:
     covariance_trace: float = 0.0
 
 
+def _orbit_rate_body(q_orbit_body: ArrayLike, omega0: float) -> np.ndarray:
+    """``R(q)^T [0, omega0, 0]`` (3,) [rad/s]: ``omega0`` times the second row of ``R(q)`` (the
+    zero terms of the product drop out exactly), in Python floats as :func:`att.to_matrix`."""
+    x, y, z, w = att.normalize(q_orbit_body).tolist()
+    return np.array([omega0 * (2 * (x * y + z * w)), omega0 * (1 - 2 * (x * x + z * z)),
+                     omega0 * (2 * (y * z - x * w))])
+
+
 def omega_eci_from_orbit(q_orbit_body: ArrayLike, omega_body_orbit_body: ArrayLike,
                          omega0: float) -> np.ndarray:
     """``omega_body_eci_body = omega_body_orbit_body + R(q)^T [0, omega0, 0]`` [rad/s]."""
-    return np.asarray(omega_body_orbit_body, float) + att.to_matrix(q_orbit_body).T @ np.array(
-        [0.0, omega0, 0.0])
+    return np.asarray(omega_body_orbit_body, float) + _orbit_rate_body(q_orbit_body, omega0)
 
 
 def omega_orbit_from_eci(q_orbit_body: ArrayLike, omega_body_eci_body: ArrayLike,
                          omega0: float) -> np.ndarray:
     """Inverse of :func:`omega_eci_from_orbit`."""
-    return np.asarray(omega_body_eci_body, float) - att.to_matrix(q_orbit_body).T @ np.array(
-        [0.0, omega0, 0.0])
+    return np.asarray(omega_body_eci_body, float) - _orbit_rate_body(q_orbit_body, omega0)
 
 
 def _finite(*arrays) -> bool:
@@ -128,6 +135,7 @@ class MagneticFilterEstimator:
                  theta_interval_s: float = THETA_INTERVAL_S, hypotheses: int = 1,
                  hypothesis_window_s: float = 2000.0, **filter_args) -> None:
         self.filter = MagneticFilter(inertia, max_rate_rad_s=max_rate_rad_s, **filter_args)
+        angle_rate_covariance(np.eye(9))        # compiled (or loaded) before the first frame
         self.use_sensor_covariance = bool(use_sensor_covariance)
         self.max_rate = float(max_rate_rad_s)
         max_step_s = float(max_step_s)
@@ -179,8 +187,8 @@ class MagneticFilterEstimator:
             if not f.predict(dt / n, inputs.ref.omega0, dipole,
                              b_orbit_for_torque=inputs.ref.b_orbit):
                 return False
-        w = f.omega_body_eci_body
-        return _finite(w) and float(np.linalg.norm(w)) <= self.max_rate
+        w = f.omega_body_eci_body        # finite after a True predict
+        return math.sqrt(float(w @ w)) <= self.max_rate
 
     def _predict_all(self, inputs: EstimatorInputs, dt: float, out: Step) -> None:
         filters = self._filters()
@@ -259,13 +267,22 @@ class MagneticFilterEstimator:
         if not _finite(q, omega):
             out.rejections.append('filter state not finite: not published')
             return out
-        cov = np.zeros((6, 6))
-        cov[:3, :3] = 4.0 * p[:3, :3]     # small angle: error angle ~ 2 mu (or 2 phi)
-        cov[3:, 3:] = p[3:6, 3:6]
-        cov[:3, 3:] = 2.0 * p[:3, 3:6]
-        cov[3:, :3] = cov[:3, 3:].T
-        out.estimate = Estimate6(q, omega, cov)
+        out.estimate = Estimate6(q, omega, angle_rate_covariance(p))
         return out
+
+
+@jit
+def angle_rate_covariance(p):
+    """The published (6, 6) covariance of the filter's ``P`` (9, 9) or (12, 12): small angle,
+    error angle ~ ``2 phi`` (or ``2 mu``): ``[[4 P_phi, 2 P_phi,w], [2 P_w,phi, P_w]]``."""
+    cov = np.empty((6, 6))
+    for i in range(3):
+        for j in range(3):
+            cov[i, j] = 4.0 * p[i, j]
+            cov[3 + i, 3 + j] = p[3 + i, 3 + j]
+            cov[i, 3 + j] = 2.0 * p[i, 3 + j]
+            cov[3 + j, i] = cov[i, 3 + j]
+    return cov
 
 
 class GeometricEstimator:

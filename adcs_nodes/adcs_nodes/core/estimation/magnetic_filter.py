@@ -132,6 +132,7 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
 from adcs_nodes.core.kernels import cross, dcm, finite_vector, jit, matmul, mv, qmul, skew
+from adcs_nodes.core.samples import all_finite
 
 THETA_DEFAULT = (0.3e-6) ** 2
 """Default ``theta`` [T^2]: (0.3 uT)^2, about the largest magnetometer noise variance."""
@@ -197,9 +198,9 @@ def predicted_field_body(q_orbit_body: ArrayLike, b_orbit: ArrayLike) -> np.ndar
 def _check_field(b: np.ndarray, name: str, b_min: float, b_max: float) -> str:
     if b.shape != (3,):
         return f'{name} must have shape (3,), got {b.shape}'
-    if not np.all(np.isfinite(b)):
+    if not all_finite(b):
         return f'{name} is not finite'
-    mag = float(np.linalg.norm(b))
+    mag = math.sqrt(float(b @ b))
     if not b_min <= mag <= b_max:
         return f'|{name}| = {mag:.3g} T outside [{b_min:.3g}, {b_max:.3g}] T'
     return ''
@@ -292,7 +293,8 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
     """``substeps`` RK4 steps of (33) of ``h`` [s] and ``P <- F P F^T`` (34); the arguments
     are :meth:`MagneticFilter.predict`'s on arrays (``field_mode`` 0: no magnetic torque, 1:
     ``L x field`` with ``field`` in body axes, 2: ``L x C(N) field``, orbit axes). Returns
-    ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (symmetrised); may be non-finite."""
+    ``N`` (4,) (unit), ``omega'`` (3,), ``P`` (symmetrised), may be non-finite, and two flags:
+    ``N`` and ``omega'`` finite, ``P`` finite."""
     f = np.eye(9)
     for _ in range(substeps):
         a = error_matrix_kernel(inertia, inertia_inv, omega0, q, omega)  # (34), frozen
@@ -315,7 +317,8 @@ def predict_kernel(q, omega, m, p, inertia, inertia_inv, omega0, dipole, field, 
         f = f_full
     p = matmul(matmul(f, p), f.T.copy())
     p = 0.5 * (p + p.T)
-    return q, omega, p
+    return (q, omega, p, np.isfinite(q).all() and np.isfinite(omega).all(),
+            np.isfinite(p).all())
 
 
 @jit(loads_numba=True)
@@ -324,7 +327,8 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
     """(36)/(37) (and (M2)), the sequential update (38) and the correction (39) on arrays:
     the arguments of :meth:`MagneticFilter.update` (``theta`` (3,) [T^2] per body axis,
     ``form_phi``: (36)). Returns ``N+`` (4,), ``omega'+`` (3,), ``m'+`` (3,), ``P+``, ``z``
-    (3,), ``w`` and ``sigma`` (3,); may be non-finite."""
+    (3,), ``w``, ``sigma`` (3,) (may be non-finite) and whether ``N+``, ``omega'+``, ``m'+``
+    and ``P+`` are finite."""
     r = dcm(q)
     n_star = np.empty(3)
     for i in range(3):   # n* = C(N) B* = R(N)^T B*
@@ -371,7 +375,9 @@ def update_kernel(q, omega, m, p, n, b_ref, theta, tau, literal, sigma_from_inno
         w = w + k * nu
     p = 0.5 * (p + p.T)
     q_new, omega_new, m_new = correct_kernel(q, omega, m, w, form_phi)
-    return q_new, omega_new, m_new, p, z, w, sigma
+    finite = (np.isfinite(q_new).all() and np.isfinite(omega_new).all()
+              and np.isfinite(m_new).all() and np.isfinite(p).all())
+    return q_new, omega_new, m_new, p, z, w, sigma, finite
 
 
 @jit(loads_numba=True)
@@ -600,15 +606,13 @@ class MagneticFilter:
             field_mode, field = 1, b_body
         elif b_orbit is not None:
             field_mode, field = 2, b_orbit
-        with np.errstate(over='ignore', invalid='ignore'):
-            q, omega, p = predict_kernel(
-                self._q, self._omega, self._m, self._p, self.inertia, self._inertia_inv,
-                omega0, np.ascontiguousarray(dipole), np.ascontiguousarray(field, dtype=float),
-                field_mode, dt / self.substeps, self.substeps)
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(omega))):
+        q, omega, p, finite_state, finite_p = predict_kernel(
+            self._q, self._omega, self._m, self._p, self.inertia, self._inertia_inv, omega0,
+            dipole, field, field_mode, dt / self.substeps, self.substeps)
+        if not finite_state:
             return False
         self._q, self._omega = q, omega
-        if not np.all(np.isfinite(p)):
+        if not finite_p:
             self._p = self._p0.copy()
             return False
         self._p = p
@@ -647,17 +651,14 @@ class MagneticFilter:
         if reason:
             out['reason'] = reason
             return out
-        with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
-            # n* = conj(N) . B* . N, (36)/(37), (38) sequential, correction (39)
-            q, omega, m, p, z, w, sigma = update_kernel(
-                self._q, self._omega, self._m, self._p, np.ascontiguousarray(self.corrected(n)),
-                np.ascontiguousarray(b_ref), np.ascontiguousarray(theta, dtype=float),
-                self.tau, self.literal_update, self.sigma_from_innovation,
-                self.measurement_form == 'phi')
-        q_norm = math.sqrt(float(q @ q)) if np.all(np.isfinite(q)) else 0.0
+        # n* = conj(N) . B* . N, (36)/(37), (38) sequential, correction (39)
+        q, omega, m, p, z, w, sigma, finite = update_kernel(
+            self._q, self._omega, self._m, self._p, np.ascontiguousarray(self.corrected(n)),
+            np.ascontiguousarray(b_ref), np.ascontiguousarray(theta, dtype=float),
+            self.tau, self.literal_update, self.sigma_from_innovation,
+            self.measurement_form == 'phi')
         out['innovation'] = z
-        if q_norm < 1e-12 or not (np.all(np.isfinite(omega)) and np.all(np.isfinite(m))
-                                  and np.all(np.isfinite(p))):
+        if not finite or math.sqrt(float(q @ q)) < 1e-12:
             out['reason'] = 'update produced a non-finite state; reading ignored'
             return out
         rate, dist = math.sqrt(float(omega @ omega)), math.sqrt(float(m @ m))
