@@ -1,13 +1,17 @@
 """The processes of a run: one per node (or one composed), each in its own session with a
-parent-death signal and its log in the run directory; stopped in order."""
+parent-death signal and its log in the run directory; stopped in order. Node processes are
+forked by the run's zygote (:mod:`adcs_nodes.tools.run.zygote`), else executed."""
 from __future__ import annotations
 
+import json
 import os
+import select
 import signal
+import socket
 import subprocess
 import sys
 import time
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Union
 
 #: Run via ``python -S -c``: sets the parent-death signal, checks the parent is still there,
 #: then executes the command (``preexec_fn`` is unsafe while DDS threads run).
@@ -21,6 +25,10 @@ PDEATHSIG_SHIM = (
     'os.execv(sys.argv[2], sys.argv[2:])\n')
 #: Test only: ``<node>[@<starts>]:<ros args>[;...]`` appended to that node's command.
 TEST_NODE_ARGS_ENV = 'ADCS_TEST_NODE_ROS_ARGS'
+#: ``0``: no zygote, every node process executed (``python -m``).
+ZYGOTE_ENV = 'ADCS_ZYGOTE'
+#: Wall seconds the zygote may take to answer a request (its first: its imports).
+ZYGOTE_ANSWER_S = 60.0
 
 
 def with_parent_death_signal(cmd: List[str]) -> List[str]:
@@ -38,13 +46,126 @@ def cpu_seconds(pid: int) -> Optional[float]:
         return None
 
 
+class ZygoteError(RuntimeError):
+    """The zygote cannot serve (did not start, died, did not answer)."""
+
+
+class Zygote:
+    """The launcher's end of the run's fork server: :meth:`spawn` gives a :class:`Forked`."""
+
+    def __init__(self, modules: List[str], env: Dict[str, str], log_path: str,
+                 log=print) -> None:
+        self.log_path, self.log = log_path, log
+        self.sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        env = dict(env, OPENBLAS_NUM_THREADS='1', OMP_NUM_THREADS='1', MKL_NUM_THREADS='1')
+        cmd = [sys.executable, '-m', 'adcs_nodes.tools.run.zygote', str(theirs.fileno())]
+        with open(log_path, 'wb', opener=_private) as fh:
+            self.proc = subprocess.Popen(with_parent_death_signal(cmd + modules), env=env,
+                                         stdout=fh, stderr=subprocess.STDOUT,
+                                         stdin=subprocess.DEVNULL, start_new_session=True,
+                                         pass_fds=[theirs.fileno()])
+        theirs.close()
+        self.codes: Dict[int, int] = {}
+        self.pids: List[int] = []
+        self.alive = True
+
+    def pump(self, timeout: float) -> None:
+        """Read the zygote's answers for up to ``timeout`` seconds (0: what is there)."""
+        while self.alive and select.select([self.sock], [], [], timeout)[0]:
+            timeout = 0.0
+            msg = self.sock.recv(4096)
+            if not msg:
+                self.alive = False
+                try:
+                    code = self.proc.wait(5.0)
+                except subprocess.TimeoutExpired:
+                    code = None
+                self.log(f'[adcs] WARNING: the zygote (fork server) ended (exit code {code}, '
+                         f'log {self.log_path}): its node processes get SIGTERM')
+            elif 'exit' in (m := json.loads(msg)):
+                self.codes[m['exit']] = m['code']
+            else:
+                self.pids.append(m['pid'])
+
+    def spawn(self, cmd: List[str], env: Dict[str, str], log_fd: int) -> 'Forked':
+        """Fork ``cmd`` (``[python, '-m', module, args...]``) with its log on ``log_fd``."""
+        req = {'module': cmd[2], 'args': cmd[3:], 'env': env}
+        try:
+            socket.send_fds(self.sock, [json.dumps(req).encode()], [log_fd])
+        except OSError as exc:
+            self.alive = False
+            raise ZygoteError(f'it cannot be reached ({exc.strerror or exc})') from None
+        deadline = time.monotonic() + ZYGOTE_ANSWER_S
+        while not self.pids and self.alive and time.monotonic() < deadline:
+            self.pump(deadline - time.monotonic())
+        if not self.pids:
+            self.alive = False
+            raise ZygoteError(f'exit code {self.proc.poll()}' if self.proc.poll() is not None
+                              else f'no answer in {ZYGOTE_ANSWER_S:g} s')
+        return Forked(self, self.pids.pop(0))
+
+    def close(self, grace_s: float = 5.0) -> None:
+        """End of file to the zygote; wait for it (SIGKILL after ``grace_s``)."""
+        self.sock.close()
+        self.alive = False
+        try:
+            self.proc.wait(grace_s)
+        except subprocess.TimeoutExpired:
+            _killpg(self.proc, signal.SIGKILL)
+            self.proc.wait()
+
+
+class Forked:
+    """A node process forked by the :class:`Zygote`, with ``Popen``'s ``pid``, ``poll``,
+    ``wait`` and ``returncode``. A child the zygote could not report (it died) counts as ended
+    by the SIGTERM of its parent-death signal once it is gone."""
+
+    def __init__(self, zygote: Zygote, pid: int) -> None:
+        self.zygote, self.pid, self.returncode = zygote, pid, None
+
+    def poll(self) -> Optional[int]:
+        if self.returncode is None:
+            self.zygote.pump(0.0)
+            self.returncode = self.zygote.codes.get(self.pid)
+        if self.returncode is None and not self.zygote.alive and not _exists(self.pid):
+            self.returncode = -signal.SIGTERM
+        return self.returncode
+
+    def wait(self, timeout: Optional[float] = None) -> int:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self.poll() is None:
+            left = 0.1 if deadline is None else deadline - time.monotonic()
+            if left <= 0:
+                raise subprocess.TimeoutExpired(f'pid {self.pid}', timeout)
+            if self.zygote.alive:
+                self.zygote.pump(min(left, 0.1))
+            else:
+                time.sleep(min(left, 0.05))   # an orphan: reaped by init, nothing to wait on
+        return self.returncode
+
+
+def _exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
+
+
+def _private(path: str, flags: int) -> int:
+    return os.open(path, flags | os.O_CLOEXEC, 0o600)
+
+
 class Processes:
     """The child processes of one run, by node name, and their logs (``RUN_DIR/logs``)."""
 
     def __init__(self, run_dir: str, log=print) -> None:
         self.run_dir = run_dir
         self.log = log
-        self.procs: Dict[str, subprocess.Popen] = {}
+        self.procs: Dict[str, Union[subprocess.Popen, Forked]] = {}
+        self.zygote: Optional[Zygote] = None
         self.log_start: Dict[str, int] = {}       # each log's offset at its process's start
         self.spawn_count: Dict[str, int] = {}
 
@@ -61,6 +182,15 @@ class Processes:
                 extra[node] = args.split()
         return extra
 
+    def spawn_all(self, cmds: Dict[str, List[str]], env: Dict[str, str]) -> None:
+        """Start every node; through a zygote when there are several (:data:`ZYGOTE_ENV`)."""
+        modules = sorted({c[2] for c in cmds.values() if c[1:2] == ['-m']})
+        if len(cmds) > 1 and os.environ.get(ZYGOTE_ENV, '1') != '0':
+            os.makedirs(os.path.join(self.run_dir, 'logs'), mode=0o700, exist_ok=True)
+            self.zygote = Zygote(modules, env, self.log_path('zygote'), self.log)
+        for name, cmd in cmds.items():
+            self.spawn(name, cmd, env)
+
     def spawn(self, name: str, cmd: List[str], env: Dict[str, str], note: str = '') -> None:
         """Start one node; its log is created, or appended to after ``note`` (a restart)."""
         os.makedirs(os.path.join(self.run_dir, 'logs'), mode=0o700, exist_ok=True)
@@ -72,6 +202,13 @@ class Processes:
                 fh.flush()
             self.log_start[name] = fh.tell()
             self.spawn_count[name] = self.spawn_count.get(name, 0) + 1
+            if self.zygote is not None and self.zygote.alive and cmd[1:2] == ['-m']:
+                try:
+                    self.procs[name] = self.zygote.spawn(cmd, env, fd)
+                    return
+                except ZygoteError as exc:
+                    self.log(f'[adcs] WARNING: the zygote (fork server) failed: {exc} (see '
+                             f'{self.log_path("zygote")}); nodes are started as processes')
             # own session: a Ctrl-C in the terminal reaches the launcher only, which
             # stops the graph in order; the parent-death signal covers a killed launcher
             self.procs[name] = subprocess.Popen(with_parent_death_signal(cmd), env=env,
@@ -117,6 +254,8 @@ class Processes:
             if monitor is not None and self.procs['recorder'].poll() is None:
                 monitor.wait_recorder_settled(time.monotonic() + grace_s)
             self.signal_and_wait(['recorder'], grace_s)
+        if self.zygote is not None:
+            self.zygote.close()
 
     def dump_stack(self, name: str, wait_s: float = 5.0) -> str:
         """A live node's Python stacks (SIGUSR1): its log's last lines (``''``: none)."""
