@@ -73,15 +73,12 @@ class Zygote:
         """Read the zygote's answers for up to ``timeout`` seconds (0: what is there)."""
         while self.alive and select.select([self.sock], [], [], timeout)[0]:
             timeout = 0.0
-            msg = self.sock.recv(4096)
+            try:
+                msg = self.sock.recv(4096)
+            except OSError:      # reset: it died with a request unread
+                msg = b''
             if not msg:
-                self.alive = False
-                try:
-                    code = self.proc.wait(5.0)
-                except subprocess.TimeoutExpired:
-                    code = None
-                self.log(f'[adcs] WARNING: the zygote (fork server) ended (exit code {code}, '
-                         f'log {self.log_path}): its node processes get SIGTERM')
+                self._lost('ended')
             elif 'exit' in (m := json.loads(msg)):
                 self.codes[m['exit']] = m['code']
             else:
@@ -93,16 +90,23 @@ class Zygote:
         try:
             socket.send_fds(self.sock, [json.dumps(req).encode()], [log_fd])
         except OSError as exc:
-            self.alive = False
-            raise ZygoteError(f'it cannot be reached ({exc.strerror or exc})') from None
+            self._lost(f'cannot be reached ({exc.strerror or exc})')
         deadline = time.monotonic() + ZYGOTE_ANSWER_S
         while not self.pids and self.alive and time.monotonic() < deadline:
             self.pump(deadline - time.monotonic())
         if not self.pids:
-            self.alive = False
-            raise ZygoteError(f'exit code {self.proc.poll()}' if self.proc.poll() is not None
-                              else f'no answer in {ZYGOTE_ANSWER_S:g} s')
+            if self.alive:
+                self._lost(f'did not answer in {ZYGOTE_ANSWER_S:g} s')
+            raise ZygoteError()
         return Forked(self, self.pids.pop(0))
+
+    def _lost(self, why: str) -> None:
+        """The zygote is gone (or killed now): said in one line; later nodes are executed."""
+        self.alive = False
+        _killpg(self.proc, signal.SIGKILL)
+        self.log(f'[adcs] WARNING: the zygote (fork server) {why} (exit code '
+                 f'{self.proc.wait()}, log {self.log_path}): its node processes get SIGTERM; '
+                 'nodes start as processes from now on')
 
     def close(self, grace_s: float = 5.0) -> None:
         """End of file to the zygote; wait for it (SIGKILL after ``grace_s``)."""
@@ -206,9 +210,8 @@ class Processes:
                 try:
                     self.procs[name] = self.zygote.spawn(cmd, env, fd)
                     return
-                except ZygoteError as exc:
-                    self.log(f'[adcs] WARNING: the zygote (fork server) failed: {exc} (see '
-                             f'{self.log_path("zygote")}); nodes are started as processes')
+                except ZygoteError:    # said by the zygote's handle
+                    pass
             # own session: a Ctrl-C in the terminal reaches the launcher only, which
             # stops the graph in order; the parent-death signal covers a killed launcher
             self.procs[name] = subprocess.Popen(with_parent_death_signal(cmd), env=env,
