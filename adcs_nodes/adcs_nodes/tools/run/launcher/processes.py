@@ -4,6 +4,7 @@ forked by the run's zygote (:mod:`adcs_nodes.tools.run.zygote`), else executed."
 from __future__ import annotations
 
 import json
+import math
 import os
 import select
 import signal
@@ -46,31 +47,29 @@ def cpu_seconds(pid: int) -> Optional[float]:
         return None
 
 
-class ZygoteError(RuntimeError):
-    """The zygote cannot serve (did not start, died, did not answer)."""
-
-
 class Zygote:
     """The launcher's end of the run's fork server: :meth:`spawn` gives a :class:`Forked`."""
 
     def __init__(self, modules: List[str], env: Dict[str, str], log_path: str,
                  log=print) -> None:
-        self.log_path, self.log = log_path, log
+        self.log_path, self.log, self.alive = log_path, log, True
+        self.codes: Dict[int, int] = {}
+        self.pids: List[int] = []
         self.sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         env = dict(env, OPENBLAS_NUM_THREADS='1', OMP_NUM_THREADS='1', MKL_NUM_THREADS='1')
         cmd = [sys.executable, '-m', 'adcs_nodes.tools.run.zygote', str(theirs.fileno())]
-        with open(log_path, 'wb', opener=_private) as fh:
+        with open(log_path, 'wb', opener=lambda p, f: os.open(p, f | os.O_CLOEXEC, 0o600)) as fh:
             self.proc = subprocess.Popen(with_parent_death_signal(cmd + modules), env=env,
                                          stdout=fh, stderr=subprocess.STDOUT,
                                          stdin=subprocess.DEVNULL, start_new_session=True,
                                          pass_fds=[theirs.fileno()])
         theirs.close()
-        self.codes: Dict[int, int] = {}
-        self.pids: List[int] = []
-        self.alive = True
 
     def pump(self, timeout: float) -> None:
         """Read the zygote's answers for up to ``timeout`` seconds (0: what is there)."""
+        timeout = max(0.0, timeout)
+        if not self.alive:
+            time.sleep(timeout)
         while self.alive and select.select([self.sock], [], [], timeout)[0]:
             timeout = 0.0
             try:
@@ -84,8 +83,9 @@ class Zygote:
             else:
                 self.pids.append(m['pid'])
 
-    def spawn(self, cmd: List[str], env: Dict[str, str], log_fd: int) -> 'Forked':
-        """Fork ``cmd`` (``[python, '-m', module, args...]``) with its log on ``log_fd``."""
+    def spawn(self, cmd: List[str], env: Dict[str, str], log_fd: int) -> Optional['Forked']:
+        """Fork ``cmd`` (``[python, '-m', module, args...]``) with its log on ``log_fd``; None
+        if the zygote is lost."""
         req = {'module': cmd[2], 'args': cmd[3:], 'env': env}
         try:
             socket.send_fds(self.sock, [json.dumps(req).encode()], [log_fd])
@@ -94,11 +94,9 @@ class Zygote:
         deadline = time.monotonic() + ZYGOTE_ANSWER_S
         while not self.pids and self.alive and time.monotonic() < deadline:
             self.pump(deadline - time.monotonic())
-        if not self.pids:
-            if self.alive:
-                self._lost(f'did not answer in {ZYGOTE_ANSWER_S:g} s')
-            raise ZygoteError()
-        return Forked(self, self.pids.pop(0))
+        if not self.pids and self.alive:
+            self._lost(f'did not answer in {ZYGOTE_ANSWER_S:g} s')
+        return Forked(self, self.pids.pop(0)) if self.pids else None
 
     def _lost(self, why: str) -> None:
         """The zygote is gone (or killed now): said in one line; later nodes are executed."""
@@ -131,35 +129,17 @@ class Forked:
         if self.returncode is None:
             self.zygote.pump(0.0)
             self.returncode = self.zygote.codes.get(self.pid)
-        if self.returncode is None and not self.zygote.alive and not _exists(self.pid):
+        if self.returncode is None and not self.zygote.alive and cpu_seconds(self.pid) is None:
             self.returncode = -signal.SIGTERM
         return self.returncode
 
     def wait(self, timeout: Optional[float] = None) -> int:
-        deadline = None if timeout is None else time.monotonic() + timeout
+        deadline = time.monotonic() + (math.inf if timeout is None else timeout)
         while self.poll() is None:
-            left = 0.1 if deadline is None else deadline - time.monotonic()
-            if left <= 0:
+            if time.monotonic() >= deadline:
                 raise subprocess.TimeoutExpired(f'pid {self.pid}', timeout)
-            if self.zygote.alive:
-                self.zygote.pump(min(left, 0.1))
-            else:
-                time.sleep(min(left, 0.05))   # an orphan: reaped by init, nothing to wait on
+            self.zygote.pump(min(deadline - time.monotonic(), 0.05))
         return self.returncode
-
-
-def _exists(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        pass
-    return True
-
-
-def _private(path: str, flags: int) -> int:
-    return os.open(path, flags | os.O_CLOEXEC, 0o600)
 
 
 class Processes:
@@ -207,11 +187,9 @@ class Processes:
             self.log_start[name] = fh.tell()
             self.spawn_count[name] = self.spawn_count.get(name, 0) + 1
             if self.zygote is not None and self.zygote.alive and cmd[1:2] == ['-m']:
-                try:
-                    self.procs[name] = self.zygote.spawn(cmd, env, fd)
+                self.procs[name] = self.zygote.spawn(cmd, env, fd)   # None: it is lost
+                if self.procs[name] is not None:
                     return
-                except ZygoteError:    # said by the zygote's handle
-                    pass
             # own session: a Ctrl-C in the terminal reaches the launcher only, which
             # stops the graph in order; the parent-death signal covers a killed launcher
             self.procs[name] = subprocess.Popen(with_parent_death_signal(cmd), env=env,
