@@ -48,7 +48,7 @@ def cpu_seconds(pid: int) -> Optional[float]:
 
 
 class Zygote:
-    """The launcher's end of the run's fork server: :meth:`spawn` gives a :class:`Forked`."""
+    """The launcher's end of the run's fork server (:mod:`adcs_nodes.tools.run.zygote`)."""
 
     def __init__(self, modules: List[str], env: Dict[str, str], log_path: str,
                  log=print) -> None:
@@ -67,28 +67,27 @@ class Zygote:
 
     def pump(self, timeout: float) -> None:
         """Read the zygote's answers for up to ``timeout`` seconds (0: what is there)."""
-        timeout = max(0.0, timeout)
         if not self.alive:
-            time.sleep(timeout)
-        while self.alive and select.select([self.sock], [], [], timeout)[0]:
+            time.sleep(max(0.0, timeout))
+        while self.alive and select.select([self.sock], [], [], max(0.0, timeout))[0]:
             timeout = 0.0
             try:
-                msg = self.sock.recv(4096)
+                msg = json.loads(self.sock.recv(4096) or 'null')
             except OSError:      # reset: it died with a request unread
-                msg = b''
-            if not msg:
+                msg = None
+            if msg is None:
                 self._lost('ended')
-            elif 'exit' in (m := json.loads(msg)):
-                self.codes[m['exit']] = m['code']
+            elif 'exit' in msg:
+                self.codes[msg['exit']] = msg['code']
             else:
-                self.pids.append(m['pid'])
+                self.pids.append(msg['pid'])
 
     def spawn(self, cmd: List[str], env: Dict[str, str], log_fd: int) -> Optional['Forked']:
-        """Fork ``cmd`` (``[python, '-m', module, args...]``) with its log on ``log_fd``; None
-        if the zygote is lost."""
-        req = {'module': cmd[2], 'args': cmd[3:], 'env': env}
+        """Fork ``cmd`` (``[python, '-m', module, args...]``) logging to ``log_fd``; None if
+        the zygote is lost."""
         try:
-            socket.send_fds(self.sock, [json.dumps(req).encode()], [log_fd])
+            socket.send_fds(self.sock, [json.dumps(
+                {'module': cmd[2], 'args': cmd[3:], 'env': env}).encode()], [log_fd])
         except OSError as exc:
             self._lost(f'cannot be reached ({exc.strerror or exc})')
         deadline = time.monotonic() + ZYGOTE_ANSWER_S
@@ -99,7 +98,6 @@ class Zygote:
         return Forked(self, self.pids.pop(0)) if self.pids else None
 
     def _lost(self, why: str) -> None:
-        """The zygote is gone (or killed now): said in one line; later nodes are executed."""
         self.alive = False
         _killpg(self.proc, signal.SIGKILL)
         self.log(f'[adcs] WARNING: the zygote (fork server) {why} (exit code '
@@ -118,9 +116,8 @@ class Zygote:
 
 
 class Forked:
-    """A node process forked by the :class:`Zygote`, with ``Popen``'s ``pid``, ``poll``,
-    ``wait`` and ``returncode``. A child the zygote could not report (it died) counts as ended
-    by the SIGTERM of its parent-death signal once it is gone."""
+    """A process forked by the :class:`Zygote`: ``Popen``'s ``pid``, ``poll``, ``wait`` and
+    ``returncode``; one the zygote died before reporting ended by its SIGTERM once gone."""
 
     def __init__(self, zygote: Zygote, pid: int) -> None:
         self.zygote, self.pid, self.returncode = zygote, pid, None
