@@ -85,6 +85,10 @@ def serve(sock: socket.socket, cost: dict) -> None:
     ust = next((ctypes.CDLL(ln.split()[-1]) for ln in open('/proc/self/maps')
                 if '/liblttng-ust-' in ln and 'tracepoint' not in ln), None)
     sigset = ctypes.create_string_buffer(128)
+    if ust is not None:
+        os.register_at_fork(before=lambda: ust.ust_before_fork(sigset),
+                            after_in_parent=lambda: ust.ust_after_fork_parent(sigset),
+                            after_in_child=lambda: ust.ust_after_fork_child(sigset))
     while True:
         cost['cpu_s'] = round(time.process_time(), 3)
         print(f'[zygote]: start cost {json.dumps(cost)}', flush=True)
@@ -95,11 +99,7 @@ def serve(sock: socket.socket, cost: dict) -> None:
         msg, fds, _, _ = socket.recv_fds(sock, 1 << 20, 1)
         if not msg:
             return
-        if ust is not None:
-            ust.ust_before_fork(sigset)
         pid = os.fork()
-        if ust is not None:
-            (ust.ust_after_fork_parent if pid else ust.ust_after_fork_child)(sigset)
         if pid == 0:
             signal.set_wakeup_fd(-1)
             signal.signal(signal.SIGCHLD, signal.SIG_DFL)

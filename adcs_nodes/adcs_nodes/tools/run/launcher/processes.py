@@ -76,7 +76,7 @@ class Zygote:
             except OSError:      # reset: it died with a request unread
                 msg = None
             if msg is None:
-                self._lost('ended')
+                self.close('ended')
             elif 'exit' in msg:
                 self.codes[msg['exit']] = msg['code']
             else:
@@ -89,30 +89,25 @@ class Zygote:
             socket.send_fds(self.sock, [json.dumps(
                 {'module': cmd[2], 'args': cmd[3:], 'env': env}).encode()], [log_fd])
         except OSError as exc:
-            self._lost(f'cannot be reached ({exc.strerror or exc})')
+            self.close(f'cannot be reached ({exc.strerror or exc})')
         deadline = time.monotonic() + ZYGOTE_ANSWER_S
         while not self.pids and self.alive and time.monotonic() < deadline:
             self.pump(deadline - time.monotonic())
         if not self.pids and self.alive:
-            self._lost(f'did not answer in {ZYGOTE_ANSWER_S:g} s')
+            self.close(f'did not answer in {ZYGOTE_ANSWER_S:g} s')
         return Forked(self, self.pids.pop(0)) if self.pids else None
 
-    def _lost(self, why: str) -> None:
+    def close(self, lost: str = '') -> None:
+        """Stop the zygote (its remaining children get SIGTERM); ``lost``: why, said in one
+        line (later nodes are executed)."""
         self.alive = False
-        _killpg(self.proc, signal.SIGKILL)
-        self.log(f'[adcs] WARNING: the zygote (fork server) {why} (exit code '
-                 f'{self.proc.wait()}, log {self.log_path}): its node processes get SIGTERM; '
-                 'nodes start as processes from now on')
-
-    def close(self, grace_s: float = 5.0) -> None:
-        """End of file to the zygote; wait for it (SIGKILL after ``grace_s``)."""
         self.sock.close()
-        self.alive = False
-        try:
-            self.proc.wait(grace_s)
-        except subprocess.TimeoutExpired:
-            _killpg(self.proc, signal.SIGKILL)
-            self.proc.wait()
+        _killpg(self.proc, signal.SIGKILL)
+        code = self.proc.wait()
+        if lost:
+            self.log(f'[adcs] WARNING: the zygote (fork server) {lost} (exit code {code}, log '
+                     f'{self.log_path}): its node processes get SIGTERM; nodes start as '
+                     'processes from now on')
 
 
 class Forked:
