@@ -102,7 +102,8 @@ class Zygote:
         line (later nodes are executed)."""
         self.alive = False
         self.sock.close()
-        _killpg(self.proc, signal.SIGKILL)
+        if self.proc.poll() is None:
+            _killpg(self.proc, signal.SIGKILL)
         code = self.proc.wait()
         if lost:
             self.log(f'[adcs] WARNING: the zygote (fork server) {lost} (exit code {code}, log '
@@ -121,7 +122,7 @@ class Forked:
         if self.returncode is None:
             self.zygote.pump(0.0)
             self.returncode = self.zygote.codes.get(self.pid)
-        if self.returncode is None and not self.zygote.alive and cpu_seconds(self.pid) is None:
+        if self.returncode is None and not self.zygote.alive and not _running(self.pid):
             self.returncode = -signal.SIGTERM
         return self.returncode
 
@@ -132,6 +133,15 @@ class Forked:
                 raise subprocess.TimeoutExpired(f'pid {self.pid}', timeout)
             self.zygote.pump(min(deadline - time.monotonic(), 0.05))
         return self.returncode
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` is a process that has not ended (a zombie has)."""
+    try:
+        with open(f'/proc/{pid}/stat', 'rb') as fh:
+            return fh.read().rsplit(b')', 1)[1].split()[0] not in (b'Z', b'X')
+    except (OSError, IndexError):
+        return False
 
 
 class Processes:
