@@ -55,7 +55,8 @@ def child(req: dict, log_fd: int, zygote_pid: int) -> None:
     null = os.open(os.devnull, os.O_RDONLY)
     for fd, target in ((null, 0), (log_fd, 1), (log_fd, 2)):
         os.dup2(fd, target)
-    os.closerange(3, max(null, log_fd) + 1)
+    os.close(null)
+    os.close(log_fd)
     os.environ.clear()
     os.environ.update(req['env'])
     sys.argv = ['-m'] + list(req['args'])

@@ -3,6 +3,7 @@ parent-death signal and its log in the run directory; stopped in order. Node pro
 forked by the run's zygote (:mod:`adcs_nodes.tools.run.zygote`), else executed."""
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -199,21 +200,20 @@ class Processes:
                                                 stdin=subprocess.DEVNULL,
                                                 start_new_session=True)
 
-    def tail(self, name: str, lines: int = 15) -> str:
-        try:
-            with open(self.log_path(name), encoding='utf-8', errors='replace') as fh:
-                return ''.join(fh.readlines()[-lines:])
-        except OSError:
-            return ''
-
-    def current_log(self, name: str) -> str:
-        """What the node's current process logged (from its start offset)."""
+    def _read(self, name: str, offset: int = 0) -> str:
         try:
             with open(self.log_path(name), 'rb') as fh:
-                fh.seek(self.log_start.get(name, 0))
+                fh.seek(offset)
                 return fh.read().decode('utf-8', errors='replace')
         except OSError:
             return ''
+
+    def tail(self, name: str, lines: int = 15) -> str:
+        return ''.join(io.StringIO(self._read(name)).readlines()[-lines:])
+
+    def current_log(self, name: str) -> str:
+        """What the node's current process logged (from its start offset)."""
+        return self._read(name, self.log_start.get(name, 0))
 
     def signal_and_wait(self, names: List[str], grace_s: float) -> None:
         """SIGINT the named children, wait up to ``grace_s``, SIGKILL what is left."""
@@ -252,13 +252,7 @@ class Processes:
             return ''
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
-            try:
-                with open(self.log_path(name), 'rb') as fh:
-                    fh.seek(before)
-                    new = fh.read()
-            except OSError:
-                return ''
-            if b'File ' in new:
+            if 'File ' in self._read(name, before):
                 time.sleep(0.2)          # the dump is written in one go; let it finish
                 return '(its Python stacks, asked with SIGUSR1)\n' + self.tail(name, 60)
             time.sleep(0.05)
