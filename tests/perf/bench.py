@@ -32,8 +32,9 @@ Every row is measured in the same run, on the same machine, at the same time (is
    touch the workspace's; the row is skipped with the reason if that fails;
 7. ``start-up`` (issue 35): the CPU of all node processes from ``adcs run`` of the scenario as
    shipped to their first frame (each lockstep node logs its process CPU then, and before its
-   ``main`` ran: the interpreter start and imports), one process per node (``7g``) and
-   composed (``7c``); below the table, each node process's figures;
+   ``main`` ran: the interpreter start and imports), one process per node (``7g``: the run's
+   zygote, which logs its own CPU, plus its forked children) and composed (``7c``); below the
+   table, each process's figures;
 8. ``campaign``: ``adcs montecarlo`` of 100 dispersed runs of 6 orbits of the scenario on the
    plain engine, ``--jobs 2`` (:class:`CampaignMeasure`; measured once, not repeated).
 
@@ -308,7 +309,8 @@ class GraphMeasure:
 
 
 # ---------------------------------------------------------------------- (7) start-up
-#: The line every lockstep node logs at its first frame (``LockstepNode.frame_done``).
+#: The line every lockstep node logs at its first frame (``LockstepNode.frame_done``), and the
+#: zygote after its imports and each fork (``adcs_nodes.tools.run.zygote``).
 START_COST = re.compile(r'\[([A-Za-z0-9_./]+)\]: start cost (\{.*\})\s*$', re.M)
 #: Frames of a start-up run (the nodes log their CPU at the first).
 START_FRAMES = 2

@@ -202,8 +202,7 @@ class Launcher:
         self._say_start(domain, env)
         code, message = 0, ''
         try:
-            for name, cmd in self._commands(self._params_path).items():
-                self.processes.spawn(name, cmd, env)
+            self.processes.spawn_all(self._commands(self._params_path), env)
             self.transitions = Transitions(monitor.node, [] if self.compose else
                                            [n.name for n in self.nodes if is_managed(n)])
             self.transitions.unanswered_s = HEAL_UNANSWERED_S
