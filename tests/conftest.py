@@ -27,6 +27,9 @@ def pytest_configure(config):
     if not os.environ.get('ADCS_RUNS_DIR'):
         _OWN_RUNS_DIR = tempfile.mkdtemp(prefix='adcs-test-runs-')
         os.environ['ADCS_RUNS_DIR'] = _OWN_RUNS_DIR
+    worker = os.environ.get('PYTEST_XDIST_WORKER')
+    if worker:     # a worker's own subdirectory: "the latest run" is this worker's
+        os.environ['ADCS_RUNS_DIR'] = os.path.join(os.environ['ADCS_RUNS_DIR'], worker)
 
 
 def pytest_unconfigure(config):
@@ -34,26 +37,27 @@ def pytest_unconfigure(config):
         shutil.rmtree(_OWN_RUNS_DIR, ignore_errors=True)
 
 
-#: Launched-graph test files whose checks are bag contents only (a run against the plain
-#: engine's or the recorded truth: no killed process, no CPU burner, no wall-clock bound):
-#: their own xdist group, so they may run beside the other launched-graph tests.
-BAG_ONLY = frozenset({'test_engine_parity.py', 'test_tf_bag.py', 'test_registry_graph.py',
-                      'test_plugin_inputs_graph.py', 'test_faults_graph.py'})
+#: Launched-graph test files with CPU burners or wall-clock bounds: one after the other on one
+#: worker (group ``graph``), never beside each other.
+SERIAL = frozenset({'test_determinism_control.py', 'test_external_driver.py',
+                    'test_free_tumble.py', 'test_real_time.py', 'test_replay_live.py',
+                    'test_slew_action_graph.py', 'test_status_watch.py',
+                    'test_stress_loss.py'})
 
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``make test``: 2 workers, ``--dist loadgroup``) the launched-graph
-    tests of ``tests/graph`` run one after the other on one worker (group ``graph``: killed
-    processes, CPU burners, wall-clock bounds), except the bag-only ones (:data:`BAG_ONLY`,
-    group ``graph-bags``), which run one after the other too but may run beside them. The
-    unit and node tests, and the ``tests/graph`` tests marked ``parallel`` (processes that may
-    run beside a graph), fill both workers. Each test's ROS domain is its own
-    (``tests/domains.py``)."""
+    tests of ``tests/graph`` with CPU burners or wall-clock bounds (:data:`SERIAL`) run one
+    after the other on one worker (group ``graph``); each other launched-graph file is a group
+    of its own (one worker for the file; it may run beside another graph: each worker has its
+    own runs directory, each test its own ROS domain, ``tests/domains.py``). The unit and node
+    tests, and the ``tests/graph`` tests marked ``parallel``, fill both workers."""
     graph = os.path.join(ROOT, 'tests', 'graph') + os.sep
     for item in items:
         if str(item.fspath).startswith(graph) and item.get_closest_marker('parallel') is None:
-            group = 'graph-bags' if os.path.basename(str(item.fspath)) in BAG_ONLY else 'graph'
+            name = os.path.basename(str(item.fspath))
+            group = 'graph' if name in SERIAL else 'graph:' + name
             item.add_marker(pytest.mark.xdist_group(group))
         elif _uses_a_module_fixture(item):
             # one worker for the file: its module-scoped fixture (a FrameLoop run, a bag) is
