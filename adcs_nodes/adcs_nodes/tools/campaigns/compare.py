@@ -162,18 +162,19 @@ def plot(path: str, series: Dict[str, List[Tuple[np.ndarray, np.ndarray]]]) -> N
     """``compare.png`` of ``{name: [(t_s, angle_deg)] of its runs}``: per controller the
     median angle to the target over time and the 5-95 % band (the report's colours)."""
     from matplotlib.figure import Figure
-    from adcs_nodes.tools.analyse.report_html import _colours, _time_axis
+    from adcs_nodes.tools.analyse.bag_series import time_axis
+    from adcs_nodes.tools.analyse.report_html import colours_for
     fig = Figure(figsize=(10.0, 4.5))
     ax = fig.add_subplot()
-    colours = _colours(list(series))
+    colours = colours_for(list(series))
     t_end = max((t[-1] for runs in series.values() for t, _ in runs), default=1.0)
-    axis = _time_axis(t_end)
+    axis = time_axis(t_end)
     for name, runs in series.items():
         lo, mid, hi = np.nanpercentile([a for _, a in runs], [5, 50, 95], axis=0)
-        t = runs[0][0] / axis.scale
+        t = axis(runs[0][0])
         ax.fill_between(t, lo, hi, color=colours[name], alpha=0.2, lw=0)
         ax.plot(t, mid, color=colours[name], lw=1.2, label=f'{name} (median of {len(runs)})')
-    ax.set(yscale='log', xlabel=f'sim time [{axis.unit}]', ylabel='angle to the target [deg]')
+    ax.set(yscale='log', xlabel=axis.label, ylabel='angle to the target [deg]')
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.savefig(path, dpi=90, bbox_inches='tight')
