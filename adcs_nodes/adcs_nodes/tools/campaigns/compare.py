@@ -11,11 +11,11 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from adcs_nodes.tools.analyse.metrics import angle_between_deg
 from adcs_nodes.tools.campaigns.capture import ORBIT_FRAME
 from adcs_nodes.tools.campaigns.config import CampaignError
 from adcs_nodes.tools.campaigns.files import (FAILED_FILE, SERIES_FILE, load_result,
                                               run_dir_of, write_json_atomic, write_text_atomic)
-from adcs_nodes.tools.campaigns.results import angle_to_target_deg
 
 #: An actuator sample at or above this fraction of its limit counts as saturated (ASSUMPTION).
 SATURATED = 0.999
@@ -80,7 +80,7 @@ def run_metrics(run_dir: str, result: Dict[str, Any], name: str,
     t = s['t_s']
     dt = np.append(np.diff(t), 0.0)                 # each sample holds to the next
     angle = s['angle_deg'] if result.get('capture_reference') == ORBIT_FRAME else \
-        angle_to_target_deg(s['q_orbit_body'], s['q_orbit_target'])
+        angle_between_deg(s['q_orbit_target'], s['q_orbit_body'])
     window = s['target_judged'] & (t >= t[0] + 0.5 * (t[-1] - t[0]))
     craft = sc['spacecraft']
     wheels = craft.get('wheels') or []

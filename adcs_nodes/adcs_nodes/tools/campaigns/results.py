@@ -33,11 +33,6 @@ def read_truth(bag: str) -> Dict[str, np.ndarray]:
             'target_angle_deg': angle[first], 'target_judged': judged[first]}
 
 
-def angle_to_target_deg(q_frame_body: np.ndarray, q_frame_target: np.ndarray) -> np.ndarray:
-    """Angle [deg] of ``q_frame_target^* (x) q_frame_body``, shape (n,)."""
-    return metrics.angle_between_deg(q_frame_target, q_frame_body)
-
-
 def series_metrics(t_s: np.ndarray, q_orbit_body: np.ndarray, w_eci: np.ndarray,
                    w_orbit: np.ndarray, capture_deg: float, period_s: Optional[float],
                    angle_deg: Optional[np.ndarray] = None,
