@@ -59,6 +59,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from adcs_nodes.core import attitude as att
+from adcs_nodes.core.control import positive
 
 #: Gyro rate random walk [rad/s/sqrt(s)] whose bias reaches 0.01 deg/h (3-sigma) after 1 h.
 GYRO_DRIFT_WALK_RAD_S_SQRT_S = math.radians(0.01 / 3.0) / 3600.0 / math.sqrt(3600.0)
@@ -89,16 +90,6 @@ def _scale_factor(value, n: int, name: str = 'scale_factor_error') -> np.ndarray
     if np.any(s <= -1.0):
         raise ValueError(f'{name} must be > -1 (measured = (1 + s) true), got {s.tolist()}')
     return s
-
-
-def _nonneg_scalar(value, name: str) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name} must be a number, got {value!r}') from exc
-    if not (math.isfinite(x) and x >= 0.0):
-        raise ValueError(f'{name} must be finite and >= 0, got {value!r}')
-    return x
 
 
 def _unit_quaternion(value, name: str) -> np.ndarray:
@@ -146,9 +137,9 @@ class Magnetometer:
             raise ValueError('misalignment_rad is a small rotation (|delta| <= pi/2 rad); put a '
                              'large mounting rotation in q_body_sensor')
         self.scale_factor_error = _scale_factor(scale_factor_error, 3)
-        self.lsb_T = _nonneg_scalar(lsb_T, 'lsb_T')
+        self.lsb_T = positive(lsb_T, 'lsb_T', zero=True)
         self.saturation_T = _vector(saturation_T, 3, 'saturation_T', nonneg=True)
-        p = _nonneg_scalar(dropout_probability, 'dropout_probability')
+        p = positive(dropout_probability, 'dropout_probability', zero=True)
         if p > 1.0:
             raise ValueError(f'dropout_probability must be in [0, 1], got {p}')
         self.dropout_probability = p
@@ -291,7 +282,7 @@ class Gyro:
         """Measured rate (3,) [rad/s], body axes, of the true ``omega_body_eci_body``, after
         advancing the bias by ``dt`` >= 0 [s] (0 for the first sample)."""
         w = _input_vec3(omega_body_eci_body, 'omega_body_eci_body')
-        dt = _nonneg_scalar(dt, 'dt')
+        dt = positive(dt, 'dt', zero=True)
         walk = self._walk_rng.standard_normal(3)
         self._bias = self._bias + self.bias_walk_std_rad_s_sqrt_s * math.sqrt(dt) * walk
         return w + self._bias + self.noise_std_rad_s * self._noise_rng.standard_normal(3)
@@ -303,8 +294,8 @@ class WheelTachometer:
 
     def __init__(self, noise_std_rad_s: float = 0.0, quantization_rad_s: float = 0.0,
                  seed: int = 0) -> None:
-        self.noise_std_rad_s = _nonneg_scalar(noise_std_rad_s, 'noise_std_rad_s')
-        self.quantization_rad_s = _nonneg_scalar(quantization_rad_s, 'quantization_rad_s')
+        self.noise_std_rad_s = positive(noise_std_rad_s, 'noise_std_rad_s', zero=True)
+        self.quantization_rad_s = positive(quantization_rad_s, 'quantization_rad_s', zero=True)
         (self._rng,) = _streams(seed, 1)
 
     def measure(self, speed_rad_s) -> np.ndarray:

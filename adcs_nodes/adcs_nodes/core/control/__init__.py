@@ -52,14 +52,17 @@ def cross3(a: ArrayLike, b: ArrayLike) -> np.ndarray:
     return kernels.cross(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
 
 
-def positive(value, name: str, unit: str) -> float:
-    """``value`` as a finite float > 0; ``ValueError`` naming ``name`` and ``unit`` if not."""
+def positive(value, name: str, unit: str = '', zero: bool = False) -> float:
+    """``value`` as a finite float > 0 (``zero``: >= 0); ``ValueError`` naming ``name`` and
+    ``unit`` (if any) if not."""
+    u = f' [{unit}]' if unit else ''
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f'{name} must be a number [{unit}], got {value!r}') from None
-    if not (math.isfinite(x) and x > 0.0):
-        raise ValueError(f'{name} must be finite and > 0 [{unit}], got {value!r}')
+        raise ValueError(f'{name} must be a number{u}, got {value!r}') from None
+    if not (math.isfinite(x) and (x > 0.0 or (zero and x == 0.0))):
+        raise ValueError(f'{name} must be finite and {">=" if zero else ">"} 0{u}, got '
+                         f'{value!r}')
     return x
 
 
