@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core.command_health import (TIME_TOL_S, CommandHealth, clip_finite,
                                             limit_violation, warm_up)
-from adcs_nodes.core.control import Command, Estimate, Target
+from adcs_nodes.core.control import Command, Estimate, Target, positive
 from adcs_nodes.core.mode_sequence import AUTO_SEQUENCE, AutoSequence, ModeSequencer
 
 __all__ = ['AUTO', 'AUTO_SEQUENCE', 'AutoSequence', 'ControllerManagerCore', 'TIME_TOL_S',
@@ -96,9 +96,7 @@ class ControllerManagerCore:
         if bad or safe in self.fallback or len(set(self.fallback)) != len(self.fallback):
             raise ValueError(f'fallback must list configured controllers other than the safe '
                              f'one ({safe!r}), each once; got {self.fallback}; known: {names}')
-        self.startup_s = float(startup_s)
-        if not (math.isfinite(self.startup_s) and self.startup_s >= 0.0):
-            raise ValueError(f'startup_s must be finite and >= 0 [s], got {startup_s!r}')
+        self.startup_s = positive(startup_s, 'startup_s', 's', zero=True)
         self.reset()
 
     def _check_initial(self, initial: Optional[str]) -> str:

@@ -31,6 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.control import positive
 from adcs_nodes.core.kernels import jit
 from adcs_nodes.core.orbit import MU_EARTH  # one value for the whole project
 
@@ -379,10 +380,7 @@ class HarmonicTorque:
     def __init__(self, amplitude_Nm, omega_rad_s: float, seed: int = 0,
                  phase_rad=None) -> None:
         self.amplitude_Nm = _vec3_nonneg(amplitude_Nm, 'amplitude_Nm')
-        w = float(omega_rad_s)
-        if not (math.isfinite(w) and w >= 0.0):
-            raise ValueError(f'omega_rad_s must be finite and >= 0, got {omega_rad_s!r}')
-        self.omega_rad_s = w
+        self.omega_rad_s = positive(omega_rad_s, 'omega_rad_s', zero=True)
         if phase_rad is None:
             self.phase_rad = np.random.default_rng(_seed(seed)).uniform(0.0, 2.0 * math.pi, 3)
         else:

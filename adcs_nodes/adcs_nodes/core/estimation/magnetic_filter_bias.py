@@ -35,6 +35,7 @@ from typing import Optional
 import numpy as np
 from numpy.typing import ArrayLike
 
+from adcs_nodes.core.control import positive
 from adcs_nodes.core.estimation.algorithms import MagneticFilterEstimator
 from adcs_nodes.core.estimation.magnetic_filter import THETA_DEFAULT, MagneticFilter
 
@@ -72,11 +73,7 @@ class MagneticFilterBias(MagneticFilter):
                  bias_gate_sigma: float = GATE_DEFAULT, **filter_args) -> None:
         self.bias_std0 = _positive(bias_std0_T, 'bias_std0_T', 'T', 1e-4)
         self.magnitude_std = _positive(magnitude_std_T, 'magnitude_std_T', 'T', 1e-4)
-        walk = float(bias_walk_T_sqrt_s)
-        if not (math.isfinite(walk) and walk >= 0.0):
-            raise ValueError(f'bias_walk_T_sqrt_s must be finite and >= 0 [T/sqrt(s)], got '
-                             f'{bias_walk_T_sqrt_s!r}')
-        self.bias_walk = walk
+        self.bias_walk = positive(bias_walk_T_sqrt_s, 'bias_walk_T_sqrt_s', 'T/sqrt(s)', zero=True)
         self.max_bias = _positive(max_bias_T, 'max_bias_T', 'T')
         self.gate = _positive(bias_gate_sigma, 'bias_gate_sigma', 'std')
         b0 = np.asarray(bias0_T, dtype=float)
