@@ -59,7 +59,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.control import positive
+from adcs_nodes.core.control import integer, positive
 
 #: Gyro rate random walk [rad/s/sqrt(s)] whose bias reaches 0.01 deg/h (3-sigma) after 1 h.
 GYRO_DRIFT_WALK_RAD_S_SQRT_S = math.radians(0.01 / 3.0) / 3600.0 / math.sqrt(3600.0)
@@ -103,9 +103,8 @@ def _unit_quaternion(value, name: str) -> np.ndarray:
 
 def _streams(seed, n: int):
     """``n`` independent generators from a non-negative integer seed."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
-    return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(n)]
+    seeds = np.random.SeedSequence(integer(seed, 'seed', 0)).spawn(n)
+    return [np.random.default_rng(s) for s in seeds]
 
 
 def _input_vec3(v, name: str) -> np.ndarray:

@@ -66,6 +66,15 @@ def positive(value, name: str, unit: str = '', zero: bool = False) -> float:
     return x
 
 
+def integer(value, name: str, low: int = 1) -> int:
+    """``value`` as an int >= ``low`` (a bool or a float is refused); ``ValueError`` naming
+    ``name`` if not."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        what = 'a non-negative integer' if low == 0 else f'an integer >= {low}'
+        raise ValueError(f'{name} must be {what}, got {value!r}')
+    return int(value)
+
+
 def inertia_matrix(value: ArrayLike, name: str = 'inertia_kgm2') -> np.ndarray:
     """An inertia tensor [kg m^2] as a (3, 3) float array (a (3,) value is the diagonal);
     ``ValueError`` unless finite with a positive definite symmetric part."""

@@ -131,7 +131,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
-from adcs_nodes.core.control import positive
+from adcs_nodes.core.control import integer, positive
 from adcs_nodes.core.kernels import cross, dcm, finite_vector, jit, matmul, mv, qmul, skew
 from adcs_nodes.core.samples import all_finite
 
@@ -459,9 +459,7 @@ class MagneticFilter:
             raise ValueError('inertia must be a finite symmetric positive definite (3, 3) array')
         if measurement_form not in ('phi', 'mu'):
             raise ValueError(f"measurement_form must be 'phi' or 'mu', got {measurement_form!r}")
-        if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) \
-                or substeps < 1:
-            raise ValueError(f'substeps must be an integer >= 1, got {substeps!r}')
+        substeps = integer(substeps, 'substeps')
         if p0_diag is None:
             p0_diag = P0_PHI_DEFAULT if measurement_form == 'phi' else P0_MU_DEFAULT
         p0 = np.asarray(p0_diag, dtype=float)

@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude as att
-from adcs_nodes.core.control import positive
+from adcs_nodes.core.control import integer, positive
 from adcs_nodes.core.estimation.algorithms import Estimate6, EstimatorInputs, Step
 
 #: Star tracker std per axis for paper 001's 0.02 deg (3-sigma) [rad].
@@ -85,10 +85,7 @@ class MEKF:
                             'rad/s/sqrt(s)', zero=True)
         self.p0_bias = positive(p0_bias_rad_s, 'p0_bias_rad_s', 'rad/s')
         self.gate = positive(gate_nis, 'gate_nis', '-')
-        if isinstance(max_rejections, bool) or not isinstance(max_rejections, int) \
-                or max_rejections < 1:
-            raise ValueError(f'max_rejections must be an integer >= 1, got {max_rejections!r}')
-        self.max_rejections = max_rejections
+        self.max_rejections = integer(max_rejections, 'max_rejections')
         self.reset()
 
     def reset(self) -> None:
