@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from adcs_nodes.core.control import integer
+from adcs_nodes.core.control import integer, positive
 
 
 def _vector(value, name: str, shape: tuple | None = None) -> np.ndarray:
@@ -169,9 +169,7 @@ class WheelMomentumError:
         self.std_Nms = _limits(std_Nms, 'std_Nms', (self.n,))
         if not np.all(np.isfinite(self.std_Nms)):
             raise ValueError(f'std_Nms must be finite, got {self.std_Nms}')
-        period = float(period_s)
-        if not (np.isfinite(period) and period > 0.0):
-            raise ValueError(f'period_s must be > 0 and finite, got {period_s!r}')
+        period = positive(period_s, 'period_s', 's')
         self.seed = integer(seed, 'seed', 0)
         self.period_s = period
 

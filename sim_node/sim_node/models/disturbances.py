@@ -106,9 +106,7 @@ class RandomTorque:
         std = np.array(std_Nm, dtype=float)
         if std.shape not in ((), (3,)) or not np.all(np.isfinite(std)) or np.any(std < 0.0):
             raise ValueError(f'std_Nm must be a finite scalar or (3,) vector >= 0, got {std}')
-        period = float(period_s)
-        if not (math.isfinite(period) and period > 0.0):
-            raise ValueError(f'period_s must be > 0 and finite, got {period_s}')
+        period = positive(period_s, 'period_s', 's')
         self.seed = integer(seed, 'seed', 0)
         self.std_Nm = np.broadcast_to(std, (3,)).copy()
         self.period_s = period
@@ -401,9 +399,7 @@ class PeriodicPulseTorque:
     def __init__(self, amplitude_Nm, period_s: float, duration_s: float, start_s: float = 0.0,
                  seed: int = 0, signs=None) -> None:
         self.amplitude_Nm = _vec3_nonneg(amplitude_Nm, 'amplitude_Nm')
-        period, dur, start = float(period_s), float(duration_s), float(start_s)
-        if not (math.isfinite(period) and period > 0.0):
-            raise ValueError(f'period_s must be > 0 and finite, got {period_s!r}')
+        period, dur, start = positive(period_s, 'period_s', 's'), float(duration_s), float(start_s)
         if not (math.isfinite(dur) and 0.0 <= dur <= period):
             raise ValueError(f'duration_s must be in [0, period_s], got {duration_s!r}')
         if not math.isfinite(start):
