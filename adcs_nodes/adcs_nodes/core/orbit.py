@@ -49,6 +49,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.control import finite
 from adcs_nodes.core.spec import REQUIRED, Param, Section
 
 MU_EARTH = 3.986004418e14
@@ -90,16 +91,6 @@ class OrbitModel(Protocol):
 
 
 # ---------------------------------------------------------------------------- validation
-def _finite(value: float, name: str) -> float:
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f'{name} must be a number, got {value!r}') from None
-    if not math.isfinite(value):
-        raise ValueError(f'{name} must be finite, got {value}')
-    return value
-
-
 def _vec3(v: ArrayLike, name: str) -> np.ndarray:
     v = np.asarray(v, dtype=float)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
@@ -236,14 +227,14 @@ class CircularOrbit:
 
     def __init__(self, altitude_m: float, inclination_rad: float, raan_rad: float = 0.0,
                  arg_latitude0_rad: float = 0.0, *, epoch: datetime) -> None:
-        altitude_m = _finite(altitude_m, 'altitude_m')
+        altitude_m = finite(altitude_m, 'altitude_m')
         if altitude_m <= 0.0:
             raise ValueError(f'altitude_m must be > 0, got {altitude_m}')
-        inc = _finite(inclination_rad, 'inclination_rad')
+        inc = finite(inclination_rad, 'inclination_rad')
         if not 0.0 <= inc <= math.pi:
             raise ValueError(f'inclination_rad must be in [0, pi], got {inc}')
-        self.raan = _finite(raan_rad, 'raan_rad')
-        self.arg_latitude0 = _finite(arg_latitude0_rad, 'arg_latitude0_rad')
+        self.raan = finite(raan_rad, 'raan_rad')
+        self.arg_latitude0 = finite(arg_latitude0_rad, 'arg_latitude0_rad')
         self.epoch = _utc(epoch)
         self.inclination = inc
         self.radius = R_EARTH + altitude_m

@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from adcs_nodes.core import attitude
-from adcs_nodes.core.control import integer, positive
+from adcs_nodes.core.control import finite, integer, positive
 from adcs_nodes.core.kernels import jit
 from adcs_nodes.core.orbit import MU_EARTH  # one value for the whole project
 
@@ -399,12 +399,10 @@ class PeriodicPulseTorque:
     def __init__(self, amplitude_Nm, period_s: float, duration_s: float, start_s: float = 0.0,
                  seed: int = 0, signs=None) -> None:
         self.amplitude_Nm = _vec3_nonneg(amplitude_Nm, 'amplitude_Nm')
-        period, dur, start = positive(period_s, 'period_s', 's'), float(duration_s), float(start_s)
+        period, dur = positive(period_s, 'period_s', 's'), float(duration_s)
         if not (math.isfinite(dur) and 0.0 <= dur <= period):
             raise ValueError(f'duration_s must be in [0, period_s], got {duration_s!r}')
-        if not math.isfinite(start):
-            raise ValueError(f'start_s must be finite, got {start_s!r}')
-        self.period_s, self.duration_s, self.start_s = period, dur, start
+        self.period_s, self.duration_s, self.start_s = period, dur, finite(start_s, 'start_s')
         if signs is None:
             rng = np.random.default_rng(integer(seed, 'seed', 0))
             self.signs = np.where(rng.random(3) < 0.5, -1.0, 1.0)

@@ -52,6 +52,17 @@ def cross3(a: ArrayLike, b: ArrayLike) -> np.ndarray:
     return kernels.cross(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
 
 
+def finite(value, name: str) -> float:
+    """``value`` as a finite float; ``ValueError`` naming ``name`` if not."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be a number, got {value!r}') from None
+    if not math.isfinite(x):
+        raise ValueError(f'{name} must be finite, got {x}')
+    return x
+
+
 def positive(value, name: str, unit: str = '', zero: bool = False) -> float:
     """``value`` as a finite float > 0 (``zero``: >= 0); ``ValueError`` naming ``name`` and
     ``unit`` (if any) if not."""
