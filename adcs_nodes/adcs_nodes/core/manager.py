@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core.command_health import (TIME_TOL_S, CommandHealth, clip_finite,
                                             limit_violation, warm_up)
-from adcs_nodes.core.control import Command, Estimate, Target, positive
+from adcs_nodes.core.control import Command, Estimate, Target, finite, positive
 from adcs_nodes.core.mode_sequence import AUTO_SEQUENCE, AutoSequence, ModeSequencer
 
 __all__ = ['AUTO', 'AUTO_SEQUENCE', 'AutoSequence', 'ControllerManagerCore', 'TIME_TOL_S',
@@ -227,9 +227,7 @@ class ControllerManagerCore:
         ``estimate_stale_frames``, ``replaced_requests``, ``note`` (the forwarded command's,
         e.g. a failed wheel it flies without).
         """
-        t = float(t)
-        if not math.isfinite(t):
-            raise ValueError(f'frame time must be finite, got {t}')
+        t = finite(t, 'frame time')
         if self._t_first is None:
             self._t_first = t
         est_fault = self.health.estimate_fault(t, estimate, estimate_t)

@@ -63,17 +63,19 @@ def finite(value, name: str) -> float:
     return x
 
 
-def positive(value, name: str, unit: str = '', zero: bool = False) -> float:
-    """``value`` as a finite float > 0 (``zero``: >= 0); ``ValueError`` naming ``name`` and
-    ``unit`` (if any) if not."""
+def positive(value, name: str, unit: str = '', zero: bool = False,
+             upper: float = math.inf) -> float:
+    """``value`` as a finite float > 0 (``zero``: >= 0) and <= ``upper``; ``ValueError``
+    naming ``name`` and ``unit`` (if any) if not."""
     u = f' [{unit}]' if unit else ''
     try:
         x = float(value)
     except (TypeError, ValueError):
         raise ValueError(f'{name} must be a number{u}, got {value!r}') from None
-    if not (math.isfinite(x) and (x > 0.0 or (zero and x == 0.0))):
-        raise ValueError(f'{name} must be finite and {">=" if zero else ">"} 0{u}, got '
-                         f'{value!r}')
+    if not (math.isfinite(x) and (x > 0.0 or (zero and x == 0.0)) and x <= upper):
+        low = f'{">=" if zero else ">"} 0'
+        what = f'finite, {low} and <= {upper:g}' if upper < math.inf else f'finite and {low}'
+        raise ValueError(f'{name} must be {what}{u}, got {value!r}')
     return x
 
 

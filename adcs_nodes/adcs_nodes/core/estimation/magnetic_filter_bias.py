@@ -49,13 +49,6 @@ GATE_DEFAULT = 5.0
 """Default innovation gate of (B4) [std]."""
 
 
-def _positive(value, name: str, unit: str, upper: float = math.inf) -> float:
-    x = float(value)
-    if not (math.isfinite(x) and 0.0 < x <= upper):
-        raise ValueError(f'{name} must be finite, > 0 and <= {upper:g} [{unit}], got {value!r}')
-    return x
-
-
 class MagneticFilterBias(MagneticFilter):
     """Paper 000's filter (33)-(39) on bias-corrected readings, bias from (B1)-(B4).
 
@@ -71,11 +64,11 @@ class MagneticFilterBias(MagneticFilter):
                  magnitude_std_T: float = MAGNITUDE_STD_DEFAULT,
                  bias_walk_T_sqrt_s: float = 0.0, max_bias_T: float = MAX_BIAS_DEFAULT,
                  bias_gate_sigma: float = GATE_DEFAULT, **filter_args) -> None:
-        self.bias_std0 = _positive(bias_std0_T, 'bias_std0_T', 'T', 1e-4)
-        self.magnitude_std = _positive(magnitude_std_T, 'magnitude_std_T', 'T', 1e-4)
+        self.bias_std0 = positive(bias_std0_T, 'bias_std0_T', 'T', upper=1e-4)
+        self.magnitude_std = positive(magnitude_std_T, 'magnitude_std_T', 'T', upper=1e-4)
         self.bias_walk = positive(bias_walk_T_sqrt_s, 'bias_walk_T_sqrt_s', 'T/sqrt(s)', zero=True)
-        self.max_bias = _positive(max_bias_T, 'max_bias_T', 'T')
-        self.gate = _positive(bias_gate_sigma, 'bias_gate_sigma', 'std')
+        self.max_bias = positive(max_bias_T, 'max_bias_T', 'T')
+        self.gate = positive(bias_gate_sigma, 'bias_gate_sigma', 'std')
         b0 = np.asarray(bias0_T, dtype=float)
         if b0.shape != (3,) or not np.all(np.isfinite(b0)) \
                 or float(np.linalg.norm(b0)) > self.max_bias:
