@@ -60,6 +60,7 @@ import numpy as np
 
 from adcs_nodes.core import attitude as att
 from adcs_nodes.core.control import integer, positive
+from adcs_nodes.core.kernels import finite_vector
 
 #: Gyro rate random walk [rad/s/sqrt(s)] whose bias reaches 0.01 deg/h (3-sigma) after 1 h.
 GYRO_DRIFT_WALK_RAD_S_SQRT_S = math.radians(0.01 / 3.0) / 3600.0 / math.sqrt(3600.0)
@@ -107,13 +108,6 @@ def _streams(seed, n: int):
     return [np.random.default_rng(s) for s in seeds]
 
 
-def _input_vec3(v, name: str) -> np.ndarray:
-    a = np.asarray(v, dtype=float)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f'{name} must be a finite (3,) vector, got {v!r}')
-    return a
-
-
 class Magnetometer:
     """Three-axis magnetometer, (M1)-(M7).
 
@@ -157,7 +151,7 @@ class Magnetometer:
     def measure(self, b_body) -> Optional[np.ndarray]:
         """Measured field (3,) [T], sensor axes, of the true ``b_body`` (3,) [T], body axes;
         ``None`` when the sample dropped out."""
-        b = self.matrix @ _input_vec3(b_body, 'b_body') + self.bias_T
+        b = self.matrix @ finite_vector(b_body, 'b_body', (3,)) + self.bias_T
         b = b + self.noise_std_T * self._noise_rng.standard_normal(3)
         lost = self._drop_rng.random() < self.dropout_probability
         sat = self.saturation_T
@@ -178,7 +172,7 @@ class HorizonMeasurement(NamedTuple):
 def roll_pitch_of_zenith(zenith_body) -> tuple:
     """True ``(roll in (-pi, pi], pitch in [-pi/2, pi/2])`` [rad], (H1), of the zenith
     (orbit-frame z) ``zenith_body`` (3,) in body components, any non-zero length."""
-    z = _input_vec3(zenith_body, 'zenith_body')
+    z = finite_vector(zenith_body, 'zenith_body', (3,))
     n = np.linalg.norm(z)
     if n == 0.0:
         raise ValueError('zenith_body must not be zero')
@@ -214,7 +208,7 @@ class HorizonSensor:
     def measure_zenith(self, zenith_body) -> HorizonMeasurement:
         """Measured roll and pitch [rad] (NaN when not valid) of the zenith ``zenith_body``
         (3,) in body components (``R(q_eci_body)^T r_eci``), any non-zero length."""
-        z = _input_vec3(zenith_body, 'zenith_body')
+        z = finite_vector(zenith_body, 'zenith_body', (3,))
         roll, pitch = roll_pitch_of_zenith(z)
         noise = self.noise_std_rad * self._noise_rng.standard_normal(2)
         valid = bool(z[2] > 0.0 and abs(roll) <= self.fov_rad[0]
@@ -280,7 +274,7 @@ class Gyro:
     def measure(self, omega_body_eci_body, dt: float) -> np.ndarray:
         """Measured rate (3,) [rad/s], body axes, of the true ``omega_body_eci_body``, after
         advancing the bias by ``dt`` >= 0 [s] (0 for the first sample)."""
-        w = _input_vec3(omega_body_eci_body, 'omega_body_eci_body')
+        w = finite_vector(omega_body_eci_body, 'omega_body_eci_body', (3,))
         dt = positive(dt, 'dt', zero=True)
         walk = self._walk_rng.standard_normal(3)
         self._bias = self._bias + self.bias_walk_std_rad_s_sqrt_s * math.sqrt(dt) * walk
