@@ -195,11 +195,8 @@ def _build_mpi(p: Dict[str, Any], ctx: Dict[str, Any]):
         raise ValueError('controller mpi needs reaction wheels (spacecraft.wheels)')
     return MPIController(
         inertia, ctx['wheel_axes_body'], ctx['wheel_max_torque_Nm'],
-        ctx['wheel_max_momentum_Nms'], ctx['period_s'], series_order=p['series_order'],
-        literal_model=p['literal_model'], min_horizon_s=p['min_horizon_s'],
-        hold_horizon_s=p['hold_horizon_s'],
-        saturation=p['saturation'], reference_time=p['reference_time'],
-        exact_transition=p['exact_transition'])
+        ctx['wheel_max_momentum_Nms'], ctx['period_s'],
+        **{k: v for k, v in p.items() if k != 'model_inertia_kgm2'})
 
 
 register(Entry(
@@ -347,11 +344,7 @@ register(Entry(
 
 def _build_mekf(p: Dict[str, Any], ctx: Dict[str, Any]):
     from adcs_nodes.core.estimation.mekf import MEKF
-    return MEKF(star_tracker_std_rad=p['star_tracker_std_rad'],
-                gyro_noise_std_rad_s=p['gyro_noise_std_rad_s'],
-                gyro_bias_walk_rad_s_sqrt_s=p['gyro_bias_walk_rad_s_sqrt_s'],
-                p0_bias_rad_s=p['p0_bias_rad_s'], gate_nis=p['gate_nis'],
-                max_rejections=p['max_rejections'])
+    return MEKF(**p)                     # the parameters are its keyword arguments
 
 
 register(Entry(

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from adcs_nodes.tools import campaigns as mc
+from adcs_nodes.tools.analyse.metrics import angle_between_deg
 from adcs_nodes.tools.campaigns.cli import config_from_args, main
 from adcs_nodes.scenario import load_scenario
 
@@ -222,7 +223,7 @@ def test_paper000_numbers_are_the_orbit_frame_ones_and_an_old_campaign_resumes(t
     assert np.array_equal(series['q_orbit_target'],
                           np.tile([0.0, 0.0, 0.0, 1.0], (series['t_s'].size, 1)))
     assert series['target_judged'].all()
-    to_target = mc.angle_to_target_deg(series['q_orbit_body'], series['q_orbit_target'])
+    to_target = angle_between_deg(series['q_orbit_target'], series['q_orbit_body'])
     assert np.array_equal(to_target, series['angle_deg'])      # the orbit frame's, bit for bit
     np.savez_compressed(os.path.join(run_dir, mc.SERIES_FILE), **{
         k: v for k, v in series.items() if k not in ('q_orbit_target', 'target_judged')})
@@ -285,13 +286,13 @@ def test_an_eci_profile_is_judged_on_the_plain_engine(tmp_path):
                      progress=False).exit_code in (0, 3)
     truth = mc.read_truth(bag)
     with np.load(os.path.join(run_dir, mc.SERIES_FILE)) as s:
-        angle = mc.angle_to_target_deg(s['q_orbit_body'], s['q_orbit_target'])
+        angle = angle_between_deg(s['q_orbit_target'], s['q_orbit_body'])
         q_target, judged = s['q_orbit_target'], s['target_judged']
     assert judged.all() and not np.isnan(angle).any()
     assert np.abs(angle - truth['target_angle_deg']).max() < 1e-9
     # an ECI target moves in the orbit frame (the orbit rate, about 0.06 deg/s), also
     # between the guidance's frames
-    moved = mc.angle_to_target_deg(q_target[:1], q_target[-1:])[0]
+    moved = angle_between_deg(q_target[-1:], q_target[:1])[0]
     assert 3.0 < moved < 7.0 and not np.array_equal(q_target[1], q_target[0])
     m = mc.bag_metrics(bag, 5.0, res['period_s'], mc.GUIDANCE_TARGET)
     for key in ('status', 'capture_time_s', 'first_entry_s', 'last_exit_s', 'samples'):

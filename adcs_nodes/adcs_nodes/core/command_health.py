@@ -110,13 +110,7 @@ class CommandHealth:
         self.n_wheels = int(wheel.size)
         self.max_torque = limits_vector(max_torque, 'max_torque', 3)
         warm_up()
-        try:
-            self.stale_after = float(stale_after_s)
-        except (TypeError, ValueError):
-            raise ValueError(f'stale_after_s must be a number [s], got {stale_after_s!r}') \
-                from None
-        if not (math.isfinite(self.stale_after) and self.stale_after >= 0.0):
-            raise ValueError(f'stale_after_s must be finite and >= 0 [s], got {stale_after_s!r}')
+        self.stale_after = positive(stale_after_s, 'stale_after_s', 's', zero=True)
         self.estimate_period = (None if estimate_period_s is None else
                                 positive(estimate_period_s, 'estimate_period_s', 's'))
         self.estimate_users = set(estimate_users)

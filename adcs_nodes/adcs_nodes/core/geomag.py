@@ -58,7 +58,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core.kernels import jit
-from adcs_nodes.core.orbit import OrbitModel, _finite, _utc, gmst
+from adcs_nodes.core.control import finite
+from adcs_nodes.core.orbit import OrbitModel, _utc, gmst
 from adcs_nodes.core.spec import Param, Section
 
 R_REF_M = 6371200.0
@@ -190,14 +191,14 @@ class DipoleField(GeomagneticField):
                  pole_colatitude_rad: float = POLE_COLATITUDE_DEFAULT_RAD,
                  pole_longitude_rad: float = POLE_LONGITUDE_DEFAULT_RAD) -> None:
         super().__init__(epoch)
-        self.b0 = _finite(b0_T, 'b0_T')
-        self.r_ref = _finite(r_ref_m, 'r_ref_m')
+        self.b0 = finite(b0_T, 'b0_T')
+        self.r_ref = finite(r_ref_m, 'r_ref_m')
         if self.b0 <= 0.0 or self.r_ref <= 0.0:
             raise ValueError(f'b0_T and r_ref_m must be > 0, got {self.b0}, {self.r_ref}')
-        colat = _finite(pole_colatitude_rad, 'pole_colatitude_rad')
+        colat = finite(pole_colatitude_rad, 'pole_colatitude_rad')
         if not 0.0 <= colat <= math.pi:
             raise ValueError(f'pole_colatitude_rad must be in [0, pi], got {colat}')
-        lon = _finite(pole_longitude_rad, 'pole_longitude_rad')
+        lon = finite(pole_longitude_rad, 'pole_longitude_rad')
         self.pole_colatitude, self.pole_longitude = colat, lon
         # Unit dipole moment (3,), ECEF: minus the direction to the north geomagnetic pole.
         self.m_ecef = -np.array([math.sin(colat) * math.cos(lon),

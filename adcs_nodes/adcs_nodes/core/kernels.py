@@ -160,3 +160,21 @@ def finite_vector(value: ArrayLike, name: str, shape: tuple) -> np.ndarray:
     if not math.isfinite(sum(arr.ravel().tolist())) and not np.isfinite(arr).all():
         raise ValueError(f'{name} must be finite, got {arr}')    # a finite sum: all finite
     return arr
+
+
+#: Environment variables that set the thread count of BLAS/OpenMP libraries at load time.
+BLAS_THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS',
+                   'BLIS_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS')
+
+
+def limit_blas_threads() -> None:
+    """One BLAS thread: in the libraries already loaded, and (environment) in later ones (tiny
+    LAPACK calls: extra threads cost CPU, same bits; DESIGN section 6)."""
+    import os
+    for key in BLAS_THREAD_ENV:
+        os.environ[key] = '1'
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - pinned in ros2_ws/requirements.txt
+        return
+    threadpool_limits(limits=1)

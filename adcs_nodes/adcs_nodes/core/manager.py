@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike
 
 from adcs_nodes.core.command_health import (TIME_TOL_S, CommandHealth, clip_finite,
                                             limit_violation, warm_up)
-from adcs_nodes.core.control import Command, Estimate, Target
+from adcs_nodes.core.control import Command, Estimate, Target, finite, positive
 from adcs_nodes.core.mode_sequence import AUTO_SEQUENCE, AutoSequence, ModeSequencer
 
 __all__ = ['AUTO', 'AUTO_SEQUENCE', 'AutoSequence', 'ControllerManagerCore', 'TIME_TOL_S',
@@ -96,9 +96,7 @@ class ControllerManagerCore:
         if bad or safe in self.fallback or len(set(self.fallback)) != len(self.fallback):
             raise ValueError(f'fallback must list configured controllers other than the safe '
                              f'one ({safe!r}), each once; got {self.fallback}; known: {names}')
-        self.startup_s = float(startup_s)
-        if not (math.isfinite(self.startup_s) and self.startup_s >= 0.0):
-            raise ValueError(f'startup_s must be finite and >= 0 [s], got {startup_s!r}')
+        self.startup_s = positive(startup_s, 'startup_s', 's', zero=True)
         self.reset()
 
     def _check_initial(self, initial: Optional[str]) -> str:
@@ -229,9 +227,7 @@ class ControllerManagerCore:
         ``estimate_stale_frames``, ``replaced_requests``, ``note`` (the forwarded command's,
         e.g. a failed wheel it flies without).
         """
-        t = float(t)
-        if not math.isfinite(t):
-            raise ValueError(f'frame time must be finite, got {t}')
+        t = finite(t, 'frame time')
         if self._t_first is None:
             self._t_first = t
         est_fault = self.health.estimate_fault(t, estimate, estimate_t)

@@ -49,6 +49,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.control import finite
+from adcs_nodes.core.kernels import finite_vector
 from adcs_nodes.core.spec import REQUIRED, Param, Section
 
 MU_EARTH = 3.986004418e14
@@ -90,23 +92,6 @@ class OrbitModel(Protocol):
 
 
 # ---------------------------------------------------------------------------- validation
-def _finite(value: float, name: str) -> float:
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f'{name} must be a number, got {value!r}') from None
-    if not math.isfinite(value):
-        raise ValueError(f'{name} must be finite, got {value}')
-    return value
-
-
-def _vec3(v: ArrayLike, name: str) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f'{name} must be a finite array of shape (3,), got {v!r}')
-    return v
-
-
 def _utc(t_utc: datetime, name: str = 'epoch') -> datetime:
     if not isinstance(t_utc, datetime):
         raise ValueError(f'{name} must be a datetime, got {t_utc!r}')
@@ -153,12 +138,12 @@ def _rz(angle: float) -> np.ndarray:
 
 def ecef_from_eci(r_eci: ArrayLike, t_utc: datetime, t: float = 0.0) -> np.ndarray:
     """Earth-fixed components (3,) of the ECI vector ``r_eci`` (3,), any unit, at ``t_utc + t``."""
-    return _rz(gmst(t_utc, t)).T @ _vec3(r_eci, 'r_eci')
+    return _rz(gmst(t_utc, t)).T @ finite_vector(r_eci, 'r_eci', (3,))
 
 
 def eci_from_ecef(r_ecef: ArrayLike, t_utc: datetime, t: float = 0.0) -> np.ndarray:
     """ECI components (3,) of the Earth-fixed vector ``r_ecef`` (3,) at ``t_utc + t``."""
-    return _rz(gmst(t_utc, t)) @ _vec3(r_ecef, 'r_ecef')
+    return _rz(gmst(t_utc, t)) @ finite_vector(r_ecef, 'r_ecef', (3,))
 
 
 # ------------------------------------------------------------------------- orbit frames
@@ -175,7 +160,7 @@ def _frame_axes(r: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
 def orbit_frame_dcm(r_eci: ArrayLike, v_eci: ArrayLike) -> np.ndarray:
     """``R_eci_orbit`` (3, 3), columns the orbit x, y, z (O3), of ``r_eci`` [m] and ``v_eci``
     [m/s] (3,), ECI (``ValueError`` if not finite, zero or parallel)."""
-    x, y, z = _frame_axes(_vec3(r_eci, 'r_eci'), _vec3(v_eci, 'v_eci'))
+    x, y, z = _frame_axes(finite_vector(r_eci, 'r_eci', (3,)), finite_vector(v_eci, 'v_eci', (3,)))
     return np.column_stack((x, y, z))
 
 
@@ -199,7 +184,7 @@ def _argument_of_latitude(r: np.ndarray, h_hat: np.ndarray) -> float:
 
 def state_from_rv(r_eci: ArrayLike, v_eci: ArrayLike) -> OrbitState:
     """:class:`OrbitState` of a position (3,) [m] and velocity (3,) [m/s] in ECI (O3, O4)."""
-    r, v = _vec3(r_eci, 'r_eci'), _vec3(v_eci, 'v_eci')
+    r, v = finite_vector(r_eci, 'r_eci', (3,)), finite_vector(v_eci, 'v_eci', (3,))
     x, y, z = _frame_axes(r, v)
     omega = _cross(r, v) / (r @ r)
     return OrbitState(r, v, _quat_from_axes(x, y, z), omega, float(math.sqrt(omega @ omega)),
@@ -236,14 +221,14 @@ class CircularOrbit:
 
     def __init__(self, altitude_m: float, inclination_rad: float, raan_rad: float = 0.0,
                  arg_latitude0_rad: float = 0.0, *, epoch: datetime) -> None:
-        altitude_m = _finite(altitude_m, 'altitude_m')
+        altitude_m = finite(altitude_m, 'altitude_m')
         if altitude_m <= 0.0:
             raise ValueError(f'altitude_m must be > 0, got {altitude_m}')
-        inc = _finite(inclination_rad, 'inclination_rad')
+        inc = finite(inclination_rad, 'inclination_rad')
         if not 0.0 <= inc <= math.pi:
             raise ValueError(f'inclination_rad must be in [0, pi], got {inc}')
-        self.raan = _finite(raan_rad, 'raan_rad')
-        self.arg_latitude0 = _finite(arg_latitude0_rad, 'arg_latitude0_rad')
+        self.raan = finite(raan_rad, 'raan_rad')
+        self.arg_latitude0 = finite(arg_latitude0_rad, 'arg_latitude0_rad')
         self.epoch = _utc(epoch)
         self.inclination = inc
         self.radius = R_EARTH + altitude_m

@@ -36,6 +36,8 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
+from adcs_nodes.core.kernels import limit_blas_threads
+
 #: Wall seconds a closing process waits, in all, for its samples to be acknowledged.
 FLUSH_BUDGET_S = 4.0
 #: Wall seconds a node process gives rclpy to shut its executor down and destroy its nodes
@@ -44,21 +46,6 @@ FLUSH_BUDGET_S = 4.0
 #: holds the GIL. rclpy.shutdown() is skipped (its logging finalisation hung the same way).
 TEARDOWN_BUDGET_S = 1.0
 HANG_S = 0.5
-#: Environment variables that set the thread count of BLAS/OpenMP libraries at load time.
-BLAS_THREAD_ENV = ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS',
-                   'BLIS_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS', 'NUMEXPR_NUM_THREADS')
-
-
-def limit_blas_threads() -> None:
-    """One BLAS thread: in the libraries already loaded, and (environment) in later ones."""
-    for key in BLAS_THREAD_ENV:
-        os.environ[key] = '1'
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - pinned in ros2_ws/requirements.txt
-        return
-    threadpool_limits(limits=1)
-
 
 limit_blas_threads()
 

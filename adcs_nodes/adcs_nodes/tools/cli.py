@@ -333,27 +333,18 @@ def build_parser() -> argparse.ArgumentParser:
                    'bias=[1e-6,0,0]; repeatable')
     p.set_defaults(func=cmd_fault)
 
-    from adcs_nodes.tools import campaigns as montecarlo
-    p = sub.add_parser('montecarlo', help='dispersed Monte Carlo campaign (parallel, resumable)')
-    montecarlo.add_arguments(p)
-    p.set_defaults(func=montecarlo.run_from_args)
-
-    from adcs_nodes.tools.campaigns import sweep
-    p = sub.add_parser('sweep', help='a Monte Carlo campaign per point of a grid of scenario '
-                       'values (plain engine, resumable): capture, hold, filter convergence')
-    sweep.add_arguments(p)
-    p.set_defaults(func=sweep.run_from_args)
-
-    from adcs_nodes.tools.campaigns import compare
-    p = sub.add_parser('compare', help='controllers side by side: a Monte Carlo campaign per '
-                       'controller on the same draws (plain engine, resumable), one table')
-    compare.add_arguments(p)
-    p.set_defaults(func=compare.run_from_args)
-
-    from adcs_nodes.tools import replay
-    p = sub.add_parser('replay', help='publish recorded sensor topics as a driver would')
-    replay.add_arguments(p)
-    p.set_defaults(func=replay.run_from_args)
+    from adcs_nodes.tools import campaigns as montecarlo, replay
+    from adcs_nodes.tools.campaigns import compare, sweep
+    for name, tool, text in (
+            ('montecarlo', montecarlo, 'dispersed Monte Carlo campaign (parallel, resumable)'),
+            ('sweep', sweep, 'a Monte Carlo campaign per point of a grid of scenario values '
+             '(plain engine, resumable): capture, hold, filter convergence'),
+            ('compare', compare, 'controllers side by side: a Monte Carlo campaign per '
+             'controller on the same draws (plain engine, resumable), one table'),
+            ('replay', replay, 'publish recorded sensor topics as a driver would')):
+        p = sub.add_parser(name, help=text)
+        tool.add_arguments(p)
+        p.set_defaults(func=tool.run_from_args)
 
     p = sub.add_parser('schema', help='print every scenario key (Markdown table)')
     p.set_defaults(func=cmd_schema)

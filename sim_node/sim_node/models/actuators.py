@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from adcs_nodes.core.control import integer, positive
+
 
 def _vector(value, name: str, shape: tuple | None = None) -> np.ndarray:
     """``value`` as a finite float array (optionally of ``shape``), else ``ValueError``."""
@@ -163,19 +165,13 @@ class WheelMomentumError:
     [N m s] >= 0 (paper 001: 0.01 / 3), ``period_s`` ``T`` [s] > 0, ``seed`` >= 0."""
 
     def __init__(self, std_Nms, period_s: float, n: int, seed: int) -> None:
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f'n must be an integer >= 1, got {n!r}')
-        self.std_Nms = _limits(std_Nms, 'std_Nms', (int(n),))
+        self.n = integer(n, 'n')
+        self.std_Nms = _limits(std_Nms, 'std_Nms', (self.n,))
         if not np.all(np.isfinite(self.std_Nms)):
             raise ValueError(f'std_Nms must be finite, got {self.std_Nms}')
-        period = float(period_s)
-        if not (np.isfinite(period) and period > 0.0):
-            raise ValueError(f'period_s must be > 0 and finite, got {period_s!r}')
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
+        period = positive(period_s, 'period_s', 's')
+        self.seed = integer(seed, 'seed', 0)
         self.period_s = period
-        self.n = int(n)
-        self.seed = int(seed)
 
     def error(self, j: int) -> np.ndarray:
         """``e_j`` [N m s], shape (n,); zero for ``j < 0``."""

@@ -31,6 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.control import finite, integer, positive
 from adcs_nodes.core.kernels import jit
 from adcs_nodes.core.orbit import MU_EARTH  # one value for the whole project
 
@@ -105,14 +106,10 @@ class RandomTorque:
         std = np.array(std_Nm, dtype=float)
         if std.shape not in ((), (3,)) or not np.all(np.isfinite(std)) or np.any(std < 0.0):
             raise ValueError(f'std_Nm must be a finite scalar or (3,) vector >= 0, got {std}')
-        period = float(period_s)
-        if not (math.isfinite(period) and period > 0.0):
-            raise ValueError(f'period_s must be > 0 and finite, got {period_s}')
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
+        period = positive(period_s, 'period_s', 's')
+        self.seed = integer(seed, 'seed', 0)
         self.std_Nm = np.broadcast_to(std, (3,)).copy()
         self.period_s = period
-        self.seed = int(seed)
         self._last_index: int | None = None
         self._last_value = np.zeros(3)
 
@@ -354,12 +351,6 @@ def random_torque_rows(seed, std, period, t, h, last, value, table):
     return last
 
 
-def _seed(seed) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
-    return int(seed)
-
-
 def _vec3_nonneg(value, name: str) -> np.ndarray:
     arr = np.array(value, dtype=float)
     if arr.shape not in ((), (3,)) or not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
@@ -379,12 +370,10 @@ class HarmonicTorque:
     def __init__(self, amplitude_Nm, omega_rad_s: float, seed: int = 0,
                  phase_rad=None) -> None:
         self.amplitude_Nm = _vec3_nonneg(amplitude_Nm, 'amplitude_Nm')
-        w = float(omega_rad_s)
-        if not (math.isfinite(w) and w >= 0.0):
-            raise ValueError(f'omega_rad_s must be finite and >= 0, got {omega_rad_s!r}')
-        self.omega_rad_s = w
+        self.omega_rad_s = positive(omega_rad_s, 'omega_rad_s', zero=True)
         if phase_rad is None:
-            self.phase_rad = np.random.default_rng(_seed(seed)).uniform(0.0, 2.0 * math.pi, 3)
+            rng = np.random.default_rng(integer(seed, 'seed', 0))
+            self.phase_rad = rng.uniform(0.0, 2.0 * math.pi, 3)
         else:
             ph = np.array(phase_rad, dtype=float)
             if ph.shape != (3,) or not np.all(np.isfinite(ph)):
@@ -410,16 +399,12 @@ class PeriodicPulseTorque:
     def __init__(self, amplitude_Nm, period_s: float, duration_s: float, start_s: float = 0.0,
                  seed: int = 0, signs=None) -> None:
         self.amplitude_Nm = _vec3_nonneg(amplitude_Nm, 'amplitude_Nm')
-        period, dur, start = float(period_s), float(duration_s), float(start_s)
-        if not (math.isfinite(period) and period > 0.0):
-            raise ValueError(f'period_s must be > 0 and finite, got {period_s!r}')
+        period, dur = positive(period_s, 'period_s', 's'), float(duration_s)
         if not (math.isfinite(dur) and 0.0 <= dur <= period):
             raise ValueError(f'duration_s must be in [0, period_s], got {duration_s!r}')
-        if not math.isfinite(start):
-            raise ValueError(f'start_s must be finite, got {start_s!r}')
-        self.period_s, self.duration_s, self.start_s = period, dur, start
+        self.period_s, self.duration_s, self.start_s = period, dur, finite(start_s, 'start_s')
         if signs is None:
-            rng = np.random.default_rng(_seed(seed))
+            rng = np.random.default_rng(integer(seed, 'seed', 0))
             self.signs = np.where(rng.random(3) < 0.5, -1.0, 1.0)
         else:
             sg = np.array(signs, dtype=float)

@@ -45,6 +45,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from adcs_nodes.core.control import integer
 from sim_node.models import kernels
 from sim_node.models.actuators import Magnetorquer, WheelCluster, WheelMomentumError
 from sim_node.models.disturbances import (MU_EARTH, ConstantTorque, Disturbance, RandomTorque,
@@ -412,10 +413,7 @@ class Spacecraft:
         t, dt = float(t), float(dt)
         if not (math.isfinite(t) and math.isfinite(dt) and dt > 0.0):
             raise ValueError(f't must be finite and dt > 0, got t={t}, dt={dt}')
-        if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) \
-                or substeps < 1:
-            raise ValueError(f'substeps must be an integer >= 1, got {substeps!r}')
-        substeps = int(substeps)
+        substeps = integer(substeps, 'substeps')
         x, u, field = self._frame_inputs(state, env, command)
         coef, b_prev, tau_prev = self._field_terms(t, dt, env, field)
         tau_dist = self._disturbance_table(t, dt / substeps, substeps)

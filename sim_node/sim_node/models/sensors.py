@@ -59,6 +59,8 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from adcs_nodes.core import attitude as att
+from adcs_nodes.core.control import integer, positive
+from adcs_nodes.core.kernels import finite_vector
 
 #: Gyro rate random walk [rad/s/sqrt(s)] whose bias reaches 0.01 deg/h (3-sigma) after 1 h.
 GYRO_DRIFT_WALK_RAD_S_SQRT_S = math.radians(0.01 / 3.0) / 3600.0 / math.sqrt(3600.0)
@@ -91,16 +93,6 @@ def _scale_factor(value, n: int, name: str = 'scale_factor_error') -> np.ndarray
     return s
 
 
-def _nonneg_scalar(value, name: str) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name} must be a number, got {value!r}') from exc
-    if not (math.isfinite(x) and x >= 0.0):
-        raise ValueError(f'{name} must be finite and >= 0, got {value!r}')
-    return x
-
-
 def _unit_quaternion(value, name: str) -> np.ndarray:
     q = np.array(value, dtype=float)
     if q.shape != (4,) or not np.all(np.isfinite(q)):
@@ -112,16 +104,8 @@ def _unit_quaternion(value, name: str) -> np.ndarray:
 
 def _streams(seed, n: int):
     """``n`` independent generators from a non-negative integer seed."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
-    return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(n)]
-
-
-def _input_vec3(v, name: str) -> np.ndarray:
-    a = np.asarray(v, dtype=float)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f'{name} must be a finite (3,) vector, got {v!r}')
-    return a
+    seeds = np.random.SeedSequence(integer(seed, 'seed', 0)).spawn(n)
+    return [np.random.default_rng(s) for s in seeds]
 
 
 class Magnetometer:
@@ -146,9 +130,9 @@ class Magnetometer:
             raise ValueError('misalignment_rad is a small rotation (|delta| <= pi/2 rad); put a '
                              'large mounting rotation in q_body_sensor')
         self.scale_factor_error = _scale_factor(scale_factor_error, 3)
-        self.lsb_T = _nonneg_scalar(lsb_T, 'lsb_T')
+        self.lsb_T = positive(lsb_T, 'lsb_T', zero=True)
         self.saturation_T = _vector(saturation_T, 3, 'saturation_T', nonneg=True)
-        p = _nonneg_scalar(dropout_probability, 'dropout_probability')
+        p = positive(dropout_probability, 'dropout_probability', zero=True)
         if p > 1.0:
             raise ValueError(f'dropout_probability must be in [0, 1], got {p}')
         self.dropout_probability = p
@@ -167,7 +151,7 @@ class Magnetometer:
     def measure(self, b_body) -> Optional[np.ndarray]:
         """Measured field (3,) [T], sensor axes, of the true ``b_body`` (3,) [T], body axes;
         ``None`` when the sample dropped out."""
-        b = self.matrix @ _input_vec3(b_body, 'b_body') + self.bias_T
+        b = self.matrix @ finite_vector(b_body, 'b_body', (3,)) + self.bias_T
         b = b + self.noise_std_T * self._noise_rng.standard_normal(3)
         lost = self._drop_rng.random() < self.dropout_probability
         sat = self.saturation_T
@@ -188,7 +172,7 @@ class HorizonMeasurement(NamedTuple):
 def roll_pitch_of_zenith(zenith_body) -> tuple:
     """True ``(roll in (-pi, pi], pitch in [-pi/2, pi/2])`` [rad], (H1), of the zenith
     (orbit-frame z) ``zenith_body`` (3,) in body components, any non-zero length."""
-    z = _input_vec3(zenith_body, 'zenith_body')
+    z = finite_vector(zenith_body, 'zenith_body', (3,))
     n = np.linalg.norm(z)
     if n == 0.0:
         raise ValueError('zenith_body must not be zero')
@@ -224,7 +208,7 @@ class HorizonSensor:
     def measure_zenith(self, zenith_body) -> HorizonMeasurement:
         """Measured roll and pitch [rad] (NaN when not valid) of the zenith ``zenith_body``
         (3,) in body components (``R(q_eci_body)^T r_eci``), any non-zero length."""
-        z = _input_vec3(zenith_body, 'zenith_body')
+        z = finite_vector(zenith_body, 'zenith_body', (3,))
         roll, pitch = roll_pitch_of_zenith(z)
         noise = self.noise_std_rad * self._noise_rng.standard_normal(2)
         valid = bool(z[2] > 0.0 and abs(roll) <= self.fov_rad[0]
@@ -290,8 +274,8 @@ class Gyro:
     def measure(self, omega_body_eci_body, dt: float) -> np.ndarray:
         """Measured rate (3,) [rad/s], body axes, of the true ``omega_body_eci_body``, after
         advancing the bias by ``dt`` >= 0 [s] (0 for the first sample)."""
-        w = _input_vec3(omega_body_eci_body, 'omega_body_eci_body')
-        dt = _nonneg_scalar(dt, 'dt')
+        w = finite_vector(omega_body_eci_body, 'omega_body_eci_body', (3,))
+        dt = positive(dt, 'dt', zero=True)
         walk = self._walk_rng.standard_normal(3)
         self._bias = self._bias + self.bias_walk_std_rad_s_sqrt_s * math.sqrt(dt) * walk
         return w + self._bias + self.noise_std_rad_s * self._noise_rng.standard_normal(3)
@@ -303,8 +287,8 @@ class WheelTachometer:
 
     def __init__(self, noise_std_rad_s: float = 0.0, quantization_rad_s: float = 0.0,
                  seed: int = 0) -> None:
-        self.noise_std_rad_s = _nonneg_scalar(noise_std_rad_s, 'noise_std_rad_s')
-        self.quantization_rad_s = _nonneg_scalar(quantization_rad_s, 'quantization_rad_s')
+        self.noise_std_rad_s = positive(noise_std_rad_s, 'noise_std_rad_s', zero=True)
+        self.quantization_rad_s = positive(quantization_rad_s, 'quantization_rad_s', zero=True)
         (self._rng,) = _streams(seed, 1)
 
     def measure(self, speed_rad_s) -> np.ndarray:

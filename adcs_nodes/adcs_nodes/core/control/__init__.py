@@ -52,15 +52,40 @@ def cross3(a: ArrayLike, b: ArrayLike) -> np.ndarray:
     return kernels.cross(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
 
 
-def positive(value, name: str, unit: str) -> float:
-    """``value`` as a finite float > 0; ``ValueError`` naming ``name`` and ``unit`` if not."""
+def finite(value, name: str) -> float:
+    """``value`` as a finite float; ``ValueError`` naming ``name`` if not."""
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f'{name} must be a number [{unit}], got {value!r}') from None
-    if not (math.isfinite(x) and x > 0.0):
-        raise ValueError(f'{name} must be finite and > 0 [{unit}], got {value!r}')
+        raise ValueError(f'{name} must be a number, got {value!r}') from None
+    if not math.isfinite(x):
+        raise ValueError(f'{name} must be finite, got {x}')
     return x
+
+
+def positive(value, name: str, unit: str = '', zero: bool = False,
+             upper: float = math.inf) -> float:
+    """``value`` as a finite float > 0 (``zero``: >= 0) and <= ``upper``; ``ValueError``
+    naming ``name`` and ``unit`` (if any) if not."""
+    u = f' [{unit}]' if unit else ''
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be a number{u}, got {value!r}') from None
+    if not (math.isfinite(x) and (x > 0.0 or (zero and x == 0.0)) and x <= upper):
+        low = f'{">=" if zero else ">"} 0'
+        what = f'finite, {low} and <= {upper:g}' if upper < math.inf else f'finite and {low}'
+        raise ValueError(f'{name} must be {what}{u}, got {value!r}')
+    return x
+
+
+def integer(value, name: str, low: int = 1) -> int:
+    """``value`` as an int >= ``low`` (a bool or a float is refused); ``ValueError`` naming
+    ``name`` if not."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        what = 'a non-negative integer' if low == 0 else f'an integer >= {low}'
+        raise ValueError(f'{name} must be {what}, got {value!r}')
+    return int(value)
 
 
 def inertia_matrix(value: ArrayLike, name: str = 'inertia_kgm2') -> np.ndarray:

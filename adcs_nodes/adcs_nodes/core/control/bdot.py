@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core.control import (Command, ControlInputs, Estimate, Target, limits_vector,
-                                     scale_to_limits)
+                                     positive, scale_to_limits)
 
 
 def _valid_vec3(v) -> Optional[np.ndarray]:
@@ -77,17 +77,8 @@ class BdotController:
 
     def __init__(self, gain: float, max_dipole_Am2: ArrayLike = 40.0,
                  filter_time_constant_s: float = 0.0, n_wheels: int = 0) -> None:
-        try:
-            self.gain = float(gain)
-            self.tau = float(filter_time_constant_s)
-        except (TypeError, ValueError):
-            raise ValueError(f'gain [A m^2 s/T] and filter_time_constant_s [s] must be numbers, '
-                             f'got {gain!r}, {filter_time_constant_s!r}') from None
-        if not (math.isfinite(self.gain) and self.gain > 0.0):
-            raise ValueError(f'gain must be finite and > 0 [A m^2 s/T], got {gain!r}')
-        if not (math.isfinite(self.tau) and self.tau >= 0.0):
-            raise ValueError(f'filter_time_constant_s must be finite and >= 0 [s], got '
-                             f'{filter_time_constant_s!r}')
+        self.gain = positive(gain, 'gain', 'A m^2 s/T')
+        self.tau = positive(filter_time_constant_s, 'filter_time_constant_s', 's', zero=True)
         self.max_dipole = limits_vector(max_dipole_Am2, 'max_dipole_Am2', 3,
                                         allow_zero=False, allow_inf=False)
         if int(n_wheels) != n_wheels or n_wheels < 0:

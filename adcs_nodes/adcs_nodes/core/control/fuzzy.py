@@ -52,7 +52,8 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from adcs_nodes.core.control import finite_vector, inertia_matrix, limits_vector, scale_to_limits
+from adcs_nodes.core.control import (finite_vector, inertia_matrix, limits_vector, positive,
+                                     scale_to_limits)
 from adcs_nodes.core.control import eigenaxis as ea
 
 __all__ = ['PHI_TERMS', 'DPHI_TERMS', 'MK_TERMS', 'TABLE1_ROWS_PRINTED', 'TABLE1', 'G_TERMS',
@@ -177,9 +178,7 @@ class Mamdani:
         if not (np.issubdtype(table.dtype, np.integer) and table.min() >= 0
                 and table.max() < m):
             raise ValueError(f'rule table must hold output term indices 0..{m - 1}')
-        w = float(out_half_width)
-        if not (math.isfinite(w) and w > 0.0):
-            raise ValueError(f'output half width must be finite and > 0, got {out_half_width}')
+        w = positive(out_half_width, 'output half width')
         if int(n_points) < 3:
             raise ValueError(f'n_points must be >= 3, got {n_points}')
         self.table = table.astype(int)
@@ -277,9 +276,7 @@ class FuzzyEigenaxisController(ea.EigenaxisTorqueLaw):
             raise ValueError(f'unknown fuzzy parameters {sorted(unknown)}; known: '
                              f'{", ".join(DEFAULTS)}')
         bp = dict(DEFAULTS, **breakpoints)
-        self.mk_gain = float(bp['mk_gain'])
-        if not (math.isfinite(self.mk_gain) and self.mk_gain > 0.0):
-            raise ValueError(f'mk_gain must be finite and > 0, got {bp["mk_gain"]}')
+        self.mk_gain = positive(bp['mk_gain'], 'mk_gain')
         self.flc1 = Mamdani(bp['phi_peaks_deg'], bp['dphi_peaks_deg_s'], bp['mk_peaks_Nm'],
                             bp['mk_half_width_Nm'], table1_indices(table1_rows), n_points)
         self.flc2 = Mamdani(bp['g_peaks_deg_s'], bp['dg_peaks_deg_s2'], bp['mgk_peaks_Nm'],

@@ -340,11 +340,9 @@ class MPIController:
             raise ValueError(f'series_order must be an integer in [1, 30], got {series_order!r}')
         self.order = int(series_order)
         self.literal = bool(literal_model)
-        for key, v in (('min_horizon_s', min_horizon_s), ('hold_horizon_s', hold_horizon_s)):
-            if not (math.isfinite(float(v)) and float(v) >= 0.0):
-                raise ValueError(f'{key} must be finite and >= 0 [s], got {v!r}')
-        self.min_horizon = float(min_horizon_s) or self.period
-        self.hold_horizon = float(hold_horizon_s) or self.period
+        self.min_horizon = positive(min_horizon_s, 'min_horizon_s', 's', zero=True) or self.period
+        self.hold_horizon = positive(hold_horizon_s, 'hold_horizon_s', 's', zero=True) \
+            or self.period
         if saturation not in self.SATURATION:
             raise ValueError(f'saturation must be one of {self.SATURATION}, got {saturation!r}')
         if reference_time not in self.REFERENCE_TIME:

@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude as att
+from adcs_nodes.core.control import positive
 from adcs_nodes.core.estimation.horizon_yaw import (attitude_from_horizon_and_yaw,
                                                     triad_from_horizon_and_field,
                                                     yaw_from_horizon_and_field)
@@ -138,15 +139,8 @@ class MagneticFilterEstimator:
         angle_rate_covariance(np.eye(9))        # compiled (or loaded) before the first frame
         self.use_sensor_covariance = bool(use_sensor_covariance)
         self.max_rate = float(max_rate_rad_s)
-        max_step_s = float(max_step_s)
-        if not (math.isfinite(max_step_s) and max_step_s > 0.0):
-            raise ValueError(f'max_step_s must be finite and > 0 [s], got {max_step_s}')
-        self.max_step = max_step_s
-        theta_interval_s = float(theta_interval_s)
-        if not (math.isfinite(theta_interval_s) and theta_interval_s >= 0.0):
-            raise ValueError(f'theta_interval_s must be finite and >= 0 [s], got '
-                             f'{theta_interval_s}')
-        self.theta_interval = theta_interval_s
+        self.max_step = positive(max_step_s, 'max_step_s', 's')
+        self.theta_interval = positive(theta_interval_s, 'theta_interval_s', 's', zero=True)
         self.bank = (HypothesisBank(hypotheses, hypothesis_window_s)
                      if int(hypotheses) > 1 else None)
         self._t_sample: Optional[float] = None     # time of the last accepted sample [s]

@@ -54,23 +54,17 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.control import finite
 from adcs_nodes.core.estimation.triad import MIN_SIN_ANGLE, triad
 
 MIN_YAW_CONDITIONING = 1e-6
 """Default smallest ``kappa`` (Y4) accepted by :func:`yaw_from_horizon_and_field`."""
 
 
-def _angle(x: float, name: str) -> float:
-    x = float(x)
-    if not math.isfinite(x):
-        raise ValueError(f'{name} must be finite, got {x}')
-    return x
-
-
 def zenith_body(roll: float, pitch: float) -> np.ndarray:
     """Unit zenith ``z_body`` (3,), body axes, of the 3-2-1 ``roll``, ``pitch`` [rad] of the
     body w.r.t. the orbit frame (H1)."""
-    phi, theta = _angle(roll, 'roll'), _angle(pitch, 'pitch')
+    phi, theta = finite(roll, 'roll'), finite(pitch, 'pitch')
     return np.array([-math.sin(theta), math.cos(theta) * math.sin(phi),
                      math.cos(theta) * math.cos(phi)])  # (H1)
 
@@ -82,7 +76,7 @@ def yaw_conditioning(pitch: float, b_orbit: ArrayLike) -> float:
     n2 = float(a0 @ a0)
     if n2 == 0.0:
         return 0.0
-    return abs(math.cos(_angle(pitch, 'pitch'))) * float(a0[0] ** 2 + a0[1] ** 2) / n2
+    return abs(math.cos(finite(pitch, 'pitch'))) * float(a0[0] ** 2 + a0[1] ** 2) / n2
 
 
 def yaw_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike, b_orbit: ArrayLike,
@@ -98,7 +92,7 @@ def yaw_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike, b_o
     """
     if method not in ('atan2', 'asin'):
         raise ValueError(f"method must be 'atan2' or 'asin', got {method!r}")
-    phi, theta = _angle(roll, 'roll'), _angle(pitch, 'pitch')
+    phi, theta = finite(roll, 'roll'), finite(pitch, 'pitch')
     a, a0 = attitude.as_vec3(b_body, 'b_body'), attitude.as_vec3(b_orbit, 'b_orbit')
     kappa = yaw_conditioning(theta, a0)
     if kappa < min_conditioning:
@@ -122,8 +116,8 @@ def yaw_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike, b_o
 def attitude_from_horizon_and_yaw(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """``q_orbit_body`` (4,), scalar last, of the 3-2-1 angles [rad] of paper 004 (1):
     ``R(q)^T = C = R1(roll) R2(pitch) R3(yaw)`` (orbit -> body)."""
-    return attitude.from_euler_321(_angle(roll, 'roll'), _angle(pitch, 'pitch'),
-                                   _angle(yaw, 'yaw'))
+    return attitude.from_euler_321(finite(roll, 'roll'), finite(pitch, 'pitch'),
+                                   finite(yaw, 'yaw'))
 
 
 def triad_from_horizon_and_field(roll: float, pitch: float, b_body: ArrayLike,

@@ -33,6 +33,7 @@ from typing import List, Optional
 import numpy as np
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.control import positive
 from adcs_nodes.core.estimation.magnetic_filter import MagneticFilter
 
 LOCK_DEG = 3.0
@@ -68,9 +69,7 @@ class HypothesisBank:
     def __init__(self, count: int, window_s: float) -> None:
         if int(count) < 2:
             raise ValueError(f'count must be >= 2 hypotheses, got {count}')
-        if not (math.isfinite(window_s) and window_s > 0.0):
-            raise ValueError(f'window_s must be finite and > 0 [s], got {window_s}')
-        self.count, self.window = int(count), float(window_s)
+        self.count, self.window = int(count), positive(window_s, 'window_s', 's')
         self.members: List[MagneticFilter] = []
         self.scores: List[float] = []
         self.t_start: Optional[float] = None

@@ -131,6 +131,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude
+from adcs_nodes.core.control import integer, positive
 from adcs_nodes.core.kernels import cross, dcm, finite_vector, jit, matmul, mv, qmul, skew
 from adcs_nodes.core.samples import all_finite
 
@@ -450,21 +451,15 @@ class MagneticFilter:
                  max_disturbance_rad_s2: float = MAX_DISTURBANCE_DEFAULT,
                  misalignment_std0_rad: float = 0.0) -> None:
         inertia = np.asarray(inertia, dtype=float)
-        theta, tau = float(theta), float(tau)
-        max_rate_rad_s = float(max_rate_rad_s)
-        max_disturbance_rad_s2 = float(max_disturbance_rad_s2)
+        theta, tau = positive(theta, 'theta', 'T^2'), positive(tau, 'tau', zero=True)
+        max_rate_rad_s = positive(max_rate_rad_s, 'max_rate_rad_s')
+        max_disturbance_rad_s2 = positive(max_disturbance_rad_s2, 'max_disturbance_rad_s2')
         if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)) \
                 or not np.allclose(inertia, inertia.T) or np.any(np.linalg.eigvalsh(inertia) <= 0):
             raise ValueError('inertia must be a finite symmetric positive definite (3, 3) array')
-        if not (math.isfinite(theta) and theta > 0.0):
-            raise ValueError(f'theta must be finite and > 0 [T^2], got {theta}')
-        if not (math.isfinite(tau) and tau >= 0.0):
-            raise ValueError(f'tau must be finite and >= 0, got {tau}')
         if measurement_form not in ('phi', 'mu'):
             raise ValueError(f"measurement_form must be 'phi' or 'mu', got {measurement_form!r}")
-        if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) \
-                or substeps < 1:
-            raise ValueError(f'substeps must be an integer >= 1, got {substeps!r}')
+        substeps = integer(substeps, 'substeps')
         if p0_diag is None:
             p0_diag = P0_PHI_DEFAULT if measurement_form == 'phi' else P0_MU_DEFAULT
         p0 = np.asarray(p0_diag, dtype=float)
@@ -483,12 +478,7 @@ class MagneticFilter:
         self.substeps = int(substeps)
         self.sigma_from_innovation = bool(sigma_from_innovation)
         self.b_limits = (b_min, b_max)
-        if not (math.isfinite(max_rate_rad_s) and max_rate_rad_s > 0.0):
-            raise ValueError(f'max_rate_rad_s must be finite and > 0, got {max_rate_rad_s}')
         self.max_rate = float(max_rate_rad_s)
-        if not (math.isfinite(max_disturbance_rad_s2) and max_disturbance_rad_s2 > 0.0):
-            raise ValueError('max_disturbance_rad_s2 must be finite and > 0, got '
-                             f'{max_disturbance_rad_s2}')
         self.max_disturbance = float(max_disturbance_rad_s2)
         mis = float(misalignment_std0_rad)
         if not (math.isfinite(mis) and 0.0 <= mis <= MAX_MISALIGNMENT_RAD):

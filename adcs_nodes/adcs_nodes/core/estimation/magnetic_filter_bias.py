@@ -35,6 +35,7 @@ from typing import Optional
 import numpy as np
 from numpy.typing import ArrayLike
 
+from adcs_nodes.core.control import positive
 from adcs_nodes.core.estimation.algorithms import MagneticFilterEstimator
 from adcs_nodes.core.estimation.magnetic_filter import THETA_DEFAULT, MagneticFilter
 
@@ -46,13 +47,6 @@ MAX_BIAS_DEFAULT = 5e-6
 """Default guard on ``|b^|`` [T]."""
 GATE_DEFAULT = 5.0
 """Default innovation gate of (B4) [std]."""
-
-
-def _positive(value, name: str, unit: str, upper: float = math.inf) -> float:
-    x = float(value)
-    if not (math.isfinite(x) and 0.0 < x <= upper):
-        raise ValueError(f'{name} must be finite, > 0 and <= {upper:g} [{unit}], got {value!r}')
-    return x
 
 
 class MagneticFilterBias(MagneticFilter):
@@ -70,15 +64,11 @@ class MagneticFilterBias(MagneticFilter):
                  magnitude_std_T: float = MAGNITUDE_STD_DEFAULT,
                  bias_walk_T_sqrt_s: float = 0.0, max_bias_T: float = MAX_BIAS_DEFAULT,
                  bias_gate_sigma: float = GATE_DEFAULT, **filter_args) -> None:
-        self.bias_std0 = _positive(bias_std0_T, 'bias_std0_T', 'T', 1e-4)
-        self.magnitude_std = _positive(magnitude_std_T, 'magnitude_std_T', 'T', 1e-4)
-        walk = float(bias_walk_T_sqrt_s)
-        if not (math.isfinite(walk) and walk >= 0.0):
-            raise ValueError(f'bias_walk_T_sqrt_s must be finite and >= 0 [T/sqrt(s)], got '
-                             f'{bias_walk_T_sqrt_s!r}')
-        self.bias_walk = walk
-        self.max_bias = _positive(max_bias_T, 'max_bias_T', 'T')
-        self.gate = _positive(bias_gate_sigma, 'bias_gate_sigma', 'std')
+        self.bias_std0 = positive(bias_std0_T, 'bias_std0_T', 'T', upper=1e-4)
+        self.magnitude_std = positive(magnitude_std_T, 'magnitude_std_T', 'T', upper=1e-4)
+        self.bias_walk = positive(bias_walk_T_sqrt_s, 'bias_walk_T_sqrt_s', 'T/sqrt(s)', zero=True)
+        self.max_bias = positive(max_bias_T, 'max_bias_T', 'T')
+        self.gate = positive(bias_gate_sigma, 'bias_gate_sigma', 'std')
         b0 = np.asarray(bias0_T, dtype=float)
         if b0.shape != (3,) or not np.all(np.isfinite(b0)) \
                 or float(np.linalg.norm(b0)) > self.max_bias:

@@ -52,6 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from adcs_nodes.core import attitude as att
+from adcs_nodes.core.control import integer, positive
 from adcs_nodes.core.estimation.algorithms import Estimate6, EstimatorInputs, Step
 
 #: Star tracker std per axis for paper 001's 0.02 deg (3-sigma) [rad].
@@ -60,17 +61,6 @@ STAR_TRACKER_STD_RAD = math.radians(0.02 / 3.0)
 GYRO_NOISE_STD_RAD_S = 1e-6
 #: Bias random walk reaching 0.01 deg/h (3-sigma) after 1 h [rad/s/sqrt(s)].
 GYRO_BIAS_WALK_RAD_S_SQRT_S = math.radians(0.01 / 3.0) / 3600.0 / math.sqrt(3600.0)
-
-
-def _nonneg(value: float, name: str, unit: str, positive: bool = False) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f'{name} must be a number [{unit}], got {value!r}') from None
-    if not math.isfinite(x) or x < 0.0 or (positive and x == 0.0):
-        raise ValueError(f'{name} must be finite and {">" if positive else ">="} 0 [{unit}], '
-                         f'got {value!r}')
-    return x
 
 
 def _finite(a) -> bool:
@@ -89,16 +79,13 @@ class MEKF:
                  gyro_bias_walk_rad_s_sqrt_s: float = GYRO_BIAS_WALK_RAD_S_SQRT_S,
                  p0_bias_rad_s: float = 1e-4, gate_nis: float = 100.0,
                  max_rejections: int = 10) -> None:
-        self.s_st = _nonneg(star_tracker_std_rad, 'star_tracker_std_rad', 'rad', True)
-        self.s_v = _nonneg(gyro_noise_std_rad_s, 'gyro_noise_std_rad_s', 'rad/s')
-        self.s_u = _nonneg(gyro_bias_walk_rad_s_sqrt_s, 'gyro_bias_walk_rad_s_sqrt_s',
-                           'rad/s/sqrt(s)')
-        self.p0_bias = _nonneg(p0_bias_rad_s, 'p0_bias_rad_s', 'rad/s', True)
-        self.gate = _nonneg(gate_nis, 'gate_nis', '-', True)
-        if isinstance(max_rejections, bool) or not isinstance(max_rejections, int) \
-                or max_rejections < 1:
-            raise ValueError(f'max_rejections must be an integer >= 1, got {max_rejections!r}')
-        self.max_rejections = max_rejections
+        self.s_st = positive(star_tracker_std_rad, 'star_tracker_std_rad', 'rad')
+        self.s_v = positive(gyro_noise_std_rad_s, 'gyro_noise_std_rad_s', 'rad/s', zero=True)
+        self.s_u = positive(gyro_bias_walk_rad_s_sqrt_s, 'gyro_bias_walk_rad_s_sqrt_s',
+                            'rad/s/sqrt(s)', zero=True)
+        self.p0_bias = positive(p0_bias_rad_s, 'p0_bias_rad_s', 'rad/s')
+        self.gate = positive(gate_nis, 'gate_nis', '-')
+        self.max_rejections = integer(max_rejections, 'max_rejections')
         self.reset()
 
     def reset(self) -> None:

@@ -51,7 +51,7 @@ class RunData:
     wheels: Dict[str, list] = _series('h', 'speed')
     wheel_names: List[str] = field(default_factory=list)
     est: Dict[str, list] = _series('q_eci_body', 'w_eci', 'cov')
-    target: Dict[str, list] = _series('q', 'frame')
+    target: Dict[str, list] = _series('q', 'frame', 'judged')
     status: Dict[str, list] = _series('active', 'mode', 'switch_count', 'last_fault')
     diag: Dict[str, list] = _series('rejected', 'last')
     cmd: Dict[str, list] = _series('source', 'dipole')
@@ -78,7 +78,8 @@ _FIELDS = {
                                         'w_eci': _vec('omega_body_eci_body'),
                                         'cov': lambda m: list(m.covariance)}),
     '/adcs/attitude_target': ('target', {'q': _vec('q_ref_body'),
-                                         'frame': lambda m: m.header.frame_id or 'orbit'}),
+                                         'frame': lambda m: m.header.frame_id or 'orbit',
+                                         'judged': lambda m: m.profile != 'maneuver'}),
     '/adcs/controller_status': ('status', {
         'active': lambda m: m.active, 'mode': lambda m: m.mode,
         'switch_count': lambda m: int(m.switch_count), 'last_fault': lambda m: m.last_fault}),

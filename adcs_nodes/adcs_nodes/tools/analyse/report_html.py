@@ -30,7 +30,8 @@ KNOWN_COLOURS = {'bdot': '#c44e52', 'magnetic': '#dd8452', 'mpi': '#4c72b0',
 _DEG = 180.0 / math.pi
 
 
-def _colours(names: Sequence[str]) -> Dict[str, str]:
+def colours_for(names: Sequence[str]) -> Dict[str, str]:
+    """``{name: colour}``: :data:`KNOWN_COLOURS`, then ``names`` in the free :data:`PALETTE`."""
     out = dict(KNOWN_COLOURS)
     free = [c for c in PALETTE if c not in out.values()]
     for n in names:
@@ -319,7 +320,7 @@ def _timeline_sections(s: RunData, sc: Dict[str, Any], axis: TimeAxis, t_end: fl
     """The timeline figure (also ``overview.png``), the switches and the faults."""
     parts = ['<h2>Timeline</h2>']
     if s.cmd['t'] or s.status['t'] or s.state['t']:
-        colours = _colours(sorted(set(s.cmd['source'] + s.status['active'] + s.status['mode'])))
+        colours = colours_for(sorted(set(s.cmd['source'] + s.status['active'] + s.status['mode'])))
         png = _png(_overview(s, axis, t_end, colours, pointing_deg(s)))
         (out / 'overview.png').write_bytes(png)
         parts.append(_img(png, 'timeline: controllers, modes, faults, attitude error, rates'))

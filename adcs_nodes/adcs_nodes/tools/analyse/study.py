@@ -241,9 +241,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from adcs_nodes.scenario import ScenarioError
     args = build_parser().parse_args(argv)
     try:
-        from adcs_nodes.tools.run.plain import one_blas_thread
+        from adcs_nodes.core.kernels import limit_blas_threads
         from sim_node.engine import EngineError
-        one_blas_thread()
+        limit_blas_threads()
         return args.func(args)
     except (ScenarioError, EngineError) as exc:
         print(f'study: {exc}', file=sys.stderr)

@@ -8,7 +8,7 @@ from adcs_nodes.tools.campaigns.config import (  # noqa: F401
 from adcs_nodes.tools.campaigns.files import (  # noqa: F401
     FAILED_FILE, RESULT_FILE, SERIES_FILE, load_result, run_dir_of, write_json_atomic)
 from adcs_nodes.tools.campaigns.results import (  # noqa: F401
-    angle_to_target_deg, bag_metrics, read_truth, series_metrics)
+    bag_metrics, read_truth, series_metrics)
 from adcs_nodes.tools.campaigns.runner import close_servers, execute_run  # noqa: F401
 from adcs_nodes.tools.campaigns.summary import (  # noqa: F401
     orbit_period_s, plot_capture_vs_rate, summary_markdown)

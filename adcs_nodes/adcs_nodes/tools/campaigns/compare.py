@@ -11,11 +11,11 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from adcs_nodes.tools.analyse.metrics import angle_between_deg
 from adcs_nodes.tools.campaigns.capture import ORBIT_FRAME
 from adcs_nodes.tools.campaigns.config import CampaignError
 from adcs_nodes.tools.campaigns.files import (FAILED_FILE, SERIES_FILE, load_result,
                                               run_dir_of, write_json_atomic, write_text_atomic)
-from adcs_nodes.tools.campaigns.results import angle_to_target_deg
 
 #: An actuator sample at or above this fraction of its limit counts as saturated (ASSUMPTION).
 SATURATED = 0.999
@@ -80,7 +80,7 @@ def run_metrics(run_dir: str, result: Dict[str, Any], name: str,
     t = s['t_s']
     dt = np.append(np.diff(t), 0.0)                 # each sample holds to the next
     angle = s['angle_deg'] if result.get('capture_reference') == ORBIT_FRAME else \
-        angle_to_target_deg(s['q_orbit_body'], s['q_orbit_target'])
+        angle_between_deg(s['q_orbit_target'], s['q_orbit_body'])
     window = s['target_judged'] & (t >= t[0] + 0.5 * (t[-1] - t[0]))
     craft = sc['spacecraft']
     wheels = craft.get('wheels') or []
@@ -162,18 +162,19 @@ def plot(path: str, series: Dict[str, List[Tuple[np.ndarray, np.ndarray]]]) -> N
     """``compare.png`` of ``{name: [(t_s, angle_deg)] of its runs}``: per controller the
     median angle to the target over time and the 5-95 % band (the report's colours)."""
     from matplotlib.figure import Figure
-    from adcs_nodes.tools.analyse.report_html import _colours, _time_axis
+    from adcs_nodes.tools.analyse.bag_series import time_axis
+    from adcs_nodes.tools.analyse.report_html import colours_for
     fig = Figure(figsize=(10.0, 4.5))
     ax = fig.add_subplot()
-    colours = _colours(list(series))
+    colours = colours_for(list(series))
     t_end = max((t[-1] for runs in series.values() for t, _ in runs), default=1.0)
-    axis = _time_axis(t_end)
+    axis = time_axis(t_end)
     for name, runs in series.items():
         lo, mid, hi = np.nanpercentile([a for _, a in runs], [5, 50, 95], axis=0)
-        t = runs[0][0] / axis.scale
+        t = axis(runs[0][0])
         ax.fill_between(t, lo, hi, color=colours[name], alpha=0.2, lw=0)
         ax.plot(t, mid, color=colours[name], lw=1.2, label=f'{name} (median of {len(runs)})')
-    ax.set(yscale='log', xlabel=f'sim time [{axis.unit}]', ylabel='angle to the target [deg]')
+    ax.set(yscale='log', xlabel=axis.label, ylabel='angle to the target [deg]')
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.savefig(path, dpi=90, bbox_inches='tight')

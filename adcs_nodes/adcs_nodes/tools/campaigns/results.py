@@ -3,67 +3,34 @@ paper 000; :mod:`.capture`) judged by :mod:`adcs_nodes.tools.analyse.metrics`.""
 from __future__ import annotations
 
 import math
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, Optional
 
 import numpy as np
 
-from adcs_nodes.tools.analyse import metrics
+from adcs_nodes.tools.analyse import bag_series, metrics
 from adcs_nodes.tools.campaigns.capture import ORBIT_FRAME
-
-STATE_TOPIC = '/sim/state'
-TARGET_TOPIC = '/adcs/attitude_target'
 
 
 def read_truth(bag: str) -> Dict[str, np.ndarray]:
-    """``/sim/state`` of a bag, a row per stamp (rates [rad/s]), with the angle to the latest
-    target (NaN: none yet); ValueError without ``/sim/state``."""
-    from adcs_nodes.bag import header_stamp_ns, read_messages
-
-    stamps: List[int] = []
-    q, q_eci, w_eci, w_orb = [], [], [], []
-    targets: List[tuple] = []          # (stamp, q_ref_body, frame, judged)
-    for topic, _, msg in read_messages(bag, [STATE_TOPIC, TARGET_TOPIC]):
-        stamp = header_stamp_ns(msg)
-        if topic == TARGET_TOPIC:
-            if not targets or stamp > targets[-1][0]:
-                targets.append((stamp, _xyzw(msg.q_ref_body), msg.header.frame_id or 'orbit',
-                                msg.profile != 'maneuver'))
-            continue
-        if stamps and stamp <= stamps[-1]:
-            continue
-        stamps.append(stamp)
-        q.append(_xyzw(msg.q_orbit_body))
-        q_eci.append(_xyzw(msg.q_eci_body))
-        w_eci.append(_xyz(msg.omega_body_eci_body))
-        w_orb.append(_xyz(msg.omega_body_orbit_body))
-    if not stamps:
-        raise ValueError(f'{bag}: no {STATE_TOPIC} message')
-    t_ns = np.asarray(stamps, dtype=np.int64)
-    angle, judged = np.full(t_ns.size, np.nan), np.ones(t_ns.size, dtype=bool)
-    if targets:
-        j = np.searchsorted(np.array([x[0] for x in targets], dtype=np.int64), t_ns,
-                            side='right') - 1
-        have = j >= 0
-        jj = j[have]
-        eci = np.array([x[2] == 'eci' for x in targets])[jj]
-        q_body = np.where(eci[:, None], np.asarray(q_eci)[have], np.asarray(q)[have])
-        angle[have] = angle_to_target_deg(q_body, np.array([x[1] for x in targets])[jj])
-        judged[have] = np.array([x[3] for x in targets])[jj]
-    return {'t_s': (t_ns - stamps[0]) / 1e9, 'q': np.asarray(q), 'w_eci': np.asarray(w_eci),
-            'w_orbit': np.asarray(w_orb), 'target_angle_deg': angle, 'target_judged': judged}
-
-
-def _xyz(v: Any) -> tuple:
-    return (v.x, v.y, v.z)
-
-
-def _xyzw(o: Any) -> tuple:
-    return (o.x, o.y, o.z, o.w)
-
-
-def angle_to_target_deg(q_frame_body: np.ndarray, q_frame_target: np.ndarray) -> np.ndarray:
-    """Angle [deg] of ``q_frame_target^* (x) q_frame_body``, shape (n,)."""
-    return metrics.angle_between_deg(q_frame_target, q_frame_body)
+    """``/sim/state`` of a bag (:func:`~adcs_nodes.tools.analyse.bag_series.read_run`), a row
+    per stamp (rates [rad/s]), with the angle to the latest target [deg] (NaN: none yet) and
+    whether it is judged (not a ``maneuver``); ValueError without ``/sim/state``."""
+    data = bag_series.read_run(bag)
+    if not data.state['t']:
+        raise ValueError(f'{bag}: no {bag_series.STATE_TOPIC} message')
+    t_ns = np.asarray(data.state['t'], dtype=np.int64)
+    first = np.diff(t_ns, prepend=t_ns[0] - 1) > 0            # one row per stamp
+    angle = bag_series.pointing_deg(data)
+    judged = np.ones(t_ns.size, dtype=bool)
+    if angle is None:
+        angle = np.full(t_ns.size, np.nan)
+    else:
+        k = np.searchsorted(np.asarray(data.target['t'], dtype=np.int64), t_ns, 'right') - 1
+        judged[k >= 0] = np.asarray(data.target['judged'])[k[k >= 0]]
+    state = {k: np.asarray(v)[first] for k, v in data.state.items()}
+    return {'t_s': (t_ns[first] - t_ns[0]) / 1e9, 'q': state['q_orbit_body'],
+            'w_eci': state['w_eci'], 'w_orbit': state['w_orbit'],
+            'target_angle_deg': angle[first], 'target_judged': judged[first]}
 
 
 def series_metrics(t_s: np.ndarray, q_orbit_body: np.ndarray, w_eci: np.ndarray,

@@ -80,7 +80,7 @@ def mc_worker(run_dir: str) -> int:
     from adcs_nodes.tools.campaigns.capture import ORBIT_FRAME, capture_reference
     from adcs_nodes.tools.campaigns.files import (RESULT_FILE, SERIES_FILE, fail, result_head,
                                                   write_json_atomic)
-    from adcs_nodes.tools.campaigns.results import angle_to_target_deg, series_metrics
+    from adcs_nodes.tools.campaigns.results import series_metrics
     from adcs_nodes.scenario import ScenarioError, load_scenario
 
     t0, cpu0 = time.monotonic(), time.process_time()
@@ -103,7 +103,7 @@ def mc_worker(run_dir: str) -> int:
     os.replace(tmp, os.path.join(run_dir, SERIES_FILE))
     angle = judged = None                 # the orbit frame
     if reference != ORBIT_FRAME:          # the target the run published
-        angle = angle_to_target_deg(s['q_orbit_body'], s['q_orbit_target'])
+        angle = metrics.angle_between_deg(s['q_orbit_target'], s['q_orbit_body'])
         judged = s['target_judged']
     m = series_metrics(s['t_s'], s['q_orbit_body'], s['w_eci'], s['w_orbit'],
                        job['capture_deg'], job.get('period_s') or s['period_s'],

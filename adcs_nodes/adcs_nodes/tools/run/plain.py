@@ -162,15 +162,3 @@ def run_plain(sc: Dict[str, Any], duration_s: Optional[float] = None,
     message += f' (plain engine: {time.process_time() - cpu0:.2f} s CPU)'
     return RunResult(code, loop.t_ns / 1e9 if not loop.done else duration, wall, loop.k,
                      0, record, '', message, loop.k / wall if wall > 0 else 0.0)
-
-
-def one_blas_thread() -> None:
-    """One BLAS/OpenMP thread in this process and its children (tiny LAPACK calls: extra
-    threads cost CPU, same bits; DESIGN section 6)."""
-    for key in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
-        os.environ[key] = '1'
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - pinned in ros2_ws/requirements.txt
-        return
-    threadpool_limits(limits=1)
