@@ -38,13 +38,21 @@ def with_parent_death_signal(cmd: List[str]) -> List[str]:
     return [sys.executable, '-S', '-c', PDEATHSIG_SHIM, str(os.getpid())] + list(cmd)
 
 
+def _stat(pid: int) -> List[bytes]:
+    """The fields of ``/proc/PID/stat`` after the command name (state first); [] if gone."""
+    try:
+        with open(f'/proc/{pid}/stat', 'rb') as fh:
+            return fh.read().rsplit(b')', 1)[1].split()
+    except (OSError, IndexError):
+        return []
+
+
 def cpu_seconds(pid: int) -> Optional[float]:
     """CPU time (user + system) of process ``pid`` [s], None if it cannot be read."""
     try:
-        with open(f'/proc/{pid}/stat', 'rb') as fh:
-            fields = fh.read().rsplit(b')', 1)[1].split()
+        fields = _stat(pid)
         return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-    except (OSError, ValueError, IndexError):
+    except (ValueError, IndexError):
         return None
 
 
@@ -138,11 +146,7 @@ class Forked:
 
 def _running(pid: int) -> bool:
     """Whether ``pid`` is a process that has not ended (a zombie has)."""
-    try:
-        with open(f'/proc/{pid}/stat', 'rb') as fh:
-            return fh.read().rsplit(b')', 1)[1].split()[0] not in (b'Z', b'X')
-    except (OSError, IndexError):
-        return False
+    return _stat(pid)[:1] not in ([], [b'Z'], [b'X'])
 
 
 class Processes:
