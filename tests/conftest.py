@@ -47,7 +47,7 @@ SERIAL = frozenset({'test_determinism_control.py', 'test_external_driver.py',
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    """Under pytest-xdist (``make test``: 3 workers, ``--dist loadgroup``) the launched-graph
+    """Under pytest-xdist (``make test``: 2 workers, ``--dist loadgroup``) the launched-graph
     tests of ``tests/graph`` with CPU burners or wall-clock bounds (:data:`SERIAL`) run one
     after the other on one worker (group ``graph``); each other launched-graph file is a group
     of its own (one worker for the file; it may run beside another graph: each worker has its
